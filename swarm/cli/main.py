@@ -1,0 +1,43 @@
+"""The ``swarm`` command line: one entry point, one module per sub-command."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from swarm.errors import SwarmError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from swarm.cli import bench, demo
+
+    parser = argparse.ArgumentParser(
+        prog="swarm",
+        description="TPODS swarm: robust proximity operations with Markov-model guidance switching.",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for module in (demo, bench):
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        return int(args.func(args) or 0)
+    except SwarmError as exc:  # user-facing errors: one clear line, no traceback
+        print(f"swarm: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,517 @@
+"""Compiled kernels of the multiplicative EKF (paper section IV), one filter per call of ``*_one``.
+
+The public API is :class:`swarm.core.estimator.PoseEstimator`; this module is its inner loop. Each
+``*_batch`` kernel loops over a leading batch axis and calls the same ``*_one`` code, so a batch of one
+and a batch of a thousand give bit-identical results per filter.
+
+Array layout of one filter (all float64 unless said otherwise):
+
+``X`` (10,)
+    ``[p_ms(3), v_ms(3), q_ms_body(4)]``: centre-of-mass position [m] and velocity [m/s] in the mothership
+    frame ``c`` and the reference attitude quaternion, scalar-last (x, y, z, w), Hamilton product, mapping
+    body vectors into ``c``.
+``P`` (9, 9)
+    Covariance of the error state ``zeta = (d_p, d_v, d_theta)`` (paper eq. 4); ``d_theta`` is the
+    body-frame rotation vector with ``q_true = q_ref (x) exp(d_theta)``, the Hamilton-product form of
+    Markley 2003's ``dq = q (x) q_ref^-1`` (Shuster product). For the tandem structure the cross blocks
+    between translation and attitude are identically zero.
+``ST_I`` (3, N_TYPES) int64
+    Counters per measurement type: row ``COUNT_ACCEPTED``, ``COUNT_REJECTED`` (Mahalanobis gate),
+    ``COUNT_REFUSED`` (non-finite or invalid input).
+``ST_F`` (N_STF,)
+    ``[since_update_s, underweight_left, last_d2[N_TYPES]...]`` book-keeping.
+
+Parameter vector ``PRM`` (N_PRM,): see the ``PRM_*`` indices.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from swarm.core._rot_nb import qconj, qexp, qlog, qmat, qmul, qnormalize, skew3
+
+# Measurement types (columns of the counters).
+TYPE_RANGE = 0
+TYPE_FEATURES = 1
+TYPE_POSE = 2
+TYPE_ATTITUDE = 3
+TYPE_PREDICT = 4
+N_TYPES = 5
+
+COUNT_ACCEPTED = 0
+COUNT_REJECTED = 1
+COUNT_REFUSED = 2
+
+# Status codes returned per filter.
+ST_ACCEPTED = 0
+ST_REJECTED = 1
+ST_REFUSED_NONFINITE = 2
+ST_REFUSED_INVALID = 3
+ST_SKIPPED = 4
+
+# Parameter vector layout.
+PRM_TANDEM = 0  # 1.0 for the tandem structure, 0.0 for compounded
+PRM_ACCEL_PSD = 1  # white-acceleration power spectral density [m^2/s^3]
+PRM_ATT_PSD = 2  # attitude random-walk PSD (gyro ARW^2 + unmodelled bias) [rad^2/s]
+PRM_UW_BETA = 3  # underweighting factor beta (Zanetti et al. 2010); 0 disables
+PRM_UW_GAP_S = 4  # a prediction span at least this long arms underweighting [s]
+PRM_UW_COUNT = 5  # number of accepted updates underweighted after such a span
+PRM_UW_RATIO = 6  # underweight only while tr(H P H^T) > ratio * tr(R)
+PRM_LEVER = 7  # 7:10 UWB tag lever arm P1 in the body frame [m]
+N_PRM = 10
+
+STF_SINCE = 0
+STF_UW_LEFT = 1
+STF_D2 = 2  # 2 : 2 + N_TYPES, squared Mahalanobis distance of the last gated update per type
+N_STF = 2 + N_TYPES
+
+
+@njit(cache=True)
+def _all_finite(a):
+    for v in a.ravel():
+        if not np.isfinite(v):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _sandwich(F, P):
+    """F P F^T for small dense matrices (explicit loops: no BLAS call overhead)."""
+    n = F.shape[0]
+    FP = np.zeros((n, n))
+    for i in range(n):
+        for k in range(n):
+            f = F[i, k]
+            if f != 0.0:
+                for j in range(n):
+                    FP[i, j] += f * P[k, j]
+    out = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            s = 0.0
+            for k in range(n):
+                s += FP[i, k] * F[j, k]
+            out[i, j] = s
+            out[j, i] = s
+    return out
+
+
+@njit(cache=True)
+def _translation_noise(dt, q_acc):
+    """Discrete white-noise-acceleration covariance, Bar-Shalom, Li & Kirubarajan 2001 eq. 6.2.3-8."""
+    Q = np.zeros((6, 6))
+    a = q_acc * dt**3 / 3.0
+    b = q_acc * dt**2 / 2.0
+    c = q_acc * dt
+    for i in range(3):
+        Q[i, i] = a
+        Q[i, i + 3] = b
+        Q[i + 3, i] = b
+        Q[i + 3, i + 3] = c
+    return Q
+
+
+@njit(cache=True)
+def predict_one(X, P, ST_I, ST_F, w_body, a_ms, dt, PRM):
+    """Propagate one filter over ``dt`` [s] with gyro rate ``w_body`` [rad/s] (paper eq. 3, an input,
+    not a state) and known acceleration ``a_ms`` [m/s^2] (commanded thrust / mass, frame ``c``).
+
+    Translation: constant-acceleration kinematics over the step. Attitude: ``q <- q (x) exp(w dt)``; the
+    error transition is ``Phi = exp(-[w dt x])`` (Crassidis & Junkins 2011, sec. 7.2.4, body-frame error).
+    Tandem propagates the 6x6 and 3x3 blocks; compounded the full 9x9 (the cost the paper's Table I
+    compares).
+    """
+    if not (np.isfinite(dt) and _all_finite(w_body) and _all_finite(a_ms)):
+        ST_I[COUNT_REFUSED, TYPE_PREDICT] += 1
+        return ST_REFUSED_NONFINITE
+    if dt < 0.0:
+        ST_I[COUNT_REFUSED, TYPE_PREDICT] += 1
+        return ST_REFUSED_INVALID
+    for i in range(3):
+        X[i] += X[3 + i] * dt + 0.5 * a_ms[i] * dt * dt
+        X[3 + i] += a_ms[i] * dt
+    phi = w_body * dt
+    dq = qexp(phi)
+    X[6:10] = qnormalize(qmul(X[6:10], dq))
+    Phi = qmat(dq).T
+
+    Qt = _translation_noise(dt, PRM[PRM_ACCEL_PSD])
+    qa = PRM[PRM_ATT_PSD] * dt
+    if PRM[PRM_TANDEM] != 0.0:
+        Ft = np.eye(6)
+        for i in range(3):
+            Ft[i, i + 3] = dt
+        Pt = _sandwich(Ft, P[:6, :6].copy()) + Qt
+        Pa = _sandwich(Phi, P[6:, 6:].copy())
+        P[:6, :6] = Pt
+        P[6:, 6:] = Pa
+        for i in range(3):
+            P[6 + i, 6 + i] += qa
+    else:
+        F = np.eye(9)
+        for i in range(3):
+            F[i, i + 3] = dt
+        F[6:, 6:] = Phi
+        Pn = _sandwich(F, P)
+        Pn[:6, :6] += Qt
+        for i in range(3):
+            Pn[6 + i, 6 + i] += qa
+        P[:, :] = Pn
+    ST_F[STF_SINCE] += dt
+    if PRM[PRM_UW_BETA] > 0.0 and ST_F[STF_SINCE] >= PRM[PRM_UW_GAP_S]:
+        ST_F[STF_UW_LEFT] = PRM[PRM_UW_COUNT]
+    ST_I[COUNT_ACCEPTED, TYPE_PREDICT] += 1
+    return ST_ACCEPTED
+
+
+@njit(cache=True)
+def _kalman_block(Pb, H, nu, R, gate, ST_F, PRM):
+    """Joseph-form update of one (sub)filter; returns (status, d2, dx, P_new).
+
+    ``d2 = nu^T S^-1 nu`` is the squared Mahalanobis distance (paper sec. IV-D) with
+    ``S = H P H^T + R``; the update is refused outright when ``d2 > gate``. Underweighting
+    (Lear's rule as analysed by Zanetti, DeMars & Bishop 2010, "Underweighting nonlinear
+    measurements", JGCD 33(5)) uses ``S_uw = (1 + beta) H P H^T + R`` in the gain for the first updates
+    after a long prediction while the prior dominates the noise. The Joseph form
+    ``(I - K H) P (I - K H)^T + K R K^T`` (Crassidis & Junkins 2011 eq. 5.39) keeps P symmetric positive
+    and is the exact covariance for any gain, the underweighted one included.
+    """
+    n = Pb.shape[0]
+    m = H.shape[0]
+    PHt = Pb @ H.T
+    HPHt = H @ PHt
+    S = HPHt + R
+    if m == 1:
+        d2 = nu[0] * nu[0] / S[0, 0]
+    else:
+        d2 = nu @ np.linalg.solve(S, nu)
+    if not np.isfinite(d2) or d2 < 0.0:
+        return ST_REFUSED_INVALID, d2, np.zeros(n), Pb
+    if d2 > gate:
+        return ST_REJECTED, d2, np.zeros(n), Pb
+    Sg = S
+    if ST_F[STF_UW_LEFT] > 0.0 and PRM[PRM_UW_BETA] > 0.0:
+        if np.trace(HPHt) > PRM[PRM_UW_RATIO] * np.trace(R):
+            Sg = S + PRM[PRM_UW_BETA] * HPHt
+    if m == 1:
+        K = PHt / Sg[0, 0]
+    else:
+        K = np.linalg.solve(Sg, PHt.T).T
+    A = np.eye(n) - K @ H
+    Pn = _sandwich(A, Pb) + K @ R @ K.T
+    dx = K @ nu
+    if not (_all_finite(Pn) and _all_finite(dx)):
+        return ST_REFUSED_INVALID, d2, np.zeros(n), Pb
+    return ST_ACCEPTED, d2, dx, Pn
+
+
+@njit(cache=True)
+def _apply_correction(X, P, dx9):
+    """Add the translation correction and do the multiplicative attitude reset (Markley 2003):
+    ``q <- q (x) exp(d_theta)``, ``d_theta <- 0``, covariance mapped by ``G = I - 0.5 [d_theta x]``
+    (first-order reset Jacobian, Mueller, Hehn & D'Andrea 2016 eq. 11-12)."""
+    for i in range(6):
+        X[i] += dx9[i]
+    dth = dx9[6:9].copy()
+    if dth[0] != 0.0 or dth[1] != 0.0 or dth[2] != 0.0:
+        X[6:10] = qnormalize(qmul(X[6:10], qexp(dth)))
+        T = np.eye(9)
+        T[6:, 6:] -= 0.5 * skew3(dth)
+        P[:, :] = _sandwich(T, P)
+
+
+@njit(cache=True)
+def _commit(X, P, ST_I, ST_F, kind, status, d2, dx9, P_new):
+    ST_F[STF_D2 + kind] = d2
+    if status == ST_ACCEPTED:
+        P[:, :] = P_new
+        _apply_correction(X, P, dx9)
+        ST_I[COUNT_ACCEPTED, kind] += 1
+        ST_F[STF_SINCE] = 0.0
+        if ST_F[STF_UW_LEFT] > 0.0:
+            ST_F[STF_UW_LEFT] -= 1.0
+    elif status == ST_REJECTED:
+        ST_I[COUNT_REJECTED, kind] += 1
+    else:
+        ST_I[COUNT_REFUSED, kind] += 1
+    return status
+
+
+@njit(cache=True)
+def _update(X, P, ST_I, ST_F, PRM, kind, H, nu, R, gate, tandem_att):
+    """Shared measurement step for both structures.
+
+    Compounded: one 9-state Joseph update. Tandem: the 6-state translation filter and the 3-state
+    attitude filter are updated separately, each treating the other block's uncertainty as extra
+    measurement noise (``R + H_other P_other H_other^T``, a "consider" treatment without
+    cross-covariance), and the gate is tested once on the joint innovation covariance, which is the same
+    for both blocks. A measurement that involves both blocks (vision) updates the translation filter
+    first and then the attitude filter with the residual left over and the updated translation covariance
+    considered: the measurement is used twice with its noise counted once per filter, the tandem's
+    approximation (the compounded structure is the reference). A block the measurement does not involve
+    (zero columns of ``H``) is left untouched, and so is the attitude filter for a range
+    (``tandem_att`` false): the range's attitude partials only enter the translation filter's noise.
+    """
+    if PRM[PRM_TANDEM] == 0.0:
+        status, d2, dx, Pn = _kalman_block(P, H, nu, R, gate, ST_F, PRM)
+        return _commit(X, P, ST_I, ST_F, kind, status, d2, dx, Pn)
+    Ht = np.ascontiguousarray(H[:, :6])
+    Ha = np.ascontiguousarray(H[:, 6:])
+    Pt = P[:6, :6].copy()
+    Pa = P[6:, 6:].copy()
+    use_t = _all_nonzero(Ht)
+    use_a = tandem_att and _all_nonzero(Ha)
+    Rt = R + Ha @ Pa @ Ha.T  # noise seen by the translation filter
+    Ra = R + Ht @ Pt @ Ht.T  # noise seen by the attitude filter
+    dx9 = np.zeros(9)
+    Pn = P.copy()
+    if use_t:
+        status, d2, dxt, Ptn = _kalman_block(Pt, Ht, nu, Rt, gate, ST_F, PRM)
+        if status != ST_ACCEPTED:
+            return _commit(X, P, ST_I, ST_F, kind, status, d2, dx9, Pn)
+        dx9[:6] = dxt
+        Pn[:6, :6] = Ptn
+        if use_a:
+            # attitude filter: the translation it considers is the one just updated
+            Ra = R + Ht @ Ptn @ Ht.T
+            nu_a = nu - Ht @ dxt
+            status_a, _, dxa, Pan = _kalman_block(Pa, Ha, nu_a, Ra, np.inf, ST_F, PRM)
+            if status_a == ST_ACCEPTED:
+                dx9[6:] = dxa
+                Pn[6:, 6:] = Pan
+        return _commit(X, P, ST_I, ST_F, kind, status, d2, dx9, Pn)
+    status, d2, dxa, Pan = _kalman_block(Pa, Ha, nu, Ra, gate, ST_F, PRM)
+    dx9[6:] = dxa
+    Pn[6:, 6:] = Pan
+    return _commit(X, P, ST_I, ST_F, kind, status, d2, dx9, Pn)
+
+
+@njit(cache=True)
+def _all_nonzero(H):
+    """True when the block ``H`` has any non-zero entry (the measurement involves that block)."""
+    for v in H.ravel():
+        if v != 0.0:
+            return True
+    return False
+
+
+@njit(cache=True)
+def range_model(X, anchor_ms, lever_body):
+    """UWB range to an anchor with the tag lever arm ``P1`` (paper eq. 1, Fig. 2).
+
+    ``h = || p + R(q) P1 - a ||``; ``dh/dp = u^T``, ``dh/dv = 0``,
+    ``dh/dtheta = -u^T R(q) [P1 x]`` with ``u`` the unit line of sight anchor -> tag.
+    Returns ``(h, H (1, 9))``.
+    """
+    Rq = qmat(X[6:10])
+    tag = X[0:3] + Rq @ lever_body
+    d = tag - anchor_ms
+    h = np.sqrt(d @ d)
+    H = np.zeros((1, 9))
+    if h > 0.0:
+        u = d / h
+        H[0, 0:3] = u
+        H[0, 6:9] = -(u @ Rq) @ skew3(lever_body)
+    return h, H
+
+
+@njit(cache=True)
+def update_range_one(X, P, ST_I, ST_F, PRM, anchor_ms, z_m, sigma_m, gate):
+    if not (np.isfinite(z_m) and np.isfinite(sigma_m) and _all_finite(anchor_ms)):
+        ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
+        return ST_REFUSED_NONFINITE
+    if z_m < 0.0 or sigma_m <= 0.0:
+        ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
+        return ST_REFUSED_INVALID
+    h, H = range_model(X, anchor_ms, PRM[PRM_LEVER : PRM_LEVER + 3])
+    if h == 0.0:
+        ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
+        return ST_REFUSED_INVALID
+    nu = np.array([z_m - h])
+    R = np.array([[sigma_m * sigma_m]])
+    return _update(X, P, ST_I, ST_F, PRM, TYPE_RANGE, H, nu, R, gate, False)
+
+
+@njit(cache=True)
+def camera_point_model(X, w_ms, cam_pos_body, R_body_cam):
+    """A point ``w`` (frame ``c``) seen in the camera frame: ``f = R_bc^T (R(q)^T (w - p) - c_b)``.
+
+    ``df/dp = -R_bc^T R(q)^T``, ``df/dtheta = R_bc^T [y x]`` with ``y = R(q)^T (w - p)`` (from
+    ``R(q (x) exp(dth))^T = (I - [dth x]) R(q)^T``). Returns ``(f (3,), H (3, 9))``.
+    """
+    Rq = qmat(X[6:10])
+    y = Rq.T @ (w_ms - X[0:3])
+    f = R_body_cam.T @ (y - cam_pos_body)
+    H = np.zeros((3, 9))
+    H[:, 0:3] = -(R_body_cam.T @ Rq.T)
+    H[:, 6:9] = R_body_cam.T @ skew3(y)
+    return f, H
+
+
+@njit(cache=True)
+def update_features_one(
+    X, P, ST_I, ST_F, PRM, markers_ms, f_cam, sigma_m, target_cov_ms, cam_pos_body, R_body_cam, gate
+):
+    """Marker feature vectors in the camera frame (paper sec. III and IV-D, 1 mm noise), all markers
+    stacked into one vector measurement. The target position uncertainty ``target_cov_ms`` (3x3, frame c)
+    shifts every marker alike, so it enters every block of ``R``, cross blocks included."""
+    if not (
+        _all_finite(markers_ms) and _all_finite(f_cam) and np.isfinite(sigma_m) and _all_finite(target_cov_ms)
+    ):
+        ST_I[COUNT_REFUSED, TYPE_FEATURES] += 1
+        return ST_REFUSED_NONFINITE
+    n = markers_ms.shape[0]
+    if n == 0 or sigma_m <= 0.0:
+        ST_I[COUNT_REFUSED, TYPE_FEATURES] += 1
+        return ST_REFUSED_INVALID
+    H = np.zeros((3 * n, 9))
+    nu = np.zeros(3 * n)
+    for j in range(n):
+        f, Hj = camera_point_model(X, markers_ms[j], cam_pos_body, R_body_cam)
+        H[3 * j : 3 * j + 3, :] = Hj
+        nu[3 * j : 3 * j + 3] = f_cam[j] - f
+    M = R_body_cam.T @ qmat(X[6:10]).T
+    C = M @ target_cov_ms @ M.T
+    R = np.zeros((3 * n, 3 * n))
+    for j in range(n):
+        for k in range(n):
+            R[3 * j : 3 * j + 3, 3 * k : 3 * k + 3] = C
+        for i in range(3):
+            R[3 * j + i, 3 * j + i] += sigma_m * sigma_m
+    return _update(X, P, ST_I, ST_F, PRM, TYPE_FEATURES, H, nu, R, gate, True)
+
+
+@njit(cache=True)
+def pose_residual(X, p_target_ms, q_ms_target, t_cam, q_cam_target, cam_pos_body, R_body_cam, q_body_cam):
+    """Residual ``(nu (6,), H (6, 9))`` of a PnP pose: ``nu[:3] = t_cam - f(p_target)`` (camera point model)
+    and ``nu[3:] = log(q_ref^-1 (x) q_meas)`` with the implied body attitude
+    ``q_meas = q_ms_target (x) q_cam_target^-1 (x) q_body_cam^-1``; ``H[3:] = [0 0 I]``."""
+    f, Hp = camera_point_model(X, p_target_ms, cam_pos_body, R_body_cam)
+    q_meas = qmul(qmul(q_ms_target, qconj(qnormalize(q_cam_target))), qconj(q_body_cam))
+    H = np.zeros((6, 9))
+    H[0:3, :] = Hp
+    for i in range(3):
+        H[3 + i, 6 + i] = 1.0
+    nu = np.zeros(6)
+    nu[0:3] = t_cam - f
+    nu[3:6] = qlog(qmul(qconj(X[6:10]), qnormalize(q_meas)))
+    return nu, H
+
+
+@njit(cache=True)
+def attitude_residual(X, q_meas):
+    """Residual ``(nu (3,), H (3, 9))`` of an attitude measurement: ``log(q_ref^-1 (x) q_meas)``,
+    ``H = [0 0 I]`` (body-frame error)."""
+    nu = qlog(qmul(qconj(X[6:10]), qnormalize(q_meas)))
+    H = np.zeros((3, 9))
+    for i in range(3):
+        H[i, 6 + i] = 1.0
+    return nu, H
+
+
+@njit(cache=True)
+def update_pose_one(
+    X, P, ST_I, ST_F, PRM, p_target_ms, q_ms_target, t_cam, q_cam_target, cov_cam, target_cov_ms,
+    cam_pos_body, R_body_cam, q_body_cam, gate,
+):  # fmt: skip
+    """Relative pose of the target from PnP: position ``t_cam`` of the target origin in the camera frame
+    and attitude ``q_cam_target``, with covariance ``cov_cam`` (6x6) of ``(dt_cam, dphi_cam)`` where
+    ``R_ct_meas = exp([dphi_cam x]) R_ct``. The attitude residual is the body-frame rotation vector
+    ``log(q_ref^-1 (x) q_meas)`` of the implied body attitude
+    ``q_meas = q_ms_target (x) q_cam_target^-1 (x) q_body_cam^-1``, whose noise is ``-R_bc dphi_cam``."""
+    if not (
+        _all_finite(p_target_ms)
+        and _all_finite(q_ms_target)
+        and _all_finite(t_cam)
+        and _all_finite(q_cam_target)
+        and _all_finite(cov_cam)
+        and _all_finite(target_cov_ms)
+    ):
+        ST_I[COUNT_REFUSED, TYPE_POSE] += 1
+        return ST_REFUSED_NONFINITE
+    nq = q_cam_target @ q_cam_target
+    if nq < 0.5 or nq > 2.0:
+        ST_I[COUNT_REFUSED, TYPE_POSE] += 1
+        return ST_REFUSED_INVALID
+    nu, H = pose_residual(
+        X, p_target_ms, q_ms_target, t_cam, q_cam_target, cam_pos_body, R_body_cam, q_body_cam
+    )
+    T = np.eye(6)
+    T[3:, 3:] = -R_body_cam
+    R = T @ cov_cam @ T.T
+    M = R_body_cam.T @ qmat(X[6:10]).T
+    R[0:3, 0:3] += M @ target_cov_ms @ M.T
+    R = 0.5 * (R + R.T)
+    return _update(X, P, ST_I, ST_F, PRM, TYPE_POSE, H, nu, R, gate, True)
+
+
+@njit(cache=True)
+def update_attitude_one(X, P, ST_I, ST_F, PRM, q_meas, cov_body, gate):
+    """AHRS attitude: residual ``log(q_ref^-1 (x) q_meas)`` (body frame), ``H = [0 0 I]``."""
+    if not (_all_finite(q_meas) and _all_finite(cov_body)):
+        ST_I[COUNT_REFUSED, TYPE_ATTITUDE] += 1
+        return ST_REFUSED_NONFINITE
+    nq = q_meas @ q_meas
+    if nq < 0.5 or nq > 2.0:
+        ST_I[COUNT_REFUSED, TYPE_ATTITUDE] += 1
+        return ST_REFUSED_INVALID
+    nu, H = attitude_residual(X, q_meas)
+    R = 0.5 * (cov_body + cov_body.T)
+    return _update(X, P, ST_I, ST_F, PRM, TYPE_ATTITUDE, H, nu, R, gate, True)
+
+
+# ---- batch loops: the same per-filter code over a leading axis ---------------------------------------
+
+
+@njit(cache=True)
+def predict_batch(X, P, ST_I, ST_F, W, A, dt, PRM, out):
+    for b in range(X.shape[0]):
+        out[b] = predict_one(X[b], P[b], ST_I[b], ST_F[b], W[b], A[b], dt, PRM)
+
+
+@njit(cache=True)
+def update_range_batch(X, P, ST_I, ST_F, PRM, anchors, z, sigma, mask, gate, out):
+    for b in range(X.shape[0]):
+        if mask[b]:
+            out[b] = update_range_one(X[b], P[b], ST_I[b], ST_F[b], PRM, anchors[b], z[b], sigma[b], gate)
+        else:
+            out[b] = ST_SKIPPED
+
+
+@njit(cache=True)
+def update_features_batch(
+    X, P, ST_I, ST_F, PRM, markers, f_cam, sigma, target_cov, cam_pos_body, R_body_cam, mask, gate, out
+):
+    for b in range(X.shape[0]):
+        if mask[b]:
+            out[b] = update_features_one(
+                X[b], P[b], ST_I[b], ST_F[b], PRM, markers[b], f_cam[b], sigma[b], target_cov[b],
+                cam_pos_body, R_body_cam, gate,
+            )  # fmt: skip
+        else:
+            out[b] = ST_SKIPPED
+
+
+@njit(cache=True)
+def update_pose_batch(
+    X, P, ST_I, ST_F, PRM, p_t, q_t, t_cam, q_ct, cov_cam, target_cov, cam_pos_body, R_body_cam, q_body_cam,
+    mask, gate, out,
+):  # fmt: skip
+    for b in range(X.shape[0]):
+        if mask[b]:
+            out[b] = update_pose_one(
+                X[b], P[b], ST_I[b], ST_F[b], PRM, p_t[b], q_t[b], t_cam[b], q_ct[b], cov_cam[b],
+                target_cov[b], cam_pos_body, R_body_cam, q_body_cam, gate,
+            )  # fmt: skip
+        else:
+            out[b] = ST_SKIPPED
+
+
+@njit(cache=True)
+def update_attitude_batch(X, P, ST_I, ST_F, PRM, q_meas, cov_body, mask, gate, out):
+    for b in range(X.shape[0]):
+        if mask[b]:
+            out[b] = update_attitude_one(X[b], P[b], ST_I[b], ST_F[b], PRM, q_meas[b], cov_body[b], gate)
+        else:
+            out[b] = ST_SKIPPED

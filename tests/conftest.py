@@ -1,0 +1,18 @@
+"""Suite-wide options: ``--runslow`` enables the long statistical runs marked ``slow``."""
+
+from __future__ import annotations
+
+import pytest
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--runslow", action="store_true", default=False, help="run tests marked slow")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if config.getoption("--runslow"):
+        return
+    skip = pytest.mark.skip(reason="statistical long run: use --runslow (a small version runs by default)")
+    for item in items:
+        if "slow" in item.keywords:
+            item.add_marker(skip)
