@@ -154,6 +154,11 @@ def chi2_gate(dim: int, probability: float) -> float:
 
 def _batch(name: str, value, n: int, tail: tuple[int, ...]) -> np.ndarray:
     """``value`` as a C-contiguous float64 array of shape ``(n, *tail)``, broadcasting a single item."""
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.flags.c_contiguous:
+        if value.shape == (n, *tail):
+            return value
+        if n == 1 and value.shape == tail:
+            return value.reshape(1, *tail)
     a = np.asarray(value, dtype=np.float64)
     if a.shape == tail:
         a = np.broadcast_to(a, (n, *tail))

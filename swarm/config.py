@@ -1,0 +1,571 @@
+"""Typed scenario files: build frozen params dataclasses from TOML, validate every field, write them back.
+
+A scenario is a frozen dataclass composed of the modules' params dataclasses (``EstimatorParams`` ...); the
+TOML file mirrors it, one table per nested dataclass::
+
+    seed = 7
+
+    [estimator]
+    structure = "tandem"
+    sigma_range_m = 0.02
+
+    [chaser.dynamics]
+    mass_kg = 3.0
+
+The field types decide how a TOML value is read (:func:`from_mapping`) and written (:func:`to_mapping`,
+:func:`dump_toml`):
+
+======================================  ============================================================
+field type                              TOML value
+======================================  ============================================================
+``float``                               integer or float, finite (``nan`` and ``inf`` are rejected)
+``int``                                 integer (an integral float such as ``3.0`` is accepted)
+``bool``                                ``true`` or ``false``
+``str``                                 string
+``Literal["a", "b"]``                   one of the listed values
+``enum.Enum`` subclass (``StrEnum``)    a member's value, e.g. ``"tandem"``
+dataclass                               table
+``tuple[X, Y, Z]`` / ``tuple[X, ...]``  array of exactly that length / of any length
+``X | None``                            ``X``, or the key left out for a None default (TOML has no null;
+                                        :func:`to_mapping` output for JSON keeps None and reads back)
+``dict[str, X]``                        table of named entries, e.g. ``[agents.a1]``, ``[agents.a2]``
+======================================  ============================================================
+
+A key missing from a table keeps its default: the value in the enclosing field's default instance when
+there is one (``chaser: Vehicle = Vehicle(mass_kg=3.0)`` keeps 3.0 when ``[chaser]`` sets only other
+keys), else the dataclass's own default. Unknown keys are errors. Every error is a
+:class:`swarm.errors.ConfigError` whose message names the dotted path of the field (``chaser.dynamics.
+mass_kg``, ``markers_ms[2][0]``) and quotes the bad value. A dataclass's own ``__post_init__`` error
+(``estimator.sigma_range_m must be ...``, by the project's convention) is re-rooted at the field's real
+path (``agents.a1.sigma_range_m must be ...``), or prefixed with the path if it does not follow it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import enum
+import math
+import numbers
+import os
+import re
+import reprlib
+import tomllib
+import types
+import typing
+from collections.abc import Mapping
+from typing import Any, Literal, TypeVar, get_args, get_origin
+
+from swarm.errors import ConfigError
+
+__all__ = ["apply_overrides", "dump_toml", "from_mapping", "load_toml", "parse_override", "to_mapping"]
+
+T = TypeVar("T")
+
+_NONE_TYPE = type(None)
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+_KEY_PART = r'(?:[A-Za-z0-9_-]+|"(?:[^"\\\n]|\\.)*")'
+_DOTTED_KEY = re.compile(rf"\s*{_KEY_PART}(?:\s*\.\s*{_KEY_PART})*\s*")
+# An override value that is not TOML but looks like a word is taken as a string, so that
+# ``--set estimator.structure=compounded`` works without shell-quoting the TOML quotes.
+_BARE_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
+_TOML_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+
+_repr = reprlib.Repr()
+_repr.maxstring = 80
+_repr.maxother = 80
+_repr.maxlist = _repr.maxtuple = 8
+_repr.maxdict = 4
+_repr.maxlevel = 3
+
+# Modes of the one type-directed walk: build the dataclass, or produce plain data for JSON or TOML.
+_OBJ, _DATA, _TOML = "obj", "data", "toml"
+
+
+# ------------------------------------------------------------------------------------------- public API
+
+
+def from_mapping(cls: type[T], data: Mapping[str, Any], section: str = "") -> T:
+    """An instance of the dataclass ``cls`` built from ``data`` (e.g. ``tomllib.load`` output), recursively.
+
+    ``section`` is the dotted path of ``data`` inside the scenario (``"chaser.dynamics"``), used only to
+    name fields in error messages. Raises ConfigError naming the field for any bad, unknown or missing
+    key; TypeError if ``cls`` is not a dataclass or has a field type this module does not support.
+    """
+    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
+        raise TypeError(f"from_mapping needs a dataclass type, got {cls!r}")
+    return _walk(cls, data, section, None, _OBJ)
+
+
+def to_mapping(obj: Any) -> dict[str, Any]:
+    """The inverse of :func:`from_mapping`: nested dicts of plain values (enums as their values, tuples as
+    lists, None kept), ready for ``json.dump``; ``from_mapping(type(obj), to_mapping(obj)) == obj``."""
+    _require_instance(obj)
+    return _walk(type(obj), obj, "", None, _DATA)
+
+
+def dump_toml(obj: Any) -> str:
+    """``obj`` as a TOML document that :func:`from_mapping` reads back to an equal object.
+
+    Every field is written, None fields are omitted. Raises ConfigError naming the field when a value
+    cannot round-trip: None where the default is not None (TOML has no null) or a non-finite float.
+    """
+    _require_instance(obj)
+    lines: list[str] = []
+    _emit_table(_walk(type(obj), obj, "", None, _TOML), [], lines)
+    return "\n".join(lines) + "\n" if lines else ""
+
+
+def load_toml(cls: type[T], path: str | os.PathLike[str], overrides: Mapping[str, object] | None = None) -> T:
+    """Read the TOML file at ``path`` into the dataclass ``cls``.
+
+    ``overrides`` maps dotted keys to values (``{"estimator.sigma_range_m": 0.03}``, e.g. from
+    :func:`parse_override`) applied on top of the file (:func:`apply_overrides`) before validation.
+    A missing or unreadable file, a TOML syntax error (with its line and column) and every invalid field
+    raise ConfigError naming the file; an invalid overridden value is reported as coming from the override.
+    """
+    name = os.fspath(path)
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{name}: invalid TOML: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{name}: not UTF-8 text: {exc}") from exc
+    except OSError as exc:
+        raise ConfigError(f"{name}: cannot read the scenario file: {exc.strerror or exc}") from exc
+    keys: list[str] = []
+    if overrides:
+        data = apply_overrides(data, overrides)
+        keys = [_join_parts(_split_key(k)) for k in overrides]
+    try:
+        return from_mapping(cls, data)
+    except ConfigError as exc:
+        msg = str(exc)
+        for key in keys:
+            if msg.startswith(key) and msg[len(key) : len(key) + 1] in ("", ":", ".", "[", " "):
+                raise ConfigError(f"{msg} (value set by override {key})") from exc
+        raise ConfigError(f"{name}: {msg}") from exc
+
+
+def parse_override(text: str) -> tuple[str, object]:
+    """Split a ``--set`` argument ``"key=value"`` into the dotted key and the value parsed as TOML
+    (``1.5``, ``true``, ``"text"``, ``[1, 2, 3]``, ``{a = 1}``); a bare word (``compounded``) that is not
+    TOML is taken as a string. Raises ConfigError on a malformed key or value."""
+    key, sep, raw = text.partition("=")
+    key, raw = key.strip(), raw.strip()
+    if not sep or not key:
+        raise ConfigError(f"override {text!r}: expected key=value, e.g. estimator.sigma_range_m=0.03")
+    _split_key(key)
+    if not raw:
+        raise ConfigError(f"override {text!r}: missing value after '='")
+    try:
+        doc = tomllib.loads(f"v = {raw}")
+    except tomllib.TOMLDecodeError as exc:
+        if _BARE_WORD.fullmatch(raw):
+            return key, raw
+        raise ConfigError(
+            f"{key}: cannot parse the override value {raw!r} as TOML ({exc}); quote strings: {key}='\"text\"'"
+        ) from exc
+    if set(doc) != {"v"}:
+        raise ConfigError(f"{key}: the override value {raw!r} is not a single TOML value")
+    return key, doc["v"]
+
+
+def apply_overrides(data: Mapping[str, Any], overrides: Mapping[str, object]) -> dict[str, Any]:
+    """A copy of the parsed mapping ``data`` with each dotted key of ``overrides`` set (intermediate tables
+    are created; a table value is merged into an existing table). Values are validated later, by
+    :func:`from_mapping`; a key that runs through a non-table value raises ConfigError."""
+    out = _copy_tree(data)
+    for key, value in overrides.items():
+        parts = _split_key(key)
+        node = out
+        for i, part in enumerate(parts[:-1]):
+            child = node.setdefault(part, {})
+            if not isinstance(child, dict):
+                where = _join_parts(parts[: i + 1])
+                raise ConfigError(
+                    f"{_join_parts(parts)}: cannot set it, {where} is {_show(child)}, not a table"
+                )
+            node = child
+        last = parts[-1]
+        if isinstance(value, Mapping) and isinstance(node.get(last), dict):
+            _merge(node[last], value)
+        else:
+            node[last] = _copy_tree(value)
+    return out
+
+
+# ----------------------------------------------------------------------------------------------- schema
+
+_SCHEMAS: dict[type, dict[str, tuple[dataclasses.Field, Any]]] = {}
+
+
+def _schema(cls: type) -> dict[str, tuple[dataclasses.Field, Any]]:
+    """The init fields of the dataclass ``cls`` with their resolved types, every type checked as supported."""
+    cached = _SCHEMAS.get(cls)
+    if cached is not None:
+        return cached
+    try:
+        hints = typing.get_type_hints(cls)
+    except (NameError, TypeError, AttributeError) as exc:
+        raise TypeError(f"cannot resolve the type hints of {cls.__qualname__}: {exc}") from exc
+    schema = {f.name: (f, hints[f.name]) for f in dataclasses.fields(cls) if f.init}
+    _SCHEMAS[cls] = schema  # before checking, so that a self-referencing dataclass terminates
+    try:
+        for name, (_, tp) in schema.items():
+            _check_type(tp, f"{cls.__qualname__}.{name}")
+    except TypeError:
+        del _SCHEMAS[cls]
+        raise
+    return schema
+
+
+def _optional_inner(tp: Any) -> Any:
+    """``X`` for ``X | None`` / ``Optional[X]``; None for any other type."""
+    if get_origin(tp) in (typing.Union, types.UnionType):
+        args = get_args(tp)
+        rest = [a for a in args if a is not _NONE_TYPE]
+        if len(args) == 2 and len(rest) == 1:
+            return rest[0]
+    return None
+
+
+def _check_type(tp: Any, where: str) -> None:
+    origin, args = get_origin(tp), get_args(tp)
+    if tp in (float, int, bool, str):
+        return
+    inner = _optional_inner(tp)
+    if inner is not None:
+        return _check_type(inner, where)
+    if origin is Literal and args and all(isinstance(a, str | int | enum.Enum) for a in args):
+        return
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        return
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+        _schema(tp)
+        return
+    if origin is tuple and ((len(args) == 2 and args[1] is Ellipsis) or Ellipsis not in args):
+        for a in args[:1] if Ellipsis in args else args:
+            _check_type(a, where)
+        return
+    if origin is dict and len(args) == 2 and args[0] is str:
+        return _check_type(args[1], where)
+    raise TypeError(f"{where}: unsupported field type {tp!r} (see the table in swarm.config)")
+
+
+# --------------------------------------------------------------------------------------- the typed walk
+
+
+def _walk(tp: Any, value: Any, path: str, base: Any, mode: str) -> Any:
+    """``value`` of field type ``tp`` at ``path``: built into the typed value (mode ``_OBJ``) or turned into
+    plain data (``_DATA``, ``_TOML``). ``base`` is the field's default instance for dataclass fields."""
+    inner = _optional_inner(tp)
+    if inner is not None:
+        if value is None:
+            if mode == _TOML:
+                raise ConfigError(f"{path}: None cannot be written to TOML, which has no null")
+            return None
+        return _walk(inner, value, path, base, mode)
+    if tp is float:
+        return _to_float(value, path)
+    if tp is int:
+        return _to_int(value, path)
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+        raise _bad(path, "true or false", value)
+    if tp is str:
+        if isinstance(value, str):
+            return value if type(value) is str else str.__str__(value)
+        raise _bad(path, "a string", value)
+    origin, args = get_origin(tp), get_args(tp)
+    if origin is Literal:
+        choice = _to_literal(args, value, path)
+        return choice.value if mode != _OBJ and isinstance(choice, enum.Enum) else choice
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        member = _to_enum(tp, value, path)
+        return member if mode == _OBJ else member.value
+    if dataclasses.is_dataclass(tp):
+        base = base if isinstance(base, tp) else None
+        if mode == _OBJ:
+            if isinstance(value, tp):
+                return value
+            if not isinstance(value, Mapping):
+                raise _bad(path, "a table", value)
+            return _build(tp, value, path, base)
+        if not isinstance(value, tp):
+            raise _bad(path, f"a {tp.__qualname__}", value)
+        return _unbuild(tp, value, path, base, mode)
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise _bad(path, "an array", value)
+        if Ellipsis in args:
+            item_types = [args[0]] * len(value)
+        elif len(value) != len(args):
+            raise ConfigError(
+                f"{path}: expected an array of {len(args)} items, got {len(value)}: {_show(value)}"
+            )
+        else:
+            item_types = list(args)
+        pairs = enumerate(zip(item_types, value, strict=True))
+        items = (_walk(t, v, f"{path}[{i}]", None, mode) for i, (t, v) in pairs)
+        return tuple(items) if mode == _OBJ else list(items)
+    if origin is dict:
+        if not isinstance(value, Mapping):
+            raise _bad(path, "a table", value)
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise ConfigError(f"{path}: keys must be strings, got {k!r}")
+            out[k] = _walk(args[1], v, _join(path, k), None, mode)
+        return out
+    raise TypeError(f"{path}: unsupported field type {tp!r}")
+
+
+def _build(cls: type, data: Mapping[str, Any], path: str, base: Any) -> Any:
+    """The dataclass ``cls`` from the table ``data``; missing keys keep ``base``'s values (if given) or the
+    class defaults; the dataclass's own validation errors get the path."""
+    schema = _schema(cls)
+    unknown = [k for k in data if k not in schema]
+    if unknown:
+        raise _unknown_keys(path, unknown, list(schema))
+    kwargs = {}
+    for name, (f, tp) in schema.items():
+        where = _join(path, name)
+        if name not in data:
+            if base is None and _default(f) is dataclasses.MISSING:
+                raise ConfigError(f"{where}: missing (the field has no default)")
+            continue
+        value = data[name]
+        sub_base = None
+        if isinstance(value, Mapping):  # only a table can be built on top of a default instance
+            sub_base = getattr(base, name) if base is not None else _default(f)
+        kwargs[name] = _walk(tp, value, where, sub_base, _OBJ)
+    try:
+        return dataclasses.replace(base, **kwargs) if base is not None else cls(**kwargs)
+    except ValueError as exc:  # ConfigError included: the dataclass's own __post_init__ checks
+        raise ConfigError(_with_path(path, str(exc), schema)) from exc
+
+
+def _unbuild(cls: type, obj: Any, path: str, base: Any, mode: str) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for name, (f, tp) in _schema(cls).items():
+        where = _join(path, name)
+        value = getattr(obj, name)
+        default = getattr(base, name) if base is not None else _default(f)
+        if value is None and mode == _TOML:
+            if default is not None:
+                shown = "no default" if default is dataclasses.MISSING else f"the default {_show(default)}"
+                raise ConfigError(
+                    f"{where}: None cannot be written to TOML (no null; omitting the key would load {shown})"
+                )
+            continue
+        out[name] = _walk(tp, value, where, default, mode)
+    return out
+
+
+def _default(f: dataclasses.Field) -> Any:
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
+    return dataclasses.MISSING
+
+
+# ------------------------------------------------------------------------------------- scalar checks
+
+
+def _to_float(value: Any, path: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise _bad(path, "a number", value)
+    try:
+        f = float(value)
+    except OverflowError:
+        raise _bad(path, "a number within the float range", value) from None
+    if not math.isfinite(f):
+        raise _bad(path, "a finite number", value)
+    return f
+
+
+def _to_int(value: Any, path: str) -> int:
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+        return int(value)
+    if (
+        isinstance(value, numbers.Real)
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and float(value).is_integer()
+    ):
+        return int(value)
+    raise _bad(path, "an integer", value)
+
+
+def _to_literal(choices: tuple, value: Any, path: str) -> Any:
+    for c in choices:
+        if isinstance(c, enum.Enum):
+            if value is c or (_same_kind(value, c.value) and value == c.value):
+                return c
+        elif _same_kind(value, c) and value == c:
+            return c
+    shown = ", ".join(_show(c.value if isinstance(c, enum.Enum) else c) for c in choices)
+    raise _bad(path, f"one of {shown}", value)
+
+
+def _to_enum(cls: type[enum.Enum], value: Any, path: str) -> enum.Enum:
+    if isinstance(value, cls):
+        return value
+    values = [m.value for m in cls]
+    if not isinstance(value, bool) or any(isinstance(v, bool) for v in values):
+        try:
+            return cls(value)
+        except (ValueError, TypeError):
+            pass
+    raise _bad(path, f"one of {', '.join(_show(v) for v in values)}", value)
+
+
+def _same_kind(value: Any, choice: Any) -> bool:
+    if isinstance(choice, bool) or isinstance(value, bool):
+        return isinstance(value, bool) and isinstance(choice, bool)
+    return isinstance(value, type(choice))
+
+
+# ------------------------------------------------------------------------------------------ messages
+
+
+def _show(value: Any) -> str:
+    return _repr.repr(value)
+
+
+def _bad(path: str, expected: str, value: Any) -> ConfigError:
+    return ConfigError(f"{path or '(top level)'}: expected {expected}, got {_show(value)}")
+
+
+def _unknown_keys(path: str, unknown: list, valid: list[str]) -> ConfigError:
+    first = str(unknown[0])
+    close = difflib.get_close_matches(first, valid, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    where = f"in {path}" if path else "at the top level"
+    others = ", ".join(_join(path, str(k)) for k in unknown[1:])
+    more = f"; also unknown: {others}" if others else ""
+    return ConfigError(
+        f"{_join(path, first)}: unknown key{hint}; valid keys {where}: {', '.join(valid) or '(none)'}{more}"
+    )
+
+
+def _with_path(path: str, msg: str, fields: Mapping[str, Any]) -> str:
+    """``msg`` from the dataclass at ``path`` made to name the full path: kept if it does; a leading
+    ``<section>.<field>`` (the convention, e.g. ``estimator.sigma_range_m must ...``) or ``<section>``
+    re-rooted at ``path``; else prefixed with ``path:``."""
+    if not path or re.search(rf"(?<![\w.\"]){re.escape(path)}(?![\w\"])", msg):
+        return msg
+    lead = re.match(r"([A-Za-z_][\w.]*)\.(\w+)\b", msg)
+    if lead and lead.group(2) in fields:
+        return path + msg[lead.end(1) :]
+    last = path.rsplit(".", 1)[-1]
+    if msg.startswith(last) and msg[len(last) : len(last) + 1] in (".", ":", " "):
+        return path + msg[len(last) :]
+    return f"{path}: {msg}"
+
+
+# ---------------------------------------------------------------------------------------------- keys
+
+
+def _join(path: str, key: str) -> str:
+    part = key if _BARE_KEY.fullmatch(key) else _toml_str(key)
+    return f"{path}.{part}" if path else part
+
+
+def _join_parts(parts: tuple[str, ...]) -> str:
+    path = ""
+    for p in parts:
+        path = _join(path, p)
+    return path
+
+
+def _split_key(key: str) -> tuple[str, ...]:
+    """The parts of a dotted TOML key (``a.b``, ``agents."a 1".gain``)."""
+    if not isinstance(key, str) or not _DOTTED_KEY.fullmatch(key):
+        raise ConfigError(f"invalid override key {key!r}: expected a dotted key like estimator.sigma_range_m")
+    try:
+        node: Any = tomllib.loads(f"{key} = 0")
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"invalid override key {key!r}: {exc}") from exc
+    parts = []
+    while isinstance(node, dict):
+        ((part, node),) = node.items()
+        parts.append(part)
+    return tuple(parts)
+
+
+def _copy_tree(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {k: _copy_tree(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_copy_tree(v) for v in value]
+    return value
+
+
+def _merge(dst: dict[str, Any], src: Mapping[str, Any]) -> None:
+    for k, v in src.items():
+        if isinstance(v, Mapping) and isinstance(dst.get(k), dict):
+            _merge(dst[k], v)
+        else:
+            dst[k] = _copy_tree(v)
+
+
+# -------------------------------------------------------------------------------------- TOML writer
+
+
+def _emit_table(table: dict[str, Any], prefix: list[str], lines: list[str]) -> None:
+    """Key/value lines of ``table`` under a ``[prefix]`` header, then its sub-tables. The header is left
+    out when the table has only sub-tables (TOML creates it implicitly) but kept for an empty table."""
+    scalars = [(k, v) for k, v in table.items() if not isinstance(v, dict)]
+    tables = [(k, v) for k, v in table.items() if isinstance(v, dict)]
+    if prefix and (scalars or not tables):
+        if lines:
+            lines.append("")
+        lines.append("[" + ".".join(_toml_key(p) for p in prefix) + "]")
+    lines.extend(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in scalars)
+    for k, v in tables:
+        _emit_table(v, [*prefix, k], lines)
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v)  # shortest repr that round-trips exactly; always TOML float syntax when finite
+    if isinstance(v, str):
+        return _toml_str(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise ConfigError(f"cannot write {_show(v)} (of type {type(v).__name__}) to TOML")
+
+
+def _toml_key(k: str) -> str:
+    return k if _BARE_KEY.fullmatch(k) else _toml_str(k)
+
+
+def _toml_str(s: str) -> str:
+    """A TOML basic string: quotes, backslashes and control characters escaped (TOML 1.0, "String")."""
+    out = ['"']
+    for ch in s:
+        code = ord(ch)
+        if ch in _TOML_ESCAPES:
+            out.append(_TOML_ESCAPES[ch])
+        elif code < 0x20 or code == 0x7F:
+            out.append(f"\\u{code:04X}")
+        elif 0xD800 <= code <= 0xDFFF:
+            raise ConfigError(f"cannot write the lone surrogate U+{code:04X} in {_show(s)} to TOML")
+        else:
+            out.append(ch)
+    out.append('"')
+    return "".join(out)
+
+
+def _require_instance(obj: Any) -> None:
+    if isinstance(obj, type) or not dataclasses.is_dataclass(obj):
+        raise TypeError(f"expected a dataclass instance, got {obj!r}")
