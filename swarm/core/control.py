@@ -26,7 +26,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
-from swarm.core.rotations import quat_conj, quat_mul
+from swarm.core.rotations import cross, quat_conj, quat_mul
 from swarm.errors import ConfigError
 
 __all__ = [
@@ -156,7 +156,7 @@ def attitude_torque(
     q_e = quat_mul(quat_conj(q_ref), q)
     sign = np.where(q_e[..., 3:] < 0.0, -1.0, 1.0)
     Iw = inertia * w
-    gyro = np.cross(w, Iw)
+    gyro = cross(w, Iw)  # written out: np.cross costs ~15 us on 3-vectors
     tau = -params.kp_nm * sign * q_e[..., :3] - params.kd_nms * (w - w_ref) + gyro
     return saturate_norm(tau, params.max_torque_nm)
 

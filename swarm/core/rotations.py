@@ -84,7 +84,7 @@ def _as_last(x: ArrayLike, n: int, name: str) -> FloatArray:
     return a
 
 
-def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
+def cross(a: FloatArray, b: FloatArray) -> FloatArray:
     """Cross product over the last axis, written out (np.cross is slow for small batches)."""
     ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
     bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
@@ -148,8 +148,8 @@ def quat_rotate(q: ArrayLike, v: ArrayLike) -> FloatArray:
     v = _as_last(v, 3, "v")
     u, w = q[..., :3], q[..., 3:]
     s = 2.0 / np.sum(q * q, axis=-1, keepdims=True)
-    uxv = _cross(u, v)
-    return v + s * (w * uxv + _cross(u, uxv))
+    uxv = cross(u, v)
+    return v + s * (w * uxv + cross(u, uxv))
 
 
 def quat_to_matrix(q: ArrayLike) -> FloatArray:

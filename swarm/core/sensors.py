@@ -178,9 +178,10 @@ class UwbParams:
     """Smallest extra path length of an outlier [m]; outliers are always long (a reflected path)."""
     nlos_max_m: float = 1.5
     """Largest extra path length of an outlier [m]; the extra length is uniform in [min, max]."""
-    clock_drift_m_s: float | tuple[float, ...] = 0.0
-    """Growth rate of the clock-drift range bias [m/s], one value for every anchor link or one per
-    anchor. The bias is ``rate * (t - clock_drift_start_s)`` after the start, zero before."""
+    clock_drift_m_s: tuple[float, ...] = (0.0,)
+    """Growth rate of the clock-drift range bias [m/s]: one value for every anchor link, or one per
+    anchor (a plain number is accepted in code). The bias is ``rate * (t - clock_drift_start_s)`` after
+    the start, zero before."""
     clock_drift_start_s: float = 0.0
     """Time at which the clock-drift bias starts growing [s]."""
     dropout_probability: float = 0.0
@@ -202,7 +203,9 @@ class UwbParams:
         drift = self.clock_drift_m_s
         if isinstance(drift, list | np.ndarray):
             drift = tuple(float(d) for d in drift)
-            object.__setattr__(self, "clock_drift_m_s", drift)
+        elif isinstance(drift, int | float) and not isinstance(drift, bool):
+            drift = (drift,)
+        object.__setattr__(self, "clock_drift_m_s", drift)
         values = drift if isinstance(drift, tuple) else (drift,)
         if len(values) == 0 or not all(isinstance(d, int | float) and math.isfinite(d) for d in values):
             raise ConfigError(
@@ -255,6 +258,8 @@ class UwbRadio:
         if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] == 0 or not np.all(np.isfinite(a)):
             raise ValueError(f"anchors_ms must be a finite (N, 3) array with N >= 1, got shape {a.shape}")
         drift = params.clock_drift_m_s
+        if len(drift) == 1:
+            drift = drift[0]
         if isinstance(drift, tuple):
             if len(drift) != a.shape[0]:
                 raise ConfigError(

@@ -1,0 +1,105 @@
+"""``swarm sim SCENARIO``: one in-process closed-loop run (world, mothership radio and agents)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+from swarm.config import parse_override
+from swarm.errors import ConfigError
+
+
+def add_scenario_args(p: argparse.ArgumentParser) -> None:
+    """Arguments every command that loads a scenario shares."""
+    p.add_argument("scenario", help="bundled scenario name (docking) or a TOML file")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override one scenario field, e.g. --set estimator.sigma_range_m=0.03 (repeatable)",
+    )
+
+
+def load_from_args(args: argparse.Namespace):
+    from swarm.scenario import load_scenario
+
+    overrides = dict(parse_override(text) for text in args.overrides)
+    return load_scenario(args.scenario, overrides)
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--seed must be a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"--seed must be a non-negative integer, got {text!r}")
+    return value
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("sim", help="run one docking in-process and print its outcome")
+    add_scenario_args(p)
+    p.add_argument(
+        "--policy", choices=("fixed", "mdp"), default=None, help="switching policy (default: scenario's)"
+    )
+    p.add_argument("--seed", type=_seed, default=0, help="root seed of every random stream (default 0)")
+    p.add_argument(
+        "--json", type=Path, default=None, metavar="FILE", help="write the summary and time series"
+    )
+    p.add_argument("--plot", type=Path, default=None, metavar="FILE.png", help="draw trajectory and errors")
+    p.add_argument("--no-series", action="store_true", help="do not record time series (faster)")
+    p.set_defaults(func=run)
+
+
+def _fmt(v, unit: str = "", scale: float = 1.0, digits: int = 3) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    return f"{v * scale:.{digits}f}{unit}"
+
+
+def print_summary(res: dict) -> None:
+    print(f"scenario {res['scenario']}  policy {res['policy']}  seed {res['seed']}")
+    for cid, c in res["chasers"].items():
+        status = (
+            "DOCKED" if c["docked"] else ("COLLISION" if c["collided"] else f"not docked ({c['final_mode']})")
+        )
+        print(f"  {cid}: {status}")
+        print(f"    docking time      {_fmt(c['docking_time_s'], ' s', digits=2)}")
+        print(f"    total impulse     {_fmt(c['total_impulse_ns'], ' N s', digits=4)}")
+        print(f"    position error    {_fmt(c['position_error_m'], ' cm', 100.0, 3)}")
+        print(f"    attitude error    {_fmt(c['attitude_error_rad'], ' rad', digits=4)}")
+        print(f"    radii chosen      r2 = {c['r2_m']:.3f} m, r1 = {c['r1_m']:.3f} m")
+        print(f"    keep-out violated {c['keepout_violated']}")
+        print("    modes:")
+        for m in c["modes"]:
+            print(f"      t = {m['t_s']:7.2f} s  r = {m['range_m']:.3f} m  -> {m['mode']:<9} {m['reason']}")
+    print(
+        f"  wall {res['wall_s']:.2f} s for {res['sim_time_s']:.1f} s simulated: "
+        f"{res['realtime_factor']:.0f}x real time"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from swarm.sim.docking import run_docking
+
+    sc = load_from_args(args)
+    record = not args.no_series or args.plot is not None or args.json is not None
+    res = run_docking(sc, args.policy, args.seed, record_series=record)
+    print_summary(res)
+    if args.json is not None:
+        try:
+            args.json.write_text(json.dumps(res, indent=1))
+        except OSError as exc:
+            raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc}") from None
+        print(f"  summary written to {args.json}")
+    if args.plot is not None:
+        from swarm.sim.plot import plot_run
+
+        plot_run(res, sc, args.plot)
+        print(f"  plot written to {args.plot}")
+    return 0 if all(c["docked"] for c in res["chasers"].values()) else 1

@@ -1,0 +1,229 @@
+"""One vehicle's on-board software: estimator, switcher, guidance, controllers and thruster allocation.
+
+This object is what runs inside an agent process (``python -m agents``) and, unchanged, inside the
+in-process simulation (:mod:`swarm.sim.docking`): both feed it the same sensor samples in the same order
+and read the same commands, so one seed gives one trajectory in either runner. It does no I/O.
+
+Per tick (the IMU period) the runner calls :meth:`VehicleAgent.on_imu`, then :meth:`on_uwb` /
+:meth:`on_vision` for the samples of that tick, and at control ticks :meth:`control`, which returns the
+nozzle thrusts to hold until the next control tick. The chaser's guidance and vision use the target's
+*published estimate* (:meth:`set_target_estimate`), never the truth.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from swarm.core import rotations as rot
+from swarm.core.camera import solve_pnp
+from swarm.core.control import TranslationController, attitude_torque
+from swarm.core.estimator import MeasKind, PoseEstimator, UpdateStatus, chi2_gate
+from swarm.core.guidance import ChaserGuidance, Mode, NavInput, Reference, StationKeeping
+from swarm.core.mdp import make_switcher
+from swarm.core.thrusters import allocate, allocation_matrix
+
+
+@dataclass
+class TargetEstimate:
+    """The target's published estimate as the chaser uses it (frame ms)."""
+
+    t_s: float
+    p_ms: np.ndarray
+    q_ms_body: np.ndarray
+    cov_pos: np.ndarray
+
+
+@dataclass
+class Command:
+    """Output of one control step."""
+
+    t_s: float
+    thrusts_n: np.ndarray  # (n_nozzles,) [N], held until the next control step
+    force_body_n: np.ndarray  # achieved force (3,) [N], body frame
+    torque_body_nm: np.ndarray  # achieved torque (3,) [N m], body frame
+    saturated: bool
+    reference: Reference
+    events: list[dict] = field(default_factory=list)
+
+
+class VehicleAgent:
+    """Estimator + switcher + guidance + control of one vehicle (module docstring).
+
+    ``scenario`` is a :class:`swarm.scenario.Scenario`; ``vehicle_id`` names the vehicle in it;
+    ``p0_ms``/``v0_ms``/``q0_ms_body`` is the initial estimate and ``cov0`` its covariance (9,).
+    """
+
+    def __init__(self, scenario, vehicle_id: str, p0_ms, v0_ms, q0_ms_body, cov0, policy: str) -> None:
+        sc = scenario
+        spec = sc.vehicles[vehicle_id]
+        self.id = vehicle_id
+        self.role = spec.role
+        self.target_id = spec.target
+        self.sc = sc
+        self.mass_kg = sc.dynamics.mass_kg
+        self.inertia = np.asarray(sc.dynamics.inertia_diag_kgm2, dtype=float)
+        self.est = PoseEstimator.create(sc.estimator, p0_ms, v0_ms, q0_ms_body, cov0)
+        self.translation = TranslationController(self.mass_kg, sc.translation_control)
+        self.B = allocation_matrix(sc.thrusters)
+        self.max_thrust = sc.thrusters.max_thrust_n
+        self.anchors = np.asarray(sc.anchors_m, dtype=float)
+        self.markers_target = sc.markers.markers(sc.guidance.docking_face)
+        if self.role == "chaser":
+            self.switcher = make_switcher(policy, sc.mdp, sc.fixed)
+            q_mission = rot.euler_to_quat(np.radians(spec.euler_deg), sc.euler_seq)
+            self.guidance = ChaserGuidance(sc.guidance, self.switcher, q_mission, p0_ms)
+        else:
+            self.switcher = None
+            q_nom = rot.euler_to_quat(np.radians(spec.euler_deg), sc.euler_seq)
+            self.guidance = StationKeeping(spec.position_m, q_nom, sc.station)
+        self.target: TargetEstimate | None = None
+        self.w_body = np.zeros(3)  # latest gyro rate, for the rate damping of the attitude law
+        self.a_ms = np.zeros(3)  # known acceleration input of the filter: achieved thrust / mass
+        self.f_body = np.zeros(3)
+        window = max(1, round(sc.agent.health_window_s * sc.uwb.rate_hz))
+        self._gate_1d = chi2_gate(1, sc.estimator.gate_probability)
+        self._range_ok: deque[bool] = deque(maxlen=window)
+        self._range_d2: deque[float] = deque(maxlen=window)
+        self._last_vision_s = -np.inf
+        self.mode = self.guidance.mode
+        self.last_command: Command | None = None
+        self.t_s = 0.0
+
+    # ---- sensor inputs ------------------------------------------------------------------------------
+    def on_imu(self, t_s: float, dt_s: float, gyro_body, q_ahrs_ms_body=None) -> int:
+        """Propagate the filter with the gyro over ``dt_s`` (paper eq. 3) and the known acceleration of
+        the command in force; fuse the AHRS attitude when the vehicle has one."""
+        self.t_s = t_s
+        gyro = np.asarray(gyro_body, dtype=float)
+        if np.all(np.isfinite(gyro)):
+            self.w_body = gyro
+        # the commanded force acts along the body axes: express it with the current attitude estimate
+        self.a_ms = rot.quat_rotate(self.est.q_ms_body[0], self.f_body) / self.mass_kg
+        status = int(self.est.predict(gyro, self.a_ms, dt_s)[0])
+        if q_ahrs_ms_body is not None:
+            sig = np.radians(self.sc.ahrs.sigma_deg)
+            self.est.update_attitude(q_ahrs_ms_body, sig**2 * np.eye(3))
+        return status
+
+    def on_uwb(self, anchor_id: int, range_m: float) -> int:
+        """One two-way range to anchor ``anchor_id`` (index into the scenario's anchors)."""
+        if not (0 <= int(anchor_id) < len(self.anchors)):
+            return int(UpdateStatus.REFUSED_INVALID)
+        if not self.sc.agent.uwb_with_vision and self.relative_nav:
+            return int(UpdateStatus.SKIPPED)  # vision is the primary measurement near the target
+        status = int(self.est.update_range(self.anchors[int(anchor_id)], range_m)[0])
+        if status in (UpdateStatus.ACCEPTED, UpdateStatus.REJECTED_OUTLIER):
+            gate = self._gate_1d
+            self._range_ok.append(status == UpdateStatus.ACCEPTED)
+            self._range_d2.append(min(float(self.est.last_d2[0, MeasKind.RANGE]), gate))
+        return status
+
+    def on_vision(self, t_s: float, kind: str, data: np.ndarray) -> int:
+        """Vision of the target's docking-face markers: ``kind`` "features" (6, 3) marker positions in the
+        camera frame [m] (the paper's model) or "pixels" (6, 2) for PnP on board."""
+        if self.target is None:
+            return int(UpdateStatus.SKIPPED)
+        tgt = self.target
+        cov_t = tgt.cov_pos if self.sc.agent.vision_target_cov else np.zeros((3, 3))
+        if kind == "features":
+            markers_ms = tgt.p_ms + rot.quat_rotate(tgt.q_ms_body, self.markers_target)
+            status = int(self.est.update_features(markers_ms, data, target_cov_ms=cov_t)[0])
+        elif kind == "pixels":
+            pnp = solve_pnp(np.asarray(data, dtype=float), self.markers_target, self.sc.camera)
+            if pnp is None:
+                return int(UpdateStatus.REFUSED_INVALID)
+            status = int(
+                self.est.update_pose(
+                    tgt.p_ms, tgt.q_ms_body, pnp.t_cam_m, pnp.q_cam_target, pnp.cov_cam, cov_t
+                )[0]
+            )
+        else:
+            return int(UpdateStatus.REFUSED_INVALID)
+        if status == UpdateStatus.ACCEPTED:
+            self._last_vision_s = t_s
+        return status
+
+    @property
+    def vision_recent(self) -> bool:
+        return self.t_s - self._last_vision_s <= self.sc.agent.vision_recent_s
+
+    @property
+    def relative_nav(self) -> bool:
+        """Navigating relative to the target: vision is available, or it was during this final approach
+        (the camera loses the markers in the last centimetres, which are flown on the IMU)."""
+        return self.vision_recent or (self.mode in (Mode.DOCK, Mode.DOCKED) and self._last_vision_s > -np.inf)
+
+    def set_target_estimate(self, est: TargetEstimate) -> None:
+        """The target's latest published estimate; held fixed while vision is available when
+        ``agent.latch_target_with_vision`` (see :class:`swarm.scenario.AgentParams`)."""
+        if self.sc.agent.latch_target_with_vision and self.relative_nav and self.target is not None:
+            return
+        self.target = est
+
+    # ---- outputs ------------------------------------------------------------------------------------
+    def estimate(self) -> TargetEstimate:
+        """This vehicle's estimate in the form another agent consumes."""
+        return TargetEstimate(
+            self.t_s, self.est.p_ms[0].copy(), self.est.q_ms_body[0].copy(), self.est.P[0, :3, :3].copy()
+        )
+
+    @property
+    def sigma_pos_max_m(self) -> float:
+        return float(self.est.sigma_pos_max_m[0])
+
+    @property
+    def mahalanobis_d(self) -> float:
+        """RMS Mahalanobis distance of the recent ranges, each clipped at the gate (Algorithm 1's d)."""
+        return float(np.sqrt(np.mean(self._range_d2))) if self._range_d2 else 0.0
+
+    @property
+    def rejection_fraction(self) -> float:
+        return 1.0 - float(np.mean(self._range_ok)) if self._range_ok else 0.0
+
+    def control(self, t_s: float, dt_s: float) -> Command:
+        """Guidance, switcher and controllers on the current estimate; returns the nozzle thrusts."""
+        est = self.est
+        p, v, q = est.p_ms[0].copy(), est.v_ms[0].copy(), est.q_ms_body[0].copy()
+        tgt = self.target
+        nav = NavInput(
+            t_s=t_s,
+            p_ms=p,
+            v_ms=v,
+            q_ms_body=q,
+            sigma_pos_max_m=self.sigma_pos_max_m,
+            mahalanobis_d=self.mahalanobis_d,
+            rejection_fraction=self.rejection_fraction,
+            vision=self.vision_recent,
+            p_target_ms=tgt.p_ms if tgt is not None else p,
+            q_ms_target=tgt.q_ms_body if tgt is not None else q,
+        )
+        if self.role == "chaser" and tgt is None:  # nothing to fly to yet: hold still
+            ref = Reference(Mode.HOLD, p, np.zeros(3), np.zeros(3), q, 0.0)
+        else:
+            ref = self.guidance.step(nav, dt_s)
+        if ref.events:
+            self.translation.reset()
+        self.mode = ref.mode
+        if ref.mode is Mode.DOCKED:
+            thrusts = np.zeros(self.B.shape[1])
+            wrench = np.zeros(6)
+            saturated = False
+        else:
+            F_ms = self.translation.step(p, v, ref.p_ms, ref.v_ms, ref.a_ms)
+            tau = attitude_torque(q, self.w_body, ref.q_ms_body, None, self.inertia, self.sc.attitude_control)
+            if isinstance(self.guidance, StationKeeping):  # dead band: hold still inside it
+                if not self.guidance.translate:
+                    F_ms = np.zeros(3)
+                    self.translation.reset()
+                if not self.guidance.rotate:
+                    tau = np.zeros(3)
+            F_body = rot.quat_rotate(rot.quat_conj(q), F_ms)
+            alloc = allocate(np.concatenate([F_body, tau]), self.B, self.max_thrust)
+            thrusts, wrench, saturated = alloc.thrusts_n, alloc.wrench_achieved, bool(alloc.saturated)
+        self.f_body = wrench[:3].copy()
+        cmd = Command(t_s, thrusts, wrench[:3], wrench[3:], saturated, ref, list(ref.events))
+        self.last_command = cmd
+        return cmd

@@ -1,0 +1,465 @@
+"""Guidance modes of the docking chaser and the station-keeping target (paper section V, Fig. 1, Fig. 4).
+
+The chaser flies APPROACH (along the line of sight to the target, keeping its mission attitude), REORIENT
+(turns to the docking attitude while still closing along the line of sight), ALIGN (goes to the alignment
+point straight in front of the target's docking face, around the keep-out sphere) and DOCK (final approach
+along the face normal to contact), then DOCKED. The switch radii ``r2`` (APPROACH -> REORIENT) and ``r1``
+(REORIENT -> ALIGN) come from a switcher: fixed radii or Algorithm 1 (:mod:`swarm.core.mdp`). HOLD freezes
+the reference while the estimate is not trustworthy (and at start, until the first estimate has
+converged: "the chaser begins motion ... once the initial position is estimated with specified variance",
+paper Fig. 8); ABORT backs away from the target when the estimate fails close in, or a HOLD lasts too long.
+
+Everything here runs on *estimates*: the chaser's own and the target's published one, never the truth.
+The reference is a carrot that moves toward the mode's goal at the mode's speed and never leads the
+vehicle by more than ``max_lead_m``, so the LQR (section IV-B) tracks a smooth, feasible path.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from swarm.core import rotations as rot
+from swarm.errors import ConfigError
+
+FACES = ("+x", "-x", "+y", "-y", "+z", "-z")
+
+
+class Mode(enum.StrEnum):
+    HOLD = "HOLD"
+    APPROACH = "APPROACH"
+    REORIENT = "REORIENT"
+    ALIGN = "ALIGN"
+    DOCK = "DOCK"
+    DOCKED = "DOCKED"
+    ABORT = "ABORT"
+    STATION = "STATION"  # the target keeps station
+
+
+@dataclass(frozen=True)
+class GuidanceParams:
+    """Geometry, speeds and thresholds of the docking guidance (every number a scenario default)."""
+
+    docking_face: str = "+x"
+    """Target face to dock on, in the target body frame (one of +x, -x, +y, -y, +z, -z). The chaser docks
+    with its bottom (-z) face, where its camera is."""
+    half_size_m: float = 0.05
+    """Half the side of a TPODS cube [m]; ports sit at the face centres, so centres are twice this apart
+    at contact."""
+    align_distance_m: float = 0.25
+    """Distance of the alignment point from the target centre along the docking-face normal [m]."""
+    keepout_radius_m: float = 0.15
+    """Keep-out sphere around the target centre [m]: entered only in DOCK, inside the docking corridor."""
+    keepout_margin_m: float = 0.03
+    """Extra clearance the reference keeps outside the keep-out sphere [m]."""
+    corridor_half_angle_deg: float = 12.0
+    """Half-angle of the docking corridor around the face normal, apex at the target centre [deg]."""
+    approach_speed_m_s: float = 0.02
+    """Reference speed in APPROACH and REORIENT [m/s]."""
+    align_speed_m_s: float = 0.015
+    """Reference speed in ALIGN [m/s]."""
+    dock_speed_m_s: float = 0.008
+    """Reference speed in DOCK [m/s]."""
+    abort_speed_m_s: float = 0.02
+    """Reference speed while backing away in ABORT [m/s]."""
+    max_lead_m: float = 0.05
+    """The reference waits when it leads the estimated position by more than this [m]."""
+    align_tolerance_m: float = 0.02
+    """ALIGN -> DOCK once within this distance of the alignment point [m] ..."""
+    align_attitude_tolerance_rad: float = 0.05
+    """... with at most this attitude error to the docking attitude [rad] ..."""
+    align_speed_tolerance_m_s: float = 0.01
+    """... and at most this speed [m/s]."""
+    dock_overshoot_m: float = 0.01
+    """The DOCK reference aims this far past port contact so that contact is made [m]."""
+    contact_distance_m: float = 0.005
+    """Docking contact: port-to-port gap along the face normal at most this [m] ..."""
+    contact_lateral_m: float = 0.02
+    """... lateral port offset at most this [m] ..."""
+    contact_attitude_rad: float = 0.1
+    """... attitude error to the docking attitude at most this [rad] ..."""
+    contact_speed_m_s: float = 0.03
+    """... and closing speed at most this [m/s]; a contact outside these is a collision."""
+    hold_sigma_pos_m: float = 0.06
+    """HOLD when the largest position standard deviation exceeds this [m] ..."""
+    resume_sigma_pos_m: float = 0.04
+    """... and resume below this (hysteresis) [m]."""
+    hold_rejection_fraction: float = 0.5
+    """HOLD when more than this fraction of the recent range updates was rejected."""
+    abort_after_hold_s: float = 30.0
+    """A HOLD (after start) longer than this turns into ABORT [s]."""
+    abort_retreat_m: float = 0.3
+    """ABORT backs away to this distance beyond the keep-out sphere along the line of sight [m]."""
+    max_retries: int = 1
+    """After an ABORT the approach is retried this many times once the estimate is healthy again."""
+    stall_timeout_s: float = 2.0
+    """REORIENT held at the keep-out boundary this long without reaching r1 switches to ALIGN [s]."""
+
+    def __post_init__(self) -> None:
+        if self.docking_face not in FACES:
+            raise ConfigError(f"guidance.docking_face must be one of {FACES}, got {self.docking_face!r}")
+        for name in (
+            "half_size_m", "align_distance_m", "keepout_radius_m", "approach_speed_m_s", "align_speed_m_s",
+            "dock_speed_m_s", "abort_speed_m_s", "max_lead_m", "align_tolerance_m",
+            "align_attitude_tolerance_rad", "align_speed_tolerance_m_s", "contact_distance_m",
+            "contact_lateral_m", "contact_attitude_rad", "contact_speed_m_s", "hold_sigma_pos_m",
+            "resume_sigma_pos_m", "abort_after_hold_s", "abort_retreat_m", "stall_timeout_s",
+            "corridor_half_angle_deg",
+        ):  # fmt: skip
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ConfigError(f"guidance.{name} must be a positive number, got {v!r}")
+        for name in ("keepout_margin_m", "dock_overshoot_m"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ConfigError(f"guidance.{name} must be a non-negative number, got {v!r}")
+        if self.align_distance_m <= self.keepout_radius_m + self.keepout_margin_m:
+            raise ConfigError(
+                "guidance.align_distance_m must lie outside the keep-out sphere plus margin "
+                f"({self.keepout_radius_m + self.keepout_margin_m} m), got {self.align_distance_m!r}"
+            )
+        if self.keepout_radius_m <= 2 * self.half_size_m:
+            raise ConfigError(
+                f"guidance.keepout_radius_m must exceed the docked centre distance {2 * self.half_size_m} m, "
+                f"got {self.keepout_radius_m!r}"
+            )
+        if self.resume_sigma_pos_m > self.hold_sigma_pos_m:
+            raise ConfigError(
+                "guidance.resume_sigma_pos_m must not exceed hold_sigma_pos_m, "
+                f"got {self.resume_sigma_pos_m!r}"
+            )
+        if not (0 < self.hold_rejection_fraction <= 1):
+            raise ConfigError(
+                f"guidance.hold_rejection_fraction must be in (0, 1], got {self.hold_rejection_fraction!r}"
+            )
+        if int(self.max_retries) != self.max_retries or self.max_retries < 0:
+            raise ConfigError(
+                f"guidance.max_retries must be a non-negative integer, got {self.max_retries!r}"
+            )
+
+    @cached_property
+    def face_normal_target(self) -> np.ndarray:
+        """Outward unit normal of the docking face in the target body frame."""
+        n = np.zeros(3)
+        n["xyz".index(self.docking_face[1])] = 1.0 if self.docking_face[0] == "+" else -1.0
+        return n
+
+    @cached_property
+    def q_target_chaser_docked(self) -> np.ndarray:
+        """Chaser attitude relative to the target when docked, scalar-last: chaser +z along the face
+        normal (its bottom face and camera against the docking face), chaser +x along the next target
+        axis in x -> y -> z order (the port's clocking)."""
+        n = self.face_normal_target
+        axis = "xyz".index(self.docking_face[1])
+        x_c = np.zeros(3)
+        x_c[(axis + 1) % 3] = 1.0
+        y_c = np.cross(n, x_c)
+        return rot.matrix_to_quat(np.column_stack([x_c, y_c, n]))
+
+
+@dataclass(frozen=True)
+class NavInput:
+    """What the guidance knows at one evaluation (all estimates, frame ms)."""
+
+    t_s: float
+    p_ms: np.ndarray
+    v_ms: np.ndarray
+    q_ms_body: np.ndarray
+    sigma_pos_max_m: float
+    mahalanobis_d: float
+    """Mahalanobis distance of the recent range innovations (RMS of sqrt(d^2)); Algorithm 1's d."""
+    rejection_fraction: float
+    """Fraction of the recent range updates rejected by the gate."""
+    vision: bool
+    """A vision update was accepted recently."""
+    p_target_ms: np.ndarray
+    q_ms_target: np.ndarray
+
+
+@dataclass
+class Reference:
+    """Output of one guidance evaluation: the controllers' reference and the mode bookkeeping."""
+
+    mode: Mode
+    p_ms: np.ndarray
+    v_ms: np.ndarray
+    a_ms: np.ndarray
+    q_ms_body: np.ndarray
+    range_m: float
+    events: list[dict] = field(default_factory=list)
+    decision: object | None = None
+
+
+def docking_geometry(
+    p: GuidanceParams, p_target_ms, q_ms_target
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Face normal (ms), docked chaser centre (ms) and docking attitude q_ms_body for a target pose."""
+    n_ms = rot.quat_rotate(q_ms_target, p.face_normal_target)
+    p_docked = np.asarray(p_target_ms) + 2.0 * p.half_size_m * n_ms
+    q_dock = rot.quat_normalize(rot.quat_mul(q_ms_target, p.q_target_chaser_docked))
+    return n_ms, p_docked, q_dock
+
+
+def contact_state(p: GuidanceParams, p_c, v_c, q_c, p_t, q_t, v_t=None) -> dict:
+    """Port-to-port geometry of a chaser/target pair (used by the world on the truth): gap along the
+    face normal, lateral offset, attitude error to the docking attitude and closing speed."""
+    n_ms, p_docked, q_dock = docking_geometry(p, p_t, q_t)
+    rel = np.asarray(p_c) - p_docked
+    gap = float(rel @ n_ms)
+    lateral = float(np.linalg.norm(rel - gap * n_ms))
+    att = float(np.linalg.norm(rot.attitude_error(q_dock, q_c)))
+    v_rel = np.asarray(v_c) - (0.0 if v_t is None else np.asarray(v_t))
+    closing = float(-v_rel @ n_ms)
+    return {"gap_m": gap, "lateral_m": lateral, "attitude_rad": att, "closing_m_s": closing}
+
+
+def in_corridor(p: GuidanceParams, p_c, p_t, n_ms) -> bool:
+    rel = np.asarray(p_c) - np.asarray(p_t)
+    r = np.linalg.norm(rel)
+    return bool(r > 0 and rel @ n_ms >= r * np.cos(np.radians(p.corridor_half_angle_deg)))
+
+
+class ChaserGuidance:
+    """Mode logic and reference generation of the chaser (module docstring).
+
+    ``switcher`` is a :class:`swarm.core.mdp.FixedSwitcher` or :class:`swarm.core.mdp.MdpSwitcher`: it is
+    asked at every evaluation inside ``r_t`` (``evaluate``) and supplies ``r1_m`` and ``r2_m``.
+    """
+
+    def __init__(self, params: GuidanceParams, switcher, q_mission_ms_body, p_start_ms) -> None:
+        self.p = params
+        self.switcher = switcher
+        self.q_mission = rot.quat_normalize(np.asarray(q_mission_ms_body, dtype=float))
+        self.mode = Mode.HOLD
+        self.resume_mode = Mode.APPROACH
+        self.started = False
+        self.p_ref = np.asarray(p_start_ms, dtype=float).copy()
+        self.mode_since_s = 0.0
+        self.stall_since_s: float | None = None
+        self.retries = 0
+        self.history: list[dict] = []
+
+    # ---- helpers --------------------------------------------------------------------------------
+    def _switch(self, t_s: float, new: Mode, r: float, reason: str, out: list[dict]) -> None:
+        ev = {"t_s": t_s, "from": self.mode.value, "to": new.value, "range_m": r, "reason": reason}
+        self.history.append(ev)
+        out.append(ev)
+        self.mode = new
+        self.mode_since_s = t_s
+        self.stall_since_s = None
+
+    def _carrot(self, nav: NavInput, goal: np.ndarray, speed: float, dt: float) -> np.ndarray:
+        """Move the reference toward ``goal`` at ``speed``; wait while it leads the vehicle too far."""
+        delta = goal - self.p_ref
+        dist = float(np.linalg.norm(delta))
+        lead = float(np.linalg.norm(self.p_ref - nav.p_ms))
+        if dist < 1e-9 or lead > self.p.max_lead_m:
+            return np.zeros(3)
+        step = min(dist, speed * dt)
+        v = delta / dist * (step / dt)
+        self.p_ref = self.p_ref + v * dt
+        return v
+
+    def _arc_goal(self, p_t: np.ndarray, n_ms: np.ndarray, goal: np.ndarray, speed: float, dt: float):
+        """Next goal on the way to ``goal`` that keeps outside the keep-out sphere: straight when the
+        segment clears the sphere, else along the great circle through the reference toward the normal."""
+        clear = self.p.keepout_radius_m + self.p.keepout_margin_m
+        a, b = self.p_ref - p_t, goal - p_t
+        seg = b - a
+        s = np.clip(-(a @ seg) / max(seg @ seg, 1e-12), 0.0, 1.0)
+        if np.linalg.norm(a + s * seg) >= clear:
+            return goal
+        radius = max(np.linalg.norm(a), clear)
+        u = a / np.linalg.norm(a)
+        axis = np.cross(u, n_ms)
+        if np.linalg.norm(axis) < 1e-9:  # exactly opposite the face: any perpendicular axis will do
+            axis = np.cross(u, np.eye(3)[np.argmin(np.abs(u))])
+        axis /= np.linalg.norm(axis)
+        ang = min(np.arccos(np.clip(u @ n_ms, -1.0, 1.0)), 4.0 * speed * dt / radius + 0.05)
+        return p_t + radius * rot.quat_rotate(rot.rotvec_exp(axis * ang), u)
+
+    # ---- one evaluation -------------------------------------------------------------------------
+    def step(self, nav: NavInput, dt: float) -> Reference:
+        p = self.p
+        events: list[dict] = []
+        t = nav.t_s
+        p_t = np.asarray(nav.p_target_ms, dtype=float)
+        n_ms, p_docked, q_dock = docking_geometry(p, p_t, nav.q_ms_target)
+        r = float(np.linalg.norm(nav.p_ms - p_t))
+        qe = rot.quat_mul(rot.quat_conj(q_dock), nav.q_ms_body)
+        qe_norm = float(np.linalg.norm(qe[:3]))
+        unhealthy = (
+            nav.sigma_pos_max_m > p.hold_sigma_pos_m or nav.rejection_fraction > p.hold_rejection_fraction
+        )
+        healthy = (
+            nav.sigma_pos_max_m < p.resume_sigma_pos_m and nav.rejection_fraction <= p.hold_rejection_fraction
+        )
+        decision = None
+
+        # --- health supervision (HOLD / ABORT) ---
+        if self.mode is Mode.HOLD:
+            if healthy:
+                reason = "initial estimate converged" if not self.started else "estimate healthy again"
+                reason += f" (sigma_pos={nav.sigma_pos_max_m:.3f} m)"
+                self.started = True
+                self.p_ref = nav.p_ms.copy()
+                self._switch(t, self.resume_mode, r, reason, events)
+            elif self.started and t - self.mode_since_s > p.abort_after_hold_s:
+                self._switch(t, Mode.ABORT, r, f"HOLD longer than {p.abort_after_hold_s:.0f} s", events)
+        elif self.mode in (Mode.APPROACH, Mode.REORIENT, Mode.ALIGN) and unhealthy:
+            self.resume_mode = self.mode
+            why = (
+                f"sigma_pos={nav.sigma_pos_max_m:.3f} m > {p.hold_sigma_pos_m} m"
+                if nav.sigma_pos_max_m > p.hold_sigma_pos_m
+                else f"{nav.rejection_fraction:.0%} of recent ranges rejected"
+            )
+            self.p_ref = nav.p_ms.copy()
+            self._switch(t, Mode.HOLD, r, "estimate not trustworthy: " + why, events)
+        elif self.mode is Mode.DOCK and unhealthy:
+            self._switch(t, Mode.ABORT, r, "estimate not trustworthy inside the keep-out sphere", events)
+
+        # --- switching radii (Algorithm 1 or fixed) ---
+        if self.mode in (Mode.APPROACH, Mode.REORIENT):
+            decision = self.switcher.evaluate(t, r, nav.mahalanobis_d, qe_norm, nav.sigma_pos_max_m)
+        r1, r2 = self.switcher.r1_m, self.switcher.r2_m
+        corridor = in_corridor(p, nav.p_ms, p_t, n_ms)
+
+        if self.mode is Mode.APPROACH and r <= r2:
+            self._switch(t, Mode.REORIENT, r, f"r={r:.3f} m <= r2={r2:.3f} m", events)
+        if self.mode is Mode.REORIENT:
+            if corridor and nav.vision and r <= p.align_distance_m + p.align_tolerance_m:
+                self._switch(
+                    t, Mode.DOCK, r,
+                    f"ALIGN skipped: already in the docking corridor with vision (sigma_pos="
+                    f"{nav.sigma_pos_max_m * 1000:.1f} mm)", events,
+                )  # fmt: skip
+            elif r <= r1:
+                self._switch(t, Mode.ALIGN, r, f"r={r:.3f} m <= r1={r1:.3f} m", events)
+            elif self.stall_since_s is not None and t - self.stall_since_s > p.stall_timeout_s:
+                self._switch(
+                    t, Mode.ALIGN, r,
+                    f"held at the keep-out boundary {p.stall_timeout_s:.0f} s above r1={r1:.3f} m", events,
+                )  # fmt: skip
+        if self.mode is Mode.ALIGN:
+            p_align = p_t + p.align_distance_m * n_ms
+            att_err = 2.0 * np.arcsin(min(qe_norm, 1.0))
+            if (
+                np.linalg.norm(nav.p_ms - p_align) <= p.align_tolerance_m
+                and att_err <= p.align_attitude_tolerance_rad
+                and np.linalg.norm(nav.v_ms) <= p.align_speed_tolerance_m_s
+            ):
+                self._switch(t, Mode.DOCK, r, "at the alignment point", events)
+        if self.mode is Mode.DOCK:
+            c = contact_state(p, nav.p_ms, nav.v_ms, nav.q_ms_body, p_t, nav.q_ms_target)
+            if c["gap_m"] <= p.contact_distance_m:
+                self._switch(t, Mode.DOCKED, r, f"estimated port gap {c['gap_m'] * 1000:.1f} mm", events)
+        if self.mode is Mode.ABORT and self.retries < p.max_retries and healthy:
+            retreat = np.linalg.norm(self.p_ref - p_t) >= p.keepout_radius_m + p.abort_retreat_m - 1e-3
+            if retreat and t - self.mode_since_s > 5.0:
+                self.retries += 1
+                self.p_ref = nav.p_ms.copy()
+                self._switch(t, Mode.APPROACH, r, f"retry {self.retries} after abort", events)
+
+        # --- reference for the mode ---
+        v_ref = np.zeros(3)
+        q_ref = q_dock
+        clear = p.keepout_radius_m + p.keepout_margin_m
+        if self.mode in (Mode.APPROACH, Mode.REORIENT):
+            u = (self.p_ref - p_t) / max(np.linalg.norm(self.p_ref - p_t), 1e-9)
+            stop = clear
+            goal = p_t + u * stop
+            v_ref = self._carrot(nav, goal, p.approach_speed_m_s, dt)
+            if self.mode is Mode.APPROACH:
+                q_ref = self.q_mission
+            if self.mode is Mode.REORIENT and np.linalg.norm(self.p_ref - goal) < 1e-6:
+                self.stall_since_s = t if self.stall_since_s is None else self.stall_since_s
+        elif self.mode is Mode.ALIGN:
+            p_align = p_t + p.align_distance_m * n_ms
+            v_ref = self._carrot(
+                nav, self._arc_goal(p_t, n_ms, p_align, p.align_speed_m_s, dt), p.align_speed_m_s, dt
+            )
+        elif self.mode is Mode.DOCK:
+            v_ref = self._carrot(nav, p_docked - p.dock_overshoot_m * n_ms, p.dock_speed_m_s, dt)
+        elif self.mode is Mode.ABORT:
+            u = (nav.p_ms - p_t) / max(r, 1e-9)
+            goal = p_t + u * (p.keepout_radius_m + p.abort_retreat_m)
+            v_ref = self._carrot(nav, goal, p.abort_speed_m_s, dt)
+            q_ref = nav.q_ms_body
+        elif self.mode is Mode.HOLD:
+            q_ref = nav.q_ms_body if not self.started else q_ref
+            if not self.started:
+                q_ref = self.q_mission
+        elif self.mode is Mode.DOCKED:
+            self.p_ref = nav.p_ms.copy()
+        return Reference(
+            mode=self.mode, p_ms=self.p_ref.copy(), v_ms=v_ref, a_ms=np.zeros(3), q_ms_body=q_ref,
+            range_m=r, events=events, decision=decision,
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class StationParams:
+    """Dead-band station keeping of a target: it fires only when its estimate leaves the dead band, so a
+    target being docked on holds still instead of chasing the noise of its own estimate."""
+
+    deadband_m: float = 0.04
+    """Translation control starts when the estimated position leaves this ball around the station [m] ..."""
+    settle_m: float = 0.01
+    """... and stops once back within this [m] ..."""
+    settle_speed_m_s: float = 0.002
+    """... and slower than this [m/s] (hysteresis: no limit cycle at the dead-band edge)."""
+    deadband_deg: float = 3.0
+    """Attitude control starts above this estimated attitude error [deg] ..."""
+    settle_deg: float = 0.5
+    """... and stops below this [deg]."""
+    converged_sigma_m: float = 0.02
+    """No control at all until the estimate's largest position sigma is below this [m]: a target must
+    not fly to where a not-yet-converged estimate says the station is."""
+
+    def __post_init__(self) -> None:
+        for name in (
+            "deadband_m",
+            "settle_m",
+            "settle_speed_m_s",
+            "deadband_deg",
+            "settle_deg",
+            "converged_sigma_m",
+        ):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ConfigError(f"station.{name} must be a non-negative number, got {v!r}")
+
+
+class StationKeeping:
+    """The target's guidance: hold the initial pose (mode STATION) with a dead band (:class:`StationParams`).
+    :attr:`translate` and :attr:`rotate` say whether the controllers should act this step."""
+
+    def __init__(self, p_ms, q_ms_body, params: StationParams | None = None) -> None:
+        self.params = params or StationParams()
+        self.p_ref = np.asarray(p_ms, dtype=float).copy()
+        self.q_ref = rot.quat_normalize(np.asarray(q_ms_body, dtype=float))
+        self.mode = Mode.STATION
+        self.history: list[dict] = []
+        self.translate = False
+        self.rotate = False
+
+    def step(self, nav: NavInput, dt: float) -> Reference:
+        p = self.params
+        r = float(np.linalg.norm(nav.p_ms - self.p_ref))
+        att = float(np.linalg.norm(rot.attitude_error(self.q_ref, nav.q_ms_body)))
+        if nav.sigma_pos_max_m > p.converged_sigma_m:
+            self.translate = self.rotate = False
+        else:
+            speed = float(np.linalg.norm(nav.v_ms))
+            if self.translate:
+                self.translate = not (r < p.settle_m and speed < p.settle_speed_m_s)
+            else:
+                self.translate = r > p.deadband_m
+            if self.rotate:
+                self.rotate = att > np.radians(p.settle_deg)
+            else:
+                self.rotate = att > np.radians(p.deadband_deg)
+        return Reference(Mode.STATION, self.p_ref.copy(), np.zeros(3), np.zeros(3), self.q_ref, r)

@@ -1,0 +1,226 @@
+"""In-process closed loop: world, mothership radio network and every agent stepped in one process.
+
+The order of one tick ``k`` is the contract the distributed swarm (issue 4) follows as well:
+
+1. every agent takes its sensor frame of tick ``k`` (gyro predict, AHRS, the UWB range the mothership
+   produced from the truth at ``t_k``, vision), a chaser using its target's estimate of tick ``k - 1``;
+2. every agent publishes its estimate of tick ``k``; at control ticks it runs guidance + control and
+   returns nozzle thrusts, which the world holds until the next control tick;
+3. the world checks contact and the keep-out sphere on the truth, then steps to tick ``k + 1``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from swarm.core import rotations as rot
+from swarm.core.agent import VehicleAgent
+from swarm.core.guidance import Mode, docking_geometry
+from swarm.core.world import UwbNetwork, World, stream
+
+TERMINAL = (Mode.DOCKED,)
+
+
+def initial_estimate(sc, vehicle_index: int, x_true: np.ndarray, seed: int):
+    """Initial estimate of a vehicle: truth plus N(0, sigma^2) from its ``init`` stream (also P0)."""
+    sig = sc.initial.sigmas
+    e = stream(seed, vehicle_index, "init").normal(size=9) * sig
+    p0 = x_true[0:3] + e[0:3]
+    v0 = x_true[3:6] + e[3:6]
+    q0 = rot.multiplicative_reset(x_true[6:10], -e[6:9])
+    return p0, v0, q0, sig**2
+
+
+@dataclass
+class ChaserOutcome:
+    """What happened to one chaser (DESIGN.md section 8 field names in :meth:`as_dict`)."""
+
+    docked: bool = False
+    collided: bool = False
+    docking_time_s: float | None = None
+    total_impulse_ns: float = 0.0
+    position_error_m: float | None = None
+    attitude_error_rad: float | None = None
+    contact: dict | None = None
+    keepout_violated: bool = False
+    modes: list[dict] = field(default_factory=list)
+    events: list[dict] = field(default_factory=list)
+    series: dict[str, list] = field(default_factory=dict)
+
+
+def _new_series() -> dict[str, list]:
+    keys = ("t_s", "p_true_ms", "p_est_ms", "q_true_ms_body", "q_est_ms_body", "cov_pos", "mode")
+    return {k: [] for k in keys}
+
+
+class DockingSim:
+    """One run of a scenario in-process; :meth:`run` returns the JSON-ready summary."""
+
+    def __init__(self, scenario, policy: str | None = None, seed: int = 0, record_series: bool = True):
+        self.sc = scenario
+        self.policy = policy or scenario.policy
+        self.seed = int(seed)
+        self.record_series = record_series
+        self.world = World(scenario, self.seed)
+        self.network = UwbNetwork(scenario, self.seed)
+        self.agents: dict[str, VehicleAgent] = {}
+        for i, vid in enumerate(scenario.vehicles):
+            p0, v0, q0, cov0 = initial_estimate(scenario, i, self.world.x[vid], self.seed)
+            self.agents[vid] = VehicleAgent(scenario, vid, p0, v0, q0, cov0, self.policy)
+        self.outcomes = {c: ChaserOutcome(series=_new_series()) for c in scenario.chasers}
+        self.done: set[str] = set()
+
+    def run(self) -> dict:
+        sc = self.sc
+        dt = sc.dt_s
+        control_every = sc.every(sc.translation_control.rate_hz)
+        control_dt = control_every * dt
+        max_k = round(sc.sim.max_duration_s / dt)
+        watched = {sc.vehicles[c].target for c in sc.chasers}
+        snap = {vid: self.agents[vid].estimate() for vid in watched}
+        frames = None
+        wall0 = time.perf_counter()
+        k = 0
+        for k in range(max_k + 1):
+            t = k * dt
+            for cid in sc.chasers:
+                self.agents[cid].set_target_estimate(snap[sc.vehicles[cid].target])
+            if frames is not None:
+                ranges = self.network.step(k, t, self.world.x)
+                for vid, agent in self.agents.items():
+                    fr = frames[vid]
+                    agent.on_imu(t, dt, fr.gyro_body, fr.q_ahrs_ms_body)
+                    if vid in ranges:
+                        agent.on_uwb(ranges[vid].anchor_id, ranges[vid].range_m)
+                    if fr.vision is not None:
+                        agent.on_vision(t, fr.vision_kind, fr.vision)
+            snap = {vid: self.agents[vid].estimate() for vid in watched}
+            if k % control_every == 0:
+                for vid, agent in self.agents.items():
+                    if vid in self.done:
+                        continue
+                    cmd = agent.control(t, control_dt)
+                    self.world.set_command(vid, cmd.thrusts_n)
+                    if vid in self.outcomes:
+                        self._log_events(vid, cmd.events)
+            self._check_truth(k, t)
+            if len(self.done) == len(self.outcomes):
+                break
+            frames = self.world.step()
+        wall = time.perf_counter() - wall0
+        return self._summary(k * dt, wall)
+
+    def _log_events(self, cid: str, events: list[dict]) -> None:
+        out = self.outcomes[cid]
+        for ev in events:
+            out.events.append(ev)
+            out.modes.append(
+                {"mode": ev["to"], "t_s": ev["t_s"], "range_m": ev["range_m"], "reason": ev["reason"]}
+            )
+
+    def _check_truth(self, k: int, t: float) -> None:
+        sc, g = self.sc, self.sc.guidance
+        for cid, out in self.outcomes.items():
+            agent = self.agents[cid]
+            tid = sc.vehicles[cid].target
+            if self.record_series and k % sc.sim.series_every == 0 and cid not in self.done:
+                s = out.series
+                s["t_s"].append(t)
+                s["p_true_ms"].append(self.world.x[cid][0:3].tolist())
+                s["p_est_ms"].append(agent.est.p_ms[0].tolist())
+                s["q_true_ms_body"].append(self.world.x[cid][6:10].tolist())
+                s["q_est_ms_body"].append(agent.est.q_ms_body[0].tolist())
+                s["cov_pos"].append(agent.est.P[0, :3, :3].tolist())
+                s["mode"].append(agent.mode.value)
+            if cid in self.done:
+                continue
+            centre_m = float(np.linalg.norm(self.world.x[cid][0:3] - self.world.x[tid][0:3]))
+            if centre_m > g.keepout_radius_m + 2 * g.half_size_m:
+                continue  # far from the target: no contact, no keep-out violation possible
+            if self.world.keepout_violated(cid, tid, docking=agent.mode in (Mode.DOCK, Mode.DOCKED)):
+                if not out.keepout_violated:
+                    rng = float(np.linalg.norm(self.world.x[cid][0:3] - self.world.x[tid][0:3]))
+                    out.events.append(
+                        {"t_s": t, "keepout_violation": True, "mode": agent.mode.value, "range_m": rng}
+                    )
+                out.keepout_violated = True
+            c = self.world.contact(cid, tid)
+            # the chaser's docking face reaches the target's docking face (in front of it, the faces
+            # overlapping), or the two cubes' centres come closer than a cube side: contact
+            touching = (
+                -2 * g.half_size_m <= c["gap_m"] <= g.contact_distance_m
+                and c["lateral_m"] <= 2 * g.half_size_m
+            )
+            if touching or centre_m < 2 * g.half_size_m:
+                ok = (
+                    c["lateral_m"] <= g.contact_lateral_m
+                    and c["attitude_rad"] <= g.contact_attitude_rad
+                    and c["closing_m_s"] <= g.contact_speed_m_s
+                )
+                out.docked, out.collided = ok, not ok
+                out.contact = c
+                out.docking_time_s = t
+                xt = self.world.x[tid]
+                _, p_docked, q_dock = docking_geometry(g, xt[0:3], xt[6:10])
+                xc = self.world.x[cid]
+                out.position_error_m = float(np.linalg.norm(xc[0:3] - p_docked))
+                out.attitude_error_rad = float(np.linalg.norm(rot.attitude_error(q_dock, xc[6:10])))
+                self.world.attach(cid, tid)
+                self.done.add(cid)
+                self._log_events(
+                    cid,
+                    [{"t_s": t, "from": agent.mode.value, "to": "CONTACT" if ok else "COLLISION",
+                      "range_m": float(np.linalg.norm(xc[0:3] - xt[0:3])),
+                      "reason": "port contact within tolerance" if ok else f"contact outside tolerance {c}"}],
+                )  # fmt: skip
+
+    def _summary(self, t_end: float, wall: float) -> dict:
+        chasers = {}
+        for cid, out in self.outcomes.items():
+            agent = self.agents[cid]
+            out.total_impulse_ns = self.world.impulse_ns[cid]
+            sw = agent.switcher
+            d = {
+                "docked": out.docked,
+                "collided": out.collided,
+                "docking_time_s": out.docking_time_s,
+                "total_impulse_ns": out.total_impulse_ns,
+                "position_error_m": out.position_error_m,
+                "attitude_error_rad": out.attitude_error_rad,
+                "final_mode": agent.mode.value,
+                "modes": out.modes,
+                "r1_m": sw.r1_m,
+                "r2_m": sw.r2_m,
+                "keepout_violated": out.keepout_violated,
+                "contact": out.contact,
+                "estimator": {
+                    "rejected_ranges": int(agent.est.count(0, "rejected")[0]),
+                    "accepted_ranges": int(agent.est.count(0, "accepted")[0]),
+                    "accepted_vision": int(
+                        agent.est.count(1, "accepted")[0] + agent.est.count(2, "accepted")[0]
+                    ),
+                },
+            }
+            if self.policy == "mdp":
+                d["decisions"] = [dec.as_dict() for dec in sw.decisions]
+            if self.record_series:
+                d["series"] = out.series
+            chasers[cid] = d
+        return {
+            "scenario": self.sc.name,
+            "policy": self.policy,
+            "seed": self.seed,
+            "sim_time_s": t_end,
+            "wall_s": wall,
+            "realtime_factor": t_end / wall if wall > 0 else None,
+            "target_impulse_ns": {v: self.world.impulse_ns[v] for v in self.sc.vehicles if v not in chasers},
+            "chasers": chasers,
+        }
+
+
+def run_docking(scenario, policy: str | None = None, seed: int = 0, record_series: bool = True) -> dict:
+    """Run one docking in-process and return its summary (DESIGN.md section 8 fields per chaser)."""
+    return DockingSim(scenario, policy, seed, record_series).run()
