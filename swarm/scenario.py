@@ -163,7 +163,8 @@ class Scenario:
     translation_control: TranslationLqrParams = field(default_factory=TranslationLqrParams)
     guidance: GuidanceParams = field(default_factory=GuidanceParams)
     station: StationParams = field(default_factory=StationParams)
-    mdp: MdpParams = field(default_factory=MdpParams)
+    mdp: MdpParams = field(default_factory=lambda: MdpParams(r_d_m=0.10))
+    """r_d: the centre-to-centre range at contact, two 10 cm cubes face to face."""
     fixed: FixedParams = field(default_factory=FixedParams)
 
     def __post_init__(self) -> None:

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from swarm.core._rot_nb import qconj, qexp, qlog, qmat, qmul, qnormalize, skew3
+from swarm.core._rot_nb import qconj, qexp, qexp3, qlog, qmat, qmul, qnormalize, skew3
 
 # Measurement types (columns of the counters).
 TYPE_RANGE = 0
@@ -98,29 +98,15 @@ def _sandwich(F, P):
 
 
 @njit(cache=True)
-def _translation_noise(dt, q_acc):
-    """Discrete white-noise-acceleration covariance, Bar-Shalom, Li & Kirubarajan 2001 eq. 6.2.3-8."""
-    Q = np.zeros((6, 6))
-    a = q_acc * dt**3 / 3.0
-    b = q_acc * dt**2 / 2.0
-    c = q_acc * dt
-    for i in range(3):
-        Q[i, i] = a
-        Q[i, i + 3] = b
-        Q[i + 3, i] = b
-        Q[i + 3, i + 3] = c
-    return Q
-
-
-@njit(cache=True)
 def predict_one(X, P, ST_I, ST_F, w_body, a_ms, dt, PRM):
     """Propagate one filter over ``dt`` [s] with gyro rate ``w_body`` [rad/s] (paper eq. 3, an input,
     not a state) and known acceleration ``a_ms`` [m/s^2] (commanded thrust / mass, frame ``c``).
 
-    Translation: constant-acceleration kinematics over the step. Attitude: ``q <- q (x) exp(w dt)``; the
-    error transition is ``Phi = exp(-[w dt x])`` (Crassidis & Junkins 2011, sec. 7.2.4, body-frame error).
-    Tandem propagates the 6x6 and 3x3 blocks; compounded the full 9x9 (the cost the paper's Table I
-    compares).
+    Translation: constant-acceleration kinematics over the step, ``F = [[I, dt I], [0, I]]``. Attitude:
+    ``q <- q (x) exp(w dt)``; the error transition is ``Phi = exp(-[w dt x])`` (Crassidis & Junkins 2011,
+    sec. 7.2.4, body-frame error). ``P <- F P F^T + Q`` is evaluated block by block, in place, using the
+    structure of ``F``: tandem updates the 6x6 and 3x3 blocks, compounded also the 6x3 cross blocks (the
+    extra work the paper's Table I charges to the compounded structure).
     """
     if not (np.isfinite(dt) and _all_finite(w_body) and _all_finite(a_ms)):
         ST_I[COUNT_REFUSED, TYPE_PREDICT] += 1
@@ -131,38 +117,166 @@ def predict_one(X, P, ST_I, ST_F, w_body, a_ms, dt, PRM):
     for i in range(3):
         X[i] += X[3 + i] * dt + 0.5 * a_ms[i] * dt * dt
         X[3 + i] += a_ms[i] * dt
-    phi = w_body * dt
-    dq = qexp(phi)
-    X[6:10] = qnormalize(qmul(X[6:10], dq))
-    Phi = qmat(dq).T
-
-    Qt = _translation_noise(dt, PRM[PRM_ACCEL_PSD])
+    bx, by, bz, bw = qexp3(w_body[0] * dt, w_body[1] * dt, w_body[2] * dt)
+    ax, ay, az, aw = X[6], X[7], X[8], X[9]
+    # q <- q (x) dq (Hamilton product, as _rot_nb.qmul), renormalised
+    nx = aw * bx + bw * ax + (ay * bz - az * by)
+    ny = aw * by + bw * ay + (az * bx - ax * bz)
+    nz = aw * bz + bw * az + (ax * by - ay * bx)
+    nw = aw * bw - (ax * bx + ay * by + az * bz)
+    inv = 1.0 / np.sqrt(nx * nx + ny * ny + nz * nz + nw * nw)
+    X[6], X[7], X[8], X[9] = nx * inv, ny * inv, nz * inv, nw * inv
+    # Phi = R(dq)^T, as scalars f_ij
+    f00 = 1 - 2 * (by * by + bz * bz)
+    f10 = 2 * (bx * by - bz * bw)
+    f20 = 2 * (bx * bz + by * bw)
+    f01 = 2 * (bx * by + bz * bw)
+    f11 = 1 - 2 * (bx * bx + bz * bz)
+    f21 = 2 * (by * bz - bx * bw)
+    f02 = 2 * (bx * bz - by * bw)
+    f12 = 2 * (by * bz + bx * bw)
+    f22 = 1 - 2 * (bx * bx + by * by)
+    # translation block: P_pp += dt (P_pv + P_vp) + dt^2 P_vv, P_pv += dt P_vv, P_vp += dt P_vv
+    for i in range(3):
+        for j in range(3):
+            pv = P[i, 3 + j]
+            vp = P[3 + i, j]
+            vv = P[3 + i, 3 + j]
+            P[i, j] += dt * (pv + vp) + dt * dt * vv
+            P[i, 3 + j] = pv + dt * vv
+            P[3 + i, j] = vp + dt * vv
+    # white-noise-acceleration Q, Bar-Shalom, Li & Kirubarajan 2001 eq. 6.2.3-8
+    q_acc = PRM[PRM_ACCEL_PSD]
+    for i in range(3):
+        P[i, i] += q_acc * dt**3 / 3.0
+        P[i, 3 + i] += q_acc * dt**2 / 2.0
+        P[3 + i, i] += q_acc * dt**2 / 2.0
+        P[3 + i, 3 + i] += q_acc * dt
+    if PRM[PRM_TANDEM] == 0.0:
+        # cross blocks: P_xth <- F_x P_xth Phi^T (rows p pick up dt times rows v first)
+        for i in range(3):
+            for j in range(3):
+                P[i, 6 + j] += dt * P[3 + i, 6 + j]
+        for r in range(6):
+            c0, c1, c2 = P[r, 6], P[r, 7], P[r, 8]
+            v0 = f00 * c0 + f01 * c1 + f02 * c2
+            v1 = f10 * c0 + f11 * c1 + f12 * c2
+            v2 = f20 * c0 + f21 * c1 + f22 * c2
+            P[r, 6], P[r, 7], P[r, 8] = v0, v1, v2
+            P[6, r], P[7, r], P[8, r] = v0, v1, v2
+    # attitude block: Phi P_thth Phi^T + Q_th
+    # attitude block T = Phi P_thth, then T Phi^T (symmetric)
+    t00 = f00 * P[6, 6] + f01 * P[7, 6] + f02 * P[8, 6]
+    t01 = f00 * P[6, 7] + f01 * P[7, 7] + f02 * P[8, 7]
+    t02 = f00 * P[6, 8] + f01 * P[7, 8] + f02 * P[8, 8]
+    t10 = f10 * P[6, 6] + f11 * P[7, 6] + f12 * P[8, 6]
+    t11 = f10 * P[6, 7] + f11 * P[7, 7] + f12 * P[8, 7]
+    t12 = f10 * P[6, 8] + f11 * P[7, 8] + f12 * P[8, 8]
+    t20 = f20 * P[6, 6] + f21 * P[7, 6] + f22 * P[8, 6]
+    t21 = f20 * P[6, 7] + f21 * P[7, 7] + f22 * P[8, 7]
+    t22 = f20 * P[6, 8] + f21 * P[7, 8] + f22 * P[8, 8]
+    P[6, 6] = t00 * f00 + t01 * f01 + t02 * f02
+    P[7, 7] = t10 * f10 + t11 * f11 + t12 * f12
+    P[8, 8] = t20 * f20 + t21 * f21 + t22 * f22
+    P[6, 7] = P[7, 6] = t00 * f10 + t01 * f11 + t02 * f12
+    P[6, 8] = P[8, 6] = t00 * f20 + t01 * f21 + t02 * f22
+    P[7, 8] = P[8, 7] = t10 * f20 + t11 * f21 + t12 * f22
     qa = PRM[PRM_ATT_PSD] * dt
-    if PRM[PRM_TANDEM] != 0.0:
-        Ft = np.eye(6)
-        for i in range(3):
-            Ft[i, i + 3] = dt
-        Pt = _sandwich(Ft, P[:6, :6].copy()) + Qt
-        Pa = _sandwich(Phi, P[6:, 6:].copy())
-        P[:6, :6] = Pt
-        P[6:, 6:] = Pa
-        for i in range(3):
-            P[6 + i, 6 + i] += qa
-    else:
-        F = np.eye(9)
-        for i in range(3):
-            F[i, i + 3] = dt
-        F[6:, 6:] = Phi
-        Pn = _sandwich(F, P)
-        Pn[:6, :6] += Qt
-        for i in range(3):
-            Pn[6 + i, 6 + i] += qa
-        P[:, :] = Pn
+    for i in range(3):
+        P[6 + i, 6 + i] += qa
     ST_F[STF_SINCE] += dt
     if PRM[PRM_UW_BETA] > 0.0 and ST_F[STF_SINCE] >= PRM[PRM_UW_GAP_S]:
         ST_F[STF_UW_LEFT] = PRM[PRM_UW_COUNT]
     ST_I[COUNT_ACCEPTED, TYPE_PREDICT] += 1
     return ST_ACCEPTED
+
+
+@njit(cache=True)
+def _update_scalar(X, P, ST_I, ST_F, PRM, kind, H, nu, r, gate, work):
+    """One scalar measurement ``z = h(x) + v``, ``v ~ N(0, r)``, Jacobian row ``H`` (9,): the same update
+    as :func:`_update` (gate, underweighting, Joseph form, reset) in O(n^2) without temporaries.
+
+    The Joseph form is evaluated exactly through the rank-one structure of ``A = I - K H``:
+    with ``u = P H^T`` and ``s = H P H^T``, ``A P A^T = M - (u - K s) K^T`` where ``M = P - K u^T``,
+    so ``P+ = M - (u - K s) K^T + r K K^T`` (Crassidis & Junkins 2011 eq. 5.39 expanded). Tandem: only
+    the translation block (``n = 6``) is estimated; the attitude block's uncertainty is considered as
+    extra noise ``H_th P_thth H_th^T`` (see :func:`_update`).
+    """
+    n = 6 if PRM[PRM_TANDEM] != 0.0 else 9
+    u = work[0]  # scratch rows (9,): no allocation in the innermost update
+    K = work[1]
+    for i in range(n):
+        acc = 0.0
+        for k in range(n):
+            acc += P[i, k] * H[k]
+        u[i] = acc
+    s = 0.0
+    for i in range(n):
+        s += H[i] * u[i]
+    rr = r
+    if n == 6:
+        for i in range(6, 9):
+            for k in range(6, 9):
+                rr += H[i] * P[i, k] * H[k]
+    S = s + rr
+    d2 = nu * nu / S
+    ST_F[STF_D2 + kind] = d2
+    if not (np.isfinite(d2) and S > 0.0):
+        ST_I[COUNT_REFUSED, kind] += 1
+        return ST_REFUSED_INVALID
+    if d2 > gate:
+        ST_I[COUNT_REJECTED, kind] += 1
+        return ST_REJECTED
+    Sg = S
+    if ST_F[STF_UW_LEFT] > 0.0 and PRM[PRM_UW_BETA] > 0.0 and s > PRM[PRM_UW_RATIO] * rr:
+        Sg = S + PRM[PRM_UW_BETA] * s
+    for i in range(n):
+        K[i] = u[i] / Sg
+        if not np.isfinite(K[i]):  # S > 0 and finite P make this unreachable short of overflow
+            ST_I[COUNT_REFUSED, kind] += 1
+            return ST_REFUSED_INVALID
+    for i in range(n):
+        u[i] -= K[i] * s  # u - K s
+    for i in range(n):  # symmetric by construction: fill the upper triangle and mirror it
+        for j in range(i, n):
+            a = P[i, j] - K[i] * (u[j] + K[j] * s) - u[i] * K[j] + rr * K[i] * K[j]
+            b = P[j, i] - K[j] * (u[i] + K[i] * s) - u[j] * K[i] + rr * K[j] * K[i]
+            v = 0.5 * (a + b)
+            P[i, j] = v
+            P[j, i] = v
+    for i in range(min(n, 6)):
+        X[i] += K[i] * nu
+    if n == 9:
+        for i in range(3):
+            u[i] = K[6 + i] * nu  # u is free again: the attitude correction
+        _reset_attitude(X, P, u[0:3])
+    ST_I[COUNT_ACCEPTED, kind] += 1
+    ST_F[STF_SINCE] = 0.0
+    if ST_F[STF_UW_LEFT] > 0.0:
+        ST_F[STF_UW_LEFT] -= 1.0
+    return ST_ACCEPTED
+
+
+@njit(cache=True)
+def _reset_attitude(X, P, dth):
+    """Multiplicative reset (Markley 2003): ``q <- q (x) exp(d_theta)``, ``d_theta <- 0``; the covariance
+    is mapped by ``G = I - 0.5 [d_theta x]`` on the attitude rows and columns (first-order reset
+    Jacobian, Mueller, Hehn & D'Andrea 2016 eq. 11-12), in O(n^2)."""
+    if dth[0] == 0.0 and dth[1] == 0.0 and dth[2] == 0.0:
+        return
+    X[6:10] = qnormalize(qmul(X[6:10], qexp(dth)))
+    G = np.eye(3) - 0.5 * skew3(dth)
+    tmp = np.empty(3)
+    for c in range(9):  # rows 6..8 <- G rows
+        for i in range(3):
+            tmp[i] = G[i, 0] * P[6, c] + G[i, 1] * P[7, c] + G[i, 2] * P[8, c]
+        for i in range(3):
+            P[6 + i, c] = tmp[i]
+    for rrow in range(9):  # columns 6..8 <- columns G^T
+        for i in range(3):
+            tmp[i] = P[rrow, 6] * G[i, 0] + P[rrow, 7] * G[i, 1] + P[rrow, 8] * G[i, 2]
+        for i in range(3):
+            P[rrow, 6 + i] = tmp[i]
 
 
 @njit(cache=True)
@@ -208,17 +322,10 @@ def _kalman_block(Pb, H, nu, R, gate, ST_F, PRM):
 
 @njit(cache=True)
 def _apply_correction(X, P, dx9):
-    """Add the translation correction and do the multiplicative attitude reset (Markley 2003):
-    ``q <- q (x) exp(d_theta)``, ``d_theta <- 0``, covariance mapped by ``G = I - 0.5 [d_theta x]``
-    (first-order reset Jacobian, Mueller, Hehn & D'Andrea 2016 eq. 11-12)."""
+    """Add the translation correction and do the multiplicative attitude reset (:func:`_reset_attitude`)."""
     for i in range(6):
         X[i] += dx9[i]
-    dth = dx9[6:9].copy()
-    if dth[0] != 0.0 or dth[1] != 0.0 or dth[2] != 0.0:
-        X[6:10] = qnormalize(qmul(X[6:10], qexp(dth)))
-        T = np.eye(9)
-        T[6:, 6:] -= 0.5 * skew3(dth)
-        P[:, :] = _sandwich(T, P)
+    _reset_attitude(X, P, dx9[6:9].copy())
 
 
 @njit(cache=True)
@@ -317,6 +424,40 @@ def range_model(X, anchor_ms, lever_body):
 
 
 @njit(cache=True)
+def _range_row(X, anchor_ms, lever_body, H):
+    """:func:`range_model` written out in scalars, filling the row ``H`` (9,) in place; returns ``h``."""
+    qx, qy, qz, qw = X[6], X[7], X[8], X[9]
+    # R(q) from the unit quaternion (Crassidis & Junkins 2011 eq. 2.125, Hamilton/scalar-last form)
+    r00 = 1 - 2 * (qy * qy + qz * qz)
+    r01 = 2 * (qx * qy - qz * qw)
+    r02 = 2 * (qx * qz + qy * qw)
+    r10 = 2 * (qx * qy + qz * qw)
+    r11 = 1 - 2 * (qx * qx + qz * qz)
+    r12 = 2 * (qy * qz - qx * qw)
+    r20 = 2 * (qx * qz - qy * qw)
+    r21 = 2 * (qy * qz + qx * qw)
+    r22 = 1 - 2 * (qx * qx + qy * qy)
+    lx, ly, lz = lever_body[0], lever_body[1], lever_body[2]
+    dx = X[0] + r00 * lx + r01 * ly + r02 * lz - anchor_ms[0]
+    dy = X[1] + r10 * lx + r11 * ly + r12 * lz - anchor_ms[1]
+    dz = X[2] + r20 * lx + r21 * ly + r22 * lz - anchor_ms[2]
+    h = np.sqrt(dx * dx + dy * dy + dz * dz)
+    for i in range(9):
+        H[i] = 0.0
+    if h > 0.0:
+        ux, uy, uz = dx / h, dy / h, dz / h
+        H[0], H[1], H[2] = ux, uy, uz
+        # with w = R^T u (the line of sight in the body frame): dh/dtheta = -w^T [P1 x] = (P1 x w)^T
+        wx = r00 * ux + r10 * uy + r20 * uz
+        wy = r01 * ux + r11 * uy + r21 * uz
+        wz = r02 * ux + r12 * uy + r22 * uz
+        H[6] = ly * wz - lz * wy
+        H[7] = lz * wx - lx * wz
+        H[8] = lx * wy - ly * wx
+    return h
+
+
+@njit(cache=True)
 def update_range_one(X, P, ST_I, ST_F, PRM, anchor_ms, z_m, sigma_m, gate):
     if not (np.isfinite(z_m) and np.isfinite(sigma_m) and _all_finite(anchor_ms)):
         ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
@@ -324,13 +465,13 @@ def update_range_one(X, P, ST_I, ST_F, PRM, anchor_ms, z_m, sigma_m, gate):
     if z_m < 0.0 or sigma_m <= 0.0:
         ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
         return ST_REFUSED_INVALID
-    h, H = range_model(X, anchor_ms, PRM[PRM_LEVER : PRM_LEVER + 3])
+    work = np.empty((3, 9))
+    H = work[2]
+    h = _range_row(X, anchor_ms, PRM[PRM_LEVER : PRM_LEVER + 3], H)
     if h == 0.0:
         ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
         return ST_REFUSED_INVALID
-    nu = np.array([z_m - h])
-    R = np.array([[sigma_m * sigma_m]])
-    return _update(X, P, ST_I, ST_F, PRM, TYPE_RANGE, H, nu, R, gate, False)
+    return _update_scalar(X, P, ST_I, ST_F, PRM, TYPE_RANGE, H, z_m - h, sigma_m * sigma_m, gate, work)
 
 
 @njit(cache=True)

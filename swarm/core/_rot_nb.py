@@ -60,7 +60,20 @@ def qexp(phi: np.ndarray) -> np.ndarray:
 
     Taylor series below ``_EXP_TAYLOR_THRESHOLD_RAD`` (Sola 2017 Sec. 2.4), exactly identity at zero.
     """
-    t2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+    x, y, z, w = qexp3(phi[0], phi[1], phi[2])
+    out = np.empty(4)
+    out[0] = x
+    out[1] = y
+    out[2] = z
+    out[3] = w
+    return out
+
+
+@numba.njit(cache=True)
+def qexp3(px: float, py: float, pz: float) -> tuple[float, float, float, float]:
+    """:func:`qexp` on scalars, returning the tuple ``(x, y, z, w)``: no array allocation, for the
+    innermost kernels."""
+    t2 = px * px + py * py + pz * pz
     if t2 < _EXP_TAYLOR_THRESHOLD_RAD * _EXP_TAYLOR_THRESHOLD_RAD:
         t4 = t2 * t2
         k = 0.5 - t2 / 48.0 + t4 / 3840.0
@@ -70,12 +83,7 @@ def qexp(phi: np.ndarray) -> np.ndarray:
         half = 0.5 * theta
         k = math.sin(half) / theta
         w = math.cos(half)
-    out = np.empty(4)
-    out[0] = k * phi[0]
-    out[1] = k * phi[1]
-    out[2] = k * phi[2]
-    out[3] = w
-    return out
+    return k * px, k * py, k * pz, w
 
 
 @numba.njit(cache=True)

@@ -154,6 +154,8 @@ def chi2_gate(dim: int, probability: float) -> float:
 
 def _batch(name: str, value, n: int, tail: tuple[int, ...]) -> np.ndarray:
     """``value`` as a C-contiguous float64 array of shape ``(n, *tail)``, broadcasting a single item."""
+    if tail == () and n == 1 and type(value) in (float, np.float64):
+        return np.array([value])
     if type(value) is np.ndarray and value.dtype == np.float64 and value.flags.c_contiguous:
         if value.shape == (n, *tail):
             return value
@@ -167,9 +169,9 @@ def _batch(name: str, value, n: int, tail: tuple[int, ...]) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def _mask(mask, n: int) -> np.ndarray:
+def _mask(mask, n: int, all_true: np.ndarray) -> np.ndarray:
     if mask is None:
-        return np.ones(n, dtype=np.bool_)
+        return all_true
     m = np.asarray(mask, dtype=np.bool_)
     if m.shape != (n,):
         raise ValueError(f"mask must have shape ({n},), got {m.shape}")
@@ -191,6 +193,9 @@ class PoseEstimator:
         self._q_bc = np.asarray(params.q_body_cam, dtype=np.float64)
         self._R_bc = np.ascontiguousarray(quat_to_matrix(self._q_bc))
         self._status = np.zeros(self.n, dtype=np.int64)
+        self._all = np.ones(self.n, dtype=np.bool_)
+        self._sigma_range = np.full(self.n, params.sigma_range_m)
+        self._gate_range = chi2_gate(1, params.gate_probability)
 
     @classmethod
     def create(
@@ -275,8 +280,8 @@ class PoseEstimator:
         n = self.n
         anchors = _batch("anchor_ms", anchor_ms, n, (3,))
         z = _batch("range_m", range_m, n, ())
-        s = _batch("sigma_m", self.params.sigma_range_m if sigma_m is None else sigma_m, n, ())
-        gate = chi2_gate(1, self.params.gate_probability)
+        s = self._sigma_range if sigma_m is None else _batch("sigma_m", sigma_m, n, ())
+        gate = self._gate_range
         nb.update_range_batch(
             self.X,
             self.P,
@@ -286,7 +291,7 @@ class PoseEstimator:
             anchors,
             z,
             s,
-            _mask(mask, n),
+            _mask(mask, n, self._all),
             gate,
             self._status,
         )
@@ -309,7 +314,7 @@ class PoseEstimator:
         gate = chi2_gate(3 * m, self.params.gate_probability)
         nb.update_features_batch(
             self.X, self.P, self.counts, self.book, self._prm, mk, f, s, tc, self._cam_pos, self._R_bc,
-            _mask(mask, n), gate, self._status,
+            _mask(mask, n, self._all), gate, self._status,
         )  # fmt: skip
         return self._status.copy()
 
@@ -332,7 +337,7 @@ class PoseEstimator:
         gate = chi2_gate(6, self.params.gate_probability)
         nb.update_pose_batch(
             self.X, self.P, self.counts, self.book, self._prm, *args, self._cam_pos, self._R_bc, self._q_bc,
-            _mask(mask, n), gate, self._status,
+            _mask(mask, n, self._all), gate, self._status,
         )  # fmt: skip
         return self._status.copy()
 
@@ -344,6 +349,15 @@ class PoseEstimator:
         c = _batch("cov_body", cov_body, n, (3, 3))
         gate = chi2_gate(3, self.params.gate_probability)
         nb.update_attitude_batch(
-            self.X, self.P, self.counts, self.book, self._prm, q, c, _mask(mask, n), gate, self._status
+            self.X,
+            self.P,
+            self.counts,
+            self.book,
+            self._prm,
+            q,
+            c,
+            _mask(mask, n, self._all),
+            gate,
+            self._status,
         )
         return self._status.copy()

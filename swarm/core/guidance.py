@@ -459,7 +459,7 @@ class StationKeeping:
             else:
                 self.translate = r > p.deadband_m
             if self.rotate:
-                self.rotate = att > np.radians(p.settle_deg)
+                self.rotate = bool(att > np.radians(p.settle_deg))
             else:
-                self.rotate = att > np.radians(p.deadband_deg)
+                self.rotate = bool(att > np.radians(p.deadband_deg))
         return Reference(Mode.STATION, self.p_ref.copy(), np.zeros(3), np.zeros(3), self.q_ref, r)

@@ -1,0 +1,89 @@
+"""``swarm bench [BENCH] [--quick] [--json FILE]``: the performance measurements of DESIGN.md section 7.
+
+Each bench lives in :mod:`swarm.bench` and returns a JSON-ready dict (section 8 names) and a printable
+report; this module only parses flags, prints, and writes the JSON. Without ``BENCH`` every bench runs
+and ``--json`` gets one object keyed by bench name.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+from swarm.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+
+def _estimator(quick: bool) -> tuple[dict, str]:
+    from swarm.bench import estimator
+
+    record = estimator.run(estimator.QUICK if quick else estimator.FULL)
+    return record, estimator.format_report(record)
+
+
+def _sim(quick: bool) -> tuple[dict, str]:
+    from swarm.bench import sim
+
+    record = sim.run(quick)
+    return record, sim.format_report(record)
+
+
+BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
+    "estimator": (_estimator, "estimator step: tandem vs compounded vs FilterPy (paper Table I)"),
+    "sim": (_sim, "one in-process docking: real-time factor and profile"),
+}
+"""Bench name -> (runner taking ``quick``, one-line help). Later issues add sim, montecarlo, transport."""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "bench",
+        help="performance benchmarks (all of them without a BENCH)",
+        description="Performance benchmarks; ratios are measured in one run, absolute times are noisy.",
+    )
+    # SUPPRESS on both levels: a flag given before BENCH is not reset by the sub-parser's default.
+    _add_flags(p, argparse.SUPPRESS)
+    p.set_defaults(func=run, bench=None, quick=False, json=None)
+    benches = p.add_subparsers(dest="bench", metavar="BENCH")
+    for name, (_, help_text) in BENCHES.items():
+        bp = benches.add_parser(name, help=help_text, description=help_text)
+        _add_flags(bp, argparse.SUPPRESS)
+
+
+def _add_flags(p: argparse.ArgumentParser, default) -> None:
+    p.add_argument("--quick", action="store_true", default=default, help="short run (a few seconds)")
+    p.add_argument("--json", type=Path, metavar="FILE", default=default, help="write the results as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    names = [args.bench] if args.bench else list(BENCHES)
+    records = {}
+    for name in names:
+        log.info("bench %s%s", name, " (quick)" if args.quick else "")
+        record, report = BENCHES[name][0](args.quick)
+        print(report)
+        records[name] = record
+    if args.json is not None:
+        out = records[names[0]] if args.bench else records
+        try:
+            args.json.write_text(json.dumps(_finite_or_null(out), indent=2) + "\n")
+        except OSError as exc:
+            raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc.strerror}") from exc
+        log.info("wrote %s", args.json)
+    return 0
+
+
+def _finite_or_null(x):
+    """``x`` with NaN and infinities as ``None``, so the file is strict JSON."""
+    if isinstance(x, dict):
+        return {k: _finite_or_null(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_finite_or_null(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x

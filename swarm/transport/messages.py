@@ -1,0 +1,860 @@
+"""Every wire message of the swarm, and the one codec that turns them into bytes and back.
+
+Wire format (``docs/protocol.md`` is the reference for drivers and other languages): one msgpack map per
+Zenoh sample, ``{"v": SCHEMA_VERSION, "type": "<class name>", "<field>": <value>, ...}`` with the field
+names of the dataclasses below. Floats may arrive as msgpack ints; integers must be ints; tuples are
+arrays; a numpy array is the map ``{"dtype": "<f8", "shape": [...], "data": <bin>}`` of its raw C-order
+bytes (DESIGN.md section 9: 2-3 us per array where ``tolist`` of 1000 x 3 costs ~300 us), and plain nested
+arrays of numbers are accepted too, so a client in any language can send lists. A field with a default
+may be left out (its default applies); unknown keys are ignored, so a newer sender can add fields
+without breaking an older receiver. A change that breaks old readers bumps :data:`SCHEMA_VERSION`.
+
+Validation lives in each message's ``__post_init__``: a message that exists is valid, whether it was
+built in Python or decoded from the wire. Every field is checked for type, shape, finiteness (no NaN or
+Inf anywhere), obvious ranges and size caps, and :class:`~swarm.errors.MessageError` names the field
+(``"gyro_body: expected shape (3,), got (4,)"``). Arrays are stored as writable float64 copies (never a
+read-only ``frombuffer`` view of the payload). :func:`safe_decode` is what a Zenoh callback calls: it
+never raises; a bad message is dropped, counted per key in a :class:`DropCounter` and logged at a
+limited rate, so it never reaches a filter.
+
+Conventions (notes/conventions.md): frames ``ms`` (mothership, inertial) and ``body``; quaternions
+scalar-last ``(x, y, z, w)``, ``q_ms_body`` maps body vectors into ``ms``; SI units.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, TypeVar
+
+import msgpack
+import numpy as np
+
+from swarm.core.mdp import DECISION_KEYS
+from swarm.errors import ConfigError, MessageError
+from swarm.transport.keys import ID_PATTERN
+
+__all__ = [
+    "CLOCK_STATES",
+    "EVENT_KINDS",
+    "FACES",
+    "MAX_ITEMS",
+    "MAX_PAYLOAD_BYTES",
+    "MESSAGE_FOR_KIND",
+    "MESSAGE_TYPES",
+    "MODES",
+    "QUAT_NORM_TOL",
+    "RUN_COMMANDS",
+    "SCHEMA_VERSION",
+    "VISION_KINDS",
+    "Anchors",
+    "Clock",
+    "Command",
+    "DropCounter",
+    "Estimate",
+    "Event",
+    "Guidance",
+    "Imu",
+    "Message",
+    "RunControl",
+    "Truth",
+    "Uwb",
+    "Vision",
+    "decode",
+    "encode",
+    "safe_decode",
+]
+
+_LOG = logging.getLogger(__name__)
+
+SCHEMA_VERSION = 1
+"""Value of the ``"v"`` key of every message; a receiver drops any other version."""
+
+MAX_PAYLOAD_BYTES = 65536
+"""Largest accepted payload [bytes]; larger ones are refused before unpacking."""
+MAX_ITEMS = 64
+"""Largest number of markers, nozzles, anchors, counters per message."""
+QUAT_NORM_TOL = 1e-3
+"""A quaternion's norm must be within this of 1."""
+COV_SYMMETRY_RTOL = 1e-9
+"""``max |P - P^T| <= COV_SYMMETRY_RTOL * max |P|`` for a covariance."""
+_MAX_TEXT = 1024  # reasons and free text [characters]
+_MAX_NAME = 64  # modes, kinds, counter names [characters]
+_MAX_DEPTH = 8  # nesting of event data
+_MAX_ID = 2**31 - 1  # marker and anchor ids fit an int32 in any language
+_U64_MAX = 2**64 - 1  # msgpack's integer range
+_I64_MIN = -(2**63)
+
+# These sets mirror swarm.core.guidance.Mode and swarm.core.camera.FACES (a test asserts they agree): the
+# codec stays importable without scipy/numba/OpenCV (0.13 s instead of 0.54 s), for thin sensor drivers.
+MODES: tuple[str, ...] = ("HOLD", "APPROACH", "REORIENT", "ALIGN", "DOCK", "DOCKED", "ABORT", "STATION")
+"""Guidance modes (paper section V; ``STATION`` is the station-keeping target)."""
+FACES: tuple[str, ...] = ("+x", "-x", "+y", "-y", "+z", "-z")
+"""Faces of the target cube, named by the outward normal in the target body frame."""
+VISION_KINDS: tuple[str, ...] = ("features", "pixels")
+CLOCK_STATES: tuple[str, ...] = ("running", "paused", "stopped")
+RUN_COMMANDS: tuple[str, ...] = ("pause", "resume", "reset", "new_seed")
+EVENT_KINDS: tuple[str, ...] = (
+    "mode",
+    "docked",
+    "contact",
+    "collision",
+    "abort",
+    "estimator_reset",
+    "lost",
+    "restarted",
+)
+"""Event kinds in use; the set is open (any ``[a-z][a-z0-9_]*`` name is accepted)."""
+
+_WIRE_DTYPE = re.compile(r"[<>](?:f[248]|[iu][1248])|\|[iu]1")
+_EVENT_KIND = re.compile(r"[a-z][a-z0-9_]*")
+_DECISION_PROBABILITIES = frozenset({"A11", "A22", "A23", "A32", "A33", "pi1", "pi2"})
+_PROBABILITY_SLACK = 1e-9  # clipped probabilities; stationary ones come from a linear solve
+
+
+# ------------------------------------------------------------------------------------- field checks
+
+
+def _show(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _is_int(x: object) -> bool:
+    return isinstance(x, int | np.integer) and not isinstance(x, bool | np.bool_)
+
+
+def _is_real(x: object) -> bool:
+    return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool | np.bool_)
+
+
+def _int(value: object, name: str, lo: int = 0, hi: int = _U64_MAX) -> int:
+    if not _is_int(value):
+        raise MessageError(f"{name}: expected an integer, got {_show(value)}")
+    v = int(value)
+    if v < lo:
+        raise MessageError(f"{name}: must be >= {lo}, got {v}")
+    if v > hi:
+        raise MessageError(f"{name}: must be <= {hi}, got {v}")
+    return v
+
+
+def _float(
+    value: object, name: str, *, lo: float | None = None, positive: bool = False, nullable: bool = False
+) -> Any:
+    if value is None and nullable:
+        return None
+    if not _is_real(value):
+        raise MessageError(f"{name}: expected a number{' or nil' if nullable else ''}, got {_show(value)}")
+    try:
+        v = float(value)
+    except OverflowError:
+        v = math.inf
+    if not math.isfinite(v):
+        raise MessageError(f"{name}: not finite ({v})")
+    if positive and not v > 0.0:
+        raise MessageError(f"{name}: must be > 0, got {v}")
+    if lo is not None and v < lo:
+        raise MessageError(f"{name}: must be >= {lo:g}, got {v}")
+    return v
+
+
+def _str(
+    value: object,
+    name: str,
+    *,
+    choices: tuple[str, ...] | None = None,
+    pattern: re.Pattern | None = None,
+    max_len: int = _MAX_NAME,
+) -> str:
+    if not isinstance(value, str):
+        raise MessageError(f"{name}: expected a string, got {_show(value)}")
+    value = str(value)  # a StrEnum member becomes its plain value
+    if choices is not None and value not in choices:
+        raise MessageError(f"{name}: expected one of {choices}, got {_show(value)}")
+    if len(value) > max_len:
+        raise MessageError(f"{name}: {len(value)} characters, more than the {max_len} allowed")
+    if pattern is not None and not pattern.fullmatch(value):
+        raise MessageError(f"{name}: must match {pattern.pattern}, got {_show(value)}")
+    return value
+
+
+def _unpack_array(d: dict, name: str) -> np.ndarray:
+    """The ``{"dtype", "shape", "data"}`` wire form of an array, as a read-only view of ``data``."""
+    for k in ("dtype", "shape", "data"):
+        if k not in d:
+            raise MessageError(f"{name}: an array map needs 'dtype', 'shape' and 'data'; {k!r} is missing")
+    code, shape, data = d["dtype"], d["shape"], d["data"]
+    if not isinstance(code, str) or not _WIRE_DTYPE.fullmatch(code):
+        raise MessageError(
+            f"{name}.dtype: expected an int/float code with byte order like '<f8', got {_show(code)}"
+        )
+    if not (
+        isinstance(shape, list | tuple)
+        and len(shape) <= 2
+        and all(_is_int(s) and 0 <= s <= MAX_PAYLOAD_BYTES for s in shape)
+    ):
+        raise MessageError(
+            f"{name}.shape: expected a list of at most 2 sizes in [0, 65536], got {_show(shape)}"
+        )
+    if not isinstance(data, bytes | bytearray | memoryview):
+        raise MessageError(f"{name}.data: expected bin (raw bytes), got {_show(data)}")
+    dtype = np.dtype(code)
+    need = math.prod(int(s) for s in shape) * dtype.itemsize
+    if len(data) != need:
+        raise MessageError(f"{name}.data: {len(data)} bytes, shape {list(shape)} of {code} needs {need}")
+    return np.frombuffer(data, dtype=dtype).reshape([int(s) for s in shape])
+
+
+def _nested_numbers(value: list | tuple, name: str, ndim: int) -> np.ndarray:
+    """Plain nested arrays of numbers (``ndim`` levels) as an array; bools and strings refused."""
+
+    def walk(x: object, depth: int) -> None:
+        if isinstance(x, list | tuple):
+            if depth == ndim:
+                raise MessageError(f"{name}: nested deeper than {ndim} level(s)")
+            for item in x:
+                walk(item, depth + 1)
+        elif depth != ndim or not _is_real(x):
+            raise MessageError(f"{name}: expected {ndim}-level nested arrays of numbers, got {_show(x)}")
+
+    walk(value, 0)
+    try:
+        return np.array(value, dtype=np.float64)
+    except (ValueError, OverflowError) as exc:
+        raise MessageError(f"{name}: ragged or out-of-range nested arrays ({exc})") from None
+
+
+def _array(value: object, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
+    """A finite float64 array of ``shape`` (``None``: any length up to :data:`MAX_ITEMS`), a writable copy.
+    Accepts an ndarray, nested lists/tuples or the wire map."""
+    if isinstance(value, np.ndarray):
+        arr = value
+        if arr.dtype.kind not in "iuf":
+            raise MessageError(f"{name}: expected numbers, got dtype {arr.dtype}")
+    elif isinstance(value, dict):
+        arr = _unpack_array(value, name)
+    elif isinstance(value, list | tuple):
+        arr = _nested_numbers(value, name, len(shape))
+    else:
+        raise MessageError(
+            f"{name}: expected an array (nested lists or a dtype/shape/data map), got {_show(value)}"
+        )
+    ok = arr.ndim == len(shape) and all(e is None or a == e for a, e in zip(arr.shape, shape, strict=False))
+    if not ok:
+        spec = ", ".join("N" if e is None else str(e) for e in shape) + ("," if len(shape) == 1 else "")
+        raise MessageError(f"{name}: expected shape ({spec}), got {tuple(arr.shape)}")
+    for a, e in zip(arr.shape, shape, strict=True):
+        if e is None and a > MAX_ITEMS:
+            raise MessageError(f"{name}: {a} rows, more than the {MAX_ITEMS} allowed")
+    out = np.array(arr, dtype=np.float64)  # a copy: writable, and never a view of the payload
+    if not np.isfinite(out).all():
+        raise MessageError(f"{name}: not finite")
+    return out
+
+
+def _quat(value: object, name: str, nullable: bool = False) -> Any:
+    if value is None and nullable:
+        return None
+    q = _array(value, name, (4,))
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > QUAT_NORM_TOL:
+        raise MessageError(
+            f"{name}: norm {norm:.6g} is not within {QUAT_NORM_TOL:g} of 1 (unit quaternion x, y, z, w)"
+        )
+    return q
+
+
+def _cov(value: object, name: str, n: int) -> np.ndarray:
+    p = _array(value, name, (n, n))
+    asym = float(np.max(np.abs(p - p.T)))
+    if asym > COV_SYMMETRY_RTOL * float(np.max(np.abs(p))):
+        raise MessageError(f"{name}: not symmetric (max |P - P^T| = {asym:.3g})")
+    diag = np.diag(p)
+    if np.any(diag < 0.0):
+        i = int(np.argmin(diag))
+        raise MessageError(f"{name}: negative diagonal entry {diag[i]:.3g} at index {i}")
+    return p
+
+
+def _ids(value: object, name: str) -> tuple[int, ...]:
+    if not isinstance(value, list | tuple):
+        raise MessageError(f"{name}: expected an array of integers, got {_show(value)}")
+    if not 1 <= len(value) <= MAX_ITEMS:
+        raise MessageError(f"{name}: {len(value)} entries, expected 1 to {MAX_ITEMS}")
+    ids = tuple(_int(v, f"{name}[{i}]", 0, _MAX_ID) for i, v in enumerate(value))
+    if len(set(ids)) != len(ids):
+        raise MessageError(f"{name}: duplicate ids in {_show(ids)}")
+    return ids
+
+
+def _plain(value: object, name: str, depth: int = 0) -> Any:
+    """A copy of free-form data made of nil, bool, int, finite float, str, arrays and string-keyed maps."""
+    if value is None or isinstance(value, bool | str):
+        return value
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if _is_int(value):
+        return _int(value, name, _I64_MIN, _U64_MAX)
+    if _is_real(value):
+        return _float(value, name)
+    if depth >= _MAX_DEPTH:
+        raise MessageError(f"{name}: nested deeper than {_MAX_DEPTH} levels")
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, list | tuple):
+        return [_plain(v, f"{name}[{i}]", depth + 1) for i, v in enumerate(value)]
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise MessageError(f"{name}: map keys must be strings, got {_show(k)}")
+            out[k] = _plain(v, f"{name}.{k[:32]}", depth + 1)
+        return out
+    raise MessageError(f"{name}: unsupported value {_show(value)} (nil, bool, int, float, str, array, map)")
+
+
+def _counts(value: object, name: str) -> dict[str, int]:
+    if not isinstance(value, dict):
+        raise MessageError(f"{name}: expected a map of name -> count, got {_show(value)}")
+    if len(value) > MAX_ITEMS:
+        raise MessageError(f"{name}: {len(value)} entries, more than the {MAX_ITEMS} allowed")
+    out = {}
+    for k, v in value.items():
+        key = _str(k, f"{name} key", pattern=ID_PATTERN)
+        out[key] = _int(v, f"{name}.{key}")
+    return out
+
+
+def _decision(value: object, name: str) -> dict[str, float | None] | None:
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        raise MessageError(f"{name}: expected a map or nil, got {_show(value)}")
+    out = {}
+    for k in DECISION_KEYS:
+        if k not in value:
+            raise MessageError(f"{name}.{k}: missing")
+        prob = k in _DECISION_PROBABILITIES
+        v = _float(value[k], f"{name}.{k}", lo=0.0, nullable=prob)
+        if prob and v is not None and v > 1.0 + _PROBABILITY_SLACK:
+            raise MessageError(f"{name}.{k}: a probability must be in [0, 1], got {v}")
+        out[k] = v
+    return out
+
+
+def _set(msg: object, **values: object) -> None:
+    for k, v in values.items():
+        object.__setattr__(msg, k, v)
+
+
+# ------------------------------------------------------------------------------------------ messages
+
+
+class Message:
+    """Base of every wire message: equality compares arrays by value (shape and entries)."""
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        for f in fields(self):  # type: ignore[arg-type]
+            a, b = getattr(self, f.name), getattr(other, f.name)
+            if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+                if not (isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and np.array_equal(a, b)):
+                    return False
+            elif a != b:
+                return False
+        return True
+
+    __hash__ = None  # type: ignore[assignment]  # holds arrays
+
+
+@dataclass(frozen=True, eq=False)
+class Imu(Message):
+    """One gyro sample of one vehicle (and its AHRS attitude when there is one): ``<ns>/agent/<id>/imu``."""
+
+    tick: int
+    """Tick ``k`` of the swarm clock (>= 0); in simulation the sample time is ``k * dt``."""
+    t_s: float
+    """Sample time [s] on the swarm clock (>= 0)."""
+    dt_s: float
+    """Integration interval [s] (> 0) ending at ``t_s``, over which the estimator propagates this rate."""
+    gyro_body: np.ndarray
+    """Measured angular rate (3,) [rad/s], body frame, with the sensor's bias and noise."""
+    q_ahrs_ms_body: np.ndarray | None = None
+    """AHRS attitude (4,), unit quaternion (x, y, z, w) mapping body into ms; ``None`` when the vehicle has
+    no AHRS or on ticks without an AHRS output (it runs at 10 Hz of the 100 Hz)."""
+
+    def __post_init__(self) -> None:
+        _set(
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+            dt_s=_float(self.dt_s, "dt_s", positive=True),
+            gyro_body=_array(self.gyro_body, "gyro_body", (3,)),
+            q_ahrs_ms_body=_quat(self.q_ahrs_ms_body, "q_ahrs_ms_body", nullable=True),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class Uwb(Message):
+    """One two-way ranging exchange between a vehicle's tag and one anchor: ``<ns>/agent/<id>/uwb``."""
+
+    tick: int
+    """Tick ``k`` of the exchange (>= 0)."""
+    t_s: float
+    """Time of the exchange [s] (>= 0)."""
+    anchor_id: int
+    """Anchor ranged to (>= 0), an id of the :class:`Anchors` message."""
+    range_m: float | None = None
+    """Measured tag-anchor distance [m] (>= 0); ``None`` if the exchange happened but the reply was lost
+    (one message per UWB slot either way, so a lockstep agent knows not to wait)."""
+
+    def __post_init__(self) -> None:
+        _set(
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+            anchor_id=_int(self.anchor_id, "anchor_id", 0, _MAX_ID),
+            range_m=_float(self.range_m, "range_m", lo=0.0, nullable=True),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class Vision(Message):
+    """One camera frame's observations of the target's markers: ``<ns>/agent/<id>/vision``."""
+
+    tick: int
+    """Tick ``k`` of the frame (>= 0)."""
+    t_s: float
+    """Exposure time [s] (>= 0)."""
+    target_id: str
+    """Agent id of the vehicle whose markers were seen."""
+    face: str
+    """Face of the target the markers belong to, one of :data:`FACES`."""
+    kind: str
+    """``"features"``: marker positions in the camera frame [m] (the paper's feature model);
+    ``"pixels"``: marker image coordinates [px] (the agent runs PnP)."""
+    data: np.ndarray
+    """(N, 3) [m] in the OpenCV camera frame (+z optical axis, +x right, +y down) for ``features``;
+    (N, 2) [px] image coordinates (u right, v down, as ``cv2.projectPoints`` gives them) for ``pixels``.
+    Row i is marker ``marker_ids[i]``; 1 <= N <= :data:`MAX_ITEMS`."""
+    marker_ids: tuple[int, ...]
+    """Index of each row's marker in the face's pattern (>= 0, distinct), N entries."""
+
+    def __post_init__(self) -> None:
+        kind = _str(self.kind, "kind", choices=VISION_KINDS)
+        data = _array(self.data, "data", (None, 3 if kind == "features" else 2))
+        ids = _ids(self.marker_ids, "marker_ids")
+        if len(ids) != data.shape[0]:
+            raise MessageError(f"marker_ids: {len(ids)} ids for {data.shape[0]} rows of data")
+        _set(
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+            target_id=_str(self.target_id, "target_id", pattern=ID_PATTERN),
+            face=_str(self.face, "face", choices=FACES), kind=kind, data=data, marker_ids=ids,
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate(Message):
+    """The pose estimate of one vehicle after tick ``k``'s measurements: ``<ns>/agent/<id>/estimate``."""
+
+    tick: int
+    """Tick ``k`` of the last measurement processed (>= 0)."""
+    t_s: float
+    """Time of the estimate [s] (>= 0)."""
+    p_ms: np.ndarray
+    """Centre-of-mass position (3,) [m], frame ms."""
+    v_ms: np.ndarray
+    """Centre-of-mass velocity (3,) [m/s], frame ms."""
+    q_ms_body: np.ndarray
+    """Attitude (4,), unit quaternion (x, y, z, w) mapping body into ms."""
+    cov: np.ndarray
+    """Error-state covariance (9, 9) of ``(d_p [m], d_v [m/s], d_theta [rad])``, ``d_theta`` a body-frame
+    rotation vector (``q = q_est (x) exp(d_theta)``); symmetric, non-negative diagonal. The tandem
+    filter's cross terms between translation and attitude are zero."""
+    sigma_pos_max_m: float
+    """Largest position standard deviation [m] (>= 0), Algorithm 1's ``max(sigma_pos)``."""
+    mahalanobis_d: float
+    """Mahalanobis distance of the latest innovation (>= 0, dimensionless), Algorithm 1's ``d``."""
+    rejection_fraction: float
+    """Fraction of measurements rejected by the gate over the health window, in [0, 1]."""
+    counts: dict[str, int]
+    """Cumulative update counters (>= 0) named ``<kind>_<outcome>``, e.g. ``range_accepted``,
+    ``range_rejected``, ``features_refused``; at most :data:`MAX_ITEMS` entries."""
+
+    def __post_init__(self) -> None:
+        rf = _float(self.rejection_fraction, "rejection_fraction", lo=0.0)
+        if rf > 1.0:
+            raise MessageError(f"rejection_fraction: must be in [0, 1], got {rf}")
+        _set(
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+            p_ms=_array(self.p_ms, "p_ms", (3,)), v_ms=_array(self.v_ms, "v_ms", (3,)),
+            q_ms_body=_quat(self.q_ms_body, "q_ms_body"), cov=_cov(self.cov, "cov", 9),
+            sigma_pos_max_m=_float(self.sigma_pos_max_m, "sigma_pos_max_m", lo=0.0),
+            mahalanobis_d=_float(self.mahalanobis_d, "mahalanobis_d", lo=0.0),
+            rejection_fraction=rf, counts=_counts(self.counts, "counts"),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class Guidance(Message):
+    """Guidance state of one vehicle after tick ``k``: ``<ns>/agent/<id>/guidance``."""
+
+    tick: int
+    """Tick ``k`` (>= 0)."""
+    t_s: float
+    """Time [s] (>= 0)."""
+    mode: str
+    """Current guidance mode, one of :data:`MODES`."""
+    range_m: float | None = None
+    """Estimated range to the target [m] (>= 0); ``None`` without a target (the station keeper)."""
+    r1_m: float | None = None
+    """REORIENT -> ALIGN switch radius [m] (>= 0); ``None`` for a vehicle without a switcher."""
+    r2_m: float | None = None
+    """APPROACH -> REORIENT switch radius [m] (>= 0); ``None`` for a vehicle without a switcher."""
+    r_t_m: float | None = None
+    """Radius below which Algorithm 1 runs [m] (>= 0); ``None`` for a vehicle without a switcher."""
+    decision: dict[str, float | None] | None = None
+    """Latest Algorithm 1 pass: exactly the 17 DESIGN.md section 8 keys (``swarm.core.mdp.DECISION_KEYS``),
+    numbers >= 0, ``A11 A22 A23 A32 A33 pi1 pi2`` probabilities in [0, 1] or ``None`` where the branch did
+    not compute them; other keys are dropped. ``None`` when no pass happened yet (or the fixed policy)."""
+    reason: str = ""
+    """Human-readable account of the latest mode decision (at most 1024 characters)."""
+
+    def __post_init__(self) -> None:
+        _set(
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+            mode=_str(self.mode, "mode", choices=MODES),
+            range_m=_float(self.range_m, "range_m", lo=0.0, nullable=True),
+            r1_m=_float(self.r1_m, "r1_m", lo=0.0, nullable=True),
+            r2_m=_float(self.r2_m, "r2_m", lo=0.0, nullable=True),
+            r_t_m=_float(self.r_t_m, "r_t_m", lo=0.0, nullable=True),
+            decision=_decision(self.decision, "decision"),
+            reason=_str(self.reason, "reason", max_len=_MAX_TEXT),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class Command(Message):
+    """Actuator command of one vehicle for tick ``k``, held until the next: ``<ns>/agent/<id>/command``."""
+
+    tick: int
+    """Tick ``k`` this command answers (>= 0): in lockstep the world steps to ``k + 1`` once it has it."""
+    t_s: float
+    """Time [s] (>= 0)."""
+    thrusts_n: np.ndarray
+    """Thrust of each nozzle (N,) [N] (>= 0) in the vehicle's allocation order, 0 <= N <= :data:`MAX_ITEMS`;
+    the world holds it until the next command."""
+    force_body_n: np.ndarray
+    """Net force the thrusts produce (3,) [N], body frame."""
+    torque_body_nm: np.ndarray
+    """Net torque about the centre of mass (3,) [N m], body frame."""
+    mode: str
+    """Guidance mode that produced it, one of :data:`MODES`."""
+
+    def __post_init__(self) -> None:
+        thrusts = _array(self.thrusts_n, "thrusts_n", (None,))
+        if np.any(thrusts < 0.0):
+            raise MessageError(f"thrusts_n: must be >= 0, got {float(thrusts.min())}")
+        _set(
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0), thrusts_n=thrusts,
+            force_body_n=_array(self.force_body_n, "force_body_n", (3,)),
+            torque_body_nm=_array(self.torque_body_nm, "torque_body_nm", (3,)),
+            mode=_str(self.mode, "mode", choices=MODES),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class Truth(Message):
+    """True state of one vehicle at tick ``k`` (agents never subscribe): ``<ns>/agent/<id>/truth``."""
+
+    tick: int
+    """Tick ``k`` (>= 0)."""
+    t_s: float
+    """Time [s] (>= 0)."""
+    p_ms: np.ndarray
+    """Centre-of-mass position (3,) [m], frame ms."""
+    v_ms: np.ndarray
+    """Centre-of-mass velocity (3,) [m/s], frame ms."""
+    q_ms_body: np.ndarray
+    """Attitude (4,), unit quaternion (x, y, z, w) mapping body into ms."""
+    w_body: np.ndarray
+    """Angular rate (3,) [rad/s], body frame."""
+
+    def __post_init__(self) -> None:
+        _set(
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+            p_ms=_array(self.p_ms, "p_ms", (3,)), v_ms=_array(self.v_ms, "v_ms", (3,)),
+            q_ms_body=_quat(self.q_ms_body, "q_ms_body"), w_body=_array(self.w_body, "w_body", (3,)),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class Event(Message):
+    """Something that happened to one vehicle: ``<ns>/agent/<id>/event``."""
+
+    t_s: float
+    """Time [s] (>= 0)."""
+    kind: str
+    """What happened, ``[a-z][a-z0-9_]*`` (at most 64 characters); :data:`EVENT_KINDS` lists those in use."""
+    data: dict[str, Any] = field(default_factory=dict)
+    """Details, free form: nil, bool, int, finite float, str, arrays and string-keyed maps, nested at most
+    8 deep; e.g. ``{"from": "APPROACH", "to": "REORIENT", "range_m": 0.62, "reason": "..."}`` for ``mode``."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.data, dict):
+            raise MessageError(f"data: expected a map, got {_show(self.data)}")
+        _set(
+            self, t_s=_float(self.t_s, "t_s", lo=0.0), kind=_str(self.kind, "kind", pattern=_EVENT_KIND),
+            data=_plain(self.data, "data"),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class Clock(Message):
+    """The world's clock and run state, once per tick: ``<ns>/world/clock``."""
+
+    tick: int
+    """Current tick ``k`` (>= 0)."""
+    t_s: float
+    """Current time [s] (>= 0), ``k * dt``."""
+    state: str
+    """``"running"``, ``"paused"`` or ``"stopped"``."""
+    seed: int
+    """Seed of the current run (0 <= seed < 2**64): every random stream derives from it."""
+
+    def __post_init__(self) -> None:
+        _set(
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+            state=_str(self.state, "state", choices=CLOCK_STATES), seed=_int(self.seed, "seed"),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class Anchors(Message):
+    """The mothership's UWB anchors: ``<ns>/mothership/anchors`` (published and answered to queries)."""
+
+    anchor_ids: tuple[int, ...]
+    """Id of each anchor (>= 0, distinct), N entries, 1 <= N <= :data:`MAX_ITEMS`."""
+    positions_ms: np.ndarray
+    """Antenna position of each anchor (N, 3) [m], frame ms; row i is ``anchor_ids[i]``."""
+
+    def __post_init__(self) -> None:
+        ids = _ids(self.anchor_ids, "anchor_ids")
+        pos = _array(self.positions_ms, "positions_ms", (None, 3))
+        if pos.shape[0] != len(ids):
+            raise MessageError(f"positions_ms: {pos.shape[0]} rows for {len(ids)} anchor ids")
+        _set(self, anchor_ids=ids, positions_ms=pos)
+
+
+@dataclass(frozen=True, eq=False)
+class RunControl(Message):
+    """A request to the world from the dashboard or the launcher: ``<ns>/control/run``."""
+
+    command: str
+    """``"pause"``, ``"resume"``, ``"reset"`` (restart the run) or ``"new_seed"`` (restart, new seed)."""
+    seed: int | None = None
+    """Seed for ``reset``/``new_seed`` (0 <= seed < 2**64); ``None``: ``reset`` keeps the current seed and
+    ``new_seed`` lets the world draw one. Ignored by ``pause`` and ``resume``."""
+
+    def __post_init__(self) -> None:
+        seed = None if self.seed is None else _int(self.seed, "seed")
+        _set(self, command=_str(self.command, "command", choices=RUN_COMMANDS), seed=seed)
+
+
+MESSAGE_TYPES: dict[str, type[Message]] = {
+    cls.__name__: cls
+    for cls in (Imu, Uwb, Vision, Estimate, Guidance, Command, Truth, Event, Clock, Anchors, RunControl)
+}
+"""Every message class by its wire ``"type"``."""
+
+MESSAGE_FOR_KIND: dict[str, type[Message]] = {
+    "imu": Imu, "uwb": Uwb, "vision": Vision, "estimate": Estimate, "guidance": Guidance, "command": Command,
+    "truth": Truth, "event": Event, "world_clock": Clock, "anchors": Anchors, "run_control": RunControl,
+}  # fmt: skip
+"""The message carried by each key kind of :meth:`swarm.transport.keys.Keys.parse`."""
+
+
+# ---------------------------------------------------------------------------------------------- codec
+
+M = TypeVar("M", bound=Message)
+
+
+def _wire(value: object) -> object:
+    if isinstance(value, np.ndarray):
+        return {"dtype": "<f8", "shape": list(value.shape), "data": value.astype("<f8", copy=False).tobytes()}
+    if isinstance(value, tuple):
+        return list(value)
+    return value
+
+
+def encode(msg: Message) -> bytes:
+    """The msgpack bytes of ``msg`` (module docstring); MessageError above :data:`MAX_PAYLOAD_BYTES`."""
+    if type(msg).__name__ not in MESSAGE_TYPES or not isinstance(msg, Message):
+        raise TypeError(f"not a wire message: {type(msg).__name__}")
+    out: dict[str, object] = {"v": SCHEMA_VERSION, "type": type(msg).__name__}
+    for f in fields(msg):  # type: ignore[arg-type]
+        out[f.name] = _wire(getattr(msg, f.name))
+    payload = msgpack.packb(out, use_bin_type=True)
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise MessageError(f"payload: {len(payload)} bytes, more than the {MAX_PAYLOAD_BYTES} allowed")
+    return payload
+
+
+def _as_bytes(payload: object) -> bytes | bytearray | memoryview:
+    if isinstance(payload, bytes | bytearray):
+        return payload
+    if isinstance(payload, memoryview):
+        if payload.nbytes > MAX_PAYLOAD_BYTES:
+            raise MessageError(f"payload: {payload.nbytes} bytes, more than the {MAX_PAYLOAD_BYTES} allowed")
+        return payload.tobytes()
+    if hasattr(payload, "__bytes__"):  # zenoh.ZBytes, without importing zenoh
+        return bytes(payload)  # type: ignore[call-overload]
+    raise MessageError(f"payload: expected bytes, got {type(payload).__name__}")
+
+
+def decode(payload: object, expected: type[M]) -> M:
+    """The message of type ``expected`` in ``payload`` (bytes, bytearray, memoryview or ``zenoh.ZBytes``).
+
+    Raises MessageError naming the field and the problem: ``"payload: not valid msgpack (...)"``,
+    ``"payload: not a msgpack map"``, ``"v: unsupported schema version 7 ..."``, ``"type: expected 'Imu',
+    got 'Uwb'"``, ``"<field>: missing"``, or any field check of the message class.
+    """
+    data = _as_bytes(payload)
+    if len(data) > MAX_PAYLOAD_BYTES:
+        raise MessageError(f"payload: {len(data)} bytes, more than the {MAX_PAYLOAD_BYTES} allowed")
+    try:
+        obj = msgpack.unpackb(data, raw=False, strict_map_key=True)
+    except Exception as exc:  # msgpack raises ValueError, ExtraData, FormatError, StackError, UnicodeError...
+        raise MessageError(f"payload: not valid msgpack ({type(exc).__name__}: {exc})"[:200]) from None
+    if not isinstance(obj, dict):
+        raise MessageError(f"payload: not a msgpack map (got {type(obj).__name__})")
+    if "v" not in obj:
+        raise MessageError("v: missing (the schema version)")
+    version = obj["v"]
+    if not _is_int(version) or version != SCHEMA_VERSION:
+        raise MessageError(
+            f"v: unsupported schema version {_show(version)} (this codec speaks {SCHEMA_VERSION})"
+        )
+    name = expected.__name__
+    if obj.get("type") != name:
+        raise MessageError(f"type: expected {name!r}, got {_show(obj.get('type'))}")
+    kwargs = {}
+    for f in fields(expected):  # type: ignore[arg-type]
+        if f.name in obj:
+            kwargs[f.name] = obj[f.name]
+        elif f.default is MISSING and f.default_factory is MISSING:
+            raise MessageError(f"{f.name}: missing")
+    return expected(**kwargs)
+
+
+# --------------------------------------------------------------------------------------- bad messages
+
+
+class _KeyDrops:
+    __slots__ = ("last_log_s", "last_reason", "pending", "total")
+
+    def __init__(self) -> None:
+        self.total = 0
+        self.pending = 0
+        self.last_reason = ""
+        self.last_log_s: float | None = None
+
+
+class DropCounter:
+    """Thread-safe count of dropped (invalid) messages per key, with a rate-limited warning per key.
+
+    The first drop on a key is logged at once; later ones at most once per ``log_interval_s`` per key,
+    saying how many were dropped since the previous line and the last reason. :meth:`flush` logs what is
+    pending (call it at shutdown). At most ``max_keys`` keys are tracked one by one; drops on further keys
+    are counted under ``"<other keys>"`` so a flood of invented keys cannot grow memory.
+    """
+
+    OTHER = "<other keys>"
+
+    def __init__(
+        self,
+        log_interval_s: float = 10.0,
+        logger: logging.Logger | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        max_keys: int = 1024,
+    ) -> None:
+        if not (
+            isinstance(log_interval_s, int | float) and log_interval_s > 0 and math.isfinite(log_interval_s)
+        ):
+            raise ConfigError(f"transport.log_interval_s must be a finite number > 0, got {log_interval_s!r}")
+        if not (isinstance(max_keys, int) and max_keys >= 1):
+            raise ConfigError(f"transport.max_keys must be an integer >= 1, got {max_keys!r}")
+        self.log_interval_s = float(log_interval_s)
+        self._log = logger if logger is not None else _LOG
+        self._clock = clock
+        self._max_keys = max_keys
+        self._lock = threading.Lock()
+        self._keys: dict[str, _KeyDrops] = {}
+
+    def drop(self, key: str, reason: str) -> None:
+        """Count one dropped message on ``key`` for ``reason``, and log if this key's interval has passed."""
+        key, reason = str(key), str(reason)[:300]
+        now = self._clock()
+        with self._lock:
+            if key not in self._keys and len(self._keys) >= self._max_keys:
+                key = self.OTHER
+            st = self._keys.setdefault(key, _KeyDrops())
+            st.total += 1
+            st.pending += 1
+            st.last_reason = reason
+            if st.last_log_s is not None and now - st.last_log_s < self.log_interval_s:
+                return
+            pending, total = st.pending, st.total
+            st.pending, st.last_log_s = 0, now
+        self._emit(key, pending, total, reason)
+
+    def _emit(self, key: str, pending: int, total: int, reason: str) -> None:
+        self._log.warning(
+            "dropped %d invalid message%s on %s (total %d); last: %s",
+            pending, "" if pending == 1 else "s", key, total, reason,
+        )  # fmt: skip
+
+    def flush(self) -> None:
+        """Log every key's drops not yet reported."""
+        with self._lock:
+            todo = [(k, s.pending, s.total, s.last_reason) for k, s in self._keys.items() if s.pending]
+            for k, *_ in todo:
+                self._keys[k].pending = 0
+        for item in todo:
+            self._emit(*item)
+
+    def count(self, key: str) -> int:
+        """Messages dropped on ``key`` so far."""
+        with self._lock:
+            st = self._keys.get(str(key))
+            return 0 if st is None else st.total
+
+    def counts(self) -> dict[str, int]:
+        """A snapshot of the drops per key."""
+        with self._lock:
+            return {k: s.total for k, s in self._keys.items()}
+
+    @property
+    def total(self) -> int:
+        """Messages dropped on all keys."""
+        with self._lock:
+            return sum(s.total for s in self._keys.values())
+
+
+def safe_decode(payload: object, expected: type[M], key: object, counter: DropCounter) -> M | None:
+    """:func:`decode` for a Zenoh callback: the message, or ``None`` after counting and (rate-limited)
+    logging the drop under ``key``. Never raises."""
+    try:
+        return decode(payload, expected)
+    except MessageError as exc:
+        reason = str(exc)
+    except Exception as exc:  # a codec bug must not kill the callback either; it is counted like bad input
+        reason = f"{type(exc).__name__}: {exc}"
+    try:
+        counter.drop(str(key), reason)
+    except Exception:
+        _LOG.exception("could not count a dropped message on %s", key)
+    return None

@@ -1,0 +1,329 @@
+"""Tests of swarm.scenario: the bundled paper scenario, validation of every table, cross-field checks and
+overrides. Bad files are the bundled ``scenarios/docking.toml`` with one line changed, so each error comes
+from an otherwise valid, complete scenario."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from swarm.config import dump_toml, to_mapping
+from swarm.errors import ConfigError
+from swarm.scenario import SCENARIO_DIR, Scenario, load_scenario
+
+DOCKING_TOML = SCENARIO_DIR / "docking.toml"
+TEXT = DOCKING_TOML.read_text()
+
+
+def variant(tmp_path: Path, table: str, key: str, value: str) -> Path:
+    """``docking.toml`` with ``key = value`` in ``[table]`` (``""`` = top level), replacing the existing
+    line or appending one to the table; returns the new file."""
+    lines = TEXT.splitlines()
+    header = re.compile(r"^\s*\[([^\]]+)\]")
+    current, start, end, hit = "", None, len(lines), None
+    if table == "":
+        start = 0
+    for i, line in enumerate(lines):
+        m = header.match(line)
+        if m:
+            if current == table and start is not None and i > start:
+                end = i
+                break
+            current = m.group(1).strip()
+            if current == table:
+                start = i + 1
+            continue
+        if current == table and re.match(rf"^\s*{re.escape(key)}\s*=", line):
+            hit = i
+            end = i
+            break
+    assert start is not None, f"no table [{table}] in docking.toml"
+    if hit is not None:
+        lines[hit] = f"{key} = {value}"
+    else:
+        lines.insert(end, f"{key} = {value}")
+    path = tmp_path / "variant.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def load_variant(tmp_path: Path, table: str, key: str, value: str) -> Scenario:
+    return load_scenario(variant(tmp_path, table, key, value))
+
+
+def mismatches(a, b, path: str = "", rel: float = 1e-4) -> list[str]:
+    """Dotted paths where two ``to_mapping`` trees differ; floats compared to ``rel`` (the file writes derived
+    constants such as 10 deg/h in deg/s to 5 significant figures)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        out = [f"{path}.{k}".lstrip(".") for k in set(a) ^ set(b)]
+        for k in set(a) & set(b):
+            out += mismatches(a[k], b[k], f"{path}.{k}".lstrip("."), rel)
+        return out
+    if isinstance(a, list) and isinstance(b, list):
+        if len(a) != len(b):
+            return [path]
+        return [
+            m
+            for i, (x, y) in enumerate(zip(a, b, strict=True))
+            for m in mismatches(x, y, f"{path}[{i}]", rel)
+        ]
+    if isinstance(a, float) or isinstance(b, float):
+        ok = (
+            isinstance(a, int | float)
+            and isinstance(b, int | float)
+            and math.isclose(a, b, rel_tol=rel, abs_tol=1e-12)
+        )
+        return [] if ok else [f"{path}: {a!r} vs {b!r}"]
+    return [] if a == b else [f"{path}: {a!r} vs {b!r}"]
+
+
+# ---- the bundled scenario ---------------------------------------------------------------------------------
+
+
+def test_docking_toml_matches_the_code_defaults():
+    diff = mismatches(to_mapping(load_scenario("docking")), to_mapping(Scenario()))
+    assert diff == []
+
+
+def test_docking_toml_mdp_r_d_matches_the_code_default():
+    assert load_scenario("docking").mdp.r_d_m == Scenario().mdp.r_d_m
+
+
+def test_bundled_name_and_file_path_load_the_same_scenario():
+    assert load_scenario("docking") == load_scenario(DOCKING_TOML) == load_scenario(str(DOCKING_TOML))
+
+
+def test_target_quaternion_follows_the_stated_euler_convention():
+    sc = load_scenario("docking")
+    q = sc.q0("target")
+    expected = np.array([-0.5, 0.5, -0.5, 0.5])
+    assert np.allclose(q, expected, atol=1e-12) or np.allclose(q, -expected, atol=1e-12)
+    # lowercase "xyz" is scipy's extrinsic convention about the fixed mothership axes
+    scipy_q = Rotation.from_euler(sc.euler_seq, sc.vehicles["target"].euler_deg, degrees=True).as_quat()
+    assert abs(float(np.dot(q, scipy_q))) == pytest.approx(1.0)
+
+
+def test_chaser_starts_at_the_identity_attitude():
+    np.testing.assert_allclose(load_scenario("docking").q0("chaser"), [0.0, 0.0, 0.0, 1.0], atol=1e-12)
+
+
+def test_paper_numbers_are_in_the_docking_scenario():
+    sc = load_scenario("docking")
+    # paper sec. III: anchors and the tag position P1 = (0.05, 0.05, 0) m; 2 cm range noise
+    assert sc.anchors_m == ((1.0, -0.2, 0.5), (1.0, 0.2, -0.5), (-1.0, 0.2, -0.5), (-1.0, -0.2, 0.5))
+    assert sc.tag_lever_arm_body_m == (0.05, 0.05, 0.0)
+    assert sc.estimator.lever_arm_body_m == sc.tag_lever_arm_body_m
+    assert sc.uwb.sigma_m == 0.02
+    assert sc.camera.feature_sigma_m == 0.001
+    # paper Fig. 5: chaser at (0, 1, 0) m, (0, 0, 0) deg; target at (1, 2, 1) m, (-90, 0, -90) deg
+    ch, tg = sc.vehicles["chaser"], sc.vehicles["target"]
+    assert (ch.role, ch.position_m, ch.euler_deg, ch.target) == (
+        "chaser",
+        (0.0, 1.0, 0.0),
+        (0.0, 0.0, 0.0),
+        "target",
+    )
+    assert (tg.role, tg.position_m, tg.euler_deg) == ("target", (1.0, 2.0, 1.0), (-90.0, 0.0, -90.0))
+    # paper sec. V-C fixed radii; Algorithm 1's initial radii and thresholds
+    assert (sc.fixed.r2_m, sc.fixed.r1_m) == (0.8, 0.3)
+    assert (sc.mdp.r1_init_m, sc.mdp.r2_init_m) == (0.1, 0.3)
+    assert (sc.mdp.a11_threshold, sc.mdp.pi2_threshold) == (0.4, 0.6)
+    # hardware rates (paper sec. VI-A / DESIGN.md section 3): IMU 100 Hz, UWB 50 Hz, vision 20 Hz
+    assert (sc.sim.imu_rate_hz, sc.uwb.rate_hz, sc.camera.rate_hz) == (100.0, 50.0, 20.0)
+    assert sc.chasers == ["chaser"]
+
+
+def test_scenario_round_trips_through_toml(tmp_path):
+    path = tmp_path / "dumped.toml"
+    path.write_text(dump_toml(load_scenario("docking")))
+    assert load_scenario(path) == load_scenario("docking")
+
+
+# ---- file-level errors ------------------------------------------------------------------------------------
+
+
+def test_missing_file_names_the_file(tmp_path):
+    with pytest.raises(ConfigError, match=r"nope\.toml"):
+        load_scenario(tmp_path / "nope.toml")
+
+
+def test_unknown_bundled_name_names_the_file_it_looked_for():
+    with pytest.raises(ConfigError, match=r"no_such_scenario\.toml"):
+        load_scenario("no_such_scenario")
+
+
+def test_toml_syntax_error_names_the_file_and_line(tmp_path):
+    path = tmp_path / "broken.toml"
+    path.write_text('name = "docking"\n[guidance\nkeepout_radius_m = 0.15\n')
+    with pytest.raises(ConfigError, match=r"broken\.toml.*invalid TOML.*line 2"):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize(
+    ("table", "key", "field"),
+    [
+        ("guidance", "keepout_radius", "guidance.keepout_radius"),
+        ("estimator", "sigma_rang_m", "estimator.sigma_rang_m"),
+        ("vehicles.chaser", "mass_kg", "vehicles.chaser.mass_kg"),
+        ("", "seed", "seed"),
+    ],
+)
+def test_unknown_key_is_named(tmp_path, table, key, field):
+    with pytest.raises(ConfigError, match=rf"{re.escape(field)}: unknown key"):
+        load_variant(tmp_path, table, key, "1.0")
+
+
+def test_unknown_key_suggests_the_close_one(tmp_path):
+    with pytest.raises(ConfigError, match="did you mean 'keepout_radius_m'"):
+        load_variant(tmp_path, "guidance", "keepout_radius", "0.15")
+
+
+def test_unknown_table_is_named(tmp_path):
+    path = tmp_path / "typo.toml"
+    path.write_text(TEXT + "\n[guidence]\nkeepout_radius_m = 0.15\n")
+    with pytest.raises(ConfigError, match=r"guidence: unknown key"):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize(
+    ("table", "key", "value", "field"),
+    [
+        ("estimator", "sigma_range_m", '"big"', "estimator.sigma_range_m"),
+        ("guidance", "max_retries", "1.5", "guidance.max_retries"),
+        ("ahrs", "enabled", "1", "ahrs.enabled"),
+        ("guidance", "docking_face", "1", "guidance.docking_face"),
+        ("vehicles.chaser", "position_m", "[0.0, 1.0]", "vehicles.chaser.position_m"),
+        ("vehicles.chaser", "position_m", '[0.0, "1", 0.0]', r"vehicles.chaser.position_m[1]"),
+        ("camera", "width_px", "320.5", "camera.width_px"),
+        ("uwb", "dropout_windows_s", "[[1.0]]", "uwb.dropout_windows_s[0]"),
+        ("estimator", "structure", '"triple"', "estimator.structure"),
+        ("", "policy", '"markov"', "policy"),
+    ],
+)
+def test_wrong_type_is_named(tmp_path, table, key, value, field):
+    with pytest.raises(ConfigError, match=re.escape(field) + ": expected"):
+        load_variant(tmp_path, table, key, value)
+
+
+@pytest.mark.parametrize(
+    ("table", "key", "value", "field"),
+    [
+        ("estimator", "sigma_range_m", "-1.0", "estimator.sigma_range_m"),
+        ("estimator", "gate_probability", "1.0", "estimator.gate_probability"),
+        ("guidance", "align_distance_m", "0.16", "guidance.align_distance_m"),  # inside keep-out + margin
+        ("guidance", "docking_face", '"+w"', "guidance.docking_face"),
+        ("guidance", "resume_sigma_pos_m", "0.07", "guidance.resume_sigma_pos_m"),
+        ("uwb", "nlos_probability", "1.5", "uwb.nlos_probability"),
+        ("uwb", "sigma_m", "0.0", "uwb.sigma_m"),
+        ("uwb", "nlos_max_m", "0.1", "uwb.nlos_max_m"),
+        ("camera", "fx_px", "0.0", "camera.fx_px"),
+        ("camera", "min_range_m", "2.0", "camera.min_range_m"),
+        ("mdp", "a11_threshold", "1.5", "mdp.a11_threshold"),
+        ("mdp", "r1_init_m", "0.5", "mdp.r1_init_m"),
+        ("fixed", "r1_m", "0.9", "fixed.r1_m"),
+        ("sim", "imu_rate_hz", "0.0", "sim.imu_rate_hz"),
+        ("station", "deadband_m", "-0.01", "station.deadband_m"),
+        ("initial", "sigma_pos_m", "0.0", "initial.sigma_pos_m"),
+        ("agent", "health_window_s", "0.0", "agent.health_window_s"),
+        ("vehicles.chaser", "role", '"pilot"', "vehicles.chaser.role"),
+        ("", "euler_seq", '"xyw"', "euler_seq"),
+    ],
+)
+def test_bad_value_is_named(tmp_path, table, key, value, field):
+    with pytest.raises(ConfigError, match=re.escape(field)) as exc:
+        load_variant(tmp_path, table, key, value)
+    assert "variant.toml" in str(exc.value)  # and the file it came from
+
+
+# ---- cross-field checks -----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("target", ['"ghost"', '"chaser"'])  # missing; not a target
+def test_chaser_target_must_be_a_target(tmp_path, target):
+    with pytest.raises(ConfigError, match=r"vehicles\.chaser\.target"):
+        load_variant(tmp_path, "vehicles.chaser", "target", target)
+
+
+def test_chaser_without_target_is_an_error(tmp_path):
+    path = tmp_path / "no_target.toml"
+    path.write_text(TEXT.replace('target = "target"\n', ""))
+    with pytest.raises(ConfigError, match=r"vehicles\.chaser\.target"):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize(
+    ("table", "value", "field"),
+    [
+        ("uwb", "30.0", "uwb.rate_hz"),
+        ("camera", "7.0", "camera.rate_hz"),
+        ("translation_control", "3.0", "translation_control.rate_hz"),
+        ("ahrs", "40.0", "ahrs.rate_hz"),
+        ("ahrs", "200.0", "ahrs.rate_hz"),  # faster than the tick
+    ],
+)
+def test_rate_must_divide_the_imu_rate(tmp_path, table, value, field):
+    with pytest.raises(ConfigError, match=rf"{re.escape(field)}.*sim\.imu_rate_hz"):
+        load_variant(tmp_path, table, "rate_hz", value)
+
+
+def test_rates_that_divide_the_imu_rate_are_accepted(tmp_path):
+    assert load_variant(tmp_path, "uwb", "rate_hz", "25.0").uwb.rate_hz == 25.0
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "named"),
+    [
+        ("pos_body_m", "[0.0, 0.0, -0.04]", "camera.pos_body_m"),
+        ("q_body_cam", "[0.0, 1.0, 0.0, 0.0]", "q_body_cam"),
+    ],
+)
+def test_camera_mounting_must_match_the_estimator_model(tmp_path, key, value, named):
+    with pytest.raises(ConfigError, match=r"estimator\.camera_pos_body_m") as exc:
+        load_variant(tmp_path, "camera", key, value)
+    assert named in str(exc.value)
+
+
+def test_marker_cube_must_match_the_guidance_cube(tmp_path):
+    with pytest.raises(ConfigError, match=r"markers\.half_size_m.*guidance\.half_size_m"):
+        load_variant(tmp_path, "markers", "half_size_m", "0.04")
+
+
+# ---- overrides --------------------------------------------------------------------------------------------
+
+
+def test_overrides_apply_and_leave_the_rest_alone():
+    sc = load_scenario(
+        "docking",
+        overrides={
+            "uwb.nlos_probability": 0.1,
+            "fixed.r2_m": 0.7,
+            "vehicles.chaser.position_m": [0.0, 1.2, 0.0],
+        },
+    )
+    assert sc.uwb.nlos_probability == 0.1
+    assert sc.fixed.r2_m == 0.7
+    assert sc.vehicles["chaser"].position_m == (0.0, 1.2, 0.0)
+    base = load_scenario("docking")
+    assert sc.uwb.sigma_m == base.uwb.sigma_m
+    assert sc.vehicles["target"] == base.vehicles["target"]
+    assert sc.estimator == base.estimator
+
+
+def test_bad_override_names_the_field_and_says_it_was_an_override():
+    with pytest.raises(ConfigError, match=r"estimator\.sigma_range_m.*override"):
+        load_scenario("docking", overrides={"estimator.sigma_range_m": -1.0})
+
+
+def test_override_of_an_unknown_key_is_named():
+    with pytest.raises(ConfigError, match=r"guidance\.keepout_radius: unknown key"):
+        load_scenario("docking", overrides={"guidance.keepout_radius": 0.2})
+
+
+def test_override_can_break_a_cross_field_check():
+    with pytest.raises(ConfigError, match=r"uwb\.rate_hz"):
+        load_scenario("docking", overrides={"uwb.rate_hz": 30.0})
