@@ -105,6 +105,11 @@ class Keys:
             raise ConfigError(f"agent key kind must be one of {AGENT_KINDS}, got {kind!r}")
         return f"{self.namespace}/agent/*/{kind}"
 
+    def agent_topics(self, agent_id: str) -> str:
+        """Wildcard over every topic of one vehicle: ``<ns>/agent/<id>/*``. One subscriber on it delivers
+        that vehicle's samples in publication order (separate subscribers run on separate threads)."""
+        return f"{self.namespace}/agent/{check_id(agent_id)}/*"
+
     # ---------------------------------------------------------------------------------- swarm-wide
 
     def world_clock(self) -> str:
@@ -127,6 +132,10 @@ class Keys:
     def alive_all(self) -> str:
         """Wildcard over every liveliness token of this swarm."""
         return f"{self.namespace}/alive/**"
+
+    def everything(self) -> str:
+        """Wildcard over every key of this swarm (a recorder): ``<ns>/**``."""
+        return f"{self.namespace}/**"
 
     # ---------------------------------------------------------------------------------- inverse
 

@@ -1,0 +1,697 @@
+"""Tests for swarm.transport.messages: the wire codec of every message, its validation and the drop counter.
+
+Oracles: round trips (encode then decode gives the message back, bit for bit), msgpack itself (payloads
+built by hand with ``msgpack.packb``, as a client in another language would), hand-written expected error
+messages, and the core's own enums for the mirrored constants.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import re
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from swarm.core.mdp import DECISION_KEYS
+from swarm.errors import ConfigError, MessageError
+from swarm.transport import messages as msgs
+from swarm.transport.keys import ID_PATTERN
+from swarm.transport.messages import (
+    MAX_ITEMS,
+    MAX_PAYLOAD_BYTES,
+    MESSAGE_FOR_KIND,
+    MESSAGE_TYPES,
+    SCHEMA_VERSION,
+    Anchors,
+    Clock,
+    Command,
+    DropCounter,
+    Estimate,
+    Event,
+    Guidance,
+    Imu,
+    RunControl,
+    Truth,
+    Uwb,
+    Vision,
+    decode,
+    encode,
+    safe_decode,
+)
+
+NAN, INF = math.nan, math.inf
+Q = [0.0, 0.0, 0.0, 1.0]
+PROBS = {"A11", "A22", "A23", "A32", "A33", "pi1", "pi2"}
+DECISION = {k: (None if k in {"A32", "A33", "pi1", "pi2"} else 0.5) for k in DECISION_KEYS}
+ANCHORS_MS = [[1.0, -0.2, 0.5], [1.0, 0.2, -0.5], [-1.0, 0.2, -0.5], [-1.0, -0.2, 0.5]]  # DESIGN.md sec. 3
+
+VALID = {
+    Imu: Imu(1, 0.01, 0.01, [0.1, 0.2, 0.3], Q),
+    Uwb: Uwb(2, 0.02, 1, 1.5),
+    Vision: Vision(3, 0.05, "target", "+x", "features", np.full((6, 3), 0.1), (0, 1, 2, 3, 4, 5)),
+    Estimate: Estimate(
+        4, 0.04, [1.0, 2.0, 3.0], [0.0, 0.0, 0.0], Q, np.eye(9) * 1e-4, 0.01, 0.5, 0.0,
+        {"range_accepted": 3, "range_rejected": 1},
+    ),
+    Guidance: Guidance(5, 0.05, "REORIENT", 0.25, 0.1, 0.3, 1.0, DECISION, "A22=0.5 > 0.4"),
+    Command: Command(6, 0.06, np.zeros(10), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], "APPROACH"),
+    Truth: Truth(7, 0.07, [1.0, 2.0, 1.0], [0.0, 0.0, 0.0], Q, [0.0, 0.0, 0.0]),
+    Event: Event(0.08, "mode", {"from": "HOLD", "to": "APPROACH", "range_m": 1.0}),
+    Clock: Clock(8, 0.08, "running", 42),
+    Anchors: Anchors((0, 1, 2, 3), ANCHORS_MS),
+    RunControl: RunControl("reset", 7),
+}  # fmt: skip
+
+SILENT = logging.getLogger("tests.transport.silent")
+SILENT.disabled = True  # the hypothesis tests drop thousands of messages on purpose
+
+
+def wire(msg) -> dict:
+    return msgpack.unpackb(encode(msg), raw=False)
+
+
+def pack(obj) -> bytes:
+    return msgpack.packb(obj, use_bin_type=True)
+
+
+def array_map(values, dtype="<f8", shape=None) -> dict:
+    a = np.asarray(values, dtype=dtype)
+    return {"dtype": dtype, "shape": list(a.shape if shape is None else shape), "data": a.tobytes()}
+
+
+# ------------------------------------------------------------------------------------- strategies
+
+finite = st.floats(-1e6, 1e6, allow_nan=False)
+nonneg = st.floats(0.0, 1e6)
+ticks = st.integers(0, 2**64 - 1)
+times = st.floats(0.0, 1e7)
+ids = st.from_regex(ID_PATTERN, fullmatch=True)
+
+
+def vec(n: int):
+    return arrays(np.float64, (n,), elements=finite)
+
+
+quats = (
+    arrays(np.float64, (4,), elements=st.floats(-1.0, 1.0))
+    .filter(lambda q: np.linalg.norm(q) > 0.1)
+    .map(lambda q: q / np.linalg.norm(q))
+)
+
+
+def _sym(a: np.ndarray) -> np.ndarray:
+    p = a + a.T  # exactly symmetric: float addition commutes
+    np.fill_diagonal(p, np.abs(np.diag(p)))
+    return p
+
+
+covs = arrays(np.float64, (9, 9), elements=st.floats(-1e3, 1e3)).map(_sym)
+
+
+def marked(n_cols: int):
+    return st.integers(1, MAX_ITEMS).flatmap(
+        lambda n: st.tuples(
+            arrays(np.float64, (n, n_cols), elements=finite),
+            st.lists(st.integers(0, 2**31 - 1), min_size=n, max_size=n, unique=True).map(tuple),
+        )
+    )
+
+
+def _depth(x) -> int:
+    if isinstance(x, list):
+        return 1 + max((_depth(v) for v in x), default=0)
+    if isinstance(x, dict):
+        return 1 + max((_depth(v) for v in x.values()), default=0)
+    return 0
+
+
+plain = st.recursive(
+    st.none() | st.booleans() | st.integers(-(2**63), 2**64 - 1) | finite | st.text(max_size=12),
+    lambda c: st.lists(c, max_size=4) | st.dictionaries(st.text(max_size=8), c, max_size=4),
+    max_leaves=16,
+)
+event_data = st.dictionaries(st.text(max_size=8), plain, max_size=5).filter(lambda d: _depth(d) <= 8)
+decisions = st.fixed_dictionaries(
+    {k: (st.none() | st.floats(0.0, 1.0)) if k in PROBS else nonneg for k in DECISION_KEYS}
+)
+counts = st.dictionaries(st.from_regex(r"[a-z_]{1,20}", fullmatch=True), ticks, max_size=10)
+
+
+@st.composite
+def visions(draw):
+    kind = draw(st.sampled_from(msgs.VISION_KINDS))
+    data, marker_ids = draw(marked(3 if kind == "features" else 2))
+    face = draw(st.sampled_from(msgs.FACES))
+    return Vision(draw(ticks), draw(times), draw(ids), face, kind, data, marker_ids)
+
+
+STRATEGIES = {
+    Imu: st.builds(Imu, ticks, times, st.floats(1e-6, 10.0), vec(3), st.none() | quats),
+    Uwb: st.builds(Uwb, ticks, times, st.integers(0, 2**31 - 1), st.none() | nonneg),
+    Vision: visions(),
+    Estimate: st.builds(
+        Estimate, ticks, times, vec(3), vec(3), quats, covs, nonneg, nonneg, st.floats(0.0, 1.0), counts
+    ),
+    Guidance: st.builds(
+        Guidance, ticks, times, st.sampled_from(msgs.MODES), st.none() | nonneg, st.none() | nonneg,
+        st.none() | nonneg, st.none() | nonneg, st.none() | decisions, st.text(max_size=40),
+    ),
+    Command: st.builds(
+        Command, ticks, times, arrays(np.float64, st.integers(0, MAX_ITEMS), elements=nonneg), vec(3), vec(3),
+        st.sampled_from(msgs.MODES),
+    ),
+    Truth: st.builds(Truth, ticks, times, vec(3), vec(3), quats, vec(3)),
+    Event: st.builds(Event, times, st.from_regex(r"[a-z][a-z0-9_]{0,20}", fullmatch=True), event_data),
+    Clock: st.builds(Clock, ticks, times, st.sampled_from(msgs.CLOCK_STATES), ticks),
+    Anchors: marked(3).map(lambda m: Anchors(m[1], m[0])),
+    RunControl: st.builds(RunControl, st.sampled_from(msgs.RUN_COMMANDS), st.none() | ticks),
+}  # fmt: skip
+
+ALL = list(VALID)
+
+
+# --------------------------------------------------------------------------------------- round trips
+
+
+def test_every_message_type_has_a_valid_example_and_a_strategy():
+    assert set(VALID) == set(STRATEGIES) == set(MESSAGE_TYPES.values())
+
+
+@pytest.mark.parametrize("cls", ALL, ids=lambda c: c.__name__)
+@given(data=st.data())
+def test_round_trip_gives_the_message_back(cls, data):
+    msg = data.draw(STRATEGIES[cls])
+    assert decode(encode(msg), cls) == msg
+
+
+@pytest.mark.parametrize("cls", ALL, ids=lambda c: c.__name__)
+@given(data=st.data())
+def test_arrays_sent_as_plain_lists_decode_to_the_same_message(cls, data):
+    msg = data.draw(STRATEGIES[cls])
+    as_lists = {"v": SCHEMA_VERSION, "type": cls.__name__}
+    for f in dataclasses.fields(msg):
+        value = getattr(msg, f.name)
+        as_lists[f.name] = value.tolist() if isinstance(value, np.ndarray) else value
+    assert decode(pack(as_lists), cls) == msg
+
+
+def test_wire_map_has_version_type_and_raw_little_endian_arrays():
+    w = wire(Imu(3, 0.03, 0.01, [0.01, -0.02, 0.0]))
+    assert w["v"] == SCHEMA_VERSION and w["type"] == "Imu"
+    assert w["gyro_body"] == {
+        "dtype": "<f8",
+        "shape": [3],
+        "data": np.array([0.01, -0.02, 0.0], "<f8").tobytes(),
+    }
+    assert w["q_ahrs_ms_body"] is None
+
+
+@pytest.mark.parametrize("dtype", ["<f8", ">f8", "<f4", ">f4", "<f2", "<i4", ">i2", "<u8", "|u1", "|i1"])
+def test_any_int_or_float_dtype_and_byte_order_decodes_to_float64(dtype):
+    w = wire(VALID[Truth])
+    w["p_ms"] = array_map([1, 2, 3], dtype)
+    p = decode(pack(w), Truth).p_ms
+    assert p.dtype == np.float64 and p.tolist() == [1.0, 2.0, 3.0]
+
+
+@pytest.mark.parametrize("cls", ALL, ids=lambda c: c.__name__)
+def test_decoded_arrays_are_writable_float64_copies(cls):
+    payload = encode(VALID[cls])
+    msg = decode(payload, cls)
+    for f in dataclasses.fields(msg):
+        a = getattr(msg, f.name)
+        if isinstance(a, np.ndarray):
+            assert a.dtype == np.float64 and a.flags.writeable and a.flags.owndata, f.name
+            a[...] = 0.0  # would raise on a frombuffer view
+    assert decode(payload, cls) == VALID[cls]  # the payload is untouched
+
+
+def test_unknown_keys_are_ignored_for_forward_compatibility():
+    w = wire(VALID[Estimate])
+    w["innovation_nis"] = [1.0, 2.0]
+    w["future"] = {"nested": True}
+    assert decode(pack(w), Estimate) == VALID[Estimate]
+
+
+@pytest.mark.parametrize(
+    "cls, field, default",
+    [(Imu, "q_ahrs_ms_body", None), (Uwb, "range_m", None), (Guidance, "decision", None),
+     (Guidance, "reason", ""), (Event, "data", {}), (RunControl, "seed", None)],
+)  # fmt: skip
+def test_a_field_with_a_default_may_be_left_out(cls, field, default):
+    w = wire(VALID[cls])
+    del w[field]
+    assert getattr(decode(pack(w), cls), field) == default
+
+
+def test_lost_uwb_reply_is_a_null_range():
+    assert decode(encode(Uwb(10, 0.1, 2, None)), Uwb).range_m is None
+
+
+def test_payload_may_be_bytearray_memoryview_or_have_bytes_method():
+    class FakeZBytes:  # like zenoh.ZBytes
+        def __init__(self, b: bytes) -> None:
+            self.b = b
+
+        def __bytes__(self) -> bytes:
+            return self.b
+
+    b = encode(VALID[Uwb])
+    for payload in (bytearray(b), memoryview(b), FakeZBytes(b)):
+        assert decode(payload, Uwb) == VALID[Uwb]
+
+
+# ---------------------------------------------------------------------------------------- validation
+
+DELETE = object()
+TOO_DEEP: dict = {}
+_node = TOO_DEEP
+for _ in range(8):
+    _node["x"] = {}
+    _node = _node["x"]
+
+# (class, field path, bad value, expected start of the error message); DELETE removes the key
+CASES = [
+    (Imu, "tick", -1, "tick: must be >= 0, got -1"),
+    (Imu, "tick", 1.5, "tick: expected an integer"),
+    (Imu, "tick", True, "tick: expected an integer"),
+    (Imu, "tick", DELETE, "tick: missing"),
+    (Imu, "t_s", NAN, "t_s: not finite"),
+    (Imu, "t_s", INF, "t_s: not finite"),
+    (Imu, "t_s", -0.5, "t_s: must be >= 0"),
+    (Imu, "t_s", "0.1", "t_s: expected a number"),
+    (Imu, "dt_s", 0.0, "dt_s: must be > 0"),
+    (Imu, "dt_s", -0.01, "dt_s: must be > 0"),
+    (Imu, "gyro_body", [1.0, 2.0, 3.0, 4.0], "gyro_body: expected shape (3,), got (4,)"),
+    (Imu, "gyro_body", array_map([1.0, 2.0, 3.0, 4.0]), "gyro_body: expected shape (3,), got (4,)"),
+    (Imu, "gyro_body", [[1.0, 2.0, 3.0]], "gyro_body: nested deeper"),
+    (Imu, "gyro_body", [1.0, NAN, 3.0], "gyro_body: not finite"),
+    (Imu, "gyro_body", array_map([1.0, INF, 3.0]), "gyro_body: not finite"),
+    (Imu, "gyro_body", ["a", "b", "c"], "gyro_body: expected 1-level nested arrays of numbers"),
+    (Imu, "gyro_body", [True, 0, 0], "gyro_body: expected 1-level nested arrays of numbers"),
+    (Imu, "gyro_body", None, "gyro_body: expected an array"),
+    (Imu, "gyro_body", DELETE, "gyro_body: missing"),
+    (Imu, "gyro_body", {"dtype": "<c16", "shape": [3], "data": bytes(48)}, "gyro_body.dtype:"),
+    (Imu, "gyro_body", {"dtype": "|O", "shape": [3], "data": bytes(24)}, "gyro_body.dtype:"),
+    (Imu, "gyro_body", {"dtype": "f8", "shape": [3], "data": bytes(24)}, "gyro_body.dtype:"),
+    (Imu, "gyro_body", {"dtype": "<f8", "shape": [3], "data": bytes(16)}, "gyro_body.data: 16 bytes"),
+    (Imu, "gyro_body", {"dtype": "<f8", "shape": [3], "data": "abc"}, "gyro_body.data: expected bin"),
+    (Imu, "gyro_body", {"dtype": "<f8", "shape": [-3], "data": bytes(24)}, "gyro_body.shape:"),
+    (Imu, "gyro_body", {"dtype": "<f8", "shape": [1, 1, 3], "data": bytes(24)}, "gyro_body.shape:"),
+    (Imu, "gyro_body", {"dtype": "<f8", "shape": [3]}, "gyro_body: an array map needs"),
+    (Imu, "q_ahrs_ms_body", [0.0, 0.0, 0.0, 2.0], "q_ahrs_ms_body: norm 2 is not within 0.001 of 1"),
+    (Imu, "q_ahrs_ms_body", [0.0, 0.0, 0.0, 0.998], "q_ahrs_ms_body: norm 0.998"),
+    (Imu, "q_ahrs_ms_body", [0.0, 0.0, INF, 1.0], "q_ahrs_ms_body: not finite"),
+    (Uwb, "anchor_id", -1, "anchor_id: must be >= 0"),
+    (Uwb, "anchor_id", 2**31, "anchor_id: must be <="),
+    (Uwb, "range_m", -0.1, "range_m: must be >= 0"),
+    (Uwb, "range_m", INF, "range_m: not finite"),
+    (Uwb, "range_m", "far", "range_m: expected a number or nil"),
+    (Vision, "kind", "depth", "kind: expected one of ('features', 'pixels')"),
+    (Vision, "face", "+w", "face: expected one of"),
+    (Vision, "target_id", "a/b", "target_id: must match"),
+    (Vision, "target_id", 7, "target_id: expected a string"),
+    (Vision, "data", np.ones((6, 2)).tolist(), "data: expected shape (N, 3), got (6, 2)"),
+    (Vision, "data", [], "data: expected shape (N, 3), got (0,)"),
+    (Vision, "marker_ids", [0, 1, 2], "marker_ids: 3 ids for 6 rows"),
+    (Vision, "marker_ids", [0, 0, 1, 2, 3, 4], "marker_ids: duplicate ids"),
+    (Vision, "marker_ids", [-1, 1, 2, 3, 4, 5], "marker_ids[0]: must be >= 0"),
+    (Vision, "marker_ids", [], "marker_ids: 0 entries"),
+    (Vision, "marker_ids", "012345", "marker_ids: expected an array of integers"),
+    (Estimate, "cov", (np.eye(9) + np.triu(np.ones((9, 9)), 1) * 1e-3).tolist(), "cov: not symmetric"),
+    (Estimate, "cov", (-np.eye(9)).tolist(), "cov: negative diagonal entry -1 at index 0"),
+    (Estimate, "cov", np.eye(6).tolist(), "cov: expected shape (9, 9), got (6, 6)"),
+    (Estimate, "p_ms", [1.0, 2.0], "p_ms: expected shape (3,), got (2,)"),
+    (Estimate, "v_ms", [0.0, NAN, 0.0], "v_ms: not finite"),
+    (Estimate, "q_ms_body", [0.0, 0.0, 0.0, 0.0], "q_ms_body: norm 0"),
+    (Estimate, "rejection_fraction", 1.5, "rejection_fraction: must be in [0, 1]"),
+    (Estimate, "sigma_pos_max_m", -1.0, "sigma_pos_max_m: must be >= 0"),
+    (Estimate, "mahalanobis_d", NAN, "mahalanobis_d: not finite"),
+    (Estimate, "counts", {"range_accepted": -1}, "counts.range_accepted: must be >= 0"),
+    (Estimate, "counts", {"range_accepted": 1.0}, "counts.range_accepted: expected an integer"),
+    (Estimate, "counts", [1], "counts: expected a map"),
+    (Estimate, "counts", {"bad key!": 1}, "counts key: must match"),
+    (Estimate, "counts", {f"k{i}": 0 for i in range(MAX_ITEMS + 1)}, "counts: 65 entries, more than the 64"),
+    (Guidance, "mode", "FLY", "mode: expected one of"),
+    (Guidance, "mode", "approach", "mode: expected one of"),
+    (Guidance, "range_m", -1.0, "range_m: must be >= 0"),
+    (Guidance, "r1_m", NAN, "r1_m: not finite"),
+    (Guidance, "decision", "x", "decision: expected a map or nil"),
+    (Guidance, "decision.A11", 2.0, "decision.A11: a probability must be in [0, 1]"),
+    (Guidance, "decision.A11", -0.5, "decision.A11: must be >= 0"),
+    (Guidance, "decision.r_m", None, "decision.r_m: expected a number, got None"),
+    (Guidance, "decision.pi2", NAN, "decision.pi2: not finite"),
+    (Guidance, "decision.A22", DELETE, "decision.A22: missing"),
+    (Guidance, "reason", 123, "reason: expected a string"),
+    (Guidance, "reason", "x" * 1025, "reason: 1025 characters, more than the 1024"),
+    (Command, "thrusts_n", [-0.1] + [0.0] * 9, "thrusts_n: must be >= 0, got -0.1"),
+    (Command, "thrusts_n", [0.0] * (MAX_ITEMS + 1), "thrusts_n: 65 rows, more than the 64 allowed"),
+    (Command, "force_body_n", [0.0, 0.0], "force_body_n: expected shape (3,), got (2,)"),
+    (Command, "torque_body_nm", [0.0, 0.0, NAN], "torque_body_nm: not finite"),
+    (Command, "mode", "approach", "mode: expected one of"),
+    (Truth, "q_ms_body", [1.0, 1.0, 0.0, 0.0], "q_ms_body: norm 1.41421"),
+    (Truth, "w_body", [0.0, 0.0, INF], "w_body: not finite"),
+    (Event, "kind", "", "kind: must match"),
+    (Event, "kind", "Mode", "kind: must match"),
+    (Event, "t_s", -1.0, "t_s: must be >= 0"),
+    (Event, "data", [1, 2], "data: expected a map"),
+    (Event, "data", {"x": NAN}, "data.x: not finite"),
+    (Event, "data", {"a": {"b": [1.0, INF]}}, "data.a.b[1]: not finite"),
+    (Event, "data", {"b": b"raw"}, "data.b: unsupported value"),
+    (Event, "data", TOO_DEEP, "data.x.x.x.x.x.x.x.x: nested deeper than 8"),
+    (Clock, "state", "flying", "state: expected one of ('running', 'paused', 'stopped')"),
+    (Clock, "seed", -1, "seed: must be >= 0"),
+    (Clock, "seed", 1.0, "seed: expected an integer"),
+    (Anchors, "anchor_ids", [0, 1, 2], "positions_ms: 4 rows for 3 anchor ids"),
+    (Anchors, "anchor_ids", [0, 0, 1, 2], "anchor_ids: duplicate ids"),
+    (Anchors, "positions_ms", [[1.0, 2.0]] * 4, "positions_ms: expected shape (N, 3), got (4, 2)"),
+    (RunControl, "command", "explode", "command: expected one of ('pause', 'resume', 'reset', 'new_seed')"),
+    (RunControl, "seed", -1, "seed: must be >= 0"),
+]  # fmt: skip
+
+
+def _mutated(base: dict, path: str, bad) -> dict:
+    out = dict(base)
+    head, _, sub = path.partition(".")
+    if sub:
+        out[head] = _mutated(out[head], sub, bad)
+    elif bad is DELETE:
+        del out[head]
+    else:
+        out[head] = bad
+    return out
+
+
+def _case_id(case) -> str:
+    return f"{case[0].__name__}.{case[1]}={str(case[2])[:20]}"
+
+
+@pytest.mark.parametrize("case", CASES, ids=_case_id)
+def test_decoding_a_bad_field_raises_message_error_naming_it(case):
+    cls, path, bad, expected = case
+    payload = pack(_mutated(wire(VALID[cls]), path, bad))
+    with pytest.raises(MessageError) as exc:
+        decode(payload, cls)
+    assert str(exc.value).startswith(expected), str(exc.value)
+
+
+@pytest.mark.parametrize("case", [c for c in CASES if c[2] is not DELETE], ids=_case_id)
+def test_building_a_bad_message_in_python_raises_the_same_error(case):
+    cls, path, bad, expected = case
+    kwargs = {f.name: getattr(VALID[cls], f.name) for f in dataclasses.fields(cls)}
+    with pytest.raises(MessageError) as exc:
+        cls(**_mutated(kwargs, path, bad))
+    assert str(exc.value).startswith(expected), str(exc.value)
+
+
+def test_more_than_64_markers_are_refused():
+    w = wire(VALID[Vision])
+    w["data"], w["marker_ids"] = np.zeros((MAX_ITEMS + 1, 3)).tolist(), list(range(MAX_ITEMS + 1))
+    with pytest.raises(MessageError, match=r"^data: 65 rows, more than the 64 allowed"):
+        decode(pack(w), Vision)
+
+
+def test_64_markers_are_accepted():
+    w = wire(VALID[Vision])
+    w["data"], w["marker_ids"] = np.zeros((MAX_ITEMS, 3)).tolist(), list(range(MAX_ITEMS))
+    assert decode(pack(w), Vision).data.shape == (MAX_ITEMS, 3)
+
+
+def test_pixels_need_two_columns():
+    w = wire(VALID[Vision])
+    w["kind"] = "pixels"
+    with pytest.raises(MessageError, match=r"^data: expected shape \(N, 2\), got \(6, 3\)"):
+        decode(pack(w), Vision)
+
+
+def test_covariance_asymmetry_within_the_relative_tolerance_is_accepted():
+    p = np.eye(9)
+    p[0, 1] = 1e-12  # 1e-12 <= 1e-9 * max|P| = 1e-9
+    kwargs = {f.name: getattr(VALID[Estimate], f.name) for f in dataclasses.fields(Estimate)}
+    assert Estimate(**{**kwargs, "cov": p}).cov[0, 1] == 1e-12
+
+
+def test_quaternion_norm_within_tolerance_is_accepted_as_sent():
+    q = [0.0, 0.0, 0.0, 1.0009]
+    assert decode(encode(Truth(0, 0.0, [0, 0, 0], [0, 0, 0], q, [0, 0, 0])), Truth).q_ms_body[3] == 1.0009
+
+
+@pytest.mark.parametrize(
+    "mutate, expected",
+    [
+        (lambda w: {**w, "v": 7}, "v: unsupported schema version 7"),
+        (lambda w: {**w, "v": "1"}, "v: unsupported schema version '1'"),
+        (lambda w: {**w, "v": True}, "v: unsupported schema version True"),
+        (lambda w: {k: x for k, x in w.items() if k != "v"}, "v: missing"),
+        (lambda w: {**w, "type": "Uwb"}, "type: expected 'Imu', got 'Uwb'"),
+        (lambda w: {k: x for k, x in w.items() if k != "type"}, "type: expected 'Imu', got None"),
+        (lambda w: [w], "payload: not a msgpack map"),
+        (lambda w: 3, "payload: not a msgpack map"),
+    ],
+)
+def test_envelope_errors_name_version_type_or_payload(mutate, expected):
+    with pytest.raises(MessageError) as exc:
+        decode(pack(mutate(wire(VALID[Imu]))), Imu)
+    assert str(exc.value).startswith(expected), str(exc.value)
+
+
+def test_wrong_message_type_is_refused():
+    with pytest.raises(MessageError, match=r"^type: expected 'Imu', got 'Uwb'"):
+        decode(encode(VALID[Uwb]), Imu)
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [b"", b"\xc1", b"\x81\xa1", encode(Uwb(2, 0.02, 1, 1.5)) + b"\x00", b"\x81\x01\x02", b"\x81\xa1\xff\x01"],
+    ids=["empty", "reserved-byte", "truncated", "trailing-bytes", "int-map-key", "bad-utf8"],
+)
+def test_bytes_that_are_not_msgpack_are_a_message_error(payload):
+    with pytest.raises(MessageError, match=r"^payload: not valid msgpack"):
+        decode(payload, Uwb)
+
+
+def test_payload_over_64_kib_is_refused_before_unpacking():
+    w = wire(VALID[Event])
+    w["padding"] = "x" * MAX_PAYLOAD_BYTES
+    with pytest.raises(MessageError, match=r"^payload: \d+ bytes, more than the 65536 allowed"):
+        decode(pack(w), Event)
+
+
+def test_encoding_a_message_over_64_kib_is_refused():
+    with pytest.raises(MessageError, match=r"^payload: \d+ bytes, more than the 65536 allowed"):
+        encode(Event(0.0, "log", {"text": "x" * MAX_PAYLOAD_BYTES}))
+
+
+def test_a_payload_that_is_not_bytes_is_a_message_error():
+    with pytest.raises(MessageError, match=r"^payload: expected bytes, got int"):
+        decode(5, Uwb)
+
+
+def test_encode_refuses_what_is_not_a_message():
+    with pytest.raises(TypeError):
+        encode({"v": 1})  # type: ignore[arg-type]
+
+
+def test_building_from_numpy_scalars_and_enums_gives_plain_python_values():
+    from swarm.core.guidance import Mode
+
+    g = Guidance(np.int64(3), np.float32(0.5), Mode.ALIGN)
+    assert type(g.tick) is int and type(g.t_s) is float and type(g.mode) is str and g.mode == "ALIGN"
+    e = Event(0.0, "mode", {"k": np.int64(2), "x": np.float64(0.5), "a": np.arange(2.0), "b": np.bool_(True)})
+    assert e.data == {"k": 2, "x": 0.5, "a": [0.0, 1.0], "b": True}
+    assert decode(encode(e), Event) == e
+
+
+# ------------------------------------------------------------------------------------- safe_decode
+
+
+@settings(max_examples=300)
+@given(st.binary(max_size=512), st.sampled_from(ALL))
+def test_arbitrary_bytes_never_raise_from_safe_decode_and_are_counted(payload, cls):
+    counter = DropCounter(logger=SILENT)
+    assert safe_decode(payload, cls, "tpods/agent/a/x", counter) is None
+    assert counter.count("tpods/agent/a/x") == 1
+
+
+msgpack_values = st.recursive(
+    st.none() | st.booleans() | st.integers(-(2**63), 2**64 - 1) | st.floats() | st.text(max_size=10)
+    | st.binary(max_size=10),
+    lambda c: st.lists(c, max_size=5) | st.dictionaries(st.text(max_size=10), c, max_size=5),
+    max_leaves=20,
+)  # fmt: skip
+
+
+@settings(max_examples=300)
+@given(msgpack_values, st.sampled_from(ALL))
+def test_arbitrary_msgpack_structures_are_dropped_and_counted(obj, cls):
+    counter = DropCounter(logger=SILENT)
+    assert safe_decode(pack(obj), cls, "k", counter) is None
+    assert counter.total == 1
+
+
+@st.composite
+def envelopes(draw):
+    """The right ``v`` and ``type`` with arbitrary values for some of the fields: mostly invalid."""
+    cls = draw(st.sampled_from(ALL))
+    names = [f.name for f in dataclasses.fields(cls)]
+    body = draw(st.fixed_dictionaries({}, optional={n: msgpack_values for n in names}))
+    return cls, {"v": SCHEMA_VERSION, "type": cls.__name__, **body}
+
+
+@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+@given(envelopes())
+def test_well_formed_envelopes_with_arbitrary_fields_decode_or_are_counted(case):
+    cls, obj = case
+    counter = DropCounter(logger=SILENT)
+    msg = safe_decode(pack(obj), cls, "k", counter)
+    if msg is None:
+        assert counter.count("k") == 1
+    else:  # the fields happened to be valid: then it is a real message
+        assert isinstance(msg, cls) and counter.total == 0 and decode(encode(msg), cls) == msg
+
+
+def test_safe_decode_returns_the_message_when_valid_and_counts_nothing():
+    counter = DropCounter(logger=SILENT)
+    assert safe_decode(encode(VALID[Clock]), Clock, "k", counter) == VALID[Clock]
+    assert counter.counts() == {}
+
+
+def test_safe_decode_counts_an_unexpected_exception_instead_of_raising(monkeypatch):
+    def broken(payload, expected):
+        raise RuntimeError("codec bug")
+
+    monkeypatch.setattr(msgs, "decode", broken)
+    counter = DropCounter(logger=SILENT)
+    assert safe_decode(encode(VALID[Clock]), Clock, "k", counter) is None
+    assert counter.count("k") == 1
+
+
+def test_safe_decode_logs_the_reason_naming_key_and_field(caplog):
+    w = wire(VALID[Imu])
+    w["gyro_body"] = [0.0, NAN, 0.0]
+    with caplog.at_level(logging.WARNING, logger="swarm.transport.messages"):
+        safe_decode(pack(w), Imu, "tpods/agent/a/imu", DropCounter())
+    assert "tpods/agent/a/imu" in caplog.text and "gyro_body: not finite" in caplog.text
+
+
+# ------------------------------------------------------------------------------------- DropCounter
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_drop_counter_logs_at_most_once_per_key_per_interval(caplog):
+    clock = FakeClock()
+    log = logging.getLogger("tests.transport.drops")
+    counter = DropCounter(log_interval_s=10.0, logger=log, clock=clock)
+    with caplog.at_level(logging.WARNING, logger=log.name):
+        for t, reason in [(0.0, "r0"), (1.0, "r1"), (2.0, "r2"), (10.5, "r3")]:
+            clock.t = t
+            counter.drop("k", reason)
+        counter.drop("other", "q0")  # another key has its own interval
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines == [
+        "dropped 1 invalid message on k (total 1); last: r0",
+        "dropped 3 invalid messages on k (total 4); last: r3",
+        "dropped 1 invalid message on other (total 1); last: q0",
+    ]
+    assert counter.counts() == {"k": 4, "other": 1} and counter.total == 5
+
+
+def test_drop_counter_flush_reports_pending_drops_once(caplog):
+    clock = FakeClock()
+    log = logging.getLogger("tests.transport.flush")
+    counter = DropCounter(log_interval_s=10.0, logger=log, clock=clock)
+    with caplog.at_level(logging.WARNING, logger=log.name):
+        counter.drop("k", "a")
+        counter.drop("k", "b")
+        counter.flush()
+        counter.flush()
+    assert [r.getMessage() for r in caplog.records] == [
+        "dropped 1 invalid message on k (total 1); last: a",
+        "dropped 1 invalid message on k (total 2); last: b",
+    ]
+
+
+def test_drop_counter_is_thread_safe():
+    counter = DropCounter(logger=SILENT)
+
+    def work(i: int) -> None:
+        for _ in range(2000):
+            counter.drop(f"k{i % 4}", "x")
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert counter.counts() == {f"k{i}": 4000 for i in range(4)}
+
+
+def test_drop_counter_bounds_the_number_of_keys_it_tracks():
+    counter = DropCounter(logger=SILENT, max_keys=2)
+    for i in range(5):
+        counter.drop(f"k{i}", "x")
+    assert counter.counts() == {"k0": 1, "k1": 1, DropCounter.OTHER: 3}
+
+
+@pytest.mark.parametrize("kwargs", [{"log_interval_s": 0.0}, {"log_interval_s": NAN}, {"max_keys": 0}])
+def test_drop_counter_refuses_bad_settings(kwargs):
+    with pytest.raises(ConfigError, match=r"^transport\."):
+        DropCounter(**kwargs)
+
+
+# ----------------------------------------------------------------------------- contract with the core
+
+
+def test_mirrored_modes_and_faces_agree_with_the_core():
+    from swarm.core.camera import FACES
+    from swarm.core.guidance import Mode
+
+    assert msgs.MODES == tuple(m.value for m in Mode)
+    assert msgs.FACES == FACES
+
+
+def test_a_real_decision_record_passes_validation():
+    from swarm.core.mdp import MdpSwitcher
+
+    sw = MdpSwitcher()
+    dec = sw.evaluate(t_s=1.0, r_m=0.5, d=0.3, qe_vec_norm=0.2, sigma_pos_max_m=0.01)
+    g = Guidance(1, 1.0, "APPROACH", 0.5, sw.r1_m, sw.r2_m, 1.0, dec.as_dict(diagnostics=True), dec.reason)
+    assert set(g.decision) == set(DECISION_KEYS) and decode(encode(g), Guidance) == g
+
+
+def test_every_key_kind_maps_to_a_message():
+    from swarm.transport.keys import AGENT_KINDS
+
+    assert set(MESSAGE_FOR_KIND) == {*AGENT_KINDS, "world_clock", "anchors", "run_control"}
+
+
+def test_the_codec_does_not_import_zenoh_or_the_heavy_core():
+    code = "import sys, swarm.transport; print(sorted({'zenoh', 'scipy', 'cv2', 'numba'} & set(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_protocol_doc_byte_example_is_what_the_codec_writes():
+    doc = (Path(__file__).parents[2] / "docs" / "protocol.md").read_text()
+    block = re.search(r"<!-- imu-example-hex -->\s*```\n(.*?)```", doc, re.S)
+    assert block is not None, "docs/protocol.md lost its byte-level example"
+    hex_bytes = "".join(re.sub(r"#.*", "", line) for line in block.group(1).splitlines())
+    assert bytes.fromhex(hex_bytes) == encode(Imu(3, 0.03, 0.01, [0.01, -0.02, 0.0]))
