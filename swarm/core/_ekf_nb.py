@@ -409,17 +409,10 @@ def range_model(X, anchor_ms, lever_body):
 
     ``h = || p + R(q) P1 - a ||``; ``dh/dp = u^T``, ``dh/dv = 0``,
     ``dh/dtheta = -u^T R(q) [P1 x]`` with ``u`` the unit line of sight anchor -> tag.
-    Returns ``(h, H (1, 9))``.
+    Returns ``(h, H (1, 9))``; the arithmetic is :func:`_range_row`'s.
     """
-    Rq = qmat(X[6:10])
-    tag = X[0:3] + Rq @ lever_body
-    d = tag - anchor_ms
-    h = np.sqrt(d @ d)
     H = np.zeros((1, 9))
-    if h > 0.0:
-        u = d / h
-        H[0, 0:3] = u
-        H[0, 6:9] = -(u @ Rq) @ skew3(lever_body)
+    h = _range_row(X, anchor_ms, lever_body, H[0])
     return h, H
 
 

@@ -388,10 +388,8 @@ class ChaserGuidance:
             goal = p_t + u * (p.keepout_radius_m + p.abort_retreat_m)
             v_ref = self._carrot(nav, goal, p.abort_speed_m_s, dt)
             q_ref = nav.q_ms_body
-        elif self.mode is Mode.HOLD:
-            q_ref = nav.q_ms_body if not self.started else q_ref
-            if not self.started:
-                q_ref = self.q_mission
+        elif self.mode is Mode.HOLD and (not self.started or self.resume_mode is Mode.APPROACH):
+            q_ref = self.q_mission  # holding before the start or during APPROACH: the mission attitude
         elif self.mode is Mode.DOCKED:
             self.p_ref = nav.p_ms.copy()
         return Reference(
