@@ -93,6 +93,10 @@ class GuidanceParams:
     """A HOLD (after start) longer than this turns into ABORT [s]."""
     abort_retreat_m: float = 0.3
     """ABORT backs away to this distance beyond the keep-out sphere along the line of sight [m]."""
+    retry_after_s: float = 5.0
+    """An ABORT retries no sooner than this after it began, once backed away and healthy [s]."""
+    arc_lookahead_rad: float = 0.05
+    """Around the keep-out sphere the goal leads the reference by this arc [rad] (a carrot on the arc)."""
     max_retries: int = 1
     """After an ABORT the approach is retried this many times once the estimate is healthy again."""
     stall_timeout_s: float = 2.0
@@ -107,7 +111,7 @@ class GuidanceParams:
             "align_attitude_tolerance_rad", "align_speed_tolerance_m_s", "contact_distance_m",
             "contact_lateral_m", "contact_attitude_rad", "contact_speed_m_s", "hold_sigma_pos_m",
             "resume_sigma_pos_m", "abort_after_hold_s", "abort_retreat_m", "stall_timeout_s",
-            "corridor_half_angle_deg",
+            "corridor_half_angle_deg", "retry_after_s", "arc_lookahead_rad",
         ):  # fmt: skip
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -278,7 +282,7 @@ class ChaserGuidance:
         if np.linalg.norm(axis) < 1e-9:  # exactly opposite the face: any perpendicular axis will do
             axis = np.cross(u, np.eye(3)[np.argmin(np.abs(u))])
         axis /= np.linalg.norm(axis)
-        ang = min(np.arccos(np.clip(u @ n_ms, -1.0, 1.0)), 4.0 * speed * dt / radius + 0.05)
+        ang = min(np.arccos(np.clip(u @ n_ms, -1.0, 1.0)), self.p.arc_lookahead_rad)
         return p_t + radius * rot.quat_rotate(rot.rotvec_exp(axis * ang), u)
 
     # ---- one evaluation -------------------------------------------------------------------------
@@ -358,7 +362,7 @@ class ChaserGuidance:
                 self._switch(t, Mode.DOCKED, r, f"estimated port gap {c['gap_m'] * 1000:.1f} mm", events)
         if self.mode is Mode.ABORT and self.retries < p.max_retries and healthy:
             retreat = np.linalg.norm(self.p_ref - p_t) >= p.keepout_radius_m + p.abort_retreat_m - 1e-3
-            if retreat and t - self.mode_since_s > 5.0:
+            if retreat and t - self.mode_since_s > p.retry_after_s:
                 self.retries += 1
                 self.p_ref = nav.p_ms.copy()
                 self._switch(t, Mode.APPROACH, r, f"retry {self.retries} after abort", events)

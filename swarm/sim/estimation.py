@@ -34,10 +34,20 @@ class EstimationScenario:
     centre_ms: tuple[float, float, float] = (0.0, 0.5, 0.0)
     pull_rate_rad_s: float = 0.5
     """Natural frequency of the commanded pull towards ``centre_ms`` [rad/s]."""
+    pull_damping: float = 0.7
+    """Damping ratio of that pull."""
     excitation_m_s2: float = 0.02
-    """Amplitude of the commanded sinusoidal excitation [m/s^2]."""
+    """Amplitude of the commanded sinusoidal excitation [m/s^2] ..."""
+    excitation_rad_s: float = 0.3
+    """... and its angular frequency [rad/s]."""
     body_rate_rad_s: float = 0.1
-    """Amplitude of the true body rates [rad/s]."""
+    """Amplitude of the true body rates [rad/s] ..."""
+    body_rate_freqs_rad_s: tuple[float, float, float] = (0.5, 0.4, 0.3)
+    """... and their angular frequencies per body axis [rad/s]."""
+    start_box_m: float = 0.3
+    """True start positions are uniform within +- this of ``centre_ms`` per axis [m] ..."""
+    start_attitude_rad: float = 0.5
+    """... and true start attitudes have this standard deviation per rotation-vector axis [rad]."""
     ahrs_every: int = 0
     """An AHRS attitude every ``ahrs_every`` IMU steps (0: none). The hardware's VN-100 gives one."""
     ahrs_sigma_rad: float = 0.01
@@ -71,7 +81,8 @@ class EstimationResult:
 def _truth_accel(t: float, p: np.ndarray, v: np.ndarray, sc: EstimationScenario, phase: np.ndarray):
     w0 = sc.pull_rate_rad_s
     c = np.asarray(sc.centre_ms)
-    return -(w0**2) * (p - c) - 2.0 * 0.7 * w0 * v + sc.excitation_m_s2 * np.sin(0.3 * t + phase)
+    excitation = sc.excitation_m_s2 * np.sin(sc.excitation_rad_s * t + phase)
+    return -(w0**2) * (p - c) - 2.0 * sc.pull_damping * w0 * v + excitation
 
 
 def run_estimation(params: EstimatorParams, sc: EstimationScenario) -> EstimationResult:
@@ -81,9 +92,9 @@ def run_estimation(params: EstimatorParams, sc: EstimationScenario) -> Estimatio
     ss = np.random.SeedSequence(sc.seed)
     rng_init, rng_proc, rng_gyro, rng_uwb, rng_out, rng_ahrs = (np.random.default_rng(s) for s in ss.spawn(6))
 
-    p = np.tile(np.asarray(sc.centre_ms), (n, 1)) + rng_init.uniform(-0.3, 0.3, (n, 3))
+    p = np.tile(np.asarray(sc.centre_ms), (n, 1)) + rng_init.uniform(-sc.start_box_m, sc.start_box_m, (n, 3))
     v = np.zeros((n, 3))
-    q = rot.rotvec_exp(rng_init.normal(0.0, 0.5, (n, 3)))
+    q = rot.rotvec_exp(rng_init.normal(0.0, sc.start_attitude_rad, (n, 3)))
     phase = rng_init.uniform(0, 2 * np.pi, (n, 3))
     sig0 = np.array([sc.init_sigma_pos_m] * 3 + [sc.init_sigma_vel_m_s] * 3 + [sc.init_sigma_att_rad] * 3)
     e0 = rng_init.normal(size=(n, 9)) * sig0
@@ -102,6 +113,7 @@ def run_estimation(params: EstimatorParams, sc: EstimationScenario) -> Estimatio
     sig_g = params.gyro_arw_rad_rts / np.sqrt(dt)
     lever = np.asarray(params.lever_arm_body_m)
     n_anchor = len(sc.anchors_ms)
+    f0, f1, f2 = sc.body_rate_freqs_rad_s
 
     ks, errs, covs, perr, aerr, nis = [], [], [], [], [], []
     out_tot = out_rej = clean_tot = clean_rej = 0
@@ -109,7 +121,7 @@ def run_estimation(params: EstimatorParams, sc: EstimationScenario) -> Estimatio
         t = k * dt
         a_cmd = _truth_accel(t, p, v, sc, phase)
         w_true = sc.body_rate_rad_s * np.stack(
-            [np.sin(0.5 * t + phase[:, 0]), np.cos(0.4 * t + phase[:, 1]), np.sin(0.3 * t + phase[:, 2])],
+            [np.sin(f0 * t + phase[:, 0]), np.cos(f1 * t + phase[:, 1]), np.sin(f2 * t + phase[:, 2])],
             axis=-1,
         )
         # truth: exact discretisation of the filter's own process model
