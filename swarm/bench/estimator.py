@@ -9,8 +9,11 @@ Measured in one process, cases interleaved block by block so that machine noise 
   directly from Python with ready-made arrays: what is left of the API once argument handling is gone.
 * **kernel**: a compiled loop over ``_ekf_nb.predict_one`` + ``update_range_one`` on one filter, no
   Python at all: the structure's computational cost, which is what Table I compares.
+* **kernel pieces**: compiled loops over one piece of that step at a time (:func:`_piece_loop`), to say
+  where the kernel's time goes.
 * **FilterPy**: ``filterpy.kalman.ExtendedKalmanFilter`` running the same 9-state multiplicative model
-  (:class:`FilterPyMekf`, tested equal to the compounded filter to 1e-9), an optional extra.
+  (:class:`~swarm.bench.filterpy_mekf.FilterPyMekf`, tested equal to the compounded filter to 1e-9), an
+  optional extra.
 * **batched**: ``PoseEstimator`` with ``n`` filters, time per step divided by ``n``.
 
 Every case replays the same precomputed run (:func:`make_inputs`): a slow drift inside the paper's four
@@ -33,6 +36,7 @@ from dataclasses import asdict, dataclass, replace
 import numba
 import numpy as np
 
+from swarm.bench.filterpy_mekf import FILTERPY_MISSING, FilterPyMekf, filterpy_available
 from swarm.core import _ekf_nb as nb
 from swarm.core import rotations as rot
 from swarm.core.estimator import EstimatorParams, MeasKind, PoseEstimator, Structure, chi2_gate
@@ -54,7 +58,6 @@ GOALS = {  # key: (the ratio it reads, target, comparison, label)
     "tandem_200x_paper_kernel": ("paper_speedup_tandem_kernel", 200.0, ">=", "paper 3.407 ms/tandem, kernel"),
 }
 """Issue 2's performance goals: reported with the measured value, never asserted."""
-FILTERPY_MISSING = "filterpy not installed (pip install .[bench])"
 STRUCTURES = ("tandem", "compounded")
 
 
@@ -137,95 +140,7 @@ def make_inputs(steps: int, dt_s: float, params: EstimatorParams, seed: int = 0)
     )
 
 
-# ---- FilterPy on the same model ----------------------------------------------------------------------
-
-
-class FilterPyMekf:
-    """FilterPy's ``ExtendedKalmanFilter`` (dim_x=9, dim_z=1) running the compounded filter's model.
-
-    The state is the error state ``(p, v, d_theta)`` around a reference quaternion ``q_ms_body`` that is
-    propagated with the gyro outside FilterPy (paper eq. 3). Per step: ``F = [[I, dt I, 0], [0, I, 0],
-    [0, 0, Phi]]`` with ``Phi = R(exp(w dt))^T`` (Crassidis & Junkins 2011 sec. 7.2.4), the known
-    acceleration through ``B = [dt^2/2 I; dt I; 0]``, ``Q`` the white-noise-acceleration blocks
-    ``q dt^3/3, q dt^2/2, q dt`` plus ``psd dt I`` on attitude; then ``ekf.update`` with the range model of
-    ``_ekf_nb.range_model`` (``h = |p + R(q) P1 - a|``, ``H = [u^T, 0, -u^T R(q) [P1 x]]``) and the
-    multiplicative reset ``q <- q (x) exp(d_theta)``, ``P <- T P T^T``, ``T = I - 1/2 [d_theta x]`` on
-    the attitude block (Markley 2003; Mueller, Hehn & D'Andrea 2016). ``d_theta`` is zero before every
-    update, so ``h`` and ``H`` are evaluated at the reference attitude, as in the compiled kernel.
-    ``F`` changes with the gyro each step; ``Q`` and ``B`` depend only on ``dt`` and are built once.
-    FilterPy has no gate: with every range accepted both filters do the same algebra.
-    """
-
-    def __init__(self, params: EstimatorParams, p_ms, v_ms, q_ms_body, cov0, dt_s: float) -> None:
-        from filterpy.kalman import ExtendedKalmanFilter
-
-        self.ekf = ExtendedKalmanFilter(dim_x=9, dim_z=1)
-        self.ekf.x = np.concatenate([p_ms, v_ms, np.zeros(3)]).reshape(9, 1)
-        self.ekf.P = np.array(cov0, dtype=float)
-        self.q_ms_body = np.array(q_ms_body, dtype=float)
-        self.dt_s = dt_s
-        self.sigma_range_m = params.sigma_range_m
-        self.lever_body_m = np.asarray(params.lever_arm_body_m, dtype=float)
-        self._skew_lever = rot.skew(self.lever_body_m)
-        eye3, q_acc = np.eye(3), params.accel_psd_m2_s3
-        Q = np.zeros((9, 9))
-        Q[:3, :3] = q_acc * dt_s**3 / 3.0 * eye3
-        Q[:3, 3:6] = Q[3:6, :3] = q_acc * dt_s**2 / 2.0 * eye3
-        Q[3:6, 3:6] = q_acc * dt_s * eye3
-        Q[6:, 6:] = (params.gyro_arw_rad_rts**2 + params.attitude_rw_extra_rad_rts**2) * dt_s * eye3
-        self.ekf.Q = Q
-        self.ekf.B = np.vstack([0.5 * dt_s**2 * eye3, dt_s * eye3, np.zeros((3, 3))])
-        self._F = np.eye(9)
-        self._F[:3, 3:6] = dt_s * eye3
-        self._R_ms_body = rot.quat_to_matrix(self.q_ms_body)
-
-    def _tag_offset(self, x: np.ndarray, anchor_ms: np.ndarray) -> np.ndarray:
-        return x[:3, 0] + self._R_ms_body @ self.lever_body_m - anchor_ms
-
-    def _hx(self, x: np.ndarray, anchor_ms: np.ndarray) -> np.ndarray:
-        d = self._tag_offset(x, anchor_ms)
-        return np.array([[np.sqrt(d @ d)]])
-
-    def _h_jacobian(self, x: np.ndarray, anchor_ms: np.ndarray) -> np.ndarray:
-        d = self._tag_offset(x, anchor_ms)
-        u = d / np.sqrt(d @ d)
-        H = np.zeros((1, 9))
-        H[0, :3] = u
-        H[0, 6:] = -(u @ self._R_ms_body) @ self._skew_lever
-        return H
-
-    def step(self, w_body: np.ndarray, a_ms: np.ndarray, anchor_ms: np.ndarray, range_m: float) -> None:
-        """One predict with gyro ``w_body`` [rad/s] and acceleration ``a_ms`` [m/s^2], then one range."""
-        ekf = self.ekf
-        dq = rot.rotvec_exp(w_body * self.dt_s)
-        self.q_ms_body = rot.quat_normalize(rot.quat_mul(self.q_ms_body, dq))
-        self._R_ms_body = rot.quat_to_matrix(self.q_ms_body)
-        self._F[6:, 6:] = rot.quat_to_matrix(dq).T
-        ekf.F = self._F
-        ekf.predict(u=a_ms.reshape(3, 1))
-        ekf.update(
-            np.array([range_m]), self._h_jacobian, self._hx, R=self.sigma_range_m**2,
-            args=(anchor_ms,), hx_args=(anchor_ms,),
-        )  # fmt: skip
-        dth = ekf.x[6:, 0].copy()
-        self.q_ms_body = rot.multiplicative_reset(self.q_ms_body, dth)
-        self._R_ms_body = rot.quat_to_matrix(self.q_ms_body)
-        x, y, z = 0.5 * dth
-        T = np.eye(9)
-        T[6:, 6:] = ((1.0, z, -y), (-z, 1.0, x), (y, -x, 1.0))  # I - [dth x] / 2 (rot.skew is slow)
-        ekf.P = T @ ekf.P @ T.T
-        ekf.x[6:] = 0.0
-
-
-def filterpy_available() -> bool:
-    try:
-        import filterpy.kalman  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-# ---- compiled loop -----------------------------------------------------------------------------------
+# ---- compiled loops ----------------------------------------------------------------------------------
 
 
 @numba.njit(cache=True)
@@ -237,6 +152,45 @@ def _kernel_loop(X, P, ST_I, ST_F, PRM, W, A, dt, anchors, Z, sigma, gate):
         if nb.update_range_one(X, P, ST_I, ST_F, PRM, anchors[k], Z[k], sigma, gate) == nb.ST_ACCEPTED:
             accepted += 1
     return accepted
+
+
+PIECES = ("predict", "update_scalar", "reset", "range_row", "all_finite", "finite_loop", "workspace")
+"""What :func:`_piece_loop` times; the first two per structure, the rest are the same code for both."""
+
+
+@numba.njit(cache=True)
+def _piece_loop(piece, X, P, ST_I, ST_F, PRM, W, A, dt, anchors, sigma):
+    """``len(W)`` calls of one piece of the step (index into :data:`PIECES`) on one filter, compiled:
+    ``predict_one``; ``_update_scalar`` on a fixed range row with zero innovation (gain and Joseph
+    algebra, no reset); ``_reset_attitude`` by a fixed 1e-5 rad correction; ``_range_row``;
+    ``_all_finite`` of a 3-vector (a step makes three: gyro, acceleration, anchor); the same test written
+    as three ``np.isfinite`` (no ``ravel``); the ``np.empty((3, 9))`` workspace of ``update_range_one``."""
+    work, H = np.empty((3, 9)), np.empty(9)
+    lever = PRM[nb.PRM_LEVER : nb.PRM_LEVER + 3]
+    nb._range_row(X, anchors[0], lever, H)
+    dth = np.array([1e-5, -2e-5, 3e-6])
+    acc = 0.0
+    for k in range(W.shape[0]):
+        if piece == 0:
+            nb.predict_one(X, P, ST_I, ST_F, W[k], A[k], dt, PRM)
+        elif piece == 1:
+            nb._update_scalar(X, P, ST_I, ST_F, PRM, nb.TYPE_RANGE, H, 0.0, sigma * sigma, np.inf, work)
+        elif piece == 2:
+            nb._reset_attitude(X, P, dth)
+        elif piece == 3:
+            acc += nb._range_row(X, anchors[k], lever, work[2])
+        elif piece == 4:
+            if nb._all_finite(anchors[k]):
+                acc += 1.0
+        elif piece == 5:
+            a = anchors[k]
+            if np.isfinite(a[0]) and np.isfinite(a[1]) and np.isfinite(a[2]):
+                acc += 1.0
+        else:
+            w = np.empty((3, 9))
+            w[0, 0] = dt
+            acc += w[0, 0]
+    return acc
 
 
 # ---- timed blocks: each returns (seconds, steps x filters, accepted ranges) ----------------------------
@@ -254,9 +208,17 @@ def _timed(loop: Callable[[], None]) -> float:
         gc.enable()
 
 
+def _create(params: EstimatorParams, inp: Inputs, n: int = 1) -> PoseEstimator:
+    return PoseEstimator.create(params, inp.p0_ms, inp.v0_ms, inp.q0_ms_body, inp.cov0, n=n)
+
+
+def _accepted(est: PoseEstimator) -> int:
+    return int(est.count(MeasKind.RANGE, "accepted").sum())
+
+
 def _api_block(params: EstimatorParams, inp: Inputs) -> Block:
     def block():
-        est = PoseEstimator.create(params, inp.p0_ms, inp.v0_ms, inp.q0_ms_body, inp.cov0)
+        est = _create(params, inp)
         W, A, anc, Z, dt = inp.w_body, inp.a_ms, inp.anchor_ms, inp.range_m, inp.dt_s
 
         def loop():
@@ -264,7 +226,7 @@ def _api_block(params: EstimatorParams, inp: Inputs) -> Block:
                 est.predict(W[k], A[k], dt)
                 est.update_range(anc[k], Z[k])
 
-        return _timed(loop), len(Z), int(est.count(MeasKind.RANGE, "accepted").sum())
+        return _timed(loop), len(Z), _accepted(est)
 
     return block
 
@@ -277,7 +239,7 @@ def _dispatch_block(params: EstimatorParams, inp: Inputs) -> Block:
     gate, prm, dt = chi2_gate(1, params.gate_probability), params.param_vector(), inp.dt_s
 
     def block():
-        est = PoseEstimator.create(params, inp.p0_ms, inp.v0_ms, inp.q0_ms_body, inp.cov0)
+        est = _create(params, inp)
         X, P, counts, book, status = est.X, est.P, est.counts, est.book, np.zeros(1, dtype=np.int64)
 
         def loop():
@@ -285,21 +247,26 @@ def _dispatch_block(params: EstimatorParams, inp: Inputs) -> Block:
                 nb.predict_batch(X, P, counts, book, W[k], A[k], dt, prm, status)
                 nb.update_range_batch(X, P, counts, book, prm, anc[k], Z[k], sigma, mask, gate, status)
 
-        return _timed(loop), K, int(est.count(MeasKind.RANGE, "accepted").sum())
+        return _timed(loop), K, _accepted(est)
 
     return block
 
 
-def _kernel_block(params: EstimatorParams, inp: Inputs) -> Block:
-    gate, prm = chi2_gate(1, params.gate_probability), params.param_vector()
+def _compiled_block(params: EstimatorParams, inp: Inputs, piece: str = "step") -> Block:
+    """The whole step (:func:`_kernel_loop`) or one of :data:`PIECES` (:func:`_piece_loop`)."""
+    gate, prm, K = chi2_gate(1, params.gate_probability), params.param_vector(), len(inp.range_m)
+    run_ = (inp.w_body, inp.a_ms, inp.dt_s, inp.anchor_ms)
 
     def block():
-        est = PoseEstimator.create(params, inp.p0_ms, inp.v0_ms, inp.q0_ms_body, inp.cov0)
-        X, P, ST_I, ST_F = est.X[0], est.P[0], est.counts[0], est.book[0]
-        args = (inp.w_body, inp.a_ms, inp.dt_s, inp.anchor_ms, inp.range_m, params.sigma_range_m, gate)
-        accepted = []
-        seconds = _timed(lambda: accepted.append(_kernel_loop(X, P, ST_I, ST_F, prm, *args)))
-        return seconds, len(inp.range_m), accepted[0]
+        est = _create(params, inp)
+        state, out = (est.X[0], est.P[0], est.counts[0], est.book[0], prm), []
+        if piece == "step":
+            seconds = _timed(
+                lambda: out.append(_kernel_loop(*state, *run_, inp.range_m, params.sigma_range_m, gate))
+            )
+            return seconds, K, out[0]
+        index = PIECES.index(piece)
+        return _timed(lambda: _piece_loop(index, *state, *run_, params.sigma_range_m)), K, K
 
     return block
 
@@ -326,14 +293,14 @@ def _batched_block(params: EstimatorParams, inp: Inputs, n: int, seed: int) -> B
     Z = inp.range_true_m[:, None] + rng.normal(0.0, params.sigma_range_m, (K, n))  # own noise per filter
 
     def block():
-        est = PoseEstimator.create(params, inp.p0_ms, inp.v0_ms, inp.q0_ms_body, inp.cov0, n=n)
+        est = _create(params, inp, n)
 
         def loop():
             for k in range(K):
                 est.predict(W[k], A[k], inp.dt_s)
                 est.update_range(inp.anchor_ms[k], Z[k])
 
-        return _timed(loop), K * n, int(est.count(MeasKind.RANGE, "accepted").sum())
+        return _timed(loop), K * n, _accepted(est)
 
     return block
 
@@ -361,6 +328,10 @@ def _measure(blocks: dict[str, Block], repeats: int) -> dict[str, dict]:
 
 
 # ---- FLOP model --------------------------------------------------------------------------------------
+# One FLOP per +, -, *, / and per sqrt, sin, cos; x**2 and x**3 are 1 and 2 multiplies; negation,
+# comparisons and integer work are free.
+
+_FLOP_PARTS = ("predict", "update", "correction")
 
 
 def _mm(a: int, b: int, c: int) -> int:
@@ -373,60 +344,92 @@ def _sandwich_dense(n: int) -> int:
     return 2 * _mm(n, n, n)
 
 
-def _sandwich_kernel(n: int, nnz: int) -> int:
-    """``_ekf_nb._sandwich``: ``F P`` skipping zeros of ``F`` (``2 n nnz(F)``), then only the upper
-    triangle of ``(F P) F^T`` with one multiply-add per term (``n (n + 1) / 2`` entries x ``2 n``)."""
-    return 2 * n * nnz + n * n * (n + 1)
-
-
-# Scalar work, counted from swarm/core/_rot_nb.py (sqrt, sin, cos, division count as one FLOP each).
 _QEXP, _QMUL, _QNORMALIZE, _QMAT = 17, 28, 12, 38
+"""``swarm.core._rot_nb``: ``qexp3`` on its small-angle branch (``|phi| < 1e-3`` rad, which the reset's
+corrections and most 10 ms gyro increments take; the sin/cos branch is 4 fewer), ``qmul``, ``qnormalize``
+and ``qmat``."""
 _PREDICT_SCALAR = 24 + 3 + _QEXP + _QMUL + _QNORMALIZE + _QMAT + 8 + 1
-"""p += v dt + a dt^2/2 and v += a dt (24), w dt (3), q (x) exp(w dt) normalised, Phi = qmat(dq)^T,
-the Q coefficients (8) and psd dt (1)."""
+"""Textbook predict outside ``P``: p += v dt + a dt^2/2 and v += a dt (24), w dt (3), q (x) exp(w dt)
+normalised, Phi = R(dq)^T, the Q coefficients (8) and psd dt (1)."""
 _RANGE_MODEL = _QMAT + _mm(3, 3, 1) + 3 + 3 + 5 + 1 + 3 + _mm(1, 3, 3) + _mm(1, 3, 3) + 2
-"""R(q), R(q) P1, + p, - anchor, |d|^2, sqrt, u = d / h, u^T R(q), (u^T R(q)) [P1 x], nu and sigma^2."""
+"""Textbook range model: R(q), R(q) P1, + p, - anchor, |d|^2, sqrt, u = d / h, u^T R(q),
+(u^T R(q)) [P1 x], then nu and sigma^2."""
 
 
-def _joseph_range(n: int, h_nnz: int, dense: bool) -> int:
-    """``_ekf_nb._kalman_block`` with one range (m = 1) on an ``n``-state block whose ``H`` has ``h_nnz``
-    non-zeros: ``P H^T``, ``H P H^T + R``, ``d2 = nu^2 / S``, ``K = P H^T / S``, ``A = I - K H``,
-    Joseph ``A P A^T + K R K^T`` (Crassidis & Junkins 2011 eq. 5.39), ``dx = K nu``. The kernel's ``A``
-    has ``n h_nnz`` non-zeros in the columns ``H`` touches plus ones on the rest of the diagonal."""
+def _joseph_dense(n: int) -> int:
+    """Textbook update of an ``n``-state filter with one range: ``P H^T``, ``S = H P H^T + R``,
+    ``d2 = nu^2 / S``, ``K = P H^T / S``, ``A = I - K H``, dense Joseph ``A P A^T + K R K^T``
+    (Crassidis & Junkins 2011 eq. 5.39), ``dx = K nu``."""
     n2 = n * n
-    rest = _mm(n, n, 1) + _mm(1, n, 1) + 1 + 3 + n + 2 * n2 + _mm(n, 1, 1) + _mm(n, 1, n) + n2 + n
-    nnz_a = n * h_nnz + (n - h_nnz)
-    return rest + (_sandwich_dense(n) if dense else _sandwich_kernel(n, nnz_a))
+    gain = _mm(n, n, 1) + _mm(1, n, 1) + 1 + 3 + n
+    joseph = 2 * n2 + _sandwich_dense(n) + _mm(n, 1, 1) + _mm(n, 1, n) + n2
+    return gain + joseph + n
 
 
-def flops_per_step(structure: str, dense: bool = True) -> dict[str, int]:
-    """FLOPs of one predict + one accepted range update, itemised, from the kernels in ``_ekf_nb``.
-
-    ``dense=True`` counts every matrix product as dense (``_mm``), the textbook algorithm a MATLAB script
-    runs; ``dense=False`` counts what the compiled kernel executes (zero-skipping, symmetric
-    ``_sandwich``). Compounded (n = 9): ``F P F^T + Q``, the Joseph update on 9 states, and the
-    multiplicative reset ``T P T^T`` that follows every range (the range corrects attitude). Tandem
-    (6 + 3): ``F P F^T + Q`` on 6 states and ``Phi P Phi^T + Q`` on 3, the range's attitude partials
-    folded into the noise (``R + H_a P_a H_a^T``; the kernel also forms ``R + H_t P_t H_t^T``, unused
-    for a range), the Joseph update on 6 states and no reset (``d_theta`` stays zero).
-    """
-    if structure == "compounded":
-        predict = _PREDICT_SCALAR + (_sandwich_dense(9) + 81 if dense else _sandwich_kernel(9, 18) + 39)
-        update = _RANGE_MODEL + _joseph_range(9, 6, dense)
-        reset_sandwich = _sandwich_dense(9) if dense else _sandwich_kernel(9, 15)
-        correction = 6 + _QEXP + _QMUL + _QNORMALIZE + 18 + reset_sandwich
-    elif structure == "tandem":
-        if dense:
-            predict = _PREDICT_SCALAR + _sandwich_dense(6) + 36 + _sandwich_dense(3) + 9
-        else:
-            predict = _PREDICT_SCALAR + _sandwich_kernel(6, 9) + 36 + _sandwich_kernel(3, 9) + 3
-        consider = (_mm(1, 3, 3) + _mm(1, 3, 1) + 1) + (_mm(1, 6, 6) + _mm(1, 6, 1) + 1)
-        update = _RANGE_MODEL + consider + _joseph_range(6, 3, dense)
-        correction = 6
+def _dense_items(tandem: bool) -> dict[str, int]:
+    if tandem:  # two filters: 6-state translation, 3-state attitude; the range only updates the first
+        cov = _sandwich_dense(6) + 36 + _sandwich_dense(3) + 9
+        consider = _mm(1, 3, 3) + _mm(1, 3, 1) + 1  # R + H_th P_thth H_th^T
+        reset = 0
     else:
+        cov, consider = _sandwich_dense(9) + 81, 0
+        reset = _QEXP + _QMUL + _QNORMALIZE + 18 + _sandwich_dense(9)  # q (x) exp(dth), T = I - [dth x]/2
+    return {
+        "predict/state": _PREDICT_SCALAR,
+        "predict/covariance": cov,
+        "update/range_model": _RANGE_MODEL,
+        "update/consider": consider,
+        "update/gain_joseph": _joseph_dense(6 if tandem else 9),
+        "correction/state": 6,
+        "correction/reset": reset,
+    }
+
+
+def _executed_items(tandem: bool) -> dict[str, int]:
+    """The statements of ``predict_one``, ``update_range_one`` (``_range_row``, ``_update_scalar``) and
+    ``_reset_attitude`` in ``swarm/core/_ekf_nb.py``, counted as written (the compiler may hoist a few
+    loop invariants such as ``dt * dt``)."""
+    n = 6 if tandem else 9
+    return {
+        "predict/kinematics": 3 * (6 + 2),  # p += v dt + 0.5 a dt dt, v += a dt
+        "predict/quaternion": 3 + _QEXP + _QMUL + 9 + 4,  # w dt, exp, q (x) dq, 1 / |q|, scale
+        "predict/phi": 3 * 5 + 6 * 4,  # Phi = R(dq)^T as scalars
+        "predict/P_translation": 9 * 10 + 3 * 15,  # P_pp, P_pv, P_vp elementwise; Q (15 per axis)
+        "predict/P_cross": 0 if tandem else 9 * 2 + 6 * 3 * 5,  # rows p += dt rows v; 6 rows times Phi^T
+        "predict/P_attitude": 9 * 5 + 6 * 5 + 1 + 3,  # T = Phi P, upper triangle of T Phi^T, + psd dt
+        "predict/bookkeeping": 1,  # time since the last update
+        "update/range_model": 39 + 21 + 6 + 3 + 15 + 9 + 2,  # R(q), d, |d|, u, R^T u, P1 x (R^T u); nu, r
+        # u = P H^T, s = H u, consider H_th P_thth H_th^T (tandem), S and d2, K = u / S, u - K s
+        "update/gain": 2 * n * n + 2 * n + (27 if tandem else 0) + 3 + n + 2 * n,
+        "update/joseph": 10 * n * (n + 1),  # 2 x 9 per upper-triangle entry and their mean (2)
+        "correction/state": 6 * 2,  # p, v += K nu
+        # dth = K nu, q (x) exp(dth) normalised, G = I - [dth x]/2 (18), G on rows and on columns
+        "correction/reset": 0 if tandem else 3 + _QEXP + _QMUL + _QNORMALIZE + 18 + 2 * 9 * 3 * 5,
+    }
+
+
+def flops_per_step(structure: str, dense: bool = False) -> dict:
+    """FLOPs of one predict + one accepted range update: ``predict``, ``update``, ``correction`` (state
+    correction and multiplicative reset), ``total``, and ``items``, the itemised counts they sum.
+
+    ``dense=False`` ("as executed") counts what the compiled kernels in ``swarm/core/_ekf_nb.py`` execute:
+    ``F P F^T + Q`` block by block in place (translation elementwise, cross blocks only for compounded,
+    the 3x3 attitude block with scalars), the range model in scalars, the O(n^2) scalar Joseph update of
+    ``_update_scalar`` (tandem ``n = 6`` with the attitude block considered as noise, compounded ``n = 9``)
+    and, for compounded, ``_reset_attitude`` on the attitude rows and columns.
+    ``tests/test_bench_estimator.py`` checks these counts against the kernels' Python source run on
+    counting scalars.
+
+    ``dense=True`` is the textbook algorithm as a straightforward MATLAB script executes it, to compare
+    with the paper's Table I: ``F P F^T`` as dense products (tandem: a 6x6 and a 3x3 filter), the dense
+    Joseph form ``(I - K H) P (I - K H)^T + K R K^T`` (Crassidis & Junkins 2011 eq. 5.39), and for
+    compounded the dense reset sandwich ``T P T^T``, ``T = I - [dth x]/2`` on attitude (Markley 2003).
+    """
+    if structure not in STRUCTURES:
         raise ValueError(f"structure must be 'tandem' or 'compounded', got {structure!r}")
-    total = predict + update + correction
-    return {"predict": predict, "update": update, "correction": correction, "total": total}
+    items = (_dense_items if dense else _executed_items)(structure == "tandem")
+    out = {part: sum(v for k, v in items.items() if k.startswith(part + "/")) for part in _FLOP_PARTS}
+    return {**out, "total": sum(items.values()), "items": items}
 
 
 # ---- the run -----------------------------------------------------------------------------------------
@@ -438,16 +441,13 @@ def _load_1m() -> float | None:
 
 def machine_info() -> dict:
     """CPU model (from /proc/cpuinfo), core count, load and library versions, for the JSON record."""
-    cpu = None
     try:
         with open("/proc/cpuinfo") as f:
             cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), None)
     except OSError:
-        pass
+        cpu = None
     try:
-        import filterpy
-
-        fp_version = filterpy.__version__
+        from filterpy import __version__ as fp_version
     except ImportError:
         fp_version = None
     return {
@@ -462,10 +462,6 @@ def machine_info() -> dict:
     }
 
 
-def _ratio(a: float | None, b: float | None) -> float | None:
-    return None if a is None or b is None else a / b
-
-
 def run(config: BenchConfig = FULL) -> dict:
     """Measure every case (module docstring) in this process; returns the JSON record (DESIGN.md sec. 8)."""
     load_before = _load_1m()
@@ -476,12 +472,19 @@ def run(config: BenchConfig = FULL) -> dict:
     for s in STRUCTURES:
         blocks[f"api/{s}"] = _api_block(params[s], inp)
         blocks[f"dispatch/{s}"] = _dispatch_block(params[s], inp)
-        blocks[f"kernel/{s}"] = _kernel_block(params[s], inp)
+        blocks[f"kernel/{s}"] = _compiled_block(params[s], inp)
     has_filterpy = filterpy_available()
     if has_filterpy:
         blocks["filterpy"] = _filterpy_block(params["compounded"], inp)
+    for i, piece in enumerate(PIECES):
+        for s in STRUCTURES if i < 2 else ("shared",):
+            blocks[f"piece/{s}/{piece}"] = _compiled_block(params.get(s, params["compounded"]), inp, piece)
     log.info("estimator bench: %d cases x %d blocks of %d steps", len(blocks), config.repeats, config.steps)
     single = _measure(blocks, config.repeats)
+    pieces: dict[str, dict[str, float]] = {s: {} for s in (*STRUCTURES, "shared")}
+    for key in [k for k in single if k.startswith("piece/")]:
+        _, group, piece = key.split("/")
+        pieces[group][piece] = 1e3 * single.pop(key)["median"]
 
     binp = make_inputs(config.batch_steps, config.dt_s, base, config.seed)
     bblocks = {
@@ -495,29 +498,32 @@ def run(config: BenchConfig = FULL) -> dict:
     api = {s: single[f"api/{s}"]["median"] for s in STRUCTURES}
     kernel = {s: single[f"kernel/{s}"]["median"] for s in STRUCTURES}
     fp = single["filterpy"]["median"] if has_filterpy else None
+    for s in STRUCTURES:
+        pieces[s]["step"] = 1e3 * kernel[s]
+        pieces[s]["range_update"] = 1e3 * kernel[s] - pieces[s]["predict"]  # derived: step - predict
     flops = {
-        s: {
-            "dense": flops_per_step(s, dense=True),
-            "kernel": flops_per_step(s, dense=False),
-            "paper": PAPER_TABLE_I[s]["flops"],
-        }
+        s: {"dense": flops_per_step(s, True), "kernel": flops_per_step(s), "paper": PAPER_TABLE_I[s]["flops"]}
         for s in STRUCTURES
     }
-    paper_ms = {st: PAPER_TABLE_I[st]["runtime_ms"] for st in STRUCTURES}
+    paper_ms = {s: PAPER_TABLE_I[s]["runtime_ms"] for s in STRUCTURES}
     ratios = {
         "tandem_over_compounded_api": api["tandem"] / api["compounded"],
         "tandem_over_compounded_kernel": kernel["tandem"] / kernel["compounded"],
-        "tandem_over_filterpy": _ratio(api["tandem"], fp),
-        "compounded_over_filterpy": _ratio(api["compounded"], fp),
+        "tandem_over_filterpy": None if fp is None else api["tandem"] / fp,
+        "compounded_over_filterpy": None if fp is None else api["compounded"] / fp,
         "paper_tandem_over_compounded": paper_ms["tandem"] / paper_ms["compounded"],
-        "paper_flops_tandem_over_compounded": flops["tandem"]["paper"] / flops["compounded"]["paper"],
     }
-    for kind in ("dense", "kernel"):
-        tc = flops["tandem"][kind]["total"] / flops["compounded"][kind]["total"]
-        ratios[f"flops_tandem_over_compounded_{kind}"] = tc
-    for st in STRUCTURES:
-        ratios[f"paper_speedup_{st}_api"] = paper_ms[st] * 1e3 / api[st]
-        ratios[f"paper_speedup_{st}_kernel"] = paper_ms[st] * 1e3 / kernel[st]
+    for kind in ("paper", "dense", "kernel"):
+        tandem, compounded = (flops[s][kind] for s in STRUCTURES)
+        key = (
+            "paper_flops_tandem_over_compounded"
+            if kind == "paper"
+            else f"flops_tandem_over_compounded_{kind}"
+        )
+        ratios[key] = tandem / compounded if kind == "paper" else tandem["total"] / compounded["total"]
+    for s in STRUCTURES:
+        ratios[f"paper_speedup_{s}_api"] = paper_ms[s] * 1e3 / api[s]
+        ratios[f"paper_speedup_{s}_kernel"] = paper_ms[s] * 1e3 / kernel[s]
     goals = {}
     for key, (ratio, target, op, _) in GOALS.items():
         value = ratios[ratio]
@@ -527,14 +533,15 @@ def run(config: BenchConfig = FULL) -> dict:
         "tandem_us": api["tandem"],
         "compounded_us": api["compounded"],
         "filterpy_us": fp,
-        "paper_tandem_ms": PAPER_TABLE_I["tandem"]["runtime_ms"],
-        "paper_compounded_ms": PAPER_TABLE_I["compounded"]["runtime_ms"],
+        "paper_tandem_ms": paper_ms["tandem"],
+        "paper_compounded_ms": paper_ms["compounded"],
         "filterpy_note": None if has_filterpy else FILTERPY_MISSING,
         "tandem_kernel_us": kernel["tandem"],
         "compounded_kernel_us": kernel["compounded"],
         "tandem_dispatch_us": single["dispatch/tandem"]["median"],
         "compounded_dispatch_us": single["dispatch/compounded"]["median"],
         "stats_us": single,
+        "kernel_pieces_ns": pieces,
         "batched_us_per_filter": {
             s: {str(n): batched[f"{s}/{n}"]["median"] for n in config.batch_sizes} for s in STRUCTURES
         },
@@ -555,52 +562,63 @@ def _fmt(stats: dict | None) -> str:
 
 
 def format_report(r: dict) -> str:
-    """The record of :func:`run` as a printable table, ratios and goal verdicts."""
-    st, cfg = r["stats_us"], r["config"]
+    """The record of :func:`run` as a printable table, ratios, kernel pieces and goal verdicts."""
+    st, cfg, ra, fl, pc, m = (
+        r[k] for k in ("stats_us", "config", "ratios", "flops", "kernel_pieces_ns", "machine")
+    )
     lines = [
         "Estimator step: one predict + one UWB range update, n = 1 filter",
-        f"median [p90] us per step over {cfg['repeats']} interleaved blocks of {cfg['steps']} steps; "
-        f"API = PoseEstimator, dispatch = compiled batch kernels called from Python, "
-        f"kernel = compiled loop",
+        f"median [p90] us per step over {cfg['repeats']} interleaved blocks of {cfg['steps']} steps; API = "
+        "PoseEstimator, dispatch = compiled batch kernels called from Python, kernel = compiled loop",
         "",
         f"{'structure':<11}| {'API us':>18} | {'dispatch us':>18} | {'kernel us':>18} | "
-        f"{'FLOPs dense/kernel':>18} | {'paper FLOPs':>11} | {'paper ms':>8} | {'x faster API/kernel':>19}",
+        f"{'FLOPs dense/exec.':>18} | {'paper FLOPs':>11} | {'paper ms':>8} | {'x faster API/kernel':>19}",
     ]
     for s in STRUCTURES:
-        fl, paper = r["flops"][s], PAPER_TABLE_I[s]
-        ra = r["ratios"]
         speed = f"{ra[f'paper_speedup_{s}_api']:.0f} / {ra[f'paper_speedup_{s}_kernel']:.0f}"
         lines.append(
             f"{s:<11}| {_fmt(st[f'api/{s}']):>18} | {_fmt(st[f'dispatch/{s}']):>18} | "
-            f"{_fmt(st[f'kernel/{s}']):>18} | {fl['dense']['total']:>8,} / {fl['kernel']['total']:>7,} | "
-            f"{paper['flops']:>11,} | {paper['runtime_ms']:>8.3f} | {speed:>19}"
+            f"{_fmt(st[f'kernel/{s}']):>18} | {fl[s]['dense']['total']:>8,} / "
+            f"{fl[s]['kernel']['total']:>7,} | {fl[s]['paper']:>11,} | "
+            f"{PAPER_TABLE_I[s]['runtime_ms']:>8.3f} | {speed:>19}"
         )
-    if r["filterpy_us"] is None:
-        lines.append(f"{'filterpy':<11}| {r['filterpy_note']}")
-    else:
-        lines.append(
-            f"{'filterpy':<11}| {_fmt(st['filterpy']):>18} | {'-':>18} | {'-':>18} | "
-            f"{'compounded model, numpy':>18}"
-        )
-    ra = r["ratios"]
+    fp_cells = (
+        f"{_fmt(st['filterpy']):>18} | {'-':>18} | {'-':>18} | compounded model" if r["filterpy_us"] else ""
+    )
+    lines.append(f"{'filterpy':<11}| {fp_cells or r['filterpy_note']}")
     accepted = min(v["accepted_fraction"] for v in st.values())
     accepted_b = min(v["accepted_fraction"] for v in r["batched_stats_us_per_filter"].values())
     lines += [
         "",
         f"ranges accepted by the 99.99 % gate (lowest over cases): {100 * accepted:.2f} % single, "
         f"{100 * accepted_b:.2f} % batched",
-        f"tandem / compounded: API {ra['tandem_over_compounded_api']:.2f}, "
-        f"kernel {ra['tandem_over_compounded_kernel']:.2f} "
-        f"(paper: runtime {ra['paper_tandem_over_compounded']:.2f}, "
-        f"FLOPs {ra['paper_flops_tandem_over_compounded']:.2f}; FLOP model: dense "
-        f"{ra['flops_tandem_over_compounded_dense']:.2f}, "
-        f"kernel {ra['flops_tandem_over_compounded_kernel']:.2f})",
+        f"tandem / compounded: API {ra['tandem_over_compounded_api']:.2f}, kernel "
+        f"{ra['tandem_over_compounded_kernel']:.2f} (paper: runtime "
+        f"{ra['paper_tandem_over_compounded']:.2f}, FLOPs {ra['paper_flops_tandem_over_compounded']:.2f}; "
+        f"FLOP model: dense {ra['flops_tandem_over_compounded_dense']:.2f}, "
+        f"as executed {ra['flops_tandem_over_compounded_kernel']:.2f})",
     ]
     if r["filterpy_us"] is not None:
         lines.append(
             f"tandem / FilterPy (API): {ra['tandem_over_filterpy']:.3f}; "
             f"compounded / FilterPy: {ra['compounded_over_filterpy']:.3f}"
         )
+    for s in STRUCTURES:
+        parts = ", ".join(f"{k} {fl[s]['kernel'][k]:,} ({fl[s]['dense'][k]:,})" for k in _FLOP_PARTS)
+        lines.append(f"FLOPs {s} as executed (dense): {parts}")
+    lines.append("kernel pieces, ns per call (compiled loops, median; range update = step - predict):")
+    for s in STRUCTURES:
+        p = pc[s]
+        lines.append(
+            f"  {s:<11} step {p['step']:.0f} = predict {p['predict']:.0f} + range update "
+            f"{p['range_update']:.0f}; _update_scalar without reset {p['update_scalar']:.0f}"
+        )
+    sh = pc["shared"]
+    lines.append(
+        f"  {'shared':<11} _reset_attitude {sh['reset']:.0f} (compounded), _range_row {sh['range_row']:.0f}, "
+        f"_all_finite of a 3-vector {sh['all_finite']:.0f} (3 per step; as three np.isfinite "
+        f"{sh['finite_loop']:.0f}), np.empty((3, 9)) {sh['workspace']:.0f}"
+    )
     lines.append("batched, us per filter per step (PoseEstimator with n filters, median [p90]):")
     for s in STRUCTURES:
         cells = [f"n={n}: {_fmt(r['batched_stats_us_per_filter'][f'{s}/{n}'])}" for n in cfg["batch_sizes"]]
@@ -611,11 +629,10 @@ def format_report(r: dict) -> str:
         verdict = {True: "met    ", False: "NOT met", None: "n/a    "}[g["met"]]
         value = "-" if g["value"] is None else f"{g['value']:.3g}"
         lines.append(f"  [{verdict}] {label:<32} {value:>6} (target {op} {target:g})")
-    m = r["machine"]
     lines += [
         "",
         f"machine: {m['cpu_model']}, {m['cpu_count']} cores, 1-min load {m['load_avg_1m_before']} before, "
-        f"{m['load_avg_1m']} after; "
-        f"python {m['python']}, numpy {m['numpy']}, numba {m['numba']}, filterpy {m['filterpy']}",
+        f"{m['load_avg_1m']} after; python {m['python']}, numpy {m['numpy']}, numba {m['numba']}, "
+        f"filterpy {m['filterpy']}",
     ]
     return "\n".join(lines)

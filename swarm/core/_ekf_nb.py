@@ -76,6 +76,12 @@ def _all_finite(a):
 
 
 @njit(cache=True)
+def _finite3(a):
+    """``_all_finite`` for a 3-vector, without ``ravel`` (~4x cheaper on the per-step path)."""
+    return np.isfinite(a[0]) and np.isfinite(a[1]) and np.isfinite(a[2])
+
+
+@njit(cache=True)
 def _sandwich(F, P):
     """F P F^T for small dense matrices (explicit loops: no BLAS call overhead)."""
     n = F.shape[0]
@@ -108,7 +114,7 @@ def predict_one(X, P, ST_I, ST_F, w_body, a_ms, dt, PRM):
     structure of ``F``: tandem updates the 6x6 and 3x3 blocks, compounded also the 6x3 cross blocks (the
     extra work the paper's Table I charges to the compounded structure).
     """
-    if not (np.isfinite(dt) and _all_finite(w_body) and _all_finite(a_ms)):
+    if not (np.isfinite(dt) and _finite3(w_body) and _finite3(a_ms)):
         ST_I[COUNT_REFUSED, TYPE_PREDICT] += 1
         return ST_REFUSED_NONFINITE
     if dt < 0.0:
@@ -452,7 +458,7 @@ def _range_row(X, anchor_ms, lever_body, H):
 
 @njit(cache=True)
 def update_range_one(X, P, ST_I, ST_F, PRM, anchor_ms, z_m, sigma_m, gate):
-    if not (np.isfinite(z_m) and np.isfinite(sigma_m) and _all_finite(anchor_ms)):
+    if not (np.isfinite(z_m) and np.isfinite(sigma_m) and _finite3(anchor_ms)):
         ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
         return ST_REFUSED_NONFINITE
     if z_m < 0.0 or sigma_m <= 0.0:

@@ -12,15 +12,17 @@ nozzle thrusts to hold until the next control tick. The chaser's guidance and vi
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
+from swarm.core import _ekf_nb as nb
 from swarm.core import rotations as rot
+from swarm.core._rot_nb import qrotate
 from swarm.core.camera import solve_pnp
 from swarm.core.control import TranslationController, attitude_torque
-from swarm.core.estimator import MeasKind, PoseEstimator, UpdateStatus, chi2_gate
+from swarm.core.estimator import PoseEstimator, UpdateStatus, chi2_gate
 from swarm.core.guidance import ChaserGuidance, Mode, NavInput, Reference, StationKeeping
 from swarm.core.mdp import make_switcher
 from swarm.core.thrusters import allocate, allocation_matrix
@@ -81,12 +83,16 @@ class VehicleAgent:
             self.guidance = StationKeeping(spec.position_m, q_nom, sc.station)
         self.target: TargetEstimate | None = None
         self.w_body = np.zeros(3)  # latest gyro rate, for the rate damping of the attitude law
-        self.a_ms = np.zeros(3)  # known acceleration input of the filter: achieved thrust / mass
-        self.f_body = np.zeros(3)
+        self.f_body = np.zeros(3)  # achieved thrust [N], body frame: the filter's known input is f / m
         window = max(1, round(sc.agent.health_window_s * sc.uwb.rate_hz))
         self._gate_1d = chi2_gate(1, sc.estimator.gate_probability)
-        self._range_ok: deque[bool] = deque(maxlen=window)
-        self._range_d2: deque[float] = deque(maxlen=window)
+        self._gate_3d = chi2_gate(3, sc.estimator.gate_probability)
+        self._ahrs_cov = np.radians(sc.ahrs.sigma_deg) ** 2 * np.eye(3)
+        self._sigma_range = float(sc.estimator.sigma_range_m)
+        # health windows of the recent ranges (a ring: [count, next]); see ``agent_uwb``
+        self.h_ok = np.zeros(window, dtype=np.bool_)
+        self.h_d2 = np.zeros(window)
+        self.h_meta = np.zeros(2, dtype=np.int64)
         self._last_vision_s = -np.inf
         self.mode = self.guidance.mode
         self.last_command: Command | None = None
@@ -97,16 +103,16 @@ class VehicleAgent:
         """Propagate the filter with the gyro over ``dt_s`` (paper eq. 3) and the known acceleration of
         the command in force; fuse the AHRS attitude when the vehicle has one."""
         self.t_s = t_s
-        gyro = np.asarray(gyro_body, dtype=float)
-        if np.all(np.isfinite(gyro)):
-            self.w_body = gyro
-        # the commanded force acts along the body axes: express it with the current attitude estimate
-        self.a_ms = rot.quat_rotate(self.est.q_ms_body[0], self.f_body) / self.mass_kg
-        status = int(self.est.predict(gyro, self.a_ms, dt_s)[0])
-        if q_ahrs_ms_body is not None:
-            sig = np.radians(self.sc.ahrs.sigma_deg)
-            self.est.update_attitude(q_ahrs_ms_body, sig**2 * np.eye(3))
-        return status
+        gyro = np.ascontiguousarray(gyro_body, dtype=np.float64)
+        has_ahrs = q_ahrs_ms_body is not None
+        q = np.ascontiguousarray(q_ahrs_ms_body, dtype=np.float64) if has_ahrs else _NO_Q
+        if gyro.shape != (3,) or q.shape != (4,):
+            return int(UpdateStatus.REFUSED_INVALID)
+        e = self.est
+        return agent_imu(
+            e.X[0], e.P[0], e.counts[0], e.book[0], e._prm, gyro, float(dt_s), self.f_body, self.mass_kg,
+            self.w_body, has_ahrs, q, self._ahrs_cov, self._gate_3d,
+        )  # fmt: skip
 
     def on_uwb(self, anchor_id: int, range_m: float) -> int:
         """One two-way range to anchor ``anchor_id`` (index into the scenario's anchors)."""
@@ -114,12 +120,11 @@ class VehicleAgent:
             return int(UpdateStatus.REFUSED_INVALID)
         if not self.sc.agent.uwb_with_vision and self.relative_nav:
             return int(UpdateStatus.SKIPPED)  # vision is the primary measurement near the target
-        status = int(self.est.update_range(self.anchors[int(anchor_id)], range_m)[0])
-        if status in (UpdateStatus.ACCEPTED, UpdateStatus.REJECTED_OUTLIER):
-            gate = self._gate_1d
-            self._range_ok.append(status == UpdateStatus.ACCEPTED)
-            self._range_d2.append(min(float(self.est.last_d2[0, MeasKind.RANGE]), gate))
-        return status
+        e = self.est
+        return agent_uwb(
+            e.X[0], e.P[0], e.counts[0], e.book[0], e._prm, self.anchors[int(anchor_id)], float(range_m),
+            self._sigma_range, self._gate_1d, self.h_ok, self.h_d2, self.h_meta,
+        )  # fmt: skip
 
     def on_vision(self, t_s: float, kind: str, data: np.ndarray) -> int:
         """Vision of the target's docking-face markers: ``kind`` "features" (6, 3) marker positions in the
@@ -177,11 +182,18 @@ class VehicleAgent:
     @property
     def mahalanobis_d(self) -> float:
         """RMS Mahalanobis distance of the recent ranges, each clipped at the gate (Algorithm 1's d)."""
-        return float(np.sqrt(np.mean(self._range_d2))) if self._range_d2 else 0.0
+        d2 = self._window(self.h_d2)
+        return float(np.sqrt(np.mean(d2))) if d2.size else 0.0
 
     @property
     def rejection_fraction(self) -> float:
-        return 1.0 - float(np.mean(self._range_ok)) if self._range_ok else 0.0
+        ok = self._window(self.h_ok)
+        return 1.0 - float(np.mean(ok)) if ok.size else 0.0
+
+    def _window(self, ring: np.ndarray) -> np.ndarray:
+        """The health ring's entries, oldest first."""
+        count, nxt = int(self.h_meta[0]), int(self.h_meta[1])
+        return ring[:count] if count < ring.size else np.concatenate([ring[nxt:], ring[:nxt]])
 
     def control(self, t_s: float, dt_s: float) -> Command:
         """Guidance, switcher and controllers on the current estimate; returns the nozzle thrusts."""
@@ -223,7 +235,41 @@ class VehicleAgent:
             F_body = rot.quat_rotate(rot.quat_conj(q), F_ms)
             alloc = allocate(np.concatenate([F_body, tau]), self.B, self.max_thrust)
             thrusts, wrench, saturated = alloc.thrusts_n, alloc.wrench_achieved, bool(alloc.saturated)
-        self.f_body = wrench[:3].copy()
+        self.f_body[:] = wrench[:3]
         cmd = Command(t_s, thrusts, wrench[:3], wrench[3:], saturated, ref, list(ref.events))
         self.last_command = cmd
         return cmd
+
+
+_NO_Q = np.zeros(4)
+
+
+@njit(cache=True)
+def agent_imu(X, P, ST_I, ST_F, PRM, gyro, dt, f_body, mass, w_body, has_ahrs, q_ahrs, ahrs_cov, gate3):
+    """One IMU sample of one filter: predict with the gyro (paper eq. 3) and the known acceleration of the
+    thrust in force, ``a_ms = R(q) f_body / m`` (the commanded force acts along the body axes, expressed
+    with the current attitude estimate); then the AHRS attitude when there is one. Keeps the latest finite
+    gyro rate in ``w_body`` for the attitude law's rate damping. Returns the predict status."""
+    if np.isfinite(gyro[0]) and np.isfinite(gyro[1]) and np.isfinite(gyro[2]):
+        w_body[:] = gyro
+    a = qrotate(X[6:10], f_body)
+    for i in range(3):
+        a[i] /= mass
+    status = nb.predict_one(X, P, ST_I, ST_F, gyro, a, dt, PRM)
+    if has_ahrs:
+        nb.update_attitude_one(X, P, ST_I, ST_F, PRM, q_ahrs, ahrs_cov, gate3)
+    return status
+
+
+@njit(cache=True)
+def agent_uwb(X, P, ST_I, ST_F, PRM, anchor_ms, range_m, sigma_m, gate1, h_ok, h_d2, h_meta):
+    """One UWB range of one filter; a gated outcome (accepted or rejected) enters the health ring:
+    accepted or not, and the squared Mahalanobis distance clipped at the gate (Algorithm 1's d)."""
+    status = nb.update_range_one(X, P, ST_I, ST_F, PRM, anchor_ms, range_m, sigma_m, gate1)
+    if status == nb.ST_ACCEPTED or status == nb.ST_REJECTED:
+        i = h_meta[1]
+        h_ok[i] = status == nb.ST_ACCEPTED
+        h_d2[i] = min(ST_F[nb.STF_D2 + nb.TYPE_RANGE], gate1)
+        h_meta[1] = (i + 1) % h_ok.shape[0]
+        h_meta[0] = min(h_meta[0] + 1, h_ok.shape[0])
+    return status

@@ -273,6 +273,7 @@ class UwbRadio:
         self.anchors_ms.setflags(write=False)
         self._anchor_rows = [tuple(row) for row in a.tolist()]
         self._next = 0
+        self._vector = self.vector
 
     @property
     def next_anchor(self) -> int:
@@ -297,24 +298,58 @@ class UwbRadio:
         """
         i = self._next
         self._next = (i + 1) % len(self._anchor_rows)
+        # One draw of four normals per exchange whatever happens (see uwb_exchange).
+        z = rng.standard_normal(4)
+        tag = np.asarray(tag_ms, dtype=np.float64)
+        lost, r, outlier = uwb_exchange(t_s, tag, self.anchors_ms[i], z, self._drift_m_s[i], self._vector)
+        return None if lost else UwbSample(t_s, i, r, outlier)
+
+    def drift_rate(self, anchor_id: int) -> float:
+        """Clock-drift bias growth rate of the link to ``anchor_id`` [m/s]."""
+        return self._drift_m_s[anchor_id]
+
+    @property
+    def vector(self) -> np.ndarray:
+        """The parameters as the flat vector :func:`uwb_exchange` reads (``UWB_*`` indices)."""
         p = self.params
-        # One draw of four normals per exchange whatever happens (module docstring): z0 is the range noise;
-        # z1..z3 become the dropout, outlier and outlier-size uniforms through the normal CDF
-        # (probability integral transform), cheaper than a second generator call.
-        z0, z1, z2, z3 = rng.standard_normal(4).tolist()
-        if 0.5 * math.erfc(-z1 * _INV_SQRT2) < p.dropout_probability:
-            return None
-        for start, end in p.dropout_windows_s:
-            if start <= t_s < end:
-                return None
-        x, y, z = np.asarray(tag_ms, dtype=np.float64).tolist()
-        ax, ay, az = self._anchor_rows[i]
-        r = math.sqrt((x - ax) ** 2 + (y - ay) ** 2 + (z - az) ** 2) + p.sigma_m * z0
-        r += self.drift_bias_m(t_s, i)
-        outlier = 0.5 * math.erfc(-z2 * _INV_SQRT2) < p.nlos_probability
-        if outlier:
-            r += p.nlos_min_m + (p.nlos_max_m - p.nlos_min_m) * 0.5 * math.erfc(-z3 * _INV_SQRT2)
-        return UwbSample(t_s, i, r if r > 0.0 else 0.0, outlier)
+        v = np.empty(UWB_N + 2 * len(p.dropout_windows_s))
+        v[UWB_SIGMA], v[UWB_P_DROP], v[UWB_P_NLOS] = p.sigma_m, p.dropout_probability, p.nlos_probability
+        v[UWB_NLOS_MIN], v[UWB_NLOS_MAX], v[UWB_DRIFT_START] = (
+            p.nlos_min_m,
+            p.nlos_max_m,
+            p.clock_drift_start_s,
+        )
+        v[UWB_N:] = np.asarray(p.dropout_windows_s, dtype=np.float64).ravel()
+        return v
+
+
+UWB_SIGMA, UWB_P_DROP, UWB_P_NLOS, UWB_NLOS_MIN, UWB_NLOS_MAX, UWB_DRIFT_START = range(6)
+UWB_N = 6  # dropout windows follow as (start, end) pairs
+
+
+@numba.njit(cache=True)
+def uwb_exchange(t_s, tag_ms, anchor_ms, z, drift_m_s, prm):
+    """One two-way-ranging exchange: ``(lost, range_m, is_outlier)``; the arithmetic of
+    :meth:`UwbRadio.sample` (its docstring has the model), compiled so the simulation's inner loop can
+    call it. ``z`` (4,) standard normals: ``z0`` is the range noise; ``z1..z3`` become the dropout,
+    outlier and outlier-size uniforms through the normal CDF (probability integral transform), so an
+    exchange always consumes four draws whatever happens."""
+    if 0.5 * math.erfc(-z[1] * _INV_SQRT2) < prm[UWB_P_DROP]:
+        return True, 0.0, False
+    for w in range(UWB_N, prm.shape[0], 2):
+        if prm[w] <= t_s < prm[w + 1]:
+            return True, 0.0, False
+    dx = tag_ms[0] - anchor_ms[0]
+    dy = tag_ms[1] - anchor_ms[1]
+    dz = tag_ms[2] - anchor_ms[2]
+    r = math.sqrt(dx * dx + dy * dy + dz * dz) + prm[UWB_SIGMA] * z[0]
+    elapsed = t_s - prm[UWB_DRIFT_START]
+    if elapsed > 0.0:
+        r += drift_m_s * elapsed
+    outlier = 0.5 * math.erfc(-z[2] * _INV_SQRT2) < prm[UWB_P_NLOS]
+    if outlier:
+        r += prm[UWB_NLOS_MIN] + (prm[UWB_NLOS_MAX] - prm[UWB_NLOS_MIN]) * 0.5 * math.erfc(-z[3] * _INV_SQRT2)
+    return False, (r if r > 0.0 else 0.0), outlier
 
 
 # ---- AHRS attitude (optional) --------------------------------------------------------------------------

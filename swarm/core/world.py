@@ -13,16 +13,25 @@ plus noise and bias; the camera, at its rate, what the chaser sees of its target
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from swarm.core import rotations as rot
+from swarm.core._rot_nb import qconj, qexp, qlog, qmul, qnormalize, qrotate
 from swarm.core.camera import camera_pose_ms, feature_vectors, project_markers, visible
 from swarm.core.dynamics import propagate
 from swarm.core.guidance import contact_state, docking_geometry
-from swarm.core.sensors import UwbRadio, ahrs_sample, gyro_init_bias, gyro_sample
+from swarm.core.sensors import UwbRadio, UwbSample, _gyro_kernel, gyro_init_bias, uwb_exchange
 from swarm.core.thrusters import allocation_matrix
+
+NOISE_BLOCK = 1024
+"""Rows of pre-drawn standard normals per sensor stream; drawn in blocks from the stream's Generator,
+which gives the very sequence of one draw per sample (numpy fills arrays in order)."""
+
+# world parameter vector (``World.prm``)
+W_DT, W_MASS, W_IXX, W_IYY, W_IZZ, W_HMAX, W_SW, W_PHI, W_SB, W_AHRS_SIGMA = range(10)
 
 STREAMS = ("init", "gyro", "ahrs", "camera", "uwb")
 
@@ -52,73 +61,98 @@ class World:
         sc = scenario
         self.sc = sc
         self.ids = list(sc.vehicles)
+        self.index = {vid: i for i, vid in enumerate(self.ids)}
+        n = len(self.ids)
         self.dt = sc.dt_s
         self.k = 0
-        self.mass = sc.dynamics.mass_kg
-        self.inertia = np.asarray(sc.dynamics.inertia_diag_kgm2, dtype=float)
-        self.h_max = sc.dynamics.integration_step_s
         self.B = allocation_matrix(sc.thrusters)
-        self.x: dict[str, np.ndarray] = {}
-        self.thrusts: dict[str, np.ndarray] = {}
-        self.bias: dict[str, np.ndarray] = {}
+        g = sc.gyro
+        phi = math.exp(-self.dt / g.bias_corr_time_s) if g.enabled_bias else 1.0
+        s_b = g.bias_sigma_rad_s * math.sqrt(1.0 - phi * phi) if g.enabled_bias else 0.0
+        self.prm = np.array(
+            [self.dt, sc.dynamics.mass_kg, *sc.dynamics.inertia_diag_kgm2, sc.dynamics.integration_step_s,
+             g.arw_rad_rts / math.sqrt(self.dt), phi, s_b, sc.ahrs.sigma_rad]
+        )  # fmt: skip
+        # truth and actuator state, one row per vehicle (views by id in ``x``)
+        self.X = np.zeros((n, 13))
+        self.thrusts = np.zeros((n, self.B.shape[1]))
+        self.wrench = np.zeros((n, 6))
+        self.thrust_sum = np.zeros(n)
+        self.impulse = np.zeros(n)
+        self.attached_arr = np.zeros(n, dtype=np.bool_)
+        self.bias = np.zeros((n, 3))
         self.rng: dict[tuple[str, str], np.random.Generator] = {}
-        self.impulse_ns: dict[str, float] = {}
-        self._wrench: dict[str, np.ndarray] = {}
-        self._thrust_sum: dict[str, float] = {}
-        self.attached: dict[str, bool] = {}
         for i, vid in enumerate(self.ids):
-            spec = sc.vehicles[vid]
-            x = np.zeros(13)
-            x[0:3] = spec.position_m
-            x[6:10] = sc.q0(vid)
-            self.x[vid] = x
-            self.thrusts[vid] = np.zeros(self.B.shape[1])
-            self._wrench[vid] = np.zeros(6)
-            self._thrust_sum[vid] = 0.0
+            self.X[i, 0:3] = sc.vehicles[vid].position_m
+            self.X[i, 6:10] = sc.q0(vid)
             for name in ("gyro", "ahrs", "camera"):
                 self.rng[vid, name] = stream(seed, i, name)
-            self.bias[vid] = gyro_init_bias(sc.gyro, self.rng[vid, "gyro"])
-            self.impulse_ns[vid] = 0.0
-            self.attached[vid] = False
+            self.bias[i] = gyro_init_bias(sc.gyro, self.rng[vid, "gyro"])
+        self.x = {vid: self.X[i] for i, vid in enumerate(self.ids)}
+        self.gyro_noise = np.zeros((n, 0, 6))
+        self.gi = np.zeros(1, dtype=np.int64)
+        self.ahrs_noise = np.zeros((n, 0, 3))
+        self.ai = np.zeros(1, dtype=np.int64)
+        self.gyro_out = np.zeros((n, 3))
+        self.ahrs_out = np.zeros((n, 4))
         self.markers_target = sc.markers.markers(sc.guidance.docking_face)
         self.vision_every = sc.every(sc.camera.rate_hz)
         self.ahrs_every = sc.every(sc.ahrs.rate_hz)
 
     @property
+    def impulse_ns(self) -> dict[str, float]:
+        """Total impulse so far per vehicle, sum over nozzles of |f| dt [N s]."""
+        return {vid: float(self.impulse[i]) for i, vid in enumerate(self.ids)}
+
+    @property
+    def attached(self) -> dict[str, bool]:
+        return {vid: bool(self.attached_arr[i]) for i, vid in enumerate(self.ids)}
+
+    @property
     def t_s(self) -> float:
         return self.k * self.dt
+
+    def reserve_noise(self, ticks: int) -> None:
+        """Make sure the pre-drawn noise covers the next ``ticks`` ticks (no sample is ever discarded)."""
+        self.gyro_noise, self.gi[0] = self._refill(self.gyro_noise, int(self.gi[0]), ticks, "gyro")
+        ahrs_ticks = ticks // self.ahrs_every + 1
+        self.ahrs_noise, self.ai[0] = self._refill(self.ahrs_noise, int(self.ai[0]), ahrs_ticks, "ahrs")
+
+    def _refill(self, buf: np.ndarray, used: int, need: int, name: str) -> tuple[np.ndarray, int]:
+        if used + need <= buf.shape[1]:
+            return buf, used
+        rows = max(NOISE_BLOCK, need)
+        new = np.empty((buf.shape[0], rows, buf.shape[2]))
+        left = buf.shape[1] - used
+        for i, vid in enumerate(self.ids):
+            new[i, :left] = buf[i, used:]
+            new[i, left:] = self.rng[vid, name].standard_normal((rows - left, buf.shape[2]))
+        return new, 0
 
     def set_command(self, vehicle_id: str, thrusts_n) -> None:
         """Nozzle thrusts [N] to hold from now on (clipped to the nozzles' range: a command cannot make a
         nozzle pull or exceed its maximum)."""
+        i = self.index[vehicle_id]
         f = np.clip(np.asarray(thrusts_n, dtype=float), 0.0, self.sc.thrusters.max_thrust_n)
-        self.thrusts[vehicle_id] = np.where(np.isfinite(f), f, 0.0)
-        self._wrench[vehicle_id] = self.B @ self.thrusts[vehicle_id]
-        self._thrust_sum[vehicle_id] = float(np.sum(self.thrusts[vehicle_id]))
+        self.thrusts[i] = np.where(np.isfinite(f), f, 0.0)
+        self.wrench[i] = self.B @ self.thrusts[i]
+        self.thrust_sum[i] = float(np.sum(self.thrusts[i]))
 
     def step(self) -> dict[str, SensorFrame]:
         """Advance every vehicle by one tick and return the sensor frames of the new tick."""
-        dt = self.dt
-        frames: dict[str, SensorFrame] = {}
+        self.reserve_noise(1)
         k1 = self.k + 1
-        for vid in self.ids:
-            x0 = self.x[vid]
-            if self.attached[vid]:
-                x1 = x0.copy()
-            else:
-                wrench = self._wrench[vid]
-                x1 = propagate(x0, wrench[:3], wrench[3:], dt, self.mass, self.inertia, self.h_max)
-                self.impulse_ns[vid] += self._thrust_sum[vid] * dt  # thrusts are >= 0: sum |f| dt
-            self.x[vid] = x1
-            w_mean = rot.quat_log(rot.quat_mul(rot.quat_conj(x0[6:10]), x1[6:10])) / dt
-            gyro, self.bias[vid] = gyro_sample(
-                w_mean, self.bias[vid], dt, self.sc.gyro, self.rng[vid, "gyro"]
-            )
-            frame = SensorFrame(k1 * dt, gyro)
-            if self.sc.ahrs.enabled and k1 % self.ahrs_every == 0:
-                frame.q_ahrs_ms_body = ahrs_sample(x1[6:10], self.sc.ahrs, self.rng[vid, "ahrs"])
-            frames[vid] = frame
+        do_ahrs = self.sc.ahrs.enabled and k1 % self.ahrs_every == 0
+        world_tick(
+            self.X, self.wrench, self.thrust_sum, self.attached_arr, self.impulse, self.bias, self.gyro_noise,
+            self.gi, self.ahrs_noise, self.ai, do_ahrs, self.prm, self.gyro_out, self.ahrs_out,
+        )  # fmt: skip
         self.k = k1
+        t1 = k1 * self.dt
+        frames = {
+            vid: SensorFrame(t1, self.gyro_out[i].copy(), self.ahrs_out[i].copy() if do_ahrs else None)
+            for i, vid in enumerate(self.ids)
+        }
         if k1 % self.vision_every == 0:
             for vid in self.ids:
                 spec = self.sc.vehicles[vid]
@@ -161,30 +195,109 @@ class World:
 
     def attach(self, chaser: str, target: str) -> None:
         """Docked: the chaser rides with the target from now on (no further propagation)."""
-        self.attached[chaser] = True
-        self.set_command(chaser, np.zeros_like(self.thrusts[chaser]))
+        self.attached_arr[self.index[chaser]] = True
+        self.set_command(chaser, np.zeros(self.thrusts.shape[1]))
+
+
+@numba.njit(cache=True)
+def world_tick(X, wrench, thrust_sum, attached, impulse, bias, gyro_noise, gi, ahrs_noise, ai, do_ahrs, prm,
+               gyro_out, ahrs_out):  # fmt: skip
+    """Advance every vehicle one tick (in place) and write its sensor samples.
+
+    Truth: :func:`swarm.core.dynamics.propagate` with the held wrench (paper eq. 1-2); impulse
+    ``+= sum |f| dt``. Gyro: the mean body rate over the tick, ``log(q0^-1 (x) q1) / dt`` (the delta-angle
+    an IMU integrates), plus white noise and the Gauss-Markov bias of ``sensors.gyro_sample`` on the next
+    pre-drawn normals. AHRS (when ``do_ahrs``): ``q (x) exp(sigma z)`` as ``sensors.ahrs_sample``.
+    """
+    dt = prm[W_DT]
+    inertia = prm[W_IXX : W_IZZ + 1]
+    z = np.empty(6)
+    for v in range(X.shape[0]):
+        x0 = X[v].copy()
+        if not attached[v]:
+            X[v] = propagate(x0, wrench[v, 0:3], wrench[v, 3:6], dt, prm[W_MASS], inertia, prm[W_HMAX])
+            impulse[v] += thrust_sum[v] * dt
+        w = qlog(qmul(qconj(x0[6:10]), X[v, 6:10]))
+        for i in range(3):
+            w[i] /= dt
+        z[:] = gyro_noise[v, gi[0]]
+        _gyro_kernel(w, bias[v], z, prm[W_SW], prm[W_PHI], prm[W_SB])
+        gyro_out[v] = z[0:3]
+        bias[v] = z[3:6]
+        if do_ahrs:
+            e = np.empty(3)
+            for i in range(3):
+                e[i] = prm[W_AHRS_SIGMA] * ahrs_noise[v, ai[0], i]
+            ahrs_out[v] = qnormalize(qmul(X[v, 6:10], qexp(e)))
+    gi[0] += 1
+    if do_ahrs:
+        ai[0] += 1
 
 
 class UwbNetwork:
-    """The mothership's simulated radio network: one round-robin UWB radio per agent (paper sec. III)."""
+    """The mothership's simulated radio network: one round-robin UWB radio per agent (paper sec. III),
+    each with its own ``uwb`` stream; the exchange itself is :func:`swarm.core.sensors.uwb_exchange`."""
 
     def __init__(self, scenario, seed: int) -> None:
         self.sc = scenario
-        self.anchors = np.asarray(scenario.anchors_m, dtype=float)
+        self.ids = list(scenario.vehicles)
+        n = len(self.ids)
+        self.anchors = np.ascontiguousarray(scenario.anchors_m, dtype=float)
         self.lever = np.asarray(scenario.tag_lever_arm_body_m, dtype=float)
-        self.radios = {vid: UwbRadio(self.anchors, scenario.uwb) for vid in scenario.vehicles}
-        self.rng = {vid: stream(seed, i, "uwb") for i, vid in enumerate(scenario.vehicles)}
+        radio = UwbRadio(self.anchors, scenario.uwb)  # validates the parameters against the anchors
+        self.prm = radio.vector
+        self.drift = np.array([radio.drift_rate(i) for i in range(len(self.anchors))])
+        self.rng = {vid: stream(seed, i, "uwb") for i, vid in enumerate(self.ids)}
         self.every = scenario.every(scenario.uwb.rate_hz)
+        self.next_anchor = np.zeros(n, dtype=np.int64)
+        self.noise = np.zeros((n, 0, 4))
+        self.ui = np.zeros(1, dtype=np.int64)
+        self.lost = np.zeros(n, dtype=np.bool_)
+        self.anchor_id = np.zeros(n, dtype=np.int64)
+        self.range_m = np.zeros(n)
+        self.outlier = np.zeros(n, dtype=np.bool_)
 
-    def step(self, k: int, t_s: float, truth: dict[str, np.ndarray]) -> dict[str, object]:
-        """Ranges of tick ``k`` from the truth states (13,) of each vehicle: ``{id: UwbSample}``; a
-        vehicle is missing when it has no exchange this tick or the reply was lost."""
-        out: dict[str, object] = {}
+    def reserve_noise(self, exchanges: int) -> None:
+        """Pre-draw the normals of the next ``exchanges`` exchanges of every radio (four each)."""
+        used = int(self.ui[0])
+        if used + exchanges <= self.noise.shape[1]:
+            return
+        rows = max(NOISE_BLOCK, exchanges)
+        new = np.empty((self.noise.shape[0], rows, 4))
+        left = self.noise.shape[1] - used
+        for i, vid in enumerate(self.ids):
+            new[i, :left] = self.noise[i, used:]
+            new[i, left:] = self.rng[vid].standard_normal((rows - left, 4))
+        self.noise, self.ui[0] = new, 0
+
+    def step(self, k: int, t_s: float, truth) -> dict[str, UwbSample]:
+        """Ranges of tick ``k`` from the truth states (13,) of each vehicle (a ``{id: state}`` map or an
+        ``(n, 13)`` array in vehicle order): ``{id: UwbSample}``; a vehicle is missing when it has no
+        exchange this tick or the reply was lost."""
         if k % self.every:
-            return out
-        for vid, x in truth.items():
-            tag = x[0:3] + rot.quat_rotate(x[6:10], self.lever)
-            sample = self.radios[vid].sample(t_s, tag, self.rng[vid])
-            if sample is not None:
-                out[vid] = sample
-        return out
+            return {}
+        X = np.ascontiguousarray([truth[v] for v in self.ids]) if isinstance(truth, dict) else truth
+        self.reserve_noise(1)
+        uwb_tick(
+            t_s, X, self.lever, self.anchors, self.drift, self.prm, self.next_anchor, self.noise, self.ui,
+            self.lost, self.anchor_id, self.range_m, self.outlier,
+        )  # fmt: skip
+        return {
+            vid: UwbSample(t_s, int(self.anchor_id[i]), float(self.range_m[i]), bool(self.outlier[i]))
+            for i, vid in enumerate(self.ids)
+            if not self.lost[i]
+        }
+
+
+@numba.njit(cache=True)
+def uwb_tick(t_s, X, lever, anchors, drift, prm, next_anchor, noise, ui, lost, anchor_id, range_m, outlier):
+    """One exchange of every radio at ``t_s`` from the truth ``X`` (n, 13): the tag is
+    ``p + R(q) P1`` (paper Fig. 2), the anchor the next in round robin (which advances even when the
+    reply is lost)."""
+    for v in range(X.shape[0]):
+        tag = X[v, 0:3] + qrotate(X[v, 6:10], lever)
+        i = next_anchor[v]
+        next_anchor[v] = (i + 1) % anchors.shape[0]
+        anchor_id[v] = i
+        lost[v], range_m[v], outlier[v] = uwb_exchange(t_s, tag, anchors[i], noise[v, ui[0]], drift[i], prm)
+    ui[0] += 1
