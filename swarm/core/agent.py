@@ -206,8 +206,9 @@ class VehicleAgent:
             v_ms=v,
             q_ms_body=q,
             sigma_pos_max_m=self.sigma_pos_max_m,
-            mahalanobis_d=self.mahalanobis_d,
-            rejection_fraction=self.rejection_fraction,
+            # the target's station keeping reads neither: spare it the two window means
+            mahalanobis_d=self.mahalanobis_d if self.role == "chaser" else 0.0,
+            rejection_fraction=self.rejection_fraction if self.role == "chaser" else 0.0,
             vision=self.vision_recent,
             p_target_ms=tgt.p_ms if tgt is not None else p,
             q_ms_target=tgt.q_ms_body if tgt is not None else q,
@@ -219,18 +220,22 @@ class VehicleAgent:
         if ref.events:
             self.translation.reset()
         self.mode = ref.mode
-        if ref.mode is Mode.DOCKED:
+        station = self.guidance if isinstance(self.guidance, StationKeeping) else None
+        idle = station is not None and not (station.translate or station.rotate)
+        if ref.mode is Mode.DOCKED or idle:  # docked, or a target inside its dead band: no thrust
+            if idle:
+                self.translation.reset()
             thrusts = np.zeros(self.B.shape[1])
             wrench = np.zeros(6)
             saturated = False
         else:
             F_ms = self.translation.step(p, v, ref.p_ms, ref.v_ms, ref.a_ms)
             tau = attitude_torque(q, self.w_body, ref.q_ms_body, None, self.inertia, self.sc.attitude_control)
-            if isinstance(self.guidance, StationKeeping):  # dead band: hold still inside it
-                if not self.guidance.translate:
+            if station is not None:  # dead band per loop: hold still inside it
+                if not station.translate:
                     F_ms = np.zeros(3)
                     self.translation.reset()
-                if not self.guidance.rotate:
+                if not station.rotate:
                     tau = np.zeros(3)
             F_body = rot.quat_rotate(rot.quat_conj(q), F_ms)
             alloc = allocate(np.concatenate([F_body, tau]), self.B, self.max_thrust)

@@ -22,10 +22,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
+from swarm.core._rot_nb import qconj, qmul
 from swarm.core.rotations import cross, quat_conj, quat_mul
 from swarm.errors import ConfigError
 
@@ -146,6 +148,17 @@ def attitude_torque(
         inertia_diag: principal moments of inertia (3,) or (..., 3) [kg m^2], body axes.
         params: gains and torque bound.
     """
+    if (
+        _single3(w_body, inertia_diag)
+        and _single4(q_ms_body, q_ref_ms_body)
+        and (w_ref_body is None or _single3(w_ref_body))
+        and inertia_diag[0] > 0
+        and inertia_diag[1] > 0
+        and inertia_diag[2] > 0
+    ):
+        w_ref = _ZERO3 if w_ref_body is None else w_ref_body
+        return _attitude_torque1(q_ms_body, w_body, q_ref_ms_body, w_ref, inertia_diag, params.kp_nm,
+                                 params.kd_nms, params.max_torque_nm)  # fmt: skip
     q = _as_last(q_ms_body, 4, "q_ms_body")
     w = _as_last(w_body, 3, "w_body")
     q_ref = _as_last(q_ref_ms_body, 4, "q_ref_ms_body")
@@ -345,6 +358,18 @@ class TranslationController:
             a_ref_ms: reference acceleration [m/s^2], frame ms, for the feed-forward (None: zero).
         Inputs broadcast against the controller's batch shape.
         """
+        if (
+            self._shape == (3,)
+            and _single3(p_ms, v_ms, p_ref_ms, v_ref_ms)
+            and (a_ref_ms is None or _single3(a_ref_ms))
+        ):
+            k_p, k_v, k_i = self.design.K_axis[0]
+            a_ref = _ZERO3 if a_ref_ms is None else a_ref_ms
+            lim = self.params.integral_limit_m_s if self.params.integral_enabled else -1.0
+            return _lqr_step1(
+                p_ms, v_ms, p_ref_ms, v_ref_ms, a_ref, self.integral_m_s, self.mass_kg, k_p, k_v, k_i,
+                self.params.dt_s, lim, self.params.max_force_n,
+            )  # fmt: skip
         e_p = np.broadcast_to(_as_last(p_ms, 3, "p_ms") - _as_last(p_ref_ms, 3, "p_ref_ms"), self._shape)
         e_v = np.broadcast_to(_as_last(v_ms, 3, "v_ms") - _as_last(v_ref_ms, 3, "v_ref_ms"), self._shape)
         a_ref = np.zeros(3) if a_ref_ms is None else _as_last(a_ref_ms, 3, "a_ref_ms")
@@ -354,3 +379,52 @@ class TranslationController:
             lim = self.params.integral_limit_m_s
             self.integral_m_s = np.clip(self.integral_m_s + e_p * self.params.dt_s, -lim, lim)
         return saturate_norm(F, self.params.max_force_n)
+
+
+# ---- compiled single-vehicle paths (the same arithmetic as above, without numpy's per-call overhead) ----
+_ZERO3 = np.zeros(3)
+
+
+def _single3(*arrays) -> bool:
+    return all(type(a) is np.ndarray and a.shape == (3,) and a.dtype == np.float64 for a in arrays)
+
+
+def _single4(*arrays) -> bool:
+    return all(type(a) is np.ndarray and a.shape == (4,) and a.dtype == np.float64 for a in arrays)
+
+
+@numba.njit(cache=True)
+def _saturate1(x, limit):
+    n = np.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+    if n > limit:
+        s = limit / n
+        for i in range(3):
+            x[i] *= s
+    return x
+
+
+@numba.njit(cache=True)
+def _attitude_torque1(q, w, q_ref, w_ref, inertia, kp, kd, max_torque):
+    """:func:`attitude_torque` for one vehicle (same law and saturation)."""
+    q_e = qmul(qconj(q_ref), q)
+    sign = -1.0 if q_e[3] < 0.0 else 1.0
+    tau = np.empty(3)
+    iw0, iw1, iw2 = inertia[0] * w[0], inertia[1] * w[1], inertia[2] * w[2]
+    gyro = (w[1] * iw2 - w[2] * iw1, w[2] * iw0 - w[0] * iw2, w[0] * iw1 - w[1] * iw0)
+    for i in range(3):
+        tau[i] = -kp * sign * q_e[i] - kd * (w[i] - w_ref[i]) + gyro[i]
+    return _saturate1(tau, max_torque)
+
+
+@numba.njit(cache=True)
+def _lqr_step1(p, v, p_ref, v_ref, a_ref, z, mass, k_p, k_v, k_i, dt, lim, max_force):
+    """:meth:`TranslationController.step` for one vehicle: ``F = sat(m a_ref - K [e_p, e_v, z])`` and
+    the clamped integral update (``lim < 0``: integral action off)."""
+    F = np.empty(3)
+    for i in range(3):
+        e_p = p[i] - p_ref[i]
+        e_v = v[i] - v_ref[i]
+        F[i] = mass * a_ref[i] - (k_p * e_p + k_v * e_v + k_i * z[i])
+        if lim >= 0.0:
+            z[i] = min(max(z[i] + e_p * dt, -lim), lim)
+    return _saturate1(F, max_force)

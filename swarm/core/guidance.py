@@ -17,15 +17,25 @@ vehicle by more than ``max_lead_m``, so the LQR (section IV-B) tracks a smooth, 
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+from numba import njit
 
 from swarm.core import rotations as rot
+from swarm.core._rot_nb import qconj, qlog, qmul, qnormalize, qrotate
 from swarm.errors import ConfigError
 
 FACES = ("+x", "-x", "+y", "-y", "+z", "-z")
+
+
+def _norm(x) -> float:
+    """Euclidean norm of a 1-D vector: what ``np.linalg.norm`` computes (``sqrt(x . x)``), bit for bit,
+    without its per-call overhead (the guidance runs every control tick)."""
+    x = np.asarray(x, dtype=np.float64)
+    return math.sqrt(x.dot(x))
 
 
 class Mode(enum.StrEnum):
@@ -209,20 +219,43 @@ def docking_geometry(
 
 def contact_state(p: GuidanceParams, p_c, v_c, q_c, p_t, q_t, v_t=None) -> dict:
     """Port-to-port geometry of a chaser/target pair (used by the world on the truth): gap along the
-    face normal, lateral offset, attitude error to the docking attitude and closing speed."""
-    n_ms, p_docked, q_dock = docking_geometry(p, p_t, q_t)
-    rel = np.asarray(p_c) - p_docked
-    gap = float(rel @ n_ms)
-    lateral = float(np.linalg.norm(rel - gap * n_ms))
-    att = float(np.linalg.norm(rot.attitude_error(q_dock, q_c)))
-    v_rel = np.asarray(v_c) - (0.0 if v_t is None else np.asarray(v_t))
-    closing = float(-v_rel @ n_ms)
-    return {"gap_m": gap, "lateral_m": lateral, "attitude_rad": att, "closing_m_s": closing}
+    face normal, lateral offset, attitude error to the docking attitude and closing speed
+    (:func:`pair_geometry`)."""
+    f64 = np.float64
+    g = pair_geometry(
+        np.asarray(p_c, f64), np.asarray(v_c, f64), np.asarray(q_c, f64), np.asarray(p_t, f64),
+        np.zeros(3) if v_t is None else np.asarray(v_t, f64), np.asarray(q_t, f64), p.face_normal_target,
+        p.q_target_chaser_docked, p.half_size_m,
+    )  # fmt: skip
+    return {"gap_m": g[1], "lateral_m": g[2], "attitude_rad": g[3], "closing_m_s": g[4]}
+
+
+@njit(cache=True)
+def pair_geometry(p_c, v_c, q_c, p_t, v_t, q_t, n_target, q_tc, half):
+    """``(centre, gap, lateral, attitude, closing, axial)`` of a chaser/target pair, frame ms: centre
+    distance; with ``n`` the docking-face normal ``R(q_t) n_target`` and the docked chaser centre
+    ``p_t + 2 half n``: the gap along ``n``, the lateral offset, the attitude error to the docking
+    attitude ``q_t (x) q_tc``, the closing speed ``-(v_c - v_t) . n``, and ``axial = (p_c - p_t) . n``
+    (inside the docking corridor when ``axial >= centre cos(half-angle)``). Compiled: the simulation
+    checks it every tick."""
+    n = qrotate(q_t, n_target)
+    dx, dy, dz = p_c[0] - p_t[0], p_c[1] - p_t[1], p_c[2] - p_t[2]
+    centre = np.sqrt(dx * dx + dy * dy + dz * dz)
+    axial = dx * n[0] + dy * n[1] + dz * n[2]
+    rx, ry, rz = dx - 2.0 * half * n[0], dy - 2.0 * half * n[1], dz - 2.0 * half * n[2]
+    gap = rx * n[0] + ry * n[1] + rz * n[2]
+    lx, ly, lz = rx - gap * n[0], ry - gap * n[1], rz - gap * n[2]
+    lateral = np.sqrt(lx * lx + ly * ly + lz * lz)
+    q_dock = qnormalize(qmul(q_t, q_tc))
+    e = qlog(qmul(qconj(q_dock), q_c))
+    att = np.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+    closing = -((v_c[0] - v_t[0]) * n[0] + (v_c[1] - v_t[1]) * n[1] + (v_c[2] - v_t[2]) * n[2])
+    return centre, gap, lateral, att, closing, axial
 
 
 def in_corridor(p: GuidanceParams, p_c, p_t, n_ms) -> bool:
     rel = np.asarray(p_c) - np.asarray(p_t)
-    r = np.linalg.norm(rel)
+    r = _norm(rel)
     return bool(r > 0 and rel @ n_ms >= r * np.cos(np.radians(p.corridor_half_angle_deg)))
 
 
@@ -258,8 +291,8 @@ class ChaserGuidance:
     def _carrot(self, nav: NavInput, goal: np.ndarray, speed: float, dt: float) -> np.ndarray:
         """Move the reference toward ``goal`` at ``speed``; wait while it leads the vehicle too far."""
         delta = goal - self.p_ref
-        dist = float(np.linalg.norm(delta))
-        lead = float(np.linalg.norm(self.p_ref - nav.p_ms))
+        dist = float(_norm(delta))
+        lead = float(_norm(self.p_ref - nav.p_ms))
         if dist < 1e-9 or lead > self.p.max_lead_m:
             return np.zeros(3)
         step = min(dist, speed * dt)
@@ -274,14 +307,14 @@ class ChaserGuidance:
         a, b = self.p_ref - p_t, goal - p_t
         seg = b - a
         s = np.clip(-(a @ seg) / max(seg @ seg, 1e-12), 0.0, 1.0)
-        if np.linalg.norm(a + s * seg) >= clear:
+        if _norm(a + s * seg) >= clear:
             return goal
-        radius = max(np.linalg.norm(a), clear)
-        u = a / np.linalg.norm(a)
+        radius = max(_norm(a), clear)
+        u = a / _norm(a)
         axis = np.cross(u, n_ms)
-        if np.linalg.norm(axis) < 1e-9:  # exactly opposite the face: any perpendicular axis will do
+        if _norm(axis) < 1e-9:  # exactly opposite the face: any perpendicular axis will do
             axis = np.cross(u, np.eye(3)[np.argmin(np.abs(u))])
-        axis /= np.linalg.norm(axis)
+        axis /= _norm(axis)
         ang = min(np.arccos(np.clip(u @ n_ms, -1.0, 1.0)), self.p.arc_lookahead_rad)
         return p_t + radius * rot.quat_rotate(rot.rotvec_exp(axis * ang), u)
 
@@ -292,9 +325,9 @@ class ChaserGuidance:
         t = nav.t_s
         p_t = np.asarray(nav.p_target_ms, dtype=float)
         n_ms, p_docked, q_dock = docking_geometry(p, p_t, nav.q_ms_target)
-        r = float(np.linalg.norm(nav.p_ms - p_t))
+        r = float(_norm(nav.p_ms - p_t))
         qe = rot.quat_mul(rot.quat_conj(q_dock), nav.q_ms_body)
-        qe_norm = float(np.linalg.norm(qe[:3]))
+        qe_norm = float(_norm(qe[:3]))
         unhealthy = (
             nav.sigma_pos_max_m > p.hold_sigma_pos_m or nav.rejection_fraction > p.hold_rejection_fraction
         )
@@ -351,9 +384,9 @@ class ChaserGuidance:
             p_align = p_t + p.align_distance_m * n_ms
             att_err = 2.0 * np.arcsin(min(qe_norm, 1.0))
             if (
-                np.linalg.norm(nav.p_ms - p_align) <= p.align_tolerance_m
+                _norm(nav.p_ms - p_align) <= p.align_tolerance_m
                 and att_err <= p.align_attitude_tolerance_rad
-                and np.linalg.norm(nav.v_ms) <= p.align_speed_tolerance_m_s
+                and _norm(nav.v_ms) <= p.align_speed_tolerance_m_s
             ):
                 self._switch(t, Mode.DOCK, r, "at the alignment point", events)
         if self.mode is Mode.DOCK:
@@ -361,7 +394,7 @@ class ChaserGuidance:
             if c["gap_m"] <= p.contact_distance_m:
                 self._switch(t, Mode.DOCKED, r, f"estimated port gap {c['gap_m'] * 1000:.1f} mm", events)
         if self.mode is Mode.ABORT and self.retries < p.max_retries and healthy:
-            retreat = np.linalg.norm(self.p_ref - p_t) >= p.keepout_radius_m + p.abort_retreat_m - 1e-3
+            retreat = _norm(self.p_ref - p_t) >= p.keepout_radius_m + p.abort_retreat_m - 1e-3
             if retreat and t - self.mode_since_s > p.retry_after_s:
                 self.retries += 1
                 self.p_ref = nav.p_ms.copy()
@@ -372,13 +405,13 @@ class ChaserGuidance:
         q_ref = q_dock
         clear = p.keepout_radius_m + p.keepout_margin_m
         if self.mode in (Mode.APPROACH, Mode.REORIENT):
-            u = (self.p_ref - p_t) / max(np.linalg.norm(self.p_ref - p_t), 1e-9)
+            u = (self.p_ref - p_t) / max(_norm(self.p_ref - p_t), 1e-9)
             stop = clear
             goal = p_t + u * stop
             v_ref = self._carrot(nav, goal, p.approach_speed_m_s, dt)
             if self.mode is Mode.APPROACH:
                 q_ref = self.q_mission
-            if self.mode is Mode.REORIENT and np.linalg.norm(self.p_ref - goal) < 1e-6:
+            if self.mode is Mode.REORIENT and _norm(self.p_ref - goal) < 1e-6:
                 self.stall_since_s = t if self.stall_since_s is None else self.stall_since_s
         elif self.mode is Mode.ALIGN:
             p_align = p_t + p.align_distance_m * n_ms
@@ -450,12 +483,12 @@ class StationKeeping:
 
     def step(self, nav: NavInput, dt: float) -> Reference:
         p = self.params
-        r = float(np.linalg.norm(nav.p_ms - self.p_ref))
-        att = float(np.linalg.norm(rot.attitude_error(self.q_ref, nav.q_ms_body)))
+        r = float(_norm(nav.p_ms - self.p_ref))
+        att = float(_norm(rot.attitude_error(self.q_ref, nav.q_ms_body)))
         if nav.sigma_pos_max_m > p.converged_sigma_m:
             self.translate = self.rotate = False
         else:
-            speed = float(np.linalg.norm(nav.v_ms))
+            speed = float(_norm(nav.v_ms))
             if self.translate:
                 self.translate = not (r < p.settle_m and speed < p.settle_speed_m_s)
             else:

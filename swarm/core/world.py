@@ -22,7 +22,7 @@ import numpy as np
 from swarm.core._rot_nb import qconj, qexp, qlog, qmul, qnormalize, qrotate
 from swarm.core.camera import camera_pose_ms, feature_vectors, project_markers, visible
 from swarm.core.dynamics import propagate
-from swarm.core.guidance import contact_state, docking_geometry
+from swarm.core.guidance import contact_state, pair_geometry
 from swarm.core.sensors import UwbRadio, UwbSample, _gyro_kernel, gyro_init_bias, uwb_exchange
 from swarm.core.thrusters import allocation_matrix
 
@@ -133,7 +133,10 @@ class World:
         """Nozzle thrusts [N] to hold from now on (clipped to the nozzles' range: a command cannot make a
         nozzle pull or exceed its maximum)."""
         i = self.index[vehicle_id]
-        f = np.clip(np.asarray(thrusts_n, dtype=float), 0.0, self.sc.thrusters.max_thrust_n)
+        f = np.asarray(thrusts_n, dtype=float)
+        if self.thrust_sum[i] == 0.0 and f.shape == self.thrusts[i].shape and not f.any():
+            return  # still all off: nothing to recompute
+        f = np.clip(f, 0.0, self.sc.thrusters.max_thrust_n)
         self.thrusts[i] = np.where(np.isfinite(f), f, 0.0)
         self.wrench[i] = self.B @ self.thrusts[i]
         self.thrust_sum[i] = float(np.sum(self.thrusts[i]))
@@ -148,7 +151,14 @@ class World:
             self.gi, self.ahrs_noise, self.ai, do_ahrs, self.prm, self.gyro_out, self.ahrs_out,
         )  # fmt: skip
         self.k = k1
+        return self.frames()
+
+    def frames(self) -> dict[str, SensorFrame]:
+        """The sensor frames of the current tick ``k`` from the last :func:`world_tick` (gyro, AHRS) and,
+        at camera ticks, what each chaser sees."""
+        k1 = self.k
         t1 = k1 * self.dt
+        do_ahrs = self.sc.ahrs.enabled and k1 % self.ahrs_every == 0
         frames = {
             vid: SensorFrame(t1, self.gyro_out[i].copy(), self.ahrs_out[i].copy() if do_ahrs else None)
             for i, vid in enumerate(self.ids)
@@ -185,13 +195,13 @@ class World:
         inside it while not docking)."""
         g = self.sc.guidance
         xc, xt = self.x[chaser], self.x[target]
-        rel = xc[0:3] - xt[0:3]
-        r = float(np.linalg.norm(rel))
-        if r >= g.keepout_radius_m:
-            return False
-        n_ms, _, _ = docking_geometry(g, xt[0:3], xt[6:10])
-        in_corridor = rel @ n_ms >= r * np.cos(np.radians(g.corridor_half_angle_deg))
-        return not (docking and in_corridor)
+        geo = pair_geometry(
+            xc[0:3], xc[3:6], xc[6:10], xt[0:3], xt[3:6], xt[6:10], g.face_normal_target,
+            g.q_target_chaser_docked, g.half_size_m,
+        )  # fmt: skip
+        return keepout_from_geometry(
+            geo[0], geo[5], g.keepout_radius_m, np.cos(np.radians(g.corridor_half_angle_deg)), docking
+        )
 
     def attach(self, chaser: str, target: str) -> None:
         """Docked: the chaser rides with the target from now on (no further propagation)."""
@@ -301,3 +311,12 @@ def uwb_tick(t_s, X, lever, anchors, drift, prm, next_anchor, noise, ui, lost, a
         anchor_id[v] = i
         lost[v], range_m[v], outlier[v] = uwb_exchange(t_s, tag, anchors[i], noise[v, ui[0]], drift[i], prm)
     ui[0] += 1
+
+
+@numba.njit(cache=True)
+def keepout_from_geometry(centre, axial, keepout_r, corridor_cos, docking):
+    """Keep-out violation from :func:`swarm.core.guidance.pair_geometry`'s centre distance and axial
+    offset: inside the sphere and not (docking inside the corridor)."""
+    if centre >= keepout_r:
+        return False
+    return not (docking and axial >= centre * corridor_cos)

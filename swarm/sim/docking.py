@@ -11,6 +11,7 @@ The order of one tick ``k`` is the contract the distributed swarm (issue 4) foll
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -20,6 +21,7 @@ from swarm.core import rotations as rot
 from swarm.core.agent import VehicleAgent
 from swarm.core.guidance import Mode, docking_geometry
 from swarm.core.world import UwbNetwork, World, stream
+from swarm.sim._fastloop import CONTACT, run_ticks
 
 TERMINAL = (Mode.DOCKED,)
 
@@ -72,20 +74,51 @@ class DockingSim:
             self.agents[vid] = VehicleAgent(scenario, vid, p0, v0, q0, cov0, self.policy)
         self.outcomes = {c: ChaserOutcome(series=_new_series()) for c in scenario.chasers}
         self.done: set[str] = set()
+        self._bind_storage()
 
     def run(self) -> dict:
         sc = self.sc
         dt = sc.dt_s
         control_every = sc.every(sc.translation_control.rate_hz)
         control_dt = control_every * dt
+        vision_every = sc.every(sc.camera.rate_hz)
+        series_every = sc.sim.series_every if self.record_series else 0
         max_k = round(sc.sim.max_duration_s / dt)
         watched = {sc.vehicles[c].target for c in sc.chasers}
-        snap = {vid: self.agents[vid].estimate() for vid in watched}
         frames = None
         wall0 = time.perf_counter()
         k = 0
-        for k in range(max_k + 1):
+        while k <= max_k:
             t = k * dt
+            snap = {vid: self.agents[vid].estimate() for vid in watched}  # estimates of tick k - 1
+            python_tick = (
+                frames is None
+                or k % control_every == 0
+                or (series_every and k % series_every == 0)
+                or any(fr.vision is not None for fr in frames.values())
+            )
+            if not python_tick:
+                # compiled ticks up to the next one that needs Python (control, series, camera)
+                k_end = k + 1
+                while k_end <= max_k and not (
+                    k_end % control_every == 0
+                    or (series_every and k_end % series_every == 0)
+                    or (sc.chasers and k_end % vision_every == 0)
+                ):
+                    k_end += 1
+                k_stop, code = self._fast(k, min(k_end, max_k + 1))
+                if code == CONTACT:  # tick k_stop's sensors are in; finish it here
+                    k = k_stop
+                    t = k * dt
+                    self._check_truth(k, t)
+                    if len(self.done) == len(self.outcomes):
+                        break
+                    frames = self.world.step()
+                    k += 1
+                else:
+                    k = k_stop
+                    frames = self.world.frames()
+                continue
             for cid in sc.chasers:
                 self.agents[cid].set_target_estimate(snap[sc.vehicles[cid].target])
             if frames is not None:
@@ -97,7 +130,6 @@ class DockingSim:
                         agent.on_uwb(ranges[vid].anchor_id, ranges[vid].range_m)
                     if fr.vision is not None:
                         agent.on_vision(t, fr.vision_kind, fr.vision)
-            snap = {vid: self.agents[vid].estimate() for vid in watched}
             if k % control_every == 0:
                 for vid, agent in self.agents.items():
                     if vid in self.done:
@@ -110,8 +142,89 @@ class DockingSim:
             if len(self.done) == len(self.outcomes):
                 break
             frames = self.world.step()
+            k += 1
         wall = time.perf_counter() - wall0
-        return self._summary(k * dt, wall)
+        return self._summary(min(k, max_k) * dt, wall)
+
+    def _bind_storage(self) -> None:
+        """Stack every agent's filter and health arrays (views stay with the agents) so the compiled
+        loop sees all vehicles at once."""
+        agents = list(self.agents.values())
+        self.AX = np.ascontiguousarray(np.concatenate([a.est.X for a in agents]))
+        self.AP = np.ascontiguousarray(np.concatenate([a.est.P for a in agents]))
+        self.AC = np.ascontiguousarray(np.concatenate([a.est.counts for a in agents]))
+        self.AB = np.ascontiguousarray(np.concatenate([a.est.book for a in agents]))
+        self.Hok = np.stack([a.h_ok for a in agents])
+        self.Hd2 = np.stack([a.h_d2 for a in agents])
+        self.Hmeta = np.stack([a.h_meta for a in agents])
+        self.Fb = np.stack([a.f_body for a in agents])
+        self.Wb = np.stack([a.w_body for a in agents])
+        for b, a in enumerate(agents):
+            a.est.X, a.est.P = self.AX[b : b + 1], self.AP[b : b + 1]
+            a.est.counts, a.est.book = self.AC[b : b + 1], self.AB[b : b + 1]
+            a.h_ok, a.h_d2, a.h_meta = self.Hok[b], self.Hd2[b], self.Hmeta[b]
+            a.f_body, a.w_body = self.Fb[b], self.Wb[b]
+        index = {vid: i for i, vid in enumerate(self.agents)}
+        self.pairs = np.array(
+            [[index[c], index[self.sc.vehicles[c].target]] for c in self.sc.chasers], dtype=np.int64
+        )
+        self.pairs = self.pairs.reshape(-1, 2)
+        self.t_agent = np.zeros(len(agents))
+        self._lv = np.zeros(len(agents))
+        self._df = np.zeros(len(agents), dtype=np.bool_)
+        self._done = np.zeros(len(self.pairs), dtype=np.bool_)
+        self._docking = np.zeros(len(self.pairs), dtype=np.bool_)
+        self._corridor_cos = float(np.cos(np.radians(self.sc.guidance.corridor_half_angle_deg)))
+        self.ko_flag = np.zeros(len(self.pairs), dtype=np.bool_)
+        self.ko_t = np.zeros(len(self.pairs))
+        self.ko_r = np.zeros(len(self.pairs))
+
+    def _fast(self, k0: int, k1: int) -> tuple[int, int]:
+        """Run ticks ``k0 .. k1 - 1`` compiled (:func:`swarm.sim._fastloop.run_ticks`)."""
+        sc, w, net = self.sc, self.world, self.network
+        g, ag = sc.guidance, sc.agent
+        agents = list(self.agents.values())
+        first = agents[0]
+        w.reserve_noise(k1 - k0)
+        net.reserve_noise((k1 - k0) // net.every + 1)
+        last_vision, dock_flag, done, docking = self._lv, self._df, self._done, self._docking
+        for b, a in enumerate(agents):
+            last_vision[b] = a._last_vision_s
+            dock_flag[b] = a.mode in (Mode.DOCK, Mode.DOCKED) and a._last_vision_s > -np.inf
+        chasers = sc.chasers
+        for c, cid in enumerate(chasers):
+            done[c] = cid in self.done
+            docking[c] = self.agents[cid].mode in (Mode.DOCK, Mode.DOCKED)
+        ko_before = self.ko_flag.copy()
+        k_stop, code = run_ticks(
+            k0, k1, sc.dt_s, net.every, w.ahrs_every, sc.ahrs.enabled,
+            w.X, w.wrench, w.thrust_sum, w.attached_arr, w.impulse, w.bias, w.gyro_noise, w.gi, w.ahrs_noise,
+            w.ai, w.prm, w.gyro_out, w.ahrs_out,
+            net.lever, net.anchors, net.drift, net.prm, net.next_anchor, net.noise, net.ui, net.lost,
+            net.anchor_id, net.range_m, net.outlier,
+            self.AX, self.AP, self.AC, self.AB, first.est._prm, self.Fb, self.Wb, first.mass_kg,
+            first._ahrs_cov, first._gate_1d, first._gate_3d, first._sigma_range,
+            self.Hok, self.Hd2, self.Hmeta,
+            last_vision, dock_flag, ag.vision_recent_s, ag.uwb_with_vision, self.t_agent,
+            self.pairs, done, docking, g.face_normal_target, g.q_target_chaser_docked, g.half_size_m,
+            g.keepout_radius_m, self._corridor_cos, g.contact_distance_m,
+            self.ko_flag, self.ko_t, self.ko_r,
+        )  # fmt: skip
+        for b, a in enumerate(agents):
+            a.t_s = float(self.t_agent[b])
+        w.k = k_stop  # the world's state is that of tick k_stop
+        for c, cid in enumerate(chasers):
+            if self.ko_flag[c] and not ko_before[c]:
+                out = self.outcomes[cid]
+                out.keepout_violated = True
+                self.ko_flag[self.sc.chasers.index(cid)] = True
+                ev = {
+                    "t_s": float(self.ko_t[c]),
+                    "keepout_violation": True,
+                    "mode": self.agents[cid].mode.value,
+                }
+                out.events.append(ev | {"range_m": float(self.ko_r[c])})
+        return k_stop, code
 
     def _log_events(self, cid: str, events: list[dict]) -> None:
         out = self.outcomes[cid]
@@ -137,7 +250,8 @@ class DockingSim:
                 s["mode"].append(agent.mode.value)
             if cid in self.done:
                 continue
-            centre_m = float(np.linalg.norm(self.world.x[cid][0:3] - self.world.x[tid][0:3]))
+            d = self.world.x[cid][0:3] - self.world.x[tid][0:3]
+            centre_m = math.sqrt(d.dot(d))  # = np.linalg.norm, without its overhead
             if centre_m > g.keepout_radius_m + 2 * g.half_size_m:
                 continue  # far from the target: no contact, no keep-out violation possible
             if self.world.keepout_violated(cid, tid, docking=agent.mode in (Mode.DOCK, Mode.DOCKED)):
