@@ -61,11 +61,19 @@ def _new_series() -> dict[str, list]:
 class DockingSim:
     """One run of a scenario in-process; :meth:`run` returns the JSON-ready summary."""
 
-    def __init__(self, scenario, policy: str | None = None, seed: int = 0, record_series: bool = True):
+    def __init__(
+        self,
+        scenario,
+        policy: str | None = None,
+        seed: int = 0,
+        record_series: bool = True,
+        fast: bool = True,
+    ):
         self.sc = scenario
         self.policy = policy or scenario.policy
         self.seed = int(seed)
         self.record_series = record_series
+        self.fast = fast  # False: every tick through the per-object Python path (the reference)
         self.world = World(scenario, self.seed)
         self.network = UwbNetwork(scenario, self.seed)
         self.agents: dict[str, VehicleAgent] = {}
@@ -92,7 +100,8 @@ class DockingSim:
             t = k * dt
             snap = {vid: self.agents[vid].estimate() for vid in watched}  # estimates of tick k - 1
             python_tick = (
-                frames is None
+                not self.fast
+                or frames is None
                 or k % control_every == 0
                 or (series_every and k % series_every == 0)
                 or any(fr.vision is not None for fr in frames.values())
