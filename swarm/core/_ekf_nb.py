@@ -655,3 +655,28 @@ def update_attitude_batch(X, P, ST_I, ST_F, PRM, q_meas, cov_body, mask, gate, o
             out[b] = update_attitude_one(X[b], P[b], ST_I[b], ST_F[b], PRM, q_meas[b], cov_body[b], gate)
         else:
             out[b] = ST_SKIPPED
+
+
+@njit(cache=True)
+def max_eig_sym3(a00, a01, a02, a11, a12, a22):
+    """Largest eigenvalue of a symmetric 3x3 matrix in closed form (Smith 1961, "Eigenvalues of a
+    symmetric 3 x 3 matrix", Comm. ACM 4(4)): the trigonometric solution of the characteristic cubic."""
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    q = (a00 + a11 + a22) / 3.0
+    if p1 == 0.0:
+        return max(a00, max(a11, a22))
+    b00, b11, b22 = a00 - q, a11 - q, a22 - q
+    p = np.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1) / 6.0)
+    det = b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02)
+    r = det / (2.0 * p * p * p)
+    r = min(1.0, max(-1.0, r))
+    return q + 2.0 * p * np.cos(np.arccos(r) / 3.0)
+
+
+@njit(cache=True)
+def max_sigma_pos_batch(P, out):
+    """``sqrt`` of the largest eigenvalue of each filter's position covariance block: the largest
+    position standard deviation [m] (Algorithm 1's max(sigma_pos))."""
+    for b in range(P.shape[0]):
+        lam = max_eig_sym3(P[b, 0, 0], P[b, 0, 1], P[b, 0, 2], P[b, 1, 1], P[b, 1, 2], P[b, 2, 2])
+        out[b] = np.sqrt(max(lam, 0.0))

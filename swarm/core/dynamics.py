@@ -73,7 +73,7 @@ class RigidBodyParams:
     )
     """Principal moments of inertia about the body axes through the centre of mass [kg m^2]; default the
     solid 10 cm cube, ``m s^2 / 6 = 0.002`` each. A scenario may make them slightly unequal."""
-    integration_step_s: float = 0.001
+    integration_step_s: float = 0.01
     """Largest RK4 sub-step [s]; :func:`propagate` splits each call into equal sub-steps no longer."""
 
     def __post_init__(self) -> None:

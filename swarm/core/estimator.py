@@ -252,7 +252,9 @@ class PoseEstimator:
     @property
     def sigma_pos_max_m(self) -> np.ndarray:
         """Largest position standard deviation per filter (n,) [m] (Algorithm 1's max(sigma_pos))."""
-        return np.sqrt(np.max(np.linalg.eigvalsh(self.P[:, :3, :3]), axis=-1))
+        out = np.empty(self.n)
+        nb.max_sigma_pos_batch(self.P, out)
+        return out
 
     @property
     def last_d2(self) -> np.ndarray:

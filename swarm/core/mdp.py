@@ -277,6 +277,12 @@ def reorient_align_probabilities(
     Returns:
         Four floats, or four arrays of the broadcast shape.
     """
+    if all(type(x) is float for x in (r_m, r2_m, d, sigma_pos_max_m)):  # one decision: plain floats
+        a22s = min(max((r_m / r2_m) * (1.0 / (1.0 + d)), 0.0), 1.0)
+        span_s = r2_m - r_d_m
+        frac_s = (r2_m - r_m) / span_s if span_s > 0.0 else 1.0
+        a32s = min(max((sigma_pos_max_m / sigma_uwb_m) * frac_s, 0.0), 1.0)
+        return a22s, 1.0 - a22s, a32s, 1.0 - a32s
     r, r2, dd, sp = np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (r_m, r2_m, d, sigma_pos_max_m))
     )

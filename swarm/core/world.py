@@ -141,8 +141,10 @@ class World:
         self.wrench[i] = self.B @ self.thrusts[i]
         self.thrust_sum[i] = float(np.sum(self.thrusts[i]))
 
-    def step(self) -> dict[str, SensorFrame]:
-        """Advance every vehicle by one tick and return the sensor frames of the new tick."""
+    def step(self, build_frames: bool = True) -> dict[str, SensorFrame] | None:
+        """Advance every vehicle by one tick and return the sensor frames of the new tick (``None`` with
+        ``build_frames=False``: the samples stay in ``gyro_out``/``ahrs_out``, and the caller vouches that
+        no camera can see its target, so no camera frame is skipped)."""
         self.reserve_noise(1)
         k1 = self.k + 1
         do_ahrs = self.sc.ahrs.enabled and k1 % self.ahrs_every == 0
@@ -151,7 +153,7 @@ class World:
             self.gi, self.ahrs_noise, self.ai, do_ahrs, self.prm, self.gyro_out, self.ahrs_out,
         )  # fmt: skip
         self.k = k1
-        return self.frames()
+        return self.frames() if build_frames else None
 
     def frames(self) -> dict[str, SensorFrame]:
         """The sensor frames of the current tick ``k`` from the last :func:`world_tick` (gyro, AHRS) and,

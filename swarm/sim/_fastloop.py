@@ -19,6 +19,7 @@ from swarm.core.world import keepout_from_geometry, uwb_tick, world_tick
 
 REACHED_END = 0
 CONTACT = 1
+SENSORS_DONE = 2
 
 
 @njit(cache=True)
@@ -29,11 +30,12 @@ def run_ticks(
     AX, AP, AC, AB, PRM, f_body, w_body, mass, ahrs_cov, gate1, gate3, sigma_r, Hok, Hd2, Hmeta,
     last_vision, dock_flag, recent_s, uwb_with_vision, t_agent,
     pairs, done, docking, n_target, q_tc, half, keepout_r, corridor_cos, contact_d,
-    ko_flag, ko_t, ko_r,
+    ko_flag, ko_t, ko_r, sensors_only,
 ):  # fmt: skip
     """Ticks ``k0 .. k1 - 1`` (module docstring). Returns ``(k, code)``: ``(k1, REACHED_END)``, or
     ``(k, CONTACT)`` when a chaser may touch its target at tick ``k``: tick ``k``'s sensors are processed,
-    its truth check and world step are left to the caller."""
+    its truth check and world step are left to the caller. With ``sensors_only`` the last tick stops after
+    its sensors: ``(k1 - 1, SENSORS_DONE)`` (the caller runs control, checks and the world step)."""
     for j in range(k0, k1):
         t = j * dt
         uwb_now = j % uwb_every == 0
@@ -55,6 +57,8 @@ def run_ticks(
                         AX[v], AP[v], AC[v], AB[v], PRM, anchors[anchor_id[v]], range_m[v], sigma_r, gate1,
                         Hok[v], Hd2[v], Hmeta[v],
                     )  # fmt: skip
+        if sensors_only and j == k1 - 1:
+            return j, SENSORS_DONE
         for c in range(pairs.shape[0]):
             if done[c]:
                 continue

@@ -21,9 +21,15 @@ from swarm.core import rotations as rot
 from swarm.core.agent import VehicleAgent
 from swarm.core.guidance import Mode, docking_geometry
 from swarm.core.world import UwbNetwork, World, stream
-from swarm.sim._fastloop import CONTACT, run_ticks
+from swarm.sim._fastloop import CONTACT, SENSORS_DONE, run_ticks
 
 TERMINAL = (Mode.DOCKED,)
+NO_VISION = object()
+"""Marker for 'this tick's samples are in the world's arrays and no camera sees anything'."""
+
+
+def _has_vision(frames) -> bool:
+    return any(fr.vision is not None for fr in frames.values())
 
 
 def initial_estimate(sc, vehicle_index: int, x_true: np.ndarray, seed: int):
@@ -93,26 +99,26 @@ class DockingSim:
         series_every = sc.sim.series_every if self.record_series else 0
         max_k = round(sc.sim.max_duration_s / dt)
         watched = {sc.vehicles[c].target for c in sc.chasers}
-        frames = None
+        frames = None  # tick k's sensor frames; NO_VISION: they are in the world's arrays, no camera frame
         wall0 = time.perf_counter()
         k = 0
         while k <= max_k:
             t = k * dt
-            snap = {vid: self.agents[vid].estimate() for vid in watched}  # estimates of tick k - 1
             python_tick = (
                 not self.fast
                 or frames is None
                 or k % control_every == 0
                 or (series_every and k % series_every == 0)
-                or any(fr.vision is not None for fr in frames.values())
+                or (frames is not NO_VISION and any(fr.vision is not None for fr in frames.values()))
             )
             if not python_tick:
                 # compiled ticks up to the next one that needs Python (control, series, camera)
+                camera = self._camera_possible()
                 k_end = k + 1
                 while k_end <= max_k and not (
                     k_end % control_every == 0
                     or (series_every and k_end % series_every == 0)
-                    or (sc.chasers and k_end % vision_every == 0)
+                    or (camera and k_end % vision_every == 0)
                 ):
                     k_end += 1
                 k_stop, code = self._fast(k, min(k_end, max_k + 1))
@@ -126,11 +132,15 @@ class DockingSim:
                     k += 1
                 else:
                     k = k_stop
-                    frames = self.world.frames()
+                    camera_tick = k % vision_every == 0 and self._camera_possible()
+                    frames = self.world.frames() if camera_tick else NO_VISION
                 continue
+            snap = {vid: self.agents[vid].estimate() for vid in watched}  # estimates of tick k - 1
             for cid in sc.chasers:
                 self.agents[cid].set_target_estimate(snap[sc.vehicles[cid].target])
-            if frames is not None:
+            if frames is NO_VISION or (self.fast and frames is not None and not _has_vision(frames)):
+                self._fast(k, k + 1, sensors_only=True)  # the same sensor steps, compiled
+            elif frames is not None:
                 ranges = self.network.step(k, t, self.world.x)
                 for vid, agent in self.agents.items():
                     fr = frames[vid]
@@ -150,7 +160,10 @@ class DockingSim:
             self._check_truth(k, t)
             if len(self.done) == len(self.outcomes):
                 break
-            frames = self.world.step()
+            build = not self.fast or ((k + 1) % vision_every == 0 and self._camera_possible())
+            frames = self.world.step(build_frames=build)
+            if frames is None:
+                frames = NO_VISION
             k += 1
         wall = time.perf_counter() - wall0
         return self._summary(min(k, max_k) * dt, wall)
@@ -184,11 +197,33 @@ class DockingSim:
         self._done = np.zeros(len(self.pairs), dtype=np.bool_)
         self._docking = np.zeros(len(self.pairs), dtype=np.bool_)
         self._corridor_cos = float(np.cos(np.radians(self.sc.guidance.corridor_half_angle_deg)))
+        self._cam_axis_body = rot.quat_rotate(
+            np.asarray(self.sc.camera.q_body_cam, dtype=float), np.array([0.0, 0.0, 1.0])
+        )
         self.ko_flag = np.zeros(len(self.pairs), dtype=np.bool_)
         self.ko_t = np.zeros(len(self.pairs))
         self.ko_r = np.zeros(len(self.pairs))
 
-    def _fast(self, k0: int, k1: int) -> tuple[int, int]:
+    def _camera_possible(self) -> bool:
+        """Whether any chaser could see its target before the next control tick (then camera ticks need
+        Python): a necessary condition on the truth, with margins for the motion within a control
+        period: the target within the camera's range (plus a cube's diagonal and 5 cm) and within its
+        field-of-view cone (plus 5 deg)."""
+        cam = self.sc.camera
+        reach = cam.max_range_m + 4.0 * self.sc.guidance.half_size_m + 0.05
+        cos_fov = np.cos(np.radians(min(cam.fov_half_angle_deg + 5.0, 180.0)))
+        X = self.world.X
+        for c, t in self.pairs:
+            d = X[t, 0:3] - X[c, 0:3]
+            dist2 = d.dot(d)
+            if dist2 > reach * reach:
+                continue
+            axis_ms = rot.quat_rotate(X[c, 6:10], self._cam_axis_body)
+            if axis_ms.dot(d) >= cos_fov * np.sqrt(dist2):
+                return True
+        return False
+
+    def _fast(self, k0: int, k1: int, sensors_only: bool = False) -> tuple[int, int]:
         """Run ticks ``k0 .. k1 - 1`` compiled (:func:`swarm.sim._fastloop.run_ticks`)."""
         sc, w, net = self.sc, self.world, self.network
         g, ag = sc.guidance, sc.agent
@@ -217,11 +252,12 @@ class DockingSim:
             last_vision, dock_flag, ag.vision_recent_s, ag.uwb_with_vision, self.t_agent,
             self.pairs, done, docking, g.face_normal_target, g.q_target_chaser_docked, g.half_size_m,
             g.keepout_radius_m, self._corridor_cos, g.contact_distance_m,
-            self.ko_flag, self.ko_t, self.ko_r,
+            self.ko_flag, self.ko_t, self.ko_r, sensors_only,
         )  # fmt: skip
         for b, a in enumerate(agents):
             a.t_s = float(self.t_agent[b])
-        w.k = k_stop  # the world's state is that of tick k_stop
+        if code != SENSORS_DONE:
+            w.k = k_stop  # the world's state is that of tick k_stop
         for c, cid in enumerate(chasers):
             if self.ko_flag[c] and not ko_before[c]:
                 out = self.outcomes[cid]

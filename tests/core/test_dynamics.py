@@ -130,7 +130,7 @@ def test_tag_position_is_centre_plus_rotated_lever() -> None:
 
 def test_one_step_equals_its_sub_steps() -> None:
     # dt = 0.01 with h_max = 1 ms is ten equal RK4 sub-steps: the same arithmetic as ten 1 ms calls.
-    params = dyn.RigidBodyParams(inertia_diag_kgm2=ASYMMETRIC_INERTIA)
+    params = dyn.RigidBodyParams(inertia_diag_kgm2=ASYMMETRIC_INERTIA, integration_step_s=0.001)
     x0 = _state(w=(0.3, -0.2, 1.0))
     F, tau = np.array([0.01, 0.02, 0.0]), np.array([0.0, 1e-4, 0.0])
     np.testing.assert_allclose(
