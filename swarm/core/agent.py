@@ -182,18 +182,11 @@ class VehicleAgent:
     @property
     def mahalanobis_d(self) -> float:
         """RMS Mahalanobis distance of the recent ranges, each clipped at the gate (Algorithm 1's d)."""
-        d2 = self._window(self.h_d2)
-        return float(np.sqrt(np.mean(d2))) if d2.size else 0.0
+        return window_stats(self.h_ok, self.h_d2, self.h_meta)[0]
 
     @property
     def rejection_fraction(self) -> float:
-        ok = self._window(self.h_ok)
-        return 1.0 - float(np.mean(ok)) if ok.size else 0.0
-
-    def _window(self, ring: np.ndarray) -> np.ndarray:
-        """The health ring's entries, oldest first."""
-        count, nxt = int(self.h_meta[0]), int(self.h_meta[1])
-        return ring[:count] if count < ring.size else np.concatenate([ring[nxt:], ring[:nxt]])
+        return window_stats(self.h_ok, self.h_d2, self.h_meta)[1]
 
     def control(self, t_s: float, dt_s: float) -> Command:
         """Guidance, switcher and controllers on the current estimate; returns the nozzle thrusts."""
@@ -278,3 +271,19 @@ def agent_uwb(X, P, ST_I, ST_F, PRM, anchor_ms, range_m, sigma_m, gate1, h_ok, h
         h_meta[1] = (i + 1) % h_ok.shape[0]
         h_meta[0] = min(h_meta[0] + 1, h_ok.shape[0])
     return status
+
+
+@njit(cache=True)
+def window_stats(h_ok, h_d2, h_meta):
+    """``(d, rejection_fraction)`` of the health ring (:func:`agent_uwb`): the RMS of the recent
+    Mahalanobis distances (each clipped at the gate; Algorithm 1's d) and the fraction rejected; zeros
+    when no range has been gated yet."""
+    count = h_meta[0]
+    if count == 0:
+        return 0.0, 0.0
+    s_d2 = 0.0
+    n_ok = 0
+    for i in range(count):
+        s_d2 += h_d2[i]
+        n_ok += 1 if h_ok[i] else 0
+    return np.sqrt(s_d2 / count), 1.0 - n_ok / count

@@ -417,6 +417,8 @@ class Switcher(Protocol):
 
 def _check_inputs(**kwargs: float) -> None:
     for name, v in kwargs.items():
+        if type(v) is float and math.isfinite(v) and (v >= 0 or name == "t_s"):
+            continue  # the common case, checked without isinstance
         if not (isinstance(v, int | float | np.floating | np.integer) and math.isfinite(v)):
             raise ValueError(f"{name} must be a finite number, got {v!r}")
         if name != "t_s" and v < 0:

@@ -220,7 +220,7 @@ def allocate(wrench_body: ArrayLike, B: ArrayLike, max_thrust_n: float) -> Alloc
     w = np.asarray(wrench_body, dtype=np.float64)
     if w.shape != (6,):
         raise ValueError(f"wrench_body must have shape (6,), got {w.shape}")
-    if not np.all(np.isfinite(w)):
+    if not np.isfinite(w).all():
         raise ValueError(f"wrench_body must be finite, got {w!r}")
     B = np.asarray(B, dtype=np.float64)
     if B.ndim != 2 or B.shape[0] != 6:

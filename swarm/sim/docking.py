@@ -113,7 +113,7 @@ class DockingSim:
             )
             if not python_tick:
                 # compiled ticks up to the next one that needs Python (control, series, camera)
-                camera = self._camera_possible()
+                camera = self._camera  # decided at the last Python tick, margins cover one control period
                 k_end = k + 1
                 while k_end <= max_k and not (
                     k_end % control_every == 0
@@ -132,7 +132,7 @@ class DockingSim:
                     k += 1
                 else:
                     k = k_stop
-                    camera_tick = k % vision_every == 0 and self._camera_possible()
+                    camera_tick = k % vision_every == 0 and self._camera
                     frames = self.world.frames() if camera_tick else NO_VISION
                 continue
             snap = {vid: self.agents[vid].estimate() for vid in watched}  # estimates of tick k - 1
@@ -160,7 +160,8 @@ class DockingSim:
             self._check_truth(k, t)
             if len(self.done) == len(self.outcomes):
                 break
-            build = not self.fast or ((k + 1) % vision_every == 0 and self._camera_possible())
+            self._camera = self._camera_possible()
+            build = not self.fast or ((k + 1) % vision_every == 0 and self._camera)
             frames = self.world.step(build_frames=build)
             if frames is None:
                 frames = NO_VISION
@@ -196,6 +197,7 @@ class DockingSim:
         self._df = np.zeros(len(agents), dtype=np.bool_)
         self._done = np.zeros(len(self.pairs), dtype=np.bool_)
         self._docking = np.zeros(len(self.pairs), dtype=np.bool_)
+        self._camera = True
         self._corridor_cos = float(np.cos(np.radians(self.sc.guidance.corridor_half_angle_deg)))
         self._cam_axis_body = rot.quat_rotate(
             np.asarray(self.sc.camera.q_body_cam, dtype=float), np.array([0.0, 0.0, 1.0])
