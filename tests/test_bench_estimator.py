@@ -192,7 +192,14 @@ def _count_in_python(monkeypatch) -> None:
     )
     for name in ("qexp3", "qexp", "qmul", "qnormalize", "skew3"):
         monkeypatch.setattr(nb, name, getattr(rn, name).py_func, raising=False)
-    for name in ("_all_finite", "_finite3", "_range_row", "_update_scalar", "_reset_attitude"):
+    for name in (
+        "_all_finite",
+        "_finite3",
+        "_range_row",
+        "_update_scalar",
+        "_reset_attitude",
+        "_reset_attitude3",
+    ):
         monkeypatch.setattr(nb, name, getattr(nb, name).py_func)
     monkeypatch.setattr(rn, "qexp3", rn.qexp3.py_func)
     for module in (nb, rn):

@@ -165,16 +165,16 @@ def _piece_loop(piece, X, P, ST_I, ST_F, PRM, W, A, dt, anchors, sigma):
     algebra, no reset); ``_reset_attitude`` by a fixed 1e-5 rad correction; ``_range_row``;
     ``_all_finite`` of a 3-vector (a step makes three: gyro, acceleration, anchor); the same test written
     as three ``np.isfinite`` (no ``ravel``); the ``np.empty((3, 9))`` workspace of ``update_range_one``."""
-    work, H = np.empty((3, 9)), np.empty(9)
+    work = np.empty((3, 9))
     lever = PRM[nb.PRM_LEVER : nb.PRM_LEVER + 3]
-    nb._range_row(X, anchors[0], lever, H)
+    nb._range_row(X, anchors[0], lever, ST_F, nb.STF_WORK + 18)  # the row _update_scalar reads
     dth = np.array([1e-5, -2e-5, 3e-6])
     acc = 0.0
     for k in range(W.shape[0]):
         if piece == 0:
             nb.predict_one(X, P, ST_I, ST_F, W[k], A[k], dt, PRM)
         elif piece == 1:
-            nb._update_scalar(X, P, ST_I, ST_F, PRM, nb.TYPE_RANGE, H, 0.0, sigma * sigma, np.inf, work)
+            nb._update_scalar(X, P, ST_I, ST_F, PRM, nb.TYPE_RANGE, 0.0, sigma * sigma, np.inf)
         elif piece == 2:
             nb._reset_attitude(X, P, dth)
         elif piece == 3:

@@ -18,7 +18,7 @@ Array layout of one filter (all float64 unless said otherwise):
 ``ST_I`` (3, N_TYPES) int64
     Counters per measurement type: row ``COUNT_ACCEPTED``, ``COUNT_REJECTED`` (Mahalanobis gate),
     ``COUNT_REFUSED`` (non-finite or invalid input).
-``ST_F`` (N_STF,)
+``ST_F`` (N_STF,) (the tail, from ``STF_WORK``, is scratch space)
     ``[since_update_s, underweight_left, last_d2[N_TYPES]...]`` book-keeping.
 
 Parameter vector ``PRM`` (N_PRM,): see the ``PRM_*`` indices.
@@ -64,7 +64,8 @@ N_PRM = 10
 STF_SINCE = 0
 STF_UW_LEFT = 1
 STF_D2 = 2  # 2 : 2 + N_TYPES, squared Mahalanobis distance of the last gated update per type
-N_STF = 2 + N_TYPES
+STF_WORK = 2 + N_TYPES  # 27 floats of scratch for the scalar update: no allocation per range
+N_STF = STF_WORK + 27
 
 
 @njit(cache=True)
@@ -198,7 +199,7 @@ def predict_one(X, P, ST_I, ST_F, w_body, a_ms, dt, PRM):
 
 
 @njit(cache=True)
-def _update_scalar(X, P, ST_I, ST_F, PRM, kind, H, nu, r, gate, work):
+def _update_scalar(X, P, ST_I, ST_F, PRM, kind, nu, r, gate):
     """One scalar measurement ``z = h(x) + v``, ``v ~ N(0, r)``, Jacobian row ``H`` (9,): the same update
     as :func:`_update` (gate, underweighting, Joseph form, reset) in O(n^2) without temporaries.
 
@@ -209,21 +210,22 @@ def _update_scalar(X, P, ST_I, ST_F, PRM, kind, H, nu, r, gate, work):
     extra noise ``H_th P_thth H_th^T`` (see :func:`_update`).
     """
     n = 6 if PRM[PRM_TANDEM] != 0.0 else 9
-    u = work[0]  # scratch rows (9,): no allocation in the innermost update
-    K = work[1]
+    # u, K and the Jacobian row H live in ST_F's scratch tail (offsets U, KO, HO): no allocation and no
+    # array views (each view costs reference counting) in the innermost update
+    U, KO, HO = STF_WORK, STF_WORK + 9, STF_WORK + 18
     for i in range(n):
         acc = 0.0
         for k in range(n):
-            acc += P[i, k] * H[k]
-        u[i] = acc
+            acc += P[i, k] * ST_F[HO + k]
+        ST_F[U + i] = acc
     s = 0.0
     for i in range(n):
-        s += H[i] * u[i]
+        s += ST_F[HO + i] * ST_F[U + i]
     rr = r
     if n == 6:
         for i in range(6, 9):
             for k in range(6, 9):
-                rr += H[i] * P[i, k] * H[k]
+                rr += ST_F[HO + i] * P[i, k] * ST_F[HO + k]
     S = s + rr
     d2 = nu * nu / S
     ST_F[STF_D2 + kind] = d2
@@ -237,25 +239,25 @@ def _update_scalar(X, P, ST_I, ST_F, PRM, kind, H, nu, r, gate, work):
     if ST_F[STF_UW_LEFT] > 0.0 and PRM[PRM_UW_BETA] > 0.0 and s > PRM[PRM_UW_RATIO] * rr:
         Sg = S + PRM[PRM_UW_BETA] * s
     for i in range(n):
-        K[i] = u[i] / Sg
-        if not np.isfinite(K[i]):  # S > 0 and finite P make this unreachable short of overflow
+        ST_F[KO + i] = ST_F[U + i] / Sg
+        if not np.isfinite(ST_F[KO + i]):  # S > 0 and finite P make this unreachable short of overflow
             ST_I[COUNT_REFUSED, kind] += 1
             return ST_REFUSED_INVALID
     for i in range(n):
-        u[i] -= K[i] * s  # u - K s
+        ST_F[U + i] -= ST_F[KO + i] * s  # u - K s
     for i in range(n):  # symmetric by construction: fill the upper triangle and mirror it
+        ki, ui = ST_F[KO + i], ST_F[U + i]
         for j in range(i, n):
-            a = P[i, j] - K[i] * (u[j] + K[j] * s) - u[i] * K[j] + rr * K[i] * K[j]
-            b = P[j, i] - K[j] * (u[i] + K[i] * s) - u[j] * K[i] + rr * K[j] * K[i]
+            kj, uj = ST_F[KO + j], ST_F[U + j]
+            a = P[i, j] - ki * (uj + kj * s) - ui * kj + rr * ki * kj
+            b = P[j, i] - kj * (ui + ki * s) - uj * ki + rr * kj * ki
             v = 0.5 * (a + b)
             P[i, j] = v
             P[j, i] = v
     for i in range(min(n, 6)):
-        X[i] += K[i] * nu
+        X[i] += ST_F[KO + i] * nu
     if n == 9:
-        for i in range(3):
-            u[i] = K[6 + i] * nu  # u is free again: the attitude correction
-        _reset_attitude(X, P, u[0:3])
+        _reset_attitude3(X, P, ST_F[KO + 6] * nu, ST_F[KO + 7] * nu, ST_F[KO + 8] * nu)
     ST_I[COUNT_ACCEPTED, kind] += 1
     ST_F[STF_SINCE] = 0.0
     if ST_F[STF_UW_LEFT] > 0.0:
@@ -264,12 +266,14 @@ def _update_scalar(X, P, ST_I, ST_F, PRM, kind, H, nu, r, gate, work):
 
 
 @njit(cache=True)
-def _reset_attitude(X, P, dth):
+def _reset_attitude3(X, P, d0, d1, d2):
     """Multiplicative reset (Markley 2003): ``q <- q (x) exp(d_theta)``, ``d_theta <- 0``; the covariance
     is mapped by ``G = I - 0.5 [d_theta x]`` on the attitude rows and columns (first-order reset
     Jacobian, Mueller, Hehn & D'Andrea 2016 eq. 11-12), in O(n^2)."""
-    if dth[0] == 0.0 and dth[1] == 0.0 and dth[2] == 0.0:
+    if d0 == 0.0 and d1 == 0.0 and d2 == 0.0:
         return
+    dth = np.empty(3)
+    dth[0], dth[1], dth[2] = d0, d1, d2
     X[6:10] = qnormalize(qmul(X[6:10], qexp(dth)))
     G = np.eye(3) - 0.5 * skew3(dth)
     tmp = np.empty(3)
@@ -283,6 +287,12 @@ def _reset_attitude(X, P, dth):
             tmp[i] = P[rrow, 6] * G[i, 0] + P[rrow, 7] * G[i, 1] + P[rrow, 8] * G[i, 2]
         for i in range(3):
             P[rrow, 6 + i] = tmp[i]
+
+
+@njit(cache=True)
+def _reset_attitude(X, P, dth):
+    """:func:`_reset_attitude3` for a rotation-vector array."""
+    _reset_attitude3(X, P, dth[0], dth[1], dth[2])
 
 
 @njit(cache=True)
@@ -423,8 +433,8 @@ def range_model(X, anchor_ms, lever_body):
 
 
 @njit(cache=True)
-def _range_row(X, anchor_ms, lever_body, H):
-    """:func:`range_model` written out in scalars, filling the row ``H`` (9,) in place; returns ``h``."""
+def _range_row(X, anchor_ms, lever_body, H, ho=0):
+    """:func:`range_model` written out in scalars, filling ``H[ho : ho + 9]`` in place; returns ``h``."""
     qx, qy, qz, qw = X[6], X[7], X[8], X[9]
     # R(q) from the unit quaternion (Crassidis & Junkins 2011 eq. 2.125, Hamilton/scalar-last form)
     r00 = 1 - 2 * (qy * qy + qz * qz)
@@ -442,17 +452,17 @@ def _range_row(X, anchor_ms, lever_body, H):
     dz = X[2] + r20 * lx + r21 * ly + r22 * lz - anchor_ms[2]
     h = np.sqrt(dx * dx + dy * dy + dz * dz)
     for i in range(9):
-        H[i] = 0.0
+        H[ho + i] = 0.0
     if h > 0.0:
         ux, uy, uz = dx / h, dy / h, dz / h
-        H[0], H[1], H[2] = ux, uy, uz
+        H[ho + 0], H[ho + 1], H[ho + 2] = ux, uy, uz
         # with w = R^T u (the line of sight in the body frame): dh/dtheta = -w^T [P1 x] = (P1 x w)^T
         wx = r00 * ux + r10 * uy + r20 * uz
         wy = r01 * ux + r11 * uy + r21 * uz
         wz = r02 * ux + r12 * uy + r22 * uz
-        H[6] = ly * wz - lz * wy
-        H[7] = lz * wx - lx * wz
-        H[8] = lx * wy - ly * wx
+        H[ho + 6] = ly * wz - lz * wy
+        H[ho + 7] = lz * wx - lx * wz
+        H[ho + 8] = lx * wy - ly * wx
     return h
 
 
@@ -464,13 +474,11 @@ def update_range_one(X, P, ST_I, ST_F, PRM, anchor_ms, z_m, sigma_m, gate):
     if z_m < 0.0 or sigma_m <= 0.0:
         ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
         return ST_REFUSED_INVALID
-    work = np.empty((3, 9))
-    H = work[2]
-    h = _range_row(X, anchor_ms, PRM[PRM_LEVER : PRM_LEVER + 3], H)
+    h = _range_row(X, anchor_ms, PRM[PRM_LEVER : PRM_LEVER + 3], ST_F, STF_WORK + 18)
     if h == 0.0:
         ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
         return ST_REFUSED_INVALID
-    return _update_scalar(X, P, ST_I, ST_F, PRM, TYPE_RANGE, H, z_m - h, sigma_m * sigma_m, gate, work)
+    return _update_scalar(X, P, ST_I, ST_F, PRM, TYPE_RANGE, z_m - h, sigma_m * sigma_m, gate)
 
 
 @njit(cache=True)
