@@ -190,7 +190,7 @@ def _count_in_python(monkeypatch) -> None:
     math_shim = types.SimpleNamespace(
         sqrt=_counting(math.sqrt), sin=_counting(math.sin), cos=_counting(math.cos), atan2=math.atan2
     )
-    for name in ("qexp3", "qexp", "qmul", "qnormalize", "skew3"):
+    for name in ("qexp3", "qexp", "qmat9", "qmul", "qnormalize", "skew3"):
         monkeypatch.setattr(nb, name, getattr(rn, name).py_func, raising=False)
     for name in (
         "_all_finite",

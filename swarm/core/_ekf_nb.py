@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from swarm.core._rot_nb import qconj, qexp, qexp3, qlog, qmat, qmul, qnormalize, skew3
+from swarm.core._rot_nb import qconj, qexp, qexp3, qlog, qmat, qmat9, qmul, qnormalize, skew3
 
 # Measurement types (columns of the counters).
 TYPE_RANGE = 0
@@ -133,16 +133,8 @@ def predict_one(X, P, ST_I, ST_F, w_body, a_ms, dt, PRM):
     nw = aw * bw - (ax * bx + ay * by + az * bz)
     inv = 1.0 / np.sqrt(nx * nx + ny * ny + nz * nz + nw * nw)
     X[6], X[7], X[8], X[9] = nx * inv, ny * inv, nz * inv, nw * inv
-    # Phi = R(dq)^T, as scalars f_ij
-    f00 = 1 - 2 * (by * by + bz * bz)
-    f10 = 2 * (bx * by - bz * bw)
-    f20 = 2 * (bx * bz + by * bw)
-    f01 = 2 * (bx * by + bz * bw)
-    f11 = 1 - 2 * (bx * bx + bz * bz)
-    f21 = 2 * (by * bz - bx * bw)
-    f02 = 2 * (bx * bz - by * bw)
-    f12 = 2 * (by * bz + bx * bw)
-    f22 = 1 - 2 * (bx * bx + by * by)
+    # Phi = R(dq)^T, as scalars f_ij = R_ji
+    f00, f10, f20, f01, f11, f21, f02, f12, f22 = qmat9(bx, by, bz, bw)
     # translation block: P_pp += dt (P_pv + P_vp) + dt^2 P_vv, P_pv += dt P_vv, P_vp += dt P_vv
     for i in range(3):
         for j in range(3):
@@ -435,17 +427,7 @@ def range_model(X, anchor_ms, lever_body):
 @njit(cache=True)
 def _range_row(X, anchor_ms, lever_body, H, ho=0):
     """:func:`range_model` written out in scalars, filling ``H[ho : ho + 9]`` in place; returns ``h``."""
-    qx, qy, qz, qw = X[6], X[7], X[8], X[9]
-    # R(q) from the unit quaternion (Crassidis & Junkins 2011 eq. 2.125, Hamilton/scalar-last form)
-    r00 = 1 - 2 * (qy * qy + qz * qz)
-    r01 = 2 * (qx * qy - qz * qw)
-    r02 = 2 * (qx * qz + qy * qw)
-    r10 = 2 * (qx * qy + qz * qw)
-    r11 = 1 - 2 * (qx * qx + qz * qz)
-    r12 = 2 * (qy * qz - qx * qw)
-    r20 = 2 * (qx * qz - qy * qw)
-    r21 = 2 * (qy * qz + qx * qw)
-    r22 = 1 - 2 * (qx * qx + qy * qy)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = qmat9(X[6], X[7], X[8], X[9])
     lx, ly, lz = lever_body[0], lever_body[1], lever_body[2]
     dx = X[0] + r00 * lx + r01 * ly + r02 * lz - anchor_ms[0]
     dy = X[1] + r10 * lx + r11 * ly + r12 * lz - anchor_ms[1]

@@ -161,3 +161,15 @@ def qrotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     out[1] = v[1] + s * (w * cy + dy)
     out[2] = v[2] + s * (w * cz + dz)
     return out
+
+
+@numba.njit(cache=True)
+def qmat9(x: float, y: float, z: float, w: float) -> tuple:
+    """The entries ``(r00, r01, r02, r10, r11, r12, r20, r21, r22)`` of ``R(q)`` for a unit quaternion
+    given as scalars (Crassidis & Junkins 2011 eq. 2.125 in the Hamilton, scalar-last form): no array
+    allocation, for the innermost kernels."""
+    return (
+        1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+        2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+        2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y),
+    )  # fmt: skip
