@@ -1,0 +1,21 @@
+"""`swarm bench sim` runs and writes the fields BENCHMARKS.md quotes (no timing assertion)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+from swarm.cli.main import main
+
+
+def test_bench_sim_quick_writes_realtime_factors(tmp_path, capsys):
+    out = tmp_path / "sim.json"
+    assert main(["bench", "sim", "--quick", "--json", str(out)]) == 0
+    rec = json.loads(out.read_text())
+    assert rec["target_realtime_factor"] == 500.0
+    for policy in ("fixed", "mdp"):
+        case = rec["cases"][policy]
+        assert math.isfinite(case["realtime_factor_median"]) and case["realtime_factor_median"] > 0
+        assert case["sim_time_s"][0] > 60.0  # a whole docking was simulated, not a stub
+    assert rec["realtime_factor"] == min(c["realtime_factor_median"] for c in rec["cases"].values())
+    assert "goal: one docking >= 500x real time" in capsys.readouterr().out
