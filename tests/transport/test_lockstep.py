@@ -1,0 +1,406 @@
+"""Tests for swarm.transport.lockstep: tick assembly on the agent's side, the command barrier on the world's.
+
+Oracle: the lockstep contract of ``docs/protocol.md`` ("Clocks and lockstep") and the tick order of
+``DockingSim.run`` (tick ``k`` needs ``imu(k)``, ``uwb(k)`` on UWB slots, a chaser its target's
+``estimate(k - 1)``; ``vision(k)`` counts only before ``imu(k)``), written out by hand per case. Threaded
+tests feed messages in shuffled orders from several producers (seeded) and check that the result does
+not depend on the order. Negative waits use 50 ms timeouts; positive ones 5 s, which they never reach.
+"""
+
+from __future__ import annotations
+
+import random
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from swarm.errors import ConfigError
+from swarm.transport.lockstep import AgentTickAssembler, CommandBarrier
+from swarm.transport.messages import Command, Estimate, Imu, Uwb, Vision
+
+DT = 0.01
+SHORT = 0.05  # s: a wait that must time out
+LONG = 5.0  # s: a wait that must succeed (returns as soon as it does)
+
+
+def imu(k: int, w: float = 0.0) -> Imu:
+    return Imu(tick=k, t_s=k * DT, dt_s=DT, gyro_body=np.array([w, 0.0, 0.0]))
+
+
+def uwb(k: int, range_m: float | None = 1.0) -> Uwb:
+    return Uwb(tick=k, t_s=k * DT, anchor_id=0, range_m=range_m)
+
+
+def vision(k: int) -> Vision:
+    return Vision(
+        tick=k, t_s=k * DT, target_id="target", face="+x", kind="features",
+        data=np.array([[0.0, 0.0, 1.0]]), marker_ids=(0,),
+    )  # fmt: skip
+
+
+def estimate(k: int, x: float = 0.0) -> Estimate:
+    return Estimate(
+        tick=k, t_s=k * DT, p_ms=np.array([x, 0.0, 0.0]), v_ms=np.zeros(3),
+        q_ms_body=np.array([0.0, 0.0, 0.0, 1.0]), cov=np.eye(9), sigma_pos_max_m=1.0,
+        mahalanobis_d=0.0, rejection_fraction=0.0, counts={},
+    )  # fmt: skip
+
+
+def command(k: int) -> Command:
+    return Command(
+        tick=k, t_s=k * DT, thrusts_n=np.zeros(4), force_body_n=np.zeros(3),
+        torque_body_nm=np.zeros(3), mode="HOLD",
+    )  # fmt: skip
+
+
+def chaser(uwb_every: int = 2, **kw) -> AgentTickAssembler:
+    return AgentTickAssembler("chaser", True, "target", uwb_every, **kw)
+
+
+def plain(uwb_every: int = 2, **kw) -> AgentTickAssembler:
+    return AgentTickAssembler("target", False, None, uwb_every, **kw)
+
+
+# ------------------------------------------------------------------------------ completion rules
+
+
+def test_non_uwb_tick_completes_on_imu_alone():
+    asm = plain(uwb_every=2)
+    asm.add(imu(1))
+    got = asm.next_tick(0)
+    assert got is not None and got.tick == 1 and got.uwb is None and got.vision is None
+    assert got.target_estimate is None
+
+
+def test_uwb_tick_waits_for_uwb():
+    asm = plain(uwb_every=2)
+    asm.add(imu(1))
+    asm.next_tick(0)
+    asm.add(imu(2))
+    assert asm.next_tick(SHORT) is None
+    assert asm.waiting_for() == ["uwb"]
+    asm.add(uwb(2))
+    got = asm.next_tick(0)
+    assert got is not None and got.tick == 2 and got.uwb.range_m == 1.0
+
+
+def test_lost_uwb_reply_completes_the_tick_with_range_none():
+    asm = plain(uwb_every=1)
+    asm.add(uwb(1, range_m=None))
+    asm.add(imu(1))
+    got = asm.next_tick(0)
+    assert got is not None and got.uwb is not None and got.uwb.range_m is None
+
+
+def test_uwb_off_slot_is_dropped_as_unexpected():
+    asm = plain(uwb_every=2)
+    assert not asm.add(uwb(1))
+    assert asm.unexpected == 1
+
+
+def test_chaser_waits_for_target_estimate_of_previous_tick():
+    asm = chaser(uwb_every=5)
+    asm.add(imu(1))
+    asm.add(estimate(1))  # estimate(k) is for tick k + 1, not k
+    assert asm.next_tick(SHORT) is None
+    assert asm.waiting_for() == ["estimate"]
+    asm.add(estimate(0, x=7.0), "target")
+    got = asm.next_tick(0)
+    assert got is not None and got.tick == 1 and got.target_estimate.tick == 0
+    assert got.target_estimate.p_ms[0] == 7.0
+    asm.add(imu(2))
+    got = asm.next_tick(0)
+    assert got is not None and got.target_estimate.tick == 1
+
+
+def test_estimate_of_another_vehicle_is_unexpected():
+    asm = chaser()
+    assert not asm.add(estimate(0), "other")
+    assert asm.unexpected == 1
+    assert not plain().add(estimate(0))  # a non-chaser uses no estimate
+
+
+def test_sensor_message_of_another_vehicle_is_unexpected():
+    asm = plain()
+    assert not asm.add(imu(1), "someone-else")
+    assert asm.unexpected == 1 and asm.next_tick(0) is None
+
+
+def test_vision_before_imu_is_part_of_the_tick():
+    asm = plain(uwb_every=3)
+    asm.add(vision(1))
+    asm.add(imu(1))
+    got = asm.next_tick(0)
+    assert got is not None and got.vision is not None and got.vision.tick == 1
+
+
+def test_vision_after_imu_is_late_and_not_used():
+    asm = plain(uwb_every=3)
+    asm.add(imu(1))
+    assert not asm.add(vision(1))  # imu(1) pending, not yet consumed
+    assert asm.late == 1
+    got = asm.next_tick(0)
+    assert got is not None and got.vision is None
+
+
+def test_vision_after_its_tick_was_processed_is_late():
+    asm = plain(uwb_every=3)
+    asm.add(imu(1))
+    asm.next_tick(0)
+    assert not asm.add(vision(1))
+    assert asm.late == 1 and asm.stale == 0
+
+
+def test_vision_of_a_future_tick_waits_for_its_imu():
+    asm = plain(uwb_every=3)
+    asm.add(vision(2))
+    asm.add(imu(1))
+    assert asm.next_tick(0).vision is None
+    asm.add(imu(2))
+    assert asm.next_tick(0).vision.tick == 2
+
+
+# ------------------------------------------------------------------------------ ordering and counters
+
+
+def test_ticks_come_out_in_order_whatever_the_arrival_order():
+    asm = plain(uwb_every=2)
+    for k in (3, 1, 4, 2):
+        asm.add(imu(k))
+    for k in (4, 2):
+        asm.add(uwb(k))
+    assert [asm.next_tick(0).tick for _ in range(4)] == [1, 2, 3, 4]
+    assert asm.next_tick(0) is None
+
+
+def test_a_later_complete_tick_does_not_overtake_an_incomplete_one():
+    asm = plain(uwb_every=2)
+    asm.add(imu(2))
+    asm.add(uwb(2))
+    assert asm.next_tick(SHORT) is None  # tick 1 lacks imu
+    asm.add(imu(1))
+    assert asm.next_tick(0).tick == 1
+
+
+def test_stale_messages_are_dropped_and_counted():
+    asm = chaser(uwb_every=1)
+    asm.add(estimate(0))
+    asm.add(imu(1))
+    asm.add(uwb(1))
+    asm.next_tick(0)
+    assert not asm.add(imu(1))
+    assert not asm.add(uwb(1))
+    assert not asm.add(estimate(0))  # used by tick 1, already processed
+    assert asm.stale == 3
+
+
+def test_duplicates_keep_the_first_message():
+    asm = plain(uwb_every=1)
+    assert asm.add(imu(1, w=1.0))
+    assert not asm.add(imu(1, w=2.0))
+    assert asm.add(uwb(1, range_m=3.0))
+    assert not asm.add(uwb(1, range_m=4.0))
+    assert asm.duplicates == 2
+    got = asm.next_tick(0)
+    assert got.imu.gyro_body[0] == 1.0 and got.uwb.range_m == 3.0
+
+
+def test_duplicate_estimate_is_counted():
+    asm = chaser()
+    assert asm.add(estimate(0, x=1.0))
+    assert not asm.add(estimate(0, x=2.0))
+    assert asm.duplicates == 1
+
+
+def test_far_future_messages_are_dropped_and_counted():
+    asm = chaser(uwb_every=1, max_ahead=10)
+    assert asm.add(imu(11))  # next is 1: 10 ahead is still buffered
+    assert not asm.add(imu(12))
+    assert not asm.add(uwb(12))
+    assert not asm.add(estimate(11))  # used by tick 12
+    assert asm.future == 3
+
+
+def test_timeout_consumes_nothing_and_the_tick_completes_later():
+    asm = plain(uwb_every=2)
+    asm.add(imu(1))
+    asm.next_tick(0)
+    asm.add(imu(2))
+    t0 = time.monotonic()
+    assert asm.next_tick(SHORT) is None
+    assert time.monotonic() - t0 >= SHORT * 0.9
+    assert asm.next_expected == 2
+    asm.add(uwb(2))
+    assert asm.next_tick(0).tick == 2
+
+
+def test_next_tick_wakes_when_another_thread_completes_the_tick():
+    asm = chaser(uwb_every=1)
+    timer = threading.Timer(0.02, lambda: [asm.add(m) for m in (uwb(1), estimate(0), imu(1))])
+    timer.start()
+    got = asm.next_tick(LONG)
+    timer.join()
+    assert got is not None and got.tick == 1
+
+
+def test_reset_resynchronises_to_a_later_tick():
+    asm = chaser(uwb_every=1)
+    asm.add(imu(2))
+    asm.add(estimate(0))
+    asm.add(imu(6))
+    asm.add(uwb(6))
+    asm.reset(6)
+    assert asm.next_expected == 6
+    assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["estimate"]
+    assert not asm.add(imu(5))  # before the reset point: stale
+    assert not asm.add(vision(5))  # no imu(5) was seen since the reset: stale, not late
+    assert asm.stale == 2 and asm.late == 0
+    asm.add(estimate(5))
+    got = asm.next_tick(0)
+    assert got.tick == 6 and got.target_estimate.tick == 5
+
+
+def test_close_wakes_a_waiting_consumer():
+    asm = plain()
+    threading.Timer(0.02, asm.close).start()
+    assert asm.next_tick(LONG) is None
+
+
+def test_chaser_without_target_is_a_config_error():
+    with pytest.raises(ConfigError, match="target id"):
+        AgentTickAssembler("chaser", True, None, 2)
+    with pytest.raises(ConfigError, match="uwb_every"):
+        AgentTickAssembler("chaser", False, None, 0)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_concurrent_producers_in_shuffled_order_give_the_in_process_tick_sequence(seed):
+    n, uwb_every, vision_every = 60, 2, 5
+    rnd = random.Random(seed)
+    asm = chaser(uwb_every=uwb_every)
+    # the world's session: vision(k) before imu(k), ticks in order (one subscriber preserves this)
+    world = []
+    for k in range(1, n + 1):
+        if k % vision_every == 0:
+            world.append(vision(k))
+        world.append(imu(k, w=float(k)))
+    mothership = [uwb(k, range_m=float(k)) for k in range(uwb_every, n + 1, uwb_every)]
+    target = [estimate(k, x=float(k)) for k in range(n)]
+    rnd.shuffle(mothership)  # other publishers: any order relative to everything else
+    rnd.shuffle(target)
+
+    def feed(msgs, source):
+        for m in msgs:
+            asm.add(m, source)
+            if rnd.random() < 0.1:
+                time.sleep(0.0005)
+
+    threads = [
+        threading.Thread(target=feed, args=(world, "chaser")),
+        threading.Thread(target=feed, args=(mothership, None)),
+        threading.Thread(target=feed, args=(target, "target")),
+    ]
+    for t in threads:
+        t.start()
+    got = [asm.next_tick(LONG) for _ in range(n)]
+    for t in threads:
+        t.join()
+    assert all(g is not None for g in got)
+    assert [g.tick for g in got] == list(range(1, n + 1))
+    assert all(g.imu.gyro_body[0] == g.tick for g in got)
+    assert [g.tick for g in got if g.uwb is not None] == list(range(uwb_every, n + 1, uwb_every))
+    assert all(g.uwb is None or g.uwb.range_m == g.tick for g in got)
+    assert [g.tick for g in got if g.vision is not None] == list(range(vision_every, n + 1, vision_every))
+    assert all(g.target_estimate.p_ms[0] == g.tick - 1 for g in got)
+    assert asm.counts() == dict.fromkeys(("stale", "duplicates", "future", "late", "unexpected"), 0)
+
+
+# ------------------------------------------------------------------------------ command barrier
+
+
+def test_barrier_returns_when_all_commands_arrived():
+    bar = CommandBarrier(["a", "b"])
+    bar.add("b", command(0))
+    bar.add("a", command(0))
+    cmds, missing = bar.wait(0, 0)
+    assert set(cmds) == {"a", "b"} and missing == []
+
+
+def test_barrier_timeout_lists_missing_agents_in_order():
+    bar = CommandBarrier(["a", "b", "c"])
+    bar.add("b", command(1))
+    t0 = time.monotonic()
+    cmds, missing = bar.wait(1, SHORT)
+    assert time.monotonic() - t0 >= SHORT * 0.9
+    assert set(cmds) == {"b"} and missing == ["a", "c"]
+
+
+def test_barrier_command_after_its_tick_was_released_is_stale():
+    bar = CommandBarrier(["a", "b"])
+    bar.add("a", command(1))
+    bar.wait(1, SHORT)
+    assert not bar.add("b", command(1))
+    assert not bar.add("b", command(0))
+    assert bar.stale == 2
+    with pytest.raises(ConfigError, match="already released"):
+        bar.wait(1, 0)
+
+
+def test_barrier_set_live_shrinking_releases_the_wait():
+    bar = CommandBarrier(["a", "b"])
+    bar.add("a", command(3))
+    threading.Timer(0.02, bar.set_live, args=(["a"],)).start()
+    t0 = time.monotonic()
+    cmds, missing = bar.wait(3, LONG)
+    assert time.monotonic() - t0 < LONG / 2
+    assert set(cmds) == {"a"} and missing == []
+
+
+def test_barrier_set_live_rejects_unknown_ids():
+    bar = CommandBarrier(["a"])
+    with pytest.raises(ConfigError, match="unknown"):
+        bar.set_live(["a", "z"])
+
+
+def test_barrier_counts_duplicates_future_and_unknown():
+    bar = CommandBarrier(["a"], max_ahead=5)
+    assert bar.add("a", command(5))
+    assert not bar.add("a", command(5))
+    assert not bar.add("a", command(6))
+    assert not bar.add("z", command(0))
+    assert bar.counts() == {"stale": 0, "duplicates": 1, "future": 1, "unknown": 1}
+
+
+def test_barrier_keeps_commands_of_later_ticks():
+    bar = CommandBarrier(["a"])
+    bar.add("a", command(2))
+    bar.add("a", command(1))
+    assert bar.wait(1, 0)[1] == []
+    cmds, missing = bar.wait(2, 0)
+    assert cmds["a"].tick == 2 and missing == []
+
+
+def test_barrier_concurrent_producers():
+    ids = [f"agent{i}" for i in range(8)]
+    n = 50
+    bar = CommandBarrier(ids)
+    rnd = random.Random(1)
+
+    def produce(agent_id, delay_s):
+        for k in range(n):
+            bar.add(agent_id, command(k))
+            if rnd.random() < 0.1:
+                time.sleep(delay_s)
+
+    threads = [threading.Thread(target=produce, args=(a, 0.0005 * (i % 3))) for i, a in enumerate(ids)]
+    for t in threads:
+        t.start()
+    results = [bar.wait(k, LONG) for k in range(n)]
+    for t in threads:
+        t.join()
+    assert all(missing == [] for _, missing in results)
+    assert all(sorted(cmds) == ids and all(c.tick == k for c in cmds.values()) for k, (cmds, _) in
+               enumerate(results))  # fmt: skip
+    assert bar.counts() == {"stale": 0, "duplicates": 0, "future": 0, "unknown": 0}
