@@ -28,7 +28,7 @@ import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from swarm.core._rot_nb import qconj, qmul
-from swarm.core.rotations import cross, quat_conj, quat_mul
+from swarm.core.rotations import as_last, cross, quat_conj, quat_mul
 from swarm.errors import ConfigError
 
 __all__ = [
@@ -55,13 +55,6 @@ def _check(section: str, obj: object, positive: tuple[str, ...], nonneg: tuple[s
         v = getattr(obj, name)
         if not (isinstance(v, int | float | np.floating | np.integer) and np.isfinite(v) and v >= 0):
             raise ConfigError(f"{section}.{name} must be a non-negative finite number, got {v!r}")
-
-
-def _as_last(x: ArrayLike, n: int, name: str) -> FloatArray:
-    a = np.asarray(x, dtype=np.float64)
-    if a.ndim == 0 or a.shape[-1] != n:
-        raise ValueError(f"{name} must have shape (..., {n}), got {a.shape}")
-    return a
 
 
 def saturate_norm(x: ArrayLike, limit: float) -> FloatArray:
@@ -159,11 +152,11 @@ def attitude_torque(
         w_ref = _ZERO3 if w_ref_body is None else w_ref_body
         return _attitude_torque1(q_ms_body, w_body, q_ref_ms_body, w_ref, inertia_diag, params.kp_nm,
                                  params.kd_nms, params.max_torque_nm)  # fmt: skip
-    q = _as_last(q_ms_body, 4, "q_ms_body")
-    w = _as_last(w_body, 3, "w_body")
-    q_ref = _as_last(q_ref_ms_body, 4, "q_ref_ms_body")
-    w_ref = np.zeros(3) if w_ref_body is None else _as_last(w_ref_body, 3, "w_ref_body")
-    inertia = _as_last(inertia_diag, 3, "inertia_diag")
+    q = as_last(q_ms_body, 4, "q_ms_body")
+    w = as_last(w_body, 3, "w_body")
+    q_ref = as_last(q_ref_ms_body, 4, "q_ref_ms_body")
+    w_ref = np.zeros(3) if w_ref_body is None else as_last(w_ref_body, 3, "w_ref_body")
+    inertia = as_last(inertia_diag, 3, "inertia_diag")
     if not np.all(inertia > 0):
         raise ValueError(f"inertia_diag must be positive, got {inertia}")
     q_e = quat_mul(quat_conj(q_ref), q)
@@ -370,9 +363,9 @@ class TranslationController:
                 p_ms, v_ms, p_ref_ms, v_ref_ms, a_ref, self.integral_m_s, self.mass_kg, k_p, k_v, k_i,
                 self.params.dt_s, lim, self.params.max_force_n,
             )  # fmt: skip
-        e_p = np.broadcast_to(_as_last(p_ms, 3, "p_ms") - _as_last(p_ref_ms, 3, "p_ref_ms"), self._shape)
-        e_v = np.broadcast_to(_as_last(v_ms, 3, "v_ms") - _as_last(v_ref_ms, 3, "v_ref_ms"), self._shape)
-        a_ref = np.zeros(3) if a_ref_ms is None else _as_last(a_ref_ms, 3, "a_ref_ms")
+        e_p = np.broadcast_to(as_last(p_ms, 3, "p_ms") - as_last(p_ref_ms, 3, "p_ref_ms"), self._shape)
+        e_v = np.broadcast_to(as_last(v_ms, 3, "v_ms") - as_last(v_ref_ms, 3, "v_ref_ms"), self._shape)
+        a_ref = np.zeros(3) if a_ref_ms is None else as_last(a_ref_ms, 3, "a_ref_ms")
         k_p, k_v, k_i = self.design.K_axis[0]
         F = self.mass_kg * a_ref - (k_p * e_p + k_v * e_v + k_i * self.integral_m_s)
         if self.params.integral_enabled:

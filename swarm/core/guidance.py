@@ -155,6 +155,11 @@ class GuidanceParams:
             )
 
     @cached_property
+    def corridor_cos(self) -> float:
+        """Cosine of the docking corridor's half-angle (inside when ``axial >= centre * corridor_cos``)."""
+        return float(np.cos(np.radians(self.corridor_half_angle_deg)))
+
+    @cached_property
     def face_normal_target(self) -> np.ndarray:
         """Outward unit normal of the docking face in the target body frame."""
         n = np.zeros(3)
@@ -256,7 +261,7 @@ def pair_geometry(p_c, v_c, q_c, p_t, v_t, q_t, n_target, q_tc, half):
 def in_corridor(p: GuidanceParams, p_c, p_t, n_ms) -> bool:
     rel = np.asarray(p_c) - np.asarray(p_t)
     r = _norm(rel)
-    return bool(r > 0 and rel @ n_ms >= r * np.cos(np.radians(p.corridor_half_angle_deg)))
+    return bool(r > 0 and rel @ n_ms >= r * p.corridor_cos)
 
 
 class ChaserGuidance:

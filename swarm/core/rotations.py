@@ -76,7 +76,7 @@ def _single(*arrays) -> bool:
     return True
 
 
-def _as_last(x: ArrayLike, n: int, name: str) -> FloatArray:
+def as_last(x: ArrayLike, n: int, name: str) -> FloatArray:
     """``x`` as float64, checked to have shape ``(..., n)``; ``name`` goes in the error message."""
     a = np.asarray(x, dtype=np.float64)
     if a.ndim == 0 or a.shape[-1] != n:
@@ -99,8 +99,8 @@ def quat_mul(p: ArrayLike, q: ArrayLike) -> FloatArray:
     """
     if _single(p, q) and p.shape[0] == 4 and q.shape[0] == 4:
         return _nb.qmul(p, q)
-    p = _as_last(p, 4, "p")
-    q = _as_last(q, 4, "q")
+    p = as_last(p, 4, "p")
+    q = as_last(q, 4, "q")
     px, py, pz, pw = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
     qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     return np.stack(
@@ -118,7 +118,7 @@ def quat_conj(q: ArrayLike) -> FloatArray:
     """Conjugate ``(-x, -y, -z, w)``, shape ``(..., 4)``: the inverse of a unit quaternion."""
     if _single(q) and q.shape[0] == 4:
         return _nb.qconj(q)
-    q = _as_last(q, 4, "q")
+    q = as_last(q, 4, "q")
     return np.concatenate([-q[..., :3], q[..., 3:]], axis=-1)
 
 
@@ -126,13 +126,13 @@ def quat_normalize(q: ArrayLike) -> FloatArray:
     """``q / |q|``, shape ``(..., 4)``. A zero quaternion gives NaN (not checked)."""
     if _single(q) and q.shape[0] == 4:
         return _nb.qnormalize(q)
-    q = _as_last(q, 4, "q")
+    q = as_last(q, 4, "q")
     return q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
 
 
 def quat_canonical(q: ArrayLike) -> FloatArray:
     """``q`` with its sign flipped where ``w < 0``, so ``w >= 0``; the same rotation, shape ``(..., 4)``."""
-    q = _as_last(q, 4, "q")
+    q = as_last(q, 4, "q")
     return np.where(q[..., 3:] < 0.0, -q, q)
 
 
@@ -144,8 +144,8 @@ def quat_rotate(q: ArrayLike, v: ArrayLike) -> FloatArray:
     """
     if _single(q, v) and q.shape[0] == 4 and v.shape[0] == 3:
         return _nb.qrotate(q, v)
-    q = _as_last(q, 4, "q")
-    v = _as_last(v, 3, "v")
+    q = as_last(q, 4, "q")
+    v = as_last(v, 3, "v")
     u, w = q[..., :3], q[..., 3:]
     s = 2.0 / np.sum(q * q, axis=-1, keepdims=True)
     uxv = cross(u, v)
@@ -160,7 +160,7 @@ def quat_to_matrix(q: ArrayLike) -> FloatArray:
     """
     if _single(q) and q.shape[0] == 4:
         return _nb.qmat(q)
-    q = _as_last(q, 4, "q")
+    q = as_last(q, 4, "q")
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     s = 2.0 / (x * x + y * y + z * z + w * w)
     xx, yy, zz = s * x * x, s * y * y, s * z * z
@@ -205,7 +205,7 @@ def matrix_to_quat(R: ArrayLike) -> FloatArray:
 
 def skew(v: ArrayLike) -> FloatArray:
     """Cross-product matrix ``[v x]``, shape ``(..., 3, 3)``: ``skew(a) @ b == cross(a, b)``."""
-    v = _as_last(v, 3, "v")
+    v = as_last(v, 3, "v")
     x, y, z = v[..., 0], v[..., 1], v[..., 2]
     zero = np.zeros_like(x)
     rows = [[zero, -z, y], [z, zero, -x], [-y, x, zero]]
@@ -222,7 +222,7 @@ def rotvec_exp(phi: ArrayLike) -> FloatArray:
     """
     if _single(phi) and phi.shape[0] == 3:
         return _nb.qexp(phi)
-    phi = _as_last(phi, 3, "phi")
+    phi = as_last(phi, 3, "phi")
     t2 = np.sum(phi * phi, axis=-1, keepdims=True)
     small = t2 < EXP_TAYLOR_THRESHOLD_RAD**2
     theta = np.sqrt(np.where(small, 1.0, t2))
@@ -261,8 +261,8 @@ def attitude_error(q_ref: ArrayLike, q: ArrayLike) -> FloatArray:
     filtering", JGCD 26(2)) multiplicative error ``dq = q (x)_S q_ref^-1`` rewritten with the Hamilton
     product (see the module docstring). Both inputs are unit ``(..., 4)``.
     """
-    q_ref = _as_last(q_ref, 4, "q_ref")
-    q = _as_last(q, 4, "q")
+    q_ref = as_last(q_ref, 4, "q_ref")
+    q = as_last(q, 4, "q")
     return quat_log(quat_mul(quat_conj(q_ref), q))
 
 
@@ -271,8 +271,8 @@ def multiplicative_reset(q_ref: ArrayLike, dtheta: ArrayLike) -> FloatArray:
 
     ``q_ref (..., 4)`` is the reference attitude, ``dtheta (..., 3)`` the body-frame error estimate (rad).
     """
-    q_ref = _as_last(q_ref, 4, "q_ref")
-    dtheta = _as_last(dtheta, 3, "dtheta")
+    q_ref = as_last(q_ref, 4, "q_ref")
+    dtheta = as_last(dtheta, 3, "dtheta")
     return quat_normalize(quat_mul(q_ref, rotvec_exp(dtheta)))
 
 
@@ -282,7 +282,7 @@ def euler_to_quat(angles_rad: ArrayLike, seq: str) -> FloatArray:
     ``seq`` is as in ``Rotation.from_euler``: lower case ``"xyz"`` extrinsic, upper case ``"XYZ"``
     intrinsic. ``euler_to_quat([yaw, pitch, roll], "ZYX")`` gives ``q_ref_body`` of the aerospace sequence.
     """
-    angles = _as_last(angles_rad, len(seq), "angles_rad")
+    angles = as_last(angles_rad, len(seq), "angles_rad")
     q = Rotation.from_euler(seq, angles.reshape(-1, len(seq))).as_quat()
     return quat_canonical(q.reshape(*angles.shape[:-1], 4))
 
@@ -293,6 +293,6 @@ def quat_to_euler(q: ArrayLike, seq: str) -> FloatArray:
     ``seq`` is three axes, lower case extrinsic or upper case intrinsic; ranges and gimbal-lock handling
     are scipy's (it warns at gimbal lock).
     """
-    q = _as_last(q, 4, "q")
+    q = as_last(q, 4, "q")
     angles = Rotation.from_quat(q.reshape(-1, 4)).as_euler(seq)
     return angles.reshape(*q.shape[:-1], 3)

@@ -201,9 +201,7 @@ class World:
             xc[0:3], xc[3:6], xc[6:10], xt[0:3], xt[3:6], xt[6:10], g.face_normal_target,
             g.q_target_chaser_docked, g.half_size_m,
         )  # fmt: skip
-        return keepout_from_geometry(
-            geo[0], geo[5], g.keepout_radius_m, np.cos(np.radians(g.corridor_half_angle_deg)), docking
-        )
+        return keepout_from_geometry(geo[0], geo[5], g.keepout_radius_m, g.corridor_cos, docking)
 
     def attach(self, chaser: str, target: str) -> None:
         """Docked: the chaser rides with the target from now on (no further propagation)."""

@@ -23,7 +23,6 @@ from swarm.core.guidance import Mode, docking_geometry
 from swarm.core.world import UwbNetwork, World, stream
 from swarm.sim._fastloop import CONTACT, SENSORS_DONE, run_ticks
 
-TERMINAL = (Mode.DOCKED,)
 NO_VISION = object()
 """Marker for 'this tick's samples are in the world's arrays and no camera sees anything'."""
 
@@ -198,7 +197,7 @@ class DockingSim:
         self._done = np.zeros(len(self.pairs), dtype=np.bool_)
         self._docking = np.zeros(len(self.pairs), dtype=np.bool_)
         self._camera = True
-        self._corridor_cos = float(np.cos(np.radians(self.sc.guidance.corridor_half_angle_deg)))
+        self._corridor_cos = self.sc.guidance.corridor_cos
         self._cam_axis_body = rot.quat_rotate(
             np.asarray(self.sc.camera.q_body_cam, dtype=float), np.array([0.0, 0.0, 1.0])
         )
@@ -303,9 +302,8 @@ class DockingSim:
                 continue  # far from the target: no contact, no keep-out violation possible
             if self.world.keepout_violated(cid, tid, docking=agent.mode in (Mode.DOCK, Mode.DOCKED)):
                 if not out.keepout_violated:
-                    rng = float(np.linalg.norm(self.world.x[cid][0:3] - self.world.x[tid][0:3]))
                     out.events.append(
-                        {"t_s": t, "keepout_violation": True, "mode": agent.mode.value, "range_m": rng}
+                        {"t_s": t, "keepout_violation": True, "mode": agent.mode.value, "range_m": centre_m}
                     )
                 out.keepout_violated = True
             c = self.world.contact(cid, tid)
