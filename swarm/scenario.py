@@ -193,6 +193,12 @@ class Scenario:
                 raise ConfigError(
                     f"{name} must divide sim.imu_rate_hz ({self.sim.imu_rate_hz} Hz) evenly, got {rate!r}"
                 )
+        if self.thrusters.half_size_m != self.guidance.half_size_m:
+            raise ConfigError(
+                "thrusters.half_size_m must equal guidance.half_size_m "
+                f"({self.guidance.half_size_m!r}: the nozzles sit on the same cube), "
+                f"got {self.thrusters.half_size_m!r}"
+            )
         if self.markers.half_size_m != self.guidance.half_size_m:
             raise ConfigError(
                 "markers.half_size_m must equal guidance.half_size_m "

@@ -327,3 +327,8 @@ def test_override_of_an_unknown_key_is_named():
 def test_override_can_break_a_cross_field_check():
     with pytest.raises(ConfigError, match=r"uwb\.rate_hz"):
         load_scenario("docking", overrides={"uwb.rate_hz": 30.0})
+
+
+def test_thruster_cube_size_must_match_the_guidance_cube():
+    with pytest.raises(ConfigError, match=r"thrusters\.half_size_m"):
+        load_scenario("docking", {"thrusters.half_size_m": 0.06})
