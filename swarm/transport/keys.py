@@ -28,6 +28,7 @@ _FORBIDDEN_NS_CHARS = frozenset("*$?#")  # wildcards and characters Zenoh reserv
 # parse() names for the keys that are not per-vehicle: the name of the Keys method that builds them
 _FIXED = {
     ("world", "clock"): "world_clock",
+    ("world", "event"): "world_event",
     ("mothership", "anchors"): "anchors",
     ("control", "run"): "run_control",
 }
@@ -116,6 +117,11 @@ class Keys:
         """Tick, time, run state and seed: world -> everyone."""
         return f"{self.namespace}/world/clock"
 
+    def world_event(self) -> str:
+        """Run start and end (with each vehicle's total impulse), lockstep timeouts: world -> launcher,
+        dashboard."""
+        return f"{self.namespace}/world/event"
+
     def anchors(self) -> str:
         """Anchor ids and positions: mothership (publisher and queryable) -> agents, dashboard."""
         return f"{self.namespace}/mothership/anchors"
@@ -148,7 +154,7 @@ class Keys:
 
     def parse(self, key: object) -> tuple[str, str | None] | None:
         """Inverse of the builders: ``(kind, agent_id)`` for ``<ns>/agent/<id>/<kind>``;
-        ``("world_clock", None)``, ``("anchors", None)``, ``("run_control", None)`` for the swarm-wide keys;
+        ``("world_clock", None)``, ``("world_event", None)``, ``("anchors", None)``, ``("run_control", None)`` for the swarm-wide keys;
         ``("alive", process_id)`` for a liveliness token (its role: :meth:`parse_alive`). ``None`` for a key
         outside this namespace, a wildcard or anything this protocol does not define. ``key`` may be a
         ``str`` or any object whose ``str()`` is the key (a Zenoh ``KeyExpr``)."""

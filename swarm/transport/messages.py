@@ -108,6 +108,11 @@ EVENT_KINDS: tuple[str, ...] = (
     "estimator_reset",
     "lost",
     "restarted",
+    "keepout_violation",
+    "summary",
+    "run_start",
+    "run_end",
+    "agent_missing",
 )
 """Event kinds in use; the set is open (any ``[a-z][a-z0-9_]*`` name is accepted)."""
 
@@ -240,7 +245,10 @@ def _array(value: object, name: str, shape: tuple[int | None, ...]) -> np.ndarra
     elif isinstance(value, dict):
         arr = _unpack_array(value, name)
     elif isinstance(value, list | tuple):
-        arr = _nested_numbers(value, name, len(shape))
+        if len(value) == 0 and len(shape) > 1 and shape[0] is None and None not in shape[1:]:
+            arr = np.zeros((0, *shape[1:]))  # "no rows" as an empty list, its row shape implied
+        else:
+            arr = _nested_numbers(value, name, len(shape))
     else:
         raise MessageError(
             f"{name}: expected an array (nested lists or a dtype/shape/data map), got {_show(value)}"
@@ -282,11 +290,11 @@ def _cov(value: object, name: str, n: int) -> np.ndarray:
     return p
 
 
-def _ids(value: object, name: str) -> tuple[int, ...]:
+def _ids(value: object, name: str, min_len: int = 1) -> tuple[int, ...]:
     if not isinstance(value, list | tuple):
         raise MessageError(f"{name}: expected an array of integers, got {_show(value)}")
-    if not 1 <= len(value) <= MAX_ITEMS:
-        raise MessageError(f"{name}: {len(value)} entries, expected 1 to {MAX_ITEMS}")
+    if not min_len <= len(value) <= MAX_ITEMS:
+        raise MessageError(f"{name}: {len(value)} entries, expected {min_len} to {MAX_ITEMS}")
     ids = tuple(_int(v, f"{name}[{i}]", 0, _MAX_ID) for i, v in enumerate(value))
     if len(set(ids)) != len(ids):
         raise MessageError(f"{name}: duplicate ids in {_show(ids)}")
@@ -439,14 +447,21 @@ class Vision(Message):
     data: np.ndarray
     """(N, 3) [m] in the OpenCV camera frame (+z optical axis, +x right, +y down) for ``features``;
     (N, 2) [px] image coordinates (u right, v down, as ``cv2.projectPoints`` gives them) for ``pixels``.
-    Row i is marker ``marker_ids[i]``; 1 <= N <= :data:`MAX_ITEMS`."""
+    Row i is marker ``marker_ids[i]``; 0 <= N <= :data:`MAX_ITEMS`. N = 0 is a frame in which no marker
+    was detected: a camera reports every frame, so a lockstep agent knows the frame of its camera tick is
+    complete (``docs/protocol.md``, "Clocks and lockstep")."""
     marker_ids: tuple[int, ...]
     """Index of each row's marker in the face's pattern (>= 0, distinct), N entries."""
+
+    @property
+    def seen(self) -> bool:
+        """Whether any marker was detected in this frame."""
+        return len(self.marker_ids) > 0
 
     def __post_init__(self) -> None:
         kind = _str(self.kind, "kind", choices=VISION_KINDS)
         data = _array(self.data, "data", (None, 3 if kind == "features" else 2))
-        ids = _ids(self.marker_ids, "marker_ids")
+        ids = _ids(self.marker_ids, "marker_ids", min_len=0)
         if len(ids) != data.shape[0]:
             raise MessageError(f"marker_ids: {len(ids)} ids for {data.shape[0]} rows of data")
         _set(
@@ -582,18 +597,23 @@ class Truth(Message):
     """Attitude (4,), unit quaternion (x, y, z, w) mapping body into ms."""
     w_body: np.ndarray
     """Angular rate (3,) [rad/s], body frame."""
+    impulse_ns: float = 0.0
+    """Total impulse the vehicle's nozzles have delivered since the run began, sum of ``|f| dt`` [N s]."""
 
     def __post_init__(self) -> None:
         _set(
             self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
             p_ms=_array(self.p_ms, "p_ms", (3,)), v_ms=_array(self.v_ms, "v_ms", (3,)),
             q_ms_body=_quat(self.q_ms_body, "q_ms_body"), w_body=_array(self.w_body, "w_body", (3,)),
+            impulse_ns=_float(self.impulse_ns, "impulse_ns", lo=0.0),
         )  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
 class Event(Message):
-    """Something that happened to one vehicle: ``<ns>/agent/<id>/event``."""
+    """Something that happened to one vehicle, ``<ns>/agent/<id>/event`` (published by its agent, and by the
+    world for what only the truth shows: ``contact``, ``collision``, ``keepout_violation``), or to the
+    run, ``<ns>/world/event`` (the world: ``run_start``, ``run_end``, ``agent_missing``)."""
 
     t_s: float
     """Time [s] (>= 0)."""
@@ -672,7 +692,8 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
 
 MESSAGE_FOR_KIND: dict[str, type[Message]] = {
     "imu": Imu, "uwb": Uwb, "vision": Vision, "estimate": Estimate, "guidance": Guidance, "command": Command,
-    "truth": Truth, "event": Event, "world_clock": Clock, "anchors": Anchors, "run_control": RunControl,
+    "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "anchors": Anchors,
+    "run_control": RunControl,
 }  # fmt: skip
 """The message carried by each key kind of :meth:`swarm.transport.keys.Keys.parse`."""
 

@@ -323,11 +323,12 @@ CASES = [
     (Vision, "target_id", "a/b", "target_id: must match"),
     (Vision, "target_id", 7, "target_id: expected a string"),
     (Vision, "data", np.ones((6, 2)).tolist(), "data: expected shape (N, 3), got (6, 2)"),
-    (Vision, "data", [], "data: expected shape (N, 3), got (0,)"),
+    (Vision, "data", [], "marker_ids: 6 ids for 0 rows"),
+    (Vision, "data", [1.0, 2.0, 3.0], "data: expected 2-level nested arrays of numbers"),
     (Vision, "marker_ids", [0, 1, 2], "marker_ids: 3 ids for 6 rows"),
     (Vision, "marker_ids", [0, 0, 1, 2, 3, 4], "marker_ids: duplicate ids"),
     (Vision, "marker_ids", [-1, 1, 2, 3, 4, 5], "marker_ids[0]: must be >= 0"),
-    (Vision, "marker_ids", [], "marker_ids: 0 entries"),
+    (Vision, "marker_ids", [], "marker_ids: 0 ids for 6 rows"),
     (Vision, "marker_ids", "012345", "marker_ids: expected an array of integers"),
     (Estimate, "cov", (np.eye(9) + np.triu(np.ones((9, 9)), 1) * 1e-3).tolist(), "cov: not symmetric"),
     (Estimate, "cov", (-np.eye(9)).tolist(), "cov: negative diagonal entry -1 at index 0"),
@@ -680,7 +681,7 @@ def test_a_real_decision_record_passes_validation():
 def test_every_key_kind_maps_to_a_message():
     from swarm.transport.keys import AGENT_KINDS
 
-    assert set(MESSAGE_FOR_KIND) == {*AGENT_KINDS, "world_clock", "anchors", "run_control"}
+    assert set(MESSAGE_FOR_KIND) == {*AGENT_KINDS, "world_clock", "world_event", "anchors", "run_control"}
 
 
 def test_the_codec_does_not_import_zenoh_or_the_heavy_core():
@@ -695,3 +696,20 @@ def test_protocol_doc_byte_example_is_what_the_codec_writes():
     assert block is not None, "docs/protocol.md lost its byte-level example"
     hex_bytes = "".join(re.sub(r"#.*", "", line) for line in block.group(1).splitlines())
     assert bytes.fromhex(hex_bytes) == encode(Imu(3, 0.03, 0.01, [0.01, -0.02, 0.0]))
+
+
+def test_a_vision_frame_without_markers_round_trips_from_lists_and_arrays():
+    """A camera reports every frame; one in which nothing was detected has zero rows (lockstep needs it)."""
+    for data in ([], np.zeros((0, 3))):
+        msg = Vision(tick=4, t_s=0.04, target_id="target", face="+x", kind="features", data=data, marker_ids=[])
+        back = decode(encode(msg), Vision)
+        assert back == msg and back.data.shape == (0, 3) and not back.seen
+    seen = Vision(4, 0.04, "target", "+x", "pixels", np.ones((1, 2)), (3,))
+    assert seen.seen
+
+
+def test_truth_carries_the_total_impulse_and_refuses_a_negative_one():
+    t = Truth(1, 0.01, np.zeros(3), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), impulse_ns=0.25)
+    assert decode(encode(t), Truth).impulse_ns == 0.25
+    with pytest.raises(MessageError, match="impulse_ns: must be >= 0"):
+        Truth(1, 0.01, np.zeros(3), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), impulse_ns=-1.0)
