@@ -3,11 +3,12 @@
 ``docs/protocol.md`` section "Clocks and lockstep" is the contract, and
 :meth:`swarm.sim.docking.DockingSim.run` the in-process tick order it reproduces:
 
-- an agent processes tick ``k`` (``k = 1, 2, ...``, consecutive) once it has ``imu(k)``, ``uwb(k)`` on its
-  UWB slots (``k % uwb_every == 0``) and, for a chaser, its target's ``estimate(k - 1)``. The world
-  publishes ``vision(k)`` before ``imu(k)`` on one session and one wildcard subscriber delivers them in
-  order, so ``imu(k)`` closes the world's part of tick ``k``: a vision frame of tick ``k`` arriving after
-  it is late and not used (:class:`AgentTickAssembler`);
+- an agent processes tick ``k`` once it has ``imu(k)``, ``uwb(k)`` on its UWB slots
+  (``k % uwb_every == 0``), ``vision(k)`` on its camera slots (``k % vision_every == 0``; the camera reports
+  every frame, with zero markers when it saw none) and, for a chaser, its target's ``estimate(k - 1)``
+  (``estimate(0)`` at ticks 0 and 1). Tick 0 has no sensor samples: the agent only publishes its initial
+  estimate and command. Every input of a tick is *expected*, so the tick is complete whatever the order
+  in which Zenoh's callback threads deliver them (:class:`AgentTickAssembler`);
 - the world steps to ``k + 1`` once every live agent's ``command(k)`` has arrived, or a timeout has passed
   (:class:`CommandBarrier`).
 
@@ -66,16 +67,16 @@ class TickInputs:
     """Everything one agent processes at tick ``k``, in the order of ``DockingSim.run``."""
 
     tick: int
-    """Tick ``k`` (>= 1)."""
-    imu: Imu
-    """``imu(k)``: gyro (+ AHRS) sample."""
+    """Tick ``k`` (>= 0)."""
+    imu: Imu | None = None
+    """``imu(k)``: gyro (+ AHRS) sample; ``None`` at tick 0 (no sample yet)."""
     vision: Vision | None = None
-    """``vision(k)`` if the world published one (it arrives before ``imu(k)``), else ``None``."""
+    """``vision(k)`` on camera slots (possibly with zero markers), else ``None``."""
     uwb: Uwb | None = None
-    """``uwb(k)`` on UWB slots (``k % uwb_every == 0``; its ``range_m`` is ``None`` when the reply was
-    lost), ``None`` on other ticks."""
+    """``uwb(k)`` on UWB slots (``range_m`` ``None`` when the reply was lost), else ``None``."""
     target_estimate: Estimate | None = None
-    """For a chaser, its target's estimate of tick ``k - 1``; ``None`` for a non-chaser."""
+    """For a chaser, its target's estimate of tick ``k - 1`` (of tick 0 at tick 0); while the target is
+    lost, its latest estimate (held), ``None`` if there never was one. ``None`` for a non-chaser."""
 
 
 class _Frame:
@@ -90,11 +91,20 @@ class _Frame:
 class AgentTickAssembler:
     """Collects one agent's sensor messages (and its target's estimates) into complete ticks.
 
-    Feed it from the Zenoh callbacks with :meth:`add`; the agent's loop calls :meth:`next_tick`. Counters
-    (read-only properties, cumulative across :meth:`reset`): ``stale`` (a tick already processed),
-    ``duplicates`` (a second message of one kind for a pending tick; the first one is kept), ``future``
-    (more than ``max_ahead`` ticks ahead), ``late`` (``vision(k)`` after ``imu(k)``), ``unexpected``
-    (``uwb`` off the UWB slots, or a message from another vehicle than expected).
+    Feed it from the Zenoh callbacks with :meth:`add`; the agent's loop calls :meth:`next_tick`.
+
+    ``start=0`` begins with tick 0 (a run from its start). ``start=None`` *joins* a run in progress (a
+    restarted agent): the first ``imu(j)`` received fixes the start at ``j + 1`` (tick ``j`` may have lost
+    inputs that came before the subscription), and messages of earlier ticks are dropped as stale.
+
+    The target's estimates are required while the target is live (:meth:`set_target_live`); once it is
+    lost, ticks complete without them and carry its latest estimate; when it is back, they are required
+    again from the first estimate it publishes.
+
+    Counters (read-only, cumulative): ``stale`` (a tick already processed), ``duplicates`` (a second
+    message of one kind for a pending tick; the first is kept), ``future`` (more than ``max_ahead`` ticks
+    ahead), ``unexpected`` (``uwb``/``vision`` off this vehicle's slots, a message of another vehicle, a
+    message type an agent does not take).
     """
 
     def __init__(
@@ -103,24 +113,30 @@ class AgentTickAssembler:
         is_chaser: bool,
         target_id: str | None,
         uwb_every: int,
+        vision_every: int | None = None,
+        start: int | None = 0,
         max_ahead: int = DEFAULT_MAX_AHEAD,
     ) -> None:
-        """``agent_id``: this vehicle; ``is_chaser``: whether each tick needs the target's estimate;
-        ``target_id``: the target's agent id (required for a chaser); ``uwb_every``: ticks between two
-        UWB slots of this vehicle (``uwb(k)`` is expected when ``k % uwb_every == 0``); ``max_ahead``:
-        ticks beyond the next expected one that are still buffered."""
+        """``agent_id``: this vehicle; ``is_chaser``: whether ticks need the target's estimates;
+        ``target_id``: the target's agent id (required for a chaser); ``uwb_every``: ticks between two UWB
+        slots (``uwb(k)`` expected when ``k % uwb_every == 0``, ``k >= 1``); ``vision_every``: ticks between
+        two camera frames of this vehicle (``None``: no camera); ``start``: the first tick (``None``: join
+        at the first ``imu``); ``max_ahead``: ticks beyond the next expected one that are still buffered."""
         self.agent_id = check_id(agent_id)
         self.is_chaser = bool(is_chaser)
         self.target_id = check_id(target_id, "target id") if (is_chaser or target_id is not None) else None
         self.uwb_every = _check_int(uwb_every, "uwb_every", 1)
+        self.vision_every = None if vision_every is None else _check_int(vision_every, "vision_every", 1)
         self.max_ahead = _check_int(max_ahead, "max_ahead", 0)
         self._cond = threading.Condition()
-        self._next = 1  # the tick next_tick returns next
-        self._base = 1  # first tick since construction / reset: imu arrived for every tick in [base, next)
+        self._next: int | None = None if start is None else _check_int(start, "start", 0)
         self._frames: dict[int, _Frame] = {}
         self._estimates: dict[int, Estimate] = {}  # by the estimate's own tick
+        self._held: Estimate | None = None  # the newest target estimate handed out
+        self._target_live = True
+        self._target_from = 0  # estimates of ticks >= this are required (while the target is live)
         self._closed = False
-        self._counts = dict.fromkeys(("stale", "duplicates", "future", "late", "unexpected"), 0)
+        self._counts = dict.fromkeys(("stale", "duplicates", "future", "unexpected"), 0)
 
     # ------------------------------------------------------------------------------ producers
 
@@ -140,21 +156,35 @@ class AgentTickAssembler:
                 self._cond.notify_all()
             return kept
 
+    def _window(self, k: int) -> str | None:
+        """Why a message of tick ``k`` cannot be kept (``"stale"``/``"future"``), else ``None``."""
+        if self._next is None:  # joining: keep a bounded window until the first imu fixes the start
+            newest = max(self._frames, default=k)
+            return "future" if abs(k - newest) > self.max_ahead else None
+        if k < self._next:
+            return "stale"
+        if k > self._next + self.max_ahead:
+            return "future"
+        return None
+
     def _add_estimate(self, msg: Estimate, source_id: str | None) -> bool:
         if not self.is_chaser or (source_id is not None and source_id != self.target_id):
             self._counts["unexpected"] += 1
             return False
-        k = msg.tick + 1  # the tick that uses it
-        if k < self._next:
+        if self._next is not None and msg.tick < self._next - 1:
             self._counts["stale"] += 1
             return False
-        if k > self._next + self.max_ahead:
+        if self._next is not None and msg.tick + 1 > self._next + self.max_ahead:  # used by tick + 1
             self._counts["future"] += 1
             return False
-        if msg.tick in self._estimates:
-            self._counts["duplicates"] += 1
+        if msg.tick in self._estimates or (self._held is not None and msg.tick <= self._held.tick):
+            self._counts["duplicates" if msg.tick in self._estimates else "stale"] += 1
             return False
+        if self._target_live and self._target_from < 0:  # the first estimate since the target came back
+            self._target_from = msg.tick
         self._estimates[msg.tick] = msg
+        if len(self._estimates) > self.max_ahead + 2:  # joining, or a target far ahead: keep the newest
+            del self._estimates[min(self._estimates)]
         return True
 
     def _add_sensor(self, msg: Imu | Uwb | Vision, source_id: str | None) -> bool:
@@ -162,29 +192,29 @@ class AgentTickAssembler:
         if source_id is not None and source_id != self.agent_id:
             self._counts["unexpected"] += 1
             return False
-        if k < self._next:
-            # imu(k) was consumed for every tick in [base, next): a vision frame there came after it
-            late = isinstance(msg, Vision) and k >= self._base
-            self._counts["late" if late else "stale"] += 1
-            return False
-        if k > self._next + self.max_ahead:
-            self._counts["future"] += 1
-            return False
-        if isinstance(msg, Uwb) and k % self.uwb_every:
+        if isinstance(msg, Uwb) and (k == 0 or k % self.uwb_every):
             self._counts["unexpected"] += 1
+            return False
+        if isinstance(msg, Vision) and (self.vision_every is None or k == 0 or k % self.vision_every):
+            self._counts["unexpected"] += 1
+            return False
+        why = self._window(k)
+        if why is not None:
+            self._counts[why] += 1
+            return False
+        if self._next is None and isinstance(msg, Imu):  # joining: this imu fixes the start
+            self._next = k + 1
+            self._counts["stale"] += sum(1 for t in self._frames if t <= k) + 1
+            self._frames = {t: f for t, f in self._frames.items() if t > k}
+            self._estimates = {t: e for t, e in self._estimates.items() if t >= k}
+            # the target may have published estimate(k) before our subscription reached it: wait for
+            # its estimates only once one has arrived
+            self._target_from = min(self._estimates, default=-1)
             return False
         frame = self._frames.get(k)
         if frame is None:
             frame = self._frames[k] = _Frame()
-        if isinstance(msg, Imu):
-            slot = "imu"
-        elif isinstance(msg, Uwb):
-            slot = "uwb"
-        else:
-            slot = "vision"
-            if frame.imu is not None:  # imu(k) closed the world's part of tick k
-                self._counts["late"] += 1
-                return False
+        slot = "imu" if isinstance(msg, Imu) else ("uwb" if isinstance(msg, Uwb) else "vision")
         if getattr(frame, slot) is not None:
             self._counts["duplicates"] += 1
             return False
@@ -193,15 +223,29 @@ class AgentTickAssembler:
 
     # ------------------------------------------------------------------------------ consumer
 
+    def _needed_estimate(self, k: int) -> int | None:
+        """The tick of the target estimate tick ``k`` waits for, or ``None`` if it waits for none."""
+        if not self.is_chaser or not self._target_live or self._target_from < 0:
+            return None
+        need = max(k - 1, 0)
+        return need if need >= self._target_from else None
+
     def _missing(self) -> list[str]:
         k = self._next
-        frame = self._frames.get(k)
+        if k is None:
+            return ["imu"]
         out = []
-        if frame is None or frame.imu is None:
-            out.append("imu")
-        if k % self.uwb_every == 0 and (frame is None or frame.uwb is None):
-            out.append("uwb")
-        if self.is_chaser and (k - 1) not in self._estimates:
+        if k > 0:
+            frame = self._frames.get(k)
+            if frame is None or frame.imu is None:
+                out.append("imu")
+            if k % self.uwb_every == 0 and (frame is None or frame.uwb is None):
+                out.append("uwb")
+            if self.vision_every is not None and k % self.vision_every == 0:
+                if frame is None or frame.vision is None:
+                    out.append("vision")
+        need = self._needed_estimate(k)
+        if need is not None and need not in self._estimates and (self._held is None or self._held.tick < need):
             out.append("estimate")
         return out
 
@@ -216,19 +260,29 @@ class AgentTickAssembler:
             if self._closed:
                 return None
             k = self._next
-            frame = self._frames.pop(k)
-            est = self._estimates.pop(k - 1, None)
+            assert k is not None
+            frame = self._frames.pop(k, None) or _Frame()
+            est = None
+            if self.is_chaser:
+                usable = [t for t in self._estimates if t <= max(k - 1, 0)]
+                if usable:
+                    newest = max(usable)
+                    self._held = self._estimates[newest]
+                    for t in usable:
+                        del self._estimates[t]
+                est = self._held
             self._next = k + 1
             return TickInputs(tick=k, imu=frame.imu, vision=frame.vision, uwb=frame.uwb, target_estimate=est)
 
-    def reset(self, k: int) -> None:
-        """Resynchronise (this agent restarted mid-run): the next tick returned is ``k`` (>= 1); buffered
-        messages of earlier ticks (estimates of ticks before ``k - 1``) are discarded."""
-        k = _check_int(k, "tick", 1)
+    def set_target_live(self, live: bool) -> None:
+        """The target's agent was seen lost (``False``: ticks stop waiting for its estimates) or back
+        (``True``: they wait again from the first estimate it publishes)."""
         with self._cond:
-            self._next = self._base = k
-            self._frames = {t: f for t, f in self._frames.items() if t >= k}
-            self._estimates = {t: e for t, e in self._estimates.items() if t >= k - 1}
+            if bool(live) == self._target_live:
+                return
+            self._target_live = bool(live)
+            if live:
+                self._target_from = -1  # set by the next estimate that arrives
             self._cond.notify_all()
 
     def close(self) -> None:
@@ -240,13 +294,14 @@ class AgentTickAssembler:
     # ------------------------------------------------------------------------------ state
 
     @property
-    def next_expected(self) -> int:
-        """The tick :meth:`next_tick` returns next."""
+    def next_expected(self) -> int | None:
+        """The tick :meth:`next_tick` returns next (``None`` while joining, before the first ``imu``)."""
         with self._cond:
             return self._next
 
     def waiting_for(self) -> list[str]:
-        """What the next tick still lacks, among ``"imu"``, ``"uwb"``, ``"estimate"`` (for a timeout log)."""
+        """What the next tick still lacks, among ``"imu"``, ``"uwb"``, ``"vision"``, ``"estimate"`` (for a
+        timeout log)."""
         with self._cond:
             return self._missing()
 
@@ -257,7 +312,7 @@ class AgentTickAssembler:
 
     @property
     def stale(self) -> int:
-        """Messages of ticks already processed (or skipped by :meth:`reset`)."""
+        """Messages of ticks already processed (or before the start of a joining agent)."""
         return self.counts()["stale"]
 
     @property
@@ -271,13 +326,8 @@ class AgentTickAssembler:
         return self.counts()["future"]
 
     @property
-    def late(self) -> int:
-        """``vision(k)`` frames that arrived after ``imu(k)`` (not part of tick ``k``)."""
-        return self.counts()["late"]
-
-    @property
     def unexpected(self) -> int:
-        """``uwb`` off this vehicle's UWB slots, messages of another vehicle, other message types."""
+        """``uwb``/``vision`` off this vehicle's slots, messages of another vehicle, other message types."""
         return self.counts()["unexpected"]
 
 

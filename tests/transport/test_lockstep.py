@@ -2,7 +2,7 @@
 
 Oracle: the lockstep contract of ``docs/protocol.md`` ("Clocks and lockstep") and the tick order of
 ``DockingSim.run`` (tick ``k`` needs ``imu(k)``, ``uwb(k)`` on UWB slots, a chaser its target's
-``estimate(k - 1)``; ``vision(k)`` counts only before ``imu(k)``), written out by hand per case. Threaded
+``estimate(k - 1)``, ``vision(k)`` on camera slots), written out by hand per case. Threaded
 tests feed messages in shuffled orders from several producers (seeded) and check that the result does
 not depend on the order. Negative waits use 50 ms timeouts; positive ones 5 s, which they never reach.
 """
@@ -56,14 +56,35 @@ def command(k: int) -> Command:
 
 
 def chaser(uwb_every: int = 2, **kw) -> AgentTickAssembler:
+    kw.setdefault("start", 1)
     return AgentTickAssembler("chaser", True, "target", uwb_every, **kw)
 
 
 def plain(uwb_every: int = 2, **kw) -> AgentTickAssembler:
+    kw.setdefault("start", 1)
     return AgentTickAssembler("target", False, None, uwb_every, **kw)
 
 
+def camera(uwb_every: int = 3, vision_every: int = 2, **kw) -> AgentTickAssembler:
+    return plain(uwb_every, vision_every=vision_every, **kw)
+
+
+ALL_ZERO = dict.fromkeys(("stale", "duplicates", "future", "unexpected"), 0)
+
+
 # ------------------------------------------------------------------------------ completion rules
+
+
+def test_tick_zero_needs_no_sensor_and_a_chaser_waits_for_the_targets_initial_estimate():
+    assert plain(start=0).next_tick(0).tick == 0
+    asm = chaser(start=0)
+    assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["estimate"]
+    asm.add(estimate(0, x=3.0), "target")
+    got = asm.next_tick(0)
+    assert got.tick == 0 and got.imu is None and got.target_estimate.p_ms[0] == 3.0
+    asm.add(imu(1))
+    got = asm.next_tick(0)  # tick 1 also uses estimate(0), as DockingSim does
+    assert got.tick == 1 and got.target_estimate.tick == 0
 
 
 def test_non_uwb_tick_completes_on_imu_alone():
@@ -128,38 +149,29 @@ def test_sensor_message_of_another_vehicle_is_unexpected():
     assert asm.unexpected == 1 and asm.next_tick(0) is None
 
 
-def test_vision_before_imu_is_part_of_the_tick():
-    asm = plain(uwb_every=3)
-    asm.add(vision(1))
+def test_camera_tick_waits_for_its_frame_in_either_arrival_order():
+    for order in ((imu, vision), (vision, imu)):
+        asm = camera(vision_every=1)
+        asm.add(order[0](1))
+        assert asm.next_tick(SHORT) is None
+        asm.add(order[1](1))
+        got = asm.next_tick(0)
+        assert got.vision is not None and got.vision.tick == 1 and got.imu.tick == 1
+
+
+def test_a_frame_without_markers_completes_the_camera_tick():
+    asm = camera(vision_every=1)
     asm.add(imu(1))
+    asm.add(Vision(1, 0.01, "target", "+x", "features", np.zeros((0, 3)), ()))
     got = asm.next_tick(0)
-    assert got is not None and got.vision is not None and got.vision.tick == 1
+    assert got is not None and not got.vision.seen
 
 
-def test_vision_after_imu_is_late_and_not_used():
-    asm = plain(uwb_every=3)
-    asm.add(imu(1))
-    assert not asm.add(vision(1))  # imu(1) pending, not yet consumed
-    assert asm.late == 1
-    got = asm.next_tick(0)
-    assert got is not None and got.vision is None
-
-
-def test_vision_after_its_tick_was_processed_is_late():
-    asm = plain(uwb_every=3)
-    asm.add(imu(1))
-    asm.next_tick(0)
-    assert not asm.add(vision(1))
-    assert asm.late == 1 and asm.stale == 0
-
-
-def test_vision_of_a_future_tick_waits_for_its_imu():
-    asm = plain(uwb_every=3)
-    asm.add(vision(2))
-    asm.add(imu(1))
-    assert asm.next_tick(0).vision is None
-    asm.add(imu(2))
-    assert asm.next_tick(0).vision.tick == 2
+def test_vision_off_its_camera_slots_or_without_a_camera_is_unexpected():
+    asm = camera(vision_every=2)
+    assert not asm.add(vision(3))
+    assert not plain().add(vision(2))  # no camera
+    assert asm.unexpected == 1
 
 
 # ------------------------------------------------------------------------------ ordering and counters
@@ -245,23 +257,6 @@ def test_next_tick_wakes_when_another_thread_completes_the_tick():
     assert got is not None and got.tick == 1
 
 
-def test_reset_resynchronises_to_a_later_tick():
-    asm = chaser(uwb_every=1)
-    asm.add(imu(2))
-    asm.add(estimate(0))
-    asm.add(imu(6))
-    asm.add(uwb(6))
-    asm.reset(6)
-    assert asm.next_expected == 6
-    assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["estimate"]
-    assert not asm.add(imu(5))  # before the reset point: stale
-    assert not asm.add(vision(5))  # no imu(5) was seen since the reset: stale, not late
-    assert asm.stale == 2 and asm.late == 0
-    asm.add(estimate(5))
-    got = asm.next_tick(0)
-    assert got.tick == 6 and got.target_estimate.tick == 5
-
-
 def test_close_wakes_a_waiting_consumer():
     asm = plain()
     threading.Timer(0.02, asm.close).start()
@@ -273,22 +268,69 @@ def test_chaser_without_target_is_a_config_error():
         AgentTickAssembler("chaser", True, None, 2)
     with pytest.raises(ConfigError, match="uwb_every"):
         AgentTickAssembler("chaser", False, None, 0)
+    with pytest.raises(ConfigError, match="vision_every"):
+        AgentTickAssembler("chaser", False, None, 2, vision_every=0)
+
+
+# ------------------------------------------------------------------------------ joining, lost target
+
+
+def test_a_joining_agent_starts_after_the_first_imu_it_sees():
+    asm = plain(uwb_every=2, start=None)
+    assert asm.next_expected is None and asm.waiting_for() == ["imu"]
+    assert asm.add(uwb(500))  # before any imu: kept until the start is known
+    assert not asm.add(imu(500))  # fixes the start at 501; tick 500 may have lost inputs
+    assert asm.next_expected == 501 and asm.stale == 2
+    asm.add(imu(501))
+    assert asm.next_tick(0).tick == 501
+    assert not asm.add(imu(499))
+    assert asm.stale == 3
+
+
+def test_a_joining_chaser_waits_for_estimates_only_once_they_flow():
+    asm = chaser(uwb_every=5, start=None)
+    asm.add(imu(100))
+    asm.add(imu(101))
+    got = asm.next_tick(0)  # no estimate arrived yet: the tick does not wait, and has none
+    assert got.tick == 101 and got.target_estimate is None
+    asm.add(estimate(101, x=1.0))
+    asm.add(imu(102))
+    asm.add(imu(103))
+    assert asm.next_tick(0).target_estimate.tick == 101
+    assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["estimate"]  # now it waits: estimate(102)
+
+
+def test_a_lost_target_stops_the_wait_and_its_last_estimate_is_held():
+    asm = chaser(uwb_every=5)
+    asm.add(estimate(0, x=4.0))
+    for k in (1, 2, 3):
+        asm.add(imu(k))
+    assert asm.next_tick(0).tick == 1
+    assert asm.next_tick(SHORT) is None  # waits for estimate(1)
+    asm.set_target_live(False)
+    got = asm.next_tick(0)
+    assert got.tick == 2 and got.target_estimate.tick == 0 and got.target_estimate.p_ms[0] == 4.0
+    asm.set_target_live(True)  # back (restarted): waits again from its first new estimate
+    assert asm.next_tick(0).tick == 3  # nothing from it yet
+    asm.add(estimate(3, x=5.0))
+    asm.add(imu(4))
+    asm.add(imu(5))
+    got = asm.next_tick(0)
+    assert got.tick == 4 and got.target_estimate.tick == 3
+    assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["uwb", "estimate"]
 
 
 @pytest.mark.parametrize("seed", range(5))
 def test_concurrent_producers_in_shuffled_order_give_the_in_process_tick_sequence(seed):
     n, uwb_every, vision_every = 60, 2, 5
     rnd = random.Random(seed)
-    asm = chaser(uwb_every=uwb_every)
-    # the world's session: vision(k) before imu(k), ticks in order (one subscriber preserves this)
-    world = []
-    for k in range(1, n + 1):
-        if k % vision_every == 0:
-            world.append(vision(k))
-        world.append(imu(k, w=float(k)))
+    asm = chaser(uwb_every=uwb_every, vision_every=vision_every, start=0)
+    # separate subscribers: imu and vision on different threads, each in its publisher's order
+    imus = [imu(k, w=float(k)) for k in range(1, n + 1)]
+    frames = [vision(k) for k in range(vision_every, n + 1, vision_every)]
     mothership = [uwb(k, range_m=float(k)) for k in range(uwb_every, n + 1, uwb_every)]
     target = [estimate(k, x=float(k)) for k in range(n)]
-    rnd.shuffle(mothership)  # other publishers: any order relative to everything else
+    rnd.shuffle(mothership)  # any order at all: the assembler must not care
     rnd.shuffle(target)
 
     def feed(msgs, source):
@@ -298,23 +340,24 @@ def test_concurrent_producers_in_shuffled_order_give_the_in_process_tick_sequenc
                 time.sleep(0.0005)
 
     threads = [
-        threading.Thread(target=feed, args=(world, "chaser")),
+        threading.Thread(target=feed, args=(imus, "chaser")),
+        threading.Thread(target=feed, args=(frames, "chaser")),
         threading.Thread(target=feed, args=(mothership, None)),
         threading.Thread(target=feed, args=(target, "target")),
     ]
     for t in threads:
         t.start()
-    got = [asm.next_tick(LONG) for _ in range(n)]
+    got = [asm.next_tick(LONG) for _ in range(n + 1)]
     for t in threads:
         t.join()
     assert all(g is not None for g in got)
-    assert [g.tick for g in got] == list(range(1, n + 1))
-    assert all(g.imu.gyro_body[0] == g.tick for g in got)
+    assert [g.tick for g in got] == list(range(n + 1))
+    assert all(g.imu.gyro_body[0] == g.tick for g in got[1:])
     assert [g.tick for g in got if g.uwb is not None] == list(range(uwb_every, n + 1, uwb_every))
     assert all(g.uwb is None or g.uwb.range_m == g.tick for g in got)
     assert [g.tick for g in got if g.vision is not None] == list(range(vision_every, n + 1, vision_every))
-    assert all(g.target_estimate.p_ms[0] == g.tick - 1 for g in got)
-    assert asm.counts() == dict.fromkeys(("stale", "duplicates", "future", "late", "unexpected"), 0)
+    assert all(g.target_estimate.p_ms[0] == max(g.tick - 1, 0) for g in got)
+    assert asm.counts() == ALL_ZERO
 
 
 # ------------------------------------------------------------------------------ command barrier
