@@ -154,10 +154,11 @@ class Keys:
 
     def parse(self, key: object) -> tuple[str, str | None] | None:
         """Inverse of the builders: ``(kind, agent_id)`` for ``<ns>/agent/<id>/<kind>``;
-        ``("world_clock", None)``, ``("world_event", None)``, ``("anchors", None)``, ``("run_control", None)`` for the swarm-wide keys;
-        ``("alive", process_id)`` for a liveliness token (its role: :meth:`parse_alive`). ``None`` for a key
-        outside this namespace, a wildcard or anything this protocol does not define. ``key`` may be a
-        ``str`` or any object whose ``str()`` is the key (a Zenoh ``KeyExpr``)."""
+        ``("world_clock", None)``, ``("world_event", None)``, ``("anchors", None)``, ``("run_control", None)``
+        for the swarm-wide keys; ``("alive", process_id)`` for a liveliness token (its role:
+        :meth:`parse_alive`). ``None`` for a key outside this namespace, a wildcard or anything this protocol
+        does not define. ``key`` may be a ``str`` or any object whose ``str()`` is the key (a Zenoh
+        ``KeyExpr``)."""
         rest = self._rest(key)
         if rest is None:
             return None

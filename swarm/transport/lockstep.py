@@ -245,7 +245,8 @@ class AgentTickAssembler:
                 if frame is None or frame.vision is None:
                     out.append("vision")
         need = self._needed_estimate(k)
-        if need is not None and need not in self._estimates and (self._held is None or self._held.tick < need):
+        held = self._held.tick if self._held is not None else -1
+        if need is not None and need not in self._estimates and held < need:
             out.append("estimate")
         return out
 

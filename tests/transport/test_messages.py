@@ -701,7 +701,7 @@ def test_protocol_doc_byte_example_is_what_the_codec_writes():
 def test_a_vision_frame_without_markers_round_trips_from_lists_and_arrays():
     """A camera reports every frame; one in which nothing was detected has zero rows (lockstep needs it)."""
     for data in ([], np.zeros((0, 3))):
-        msg = Vision(tick=4, t_s=0.04, target_id="target", face="+x", kind="features", data=data, marker_ids=[])
+        msg = Vision(4, 0.04, target_id="target", face="+x", kind="features", data=data, marker_ids=[])
         back = decode(encode(msg), Vision)
         assert back == msg and back.data.shape == (0, 3) and not back.seen
     seen = Vision(4, 0.04, "target", "+x", "pixels", np.ones((1, 2)), (3,))
