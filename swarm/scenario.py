@@ -117,6 +117,27 @@ class AgentParams:
                 raise ConfigError(f"agent.{name} must be a positive number, got {v!r}")
 
 
+@dataclass(frozen=True)
+class SwarmParams:
+    """How ``--agents N`` replicates the scenario's vehicles into N copies (:meth:`Scenario.with_pairs`)."""
+
+    pair_spacing_m: float = 0.8
+    """Distance between neighbouring copies [m]. With the paper's pair, 0.8 m keeps every chaser's path
+    more than its target's keep-out radius away from the other copies' targets."""
+    grid_axes: tuple[Vec3, Vec3] = ((0.70710678, -0.70710678, 0.0), (0.40824829, 0.40824829, -0.81649658))
+    """The two axes of the square grid of copies, frame ms (unit, orthogonal): by default the plane
+    perpendicular to the paper's line of approach (1, 1, 1), so copies sit beside each other's paths."""
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.pair_spacing_m) and self.pair_spacing_m > 0):
+            raise ConfigError(f"swarm.pair_spacing_m must be a positive number, got {self.pair_spacing_m!r}")
+        a = np.asarray(self.grid_axes, dtype=float)
+        if a.shape != (2, 3) or not np.allclose(a @ a.T, np.eye(2), atol=1e-6):
+            raise ConfigError(
+                f"swarm.grid_axes must be two orthogonal unit 3-vectors, got {self.grid_axes!r}"
+            )
+
+
 # Filter tuning for the closed loop: the truth's unmodelled acceleration is only the thrust direction error
 # of a ~0.5 deg attitude error (PSD ~1e-7 m^2/s^3, taken 10x larger), and the gyro's Gauss-Markov bias
 # (10 deg/h, tau 100 s) is absorbed as extra attitude random walk sigma_b sqrt(tau) ~ 5e-4 rad/sqrt(s).
@@ -166,6 +187,7 @@ class Scenario:
     mdp: MdpParams = field(default_factory=lambda: MdpParams(r_d_m=0.10))
     """r_d: the centre-to-centre range at contact, two 10 cm cubes face to face."""
     fixed: FixedParams = field(default_factory=FixedParams)
+    swarm: SwarmParams = field(default_factory=SwarmParams)
 
     def __post_init__(self) -> None:
         seq = self.euler_seq
@@ -225,6 +247,30 @@ class Scenario:
     @property
     def chasers(self) -> list[str]:
         return [vid for vid, v in self.vehicles.items() if v.role == "chaser"]
+
+    def with_pairs(self, n: int) -> Scenario:
+        """This scenario with its vehicles copied ``n`` times (``swarm launch --agents N``): copy ``i`` of
+        vehicle ``v`` is ``f"{v}{i}"`` (a chaser's target renamed alike), offset by a point of a square
+        grid (``swarm.pair_spacing_m`` apart along ``swarm.grid_axes``, centred on the original). ``n = 1``
+        returns the scenario unchanged, its ids included."""
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 64:
+            raise ConfigError(f"--agents must be an integer in 1..64, got {n!r}")
+        if n == 1:
+            return self
+        from dataclasses import replace
+
+        side = int(np.ceil(np.sqrt(n)))
+        axes = np.asarray(self.swarm.grid_axes, dtype=float)
+        centre = (side - 1) / 2.0
+        vehicles = {}
+        for i in range(n):
+            a, b = divmod(i, side)
+            offset = self.swarm.pair_spacing_m * ((a - centre) * axes[0] + (b - centre) * axes[1])
+            for vid, v in self.vehicles.items():
+                pos = tuple(float(x) for x in np.asarray(v.position_m) + offset)
+                target = None if v.target is None else f"{v.target}{i}"
+                vehicles[f"{vid}{i}"] = replace(v, position_m=pos, target=target)
+        return replace(self, vehicles=vehicles)
 
     def q0(self, vehicle_id: str) -> np.ndarray:
         """Initial attitude q_ms_body of a vehicle."""

@@ -332,3 +332,26 @@ def test_override_can_break_a_cross_field_check():
 def test_thruster_cube_size_must_match_the_guidance_cube():
     with pytest.raises(ConfigError, match=r"thrusters\.half_size_m"):
         load_scenario("docking", {"thrusters.half_size_m": 0.06})
+
+
+def test_with_pairs_copies_every_vehicle_on_a_grid_of_the_configured_spacing():
+    import itertools
+
+    from swarm.scenario import Scenario
+
+    sc = Scenario()
+    assert sc.with_pairs(1) is sc
+    s4 = sc.with_pairs(4)
+    assert set(s4.vehicles) == {f"{v}{i}" for v in ("chaser", "target") for i in range(4)}
+    assert all(s4.vehicles[f"chaser{i}"].target == f"target{i}" for i in range(4))
+    offsets = [
+        np.subtract(s4.vehicles[f"chaser{i}"].position_m, sc.vehicles["chaser"].position_m) for i in range(4)
+    ]
+    for i in range(4):  # each copy moves chaser and target together: the pair's geometry is kept
+        d = np.subtract(s4.vehicles[f"target{i}"].position_m, sc.vehicles["target"].position_m)
+        assert np.allclose(d, offsets[i])
+    gaps = sorted(np.linalg.norm(a - b) for a, b in itertools.combinations(offsets, 2))
+    assert np.isclose(gaps[0], sc.swarm.pair_spacing_m)  # nearest neighbours one spacing apart
+    assert np.allclose(np.mean(offsets, axis=0), 0.0)  # centred on the original pair
+    with pytest.raises(ConfigError, match=r"--agents must be an integer in 1\.\.64, got 0"):
+        sc.with_pairs(0)

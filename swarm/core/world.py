@@ -43,6 +43,16 @@ def stream(seed: int, vehicle_index: int, name: str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(entropy=int(seed), spawn_key=key))
 
 
+def initial_state(scenario, vehicle_id: str) -> np.ndarray:
+    """Truth state (13,) of ``vehicle_id`` at tick 0: at rest at its scenario position and attitude,
+    ``[p_ms, v_ms, q_ms_body, w_body]``. An agent process derives its initial estimate from it exactly as
+    :class:`World` starts, so neither runner needs the other's objects."""
+    x = np.zeros(13)
+    x[0:3] = scenario.vehicles[vehicle_id].position_m
+    x[6:10] = scenario.q0(vehicle_id)
+    return x
+
+
 @dataclass
 class SensorFrame:
     """The on-board sensor samples of one vehicle at one tick."""
@@ -83,8 +93,7 @@ class World:
         self.bias = np.zeros((n, 3))
         self.rng: dict[tuple[str, str], np.random.Generator] = {}
         for i, vid in enumerate(self.ids):
-            self.X[i, 0:3] = sc.vehicles[vid].position_m
-            self.X[i, 6:10] = sc.q0(vid)
+            self.X[i] = initial_state(sc, vid)
             for name in ("gyro", "ahrs", "camera"):
                 self.rng[vid, name] = stream(seed, i, name)
             self.bias[i] = gyro_init_bias(sc.gyro, self.rng[vid, "gyro"])
@@ -131,8 +140,10 @@ class World:
 
     def set_command(self, vehicle_id: str, thrusts_n) -> None:
         """Nozzle thrusts [N] to hold from now on (clipped to the nozzles' range: a command cannot make a
-        nozzle pull or exceed its maximum)."""
+        nozzle pull or exceed its maximum). Ignored once the vehicle is docked (:meth:`attach`)."""
         i = self.index[vehicle_id]
+        if self.attached_arr[i]:
+            return
         f = np.asarray(thrusts_n, dtype=float)
         if self.thrust_sum[i] == 0.0 and f.shape == self.thrusts[i].shape and not f.any():
             return  # still all off: nothing to recompute
@@ -205,8 +216,8 @@ class World:
 
     def attach(self, chaser: str, target: str) -> None:
         """Docked: the chaser rides with the target from now on (no further propagation)."""
-        self.attached_arr[self.index[chaser]] = True
         self.set_command(chaser, np.zeros(self.thrusts.shape[1]))
+        self.attached_arr[self.index[chaser]] = True
 
 
 @numba.njit(cache=True)

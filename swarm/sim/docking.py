@@ -11,7 +11,6 @@ The order of one tick ``k`` is the contract the distributed swarm (issue 4) foll
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -19,9 +18,10 @@ import numpy as np
 
 from swarm.core import rotations as rot
 from swarm.core.agent import VehicleAgent
-from swarm.core.guidance import Mode, docking_geometry
+from swarm.core.guidance import Mode
 from swarm.core.world import UwbNetwork, World, stream
 from swarm.sim._fastloop import CONTACT, SENSORS_DONE, run_ticks
+from swarm.sim.referee import judge
 
 NO_VISION = object()
 """Marker for 'this tick's samples are in the world's arrays and no camera sees anything'."""
@@ -296,45 +296,30 @@ class DockingSim:
                 s["mode"].append(agent.mode.value)
             if cid in self.done:
                 continue
-            d = self.world.x[cid][0:3] - self.world.x[tid][0:3]
-            centre_m = math.sqrt(d.dot(d))  # = np.linalg.norm, without its overhead
-            if centre_m > g.keepout_radius_m + 2 * g.half_size_m:
+            call = judge(self.world, g, cid, tid, agent.mode in (Mode.DOCK, Mode.DOCKED), t)
+            if call is None:
                 continue  # far from the target: no contact, no keep-out violation possible
-            if self.world.keepout_violated(cid, tid, docking=agent.mode in (Mode.DOCK, Mode.DOCKED)):
+            if call.keepout:
                 if not out.keepout_violated:
                     out.events.append(
-                        {"t_s": t, "keepout_violation": True, "mode": agent.mode.value, "range_m": centre_m}
+                        {
+                            "t_s": t,
+                            "keepout_violation": True,
+                            "mode": agent.mode.value,
+                            "range_m": call.centre_m,
+                        }
                     )
                 out.keepout_violated = True
-            c = self.world.contact(cid, tid)
-            # the chaser's docking face reaches the target's docking face (in front of it, the faces
-            # overlapping), or the two cubes' centres come closer than a cube side: contact
-            touching = (
-                -2 * g.half_size_m <= c["gap_m"] <= g.contact_distance_m
-                and c["lateral_m"] <= 2 * g.half_size_m
-            )
-            if touching or centre_m < 2 * g.half_size_m:
-                ok = (
-                    c["lateral_m"] <= g.contact_lateral_m
-                    and c["attitude_rad"] <= g.contact_attitude_rad
-                    and c["closing_m_s"] <= g.contact_speed_m_s
-                )
-                out.docked, out.collided = ok, not ok
-                out.contact = c
+            ct = call.contact
+            if ct is not None:
+                out.docked, out.collided = ct.docked, not ct.docked
+                out.contact = ct.contact
                 out.docking_time_s = t
-                xt = self.world.x[tid]
-                _, p_docked, q_dock = docking_geometry(g, xt[0:3], xt[6:10])
-                xc = self.world.x[cid]
-                out.position_error_m = float(np.linalg.norm(xc[0:3] - p_docked))
-                out.attitude_error_rad = float(np.linalg.norm(rot.attitude_error(q_dock, xc[6:10])))
+                out.position_error_m = ct.position_error_m
+                out.attitude_error_rad = ct.attitude_error_rad
                 self.world.attach(cid, tid)
                 self.done.add(cid)
-                self._log_events(
-                    cid,
-                    [{"t_s": t, "from": agent.mode.value, "to": "CONTACT" if ok else "COLLISION",
-                      "range_m": float(np.linalg.norm(xc[0:3] - xt[0:3])),
-                      "reason": "port contact within tolerance" if ok else f"contact outside tolerance {c}"}],
-                )  # fmt: skip
+                self._log_events(cid, [ct.event(agent.mode.value)])
 
     def _summary(self, t_end: float, wall: float) -> dict:
         chasers = {}
