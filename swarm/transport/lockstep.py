@@ -415,6 +415,19 @@ class CommandBarrier:
             self._commands = {t: c for t, c in self._commands.items() if t > k}
             return commands, missing
 
+    def poll(self, k: int, timeout_s: float | None = None) -> bool:
+        """Whether every live agent's ``command(k)`` is in, waiting up to ``timeout_s`` [s] for it; unlike
+        :meth:`wait` it releases nothing (a world loop polls in slices to stay responsive)."""
+        timeout_s = _check_timeout(timeout_s)
+        with self._cond:
+            return _wait(self._cond, lambda: self._live <= self._commands.get(k, {}).keys(), timeout_s)
+
+    @property
+    def next_tick(self) -> int:
+        """The lowest tick not yet released: commands of earlier ticks are stale."""
+        with self._cond:
+            return self._floor
+
     def reset(self, k: int = 0) -> None:
         """Start over at tick ``k`` (a new run): buffered commands are discarded."""
         k = _check_int(k, "tick", 0)

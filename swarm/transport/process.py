@@ -1,0 +1,220 @@
+"""What every swarm process shares: its command-line flags, the clock mode, signals, the ready line and
+reliable publishers.
+
+Each process (``python -m swarm.world``, ``python -m mothership``, ``python -m agents``) takes the same
+scenario flags as ``swarm sim`` (a scenario name or file, ``--set key=value``, ``--agents N``, ``--seed``),
+so every process of a swarm builds the very same :class:`~swarm.scenario.Scenario` from the same words,
+plus ``--namespace``, ``--clock`` and the Zenoh session flags of :mod:`swarm.transport.session`.
+
+Once its subscriptions and liveliness token are declared, a process prints one line on stdout,
+``<role> <id> ready`` (flushed), for a launcher or a test to wait on; it logs to stderr. SIGINT and SIGTERM
+set a stop flag: the process finishes its current step, publishes what it owes (a world its ``run_end``),
+closes its Zenoh session (a callback subscriber left open hangs the interpreter at exit, DESIGN.md
+section 9) and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import zenoh
+
+from swarm.errors import ConfigError, SwarmError
+from swarm.transport.keys import Keys
+from swarm.transport.session import add_zenoh_arguments, zenoh_args_from
+
+__all__ = [
+    "ClockSpec",
+    "add_process_arguments",
+    "declare_reliable",
+    "install_stop_signals",
+    "keys_from",
+    "print_ready",
+    "process_main",
+    "scenario_from",
+    "zenoh_args",
+]
+
+_LOG = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ClockSpec:
+    """How the world's clock advances (``--clock``, DESIGN.md section 4).
+
+    ``lockstep``: tick ``k + 1`` only once every live agent's command of tick ``k`` arrived (or a timeout
+    passed): deterministic, as fast as the slowest agent. ``realtime``: one tick per ``dt`` of wall time.
+    ``scaled:N``: ``N`` times real time (``N`` > 0; ``scaled:1`` is ``realtime``)."""
+
+    mode: str = "lockstep"
+    factor: float = 1.0
+    """Simulated seconds per wall second (``realtime`` and ``scaled`` only)."""
+
+    @classmethod
+    def parse(cls, text: str) -> ClockSpec:
+        """``"lockstep"``, ``"realtime"`` or ``"scaled:N"``; ConfigError naming ``--clock`` otherwise."""
+        bad = ConfigError(f"--clock must be lockstep, realtime or scaled:N with N > 0, got {text!r}")
+        if text in ("lockstep", "realtime"):
+            return cls(text, 1.0)
+        if not isinstance(text, str) or not text.startswith("scaled:"):
+            raise bad
+        try:
+            factor = float(text.split(":", 1)[1])
+        except ValueError:
+            raise bad from None
+        if not (math.isfinite(factor) and factor > 0):
+            raise bad
+        return cls("scaled", factor)
+
+    @property
+    def lockstep(self) -> bool:
+        return self.mode == "lockstep"
+
+    def __str__(self) -> str:
+        return self.mode if self.mode != "scaled" else f"scaled:{self.factor:g}"
+
+
+def _clock_arg(text: str) -> ClockSpec:
+    try:
+        return ClockSpec.parse(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _seed_arg(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--seed must be an integer in 0..2**63-1, got {text!r}") from None
+    if not 0 <= value < 2**63:
+        raise argparse.ArgumentTypeError(f"--seed must be an integer in 0..2**63-1, got {text!r}")
+    return value
+
+
+def _agents_arg(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--agents must be an integer in 1..64, got {text!r}") from None
+    if not 1 <= value <= 64:
+        raise argparse.ArgumentTypeError(f"--agents must be an integer in 1..64, got {text!r}")
+    return value
+
+
+def add_process_arguments(p: argparse.ArgumentParser, *, clock: bool = True) -> None:
+    """The scenario, seed, namespace, clock and Zenoh flags every swarm process takes."""
+    from swarm.cli.sim import add_scenario_args
+
+    add_scenario_args(p)
+    p.add_argument(
+        "--agents",
+        type=_agents_arg,
+        default=1,
+        metavar="N",
+        help="copies of the scenario's pairs (default 1)",
+    )
+    p.add_argument("--seed", type=_seed_arg, default=0, help="root seed of every random stream (default 0)")
+    p.add_argument(
+        "--policy", choices=("fixed", "mdp"), default=None, help="switching policy (default: scenario's)"
+    )
+    p.add_argument("--namespace", default="tpods", help="key namespace of this swarm (default tpods)")
+    if clock:
+        p.add_argument(
+            "--clock",
+            type=_clock_arg,
+            default=ClockSpec(),
+            metavar="lockstep|realtime|scaled:N",
+            help="how the world's clock advances (default lockstep)",
+        )
+    p.add_argument(
+        "--lease-ms",
+        type=int,
+        default=None,
+        metavar="MS",
+        help="Zenoh link lease: a hung peer is seen lost after about this long (default Zenoh's 10000)",
+    )
+    add_zenoh_arguments(p)
+
+
+def scenario_from(args: argparse.Namespace):
+    """The scenario the flags name, with ``--set`` overrides and ``--agents`` copies."""
+    from swarm.cli.sim import load_from_args
+
+    return load_from_args(args).with_pairs(args.agents)
+
+
+def keys_from(args: argparse.Namespace) -> Keys:
+    return Keys(args.namespace)
+
+
+def zenoh_args(args: argparse.Namespace):
+    """The :class:`~swarm.transport.session.ZenohArgs` of the flags (``--lease-ms`` included)."""
+    from dataclasses import replace
+
+    return replace(zenoh_args_from(args), lease_ms=args.lease_ms)
+
+
+def declare_reliable(session: zenoh.Session, key: str, express: bool = True) -> zenoh.Publisher:
+    """A reliable publisher that blocks rather than drops when congested (lockstep loses nothing);
+    ``express`` sends each sample at once instead of batching (lower latency, DESIGN.md section 9)."""
+    return session.declare_publisher(
+        key,
+        reliability=zenoh.Reliability.RELIABLE,
+        congestion_control=zenoh.CongestionControl.BLOCK,
+        express=express,
+    )
+
+
+def print_ready(role: str, process_id: str) -> None:
+    """The ready line ``<role> <id> ready`` on stdout, flushed."""
+    print(f"{role} {process_id} ready", flush=True)
+
+
+def install_stop_signals(stop: threading.Event) -> dict[int, object]:
+    """SIGINT and SIGTERM set ``stop`` (main thread only); returns the previous handlers."""
+    previous = {}
+
+    def on_signal(signum: int, _frame: object) -> None:
+        _LOG.info("%s: stopping", signal.Signals(signum).name)
+        stop.set()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, on_signal)
+    return previous
+
+
+def process_main(
+    prog: str,
+    description: str,
+    add_arguments: Callable[[argparse.ArgumentParser], None],
+    run: Callable[[argparse.Namespace, threading.Event], int],
+    argv: list[str] | None = None,
+) -> int:
+    """``python -m <process>``: parse, configure logging (stderr), run until done or a stop signal.
+    Bad input (a flag, the scenario) prints one ``<prog>: error: ...`` line and returns 2."""
+    parser = argparse.ArgumentParser(prog=prog, description=description)
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format=f"%(asctime)s %(levelname)s {prog}: %(message)s",
+        stream=sys.stderr,
+    )
+    stop = threading.Event()
+    previous = install_stop_signals(stop)
+    try:
+        return int(run(args, stop) or 0)
+    except SwarmError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr, flush=True)
+        return 2
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)  # type: ignore[arg-type]

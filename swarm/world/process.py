@@ -1,0 +1,348 @@
+"""The world process: truth dynamics and on-board sensors of every vehicle, over Zenoh.
+
+A thin adapter around :class:`swarm.core.world.World` and the referee (:mod:`swarm.sim.referee`), following
+:meth:`swarm.sim.docking.DockingSim.run`'s tick order so that a lockstep run is the in-process run:
+
+1. wait until every agent of the scenario and the mothership are alive (liveliness), then announce the
+   run (``world/event`` ``run_start``, ``world/clock`` tick 0 ``running``);
+2. tick ``k``: take every live agent's ``command(k)`` (lockstep: wait for them, or a timeout; realtime:
+   the latest of each), judge each chaser on the truth (keep-out, contact: ``agent/<id>/event``), then
+   step to ``k + 1`` and publish, per vehicle, ``truth(k+1)``, its camera frame ``vision(k+1)`` on camera
+   ticks (chasers; zero markers when the target is not in view) and ``imu(k+1)``;
+3. the run ends when every chaser has made contact, at ``sim.max_duration_s``, on a ``reset``/``new_seed``
+   run control or a stop signal: ``run_end`` (with each vehicle's total impulse), then clock ``stopped``.
+
+An agent whose liveliness token goes is dropped from the lockstep and its nozzles closed (a vehicle whose
+computer died does not keep firing); it joins again with its first command for a tick not yet stepped.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+
+import numpy as np
+
+from swarm.core.world import World
+from swarm.sim.referee import judge
+from swarm.transport.keys import Keys
+from swarm.transport.lockstep import CommandBarrier
+from swarm.transport.messages import (
+    Clock,
+    Command,
+    DropCounter,
+    Event,
+    Imu,
+    RunControl,
+    Truth,
+    Vision,
+    encode,
+)
+from swarm.transport.process import ClockSpec, declare_reliable
+from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
+
+_LOG = logging.getLogger("swarm.world")
+
+DOCKING_MODES = ("DOCK", "DOCKED")
+
+
+class WorldProcess:
+    """One run of the world over an open Zenoh session (module docstring)."""
+
+    def __init__(
+        self,
+        scenario,
+        seed: int,
+        session,
+        keys: Keys,
+        clock: ClockSpec,
+        stop: threading.Event,
+        *,
+        step_timeout_s: float = 5.0,
+        start_timeout_s: float = 60.0,
+        clock_every: int = 10,
+        process_id: str = "world",
+    ) -> None:
+        sc = scenario
+        self.sc, self.seed, self.session, self.keys, self.clock, self.stop = (
+            sc,
+            seed,
+            session,
+            keys,
+            clock,
+            stop,
+        )
+        self.step_timeout_s = step_timeout_s
+        self.start_timeout_s = start_timeout_s
+        self.clock_every = max(1, int(clock_every))
+        self.process_id = process_id
+        self.world = World(sc, seed)
+        self.ids = list(sc.vehicles)
+        self.chasers = sc.chasers
+        self.drops = DropCounter()
+        self.barrier = CommandBarrier(self.ids)
+        self._lock = threading.Lock()
+        self._alive: set[str] = set()
+        self._mothership = False
+        self._lost: list[str] = []  # agents seen lost since the main loop last looked
+        self._latest: dict[str, Command] = {}  # realtime: newest command per agent
+        self._controls: queue.Queue[RunControl] = queue.Queue()
+        self.modes = dict.fromkeys(self.ids, "HOLD")  # each agent's mode, from its last command
+        self.done: set[str] = set()
+        self.keepout: set[str] = set()
+        self.missing_ticks = 0  # lockstep ticks stepped without some live agent's command
+        self.state = "running"
+
+    # ------------------------------------------------------------------------------ Zenoh side
+
+    def _on_command(self, key: str, cmd: Command) -> None:
+        parsed = self.keys.parse(key)
+        vid = parsed[1] if parsed else None
+        if vid not in self.world.index:
+            self.drops.drop(key, "command: not a vehicle of this scenario")
+            return
+        if not self.clock.lockstep:
+            with self._lock:
+                self._latest[vid] = cmd
+            return
+        with self._lock:
+            live = self.barrier.live
+            if vid not in live and vid in self._alive and cmd.tick >= self.barrier.next_tick:
+                self.barrier.set_live(live | {vid})  # (re)joins the lockstep
+                _LOG.info("agent %s joins the lockstep at tick %d", vid, cmd.tick)
+        self.barrier.add(vid, cmd)
+
+    def _on_alive(self, role: str, pid: str, alive: bool) -> None:
+        with self._lock:
+            if role == "mothership":
+                self._mothership = alive
+                if not alive:
+                    _LOG.warning("mothership %s lost", pid)
+                return
+            if role != "agent" or pid not in self.world.index:
+                return
+            if alive:
+                self._alive.add(pid)
+                return
+            self._alive.discard(pid)
+            self._lost.append(pid)
+            self.barrier.set_live(self.barrier.live - {pid})
+        _LOG.warning("agent %s lost: its nozzles are closed and the lockstep goes on without it", pid)
+
+    def _on_control(self, _key: str, msg: RunControl) -> None:
+        self._controls.put(msg)
+
+    # ------------------------------------------------------------------------------ publishing
+
+    def _declare(self) -> None:
+        k = self.keys
+        self.pub_truth = {v: declare_reliable(self.session, k.truth(v)) for v in self.ids}
+        self.pub_imu = {v: declare_reliable(self.session, k.imu(v)) for v in self.ids}
+        self.pub_vision = {v: declare_reliable(self.session, k.vision(v)) for v in self.chasers}
+        self.pub_event = {v: declare_reliable(self.session, k.event(v)) for v in self.chasers}
+        self.pub_clock = declare_reliable(self.session, k.world_clock())
+        self.pub_world_event = declare_reliable(self.session, k.world_event())
+
+    def _publish_clock(self, k: int) -> None:
+        self.pub_clock.put(encode(Clock(k, k * self.sc.dt_s, self.state, self.seed)))
+
+    def _world_event(self, kind: str, t_s: float, **data) -> None:
+        self.pub_world_event.put(encode(Event(t_s, kind, data)))
+
+    def _publish_tick(self, k: int, frames) -> None:
+        """truth(k), vision(k) (camera ticks, chasers) and imu(k) of every vehicle, in that order."""
+        w, t = self.world, k * self.sc.dt_s
+        camera_tick = k % w.vision_every == 0
+        face = self.sc.guidance.docking_face
+        for i, vid in enumerate(self.ids):
+            x = w.X[i]
+            truth = Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], impulse_ns=float(w.impulse[i]))
+            self.pub_truth[vid].put(encode(truth))
+        for vid in self.ids:
+            fr = frames[vid]
+            if camera_tick and vid in self.pub_vision:
+                target = self.sc.vehicles[vid].target
+                if fr.vision is None:
+                    data, kind, ids = np.zeros((0, 3)), "features", ()
+                else:
+                    data, kind, ids = fr.vision, fr.vision_kind, tuple(range(len(fr.vision)))
+                self.pub_vision[vid].put(encode(Vision(k, t, target, face, kind, data, ids)))
+            self.pub_imu[vid].put(encode(Imu(k, t, self.sc.dt_s, fr.gyro_body, fr.q_ahrs_ms_body)))
+
+    # ------------------------------------------------------------------------------ the run
+
+    def _wait_for_start(self) -> bool:
+        """Until every agent of the scenario and the mothership are alive; False on stop or timeout."""
+        deadline = time.monotonic() + self.start_timeout_s
+        while not self.stop.is_set():
+            with self._lock:
+                missing = [v for v in self.ids if v not in self._alive]
+                ready = not missing and self._mothership
+            if ready:
+                return True
+            if time.monotonic() > deadline:
+                who = missing + ([] if self._mothership else ["mothership"])
+                _LOG.error("not started: after %.0f s still no %s", self.start_timeout_s, ", ".join(who))
+                return False
+            time.sleep(0.005)
+        return False
+
+    def _apply(self, vid: str, cmd: Command) -> None:
+        self.modes[vid] = cmd.mode
+        self.world.set_command(vid, cmd.thrusts_n)
+
+    def _take_commands(self, k: int) -> bool:
+        """Apply the commands of tick ``k``; False if a stop or an end-of-run control came first."""
+        if not self.clock.lockstep:
+            with self._lock:
+                latest, self._latest = self._latest, {}
+            for vid, cmd in latest.items():
+                self._apply(vid, cmd)
+            return True
+        deadline = time.monotonic() + self.step_timeout_s
+        while not self.barrier.poll(k, 0.05):
+            if self.stop.is_set() or self._handle_controls() or self.state == "paused":
+                if self.stop.is_set() or self.state == "stopped":
+                    return False
+                deadline = time.monotonic() + self.step_timeout_s  # paused: the timeout starts again
+                continue
+            if time.monotonic() > deadline:
+                break
+        commands, missing = self.barrier.wait(k, 0)
+        if missing:
+            self.missing_ticks += 1
+            _LOG.warning(
+                "tick %d: no command from %s after %.1f s; holding theirs", k, missing, self.step_timeout_s
+            )
+            self._world_event("agent_missing", k * self.sc.dt_s, tick=k, agents=missing)
+        for vid in self.ids:  # in vehicle order, as the simulation applies them
+            if vid in commands:
+                self._apply(vid, commands[vid])
+        return True
+
+    def _handle_controls(self) -> bool:
+        """Apply pending run controls; True if any arrived."""
+        got = False
+        while True:
+            try:
+                msg = self._controls.get_nowait()
+            except queue.Empty:
+                return got
+            got = True
+            if msg.command == "pause" and self.state == "running":
+                self.state = "paused"
+            elif msg.command == "resume" and self.state == "paused":
+                self.state = "running"
+            elif msg.command in ("reset", "new_seed"):
+                self.end_reason = msg.command
+                self.next_seed = msg.seed
+                self.state = "stopped"
+            _LOG.info("run control %s: clock %s", msg.command, self.state)
+            self._publish_clock(self.world.k)
+
+    def _referee(self, k: int) -> None:
+        t, g = k * self.sc.dt_s, self.sc.guidance
+        for cid in self.chasers:
+            if cid in self.done:
+                continue
+            tid = self.sc.vehicles[cid].target
+            mode = self.modes[cid]
+            call = judge(self.world, g, cid, tid, mode in DOCKING_MODES, t)
+            if call is None:
+                continue
+            if call.keepout and cid not in self.keepout:
+                self.keepout.add(cid)
+                ev = Event(t, "keepout_violation", {"t_s": t, "mode": mode, "range_m": call.centre_m})
+                self.pub_event[cid].put(encode(ev))
+            ct = call.contact
+            if ct is not None:
+                self.world.attach(cid, tid)
+                self.done.add(cid)
+                data = {
+                    **ct.event(mode), "docked": ct.docked, "docking_time_s": t, "contact": ct.contact,
+                    "position_error_m": ct.position_error_m, "attitude_error_rad": ct.attitude_error_rad,
+                }  # fmt: skip
+                kind = "contact" if ct.docked else "collision"
+                self.pub_event[cid].put(encode(Event(t, kind, data)))
+                _LOG.info("%s: %s at t = %.2f s", cid, kind, t)
+
+    def _close_lost(self) -> None:
+        with self._lock:
+            lost, self._lost = self._lost, []
+        for vid in lost:
+            self.world.set_command(vid, np.zeros(self.world.thrusts.shape[1]))
+            self.modes[vid] = "HOLD"
+
+    def run(self) -> dict:
+        """Serve one run; returns the ``run_end`` data."""
+        k = self.keys
+        self._declare()
+        subscribe_decoded(self.session, k.agent_all("command"), Command, self._on_command, self.drops)
+        subscribe_decoded(self.session, k.run_control(), RunControl, self._on_control, self.drops)
+        watch_liveliness(self.session, k, self._on_alive)
+        self._token = declare_liveliness(self.session, k, "world", self.process_id)
+        from swarm.transport.process import print_ready
+
+        print_ready("world", self.process_id)
+        self.end_reason, self.next_seed = "stopped", None
+        if not self._wait_for_start():
+            self.state = "stopped"
+            self._publish_clock(0)
+            return {"reason": "not_started"}
+        dt = self.sc.dt_s
+        max_k = round(self.sc.sim.max_duration_s / dt)
+        self._world_event(
+            "run_start", 0.0, seed=self.seed, vehicles=self.ids, clock=str(self.clock), scenario=self.sc.name
+        )
+        self._publish_clock(0)
+        wall0 = time.perf_counter()
+        pace0, pace_k = time.monotonic(), 0
+        tick = 0
+        while True:
+            if self.stop.is_set():
+                self.end_reason = "stopped"
+                break
+            self._handle_controls()
+            if self.state == "stopped":
+                break
+            if self.state == "paused":
+                time.sleep(0.01)
+                pace0, pace_k = time.monotonic(), tick
+                continue
+            if not self._take_commands(tick):
+                break
+            self._close_lost()
+            self._referee(tick)
+            if len(self.done) == len(self.chasers):
+                self.end_reason = "all_contact"
+                break
+            if tick >= max_k:
+                self.end_reason = "max_duration"
+                break
+            frames = self.world.step()
+            tick += 1
+            self._publish_tick(tick, frames)
+            if tick % self.clock_every == 0:
+                self._publish_clock(tick)
+            if not self.clock.lockstep:
+                due = pace0 + (tick - pace_k) * dt / self.clock.factor
+                left = due - time.monotonic()
+                if left > 0:
+                    self.stop.wait(left)
+        wall = time.perf_counter() - wall0
+        self.state = "stopped"
+        t_end = tick * dt
+        end = {
+            "reason": self.end_reason, "tick": tick, "t_s": t_end, "seed": self.seed, "wall_s": wall,
+            "realtime_factor": t_end / wall if wall > 0 else None,
+            "impulse_ns": self.world.impulse_ns, "done": sorted(self.done),
+            "missing_ticks": self.missing_ticks, "next_seed": self.next_seed,
+            "dropped": self.drops.total,
+        }  # fmt: skip
+        self._world_event("run_end", t_end, **end)
+        self._publish_clock(tick)
+        _LOG.info("run ended (%s) at t = %.2f s after %.2f s wall", self.end_reason, t_end, wall)
+        self.drops.flush()
+        return end
