@@ -1,0 +1,1 @@
+"""The mothership process (``python -m mothership``): anchor registry and simulated UWB radio network."""

@@ -1,0 +1,359 @@
+"""The agent process: one vehicle's estimator, switcher, guidance and control over Zenoh.
+
+A thin adapter around :class:`swarm.core.agent.VehicleAgent`, the object the in-process simulation steps.
+It subscribes only to its own sensors (``imu``, ``uwb``, ``vision`` for a chaser), its target's
+``estimate`` (a chaser), ``world/clock`` and liveliness; it publishes ``estimate`` (every tick),
+``guidance`` (every control tick), ``command`` (every tick: thrusts change at the control rate and are held
+in between) and ``event`` (mode transitions; a ``summary`` when the run ends).
+
+Lockstep (``--clock lockstep``): ticks come from :class:`swarm.transport.lockstep.AgentTickAssembler`,
+complete and in order, and each is processed exactly as ``DockingSim.run`` does: the target's estimate
+of tick ``k - 1``, then gyro (+ AHRS), range, vision of tick ``k``; ``estimate(k)``; guidance and control
+on control ticks; ``command(k)``. Tick 0 (no sensor yet) starts when the world announces the run.
+Realtime or scaled: every message is processed as it arrives.
+
+A restarted agent (``--rejoin``) joins the run in progress: it publishes zero-thrust HOLD commands while it
+re-initialises from its own sensors (the AHRS attitude, and its position by least squares on one range to
+each anchor, :func:`position_from_ranges`), then flies again from that estimate.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from swarm.core import rotations as rot
+from swarm.core.agent import TargetEstimate, VehicleAgent
+from swarm.core.estimator import MeasKind
+from swarm.core.thrusters import allocation_matrix
+from swarm.core.world import initial_state
+from swarm.errors import ConfigError, MessageError
+from swarm.sim.docking import initial_estimate
+from swarm.transport.keys import Keys
+from swarm.transport.lockstep import AgentTickAssembler, TickInputs
+from swarm.transport.messages import (
+    Clock,
+    Command,
+    DropCounter,
+    Estimate,
+    Event,
+    Guidance,
+    Imu,
+    Uwb,
+    Vision,
+    encode,
+)
+from swarm.transport.process import ClockSpec, declare_reliable, print_ready
+from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
+
+_LOG = logging.getLogger("swarm.agent")
+
+_OUTCOMES = ("accepted", "rejected", "refused")
+_KINDS = {
+    "range": MeasKind.RANGE,
+    "features": MeasKind.FEATURES,
+    "pose": MeasKind.POSE,
+    "ahrs": MeasKind.ATTITUDE,
+}
+
+
+def position_from_ranges(anchors_ms: np.ndarray, ranges: dict[int, float], lever_ms: np.ndarray, guess_ms):
+    """Centre-of-mass position [m] (3,), frame ms, and its covariance factor ``(J^T J)^-1`` from one or
+    more ranges to each of at least four anchors: nonlinear least squares (scipy ``least_squares``, soft-L1
+    loss against an NLOS range) on ``|p + lever_ms - a_i| = rho_i``, started from ``guess_ms``.
+
+    ``lever_ms`` is the tag's lever arm rotated into ms (``R(q) P1``). The paper's four anchors are coplanar
+    (``2 y + 0.8 z = 0``), so ranges alone have a mirror solution across that plane: the start decides,
+    and the scenario's start position of the vehicle lies on the side it flies on."""
+    ids = sorted(ranges)
+    A = anchors_ms[ids]
+    rho = np.array([ranges[i] for i in ids])
+
+    def residual(p):
+        return np.linalg.norm(p + lever_ms - A, axis=1) - rho
+
+    sol = least_squares(residual, np.asarray(guess_ms, dtype=float), loss="soft_l1", f_scale=0.05)
+    J = sol.jac
+    return sol.x, np.linalg.pinv(J.T @ J)
+
+
+class AgentProcess:
+    """One vehicle's on-board software over an open Zenoh session (module docstring)."""
+
+    def __init__(
+        self,
+        scenario,
+        vehicle_id: str,
+        seed: int,
+        policy: str,
+        session,
+        keys: Keys,
+        clock: ClockSpec,
+        stop: threading.Event,
+        *,
+        rejoin: bool = False,
+    ) -> None:
+        sc = scenario
+        if vehicle_id not in sc.vehicles:
+            raise ConfigError(
+                f"--id must be a vehicle of the scenario, one of {sorted(sc.vehicles)}, got {vehicle_id!r}"
+            )
+        self.sc, self.id, self.seed, self.policy = sc, vehicle_id, seed, policy
+        self.session, self.keys, self.clock, self.stop = session, keys, clock, stop
+        self.rejoin = rejoin
+        spec = sc.vehicles[vehicle_id]
+        self.chaser = spec.role == "chaser"
+        self.target_id = spec.target
+        self.dt = sc.dt_s
+        self.control_every = sc.every(sc.translation_control.rate_hz)
+        self.vision_every = sc.every(sc.camera.rate_hz) if self.chaser else None
+        self.drops = DropCounter()
+        self.assembler = AgentTickAssembler(
+            vehicle_id, self.chaser, self.target_id, sc.every(sc.uwb.rate_hz), self.vision_every,
+            start=None if rejoin else 0,
+        )  # fmt: skip
+        self.agent: VehicleAgent | None = None
+        if not rejoin:
+            p0, v0, q0, cov0 = initial_estimate(
+                sc, list(sc.vehicles).index(vehicle_id), initial_state(sc, vehicle_id), seed
+            )
+            self.agent = VehicleAgent(sc, vehicle_id, p0, v0, q0, cov0, policy)
+        self._thrusts = np.zeros(allocation_matrix(sc.thrusters).shape[1])
+        self._force = np.zeros(3)
+        self._torque = np.zeros(3)
+        self._mode = "HOLD" if self.chaser else "STATION"
+        self._started = threading.Event()
+        self._ended = threading.Event()
+        self._queue: queue.Queue = queue.Queue()
+        self._target_latest: Estimate | None = None
+        self._init_ranges: dict[int, float] = {}
+        self._init_q: np.ndarray | None = None
+        self._last_decision_t: float | None = None
+        self.ticks = 0
+
+    # ------------------------------------------------------------------------------ Zenoh side
+
+    def _on_sensor(self, key: str, msg) -> None:
+        if self.clock.lockstep:
+            self.assembler.add(msg, self.id)
+        else:
+            self._queue.put(msg)
+
+    def _on_target(self, key: str, msg: Estimate) -> None:
+        if self.clock.lockstep:
+            self.assembler.add(msg, self.target_id)
+        else:
+            self._queue.put(msg)
+
+    def _on_clock(self, _key: str, msg: Clock) -> None:
+        if msg.state in ("running", "paused"):
+            self._started.set()
+        elif msg.state == "stopped" and self._started.is_set():
+            self._ended.set()
+
+    def _on_alive(self, role: str, pid: str, alive: bool) -> None:
+        if role == "agent" and pid == self.target_id:
+            if not alive:
+                _LOG.warning("%s: target %s lost; holding its last estimate", self.id, pid)
+            self.assembler.set_target_live(alive)
+
+    # ------------------------------------------------------------------------------ publishing
+
+    def _declare(self) -> None:
+        k = self.keys
+        self.pub_estimate = declare_reliable(self.session, k.estimate(self.id))
+        self.pub_command = declare_reliable(self.session, k.command(self.id))
+        self.pub_guidance = declare_reliable(self.session, k.guidance(self.id))
+        self.pub_event = declare_reliable(self.session, k.event(self.id))
+
+    def _counts(self) -> dict[str, int]:
+        c = self.agent.est
+        return {
+            f"{name}_{what}": int(c.count(kind, what)[0])
+            for name, kind in _KINDS.items()
+            for what in _OUTCOMES
+        }
+
+    def _publish_estimate(self, k: int) -> None:
+        a = self.agent
+        e = a.est
+        args = (
+            k, a.t_s, e.p_ms[0], e.v_ms[0], e.q_ms_body[0], e.P[0], a.sigma_pos_max_m, a.mahalanobis_d,
+            a.rejection_fraction, self._counts(),
+        )  # fmt: skip
+        try:
+            msg = Estimate(*args)
+        except MessageError:  # a covariance off symmetry by rounding only: send its symmetric part
+            P = 0.5 * (e.P[0] + e.P[0].T)
+            msg = Estimate(*args[:5], P, *args[6:])
+        self.pub_estimate.put(encode(msg))
+
+    def _publish_command(self, k: int) -> None:
+        thrusts = self._thrusts
+        msg = Command(k, k * self.dt, thrusts, self._force, self._torque, self._mode)
+        self.pub_command.put(encode(msg))
+
+    def _control(self, k: int) -> None:
+        a = self.agent
+        t = k * self.dt
+        cmd = a.control(t, self.control_every * self.dt)
+        self._thrusts, self._force, self._torque = cmd.thrusts_n, cmd.force_body_n, cmd.torque_body_nm
+        self._mode = a.mode.value
+        for ev in cmd.events:
+            self.pub_event.put(encode(Event(float(ev["t_s"]), "mode", dict(ev))))
+        self._publish_guidance(k, cmd)
+
+    def _publish_guidance(self, k: int, cmd) -> None:
+        a = self.agent
+        sw = a.switcher
+        range_m = decision = r_t = None
+        if a.target is not None and self.chaser:
+            range_m = float(np.linalg.norm(a.est.p_ms[0] - a.target.p_ms))
+        if sw is not None and self.policy == "mdp":
+            r_t = float(self.sc.mdp.r_t_m)
+            if sw.decisions:
+                decision = sw.decisions[-1].as_dict()
+        reason = cmd.events[-1]["reason"] if cmd.events else ""
+        msg = Guidance(
+            k, k * self.dt, self._mode, range_m, None if sw is None else sw.r1_m,
+            None if sw is None else sw.r2_m, r_t, decision, str(reason)[:1024],
+        )  # fmt: skip
+        self.pub_guidance.put(encode(msg))
+
+    # ------------------------------------------------------------------------------ re-initialisation
+
+    def _collect_init(self, imu: Imu | None, uwb: Uwb | None) -> bool:
+        """Gather the AHRS attitude and ranges; build the agent once there is one range per anchor."""
+        if imu is not None and imu.q_ahrs_ms_body is not None:
+            self._init_q = imu.q_ahrs_ms_body
+        if uwb is not None and uwb.range_m is not None and uwb.anchor_id < len(self.sc.anchors_m):
+            self._init_ranges[uwb.anchor_id] = uwb.range_m
+        if self._init_q is None or len(self._init_ranges) < len(self.sc.anchors_m):
+            return False
+        sc = self.sc
+        lever_ms = rot.quat_rotate(self._init_q, np.asarray(sc.estimator.lever_arm_body_m, dtype=float))
+        p0, JtJ_inv = position_from_ranges(
+            np.asarray(sc.anchors_m, dtype=float),
+            self._init_ranges,
+            lever_ms,
+            sc.vehicles[self.id].position_m,
+        )
+        sig = sc.initial.sigmas
+        var_pos = max(float(np.max(np.diag(JtJ_inv))) * sc.estimator.sigma_range_m**2, sig[0] ** 2)
+        var_vel = max(sig[3] ** 2, sc.guidance.approach_speed_m_s**2)  # moving at up to the approach speed
+        var_att = max(np.radians(sc.ahrs.sigma_deg) ** 2, sig[6] ** 2)
+        cov0 = np.array([var_pos] * 3 + [var_vel] * 3 + [var_att] * 3)
+        self.agent = VehicleAgent(sc, self.id, p0, np.zeros(3), self._init_q, cov0, self.policy)
+        _LOG.info("%s re-initialised from its sensors at p = %s m", self.id, np.round(p0, 3).tolist())
+        self.pub_event.put(encode(Event(0.0 if imu is None else imu.t_s, "restarted", {"p_ms": p0.tolist()})))
+        return True
+
+    # ------------------------------------------------------------------------------ the loops
+
+    def _process(self, inp: TickInputs) -> None:
+        k = inp.tick
+        t = k * self.dt
+        if self.agent is None:
+            self._collect_init(inp.imu, inp.uwb)
+            if self.agent is None:
+                self._publish_command(k)  # zero thrust, HOLD: in the lockstep while re-initialising
+                return
+            if self.chaser and inp.target_estimate is not None:
+                self._set_target(inp.target_estimate)
+            self._publish_estimate(k)
+            self._publish_command(k)
+            return
+        a = self.agent
+        if self.chaser and inp.target_estimate is not None:
+            self._set_target(inp.target_estimate)
+        if inp.imu is not None:
+            a.on_imu(t, self.dt, inp.imu.gyro_body, inp.imu.q_ahrs_ms_body)
+        if inp.uwb is not None and inp.uwb.range_m is not None:
+            a.on_uwb(inp.uwb.anchor_id, inp.uwb.range_m)
+        if inp.vision is not None and inp.vision.seen:
+            a.on_vision(t, inp.vision.kind, inp.vision.data)
+        self._publish_estimate(k)
+        if k % self.control_every == 0:
+            self._control(k)
+        self._publish_command(k)
+        self.ticks += 1
+
+    def _set_target(self, e: Estimate) -> None:
+        self.agent.set_target_estimate(TargetEstimate(e.t_s, e.p_ms, e.q_ms_body, e.cov[:3, :3].copy()))
+
+    def _run_lockstep(self) -> None:
+        if not self.rejoin:
+            while not (self._started.wait(0.05) or self.stop.is_set()):
+                pass
+        waited_since = time.monotonic()
+        while not self.stop.is_set() and not self._ended.is_set():
+            inp = self.assembler.next_tick(0.05)
+            if inp is None:
+                if time.monotonic() - waited_since > 5.0:
+                    _LOG.warning(
+                        "%s: tick %s still lacks %s",
+                        self.id,
+                        self.assembler.next_expected,
+                        self.assembler.waiting_for(),
+                    )
+                    waited_since = time.monotonic()
+                continue
+            waited_since = time.monotonic()
+            self._process(inp)
+
+    def _run_free(self) -> None:
+        """Realtime/scaled: process each message as it arrives."""
+        while not self.stop.is_set() and not self._ended.is_set():
+            try:
+                msg = self._queue.get(timeout=0.05)
+            except queue.Empty:
+                continue
+            if isinstance(msg, Estimate):
+                self._target_latest = msg
+                if self.agent is not None:
+                    self._set_target(msg)
+            elif isinstance(msg, Imu):
+                self._process(TickInputs(msg.tick, imu=msg))
+            elif isinstance(msg, Uwb):
+                if self.agent is None:
+                    self._collect_init(None, msg)
+                elif msg.range_m is not None:
+                    self.agent.on_uwb(msg.anchor_id, msg.range_m)
+            elif isinstance(msg, Vision) and self.agent is not None and msg.seen:
+                self.agent.on_vision(msg.tick * self.dt, msg.kind, msg.data)
+
+    def run(self) -> None:
+        k = self.keys
+        self._declare()
+        subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops)
+        subscribe_decoded(self.session, k.uwb(self.id), Uwb, self._on_sensor, self.drops)
+        if self.chaser:
+            subscribe_decoded(self.session, k.vision(self.id), Vision, self._on_sensor, self.drops)
+            subscribe_decoded(self.session, k.estimate(self.target_id), Estimate, self._on_target, self.drops)
+            watch_liveliness(self.session, k, self._on_alive, history=False)
+        subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
+        self._token = declare_liveliness(self.session, k, "agent", self.id)
+        print_ready("agent", self.id)
+        if self.clock.lockstep:
+            self._run_lockstep()
+        else:
+            while not (self.rejoin or self._started.wait(0.05) or self.stop.is_set()):
+                pass
+            self._run_free()
+        if self._ended.is_set() and self.agent is not None:
+            a = self.agent
+            sw = a.switcher
+            data = {
+                "final_mode": a.mode.value, "counts": self._counts(), "ticks": self.ticks,
+                "r1_m": None if sw is None else sw.r1_m, "r2_m": None if sw is None else sw.r2_m,
+                "dropped": self.drops.total, "assembler": self.assembler.counts(),
+            }  # fmt: skip
+            self.pub_event.put(encode(Event(a.t_s, "summary", data)))
+            _LOG.info("%s: run ended in mode %s", self.id, a.mode.value)
+            self.stop.wait()  # stay up (liveliness, dashboard) until told to stop
+        self.drops.flush()

@@ -1,0 +1,121 @@
+"""The mothership process: the anchor registry and the simulated UWB radio network, over Zenoh.
+
+- Anchors: published once on ``mothership/anchors`` when the process is up (and every
+  ``anchors_every_s``), and answered to any query on that key (``session.get``), so a late joiner asks.
+- Radio network: :class:`swarm.core.world.UwbNetwork` (one round-robin radio per vehicle, the sensor and
+  fault models of :mod:`swarm.core.sensors`). From the world's ``truth`` of every vehicle at a UWB slot
+  tick ``k`` it publishes one ``uwb(k)`` per vehicle, with ``range_m`` nil when the reply was lost, so a
+  lockstep agent knows not to wait. Slots are processed in tick order: the radios' random streams are
+  consumed exactly as in the in-process simulation (same seed, same ranges).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+
+import numpy as np
+import zenoh
+
+from swarm.core.world import UwbNetwork
+from swarm.transport.keys import Keys
+from swarm.transport.messages import Anchors, Clock, DropCounter, Truth, Uwb, encode
+from swarm.transport.process import declare_reliable, print_ready
+from swarm.transport.session import declare_liveliness, subscribe_decoded
+
+_LOG = logging.getLogger("swarm.mothership")
+
+
+class MothershipProcess:
+    """Anchor services and radio network of one run (module docstring)."""
+
+    def __init__(
+        self, scenario, seed: int, session, keys: Keys, stop: threading.Event, anchors_every_s: float = 1.0
+    ) -> None:
+        self.sc, self.seed, self.session, self.keys, self.stop = scenario, seed, session, keys, stop
+        self.anchors_every_s = anchors_every_s
+        self.ids = list(scenario.vehicles)
+        self.index = {v: i for i, v in enumerate(self.ids)}
+        self.network = UwbNetwork(scenario, seed)
+        self.every = self.network.every
+        self.drops = DropCounter()
+        self._truth: queue.Queue[tuple[str, Truth]] = queue.Queue()
+        self.anchors_msg = Anchors(tuple(range(len(scenario.anchors_m))), np.asarray(scenario.anchors_m))
+        self._pending: dict[int, dict[str, Truth]] = {}
+        self._next_slot = (
+            self.every
+        )  # tick 0 has no exchange (the simulation's first range is at a slot >= 1)
+        self.slots = 0
+
+    def _on_truth(self, key: str, msg: Truth) -> None:
+        parsed = self.keys.parse(key)
+        vid = parsed[1] if parsed else None
+        if vid not in self.index:
+            self.drops.drop(key, "truth: not a vehicle of this scenario")
+            return
+        if msg.tick % self.every == 0 and msg.tick > 0:
+            self._truth.put((vid, msg))
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        try:
+            query.reply(self.keys.anchors(), encode(self.anchors_msg))
+        except Exception as exc:  # a query must never kill the queryable's thread
+            _LOG.warning("anchors query not answered: %s", exc)
+
+    def _on_clock(self, _key: str, msg: Clock) -> None:
+        if msg.state == "stopped" and msg.tick > 0:
+            _LOG.debug("world stopped at tick %d", msg.tick)
+
+    def _slot(self, k: int, truths: dict[str, Truth]) -> None:
+        X = np.zeros((len(self.ids), 13))
+        for vid, m in truths.items():
+            i = self.index[vid]
+            X[i, 0:3], X[i, 3:6], X[i, 6:10], X[i, 10:13] = m.p_ms, m.v_ms, m.q_ms_body, m.w_body
+        t = k * self.sc.dt_s
+        self.network.step(k, t, X)
+        net = self.network
+        for i, vid in enumerate(self.ids):
+            rng = None if net.lost[i] else float(net.range_m[i])
+            self.pub_uwb[vid].put(encode(Uwb(k, t, int(net.anchor_id[i]), rng)))
+        self.slots += 1
+
+    def run(self) -> None:
+        k = self.keys
+        self.pub_uwb = {v: declare_reliable(self.session, k.uwb(v)) for v in self.ids}
+        pub_anchors = declare_reliable(self.session, k.anchors(), express=False)
+        self._queryable = self.session.declare_queryable(k.anchors(), self._on_query)
+        subscribe_decoded(self.session, k.agent_all("truth"), Truth, self._on_truth, self.drops)
+        subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
+        self._token = declare_liveliness(self.session, k, "mothership", "mothership")
+        print_ready("mothership", "mothership")
+        payload = encode(self.anchors_msg)
+        pub_anchors.put(payload)
+        last_anchors = time.monotonic()
+        while not self.stop.is_set():
+            try:
+                vid, msg = self._truth.get(timeout=0.1)
+            except queue.Empty:
+                vid = None
+            now = time.monotonic()
+            if now - last_anchors >= self.anchors_every_s:
+                pub_anchors.put(payload)
+                last_anchors = now
+            if vid is None:
+                continue
+            if msg.tick < self._next_slot:
+                self.drops.drop(k.truth(vid), f"truth of tick {msg.tick}: its UWB slot was already served")
+                continue
+            slot = self._pending.setdefault(msg.tick, {})
+            slot[vid] = msg
+            # slots complete in tick order (the world steps in order); serve every complete one
+            while len(self._pending.get(self._next_slot, ())) == len(self.ids):
+                self._slot(self._next_slot, self._pending.pop(self._next_slot))
+                self._next_slot += self.every
+            if len(self._pending) > 1000:  # a vehicle's truth never came: skip its slot, say so
+                oldest = min(self._pending)
+                _LOG.warning("UWB slot %d incomplete after 1000 newer slots: skipped", oldest)
+                del self._pending[oldest]
+                self._next_slot = min(self._pending)
+        self.drops.flush()
