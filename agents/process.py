@@ -327,8 +327,25 @@ class AgentProcess:
             elif isinstance(msg, Vision) and self.agent is not None and msg.seen:
                 self.agent.on_vision(msg.tick * self.dt, msg.kind, msg.data)
 
+    def _warm_up(self) -> None:
+        """Run every compiled kernel once on a throwaway agent, so that numba's compilation (or cache
+        load) happens before this process says it is ready, not inside the first lockstep ticks."""
+        sc, dt = self.sc, self.dt
+        x = initial_state(sc, self.id)
+        scratch = VehicleAgent(sc, self.id, x[0:3], x[3:6], x[6:10], np.full(9, 1e-4), self.policy)
+        scratch.on_imu(dt, dt, np.zeros(3), x[6:10])
+        scratch.on_uwb(0, float(np.linalg.norm(np.asarray(sc.anchors_m[0]) - x[0:3])))
+        if self.chaser:
+            scratch.set_target_estimate(
+                TargetEstimate(0.0, x[0:3] + np.array([0.0, 0.0, 0.3]), x[6:10], np.eye(3) * 1e-4)
+            )
+            points = np.array([[0.01 * i, 0.01 * (i % 2), 0.3] for i in range(len(scratch.markers_target))])
+            scratch.on_vision(dt, "features", points)
+        scratch.control(0.0, self.control_every * dt)
+
     def run(self) -> None:
         k = self.keys
+        self._warm_up()
         self._declare()
         subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops)
         subscribe_decoded(self.session, k.uwb(self.id), Uwb, self._on_sensor, self.drops)

@@ -83,6 +83,9 @@ class MothershipProcess:
 
     def run(self) -> None:
         k = self.keys
+        X = np.zeros((len(self.ids), 13))
+        X[:, 9] = 1.0  # identity attitudes
+        UwbNetwork(self.sc, self.seed).step(self.every, 0.0, X)  # compile (or load) the kernel before "ready"
         self.pub_uwb = {v: declare_reliable(self.session, k.uwb(v)) for v in self.ids}
         pub_anchors = declare_reliable(self.session, k.anchors(), express=False)
         self._queryable = self.session.declare_queryable(k.anchors(), self._on_query)

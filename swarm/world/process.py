@@ -148,7 +148,7 @@ class WorldProcess:
     def _publish_clock(self, k: int) -> None:
         self.pub_clock.put(encode(Clock(k, k * self.sc.dt_s, self.state, self.seed)))
 
-    def _world_event(self, kind: str, t_s: float, **data) -> None:
+    def _world_event(self, kind: str, t_s: float, data: dict) -> None:
         self.pub_world_event.put(encode(Event(t_s, kind, data)))
 
     def _publish_tick(self, k: int, frames) -> None:
@@ -216,7 +216,7 @@ class WorldProcess:
             _LOG.warning(
                 "tick %d: no command from %s after %.1f s; holding theirs", k, missing, self.step_timeout_s
             )
-            self._world_event("agent_missing", k * self.sc.dt_s, tick=k, agents=missing)
+            self._world_event("agent_missing", k * self.sc.dt_s, {"tick": k, "agents": missing})
         for vid in self.ids:  # in vehicle order, as the simulation applies them
             if vid in commands:
                 self._apply(vid, commands[vid])
@@ -276,8 +276,10 @@ class WorldProcess:
             self.modes[vid] = "HOLD"
 
     def run(self) -> dict:
-        """Serve one run; returns the ``run_end`` data."""
+        """Serve one run; returns the ``run_end`` data once stopped (a world whose run ended stays up,
+        its clock ``stopped``, until a stop signal: the dashboard keeps showing the final state)."""
         k = self.keys
+        World(self.sc, self.seed).step()  # compile (or load) the world's kernels before "ready"
         self._declare()
         subscribe_decoded(self.session, k.agent_all("command"), Command, self._on_command, self.drops)
         subscribe_decoded(self.session, k.run_control(), RunControl, self._on_control, self.drops)
@@ -293,9 +295,8 @@ class WorldProcess:
             return {"reason": "not_started"}
         dt = self.sc.dt_s
         max_k = round(self.sc.sim.max_duration_s / dt)
-        self._world_event(
-            "run_start", 0.0, seed=self.seed, vehicles=self.ids, clock=str(self.clock), scenario=self.sc.name
-        )
+        start = {"seed": self.seed, "vehicles": self.ids, "clock": str(self.clock), "scenario": self.sc.name}
+        self._world_event("run_start", 0.0, start)
         self._publish_clock(0)
         wall0 = time.perf_counter()
         pace0, pace_k = time.monotonic(), 0
@@ -341,8 +342,9 @@ class WorldProcess:
             "missing_ticks": self.missing_ticks, "next_seed": self.next_seed,
             "dropped": self.drops.total,
         }  # fmt: skip
-        self._world_event("run_end", t_end, **end)
+        self._world_event("run_end", t_end, end)
         self._publish_clock(tick)
         _LOG.info("run ended (%s) at t = %.2f s after %.2f s wall", self.end_reason, t_end, wall)
         self.drops.flush()
+        self.stop.wait()
         return end

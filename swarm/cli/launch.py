@@ -1,0 +1,440 @@
+"""``swarm launch SCENARIO``: the whole swarm as separate processes over Zenoh.
+
+The launcher opens a Zenoh **router** (``--listen``, default a free loopback port; the line ``swarm
+listening on <endpoint>`` says where an outside client connects) and starts, each in its own process
+group, the mothership, one agent per vehicle, the world and (unless ``--headless``) the dashboard, all as
+Zenoh clients of that router: a star, in which every declaration reaches every process through one node in
+order (a chaser's subscription to its target's estimate is in place before the world announces the run).
+
+It waits for every liveliness token (not for a time), supervises the children (an agent whose token goes
+or that exits is reported lost and restarted with ``--rejoin``, with exponential backoff, at most
+``--max-restarts`` times), and collects the run from ``world/event``, ``agent/*/event`` and
+``agent/*/guidance``. The summary has ``swarm sim``'s fields per chaser (DESIGN.md section 8). After the
+run: ``--until-docked`` exits; ``--repeat`` starts the next run with a new seed; otherwise the swarm stays
+up (for the dashboard) until Ctrl-C or ``--timeout``. Ctrl-C, SIGTERM or the end stop every child: SIGTERM,
+then SIGKILL of its process group after a grace period.
+
+Exit status: 0 every chaser docked, 1 not (or the run failed), 2 bad input, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import queue
+import signal
+import threading
+import time
+from pathlib import Path
+
+from swarm.errors import ConfigError, SwarmError
+
+_LOG = logging.getLogger("swarm.launch")
+
+
+def _positive(name: str):
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number > 0, got {text!r}") from None
+        if not (v > 0 and v < float("inf")):
+            raise argparse.ArgumentTypeError(f"{name} must be a finite number > 0, got {text!r}")
+        return v
+
+    return parse
+
+
+def _count(name: str):
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer >= 0, got {text!r}") from None
+        if v < 0:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer >= 0, got {text!r}")
+        return v
+
+    return parse
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from swarm.transport.process import add_process_arguments
+
+    p = sub.add_parser(
+        "launch",
+        help="run the swarm as separate processes over Zenoh (world, mothership, agents, dashboard)",
+        description=__doc__.split("\n\n")[1],
+    )
+    add_process_arguments(p)
+    g = p.add_argument_group("launcher")
+    g.add_argument("--headless", action="store_true", help="do not start the dashboard")
+    g.add_argument("--dashboard-port", type=int, default=8080, metavar="PORT", help="dashboard port (8080)")
+    g.add_argument(
+        "--until-docked", action="store_true", help="exit when the run ends (every chaser in contact)"
+    )
+    g.add_argument("--repeat", action="store_true", help="after each run, start another with a new seed")
+    g.add_argument(
+        "--timeout", type=_positive("--timeout"), default=None, metavar="S", help="wall-time limit [s]"
+    )
+    g.add_argument(
+        "--json", type=Path, default=None, metavar="FILE", help="write the summary (DESIGN.md sec. 8)"
+    )
+    g.add_argument(
+        "--max-restarts", type=_count("--max-restarts"), default=3, metavar="N",
+        help="restarts of one agent before giving up on it (default 3)",
+    )  # fmt: skip
+    g.add_argument(
+        "--step-timeout", type=_positive("--step-timeout"), default=5.0, metavar="S",
+        help="lockstep: the world steps without a silent agent's command after this long (default 5 s)",
+    )  # fmt: skip
+    g.add_argument(
+        "--start-timeout", type=_positive("--start-timeout"), default=60.0, metavar="S",
+        help="give up if the processes are not all alive after this long (default 60 s)",
+    )  # fmt: skip
+    p.set_defaults(func=run)
+
+
+def _free_loopback() -> str:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def _client_endpoint(listen: str) -> str:
+    """The endpoint a local child connects to for a listen endpoint (``0.0.0.0``/``[::]`` -> loopback)."""
+    proto, _, addr = listen.partition("/")
+    host, _, port = addr.split("?")[0].split("#")[0].rpartition(":")
+    if host in ("0.0.0.0", "[::]", "::"):
+        host = "127.0.0.1"
+    return f"{proto}/{host}:{port}"
+
+
+class RunLog:
+    """What the launcher hears of a run (thread-safe): the world's events, each agent's mode events,
+    guidance and summary."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.run_end: dict | None = None
+        self.run_start: dict | None = None
+        self.events: dict[str, list] = {}
+        self.guidance: dict[str, list] = {}
+        self.summaries: dict[str, dict] = {}
+        self.ended = threading.Event()
+
+    def on_world_event(self, _key: str, msg) -> None:
+        with self.lock:
+            if msg.kind == "run_start":
+                self.run_start = msg.data
+            elif msg.kind == "run_end":
+                self.run_end = msg.data
+                self.ended.set()
+
+    def on_event(self, key: str, msg, keys) -> None:
+        vid = (keys.parse(key) or (None, None))[1]
+        with self.lock:
+            if msg.kind == "summary":
+                self.summaries[vid] = msg.data
+            else:
+                self.events.setdefault(vid, []).append(msg)
+
+    def on_guidance(self, key: str, msg, keys) -> None:
+        vid = (keys.parse(key) or (None, None))[1]
+        with self.lock:
+            self.guidance.setdefault(vid, []).append(msg)
+
+
+def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
+    """The run summary with ``swarm sim``'s fields per chaser, from what the launcher heard."""
+    end = log.run_end or {}
+    chasers = {}
+    with log.lock:
+        for cid in sc.chasers:
+            events = log.events.get(cid, [])
+            contact = next((e for e in events if e.kind in ("contact", "collision")), None)
+            t_end = contact.data["t_s"] if contact is not None else float("inf")
+            picked = [e.data for e in events if e.kind == "mode" and e.data.get("t_s", 0.0) <= t_end]
+            picked.sort(key=lambda d: d["t_s"])
+            if contact is not None:
+                picked.append(contact.data)
+            modes = [
+                {"mode": d["to"], "t_s": d["t_s"], "range_m": d["range_m"], "reason": d["reason"]}
+                for d in picked
+            ]
+            guid = [g for g in log.guidance.get(cid, []) if g.t_s <= t_end]
+            last = guid[-1] if guid else None
+            decisions, seen = [], set()
+            for g in guid:
+                dec = g.decision
+                if dec is not None and dec["t_s"] not in seen:
+                    seen.add(dec["t_s"])
+                    decisions.append(dec)
+            summary = log.summaries.get(cid, {})
+            counts = summary.get("counts", {})
+            c = {
+                "docked": bool(contact is not None and contact.data["docked"]),
+                "collided": bool(contact is not None and not contact.data["docked"]),
+                "docking_time_s": None if contact is None else contact.data["docking_time_s"],
+                "total_impulse_ns": end.get("impulse_ns", {}).get(cid),
+                "position_error_m": None if contact is None else contact.data["position_error_m"],
+                "attitude_error_rad": None if contact is None else contact.data["attitude_error_rad"],
+                "final_mode": last.mode if last is not None else summary.get("final_mode"),
+                "modes": modes,
+                "r1_m": last.r1_m if last is not None else summary.get("r1_m"),
+                "r2_m": last.r2_m if last is not None else summary.get("r2_m"),
+                "keepout_violated": any(e.kind == "keepout_violation" for e in events),
+                "contact": None if contact is None else contact.data["contact"],
+                "estimator": {
+                    "rejected_ranges": counts.get("range_rejected"),
+                    "accepted_ranges": counts.get("range_accepted"),
+                    "accepted_vision": (
+                        None
+                        if not counts
+                        else counts.get("features_accepted", 0) + counts.get("pose_accepted", 0)
+                    ),
+                },
+                "wall_s": end.get("wall_s"),
+                "realtime_factor": end.get("realtime_factor"),
+                "restarted": any(e.kind == "restarted" for e in events),
+            }
+            if policy == "mdp":
+                c["decisions"] = decisions
+            chasers[cid] = c
+    return {
+        "scenario": sc.name, "policy": policy, "seed": seed, "sim_time_s": end.get("t_s"),
+        "wall_s": end.get("wall_s", wall_s), "realtime_factor": end.get("realtime_factor"),
+        "end_reason": end.get("reason", "no run_end received"),
+        "target_impulse_ns": {v: i for v, i in end.get("impulse_ns", {}).items() if v not in chasers},
+        "chasers": chasers,
+    }  # fmt: skip
+
+
+def _child_args(args: argparse.Namespace, endpoint: str, seed: int) -> list[str]:
+    common = [str(args.scenario)]
+    for o in args.overrides:
+        common += ["--set", o]
+    common += ["--agents", str(args.agents), "--seed", str(seed), "--namespace", args.namespace]
+    if args.policy:
+        common += ["--policy", args.policy]
+    common += ["--mode", "client", "--connect", endpoint]
+    if args.zenoh_config:
+        common += ["--zenoh-config", args.zenoh_config]
+    if args.lease_ms:
+        common += ["--lease-ms", str(args.lease_ms)]
+    return common
+
+
+def run(args: argparse.Namespace) -> int:
+    import zenoh
+
+    from swarm.cli.sim import print_summary
+    from swarm.cli.supervisor import Child, Supervisor
+    from swarm.transport.keys import Keys
+    from swarm.transport.messages import DropCounter, Event, Guidance
+    from swarm.transport.process import scenario_from
+    from swarm.transport.session import ZenohArgs, open_session, subscribe_decoded, watch_liveliness
+
+    sc = scenario_from(args)
+    keys = Keys(args.namespace)
+    policy = args.policy or sc.policy
+    listen = list(args.listen) if args.listen else [_free_loopback()]
+    zargs = ZenohArgs(
+        mode="router", connect=tuple(args.connect or ()), listen=tuple(listen), config_file=args.zenoh_config,
+        multicast_scouting=args.multicast_scouting, lease_ms=args.lease_ms,
+    )  # fmt: skip
+    endpoint = _client_endpoint(listen[0])
+    stop = threading.Event()
+    interrupted = threading.Event()
+
+    def on_signal(signum: int, _frame: object) -> None:
+        _LOG.info("%s: stopping the swarm", signal.Signals(signum).name)
+        interrupted.set()
+        stop.set()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    sup = Supervisor(max_restarts=args.max_restarts)
+    alive_changes: queue.Queue = queue.Queue()
+    seed = args.seed
+    result: dict | None = None
+    wall0 = time.monotonic()
+    try:
+        with open_session(zargs) as session:
+            print(
+                f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",
+                flush=True,
+            )
+            drops = DropCounter()
+            box = [RunLog()]  # the current run's log: the callbacks always feed the current one
+            subscribe_decoded(
+                session, keys.world_event(), Event, lambda k, m: box[0].on_world_event(k, m), drops
+            )
+            subscribe_decoded(
+                session, keys.agent_all("event"), Event, lambda k, m: box[0].on_event(k, m, keys), drops
+            )
+            subscribe_decoded(
+                session,
+                keys.agent_all("guidance"),
+                Guidance,
+                lambda k, m: box[0].on_guidance(k, m, keys),
+                drops,
+            )
+            watch_liveliness(session, keys, lambda r, p, a: alive_changes.put((r, p, a, time.monotonic())))
+            _token = session.liveliness().declare_token(keys.alive("launcher", "launcher"))
+            while True:  # one iteration per run
+                log = box[0]
+                _start_run(args, sc, seed, endpoint, sup, Child)
+                ok = _wait_alive(sc, sup, alive_changes, args.start_timeout, stop)
+                if not ok:
+                    result = None
+                    break
+                n_proc = len(sup.children)
+                print(f"swarm up: {n_proc} processes, seed {seed}, clock {args.clock}", flush=True)
+                outcome = _supervise(args, sc, sup, alive_changes, log, stop, wall0)
+                if outcome == "ended":
+                    _wait_summaries(sc, log, sup)
+                    result = summarize(sc, policy, seed, log, time.monotonic() - wall0)
+                    print_summary(result)
+                    if args.json is not None:
+                        args.json.write_text(json.dumps(result, indent=1))
+                    if args.repeat and not stop.is_set():
+                        nxt = (log.run_end or {}).get("next_seed")
+                        seed = int(nxt) if nxt is not None else seed + 1
+                        sup.stop_all()
+                        box[0] = RunLog()
+                        continue
+                    if not args.until_docked:
+                        _hold(args, stop, wall0)
+                break
+            sup.stop_all()
+            _ = (_token, zenoh)
+    finally:
+        sup.stop_all()
+        for s, h in previous.items():
+            signal.signal(s, h)  # type: ignore[arg-type]
+    if interrupted.is_set() and result is None:
+        return 130
+    if result is None:
+        return 1
+    return 0 if result["chasers"] and all(c["docked"] for c in result["chasers"].values()) else 1
+
+
+def _start_run(args, sc, seed, endpoint, sup, Child):
+    common = _child_args(args, endpoint, seed)
+    sup.start(Child("mothership", ["mothership", *common]))
+    for vid in sc.vehicles:
+        sup.start(Child(f"agent/{vid}", ["agents", "--id", vid, "--clock", str(args.clock), *common],
+                        restartable=True, rejoin_args=["--rejoin"]))  # fmt: skip
+    world = ["swarm.world", "--clock", str(args.clock), "--step-timeout", str(args.step_timeout),
+             "--start-timeout", str(args.start_timeout)]  # fmt: skip
+    sup.start(Child("world", [*world, *common]))
+    if not args.headless:
+        import importlib.util
+
+        if importlib.util.find_spec("dashboard.__main__") is None:
+            _LOG.warning("the dashboard is not available in this version: running headless")
+        else:
+            sup.start(Child("dashboard", ["dashboard", "--port", str(args.dashboard_port), *common]))
+
+
+def _name(role: str, pid: str) -> str:
+    return f"agent/{pid}" if role == "agent" else role
+
+
+def _wait_alive(sc, sup, changes: queue.Queue, timeout_s: float, stop: threading.Event) -> bool:
+    want = {"world", "mothership", *(f"agent/{v}" for v in sc.vehicles)}
+    seen: set[str] = set()
+    deadline = time.monotonic() + timeout_s
+    while not want <= seen:
+        if stop.is_set():
+            return False
+        for c in sup.exited():
+            _LOG.error("%s exited with status %s before it was up", c.name, c.popen.returncode)
+            return False
+        try:
+            role, pid, alive, _ = changes.get(timeout=0.05)
+        except queue.Empty:
+            if time.monotonic() > deadline:
+                _LOG.error("not up after %.0f s: %s", timeout_s, ", ".join(sorted(want - seen)))
+                return False
+            continue
+        (seen.add if alive else seen.discard)(_name(role, pid))
+    return True
+
+
+def _supervise(args, sc, sup, changes: queue.Queue, log: RunLog, stop: threading.Event, wall0: float) -> str:
+    """Until the run ends (``"ended"``), a stop (``"stopped"``), the timeout or a fatal loss
+    (``"failed"``)."""
+    while not stop.is_set():
+        if log.ended.is_set():
+            return "ended"
+        if args.timeout is not None and time.monotonic() - wall0 > args.timeout:
+            _LOG.error("--timeout %.0f s reached", args.timeout)
+            return "failed"
+        try:
+            role, pid, alive, t_seen = changes.get(timeout=0.05)
+        except queue.Empty:
+            role = None
+        if role is not None and not alive and role in ("agent", "world", "mothership"):
+            name = _name(role, pid)
+            if name in sup.children:
+                what = sup.lost(name, "liveliness token gone")
+                _LOG.warning("%s (seen %.0f ms after the loss)", what, 1000 * (time.monotonic() - t_seen))
+                if role != "agent":
+                    if log.ended.wait(0.5):  # its run_end may still be on its way
+                        return "ended"
+                    _LOG.error("the %s is gone: the run cannot go on", role)
+                    return "failed"
+        elif role is not None and alive and role == "agent":
+            _LOG.info("agent %s is alive", pid)
+        for c in sup.exited():
+            if c.name in ("world", "mothership"):
+                if not log.ended.is_set():
+                    _LOG.error("%s exited with status %s", c.name, c.popen.returncode)
+                    return "failed"
+                continue
+            if c.name == "dashboard":
+                _LOG.warning("the dashboard exited with status %s", c.popen.returncode)
+                c.popen = None
+                continue
+            what = sup.lost(c.name, f"exited with status {c.popen.returncode}")
+            if what:
+                _LOG.warning("%s", what)
+        for c in sup.due_restarts():
+            _LOG.warning("%s restarted (pid %d), rejoining the run", c.name, c.popen.pid)
+    return "stopped"
+
+
+def _wait_summaries(sc, log: RunLog, sup, timeout_s: float = 3.0) -> None:
+    """After ``run_end``, until every live agent's ``summary`` event arrived (or ``timeout_s``)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with log.lock:
+            missing = [
+                v for v in sc.vehicles if v not in log.summaries and sup.children[f"agent/{v}"].running
+            ]
+        if not missing:
+            return
+        time.sleep(0.01)
+
+
+def _hold(args, stop: threading.Event, wall0: float) -> None:
+    print("run over; the swarm stays up until Ctrl-C (or --timeout)", flush=True)
+    while not stop.wait(0.1):
+        if args.timeout is not None and time.monotonic() - wall0 > args.timeout:
+            return
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="swarm launch")
+    sub = parser.add_subparsers(dest="command", required=True)
+    add_parser(sub)
+    args = parser.parse_args(["launch", *(argv or [])])
+    try:
+        return args.func(args)
+    except (ConfigError, SwarmError) as exc:
+        print(f"swarm launch: error: {exc}")
+        return 2

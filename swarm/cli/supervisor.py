@@ -1,0 +1,135 @@
+"""Child processes of ``swarm launch``: start, watch, restart with backoff, and stop, leaving nothing behind.
+
+Each child runs ``python -m <module> ...`` in its own session (process group), so a Ctrl-C in the terminal
+reaches only the launcher, which then stops the children in order; on Linux each child also gets
+``PR_SET_PDEATHSIG = SIGKILL``, so even a launcher killed with SIGKILL takes its children with it. Stopping
+is SIGTERM to the child's group, then SIGKILL to the group after a grace period (a hung child included).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+
+_LOG = logging.getLogger("swarm.launch")
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:  # runs in the child between fork and exec
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    except OSError:
+        pass
+
+
+@dataclass
+class Child:
+    """One supervised process."""
+
+    name: str
+    """``world``, ``mothership``, ``agent/<id>``, ``dashboard``."""
+    args: list[str]
+    """Arguments after ``python -m``."""
+    restartable: bool = False
+    rejoin_args: list[str] = field(default_factory=list)
+    """Extra arguments of a restart (an agent joins the run in progress: ``--rejoin``)."""
+    popen: subprocess.Popen | None = None
+    restarts: int = 0
+    next_start_s: float | None = None
+    """Monotonic time of a pending restart."""
+
+    @property
+    def running(self) -> bool:
+        return self.popen is not None and self.popen.poll() is None
+
+
+class Supervisor:
+    """Starts children, restarts the restartable ones that die (bounded, with exponential backoff) and
+    stops them all."""
+
+    def __init__(self, max_restarts: int = 3, backoff_s: float = 0.5, grace_s: float = 3.0) -> None:
+        self.children: dict[str, Child] = {}
+        self.max_restarts = max_restarts
+        self.backoff_s = backoff_s
+        self.grace_s = grace_s
+
+    def start(self, child: Child, rejoin: bool = False) -> None:
+        args = [sys.executable, "-m", *child.args, *(child.rejoin_args if rejoin else [])]
+        child.popen = subprocess.Popen(
+            args,
+            stdin=subprocess.DEVNULL,
+            stdout=sys.stderr.fileno(),  # children's ready lines and logs go to the launcher's stderr
+            stderr=sys.stderr.fileno(),
+            start_new_session=True,
+            preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
+        child.next_start_s = None
+        self.children[child.name] = child
+        _LOG.debug("started %s (pid %d): %s", child.name, child.popen.pid, " ".join(args))
+
+    def lost(self, name: str, why: str) -> str:
+        """``name`` was seen lost (its liveliness token went, or it exited): kill what is left of it and
+        schedule its restart. Returns what the launcher logs."""
+        child = self.children.get(name)
+        if child is None or child.next_start_s is not None:
+            return ""
+        self._kill(child)
+        if not child.restartable:
+            return f"{name} lost ({why}); not restartable"
+        if child.restarts >= self.max_restarts:
+            return f"{name} lost ({why}); already restarted {child.restarts} times, giving up"
+        delay = self.backoff_s * 2**child.restarts
+        child.restarts += 1
+        child.next_start_s = time.monotonic() + delay
+        return f"{name} lost ({why}); restart {child.restarts}/{self.max_restarts} in {delay:.1f} s"
+
+    def due_restarts(self) -> list[Child]:
+        """Start every child whose restart is due; returns them."""
+        now = time.monotonic()
+        due = [c for c in self.children.values() if c.next_start_s is not None and c.next_start_s <= now]
+        for c in due:
+            self.start(c, rejoin=True)
+        return due
+
+    def exited(self) -> list[Child]:
+        """Children that exited without the launcher asking (not already handled)."""
+        return [c for c in self.children.values() if c.popen is not None and c.popen.poll() is not None
+                and c.next_start_s is None]  # fmt: skip
+
+    def _kill(self, child: Child) -> None:
+        if child.popen is None:
+            return
+        try:
+            os.killpg(child.popen.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+        try:
+            child.popen.wait(5.0)
+        except subprocess.TimeoutExpired:
+            _LOG.error("%s (pid %d) survived SIGKILL for 5 s", child.name, child.popen.pid)
+
+    def stop_all(self) -> None:
+        """SIGTERM every child's group, wait up to ``grace_s``, then SIGKILL the groups of the rest."""
+        live = [c for c in self.children.values() if c.popen is not None]
+        for c in live:
+            c.next_start_s = None
+            try:
+                os.killpg(c.popen.pid, signal.SIGTERM)
+            except (ProcessLookupError, PermissionError):
+                pass
+        deadline = time.monotonic() + self.grace_s
+        for c in live:
+            left = max(0.0, deadline - time.monotonic())
+            try:
+                c.popen.wait(left)
+            except subprocess.TimeoutExpired:
+                _LOG.warning("%s did not stop within %.1f s: killing it", c.name, self.grace_s)
+            self._kill(c)  # the group too: a grandchild must not outlive it
