@@ -41,6 +41,12 @@ def _seed(text: str) -> int:
     return value
 
 
+def _agents(text: str) -> int:
+    from swarm.transport.process import _agents_arg
+
+    return _agents_arg(text)
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("sim", help="run one docking in-process and print its outcome")
     add_scenario_args(p)
@@ -48,6 +54,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--policy", choices=("fixed", "mdp"), default=None, help="switching policy (default: scenario's)"
     )
     p.add_argument("--seed", type=_seed, default=0, help="root seed of every random stream (default 0)")
+    p.add_argument(
+        "--agents", type=_agents, default=1, metavar="N", help="copies of the scenario's pairs (default: 1)"
+    )
     p.add_argument(
         "--json", type=Path, default=None, metavar="FILE", help="write the summary and time series"
     )
@@ -87,7 +96,7 @@ def print_summary(res: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     from swarm.sim.docking import run_docking
 
-    sc = load_from_args(args)
+    sc = load_from_args(args).with_pairs(args.agents)
     record = not args.no_series or args.plot is not None or args.json is not None
     res = run_docking(sc, args.policy, args.seed, record_series=record)
     print_summary(res)
