@@ -20,7 +20,6 @@ each anchor, :func:`position_from_ranges`), then flies again from that estimate.
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 
@@ -115,7 +114,7 @@ class AgentProcess:
         self.drops = DropCounter()
         self.assembler = AgentTickAssembler(
             vehicle_id, self.chaser, self.target_id, sc.every(sc.uwb.rate_hz), self.vision_every,
-            start=None if rejoin else 0,
+            start=None if rejoin else 0, wait_for_target=clock.lockstep,
         )  # fmt: skip
         self.agent: VehicleAgent | None = None
         if not rejoin:
@@ -129,26 +128,19 @@ class AgentProcess:
         self._mode = "HOLD" if self.chaser else "STATION"
         self._started = threading.Event()
         self._ended = threading.Event()
-        self._queue: queue.Queue = queue.Queue()
-        self._target_latest: Estimate | None = None
         self._init_ranges: dict[int, float] = {}
         self._init_q: np.ndarray | None = None
         self._last_decision_t: float | None = None
         self.ticks = 0
+        self._last_tick: int | None = None
 
     # ------------------------------------------------------------------------------ Zenoh side
 
     def _on_sensor(self, key: str, msg) -> None:
-        if self.clock.lockstep:
-            self.assembler.add(msg, self.id)
-        else:
-            self._queue.put(msg)
+        self.assembler.add(msg, self.id)
 
     def _on_target(self, key: str, msg: Estimate) -> None:
-        if self.clock.lockstep:
-            self.assembler.add(msg, self.target_id)
-        else:
-            self._queue.put(msg)
+        self.assembler.add(msg, self.target_id)
 
     def _on_clock(self, _key: str, msg: Clock) -> None:
         if msg.state in ("running", "paused"):
@@ -160,7 +152,8 @@ class AgentProcess:
         if role == "agent" and pid == self.target_id:
             if not alive:
                 _LOG.warning("%s: target %s lost; holding its last estimate", self.id, pid)
-            self.assembler.set_target_live(alive)
+            if self.clock.lockstep:
+                self.assembler.set_target_live(alive)
 
     # ------------------------------------------------------------------------------ publishing
 
@@ -272,7 +265,10 @@ class AgentProcess:
         if self.chaser and inp.target_estimate is not None:
             self._set_target(inp.target_estimate)
         if inp.imu is not None:
-            a.on_imu(t, self.dt, inp.imu.gyro_body, inp.imu.q_ahrs_ms_body)
+            # a free-running agent that skipped ticks propagates over the whole gap
+            gap = k - self._last_tick if self._last_tick is not None and k > self._last_tick else 1
+            a.on_imu(t, gap * self.dt, inp.imu.gyro_body, inp.imu.q_ahrs_ms_body)
+        self._last_tick = k
         if inp.uwb is not None and inp.uwb.range_m is not None:
             a.on_uwb(inp.uwb.anchor_id, inp.uwb.range_m)
         if inp.vision is not None and inp.vision.seen:
@@ -307,25 +303,16 @@ class AgentProcess:
             self._process(inp)
 
     def _run_free(self) -> None:
-        """Realtime/scaled: process each message as it arrives."""
+        """Realtime/scaled: the same in-order ticks, but a tick whose range or camera frame is late by more
+        than ``grace`` (half a tick of wall time, at least 2 ms) is processed without it, and the target's
+        estimate is the newest one at hand: the world does not wait for anybody."""
+        grace = max(0.002, 0.5 * self.dt / self.clock.factor)
         while not self.stop.is_set() and not self._ended.is_set():
-            try:
-                msg = self._queue.get(timeout=0.05)
-            except queue.Empty:
-                continue
-            if isinstance(msg, Estimate):
-                self._target_latest = msg
-                if self.agent is not None:
-                    self._set_target(msg)
-            elif isinstance(msg, Imu):
-                self._process(TickInputs(msg.tick, imu=msg))
-            elif isinstance(msg, Uwb):
-                if self.agent is None:
-                    self._collect_init(None, msg)
-                elif msg.range_m is not None:
-                    self.agent.on_uwb(msg.anchor_id, msg.range_m)
-            elif isinstance(msg, Vision) and self.agent is not None and msg.seen:
-                self.agent.on_vision(msg.tick * self.dt, msg.kind, msg.data)
+            inp = self.assembler.next_tick(grace)
+            if inp is None:
+                inp = self.assembler.take_partial()
+            if inp is not None:
+                self._process(inp)
 
     def _warm_up(self) -> None:
         """Run every compiled kernel once on a throwaway agent, so that numba's compilation (or cache

@@ -116,12 +116,15 @@ class AgentTickAssembler:
         vision_every: int | None = None,
         start: int | None = 0,
         max_ahead: int = DEFAULT_MAX_AHEAD,
+        wait_for_target: bool = True,
     ) -> None:
         """``agent_id``: this vehicle; ``is_chaser``: whether ticks need the target's estimates;
         ``target_id``: the target's agent id (required for a chaser); ``uwb_every``: ticks between two UWB
         slots (``uwb(k)`` expected when ``k % uwb_every == 0``, ``k >= 1``); ``vision_every``: ticks between
         two camera frames of this vehicle (``None``: no camera); ``start``: the first tick (``None``: join
-        at the first ``imu``); ``max_ahead``: ticks beyond the next expected one that are still buffered."""
+        at the first ``imu``); ``max_ahead``: ticks beyond the next expected one that are still buffered;
+        ``wait_for_target``: ``False`` (a free-running clock) never waits for the target's estimate, each
+        tick carrying the newest one up to tick ``k - 1``."""
         self.agent_id = check_id(agent_id)
         self.is_chaser = bool(is_chaser)
         self.target_id = check_id(target_id, "target id") if (is_chaser or target_id is not None) else None
@@ -133,10 +136,10 @@ class AgentTickAssembler:
         self._frames: dict[int, _Frame] = {}
         self._estimates: dict[int, Estimate] = {}  # by the estimate's own tick
         self._held: Estimate | None = None  # the newest target estimate handed out
-        self._target_live = True
+        self._target_live = bool(wait_for_target)
         self._target_from = 0  # estimates of ticks >= this are required (while the target is live)
         self._closed = False
-        self._counts = dict.fromkeys(("stale", "duplicates", "future", "unexpected"), 0)
+        self._counts = dict.fromkeys(("stale", "duplicates", "future", "unexpected", "incomplete"), 0)
 
     # ------------------------------------------------------------------------------ producers
 
@@ -275,6 +278,38 @@ class AgentTickAssembler:
             self._next = k + 1
             return TickInputs(tick=k, imu=frame.imu, vision=frame.vision, uwb=frame.uwb, target_estimate=est)
 
+    def take_partial(self) -> TickInputs | None:
+        """A free-running clock's way out of a tick that does not complete in time: the next tick that has
+        its ``imu``, with whatever else arrived (missing inputs counted as ``incomplete``, earlier ticks
+        without an ``imu`` skipped); ``None`` if no later ``imu`` arrived either. Messages of the returned
+        tick that come later are stale."""
+        with self._cond:
+            if self._next is None or self._closed:
+                return None
+            ready = sorted(t for t, f in self._frames.items() if f.imu is not None and t >= self._next)
+            if not ready:
+                return None
+            self._counts["incomplete"] += 1
+            self._next = ready[0]
+            for t in [t for t in self._frames if t < self._next]:
+                del self._frames[t]
+        return self.next_tick(0) or self._force()
+
+    def _force(self) -> TickInputs | None:
+        with self._cond:
+            k = self._next
+            frame = self._frames.pop(k, None)
+            if frame is None or frame.imu is None:
+                return None
+            usable = [t for t in self._estimates if t <= max(k - 1, 0)]
+            if usable:
+                self._held = self._estimates[max(usable)]
+                for t in usable:
+                    del self._estimates[t]
+            self._next = k + 1
+            est = self._held if self.is_chaser else None
+            return TickInputs(tick=k, imu=frame.imu, vision=frame.vision, uwb=frame.uwb, target_estimate=est)
+
     def set_target_live(self, live: bool) -> None:
         """The target's agent was seen lost (``False``: ticks stop waiting for its estimates) or back
         (``True``: they wait again from the first estimate it publishes)."""
@@ -330,6 +365,11 @@ class AgentTickAssembler:
     def unexpected(self) -> int:
         """``uwb``/``vision`` off this vehicle's slots, messages of another vehicle, other message types."""
         return self.counts()["unexpected"]
+
+    @property
+    def incomplete(self) -> int:
+        """Ticks taken without all their inputs (:meth:`take_partial`)."""
+        return self.counts()["incomplete"]
 
 
 class CommandBarrier:

@@ -129,7 +129,7 @@ class WorldProcess:
             self._alive.discard(pid)
             self._lost.append(pid)
             self.barrier.set_live(self.barrier.live - {pid})
-        _LOG.warning("agent %s lost: its nozzles are closed and the lockstep goes on without it", pid)
+        _LOG.warning("agent %s lost: its nozzles are closed; the world goes on without it", pid)
 
     def _on_control(self, _key: str, msg: RunControl) -> None:
         self._controls.put(msg)

@@ -69,7 +69,7 @@ def camera(uwb_every: int = 3, vision_every: int = 2, **kw) -> AgentTickAssemble
     return plain(uwb_every, vision_every=vision_every, **kw)
 
 
-ALL_ZERO = dict.fromkeys(("stale", "duplicates", "future", "unexpected"), 0)
+ALL_ZERO = dict.fromkeys(("stale", "duplicates", "future", "unexpected", "incomplete"), 0)
 
 
 # ------------------------------------------------------------------------------ completion rules
@@ -318,6 +318,23 @@ def test_a_lost_target_stops_the_wait_and_its_last_estimate_is_held():
     got = asm.next_tick(0)
     assert got.tick == 4 and got.target_estimate.tick == 3
     assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["uwb", "estimate"]
+
+
+def test_a_free_running_agent_takes_a_late_tick_partially_and_never_waits_for_the_target():
+    asm = chaser(uwb_every=2, wait_for_target=False)
+    asm.add(imu(1))
+    got = asm.next_tick(0)
+    assert got.tick == 1 and got.target_estimate is None  # no estimate yet: not waited for
+    asm.add(imu(2))  # uwb(2) is late
+    assert asm.next_tick(SHORT) is None
+    got = asm.take_partial()
+    assert got.tick == 2 and got.uwb is None and asm.incomplete == 1
+    assert not asm.add(uwb(2))  # came too late: stale
+    asm.add(estimate(2, x=9.0))
+    asm.add(imu(4))  # imu(3) never came: tick 3 is skipped
+    got = asm.take_partial()
+    assert got.tick == 4 and got.target_estimate.tick == 2 and asm.incomplete == 2
+    assert asm.take_partial() is None  # nothing further arrived
 
 
 @pytest.mark.parametrize("seed", range(5))
