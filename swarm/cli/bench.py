@@ -33,9 +33,17 @@ def _sim(quick: bool) -> tuple[dict, str]:
     return record, sim.format_report(record)
 
 
+def _transport(quick: bool) -> tuple[dict, str]:
+    from swarm.bench import transport
+
+    record = transport.run(transport.QUICK if quick else transport.FULL)
+    return record, transport.format_report(record)
+
+
 BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
     "estimator": (_estimator, "estimator step: tandem vs compounded vs FilterPy (paper Table I)"),
     "sim": (_sim, "one in-process docking: real-time factor and profile"),
+    "transport": (_transport, "the swarm over Zenoh: RTT, lockstep tick period (1/4/16 pairs), latency"),
 }
 """Bench name -> (runner taking ``quick``, one-line help). Later issues add sim, montecarlo, transport."""
 

@@ -1,0 +1,203 @@
+"""``swarm bench transport``: the swarm over Zenoh on this machine (DESIGN.md section 7).
+
+Three measurements in one run, all between separate processes on loopback, in the launcher's topology
+(every process a Zenoh client of one router, so each message crosses the router):
+
+1. raw Zenoh ping-pong round trip of a 64-byte payload between two client processes (the floor);
+2. the lockstep tick period of ``swarm launch docking --agents N`` for N = 1, 4, 16 pairs: wall time per
+   world tick over a fixed simulated span (``run_end``'s ``wall_s`` / ticks), and the real-time factor;
+3. sensor-to-estimate latency in ``realtime`` mode: a probe client stamps the arrival of the chaser's
+   ``imu(k)`` and of its ``estimate(k)`` on one clock; the difference is the agent's receive, filter and
+   publish time plus one router hop each way.
+
+Run as ``python -m swarm.bench.transport ping|pong ...`` it is the ping or the pong process.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import msgpack
+import numpy as np
+
+QUICK = {"rtt_samples": 500, "pairs": (1, 4), "span_s": 5.0, "latency_s": 4.0}
+FULL = {"rtt_samples": 3000, "pairs": (1, 4, 16), "span_s": 10.0, "latency_s": 10.0}
+
+
+def _free() -> str:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def _client(endpoint: str):
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
+
+
+def _router(endpoint: str):
+    from swarm.transport.session import ZenohArgs, open_session
+
+    return open_session(ZenohArgs(mode="router", listen=(endpoint,)))
+
+
+def _pong(endpoint: str, ns: str) -> None:
+    import zenoh
+
+    with _client(endpoint) as s:
+        pub = s.declare_publisher(f"{ns}/pong", express=True, reliability=zenoh.Reliability.RELIABLE)
+        s.declare_subscriber(f"{ns}/ping", lambda sample: pub.put(sample.payload))
+        s.liveliness().declare_token(f"{ns}/pong-up")
+        print("pong ready", flush=True)
+        sys.stdin.read()  # until the parent closes our stdin
+
+
+def _ping(endpoint: str, ns: str, n: int) -> None:
+    import zenoh
+
+    got = threading.Event()
+    with _client(endpoint) as s:
+        pub = s.declare_publisher(f"{ns}/ping", express=True, reliability=zenoh.Reliability.RELIABLE)
+        s.declare_subscriber(f"{ns}/pong", lambda _s: got.set())
+        payload = b"x" * 64
+        rtts = []
+        for i in range(n + 50):
+            got.clear()
+            t0 = time.perf_counter()
+            pub.put(payload)
+            if not got.wait(2.0):
+                continue
+            if i >= 50:  # warm-up
+                rtts.append(time.perf_counter() - t0)
+        print(json.dumps(rtts), flush=True)
+
+
+def _rtt(n: int) -> dict:
+    endpoint, ns = _free(), f"bench{os.getpid()}"
+    with _router(endpoint) as router:
+        pong = subprocess.Popen([sys.executable, "-m", "swarm.bench.transport", "pong", endpoint, ns],
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
+        try:
+            assert pong.stdout.readline().strip() == "pong ready"
+            deadline = time.monotonic() + 10
+            while not list(router.liveliness().get(f"{ns}/pong-up")) and time.monotonic() < deadline:
+                time.sleep(0.01)
+            ping = [sys.executable, "-m", "swarm.bench.transport", "ping", endpoint, ns, str(n)]
+            out = subprocess.run(ping, capture_output=True, text=True, timeout=300)
+            rtts = np.array(json.loads(out.stdout.strip().splitlines()[-1])) * 1e6
+        finally:
+            pong.stdin.close()
+            pong.wait(10)
+    return {"median": float(np.median(rtts)), "p99": float(np.percentile(rtts, 99)), "n": len(rtts)}
+
+
+def _lockstep(pairs: int, span_s: float) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run.json"
+        cmd = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--until-docked",
+               "--agents", str(pairs), "--set", f"sim.max_duration_s={span_s}", "--json", str(out),
+               "--namespace", f"bench{os.getpid()}x{pairs}"]  # fmt: skip
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+        if not out.exists():
+            raise RuntimeError(f"launch --agents {pairs} failed ({r.returncode}):\n{r.stderr[-2000:]}")
+        res = json.loads(out.read_text())
+    ticks = round(res["sim_time_s"] * 100)
+    return {"tick_us": 1e6 * res["wall_s"] / ticks, "realtime_factor": res["realtime_factor"], "ticks": ticks}
+
+
+def _latency(duration_s: float) -> dict:
+    from swarm.transport.keys import Keys
+
+    ns = f"benchlat{os.getpid()}"
+    keys = Keys(ns)
+    endpoint = _free()
+    cmd = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--clock", "realtime",
+           "--namespace", ns, "--listen", endpoint]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    imu_at: dict[int, float] = {}
+    lat: list[float] = []
+
+    def on_imu(sample) -> None:
+        now = time.perf_counter()  # stamp first: decoding is the probe's cost, not the swarm's
+        imu_at[msgpack.unpackb(bytes(sample.payload))["tick"]] = now
+
+    def on_est(sample) -> None:
+        now = time.perf_counter()
+        k = msgpack.unpackb(bytes(sample.payload))["tick"]
+        if k in imu_at:
+            lat.append(now - imu_at.pop(k))
+
+    try:
+        for line in proc.stdout:
+            if line.startswith("swarm up:"):
+                break
+        with _client(endpoint) as s:
+            s.declare_subscriber(keys.imu("chaser"), on_imu)
+            s.declare_subscriber(keys.estimate("chaser"), on_est)
+            time.sleep(duration_s)
+    finally:
+        proc.send_signal(2)
+        proc.wait(30)
+    a = np.array(lat[10:]) * 1e6
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "n": len(a)}
+
+
+def run(preset: dict) -> dict:
+    rtt = _rtt(preset["rtt_samples"])
+    lock = {str(n): _lockstep(n, preset["span_s"]) for n in preset["pairs"]}
+    latency = _latency(preset["latency_s"])
+    one = lock["1"]["tick_us"]
+    return {
+        "zenoh_rtt_us": rtt,
+        "lockstep_tick_us": {n: v["tick_us"] for n, v in lock.items()},
+        "lockstep_realtime_factor": {n: v["realtime_factor"] for n, v in lock.items()},
+        "latency_us": latency,
+        "one_pair_tick_over_rtt": one / rtt["median"],
+        "goals": {
+            "one_pair_tick_le_2x_rtt": one <= 2 * rtt["median"],
+            "pairs16_ge_10x_realtime": lock.get("16", {}).get("realtime_factor", 0) >= 10,
+            "latency_p99_lt_1ms": latency["p99"] < 1000,
+        },
+        "cores": os.cpu_count(),
+        "load_1min": os.getloadavg()[0],
+    }
+
+
+def format_report(r: dict) -> str:
+    rtt = r["zenoh_rtt_us"]
+    lines = [
+        f"Zenoh ping-pong RTT (64 B, two clients via the router): median {rtt['median']:.0f} us, "
+        f"p99 {rtt['p99']:.0f} us",
+        "lockstep tick period (swarm launch --agents N):",
+    ]
+    for n, t in r["lockstep_tick_us"].items():
+        lines.append(
+            f"  {n:>2} pair(s): {t:8.0f} us per tick, {r['lockstep_realtime_factor'][n]:.1f}x real time"
+        )
+    lines.append(f"  one pair / RTT = {r['one_pair_tick_over_rtt']:.1f} (goal <= 2)")
+    lat = r["latency_us"]
+    lines.append(
+        f"sensor-to-estimate latency (realtime): median {lat['median']:.0f} us, p99 {lat['p99']:.0f} us"
+    )
+    lines.append("goals: " + ", ".join(f"{k} {'met' if v else 'NOT met'}" for k, v in r["goals"].items()))
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    if sys.argv[1] == "pong":
+        _pong(sys.argv[2], sys.argv[3])
+    elif sys.argv[1] == "ping":
+        _ping(sys.argv[2], sys.argv[3], int(sys.argv[4]))
