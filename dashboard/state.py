@@ -38,7 +38,8 @@ ALIVE, LOST, UNSEEN = "alive", "lost", "unseen"
 
 
 class Trail:
-    """A vehicle's path: positions at least ``min_step_m`` apart, at most ``cap`` of them.
+    """A vehicle's path: positions at least ``min_step_m`` apart, at most ``cap`` of them, ending at the
+    newest position (the last point moves with the vehicle until it is ``min_step_m`` from the one before).
 
     When full, every other point is dropped (the newest kept) and the spacing doubles, so the trail covers
     the whole run at a uniform density in bounded memory: ``cap * 3`` floats, whatever the run's length.
@@ -61,10 +62,16 @@ class Trail:
         return self._n
 
     def add(self, p_ms: np.ndarray) -> bool:
-        """Append ``p_ms`` (3,) [m] if it is ``min_step_m`` or more from the last point; True if added."""
+        """Make ``p_ms`` (3,) [m] the trail's end: a new point if the current end is ``min_step_m`` or more
+        from the point before it, else the end moves there. True if the trail changed."""
         p = np.asarray(p_ms, dtype=np.float64).reshape(3)
-        if self._n and float(np.linalg.norm(p - self._buf[self._n - 1])) < self.min_step_m:
+        n = self._n
+        if n and np.array_equal(p, self._buf[n - 1]):
             return False
+        if n >= 2 and float(np.linalg.norm(self._buf[n - 1] - self._buf[n - 2])) < self.min_step_m:
+            self._buf[n - 1] = p
+            self.version += 1
+            return True
         if self._n == self.cap:
             keep = self._buf[self._n - 1 :: -2][::-1].copy()  # every other point, ending at the newest
             self._n = len(keep)
@@ -87,7 +94,8 @@ class Trail:
 
 
 class Series:
-    """Time series of ``width`` values, samples at least ``min_dt_s`` apart, at most ``cap`` of them; when
+    """Time series of ``width`` values, samples at least ``min_dt_s`` apart, at most ``cap`` of them, ending
+    at the newest sample (the last one is replaced until it is ``min_dt_s`` after the one before); when
     full, every other sample is dropped and the spacing doubles (like :class:`Trail`). A value may be NaN
     (not available: uPlot draws a gap)."""
 
@@ -106,13 +114,20 @@ class Series:
         return self._n
 
     def add(self, t_s: float, values: Iterable[float | None]) -> bool:
-        """Append a sample at ``t_s`` (``None`` values become NaN) unless it is less than ``min_dt_s`` after
-        the previous one; True if added. A time earlier than the last one restarts the series (a new run)."""
+        """Make ``(t_s, values)`` the newest sample (``None`` values become NaN): appended if the current last
+        sample is ``min_dt_s`` or more after the one before it, else it replaces the last. A time earlier
+        than the last one restarts the series (a new run). True if the series changed."""
         row = np.array([np.nan if v is None else float(v) for v in values])
-        if self._n and t_s < self._t[self._n - 1]:
+        n = self._n
+        if n and t_s < self._t[n - 1]:
             self.clear()
-        if self._n and t_s - self._t[self._n - 1] < self.min_dt_s:
+            n = 0
+        if n and t_s == self._t[n - 1] and np.array_equal(row, self._v[n - 1], equal_nan=True):
             return False
+        if n >= 2 and self._t[n - 1] - self._t[n - 2] < self.min_dt_s:
+            self._t[n - 1], self._v[n - 1] = t_s, row
+            self.version += 1
+            return True
         if self._n == self.cap:
             idx = np.arange(self._n - 1, -1, -2)[::-1]
             self._t[: len(idx)], self._v[: len(idx)] = self._t[idx], self._v[idx]
