@@ -189,8 +189,8 @@ class SceneView:
                     mapping.anchor_node(anchor_id), radius=0.03, color=(192, 57, 43), position=tuple(p)
                 )
             )
-            label = f"{mapping.anchor_node(anchor_id)}/label"
-            self._anchor_nodes.append(scene.add_label(label, f"anchor {anchor_id}", position=(0, 0, 0.06)))
+            label = f"{mapping.anchor_node(anchor_id)}/label"  # a child: removed with its anchor
+            scene.add_label(label, f"anchor {anchor_id}", position=(0, 0, 0.06))
 
     def update(self, snap: Snapshot, trails_due: bool) -> None:
         if snap.anchors_version != self._anchors_version:
@@ -301,6 +301,7 @@ class GuiView:
     ) -> None:
         gui = server.gui
         self._send = send
+        gui.add_markdown("#### TPODS swarm")
         self.status = gui.add_markdown("**no clock yet**")
         with gui.add_folder("Run"):
             self.buttons = {}
@@ -445,7 +446,7 @@ class DashboardApp:
             series_cap=self.params.series_cap,
         )
         with contextlib.redirect_stdout(sys.stderr):  # Viser's banner: stdout is for the ready line
-            self.server = viser.ViserServer(host=host, port=port, label="TPODS swarm", verbose=False)
+            self.server = viser.ViserServer(host=host, port=port, verbose=False)
         try:
             self.server.gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
             _initial_camera(self.server, sc)
