@@ -84,11 +84,18 @@ class DashboardParams:
             raise ConfigError(f"dashboard.trail_step_m must be finite and >= 0, got {self.trail_step_m!r}")
 
 
-def _initial_camera(server: viser.ViserServer, sc: Scenario) -> None:
+def _frame_the_scene(server: viser.ViserServer, sc: Scenario) -> None:
+    """A floor grid under the scenario's vehicles and anchors, and the initial camera looking at them."""
     vehicles = np.array([v.position_m for v in sc.vehicles.values()], dtype=float).reshape(-1, 3)
     pts = np.vstack([vehicles, np.array(sc.anchors_m, dtype=float).reshape(-1, 3)])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    extent = float(np.max(hi - lo))
+    size = float(np.ceil(extent + 2.0))
+    server.scene.add_grid(
+        "/grid", width=size, height=size, cell_size=0.25, section_size=1.0, plane="xy",
+        position=(*np.round(0.5 * (lo[:2] + hi[:2])).tolist(), float(lo[2]) - 0.25),
+    )  # fmt: skip
     centre = vehicles.mean(axis=0) if len(vehicles) else pts.mean(axis=0)
-    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
     direction = np.array([-0.55, -1.0, 0.75])
     eye = centre + 1.6 * max(extent, 1.0) * direction / np.linalg.norm(direction)
     server.initial_camera.position = tuple(eye)
@@ -167,8 +174,6 @@ class SceneView:
         self._anchors_version: int | None = None
         self._anchor_nodes: list[object] = []
         self._run: int | None = None
-        scene = server.scene
-        scene.add_grid("/grid", width=4.0, height=4.0, cell_size=0.25, section_size=1.0, plane="xy")
         self._outline = None
 
     def _draw_anchors(self, ids: tuple[int, ...], positions: np.ndarray) -> None:
@@ -208,17 +213,16 @@ class SceneView:
         return {k: n.trail_versions for k, n in self.nodes.items() if n.trail_versions is not None}
 
     def _update_agent(self, nodes: _AgentNodes, a: AgentSnap, snap: Snapshot, trails_due: bool) -> None:
+        shapes_due = trails_due
         if a.truth is not nodes.truth_msg:
             nodes.truth_msg = a.truth
-            if a.truth is None:
-                nodes.truth.visible = False
-            else:
+            if a.truth is not None:
                 nodes.truth.position, nodes.truth.wxyz = mapping.pose_wxyz(a.truth.p_ms, a.truth.q_ms_body)
-                nodes.truth.visible = True
+            _set(nodes.truth, "visible", a.truth is not None)
             if nodes.keepout is not None:
-                nodes.keepout.visible = a.truth is not None
                 if a.truth is not None:
                     nodes.keepout.position = a.truth.p_ms
+                _set(nodes.keepout, "visible", a.truth is not None)
         color = mapping.mode_color(a.guidance.mode if a.guidance is not None else None, a.role)
         if color != nodes.color:
             nodes.color = color
@@ -226,17 +230,20 @@ class SceneView:
         est = a.estimate
         if est is not nodes.estimate_msg:
             nodes.estimate_msg = est
-            nodes.estimate.visible = est is not None
+            _set(nodes.estimate, "visible", est is not None)
+            _set(nodes.cov, "visible", est is not None)
             if est is not None:
                 nodes.estimate.position, nodes.estimate.wxyz = mapping.pose_wxyz(est.p_ms, est.q_ms_body)
-        cov_key = (id(est), self.n_sigma)
-        if cov_key != nodes.cov_key:
-            nodes.cov_key = cov_key
-            nodes.cov.visible = est is not None
-            if est is not None:
-                radii, wxyz = mapping.covariance_ellipsoid(est.cov[:3, :3], self.n_sigma)
-                nodes.cov.position, nodes.cov.wxyz = est.p_ms, wxyz
-                nodes.cov.scale = tuple(float(r) for r in radii)
+                nodes.cov.position = est.p_ms
+            else:
+                nodes.cov_key = None
+        # The covariance changes slowly: the ellipsoid's shape (an eigen-decomposition and two messages per
+        # vehicle) follows at the trail rate, and at once for a first estimate or a new sigma.
+        if est is not None and (shapes_due or nodes.cov_key != self.n_sigma):
+            nodes.cov_key = self.n_sigma
+            radii, wxyz = mapping.covariance_ellipsoid(est.cov[:3, :3], self.n_sigma)
+            nodes.cov.wxyz = wxyz
+            nodes.cov.scale = tuple(float(r) for r in radii)
         if nodes.fov is not None:
             self._update_fov(nodes, a, snap)
         if nodes.radii:
@@ -245,10 +252,10 @@ class SceneView:
             nodes.trail_versions = a.trail_versions
             for handle, pts in ((nodes.trail_truth, a.truth_trail), (nodes.trail_estimate, a.estimate_trail)):
                 if pts is None or len(pts) < 2 or not self.show_trails:
-                    handle.visible = False
+                    _set(handle, "visible", False)
                 else:
                     handle.points = np.stack([pts[:-1], pts[1:]], axis=1).astype(np.float32)
-                    handle.visible = True
+                    _set(handle, "visible", True)
 
     def _update_fov(self, nodes: _AgentNodes, a: AgentSnap, snap: Snapshot) -> None:
         target = snap.agents.get(a.target) if a.target is not None else None
@@ -280,11 +287,11 @@ class SceneView:
         for name, handle in nodes.radii.items():
             r = radii[name]
             if r is None or centre is None:
-                handle.visible = False
+                _set(handle, "visible", False)
             else:
                 handle.position = centre
                 handle.scale = r
-                handle.visible = True
+                _set(handle, "visible", True)
 
 
 class GuiView:
@@ -384,10 +391,12 @@ class GuiView:
     def update_panels(self, snap: Snapshot, dropped: int) -> None:
         _set(self.status, "content", panels.status_markdown(snap, dropped))
         _set(self.table, "content", panels.agents_table(snap))
-        chasers = sorted(k for k, a in snap.agents.items() if a.role != "target" and a.guidance is not None)
+        chasers = [k for k, a in snap.agents.items() if a.role != "target" and a.guidance is not None]
         known = list(self.chaser.options)
         if chasers and any(c not in known for c in chasers):
-            self.chaser.options = sorted(set(c for c in known if c != "-") | set(chasers))
+            self.chaser.options = sorted(
+                {c for c in known if c != "-"} | set(chasers), key=panels.natural_key
+            )
         selected = snap.agents.get(self.chaser.value)
         _set(
             self.decision,
@@ -449,10 +458,12 @@ class DashboardApp:
             self.server = viser.ViserServer(host=host, port=port, verbose=False)
         try:
             self.server.gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
-            _initial_camera(self.server, sc)
+            _frame_the_scene(self.server, sc)
             self.link = SwarmLink(session, keys, self.state, self.drops, process_id=process_id)
             self.scene = SceneView(self.server, sc, self.params)
-            chasers = sorted(k for k, v in sc.vehicles.items() if v.role == "chaser")
+            chasers = sorted(
+                (k for k, v in sc.vehicles.items() if v.role == "chaser"), key=panels.natural_key
+            )
             self.gui = GuiView(self.server, self.link.send, chasers, self.scene, self.state)
         except BaseException:
             with contextlib.redirect_stdout(sys.stderr):

@@ -6,6 +6,7 @@ the event log. Markdown strings and numpy arrays in, no Viser: tested without a 
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 
 import numpy as np
@@ -21,11 +22,17 @@ __all__ = [
     "fmt",
     "mode_steps",
     "modes_markdown",
+    "natural_key",
     "rejected_text",
     "status_markdown",
 ]
 
 _DASH = "–"
+
+
+def natural_key(text: str) -> tuple:
+    """Sort key that orders ``chaser2`` before ``chaser10``."""
+    return tuple(int(part) if part.isdigit() else part for part in re.split(r"(\d+)", text))
 
 
 def fmt(value: float | None, digits: int = 3, scale: float = 1.0, unit: str = "") -> str:
@@ -57,7 +64,7 @@ def agents_table(snap: Snapshot) -> str:
         "| agent | role | mode | range [m] | σ [cm] | rejected | agent process |",
         "|---|---|---|---|---|---|---|",
     ]
-    for agent_id in sorted(snap.agents):
+    for agent_id in sorted(snap.agents, key=natural_key):
         a = snap.agents[agent_id]
         g = a.guidance
         role = a.role

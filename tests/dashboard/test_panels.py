@@ -97,3 +97,9 @@ def test_modes_and_events_are_listed_newest_first() -> None:
 def test_missing_numbers_are_dashes() -> None:
     assert panels.fmt(None) == "–" and panels.fmt(float("nan")) == "–"
     assert panels.fmt(0.01234, 2, 100.0, " cm") == "1.23 cm"
+
+
+def test_agents_are_listed_in_natural_order() -> None:
+    vehicles = {f"chaser{i}": ("chaser", f"target{i}") for i in (10, 2, 1)}
+    table = panels.agents_table(SwarmState(vehicles, ANCHORS).snapshot())
+    assert [line.split(" | ")[0][2:] for line in table.splitlines()[2:]] == ["chaser1", "chaser2", "chaser10"]
