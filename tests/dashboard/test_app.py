@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import re
 import sys
+import time
 from collections.abc import Iterator
 
 import pytest
@@ -85,6 +86,24 @@ def test_table_names_the_agents_with_their_modes(harness: Harness) -> None:
     harness.wait_for(lambda: "| STATION |" in harness.table_row("target"), "the target's mode in the table")
     assert "running" in app.gui.status.content
     assert app.drops.total == 0
+
+
+def test_anchors_of_a_swarm_started_before_the_dashboard_come_from_the_queryable(harness: Harness) -> None:
+    harness.swarm()  # it publishes its anchors once at start, before the dashboard exists
+    app = harness.start_app()
+    harness.wait_for(lambda: app.state.snapshot().anchors_version > 0, "the anchors from a get")
+    ids, positions = app.state.snapshot().anchors
+    assert ids == (0, 1, 2, 3) and positions.shape == (4, 3)
+
+
+def test_frames_to_the_browser_never_exceed_the_maximum_rate(harness: Harness) -> None:
+    harness.swarm("--rate-hz", "400")  # samples arrive much faster than frames may go
+    app = harness.start_app()
+    harness.wait_for(lambda: app.frames > 0, "a first frame")
+    f0, t0 = app.frames, time.monotonic()
+    time.sleep(2.0)
+    rate = (app.frames - f0) / (time.monotonic() - t0)
+    assert rate <= 1.1 * app.params.max_hz, f"{rate:.1f} frames/s"  # an upper bound: load only lowers it
 
 
 def test_an_agent_whose_process_dies_is_shown_lost_then_alive_again(harness: Harness) -> None:
