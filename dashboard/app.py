@@ -209,6 +209,12 @@ class SceneView:
                 nodes = self.nodes[agent_id] = _AgentNodes(self.server.scene, a, self.sc)
             self._update_agent(nodes, a, snap, trails_due or new_run)
 
+    def set_show_trails(self, show: bool) -> None:
+        """Show or hide every trail (their history is kept): all are pushed again at the next trail frame."""
+        self.show_trails = show
+        for nodes in list(self.nodes.values()):
+            nodes.trail_versions = None
+
     def trail_versions(self) -> dict[str, tuple[int, int]]:
         return {k: n.trail_versions for k, n in self.nodes.items() if n.trail_versions is not None}
 
@@ -363,8 +369,7 @@ class GuiView:
 
         @trails.on_update
         def _(_event: object) -> None:
-            scene.show_trails = bool(trails.value)
-            state.clear_trails()  # forces a trail push: hidden or redrawn
+            scene.set_show_trails(bool(trails.value))
 
         @clear.on_click
         def _(_event: object) -> None:

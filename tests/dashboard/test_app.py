@@ -192,3 +192,16 @@ def test_new_seed_button_starts_a_new_run(harness: Harness) -> None:
     app.gui.press("new_seed")
     harness.wait_for(lambda: "seed 5" in app.gui.status.content, "the new seed")
     harness.wait_for(lambda: app.state.run >= 1, "a new run")
+
+
+def test_hiding_trails_keeps_their_history(harness: Harness) -> None:
+    harness.swarm("--speed", "0.3")
+    app = harness.start_app()
+    harness.wait_for(lambda: "chaser" in app.scene.nodes, "the chaser's nodes")
+    nodes = app.scene.nodes["chaser"]
+    harness.wait_for(lambda: nodes.trail_truth.visible and len(nodes.trail_truth.points) > 5, "a trail")
+    app.scene.set_show_trails(False)
+    harness.wait_for(lambda: not nodes.trail_truth.visible, "the trail hidden")
+    app.scene.set_show_trails(True)
+    harness.wait_for(lambda: nodes.trail_truth.visible, "the trail shown again")
+    assert len(app.state.agents["chaser"].truth_trail) > 5
