@@ -4,10 +4,10 @@ by one render thread.
 Each frame (at most ``max_hz``, and slower when frames get expensive, :class:`~dashboard.state.FramePacer`)
 the render thread polls the newest samples (:meth:`~dashboard.link.SwarmLink.poll`), takes one snapshot
 and pushes to the browser only what changed since the previous frame, inside one ``server.atomic()``
-block so the browser applies a frame at once. Poses follow every frame; trails, tables and plots, which
-cost more to send, at their own lower rates (``DashboardParams``). Measured here (viser 1.1.1): a frame
-that moves 32 vehicles (pose, ellipsoid) costs ~2-3 ms of Python; DESIGN.md section 9 gives ~150 us
-per node update.
+block so the browser applies a frame at once. Poses follow every frame; trails, covariance shapes,
+tables and plots, which cost more, at their own lower rates (``DashboardParams``). Measured here (viser
+1.1.1, 2 shared cores under load, one browser connected): 16 pairs (32 vehicles) cost ~14 ms per frame
+(median; decoding the newest samples included), so ~20 frames/s; one pair ~2 ms, 30 frames/s.
 
 Scene (paper Fig. 1): the mothership's outline and UWB anchors; each vehicle's true pose (a box in its
 mode's colour, axes, label) and estimated pose (a wireframe box and axes), the 3-sigma position

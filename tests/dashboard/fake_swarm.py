@@ -31,7 +31,7 @@ import numpy as np
 import zenoh
 
 from swarm.core.mdp import DECISION_KEYS
-from swarm.transport.keys import Keys
+from swarm.transport.keys import AGENT_KINDS, Keys
 from swarm.transport.messages import (
     Anchors,
     Clock,
@@ -268,10 +268,11 @@ class FakeSwarm:
         bad = GARBAGE[self.tick % len(GARBAGE)]
         for pair in self.pairs:
             for vid in (pair.chaser, pair.target):
-                for kind in ("truth", "estimate", "guidance", "vision", "event"):
+                for kind in AGENT_KINDS:
                     self.put(getattr(self.keys, kind)(vid), bad)
         self.put(self.keys.world_clock(), bad)
         self.put(self.keys.anchors(), bad)
+        self.put(self.keys.run_control(), bad)  # the world's own subscriber drops it too
 
     def run(self, stop: threading.Event) -> None:
         self.put(self.keys.anchors(), self.anchors)
