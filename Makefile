@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 PYTEST_ARGS ?=
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean chromium
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -20,8 +20,19 @@ lint: $(STAMP)
 	$(PY) -m ruff check .
 	$(PY) -m ruff format --check .
 
+# The dashboard's browser tests drive Debian's chromium through playwright (no browser download). Install it
+# when missing (apt, as root or through sudo); if that is impossible, those tests skip and say why.
+chromium:
+	@command -v chromium >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" -eq 0 ]; then SUDO=; elif command -v sudo >/dev/null 2>&1; then SUDO="sudo -n"; \
+	  else echo "make: chromium missing and neither root nor sudo: browser tests will skip" >&2; exit 0; fi; \
+	  if ! command -v apt-get >/dev/null 2>&1; then \
+	    echo "make: chromium missing and no apt-get: browser tests will skip" >&2; exit 0; fi; \
+	  $$SUDO apt-get update && $$SUDO apt-get install -y chromium \
+	    || echo "make: could not install chromium: browser tests will skip" >&2; }
+
 # pytest exits 5 when it collects nothing: that is a failure of the suite, say so instead of passing.
-test: lint
+test: lint chromium
 	$(PY) -m pytest $(PYTEST_ARGS); rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests" >&2; exit 1; fi; exit $$rc
 

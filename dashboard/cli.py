@@ -1,0 +1,144 @@
+"""Command line of the dashboard: ``python -m dashboard SCENARIO`` and ``swarm dashboard SCENARIO``.
+
+Once serving, it prints one line on stdout (flushed), ``dashboard listening on http://<host>:<port>``, so
+that a launcher or a test can wait for it and read the URL (with ``--port 0`` the OS picks the port;
+if the requested port is busy, Viser takes the next free one and the line says which). It runs until
+SIGINT or SIGTERM, then closes its Zenoh session and the Viser server and exits 0; 2 for bad input.
+
+``--host`` defaults to ``localhost``: the dashboard can pause and reset the swarm, so it is not offered
+to the network unless asked (``--host 0.0.0.0``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+
+from swarm.errors import SwarmError
+
+__all__ = ["DEFAULT_PORT", "READY_PREFIX", "add_arguments", "main", "run"]
+
+_LOG = logging.getLogger("dashboard")
+
+READY_PREFIX = "dashboard listening on "
+"""Start of the line printed once the dashboard serves; the URL follows."""
+DEFAULT_PORT = 8080
+DESCRIPTION = (
+    "Viser web dashboard of a running swarm: live 3D scene (poses, trails, covariance, camera cones, "
+    "switch radii), agents table, mode timeline, Algorithm 1 decisions and run controls. It only "
+    "subscribes and sends run controls. Prints 'dashboard listening on <url>' once up."
+)
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The dashboard's flags: scenario (+ ``--set``), ``--port``, ``--host``, ``--namespace``, ``--id``,
+    ``--max-hz`` and the Zenoh session flags."""
+    from swarm.transport.session import add_zenoh_arguments
+
+    p.add_argument(
+        "scenario", nargs="?", default="docking", help="bundled scenario name or TOML file (default docking)"
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override one scenario field, as for swarm sim (repeatable)",
+    )
+    p.add_argument("--port", type=int, default=DEFAULT_PORT, help="HTTP port (default 8080; 0: any port)")
+    p.add_argument(
+        "--host",
+        default="localhost",
+        help="address to serve on (default localhost; 0.0.0.0 to let other machines in)",
+    )
+    p.add_argument("--namespace", default="tpods", help="Zenoh key namespace of the swarm (default tpods)")
+    p.add_argument("--id", dest="process_id", default="dashboard", help="liveliness id (default dashboard)")
+    p.add_argument("--max-hz", type=float, default=30.0, help="most frames per second sent to browsers (30)")
+    add_zenoh_arguments(p)
+
+
+def _url(host: str, port: int) -> str:
+    shown = "localhost" if host in ("", "0.0.0.0", "::", "localhost", "127.0.0.1") else host
+    if ":" in shown:
+        shown = f"[{shown}]"
+    return f"http://{shown}:{port}"
+
+
+def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
+    """Serve the dashboard of the parsed ``args`` until ``stop`` is set; with ``stop=None`` (the command
+    line) until SIGINT or SIGTERM, whose handlers it installs and restores. Returns 0 after a clean close;
+    ConfigError / SwarmError for bad input or a session that cannot open."""
+    from dashboard.app import DashboardApp, DashboardParams
+    from swarm.cli.sim import load_from_args
+    from swarm.errors import ConfigError
+    from swarm.transport.keys import Keys, check_id
+    from swarm.transport.session import open_session, zenoh_args_from
+
+    if not (0 <= args.port <= 65535):
+        raise ConfigError(f"--port must be in 0..65535, got {args.port}")
+    check_id(args.process_id, "--id")
+    keys = Keys(args.namespace)
+    params = DashboardParams(max_hz=args.max_hz)
+    sc = load_from_args(args)
+    zargs = zenoh_args_from(args)
+    previous: dict[int, object] = {}
+    if stop is None:
+        stop = threading.Event()
+        event = stop
+
+        def on_signal(signum: int, _frame: object) -> None:
+            _LOG.info("dashboard: %s, closing", signal.Signals(signum).name)
+            event.set()
+
+        for sig in _STOP_SIGNALS:
+            previous[sig] = signal.signal(sig, on_signal)
+    try:
+        with open_session(zargs) as session:
+            try:
+                app = DashboardApp(sc, session, keys, args.host, args.port, params, args.process_id)
+            except OSError as exc:
+                raise SwarmError(f"cannot serve on {args.host}:{args.port}: {exc}") from None
+            try:
+                app.start()
+                if args.port not in (0, app.port):
+                    _LOG.warning("port %d is busy: serving on %d instead", args.port, app.port)
+                print(READY_PREFIX + _url(args.host, app.port), flush=True)
+                while not stop.wait(0.5):
+                    pass
+            finally:
+                app.close()
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)  # type: ignore[arg-type]
+    _LOG.info("dashboard closed")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m dashboard``: the same as ``swarm dashboard``."""
+    parser = argparse.ArgumentParser(prog="python -m dashboard", description=DESCRIPTION)
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    if not args.verbose:
+        logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per browser connection
+    try:
+        return run(args)
+    except SwarmError as exc:
+        print(f"dashboard: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,183 @@
+"""The dashboard's Zenoh side: it subscribes, watches liveliness and sends run controls; it never runs
+estimator or guidance code.
+
+The world publishes each vehicle's truth every tick, and agents their estimate and guidance every tick:
+in lockstep that is thousands of samples per second, far more than a browser can show. Those
+latest-value topics (truth, estimate, guidance, vision of each vehicle, and the world clock) are
+subscribed with a Zenoh ``RingChannel(1)``: Zenoh keeps only the newest sample of each key, in Rust, and
+calls no Python per sample; the render loop takes it with :meth:`SwarmLink.poll` once per frame and
+decodes only that one (DESIGN.md section 9: ``RingChannel(1)`` suits latest-value topics). So the
+dashboard's cost follows its frame rate, not the swarm's tick rate. Topics where every sample counts,
+events (mode transitions, contact, loss), anchors and liveliness, use callbacks
+(:func:`~swarm.transport.session.subscribe_decoded`, :func:`~swarm.transport.session.watch_liveliness`).
+
+Every payload is decoded with :func:`~swarm.transport.messages.safe_decode`: an invalid one is counted
+per key in the :class:`~swarm.transport.messages.DropCounter` and logged at a limited rate, never raised.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+import zenoh
+
+from dashboard.state import SwarmState
+from swarm.transport.keys import Keys
+from swarm.transport.messages import (
+    Anchors,
+    Clock,
+    DropCounter,
+    Estimate,
+    Event,
+    Guidance,
+    Message,
+    RunControl,
+    Truth,
+    Vision,
+    encode,
+    safe_decode,
+)
+from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
+
+__all__ = ["LATEST_KINDS", "SwarmLink"]
+
+_LOG = logging.getLogger("dashboard.link")
+
+LATEST_KINDS: dict[str, type[Message]] = {
+    "truth": Truth,
+    "estimate": Estimate,
+    "guidance": Guidance,
+    "vision": Vision,
+}
+"""Per-vehicle topics of which only the newest sample matters to the dashboard."""
+
+
+class SwarmLink:
+    """Subscriptions, liveliness and the run-control publisher of one dashboard, feeding ``state``.
+
+    ``poll()`` (render thread) takes the newest sample of every latest-value topic; callbacks (Zenoh
+    threads) handle events, anchors and liveliness. ``send()`` publishes a RunControl (reliable, block:
+    a user's click must reach the world). The anchors are also asked for with ``get`` in a background
+    thread until one reply comes (a ``get`` right after the mothership declares its queryable can get no
+    reply: DESIGN.md section 9), in case the dashboard starts after they were published.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        state: SwarmState,
+        drops: DropCounter,
+        process_id: str = "dashboard",
+        anchors_retry_s: float = 1.0,
+    ) -> None:
+        self.session = session
+        self.keys = keys
+        self.state = state
+        self.drops = drops
+        self._stop = threading.Event()
+        self._rings: list[tuple[str, type[Message], zenoh.Subscriber]] = []
+        self._clock = session.declare_subscriber(keys.world_clock(), zenoh.handlers.RingChannel(1))
+        self._add_vehicles(state.take_new_agents())
+        subscribe_decoded(session, keys.agent_all("event"), Event, self._on_event, drops)
+        subscribe_decoded(session, keys.anchors(), Anchors, self._on_anchors, drops)
+        watch_liveliness(session, keys, self._on_liveliness)
+        self._run_pub = session.declare_publisher(
+            keys.run_control(),
+            reliability=zenoh.Reliability.RELIABLE,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+            encoding=zenoh.Encoding("application/msgpack"),
+        )
+        self._token = declare_liveliness(session, keys, "dashboard", process_id)
+        self._have_anchors = threading.Event()
+        self._anchors_thread = threading.Thread(
+            target=self._fetch_anchors, args=(anchors_retry_s,), name="dashboard-anchors", daemon=True
+        )
+        self._anchors_thread.start()
+
+    # ---------------------------------------------------------------------------------- render thread
+
+    def _add_vehicles(self, agent_ids: list[str]) -> None:
+        for agent_id in agent_ids:
+            for kind, cls in LATEST_KINDS.items():
+                key = getattr(self.keys, kind)(agent_id)
+                sub = self.session.declare_subscriber(key, zenoh.handlers.RingChannel(1))
+                self._rings.append((agent_id, cls, sub))
+            _LOG.debug("subscribed to vehicle %s", agent_id)
+
+    def poll(self) -> int:
+        """Take the newest sample of every latest-value topic into the state; returns how many were new.
+        Call from one thread (the render loop). Also subscribes to vehicles seen for the first time."""
+        self._add_vehicles(self.state.take_new_agents())
+        n = 0
+        sample = self._clock.try_recv()
+        if sample is not None and sample.kind == zenoh.SampleKind.PUT:
+            clock = safe_decode(sample.payload, Clock, str(sample.key_expr), self.drops)
+            if clock is not None:
+                n += 1
+                if self.state.on_clock(clock):
+                    _LOG.info("new run: seed %d (tick %d)", clock.seed, clock.tick)
+        for agent_id, cls, sub in self._rings:
+            sample = sub.try_recv()
+            if sample is None or sample.kind != zenoh.SampleKind.PUT:
+                continue
+            msg = safe_decode(sample.payload, cls, str(sample.key_expr), self.drops)
+            if msg is None:
+                continue
+            n += 1
+            if cls is Truth:
+                self.state.on_truth(agent_id, msg)  # type: ignore[arg-type]
+            elif cls is Estimate:
+                self.state.on_estimate(agent_id, msg)  # type: ignore[arg-type]
+            elif cls is Guidance:
+                self.state.on_guidance(agent_id, msg)  # type: ignore[arg-type]
+            else:
+                self.state.on_vision(agent_id, msg)  # type: ignore[arg-type]
+        return n
+
+    # ---------------------------------------------------------------------------------- any thread
+
+    def send(self, command: str, seed: int | None = None) -> RunControl:
+        """Publish ``RunControl(command, seed)`` on ``<ns>/control/run``; returns the message sent.
+        MessageError for an unknown command."""
+        msg = RunControl(command=command, seed=seed)
+        self._run_pub.put(encode(msg))
+        _LOG.info("sent run control %s%s", command, "" if seed is None else f" (seed {seed})")
+        return msg
+
+    def close(self) -> None:
+        """Stop the anchors thread. The subscriptions end when the session closes."""
+        self._stop.set()
+        self._anchors_thread.join(timeout=5.0)
+
+    # ---------------------------------------------------------------------------------- Zenoh threads
+
+    def _on_event(self, key: str, msg: Event) -> None:
+        parsed = self.keys.parse(key)
+        if parsed is not None and parsed[1] is not None:
+            self.state.on_event(parsed[1], msg)
+
+    def _on_anchors(self, _key: str, msg: Anchors) -> None:
+        self.state.on_anchors(msg)
+        self._have_anchors.set()
+
+    def _on_liveliness(self, role: str, process_id: str, alive: bool) -> None:
+        change = self.state.on_liveliness(role, process_id, alive)
+        if change is not None:
+            _LOG.info("%s %s %s", role, process_id, change)
+
+    def _fetch_anchors(self, retry_s: float) -> None:
+        key = self.keys.anchors()
+        while not (self._stop.is_set() or self._have_anchors.is_set()):
+            try:
+                for reply in self.session.get(key, timeout=retry_s):
+                    if reply.ok is not None:
+                        msg = safe_decode(reply.ok.payload, Anchors, key, self.drops)
+                        if msg is not None:
+                            self._on_anchors(key, msg)
+            except Exception as exc:  # the session closing under us ends the thread
+                if self._stop.is_set():
+                    return
+                _LOG.debug("anchors get failed: %s", exc)
+            self._stop.wait(retry_s)

@@ -1,0 +1,103 @@
+"""The dashboard in a real browser (issue 5, "must show"): with a launched swarm, headless Chromium loads
+the page, the rendered DOM names every agent and shows a mode, a screenshot of the 3D view is not blank,
+and clicking Pause stops the world's clock while Resume restarts it.
+
+The swarm and its dashboard are real processes on loopback Zenoh (:func:`conftest.launch_swarm`), started
+once for this module; the browser is Debian's ``chromium`` driven by Playwright. Screenshots are kept in
+``artifacts/`` (``dashboard-*.png``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+import cv2
+import numpy as np
+import pytest
+
+from swarm.transport.messages import MODES
+from tests.dashboard.conftest import ARTIFACTS, ClockWatch, LaunchedSwarm, launch_swarm
+from tests.transport.procs import Procs
+
+UI_TIMEOUT_MS = 40_000  # page load, websocket connect and software-GL rendering on a loaded 2-core machine
+CLOCK_TIMEOUT_S = 15.0
+STILL_S = 1.0  # how long a paused clock must stay still (the fake world ticks at 100 Hz when running)
+
+# Grey-level variance of the 3D view (the part of the screenshot left of the GUI panel, below the
+# notification corner). A blank canvas, or a page whose WebGL failed, is uniform: variance 0. The
+# scene here (grid, mothership outline, anchors, vehicles, switch spheres, cones, labels) measured
+# 300-400 in development; 50 (a standard deviation of ~7 grey levels) still fails on a uniform or
+# near-uniform view and leaves margin for camera and layout changes.
+MIN_SCENE_VARIANCE = 50.0
+SCENE_REGION = (slice(160, 800), slice(0, 860))  # rows, columns of a 1280 x 800 screenshot
+
+
+@pytest.fixture(scope="module")
+def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LaunchedSwarm]:
+    with Procs() as procs:
+        yield launch_swarm(procs, tmp_path_factory.mktemp("swarm"), pairs=2)
+
+
+@pytest.fixture(scope="module")
+def page(browser, swarm: LaunchedSwarm) -> Iterator[object]:
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    pg = context.new_page()
+    pg.goto(swarm.url)
+    pg.get_by_text("Connected").first.wait_for(timeout=UI_TIMEOUT_MS)
+    pg.get_by_text("agent process").first.wait_for(timeout=UI_TIMEOUT_MS)  # the agents table header
+    yield pg
+    context.close()
+
+
+def _wait_for_table(pg, agent_ids: tuple[str, ...]) -> str:
+    """The page's text once the agents table has a row with a mode for every agent."""
+    deadline = time.monotonic() + UI_TIMEOUT_MS / 1000
+    while True:
+        text = pg.inner_text("body")
+        if all(a in text for a in agent_ids) and any(m in text.split() for m in MODES):
+            return text
+        if time.monotonic() > deadline:
+            raise AssertionError(f"agents {agent_ids} with a mode never appeared; page text:\n{text}")
+        time.sleep(0.2)
+
+
+def test_page_names_every_agent_and_shows_a_mode(page, swarm: LaunchedSwarm) -> None:
+    text = _wait_for_table(page, swarm.agent_ids)
+    rows = [line for line in text.splitlines() if line.split("\t")[0].strip() in swarm.agent_ids]
+    assert {r.split("\t")[0].strip() for r in rows} == set(swarm.agent_ids), text
+    chaser_rows = [r for r in rows if "\tchaser\t" in r]
+    assert chaser_rows and all(any(m in r.split("\t") for m in MODES) for r in chaser_rows), text
+
+
+def test_screenshot_of_the_scene_is_not_blank(page, swarm: LaunchedSwarm) -> None:
+    _wait_for_table(page, swarm.agent_ids)
+    page.wait_for_timeout(1500)  # let the software renderer draw a few frames
+    ARTIFACTS.mkdir(exist_ok=True)
+    path = ARTIFACTS / "dashboard-browser.png"
+    png = page.screenshot(path=str(path))
+    image = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_GRAYSCALE).astype(np.float64)
+    assert image.shape == (800, 1280)
+    variance = float(image[SCENE_REGION].var())
+    print(f"scene variance {variance:.0f} (threshold {MIN_SCENE_VARIANCE:.0f}); screenshot {path}")
+    assert variance > MIN_SCENE_VARIANCE, f"the 3D view looks blank (variance {variance:.1f}); see {path}"
+
+
+def test_pause_click_stops_the_world_clock_and_resume_restarts_it(page, swarm: LaunchedSwarm) -> None:
+    watch = ClockWatch(swarm.endpoint, swarm.namespace)
+    try:
+        watch.wait_for(lambda c: c.state == "running", CLOCK_TIMEOUT_S, "a running clock")
+        page.get_by_role("button", name="Pause").click()
+        paused = watch.wait_for(lambda c: c.state == "paused", CLOCK_TIMEOUT_S, "the world to pause")
+        time.sleep(STILL_S)
+        latest = watch.latest
+        assert latest is not None and latest.state == "paused" and latest.tick == paused.tick
+        page.get_by_text("paused").first.wait_for(timeout=UI_TIMEOUT_MS)  # the dashboard shows it too
+
+        page.get_by_role("button", name="Resume").click()
+        running = lambda c: c.state == "running" and c.tick > paused.tick + 10  # noqa: E731
+        resumed = watch.wait_for(running, CLOCK_TIMEOUT_S, "the world to resume")
+        assert resumed.seed == paused.seed  # resume continues the same run
+        page.screenshot(path=str(ARTIFACTS / "dashboard-after-resume.png"))
+    finally:
+        watch.close()
