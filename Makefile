@@ -13,8 +13,10 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e '.[test,bench]'
 	touch $(STAMP)
 
+# The swarm as processes with its dashboard (http://localhost:8080), at twice real time (a docking takes about
+# a minute), a new seed after each docking, until Ctrl-C. `swarm demo` is the in-process tour (no browser).
 demo: $(STAMP)
-	$(VENV)/bin/swarm demo
+	$(VENV)/bin/swarm launch docking --clock scaled:2 --repeat
 
 lint: $(STAMP)
 	$(PY) -m ruff check .

@@ -34,6 +34,12 @@ DESCRIPTION = (
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
+def _agents(text: str) -> int:
+    from swarm.transport.process import _agents_arg
+
+    return _agents_arg(text)
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The dashboard's flags: scenario (+ ``--set``), ``--port``, ``--host``, ``--namespace``, ``--id``,
     ``--max-hz`` and the Zenoh session flags."""
@@ -49,6 +55,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=[],
         metavar="KEY=VALUE",
         help="override one scenario field, as for swarm sim (repeatable)",
+    )
+    p.add_argument(
+        "--agents",
+        type=_agents,
+        default=1,
+        metavar="N",
+        help="copies of the pairs, as launched (1)",
     )
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help="HTTP port (default 8080; 0: any port)")
     p.add_argument(
@@ -84,7 +97,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     check_id(args.process_id, "--id")
     keys = Keys(args.namespace)
     params = DashboardParams(max_hz=args.max_hz)
-    sc = load_from_args(args)
+    sc = load_from_args(args).with_pairs(args.agents)
     zargs = zenoh_args_from(args)
     previous: dict[int, object] = {}
     if stop is None:

@@ -90,8 +90,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="lockstep: the world steps without a silent agent's command after this long (default 5 s)",
     )  # fmt: skip
     g.add_argument(
-        "--start-timeout", type=_positive("--start-timeout"), default=60.0, metavar="S",
-        help="give up if the processes are not all alive after this long (default 60 s)",
+        "--start-timeout", type=_positive("--start-timeout"), default=180.0, metavar="S",
+        help="give up if the processes are not all up after this long (default 180 s: a first run compiles)",
     )  # fmt: skip
     p.set_defaults(func=run)
 
@@ -300,10 +300,18 @@ def run(args: argparse.Namespace) -> int:
                     print_summary(result)
                     if args.json is not None:
                         args.json.write_text(json.dumps(result, indent=1))
-                    if args.repeat and not stop.is_set():
-                        nxt = (log.run_end or {}).get("next_seed")
-                        seed = int(nxt) if nxt is not None else seed + 1
-                        sup.stop_all()
+                    end = log.run_end or {}
+                    asked = end.get("reason") in ("reset", "new_seed")  # the dashboard asked for a new run
+                    if (args.repeat or asked) and not stop.is_set():
+                        nxt = end.get("next_seed")
+                        seed = (
+                            int(nxt)
+                            if nxt is not None
+                            else (seed if end.get("reason") == "reset" else seed + 1)
+                        )
+                        if not asked:
+                            stop.wait(3.0)  # a moment to look at the docked pair
+                        sup.stop_all(keep=("dashboard",))
                         box[0] = RunLog()
                         continue
                     if not args.until_docked:
@@ -331,13 +339,20 @@ def _start_run(args, sc, seed, endpoint, sup, Child):
     world = ["swarm.world", "--clock", str(args.clock), "--step-timeout", str(args.step_timeout),
              "--start-timeout", str(args.start_timeout)]  # fmt: skip
     sup.start(Child("world", [*world, *common]))
-    if not args.headless:
-        import importlib.util
+    if not args.headless and not (sup.children.get("dashboard") and sup.children["dashboard"].running):
+        dash = [str(args.scenario), "--agents", str(args.agents), "--namespace", args.namespace,
+                "--port", str(args.dashboard_port), "--mode", "client", "--connect", endpoint]  # fmt: skip
+        for o in args.overrides:
+            dash += ["--set", o]
+        if args.zenoh_config:
+            dash += ["--zenoh-config", args.zenoh_config]
 
-        if importlib.util.find_spec("dashboard.__main__") is None:
-            _LOG.warning("the dashboard is not available in this version: running headless")
-        else:
-            sup.start(Child("dashboard", ["dashboard", "--port", str(args.dashboard_port), *common]))
+        def on_line(line: str) -> None:
+            if line.startswith("dashboard listening on "):
+                print(f"dashboard on {line.split()[-1]}", flush=True)
+
+        # kept across runs: the browser stays connected
+        sup.start(Child("dashboard", ["dashboard", *dash], on_line=on_line))
 
 
 def _name(role: str, pid: str) -> str:

@@ -14,7 +14,9 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 _LOG = logging.getLogger("swarm.launch")
@@ -44,6 +46,8 @@ class Child:
     restarts: int = 0
     next_start_s: float | None = None
     """Monotonic time of a pending restart."""
+    on_line: Callable[[str], None] | None = None
+    """Called with each line the child prints on stdout (on a reader thread)."""
 
     @property
     def running(self) -> bool:
@@ -65,15 +69,27 @@ class Supervisor:
         child.popen = subprocess.Popen(
             args,
             stdin=subprocess.DEVNULL,
-            stdout=sys.stderr.fileno(),  # children's ready lines and logs go to the launcher's stderr
+            stdout=subprocess.PIPE,  # ready lines: copied to the launcher's stderr, and to on_line
             stderr=sys.stderr.fileno(),
+            text=True,
+            bufsize=1,
             start_new_session=True,
             preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )
         child.next_start_s = None
         self.children[child.name] = child
+        threading.Thread(target=self._pump, args=(child, child.popen), daemon=True).start()
         _LOG.debug("started %s (pid %d): %s", child.name, child.popen.pid, " ".join(args))
+
+    def _pump(self, child: Child, popen: subprocess.Popen) -> None:
+        for line in popen.stdout:
+            try:
+                sys.stderr.write(line)
+                if child.on_line is not None:
+                    child.on_line(line.rstrip("\n"))
+            except Exception:  # a closed stderr or a bad callback must not kill the pump
+                pass
 
     def lost(self, name: str, why: str) -> str:
         """``name`` was seen lost (its liveliness token went, or it exited): kill what is left of it and
@@ -116,9 +132,10 @@ class Supervisor:
         except subprocess.TimeoutExpired:
             _LOG.error("%s (pid %d) survived SIGKILL for 5 s", child.name, child.popen.pid)
 
-    def stop_all(self) -> None:
-        """SIGTERM every child's group, wait up to ``grace_s``, then SIGKILL the groups of the rest."""
-        live = [c for c in self.children.values() if c.popen is not None]
+    def stop_all(self, keep: tuple[str, ...] = ()) -> None:
+        """SIGTERM every child's group (but those named in ``keep``), wait up to ``grace_s``, then SIGKILL
+        the groups of the rest."""
+        live = [c for c in self.children.values() if c.popen is not None and c.name not in keep]
         for c in live:
             c.next_start_s = None
             try:

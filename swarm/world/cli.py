@@ -35,8 +35,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="lockstep: step without an agent's command after this long, logged (default 5 s)",
     )  # fmt: skip
     p.add_argument(
-        "--start-timeout", type=_positive("--start-timeout"), default=60.0, metavar="S",
-        help="give up if the agents and the mothership are not all alive after this long (default 60 s)",
+        "--start-timeout", type=_positive("--start-timeout"), default=180.0, metavar="S",
+        help="give up if the agents and the mothership are not all alive after this long (default 180 s)",
     )  # fmt: skip
     p.add_argument(
         "--clock-every", type=int, default=10, metavar="TICKS",

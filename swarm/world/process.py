@@ -61,7 +61,7 @@ class WorldProcess:
         stop: threading.Event,
         *,
         step_timeout_s: float = 5.0,
-        start_timeout_s: float = 60.0,
+        start_timeout_s: float = 180.0,
         clock_every: int = 10,
         process_id: str = "world",
     ) -> None:

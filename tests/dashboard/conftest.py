@@ -1,10 +1,10 @@
 """Shared helpers of the dashboard's process tests: starting a swarm and a dashboard as real processes on
 loopback Zenoh, watching the world's clock from the test, and a headless Chromium.
 
-:func:`launch_swarm` is the one place that starts "a launched swarm with its dashboard". Today it starts
-:mod:`tests.dashboard.fake_swarm` (the world/mothership/agent processes are issue 4's) and ``python -m
-dashboard``; once ``swarm launch`` exists it becomes ``swarm launch docking --clock lockstep
---dashboard-port 0 ...`` and the tests that use it stay as they are.
+:func:`launch_swarm` is the one place that starts "a launched swarm with its dashboard": ``swarm launch
+docking --clock lockstep --dashboard-port 0 ...``, the real world, mothership and agent processes. Other
+dashboard tests drive the dashboard with :mod:`tests.dashboard.fake_swarm`, a scripted swarm whose every
+message a test controls.
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ from pathlib import Path
 
 import pytest
 
+from swarm.scenario import load_scenario
 from swarm.transport.keys import Keys
 from swarm.transport.messages import Clock, DropCounter
 from swarm.transport.session import ZenohArgs, open_session, subscribe_decoded
-from tests.dashboard.fake_swarm import scenario_toml, vehicle_ids
 from tests.transport.procs import REPO, Proc, Procs, free_port, loopback, wait_until
 
 START_TIMEOUT_S = 20.0  # a Python start with numpy, zenoh and viser (~1-2 s here) on a loaded 2-core machine
@@ -82,15 +82,21 @@ class LaunchedSwarm:
 
 
 def launch_swarm(procs: Procs, workdir: Path, pairs: int = 2) -> LaunchedSwarm:
-    """Start a swarm of ``pairs`` chaser/target pairs and its dashboard (module docstring)."""
+    """``swarm launch docking --agents PAIRS`` (lockstep) with its dashboard on a free port (module
+    docstring). The chasers approach at a tenth of the scenario's speed so that the run lasts longer than
+    the browser tests (a lockstep docking otherwise ends within ~30 s of wall time here), and the run may
+    last 1000 simulated seconds."""
     endpoint = loopback(free_port())
     namespace = new_namespace("dash")
-    scenario = workdir / f"fake-{pairs}-pairs.toml"
-    scenario.write_text(scenario_toml(pairs))
-    start_fake_swarm(procs, endpoint, namespace, "--pairs", str(pairs), "--rate-hz", "100")
-    dashboard, url = start_dashboard(procs, endpoint, namespace, str(scenario))
-    ids = tuple(v for pair in vehicle_ids(pairs) for v in pair)
-    return LaunchedSwarm(url, endpoint, namespace, ids, dashboard)
+    proc = procs.start(
+        [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--agents", str(pairs),
+         "--clock", "lockstep", "--dashboard-port", "0", "--namespace", namespace, "--listen", endpoint,
+         "--set", "guidance.approach_speed_m_s=0.002", "--set", "sim.max_duration_s=1000"]
+    )  # fmt: skip
+    url = proc.wait_for_line(r"^dashboard on (http://\S+)$", 120.0).group(1)
+    proc.wait_for_line(r"^swarm up:", 120.0)
+    sc = load_scenario("docking").with_pairs(pairs)
+    return LaunchedSwarm(url, endpoint, namespace, tuple(sc.vehicles), proc)
 
 
 class ClockWatch:
