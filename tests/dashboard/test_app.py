@@ -84,7 +84,8 @@ def test_table_names_the_agents_with_their_modes(harness: Harness) -> None:
     app = harness.start_app()
     harness.wait_for(lambda: "| APPROACH |" in harness.table_row("chaser"), "the chaser's mode in the table")
     harness.wait_for(lambda: "| STATION |" in harness.table_row("target"), "the target's mode in the table")
-    assert "running" in app.gui.status.content
+    # the status line is redrawn at a lower rate than the table: wait for it rather than race it
+    harness.wait_for(lambda: "running" in app.gui.status.content, "the clock state in the status line")
     assert app.drops.total == 0
 
 
