@@ -165,11 +165,14 @@ class AgentProcess:
         self.pub_event = declare_reliable(self.session, k.event(self.id))
 
     def _counts(self) -> dict[str, int]:
-        c = self.agent.est
+        """The filter's cumulative update counters ``<kind>_<outcome>``, the non-zero ones (an absent
+        counter is zero: a dozen zeros per tick would cost every receiver their validation)."""
+        counts = self.agent.est.counts[0]  # (outcome, kind)
         return {
-            f"{name}_{what}": int(c.count(kind, what)[0])
+            f"{name}_{what}": int(counts[row, int(kind)])
             for name, kind in _KINDS.items()
-            for what in _OUTCOMES
+            for row, what in enumerate(_OUTCOMES)
+            if counts[row, int(kind)]
         }
 
     def _publish_estimate(self, k: int) -> None:

@@ -32,6 +32,8 @@ from swarm.errors import ConfigError, SwarmError
 
 _LOG = logging.getLogger("swarm.launch")
 
+VISION_COUNTS = ("features_accepted", "pose_accepted")
+
 
 def _positive(name: str):
     def parse(text: str) -> float:
@@ -188,14 +190,10 @@ def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
                 "r2_m": last.r2_m if last is not None else summary.get("r2_m"),
                 "keepout_violated": any(e.kind == "keepout_violation" for e in events),
                 "contact": None if contact is None else contact.data["contact"],
-                "estimator": {
-                    "rejected_ranges": counts.get("range_rejected"),
-                    "accepted_ranges": counts.get("range_accepted"),
-                    "accepted_vision": (
-                        None
-                        if not counts
-                        else counts.get("features_accepted", 0) + counts.get("pose_accepted", 0)
-                    ),
+                "estimator": {  # absent counters are zero; no summary at all: unknown
+                    "rejected_ranges": counts.get("range_rejected", 0) if summary else None,
+                    "accepted_ranges": counts.get("range_accepted", 0) if summary else None,
+                    "accepted_vision": sum(counts.get(k, 0) for k in VISION_COUNTS) if summary else None,
                 },
                 "wall_s": end.get("wall_s"),
                 "realtime_factor": end.get("realtime_factor"),
