@@ -127,6 +127,10 @@ class RunLog:
         self.guidance: dict[str, list] = {}
         self.summaries: dict[str, dict] = {}
         self.ended = threading.Event()
+        self.t_s = 0.0  # the world's latest clock time [s]
+
+    def on_clock(self, _key: str, msg) -> None:
+        self.t_s = msg.t_s
 
     def on_world_event(self, _key: str, msg) -> None:
         with self.lock:
@@ -232,7 +236,7 @@ def run(args: argparse.Namespace) -> int:
     from swarm.cli.sim import print_summary
     from swarm.cli.supervisor import Child, Supervisor
     from swarm.transport.keys import Keys
-    from swarm.transport.messages import DropCounter, Event, Guidance
+    from swarm.transport.messages import Clock, DropCounter, Event, Guidance, encode
     from swarm.transport.process import scenario_from
     from swarm.transport.session import ZenohArgs, open_session, subscribe_decoded, watch_liveliness
 
@@ -270,6 +274,7 @@ def run(args: argparse.Namespace) -> int:
             subscribe_decoded(
                 session, keys.world_event(), Event, lambda k, m: box[0].on_world_event(k, m), drops
             )
+            subscribe_decoded(session, keys.world_clock(), Clock, lambda k, m: box[0].on_clock(k, m), drops)
             subscribe_decoded(
                 session, keys.agent_all("event"), Event, lambda k, m: box[0].on_event(k, m, keys), drops
             )
@@ -282,6 +287,10 @@ def run(args: argparse.Namespace) -> int:
             )
             watch_liveliness(session, keys, lambda r, p, a: alive_changes.put((r, p, a, time.monotonic())))
             _token = session.liveliness().declare_token(keys.alive("launcher", "launcher"))
+
+            def announce(vid: str, kind: str, data: dict) -> None:  # an event on the agent's key, for all
+                session.put(keys.event(vid), encode(Event(box[0].t_s, kind, data)))
+
             while True:  # one iteration per run
                 log = box[0]
                 _start_run(args, sc, seed, endpoint, sup, Child)
@@ -291,7 +300,7 @@ def run(args: argparse.Namespace) -> int:
                     break
                 n_proc = len(sup.children)
                 print(f"swarm up: {n_proc} processes, seed {seed}, clock {args.clock}", flush=True)
-                outcome = _supervise(args, sc, sup, alive_changes, log, stop, wall0)
+                outcome = _supervise(args, sc, sup, alive_changes, log, stop, wall0, announce)
                 if outcome == "ended":
                     _wait_summaries(sc, log, sup)
                     result = summarize(sc, policy, seed, log, time.monotonic() - wall0)
@@ -378,7 +387,9 @@ def _wait_alive(sc, sup, changes: queue.Queue, timeout_s: float, stop: threading
     return True
 
 
-def _supervise(args, sc, sup, changes: queue.Queue, log: RunLog, stop: threading.Event, wall0: float) -> str:
+def _supervise(
+    args, sc, sup, changes: queue.Queue, log: RunLog, stop: threading.Event, wall0: float, announce=None
+) -> str:
     """Until the run ends (``"ended"``), a stop (``"stopped"``), the timeout or a fatal loss
     (``"failed"``)."""
     while not stop.is_set():
@@ -396,6 +407,8 @@ def _supervise(args, sc, sup, changes: queue.Queue, log: RunLog, stop: threading
             if name in sup.children:
                 what = sup.lost(name, "liveliness token gone")
                 _LOG.warning("%s (seen %.0f ms after the loss)", what, 1000 * (time.monotonic() - t_seen))
+                if role == "agent" and announce is not None:
+                    announce(pid, "lost", {"why": "liveliness token gone", "action": what})
                 if role != "agent":
                     if log.ended.wait(0.5):  # its run_end may still be on its way
                         return "ended"
