@@ -10,7 +10,7 @@ from swarm.errors import SwarmError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from swarm.cli import bench, demo, router, sim
+    from swarm.cli import analyze, bench, demo, montecarlo, router, sim
 
     parser = argparse.ArgumentParser(
         prog="swarm",
@@ -18,7 +18,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (demo, sim, bench, router):
+    for module in (demo, sim, montecarlo, analyze, bench, router):
         module.add_parser(sub)
     return parser
 
