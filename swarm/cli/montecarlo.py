@@ -60,7 +60,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from swarm.montecarlo.campaign import CampaignSpec, read_manifest, run_campaign
-    from swarm.montecarlo.report import write_report
+    from swarm.montecarlo.report import finite_or_null, write_report
 
     sc = load_from_args(args)
     if args.workers is not None and args.workers < 1:
@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"report: {out / 'report.md'}")
     if args.json is not None:
         try:
-            args.json.write_text(json.dumps(rec, indent=1) + "\n")
+            args.json.write_text(json.dumps(finite_or_null(rec), indent=1) + "\n")
         except OSError as exc:
             raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc.strerror or exc}") from None
         print(f"statistics written to {args.json}")

@@ -325,16 +325,17 @@ def read_manifest(out_dir: Path) -> dict:
         raise ConfigError(f"--resume {str(out_dir)!r}: cannot read {MANIFEST}: {exc}") from None
 
 
-def _first_difference(a, b, path: str = "") -> str | None:
+def _differences(a, b, path: str = "") -> list[str]:
+    """Dotted paths where two ``to_mapping`` trees differ."""
     if isinstance(a, dict) and isinstance(b, dict):
+        out = []
         for k in sorted(set(a) | set(b)):
             if k not in a or k not in b:
-                return f"{path}.{k}".lstrip(".")
-            d = _first_difference(a[k], b[k], f"{path}.{k}")
-            if d:
-                return d
-        return None
-    return None if a == b else path.lstrip(".")
+                out.append(f"{path}.{k}".lstrip("."))
+            else:
+                out += _differences(a[k], b[k], f"{path}.{k}")
+        return out
+    return [] if a == b else [path.lstrip(".")]
 
 
 def _prepare_dir(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
@@ -348,11 +349,14 @@ def _prepare_dir(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
             saved = to_mapping(load_scenario(out_dir / SCENARIO_FILE))
         except ConfigError as exc:
             raise ConfigError(f"--resume {str(out_dir)!r}: cannot load its {SCENARIO_FILE}: {exc}") from None
-        diff = _first_difference(saved, scen)
-        if diff is not None:
+        diff = _differences(saved, scen)
+        if diff:
+            shown = ", ".join(repr(d) for d in diff[:3]) + (
+                f" and {len(diff) - 3} more" if len(diff) > 3 else ""
+            )
             raise ConfigError(
-                f"--resume {str(out_dir)!r}: the scenario differs from the one the campaign ran "
-                f"(field {diff!r}); resume with the same scenario and --set overrides"
+                f"--resume {str(out_dir)!r}: the scenario differs from the one the campaign ran in "
+                f"{shown}; resume with {str(out_dir / SCENARIO_FILE)!r} (and the same --set overrides)"
             )
         if man["root_seed"] != spec.root_seed:
             raise ConfigError(

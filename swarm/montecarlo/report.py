@@ -61,7 +61,7 @@ def write_report(out_dir: str | Path, wall_s: float | None = None, figures: bool
     rec["root_seed"] = man["root_seed"]
     rec["seed_rule"] = man["seed_rule"]
     rec["paper_table_ii"] = PAPER_TABLE_II
-    (out_dir / "report.json").write_text(json.dumps(_finite_or_null(rec), indent=1) + "\n")
+    (out_dir / "report.json").write_text(json.dumps(finite_or_null(rec), indent=1) + "\n")
     if figures:
         trajs = read_trajectories(out_dir)
         _figures(out_dir, sc, rows, trajs, policies)
@@ -318,11 +318,11 @@ def _dispersion_table(sc) -> list[str]:
     return L
 
 
-def _finite_or_null(x):
+def finite_or_null(x):
     if isinstance(x, dict):
-        return {k: _finite_or_null(v) for k, v in x.items()}
+        return {k: finite_or_null(v) for k, v in x.items()}
     if isinstance(x, list | tuple):
-        return [_finite_or_null(v) for v in x]
+        return [finite_or_null(v) for v in x]
     if isinstance(x, float) and not math.isfinite(x):
         return None
     return x
