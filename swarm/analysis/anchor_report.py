@@ -180,7 +180,10 @@ def _markdown(rec: dict) -> str:
             f"{1000 * o['face_search_worst_sigma_coarse_m']:.2f} mm): worst-case π2 "
             f"{gn['worst_pi_align']:+.3f}, worst-case max σ_pos "
             f"{1000 * gn['worst_sigma_pos_max_m']:+.2f} mm, "
-            f"mean π2 {gn['mean_pi_align']:+.3f}."
+            f"mean π2 {gn['mean_pi_align']:+.3f}. Of the {o['corner_layouts_observable']} corner choices "
+            f"that observe the position, the second best has a worst max σ_pos of "
+            f"{1000 * o['second_corner_worst_sigma_coarse_m']:.2f} mm and the median one "
+            f"{1000 * o['median_corner_worst_sigma_coarse_m']:.2f} mm on the coarse grid."
         )
     L += [
         "",

@@ -150,10 +150,11 @@ def dare_batch(
     eye = np.eye(n)
     for _ in range(max_iter):
         M = np.linalg.inv(eye + G @ X)
-        AM = A @ M
-        X_new = X + np.swapaxes(A, -1, -2) @ X @ AM
-        G = G + AM @ G @ np.swapaxes(A, -1, -2)
-        A = AM @ A
+        MA = M @ A
+        At = np.swapaxes(A, -1, -2)
+        X_new = X + At @ X @ MA
+        G = G + A @ M @ G @ At
+        A = A @ MA
         done = np.max(np.abs(X_new - X)) <= tol * np.max(np.abs(X_new))
         X = X_new
         if done:
@@ -285,8 +286,9 @@ def optimise_layout(sc, params: AnchorStudyParams) -> dict:
     Two searches: every choice of ``m`` of the box's 8 corners (the widest spreads, where a geometric
     dilution-of-precision optimum tends to sit), then differential evolution over placements anywhere on
     the faces (azimuth/elevation of a ray from the centre, :func:`layout_from_angles`) started from the
-    best corner layout. Returns ``{"anchors_m", "worst_sigma_coarse_m", "paper_worst_sigma_coarse_m",
-    "best_corner_anchors_m", "best_corner_worst_sigma_coarse_m", "evaluations", "message"}``.
+    best corner layout. Returns the layout (``"anchors_m"``), its worst ``max(sigma_pos)`` on the coarse
+    grid and the paper's, the best, second best and median corner layouts' scores, the face search's,
+    and the number of evaluations.
     """
     from itertools import combinations
 
@@ -309,8 +311,10 @@ def optimise_layout(sc, params: AnchorStudyParams) -> dict:
 
     signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
     corners = signs * half
-    best_corner = min((worst(corners[list(c)]), c) for c in combinations(range(len(corners)), m))
+    ranked = sorted((worst(corners[list(c)]), c) for c in combinations(range(len(corners)), m))
+    best_corner = ranked[0]
     corner_layout = corners[list(best_corner[1])]
+    finite_scores = [w for w, _ in ranked if math.isfinite(w)]
     res = differential_evolution(
         lambda x: worst(layout_from_angles(x, half)),
         [(-math.pi, math.pi), (-math.pi / 2, math.pi / 2)] * m,
@@ -329,6 +333,10 @@ def optimise_layout(sc, params: AnchorStudyParams) -> dict:
         "paper_worst_sigma_coarse_m": worst(np.asarray(sc.anchors_m, dtype=float)),
         "best_corner_anchors_m": corner_layout.tolist(),
         "best_corner_worst_sigma_coarse_m": float(best_corner[0]),
+        "corner_layouts": len(ranked),
+        "corner_layouts_observable": len(finite_scores),
+        "second_corner_worst_sigma_coarse_m": float(ranked[1][0]),
+        "median_corner_worst_sigma_coarse_m": float(np.median(finite_scores)),
         "face_search_worst_sigma_coarse_m": float(res.fun),
         "evaluations": evaluations,
         "message": str(res.message),
