@@ -146,6 +146,7 @@ def _markdown(rec: dict, man: dict, sc, rows: list[dict], policies: tuple[str, .
     )
     L.append("")
 
+    L += _failures(rows, policies, sc)
     if "paired" in rec:
         base, other = rec["paired_policies"]
         L += [f"## Paired differences ({other} − {base})", ""]
@@ -248,6 +249,38 @@ def _markdown(rec: dict, man: dict, sc, rows: list[dict], policies: tuple[str, .
         "",
     ]
     return "\n".join(L)
+
+
+def _failures(rows: list[dict], policies: tuple[str, ...], sc) -> list[str]:
+    """What the runs that did not dock have in common (contact outside tolerance, a contact the estimate
+    announced but the truth never made), and whether the target had fired its thrusters."""
+    bad = [r for r in rows if not r["docked"]]
+    if not bad:
+        return []
+    g = sc.guidance
+    L = ["### Runs that did not dock", ""]
+    L += [
+        "| policy | not docked | contact outside tolerance: lateral / attitude / speed | no contact "
+        "(final mode) | target fired (failed runs) | target fired (docked runs) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for pol in policies:
+        mine = [r for r in rows if r["policy"] == pol]
+        b = [r for r in mine if not r["docked"]]
+        col = [r for r in b if r["collided"]]
+        lat = sum(1 for r in col if (r["contact_lateral_m"] or 0.0) > g.contact_lateral_m)
+        att = sum(1 for r in col if (r["contact_attitude_rad"] or 0.0) > g.contact_attitude_rad)
+        spd = sum(1 for r in col if (r["contact_closing_m_s"] or 0.0) > g.contact_speed_m_s)
+        none = [r for r in b if not r["collided"]]
+        modes = ", ".join(sorted({r["final_mode"] for r in none})) or "-"
+        fired_bad = sum(1 for r in b if r["target_impulse_ns"] > 0)
+        ok = [r for r in mine if r["docked"]]
+        fired_ok = sum(1 for r in ok if r["target_impulse_ns"] > 0)
+        L.append(
+            f"| {pol} | {len(b)} | {lat} / {att} / {spd} | {len(none)} ({modes}) | {fired_bad} of {len(b)} "
+            f"| {fired_ok} of {len(ok)} |"
+        )
+    return [*L, ""]
 
 
 def _range(v: list[float]) -> str:
