@@ -4,7 +4,9 @@ number of runs, against the issue-6 target of 500 runs x 2 policies in 30 s on t
 Each case is a real :func:`swarm.montecarlo.campaign.run_campaign` of the paper's docking scenario (both
 policies, per-run CSV and trajectories written to a temporary directory) on a fresh
 :class:`~concurrent.futures.ProcessPoolExecutor`, so the wall time includes starting the workers. The
-report is timed separately. Where the time goes: the sum of the runs' own wall times (measured inside the
+report is timed separately. The workers' CPU time (``getrusage(RUSAGE_CHILDREN)``) divided by the number of
+workers is the wall time the campaign would take on idle cores; on this shared machine the measured wall
+is often much longer. Where the time goes: the sum of the runs' own wall times (measured inside the
 workers) against ``workers x wall``, the rest being pool start-up, pickling and the files; the time of a
 run itself is the closed loop's (``swarm bench sim`` profiles it).
 """
@@ -12,6 +14,7 @@ run itself is the closed loop's (``swarm bench sim`` profiles it).
 from __future__ import annotations
 
 import os
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -35,10 +38,12 @@ def run(quick: bool = False) -> dict:
     for workers, runs in QUICK_CASES if quick else FULL_CASES:
         with tempfile.TemporaryDirectory(prefix="swarm-bench-mc-") as tmp:
             out = Path(tmp) / "c"
+            cpu0 = _children_cpu_s()
             t0 = time.perf_counter()
             spec = CampaignSpec(sc, ("fixed", "mdp"), runs, 0)
             outcome = run_campaign(spec, out, workers=workers, progress=False)
             wall = time.perf_counter() - t0
+            cpu = _children_cpu_s() - cpu0  # the pool's workers, joined at the end of the campaign
             rows = read_runs(out)
             t1 = time.perf_counter()
             write_report(out)
@@ -52,6 +57,9 @@ def run(quick: bool = False) -> dict:
                 "tasks": outcome.done,
                 "wall_s": wall,
                 "report_s": report_s,
+                "workers_cpu_s": cpu,
+                "cpu_per_task_s": cpu / outcome.done,
+                "cpu_bound_wall_s": cpu / workers,
                 "run_wall_sum_s": busy,
                 "run_wall_mean_s": busy / len(rows),
                 "overhead_s": wall - busy / workers,
@@ -83,6 +91,12 @@ def run(quick: bool = False) -> dict:
     return rec
 
 
+def _children_cpu_s() -> float:
+    """User + system CPU time of this process's finished children [s] (the pool's worker processes)."""
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
 def format_report(rec: dict) -> str:
     lines = [
         "Monte Carlo campaigns (paper docking scenario, fixed + mdp, ProcessPoolExecutor), wall time",
@@ -90,13 +104,14 @@ def format_report(rec: dict) -> str:
     ]
     lines.append(
         f"{'workers':>7} {'runs':>5} {'tasks':>6} {'wall s':>8} {'per task ms':>12} {'run mean ms':>12} "
-        f"{'efficiency':>10} {'overhead s':>10} {'report s':>9}"
+        f"{'efficiency':>10} {'overhead s':>10} {'report s':>9} {'CPU ms/task':>11} {'CPU/workers s':>13}"
     )
     for c in rec["cases"]:
         lines.append(
             f"{c['workers']:>7} {c['runs']:>5} {c['tasks']:>6} {c['wall_s']:>8.1f} "
             f"{1000 * c['wall_s'] / c['tasks']:>12.0f} {1000 * c['run_wall_mean_s']:>12.0f} "
-            f"{c['efficiency']:>10.2f} {c['overhead_s']:>10.1f} {c['report_s']:>9.1f}"
+            f"{c['efficiency']:>10.2f} {c['overhead_s']:>10.1f} {c['report_s']:>9.1f} "
+            f"{1000 * c['cpu_per_task_s']:>11.0f} {c['cpu_bound_wall_s']:>13.1f}"
         )
     lines.append("")
     lines.append(f"2 workers vs 1: {rec['speedup_2_vs_1_workers']:.2f}x")
