@@ -21,13 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from swarm.montecarlo.campaign import (
-    MAIN_MODES,
-    SCENARIO_FILE,
-    read_manifest,
-    read_runs,
-    read_trajectories,
-)
+from swarm.montecarlo.campaign import SCENARIO_FILE, read_manifest, read_runs, read_trajectories
+from swarm.montecarlo.run import MAIN_MODES
 from swarm.montecarlo.stats import METRICS, PAPER_TABLE_II, PHASES, summarize
 
 MODE_COLOURS = {

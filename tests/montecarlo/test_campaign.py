@@ -21,6 +21,7 @@ from swarm.cli.main import main
 from swarm.errors import ConfigError
 from swarm.montecarlo.campaign import CampaignSpec, read_runs, run_campaign, run_seed
 from swarm.montecarlo.report import write_report
+from swarm.montecarlo.run import FIELDS
 from swarm.scenario import load_scenario
 from swarm.sim.docking import DockingSim, run_docking
 
@@ -33,7 +34,7 @@ DISPERSED = {
 RUNS, ROOT = 3, 7
 POLICIES = ("fixed", "mdp")
 PAIRED_COLUMNS = ["seed", "p0_x_m", "p0_y_m", "p0_z_m", "est0_err_x_m", "est0_err_y_m", "est0_err_z_m",
-                  "est0_att_err_rad"] + [k for k in campaign.FIELDS if k.startswith("disp_")]  # fmt: skip
+                  "est0_att_err_rad"] + [k for k in FIELDS if k.startswith("disp_")]  # fmt: skip
 RESULT_COLUMNS = (
     "docking_time_s",
     "total_impulse_ns",
