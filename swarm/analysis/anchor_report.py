@@ -130,8 +130,13 @@ def _write_csv(path, pts, ok, sig, pi2, sig_opt, pi2_opt) -> None:
             w.writerow(row)
 
 
+def _signed(x: float, digits: int) -> str:
+    """``+0.000`` rather than ``-0.000`` for a difference that rounds to zero."""
+    return f"{round(x, digits) + 0.0:+.{digits}f}"
+
+
 def _fmt_point(p) -> str:
-    return "(" + ", ".join(f"{v:.2f}" for v in p) + ")"
+    return "(" + ", ".join(f"{round(v, 6) + 0.0:.2f}" for v in p) + ")"
 
 
 def _markdown(rec: dict) -> str:
@@ -178,10 +183,10 @@ def _markdown(rec: dict) -> str:
             f"{1000 * o['paper_worst_sigma_coarse_m']:.2f} mm, best corners "
             f"{1000 * o['best_corner_worst_sigma_coarse_m']:.2f} mm, face search "
             f"{1000 * o['face_search_worst_sigma_coarse_m']:.2f} mm): worst-case π2 "
-            f"{gn['worst_pi_align']:+.3f}, worst-case max σ_pos "
-            f"{1000 * gn['worst_sigma_pos_max_m']:+.2f} mm, "
-            f"mean π2 {gn['mean_pi_align']:+.3f}. Of the {o['corner_layouts_observable']} corner choices "
-            f"that observe the position, the second best has a worst max σ_pos of "
+            f"{_signed(gn['worst_pi_align'], 3)}, worst-case max σ_pos "
+            f"{_signed(1000 * gn['worst_sigma_pos_max_m'], 2)} mm, "
+            f"mean π2 {_signed(gn['mean_pi_align'], 3)}. Of the {o['corner_layouts_observable']} corner "
+            f"choices that observe the position, the second best has a worst max σ_pos of "
             f"{1000 * o['second_corner_worst_sigma_coarse_m']:.2f} mm and the median one "
             f"{1000 * o['median_corner_worst_sigma_coarse_m']:.2f} mm on the coarse grid."
         )
@@ -235,7 +240,11 @@ def _heatmaps(out_dir, sc, params, axes, sig, pi2, sig_opt, pi2_opt, rec) -> Non
         lo = np.nanmin([np.nanmin(v) for v in vals]) if vmin is None else vmin
         hi = np.nanmax([np.nanmax(v) for v in vals]) if vmax is None else vmax
         fig, axs = plt.subplots(
-            len(layouts), len(k_idx), figsize=(4.2 * len(k_idx), 3.6 * len(layouts)), squeeze=False
+            len(layouts),
+            len(k_idx),
+            figsize=(4.2 * len(k_idx), 3.8 * len(layouts)),
+            squeeze=False,
+            layout="constrained",
         )
         for r, (name, *_rest, anchors) in enumerate(layouts):
             for c, k in enumerate(k_idx):
@@ -256,10 +265,12 @@ def _heatmaps(out_dir, sc, params, axes, sig, pi2, sig_opt, pi2_opt, rec) -> Non
                 ax.plot(anchors[:, 0], anchors[:, 1], "w^", mec="k", ms=6)
                 for v in sc.vehicles.values():
                     ax.plot(v.position_m[0], v.position_m[1], "ko" if v.role == "chaser" else "ks", ms=5)
-                ax.set(title=f"{name}, z = {zs[k]:.2f} m", xlabel="x [m]", ylabel="y [m]")
+                ax.set(
+                    title=f"{name}, z = {round(float(zs[k]), 6) + 0.0:.2f} m", xlabel="x [m]", ylabel="y [m]"
+                )
                 ax.set_xlim(min(xs[0], anchors[:, 0].min() - 0.1), xs[-1])
                 ax.set_ylim(min(ys[0], anchors[:, 1].min() - 0.1), ys[-1])
-        fig.colorbar(im, ax=axs, label=label, shrink=0.8)
+        fig.colorbar(im, ax=axs, label=label, shrink=0.9)
         fig.savefig(out_dir / fname, dpi=80)
         plt.close(fig)
     fig = plt.figure(figsize=(6, 5))

@@ -73,6 +73,6 @@ def run(args: argparse.Namespace) -> int:
                 f"worst {1000 * w['sigma_pos_max_m']:.2f} mm (pi2 {w['pi_align']:.3f}) at {w['point_m']}"
             )
     if "gain" in rec:
-        print(f"optimised layout: worst-case pi2 {rec['gain']['worst_pi_align']:+.3f}")
+        print(f"optimised layout: worst-case pi2 {round(rec['gain']['worst_pi_align'], 3) + 0.0:+.3f}")
     print(f"written to {out}/anchors.md ({rec['wall_s']:.1f} s)")
     return 0
