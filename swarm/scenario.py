@@ -25,6 +25,7 @@ from swarm.core.mdp import FixedParams, MdpParams
 from swarm.core.sensors import AhrsParams, GyroParams, UwbParams
 from swarm.core.thrusters import ThrusterParams
 from swarm.errors import ConfigError
+from swarm.montecarlo.dispersions import DispersionParams
 
 Vec3 = tuple[float, float, float]
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
@@ -188,6 +189,8 @@ class Scenario:
     """r_d: the centre-to-centre range at contact, two 10 cm cubes face to face."""
     fixed: FixedParams = field(default_factory=FixedParams)
     swarm: SwarmParams = field(default_factory=SwarmParams)
+    dispersions: DispersionParams = field(default_factory=DispersionParams)
+    """Run-to-run dispersions drawn from the seed (Monte Carlo); all off by default."""
 
     def __post_init__(self) -> None:
         seq = self.euler_seq

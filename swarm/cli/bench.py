@@ -40,10 +40,18 @@ def _transport(quick: bool) -> tuple[dict, str]:
     return record, transport.format_report(record)
 
 
+def _montecarlo(quick: bool) -> tuple[dict, str]:
+    from swarm.bench import montecarlo
+
+    record = montecarlo.run(quick)
+    return record, montecarlo.format_report(record)
+
+
 BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
     "estimator": (_estimator, "estimator step: tandem vs compounded vs FilterPy (paper Table I)"),
     "sim": (_sim, "one in-process docking: real-time factor and profile"),
     "transport": (_transport, "the swarm over Zenoh: RTT, lockstep tick period (1/4/16 pairs), latency"),
+    "montecarlo": (_montecarlo, "Monte Carlo campaign wall time: 1 vs 2 workers, number of runs"),
 }
 """Bench name -> (runner taking ``quick``, one-line help). Later issues add sim, montecarlo, transport."""
 

@@ -12,7 +12,7 @@ from swarm.errors import SwarmError
 def build_parser() -> argparse.ArgumentParser:
     from agents import cli as agent_cli
     from mothership import cli as mothership_cli
-    from swarm.cli import bench, dashboard, demo, launch, router, sim
+    from swarm.cli import analyze, bench, dashboard, demo, launch, montecarlo, router, sim
     from swarm.world import cli as world_cli
 
     parser = argparse.ArgumentParser(
@@ -21,7 +21,19 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (demo, sim, bench, launch, router, dashboard, world_cli, mothership_cli, agent_cli):
+    for module in (
+        demo,
+        sim,
+        montecarlo,
+        analyze,
+        bench,
+        launch,
+        router,
+        dashboard,
+        world_cli,
+        mothership_cli,
+        agent_cli,
+    ):
         module.add_parser(sub)
     return parser
 

@@ -20,6 +20,7 @@ from swarm.core import rotations as rot
 from swarm.core.agent import VehicleAgent
 from swarm.core.guidance import Mode
 from swarm.core.world import UwbNetwork, World, stream
+from swarm.montecarlo.dispersions import apply_dispersion, draw_dispersion
 from swarm.sim._fastloop import CONTACT, SENSORS_DONE, run_ticks
 from swarm.sim.referee import judge
 
@@ -80,6 +81,8 @@ class DockingSim:
         self.record_series = record_series
         self.fast = fast  # False: every tick through the per-object Python path (the reference)
         self.world = World(scenario, self.seed)
+        self.dispersion = draw_dispersion(scenario, self.seed)  # [dispersions]: all off -> nominal
+        apply_dispersion(self.world, scenario, self.dispersion)
         self.network = UwbNetwork(scenario, self.seed)
         self.agents: dict[str, VehicleAgent] = {}
         for i, vid in enumerate(scenario.vehicles):

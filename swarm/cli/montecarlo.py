@@ -1,0 +1,130 @@
+"""``swarm montecarlo SCENARIO``: paired Monte Carlo campaign of several policies (paper Table II, Figs. 5-6).
+
+Runs ``--runs`` paired runs of each ``--policy`` on ``--workers`` processes, saves them run by run in
+``--out DIR`` (Ctrl-C keeps the finished runs, ``--resume DIR`` continues), then writes ``DIR/report.md``
+with the statistics and figures; ``--json FILE`` gets the DESIGN.md section 8 record. The library entry
+point, which also takes any ``concurrent.futures`` executor (a dask cluster, say), is
+:func:`swarm.montecarlo.campaign.run_campaign`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+from swarm.cli.sim import add_scenario_args, load_from_args
+from swarm.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+
+def _int(flag: str):
+    def parse(text: str) -> int:
+        try:
+            return int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} must be an integer, got {text!r}") from None
+
+    return parse
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "montecarlo",
+        help="paired Monte Carlo campaign of switching policies (paper Table II, Figs. 5-6)",
+        description=__doc__.split("\n\n")[1],
+    )
+    add_scenario_args(p)
+    p.add_argument("--runs", type=_int("--runs"), default=None, help="paired runs per policy (default 500)")
+    p.add_argument(
+        "--policy",
+        dest="policies",
+        action="append",
+        default=None,
+        metavar="POLICY",
+        help="fixed or mdp; repeat to compare (default: both); the first is the baseline",
+    )
+    p.add_argument("--workers", type=_int("--workers"), default=None, help="processes (default: the cores)")
+    p.add_argument("--seed", type=_int("--seed"), default=None, help="root seed (default 0)")
+    p.add_argument(
+        "--out", type=Path, default=None, metavar="DIR", help="campaign directory (default mc-SCENARIO-seedS)"
+    )
+    p.add_argument("--resume", type=Path, default=None, metavar="DIR", help="continue the campaign in DIR")
+    p.add_argument("--json", type=Path, default=None, metavar="FILE", help="write the statistics as JSON")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-figures", action="store_true", help="report.md without the PNG figures (faster)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from swarm.montecarlo.campaign import CampaignSpec, read_manifest, run_campaign
+    from swarm.montecarlo.report import finite_or_null, write_report
+
+    sc = load_from_args(args)
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers must be a positive integer, got {args.workers}")
+    if args.resume is not None:
+        if args.out is not None and args.out.resolve() != args.resume.resolve():
+            raise ConfigError(
+                f"--out {str(args.out)!r} and --resume {str(args.resume)!r} name different directories"
+            )
+        man = read_manifest(args.resume)
+        runs = args.runs if args.runs is not None else int(man["runs"])
+        seed = args.seed if args.seed is not None else int(man["root_seed"])
+        policies = tuple(args.policies) if args.policies else tuple(man["policies"])
+        out = args.resume
+    else:
+        runs = 500 if args.runs is None else args.runs
+        seed = 0 if args.seed is None else args.seed
+        policies = tuple(args.policies) if args.policies else ("fixed", "mdp")
+        out = args.out if args.out is not None else Path(f"mc-{sc.name}-seed{seed}")
+    spec = CampaignSpec(sc, policies, runs, seed)
+    outcome = run_campaign(
+        spec, out, workers=args.workers, resume=args.resume is not None, progress=not args.no_progress
+    )
+    for failure in outcome.failures:
+        log.error("%s", failure)
+    if outcome.interrupted:
+        print(
+            f"interrupted: {outcome.done} of {outcome.total} runs kept in {out}; continue with "
+            f"swarm montecarlo {args.scenario} --resume {out}"
+        )
+        return 130
+    wall = outcome.wall_s if outcome.done > outcome.done_before else None
+    rec = write_report(out, wall_s=wall, figures=not args.no_figures)
+    _print(rec)
+    print(f"report: {out / 'report.md'}")
+    if args.json is not None:
+        try:
+            args.json.write_text(json.dumps(finite_or_null(rec), indent=1) + "\n")
+        except OSError as exc:
+            raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc.strerror or exc}") from None
+        print(f"statistics written to {args.json}")
+    return 0 if not outcome.failures else 1
+
+
+def _print(rec: dict) -> None:
+    from swarm.montecarlo.stats import METRICS
+
+    print(f"{rec['runs']} runs per policy" + (f", {rec['wall_s']:.1f} s wall" if rec.get("wall_s") else ""))
+    for pol, p in rec["policies"].items():
+        parts = [f"docked {p['docked']}/{p['n_runs']}"]
+        for m, (lab, unit, scale, dig) in METRICS.items():
+            d = p[m]
+            if d["mean"] is not None:
+                parts.append(f"{lab} {d['mean'] * scale:.{dig}f} {unit}")
+        print(f"  {pol:<6} " + ", ".join(parts))
+    if "paired" in rec:
+        base, other = rec["paired_policies"]
+        for m in ("docking_time_s", "total_impulse_ns"):
+            d = rec["paired"][m]
+            if d["mean_diff"] is None:
+                continue
+            ci = d["ci95"] or [float("nan")] * 2
+            p = d["p_value"]
+            print(
+                f"  {other} - {base} {m}: {d['mean_diff']:+.4g} [{ci[0]:+.4g}, {ci[1]:+.4g}] "
+                f"({100 * d['relative']:+.1f} %), paired t p = {p if p is None else f'{p:.2g}'}"
+            )

@@ -1,0 +1,112 @@
+"""Dispersions declared in the scenario (swarm.montecarlo.dispersions) and applied inside DockingSim."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from swarm.core import rotations as rot
+from swarm.core.thrusters import allocation_matrix, nozzle_geometry
+from swarm.core.world import W_IXX, W_IZZ, W_MASS, World
+from swarm.errors import ConfigError
+from swarm.montecarlo.dispersions import DispersionParams, draw_dispersion
+from swarm.scenario import Scenario, load_scenario
+from swarm.sim.docking import DockingSim
+
+ALL_ON = {
+    "dispersions.position_sigma_m": 0.05,
+    "dispersions.velocity_sigma_m_s": 0.002,
+    "dispersions.attitude_sigma_deg": 3.0,
+    "dispersions.mass_sigma_frac": 0.05,
+    "dispersions.inertia_sigma_frac": 0.05,
+    "dispersions.thruster_misalignment_deg": 1.0,
+}
+
+
+def test_dispersions_are_off_in_the_bundled_scenario_and_the_defaults():
+    assert load_scenario("docking").dispersions == DispersionParams() == Scenario().dispersions
+    assert not DispersionParams().enabled
+
+
+def test_off_dispersions_leave_the_world_exactly_nominal():
+    sc = load_scenario("docking")
+    sim = DockingSim(sc, "fixed", 11, record_series=False)
+    ref = World(sc, 11)
+    assert np.array_equal(sim.world.X, ref.X)
+    assert np.array_equal(sim.world.prm, ref.prm)
+    assert np.array_equal(sim.world.B, allocation_matrix(sc.thrusters))
+
+
+def test_dispersions_change_the_truth_and_the_initial_estimate_follows_it():
+    sc = load_scenario("docking", ALL_ON)
+    nominal = World(sc, 5)
+    sim = DockingSim(sc, "mdp", 5, record_series=False)
+    disp = draw_dispersion(sc, 5)
+    c = list(sc.vehicles).index("chaser")
+    np.testing.assert_array_equal(sim.world.X[c, 0:3], nominal.X[c, 0:3] + disp.position_m["chaser"])
+    np.testing.assert_array_equal(sim.world.X[c, 3:6], disp.velocity_m_s["chaser"])
+    att = rot.attitude_error(nominal.X[c, 6:10], sim.world.X[c, 6:10])
+    np.testing.assert_allclose(att, disp.attitude_rad["chaser"], atol=1e-12)
+    t = list(sc.vehicles).index("target")
+    assert np.array_equal(sim.world.X[t], nominal.X[t])  # the target is not dispersed
+    assert sim.world.prm[W_MASS] == nominal.prm[W_MASS] * disp.mass_factor
+    np.testing.assert_array_equal(
+        sim.world.prm[W_IXX : W_IZZ + 1], nominal.prm[W_IXX : W_IZZ + 1] * disp.inertia_factor
+    )
+    r, d = nozzle_geometry(sc.thrusters)
+    d_true = Rotation.from_rotvec(disp.thruster_rotvec_rad).apply(d)  # scipy as the oracle
+    np.testing.assert_allclose(sim.world.B, np.vstack([d_true.T, np.cross(r, d_true).T]), atol=1e-15)
+    assert not np.allclose(sim.world.B, allocation_matrix(sc.thrusters))
+    # the agents keep the nominal models; the initial estimate is the dispersed truth plus the [initial] error
+    err = sim.agents["chaser"].est.p_ms[0] - sim.world.X[c, 0:3]
+    assert np.linalg.norm(err) < 5 * math.sqrt(3) * sc.initial.sigma_pos_m
+    assert sim.agents["chaser"].mass_kg == sc.dynamics.mass_kg
+
+
+def test_each_quantity_has_its_own_stream():
+    # switching the mass dispersion on does not change the position draws (and vice versa)
+    a = draw_dispersion(load_scenario("docking", {"dispersions.position_sigma_m": 0.05}), 9)
+    b = draw_dispersion(load_scenario("docking", {"dispersions.position_sigma_m": 0.05,
+                                                  "dispersions.mass_sigma_frac": 0.05}), 9)  # fmt: skip
+    np.testing.assert_array_equal(a.position_m["chaser"], b.position_m["chaser"])
+    assert a.mass_factor == 1.0 and b.mass_factor != 1.0
+
+
+def test_same_seed_same_draws_other_seed_other_draws():
+    sc = load_scenario("docking", ALL_ON)
+    a, b, c = draw_dispersion(sc, 1), draw_dispersion(sc, 1), draw_dispersion(sc, 2)
+    np.testing.assert_array_equal(a.thruster_rotvec_rad, b.thruster_rotvec_rad)
+    assert not np.array_equal(a.position_m["chaser"], c.position_m["chaser"])
+
+
+@pytest.mark.parametrize("distribution", ["normal", "uniform"])
+def test_draws_have_the_declared_standard_deviation(distribution):
+    sc = load_scenario(
+        "docking", {"dispersions.position_sigma_m": 0.04, "dispersions.distribution": distribution}
+    )
+    x = np.array([draw_dispersion(sc, s).position_m["chaser"] for s in range(3000)]).ravel()
+    # 9000 draws: the sample std of a normal is within 3 % of sigma at ~4.5 standard errors (se ~ 0.75 %)
+    assert abs(np.std(x) / 0.04 - 1.0) < 0.03
+    assert abs(np.mean(x)) < 4 * 0.04 / math.sqrt(x.size)
+    if distribution == "uniform":
+        assert np.max(np.abs(x)) <= math.sqrt(3) * 0.04
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [
+        ("position_sigma_m", -0.1),
+        ("mass_sigma_frac", 0.5),
+        ("distribution", '"cauchy"'),
+        ("attitude_sigma_deg", "nan"),
+    ],
+)
+def test_bad_dispersion_is_named(key, value):
+    from swarm.config import parse_override
+
+    k, v = parse_override(f"dispersions.{key}={value}")
+    with pytest.raises(ConfigError, match=f"dispersions.{key}"):
+        load_scenario("docking", {k: v})
