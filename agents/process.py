@@ -133,6 +133,7 @@ class AgentProcess:
         self._last_decision_t: float | None = None
         self.ticks = 0
         self._last_tick: int | None = None
+        self._cpu0: float | None = None
 
     # ------------------------------------------------------------------------------ Zenoh side
 
@@ -252,6 +253,8 @@ class AgentProcess:
     # ------------------------------------------------------------------------------ the loops
 
     def _process(self, inp: TickInputs) -> None:
+        if self._cpu0 is None:
+            self._cpu0 = time.process_time()  # the run's CPU time starts at its first tick
         k = inp.tick
         t = k * self.dt
         if self.agent is None:
@@ -359,6 +362,7 @@ class AgentProcess:
                 "final_mode": a.mode.value, "counts": self._counts(), "ticks": self.ticks,
                 "r1_m": None if sw is None else sw.r1_m, "r2_m": None if sw is None else sw.r2_m,
                 "dropped": self.drops.total, "assembler": self.assembler.counts(),
+                "cpu_s": time.process_time() - (self._cpu0 or time.process_time()),
             }  # fmt: skip
             self.pub_event.put(encode(Event(a.t_s, "summary", data)))
             _LOG.info("%s: run ended in mode %s", self.id, a.mode.value)

@@ -115,7 +115,13 @@ def _lockstep(pairs: int, span_s: float) -> dict:
             raise RuntimeError(f"launch --agents {pairs} failed ({r.returncode}):\n{r.stderr[-2000:]}")
         res = json.loads(out.read_text())
     ticks = round(res["sim_time_s"] * 100)
-    return {"tick_us": 1e6 * res["wall_s"] / ticks, "realtime_factor": res["realtime_factor"], "ticks": ticks}
+    cpu = res.get("cpu_s", {})
+    agents = [v for k, v in cpu.items() if k != "world" and v is not None]
+    return {
+        "tick_us": 1e6 * res["wall_s"] / ticks, "realtime_factor": res["realtime_factor"], "ticks": ticks,
+        "world_cpu_us_per_tick": 1e6 * cpu["world"] / ticks if cpu.get("world") is not None else None,
+        "agent_cpu_us_per_tick": 1e6 * float(np.mean(agents)) / ticks if agents else None,
+    }  # fmt: skip
 
 
 def _latency(duration_s: float) -> dict:
@@ -164,6 +170,10 @@ def run(preset: dict) -> dict:
         "zenoh_rtt_us": rtt,
         "lockstep_tick_us": {n: v["tick_us"] for n, v in lock.items()},
         "lockstep_realtime_factor": {n: v["realtime_factor"] for n, v in lock.items()},
+        "lockstep_cpu_us_per_tick": {
+            n: {"world": v["world_cpu_us_per_tick"], "agent_mean": v["agent_cpu_us_per_tick"]}
+            for n, v in lock.items()
+        },
         "latency_us": latency,
         "one_pair_tick_over_rtt": one / rtt["median"],
         "goals": {
@@ -187,6 +197,12 @@ def format_report(r: dict) -> str:
         lines.append(
             f"  {n:>2} pair(s): {t:8.0f} us per tick, {r['lockstep_realtime_factor'][n]:.1f}x real time"
         )
+    for n, c in r["lockstep_cpu_us_per_tick"].items():
+        if c["world"] is not None and c["agent_mean"] is not None:
+            lines.append(
+                f"  {n:>2} pair(s): CPU per tick: world {c['world']:.0f} us, "
+                f"each agent {c['agent_mean']:.0f} us"
+            )
     lines.append(f"  one pair / RTT = {r['one_pair_tick_over_rtt']:.1f} (goal <= 2)")
     lat = r["latency_us"]
     lines.append(

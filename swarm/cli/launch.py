@@ -210,6 +210,7 @@ def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
         "scenario": sc.name, "policy": policy, "seed": seed, "sim_time_s": end.get("t_s"),
         "wall_s": end.get("wall_s", wall_s), "realtime_factor": end.get("realtime_factor"),
         "end_reason": end.get("reason", "no run_end received"),
+        "cpu_s": {"world": end.get("cpu_s"), **{v: s.get("cpu_s") for v, s in log.summaries.items()}},
         "target_impulse_ns": {v: i for v, i in end.get("impulse_ns", {}).items() if v not in chasers},
         "chasers": chasers,
     }  # fmt: skip

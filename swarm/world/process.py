@@ -299,6 +299,7 @@ class WorldProcess:
         self._world_event("run_start", 0.0, start)
         self._publish_clock(0)
         wall0 = time.perf_counter()
+        cpu0 = time.process_time()
         pace0, pace_k = time.monotonic(), 0
         tick = 0
         while True:
@@ -333,11 +334,12 @@ class WorldProcess:
                 if left > 0:
                     self.stop.wait(left)
         wall = time.perf_counter() - wall0
+        cpu = time.process_time() - cpu0
         self.state = "stopped"
         t_end = tick * dt
         end = {
             "reason": self.end_reason, "tick": tick, "t_s": t_end, "seed": self.seed, "wall_s": wall,
-            "realtime_factor": t_end / wall if wall > 0 else None,
+            "realtime_factor": t_end / wall if wall > 0 else None, "cpu_s": cpu,
             "impulse_ns": self.world.impulse_ns, "done": sorted(self.done),
             "missing_ticks": self.missing_ticks, "next_seed": self.next_seed,
             "dropped": self.drops.total,
