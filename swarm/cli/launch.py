@@ -243,6 +243,8 @@ def _config_args(args: argparse.Namespace, identity: str) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     import zenoh
 
+    zenoh.try_init_log_from_env()  # RUST_LOG=...: Zenoh's own log (its ACL decisions: access_control=trace)
+
     from swarm.cli.sim import print_summary
     from swarm.cli.supervisor import Child, Supervisor
     from swarm.transport.keys import Keys
