@@ -38,6 +38,7 @@ from swarm.transport.security import (
     make_ca,
     secure_listen,
 )
+from swarm.transport.security import main as security_main
 from tests.transport.procs import REPO, Procs, free_port, wait_until
 
 NS = "sectest"
@@ -178,6 +179,23 @@ def test_certificates_carry_the_identity_as_common_name_and_loopback_as_subject_
         assert verify.returncode == 0, verify.stdout + verify.stderr
 
 
+def test_the_template_writer_makes_configs_zenoh_loads_for_every_identity(tmp_path):
+    d = tmp_path / "swarm-pki"
+    assert security_main([str(d), "--namespace", NS, "--vehicles", *VEHICLES, "--host", "10.0.0.7"]) == 0
+    assert stat.S_IMODE(os.stat(d).st_mode) == 0o700
+    for name in ("launcher", "world", "mothership", "dashboard", "agent-chaser", "agent-target"):
+        conf = zenoh.Config.from_file(str(d / f"{name}.json5"))
+        tls = json.loads(conf.get_json("transport/link/tls"))
+        assert Path(tls["connect_certificate"]) == d / f"{name}.pem" and tls["enable_mtls"] is True
+    acl = json.loads(zenoh.Config.from_file(str(d / "launcher.json5")).get_json("access_control"))
+    assert _may(acl, "agent-chaser", "put", K.command("chaser"))
+    assert not _may(acl, "world", "put", K.command("chaser"))
+    cert = str(d / "launcher.pem")
+    san = subprocess.run(["openssl", "x509", "-in", cert, "-noout", "-ext", "subjectAltName"],
+                         capture_output=True, text=True, check=True).stdout  # fmt: skip
+    assert "IP Address:10.0.0.7" in san and "IP Address:127.0.0.1" in san
+
+
 def test_secure_refuses_zenoh_config_and_plain_listen_endpoints():
     with pytest.raises(ConfigError, match=r"--secure and --zenoh-config cannot be used together"):
         secure_listen(None, "mine.json5", 7447)
@@ -242,14 +260,16 @@ def test_through_the_router_each_identity_reaches_subscribers_only_on_its_own_ke
     """Every identity (and a CA-signed intruder) puts a tagged payload on every key; a subscriber of
     another session (the dashboard's identity, which may read everything) must get exactly the allowed
     ones. After each identity's puts it puts a fence on a key it may use: the router forwards one link's
-    messages in order, so once the fence is in, a denied put that had been let through would be in too."""
+    messages in order, so once the fence is in, a denied put that had been let through would be in too.
+    The intruder also subscribes to everything and hears nobody (only its own puts, delivered locally)."""
     names = [*MAY_PUT, "intruder"]
     fence_key = {n: sorted(MAY_PUT[n])[0] for n in MAY_PUT}
-    inbox = Inbox()
+    inbox, intruder_inbox = Inbox(), Inbox()
     sessions = {n: _open_as(material, n, router) for n in names}
     try:
         with _open_as(material, "dashboard", router) as monitor:
             monitor.declare_subscriber(K.everything(), inbox)
+            sessions["intruder"].declare_subscriber(K.everything(), intruder_inbox)
             wait_until(lambda: all(s.info.routers_zid() for s in sessions.values()), 10.0, "every link")
             # a publisher's first puts may precede the router's news of the subscriber: prime each path
             for n, s in sessions.items():
@@ -270,6 +290,7 @@ def test_through_the_router_each_identity_reaches_subscribers_only_on_its_own_ke
             s.close()
     want = {f"{n}|{key}" for n, keys in MAY_PUT.items() for key in keys}
     assert got == want, (sorted(got - want), sorted(want - got))
+    assert intruder_inbox.payloads() == {f"intruder|{key}".encode() for key in ALL_KEYS}
 
 
 def _primed(session: zenoh.Session, key: str, inbox: Inbox) -> bool:
