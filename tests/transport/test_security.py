@@ -164,6 +164,19 @@ def test_material_is_private_outside_the_repository_and_removed_on_close():
     assert not d.exists()
 
 
+def test_material_refuses_a_temporary_directory_inside_the_source_tree_and_leaves_nothing(monkeypatch):
+    import tempfile
+
+    import swarm.transport.security as security
+
+    tmp = Path(tempfile.gettempdir()).resolve()
+    before = set(tmp.glob("tpods-secure-*"))
+    monkeypatch.setattr(security, "_SOURCE_TREE", tmp)  # as if TMPDIR pointed into the repository
+    with pytest.raises(ConfigError, match=r"inside the source tree .*point TMPDIR elsewhere"):
+        SecureMaterial(K, VEHICLES)
+    assert set(tmp.glob("tpods-secure-*")) == before
+
+
 def test_certificates_carry_the_identity_as_common_name_and_loopback_as_subject_alt_name(material):
     d = material.directory
     for name in material.names:
