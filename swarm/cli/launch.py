@@ -72,6 +72,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_process_arguments(p)
     g = p.add_argument_group("launcher")
     g.add_argument("--headless", action="store_true", help="do not start the dashboard")
+    g.add_argument(
+        "--secure", action="store_true",
+        help="mutual TLS and Zenoh access control, with certificates made at run time (README: Security)",
+    )  # fmt: skip
     g.add_argument("--dashboard-port", type=int, default=8080, metavar="PORT", help="dashboard port (8080)")
     g.add_argument(
         "--until-docked", action="store_true", help="exit when the run ends (every chaser in contact)"
@@ -224,15 +228,23 @@ def _child_args(args: argparse.Namespace, endpoint: str, seed: int) -> list[str]
     if args.policy:
         common += ["--policy", args.policy]
     common += ["--mode", "client", "--connect", endpoint]
-    if args.zenoh_config:
-        common += ["--zenoh-config", args.zenoh_config]
     if args.lease_ms:
         common += ["--lease-ms", str(args.lease_ms)]
     return common
 
 
+def _config_args(args: argparse.Namespace, identity: str) -> list[str]:
+    """``--zenoh-config`` of one child: its own file in a ``--secure`` swarm, else the launcher's flag."""
+    material = getattr(args, "secure_material", None)
+    if material is not None:
+        return ["--zenoh-config", str(material.config_file(identity))]
+    return ["--zenoh-config", args.zenoh_config] if args.zenoh_config else []
+
+
 def run(args: argparse.Namespace) -> int:
     import zenoh
+
+    zenoh.try_init_log_from_env()  # RUST_LOG=...: Zenoh's own log (its ACL decisions: access_control=trace)
 
     from swarm.cli.sim import print_summary
     from swarm.cli.supervisor import Child, Supervisor
@@ -245,6 +257,11 @@ def run(args: argparse.Namespace) -> int:
     keys = Keys(args.namespace)
     policy = args.policy or sc.policy
     listen = list(args.listen) if args.listen else [_free_loopback()]
+    args.secure_material = None
+    if getattr(args, "secure", False):  # mutual TLS + Zenoh ACL: each process its own certificate and config
+        from swarm.transport.security import secure_listen
+
+        listen = secure_listen(args.listen, args.zenoh_config, int(_free_loopback().rpartition(":")[2]))
     zargs = ZenohArgs(
         mode="router", connect=tuple(args.connect or ()), listen=tuple(listen), config_file=args.zenoh_config,
         multicast_scouting=args.multicast_scouting, lease_ms=args.lease_ms,
@@ -265,6 +282,15 @@ def run(args: argparse.Namespace) -> int:
     result: dict | None = None
     wall0 = time.monotonic()
     try:
+        if getattr(args, "secure", False):
+            from dataclasses import replace
+
+            from swarm.transport.security import SecureMaterial
+
+            args.secure_material = SecureMaterial(keys, sc.vehicles, listen)
+            zargs = replace(zargs, config_file=str(args.secure_material.config_file("launcher")))
+            print(f"swarm secure: certificates and Zenoh configs in {args.secure_material.directory} "
+                  "(removed at exit)", flush=True)  # fmt: skip
         with open_session(zargs) as session:
             print(
                 f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",
@@ -329,6 +355,8 @@ def run(args: argparse.Namespace) -> int:
             _ = (_token, zenoh)
     finally:
         sup.stop_all()
+        if args.secure_material is not None:
+            args.secure_material.close()
         for s, h in previous.items():
             signal.signal(s, h)  # type: ignore[arg-type]
     if interrupted.is_set() and result is None:
@@ -340,20 +368,22 @@ def run(args: argparse.Namespace) -> int:
 
 def _start_run(args, sc, seed, endpoint, sup, Child):
     common = _child_args(args, endpoint, seed)
-    sup.start(Child("mothership", ["mothership", *common]))
+    from swarm.transport.security import agent_name
+
+    sup.start(Child("mothership", ["mothership", *common, *_config_args(args, "mothership")]))
     for vid in sc.vehicles:
-        sup.start(Child(f"agent/{vid}", ["agents", "--id", vid, "--clock", str(args.clock), *common],
-                        restartable=True, rejoin_args=["--rejoin"]))  # fmt: skip
+        agent = ["agents", "--id", vid, "--clock", str(args.clock), *common,
+                 *_config_args(args, agent_name(vid))]  # fmt: skip
+        sup.start(Child(f"agent/{vid}", agent, restartable=True, rejoin_args=["--rejoin"]))
     world = ["swarm.world", "--clock", str(args.clock), "--step-timeout", str(args.step_timeout),
              "--start-timeout", str(args.start_timeout)]  # fmt: skip
-    sup.start(Child("world", [*world, *common]))
+    sup.start(Child("world", [*world, *common, *_config_args(args, "world")]))
     if not args.headless and not (sup.children.get("dashboard") and sup.children["dashboard"].running):
         dash = [str(args.scenario), "--agents", str(args.agents), "--namespace", args.namespace,
                 "--port", str(args.dashboard_port), "--mode", "client", "--connect", endpoint]  # fmt: skip
         for o in args.overrides:
             dash += ["--set", o]
-        if args.zenoh_config:
-            dash += ["--zenoh-config", args.zenoh_config]
+        dash += _config_args(args, "dashboard")
 
         def on_line(line: str) -> None:
             if line.startswith("dashboard listening on "):
