@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from swarm.core.camera import feature_vectors
 from swarm.core.world import World
 from swarm.sim.referee import judge
 from swarm.transport.keys import Keys
@@ -275,11 +276,27 @@ class WorldProcess:
             self.world.set_command(vid, np.zeros(self.world.thrusts.shape[1]))
             self.modes[vid] = "HOLD"
 
+    def _warm_up(self) -> None:
+        """Run every compiled kernel of a tick once on a scratch world (dynamics, sensors, the camera's
+        visibility and feature model, the referee), so that numba's compilation or cache load happens
+        before this process says it is ready, not inside the run (nor in its timing)."""
+        w = World(self.sc, self.seed)
+        w.step(build_frames=False)
+        w.k = w.vision_every  # a camera tick: every chaser's visibility test runs
+        w.frames()
+        x = w.X[0]
+        feature_vectors(w.markers_target, x[0:3], x[6:10], x[0:3] - np.array([0.0, 0.0, 0.3]), x[6:10],
+                        self.sc.camera, None)  # fmt: skip
+        for cid in self.chasers[:1]:
+            tid = self.sc.vehicles[cid].target
+            w.keepout_violated(cid, tid, docking=False)
+            w.contact(cid, tid)
+
     def run(self) -> dict:
         """Serve one run; returns the ``run_end`` data once stopped (a world whose run ended stays up,
         its clock ``stopped``, until a stop signal: the dashboard keeps showing the final state)."""
         k = self.keys
-        World(self.sc, self.seed).step()  # compile (or load) the world's kernels before "ready"
+        self._warm_up()
         self._declare()
         subscribe_decoded(self.session, k.agent_all("command"), Command, self._on_command, self.drops)
         subscribe_decoded(self.session, k.run_control(), RunControl, self._on_control, self.drops)
