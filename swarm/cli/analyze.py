@@ -6,21 +6,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from swarm.cli.args import positive_float
 from swarm.cli.sim import add_scenario_args, load_from_args
 from swarm.errors import ConfigError
-
-
-def _positive(flag: str):
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag} must be a positive number, got {text!r}") from None
-        if not v > 0:
-            raise argparse.ArgumentTypeError(f"{flag} must be a positive number, got {text!r}")
-        return v
-
-    return parse
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -36,7 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--out", type=Path, default=None, metavar="DIR", help="output directory (default anchors-SCENARIO)"
     )
     a.add_argument(
-        "--spacing", type=_positive("--spacing"), default=None, help="grid spacing [m] (default 0.1)"
+        "--spacing", type=positive_float("--spacing"), default=None, help="grid spacing [m] (default 0.1)"
     )
     a.add_argument(
         "--margin", type=float, default=None, help="grid margin around the vehicles [m] (default 0.5)"

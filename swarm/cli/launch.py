@@ -35,33 +35,8 @@ _LOG = logging.getLogger("swarm.launch")
 VISION_COUNTS = ("features_accepted", "pose_accepted")
 
 
-def _positive(name: str):
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a number > 0, got {text!r}") from None
-        if not (v > 0 and v < float("inf")):
-            raise argparse.ArgumentTypeError(f"{name} must be a finite number > 0, got {text!r}")
-        return v
-
-    return parse
-
-
-def _count(name: str):
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be an integer >= 0, got {text!r}") from None
-        if v < 0:
-            raise argparse.ArgumentTypeError(f"{name} must be an integer >= 0, got {text!r}")
-        return v
-
-    return parse
-
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from swarm.cli.args import add_world_timeouts, count, positive_float
     from swarm.transport.process import add_process_arguments
 
     p = sub.add_parser(
@@ -82,23 +57,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     g.add_argument("--repeat", action="store_true", help="after each run, start another with a new seed")
     g.add_argument(
-        "--timeout", type=_positive("--timeout"), default=None, metavar="S", help="wall-time limit [s]"
+        "--timeout", type=positive_float("--timeout"), default=None, metavar="S", help="wall-time limit [s]"
     )
     g.add_argument(
         "--json", type=Path, default=None, metavar="FILE", help="write the summary (DESIGN.md sec. 8)"
     )
     g.add_argument(
-        "--max-restarts", type=_count("--max-restarts"), default=3, metavar="N",
+        "--max-restarts", type=count("--max-restarts"), default=3, metavar="N",
         help="restarts of one agent before giving up on it (default 3)",
     )  # fmt: skip
-    g.add_argument(
-        "--step-timeout", type=_positive("--step-timeout"), default=5.0, metavar="S",
-        help="lockstep: the world steps without a silent agent's command after this long (default 5 s)",
-    )  # fmt: skip
-    g.add_argument(
-        "--start-timeout", type=_positive("--start-timeout"), default=180.0, metavar="S",
-        help="give up if the processes are not all up after this long (default 180 s: a first run compiles)",
-    )  # fmt: skip
+    add_world_timeouts(g)
     p.set_defaults(func=run)
 
 

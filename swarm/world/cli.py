@@ -13,31 +13,12 @@ DESCRIPTION = (
 )
 
 
-def _positive(name: str):
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a number > 0, got {text!r}") from None
-        if not v > 0 or v != v or v == float("inf"):
-            raise argparse.ArgumentTypeError(f"{name} must be a finite number > 0, got {text!r}")
-        return v
-
-    return parse
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from swarm.cli.args import add_world_timeouts
     from swarm.transport.process import add_process_arguments
 
     add_process_arguments(p)
-    p.add_argument(
-        "--step-timeout", type=_positive("--step-timeout"), default=5.0, metavar="S",
-        help="lockstep: step without an agent's command after this long, logged (default 5 s)",
-    )  # fmt: skip
-    p.add_argument(
-        "--start-timeout", type=_positive("--start-timeout"), default=180.0, metavar="S",
-        help="give up if the agents and the mothership are not all alive after this long (default 180 s)",
-    )  # fmt: skip
+    add_world_timeouts(p)
     p.add_argument(
         "--clock-every", type=int, default=10, metavar="TICKS",
         help="publish world/clock every this many ticks (default 10)",

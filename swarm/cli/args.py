@@ -1,0 +1,49 @@
+"""Argument types the ``swarm`` commands and processes share: each names the flag and the value it refuses."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+
+
+def positive_float(flag: str) -> Callable[[str], float]:
+    """An argparse type: a finite number > 0 (``--timeout 2.5``)."""
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} must be a finite number > 0, got {text!r}") from None
+        if not (math.isfinite(v) and v > 0):
+            raise argparse.ArgumentTypeError(f"{flag} must be a finite number > 0, got {text!r}")
+        return v
+
+    return parse
+
+
+def count(flag: str) -> Callable[[str], int]:
+    """An argparse type: an integer >= 0 (``--max-restarts 3``)."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} must be an integer >= 0, got {text!r}") from None
+        if v < 0:
+            raise argparse.ArgumentTypeError(f"{flag} must be an integer >= 0, got {text!r}")
+        return v
+
+    return parse
+
+
+def add_world_timeouts(p) -> None:
+    """``--step-timeout`` and ``--start-timeout``: the world's, also taken by ``swarm launch`` for it."""
+    p.add_argument(
+        "--step-timeout", type=positive_float("--step-timeout"), default=5.0, metavar="S",
+        help="lockstep: step without a silent agent's command after this long, logged (default 5 s)",
+    )  # fmt: skip
+    p.add_argument(
+        "--start-timeout", type=positive_float("--start-timeout"), default=180.0, metavar="S",
+        help="give up if the processes are not all up after this long (default 180 s: a first run compiles)",
+    )  # fmt: skip
