@@ -409,6 +409,60 @@ def test_station_keeping_rotation_has_hysteresis():
         assert bool(s.rotate) == expected, att
 
 
+# Significance test (StationKeeping docstring): translation starts when |dp| > max(deadband_m, k sigma_max),
+# k = sqrt(chi2.ppf(0.9999, 3)) = 4.5943 (the 99.99 % point of chi-square with 3 dof is 21.108, tables).
+K_SIG = 4.5943
+
+
+def test_significance_radius_is_the_chi_square_quantile_in_sigmas():
+    assert SP.significance_sigmas == pytest.approx(K_SIG, abs=1e-4)
+
+
+def test_station_keeping_holds_on_an_unsettled_estimate():
+    # 5 cm out, beyond the 4 cm dead band, sigma 1.5 cm (below converged_sigma_m = 2 cm: the old gate was
+    # open): 5 / 1.5 = 3.3 sigma < 4.59, the offset is within what the estimate resolves
+    s = StationKeeping(P_STATION, Q_STATION, SP)
+    s.step(station_nav(0.05, sigma=0.015), DT)
+    assert not s.translate
+
+
+def test_station_keeping_releases_on_a_settled_estimate():
+    # the same 5 cm with the steady-state sigma of 8 mm: 6.25 sigma > 4.59, significant
+    s = StationKeeping(P_STATION, Q_STATION, SP)
+    s.step(station_nav(0.05, sigma=0.008), DT)
+    assert s.translate
+
+
+@pytest.mark.parametrize(
+    ("offset_m", "sigma_m", "significant"),
+    [
+        (0.046, 0.01, True),  # 4.60 sigma > 4.5943
+        (0.0459, 0.01, False),  # 4.59 sigma < 4.5943
+        (0.01, 0.0, True),  # an exact estimate: every offset is significant
+        (0.0, 0.0, False),  # no offset at all
+    ],
+)
+def test_offset_significance_is_the_chi_square_test(offset_m, sigma_m, significant):
+    s = StationKeeping(P_STATION, Q_STATION, SP)
+    assert s.offset_significant(offset_m, sigma_m) is significant
+
+
+def test_significant_offset_inside_the_dead_band_is_not_corrected():
+    # 3 cm at sigma 5 mm is 6 sigma, significant, but inside the 4 cm dead band
+    s = StationKeeping(P_STATION, Q_STATION, SP)
+    s.step(station_nav(0.03, sigma=0.005), DT)
+    assert not s.translate
+
+
+def test_insignificant_offset_does_not_start_but_a_started_correction_completes():
+    # the test decides when to start; the hysteresis (settle_m, settle_speed_m_s) when to stop
+    s = StationKeeping(P_STATION, Q_STATION, SP)
+    s.step(station_nav(0.05, sigma=0.008), DT)
+    assert s.translate
+    s.step(station_nav(0.05, sigma=0.015), DT)  # the sigma grows: 3.3 sigma, but the correction goes on
+    assert s.translate
+
+
 def test_station_keeping_reference_is_the_initial_pose():
     s = StationKeeping(P_STATION, Q_STATION, SP)
     ref = s.step(station_nav(0.1, att_deg=5.0), DT)
@@ -447,6 +501,12 @@ def test_guidance_params_errors_name_the_field(kwargs, field):
 def test_station_params_errors_name_the_field(name):
     with pytest.raises(ConfigError, match=rf"station\.{name}"):
         StationParams(**{name: -1.0})
+
+
+@pytest.mark.parametrize("value", [0.0, 1.0, float("nan"), -0.5])
+def test_station_significance_probability_must_be_a_probability(value):
+    with pytest.raises(ConfigError, match=r"station\.significance_probability"):
+        StationParams(significance_probability=value)
 
 
 def test_default_guidance_params_are_valid_and_hashable():
