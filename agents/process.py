@@ -150,6 +150,12 @@ class AgentProcess:
             self._ended.set()
 
     def _on_alive(self, role: str, pid: str, alive: bool) -> None:
+        if role == "mothership":
+            if not alive:
+                _LOG.warning("%s: mothership lost; flying without ranges until it is back", self.id)
+            if self.clock.lockstep:
+                self.assembler.set_uwb_live(alive)
+            return
         if role == "agent" and pid == self.target_id:
             if not alive:
                 _LOG.warning("%s: target %s lost; holding its last estimate", self.id, pid)
@@ -345,7 +351,7 @@ class AgentProcess:
         if self.chaser:
             subscribe_decoded(self.session, k.vision(self.id), Vision, self._on_sensor, self.drops)
             subscribe_decoded(self.session, k.estimate(self.target_id), Estimate, self._on_target, self.drops)
-            watch_liveliness(self.session, k, self._on_alive, history=False)
+        watch_liveliness(self.session, k, self._on_alive, history=False)
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
         self._token = declare_liveliness(self.session, k, "agent", self.id)
         print_ready("agent", self.id)

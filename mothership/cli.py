@@ -16,6 +16,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from swarm.transport.process import add_process_arguments
 
     add_process_arguments(p, clock=False)
+    p.add_argument(
+        "--rejoin",
+        action="store_true",
+        help="join a run in progress (a restarted mothership)",
+    )
 
 
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
@@ -26,7 +31,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     sc = scenario_from(args)
     stop = stop if stop is not None else threading.Event()
     with open_session(zenoh_args(args)) as session:
-        MothershipProcess(sc, args.seed, session, keys_from(args), stop).run()
+        MothershipProcess(sc, args.seed, session, keys_from(args), stop, rejoin=args.rejoin).run()
     return 0
 
 

@@ -32,7 +32,14 @@ class MothershipProcess:
     """Anchor services and radio network of one run (module docstring)."""
 
     def __init__(
-        self, scenario, seed: int, session, keys: Keys, stop: threading.Event, anchors_every_s: float = 1.0
+        self,
+        scenario,
+        seed: int,
+        session,
+        keys: Keys,
+        stop: threading.Event,
+        anchors_every_s: float = 1.0,
+        rejoin: bool = False,
     ) -> None:
         self.sc, self.seed, self.session, self.keys, self.stop = scenario, seed, session, keys, stop
         self.anchors_every_s = anchors_every_s
@@ -44,9 +51,9 @@ class MothershipProcess:
         self._truth: queue.Queue[tuple[str, Truth]] = queue.Queue()
         self.anchors_msg = Anchors(tuple(range(len(scenario.anchors_m))), np.asarray(scenario.anchors_m))
         self._pending: dict[int, dict[str, Truth]] = {}
-        self._next_slot = (
-            self.every
-        )  # tick 0 has no exchange (the simulation's first range is at a slot >= 1)
+        # tick 0 has no exchange: the first range is at the first slot >= 1; a restarted mothership (rejoin)
+        # starts at the slot after the first truth it sees (that slot's truths may have come before it)
+        self._next_slot: int | None = None if rejoin else self.every
         self.slots = 0
 
     def _on_truth(self, key: str, msg: Truth) -> None:
@@ -107,6 +114,9 @@ class MothershipProcess:
                 last_anchors = now
             if vid is None:
                 continue
+            if self._next_slot is None:
+                self._next_slot = msg.tick + self.every
+                _LOG.info("mothership rejoins the run: ranges from tick %d on", self._next_slot)
             if msg.tick < self._next_slot:
                 self.drops.drop(k.truth(vid), f"truth of tick {msg.tick}: its UWB slot was already served")
                 continue

@@ -338,7 +338,8 @@ def _start_run(args, sc, seed, endpoint, sup, Child):
     common = _child_args(args, endpoint, seed)
     from swarm.transport.security import agent_name
 
-    sup.start(Child("mothership", ["mothership", *common, *_config_args(args, "mothership")]))
+    mothership = ["mothership", *common, *_config_args(args, "mothership")]
+    sup.start(Child("mothership", mothership, restartable=True, rejoin_args=["--rejoin"]))
     for vid in sc.vehicles:
         agent = ["agents", "--id", vid, "--clock", str(args.clock), *common,
                  *_config_args(args, agent_name(vid))]  # fmt: skip
@@ -408,15 +409,15 @@ def _supervise(
                 _LOG.warning("%s (seen %.0f ms after the loss)", what, 1000 * (time.monotonic() - t_seen))
                 if role == "agent" and announce is not None:
                     announce(pid, "lost", {"why": "liveliness token gone", "action": what})
-                if role != "agent":
+                if role == "world":  # the truth itself: a world is not restarted mid-run
                     if log.ended.wait(0.5):  # its run_end may still be on its way
                         return "ended"
-                    _LOG.error("the %s is gone: the run cannot go on", role)
+                    _LOG.error("the world is gone: the run cannot go on")
                     return "failed"
         elif role is not None and alive and role == "agent":
             _LOG.info("agent %s is alive", pid)
         for c in sup.exited():
-            if c.name in ("world", "mothership"):
+            if c.name == "world":
                 if not log.ended.is_set():
                     _LOG.error("%s exited with status %s", c.name, c.popen.returncode)
                     return "failed"

@@ -137,6 +137,8 @@ class AgentTickAssembler:
         self._estimates: dict[int, Estimate] = {}  # by the estimate's own tick
         self._held: Estimate | None = None  # the newest target estimate handed out
         self._target_live = bool(wait_for_target)
+        self._uwb_live = True
+        self._uwb_from = 0  # uwb of ticks >= this are required (while the mothership is live)
         self._target_from = 0  # estimates of ticks >= this are required (while the target is live)
         self._closed = False
         self._counts = dict.fromkeys(("stale", "duplicates", "future", "unexpected", "incomplete"), 0)
@@ -222,6 +224,8 @@ class AgentTickAssembler:
             self._counts["duplicates"] += 1
             return False
         setattr(frame, slot, msg)
+        if slot == "uwb" and self._uwb_from < 0:  # the first range since the mothership came back
+            self._uwb_from = k
         return True
 
     # ------------------------------------------------------------------------------ consumer
@@ -242,7 +246,8 @@ class AgentTickAssembler:
             frame = self._frames.get(k)
             if frame is None or frame.imu is None:
                 out.append("imu")
-            if k % self.uwb_every == 0 and (frame is None or frame.uwb is None):
+            needs_uwb = self._uwb_live and self._uwb_from >= 0 and k >= self._uwb_from
+            if needs_uwb and k % self.uwb_every == 0 and (frame is None or frame.uwb is None):
                 out.append("uwb")
             if self.vision_every is not None and k % self.vision_every == 0:
                 if frame is None or frame.vision is None:
@@ -309,6 +314,17 @@ class AgentTickAssembler:
             self._next = k + 1
             est = self._held if self.is_chaser else None
             return TickInputs(tick=k, imu=frame.imu, vision=frame.vision, uwb=frame.uwb, target_estimate=est)
+
+    def set_uwb_live(self, live: bool) -> None:
+        """The mothership (the ranges' source) was seen lost (``False``: ticks stop waiting for ``uwb``) or
+        back (``True``: they wait again from the first range it sends)."""
+        with self._cond:
+            if bool(live) == self._uwb_live:
+                return
+            self._uwb_live = bool(live)
+            if live:
+                self._uwb_from = -1  # set by the next uwb that arrives
+            self._cond.notify_all()
 
     def set_target_live(self, live: bool) -> None:
         """The target's agent was seen lost (``False``: ticks stop waiting for its estimates) or back

@@ -179,6 +179,32 @@ def test_a_killed_agent_is_seen_lost_within_a_second_and_restarted(tmp_path):
     assert not res["keepout_violated"]
 
 
+def test_a_killed_mothership_is_restarted_and_the_agents_fly_on_without_ranges_meanwhile(tmp_path):
+    """The mothership's loss stops the agents' wait for ranges (lockstep would deadlock otherwise); the
+    restarted one joins at the slot after the first truth it sees; the run still ends docked or in a safe
+    hold, and no other process crashes."""
+    ns = _ns()
+    with Procs() as procs:
+        out = tmp_path / "launch.json"
+        proc, _ = _launch(procs, ns, "--until-docked", json_path=out)
+        proc.wait_for_line(r"^swarm up:", 120.0)
+        time.sleep(2.0)
+        victim = next(c for c in _children(ns) if "-m mothership" in c)
+        os.kill(int(victim.split()[0]), signal.SIGKILL)
+        proc.wait(RUN_S)
+    text = proc.output()
+    assert re.search(r"WARNING swarm.launch: mothership lost \(liveliness token gone\); restart 1/3", text), (
+        text
+    )
+    assert "mothership lost; flying without ranges" in text
+    assert re.search(r"mothership restarted \(pid \d+\), rejoining the run", text), text
+    assert "mothership rejoins the run: ranges from tick" in text
+    assert "Traceback" not in text
+    res = json.loads(out.read_text())["chasers"]["chaser"]
+    assert res["docked"] or res["final_mode"] in ("HOLD", "ABORT"), res
+    assert not res["keepout_violated"]
+
+
 def test_sigint_to_the_launcher_leaves_no_child_behind():
     ns = _ns()
     with Procs() as procs:

@@ -337,6 +337,25 @@ def test_a_free_running_agent_takes_a_late_tick_partially_and_never_waits_for_th
     assert asm.take_partial() is None  # nothing further arrived
 
 
+def test_a_lost_mothership_stops_the_wait_for_ranges_until_they_flow_again():
+    asm = plain(uwb_every=1)
+    asm.add(imu(1))
+    assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["uwb"]
+    asm.set_uwb_live(False)
+    got = asm.next_tick(0)
+    assert got.tick == 1 and got.uwb is None
+    asm.set_uwb_live(True)  # restarted: no range arrived yet, so none is waited for
+    asm.add(imu(2))
+    assert asm.next_tick(0).tick == 2
+    asm.add(uwb(4))  # its first range
+    asm.add(imu(3))
+    assert asm.next_tick(0).tick == 3  # before its first range: not waited for
+    asm.add(imu(4))
+    asm.add(imu(5))
+    assert asm.next_tick(0).uwb.tick == 4
+    assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["uwb"]  # from then on, waited for
+
+
 @pytest.mark.parametrize("seed", range(5))
 def test_concurrent_producers_in_shuffled_order_give_the_in_process_tick_sequence(seed):
     n, uwb_every, vision_every = 60, 2, 5
