@@ -1,0 +1,149 @@
+"""Property test against a live swarm (issue 7, bad input everywhere): thousands of arbitrary payloads —
+random bytes, arbitrary msgpack values, and valid messages with one field replaced by an arbitrary value —
+published on every key of the swarm while a lockstep docking runs, and garbage queries to the anchors
+queryable. Every payload sent is checked, on the test's side, to be one the codec refuses for that key (a
+*valid* message from an intruder is for access control: ``--secure``, tests/transport/test_security.py).
+
+Oracle: the in-process simulation of the same seed. The launched run must be that run exactly, and every
+process must survive (no traceback, launcher exit 0).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from swarm.scenario import load_scenario
+from swarm.sim.docking import run_docking
+from swarm.transport.keys import AGENT_KINDS, Keys
+from swarm.transport.messages import (
+    MESSAGE_FOR_KIND,
+    Clock,
+    Command,
+    Estimate,
+    Imu,
+    MessageError,
+    RunControl,
+    Truth,
+    Uwb,
+    decode,
+    encode,
+)
+from tests.transport.procs import Procs, free_port, loopback
+
+SEED = 3
+EXAMPLES = 2500  # payloads per run: "thousands", while the docking (~25 s of wall time here) is under way
+
+_int64 = st.integers(-(2**63), 2**64 - 1)
+_values = st.recursive(
+    st.none() | st.booleans() | _int64 | st.floats() | st.text(max_size=16) | st.binary(max_size=32),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
+    max_leaves=12,
+)
+
+_Q = np.array([0.0, 0.0, 0.0, 1.0])
+_VALID = {
+    "imu": Imu(7, 0.07, 0.01, np.zeros(3), _Q),
+    "uwb": Uwb(8, 0.08, 1, 1.5),
+    "command": Command(7, 0.07, np.zeros(10), np.zeros(3), np.zeros(3), "HOLD"),
+    "truth": Truth(7, 0.07, np.zeros(3), np.zeros(3), _Q, np.zeros(3)),
+    "estimate": Estimate(7, 0.07, np.zeros(3), np.zeros(3), _Q, np.eye(9), 0.1, 0.0, 0.0, {}),
+    "world_clock": Clock(7, 0.07, "running", 0),
+    "run_control": RunControl("pause"),
+}
+
+
+def _keys(ns: str) -> list[tuple[str, str]]:
+    k = Keys(ns)
+    out = [(kind, getattr(k, kind)(vid)) for kind in AGENT_KINDS for vid in ("chaser", "target")]
+    fixed = [("world_clock", k.world_clock()), ("world_event", k.world_event()), ("anchors", k.anchors()),
+             ("run_control", k.run_control())]  # fmt: skip
+    return [*out, *fixed]
+
+
+@st.composite
+def _mutated(draw, kind: str) -> bytes:
+    """A valid message of ``kind`` (or a close one) with one field replaced by an arbitrary value."""
+    base = _VALID.get(kind, _VALID["imu"])
+    wire = msgpack.unpackb(encode(base), raw=False)
+    field = draw(st.sampled_from(sorted(wire)))
+    wire[field] = draw(_values)
+    return msgpack.packb(wire, use_bin_type=True)
+
+
+def _refused(kind: str, payload: bytes) -> bool:
+    try:
+        decode(payload, MESSAGE_FOR_KIND[kind])
+    except MessageError:
+        return True
+    return False  # a valid message: not this test's business (see the module docstring)
+
+
+@st.composite
+def _attack(draw, keys: list[tuple[str, str]]) -> tuple[str, bytes]:
+    kind, key = draw(st.sampled_from(keys))
+    payload = draw(
+        st.binary(max_size=256) | _values.map(lambda v: msgpack.packb(v, use_bin_type=True)) | _mutated(kind)
+    )
+    return key, payload
+
+
+@pytest.fixture(scope="module")
+def swarm(tmp_path_factory):
+    import zenoh
+
+    ns = f"fuzz-{free_port()}"
+    out = tmp_path_factory.mktemp("fuzz") / "launch.json"
+    endpoint = loopback(free_port())
+    with Procs() as procs:
+        proc = procs.start([sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless",
+                            "--until-docked", "--seed", str(SEED), "--namespace", ns, "--listen", endpoint,
+                            "--json", str(out)])  # fmt: skip
+        proc.wait_for_line(r"^swarm up:", 180.0)
+        conf = zenoh.Config()
+        conf.insert_json5("mode", '"client"')
+        conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        with zenoh.open(conf) as session:
+            yield {"proc": proc, "session": session, "keys": _keys(ns), "out": out, "sent": [0]}
+
+
+def test_thousands_of_refused_payloads_on_every_key_and_query(swarm):
+    session, keys = swarm["session"], swarm["keys"]
+
+    @settings(max_examples=EXAMPLES, deadline=None, database=None, derandomize=True,
+              suppress_health_check=list(HealthCheck))  # fmt: skip
+    @given(_attack(keys))
+    def attack(item):
+        key, payload = item
+        kind = next(k for k, kk in keys if kk == key)
+        if not _refused(kind, payload):
+            return
+        session.put(key, payload)
+        swarm["sent"][0] += 1
+        if swarm["sent"][0] % 100 == 0:  # and the queryable, with a garbage query payload
+            for _reply in session.get(
+                key if kind == "anchors" else keys[-2][1], payload=payload, timeout=1.0
+            ):
+                pass
+
+    attack()
+    assert swarm["sent"][0] > 1000  # most generated payloads are refused ones (the rest are skipped)
+
+
+def test_the_run_is_still_the_in_process_run(swarm):
+    proc = swarm["proc"]
+    assert proc.wait(300.0) == 0, proc.output()
+    text = proc.output()
+    assert "Traceback" not in text
+    got = json.loads(swarm["out"].read_text())["chasers"]["chaser"]
+    want = run_docking(load_scenario("docking"), seed=SEED, record_series=False)["chasers"]["chaser"]
+    for field in ("docked", "docking_time_s", "total_impulse_ns", "position_error_m", "modes"):
+        assert got[field] == want[field], field
+    assert "dropped" in text  # the processes counted and logged the drops
