@@ -49,6 +49,12 @@ class Mode(enum.StrEnum):
     STATION = "STATION"  # the target keeps station
 
 
+CORRIDOR_MODES = (Mode.DOCK, Mode.DOCKED, Mode.ABORT)
+"""Modes in which the chaser may be inside the keep-out sphere, within the docking corridor: docking, and
+an ABORT backing out of it (it retreats along the line of sight from the target's centre, a ray that
+stays at the same angle to the face normal, so a retreat from the corridor stays in it)."""
+
+
 @dataclass(frozen=True)
 class GuidanceParams:
     """Geometry, speeds and thresholds of the docking guidance (every number a scenario default)."""
@@ -99,6 +105,11 @@ class GuidanceParams:
     """... and resume below this (hysteresis) [m]."""
     hold_rejection_fraction: float = 0.5
     """HOLD when more than this fraction of the recent range updates was rejected."""
+    hold_nis_mean: float = 8.0
+    """HOLD when the mean normalised innovation squared of the recent ranges (each clipped at the gate,
+    the square of Algorithm 1's d) exceeds this; resume at or below it. A consistent filter gives 1
+    (chi-square, 1 dof); 10 % outliers clipped at the 99.99 % gate (15.1) give ~2.4; 8 flags innovations
+    that pass the gate but are systematically large (a filter that has drifted)."""
     abort_after_hold_s: float = 30.0
     """A HOLD (after start) longer than this turns into ABORT [s]."""
     abort_retreat_m: float = 0.3
@@ -121,7 +132,7 @@ class GuidanceParams:
             "align_attitude_tolerance_rad", "align_speed_tolerance_m_s", "contact_distance_m",
             "contact_lateral_m", "contact_attitude_rad", "contact_speed_m_s", "hold_sigma_pos_m",
             "resume_sigma_pos_m", "abort_after_hold_s", "abort_retreat_m", "stall_timeout_s",
-            "corridor_half_angle_deg", "retry_after_s", "arc_lookahead_rad",
+            "corridor_half_angle_deg", "retry_after_s", "arc_lookahead_rad", "hold_nis_mean",
         ):  # fmt: skip
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -333,11 +344,16 @@ class ChaserGuidance:
         r = float(_norm(nav.p_ms - p_t))
         qe = rot.quat_mul(rot.quat_conj(q_dock), nav.q_ms_body)
         qe_norm = float(_norm(qe[:3]))
+        nis = nav.mahalanobis_d * nav.mahalanobis_d  # mean NIS of the health window
         unhealthy = (
-            nav.sigma_pos_max_m > p.hold_sigma_pos_m or nav.rejection_fraction > p.hold_rejection_fraction
+            nav.sigma_pos_max_m > p.hold_sigma_pos_m
+            or nav.rejection_fraction > p.hold_rejection_fraction
+            or nis > p.hold_nis_mean
         )
         healthy = (
-            nav.sigma_pos_max_m < p.resume_sigma_pos_m and nav.rejection_fraction <= p.hold_rejection_fraction
+            nav.sigma_pos_max_m < p.resume_sigma_pos_m
+            and nav.rejection_fraction <= p.hold_rejection_fraction
+            and nis <= p.hold_nis_mean
         )
         decision = None
 
@@ -353,11 +369,12 @@ class ChaserGuidance:
                 self._switch(t, Mode.ABORT, r, f"HOLD longer than {p.abort_after_hold_s:.0f} s", events)
         elif self.mode in (Mode.APPROACH, Mode.REORIENT, Mode.ALIGN) and unhealthy:
             self.resume_mode = self.mode
-            why = (
-                f"sigma_pos={nav.sigma_pos_max_m:.3f} m > {p.hold_sigma_pos_m} m"
-                if nav.sigma_pos_max_m > p.hold_sigma_pos_m
-                else f"{nav.rejection_fraction:.0%} of recent ranges rejected"
-            )
+            if nav.sigma_pos_max_m > p.hold_sigma_pos_m:
+                why = f"sigma_pos={nav.sigma_pos_max_m:.3f} m > {p.hold_sigma_pos_m} m"
+            elif nav.rejection_fraction > p.hold_rejection_fraction:
+                why = f"{nav.rejection_fraction:.0%} of recent ranges rejected"
+            else:
+                why = f"mean NIS of recent ranges {nis:.1f} > {p.hold_nis_mean}"
             self.p_ref = nav.p_ms.copy()
             self._switch(t, Mode.HOLD, r, "estimate not trustworthy: " + why, events)
         elif self.mode is Mode.DOCK and unhealthy:
