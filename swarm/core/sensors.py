@@ -350,7 +350,8 @@ def uwb_exchange(t_s, tag_ms, anchor_ms, z, drift_m_s, prm):
     :meth:`UwbRadio.sample` (its docstring has the model), compiled so the simulation's inner loop can
     call it. ``prm`` is :attr:`UwbRadio.vector`, possibly with fault windows (:func:`uwb_fault_vector`):
     inside an NLOS burst window the outlier probability is the window's (when larger). ``z`` (4,)
-    standard normals: ``z0`` is the range noise; ``z1..z3`` become the dropout, outlier and outlier-size uniforms through the normal CDF (probability integral transform), so an
+    standard normals: ``z0`` is the range noise; ``z1..z3`` become the dropout, outlier and outlier-size
+    uniforms through the normal CDF (probability integral transform), so an
     exchange always consumes four draws whatever happens."""
     if 0.5 * math.erfc(-z[1] * _INV_SQRT2) < prm[UWB_P_DROP]:
         return True, 0.0, False

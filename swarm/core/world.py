@@ -312,7 +312,8 @@ class UwbNetwork:
     def set_fault_windows(self, dropouts, nlos_bursts) -> None:
         """Every fault window of the network from now on (:mod:`swarm.core.faults`): dropout windows
         ``(start, end)`` and NLOS bursts ``(start, end, probability)`` [s], on top of
-        ``uwb.dropout_windows_s`` (a :class:`~swarm.core.faults.FaultSchedule` gives both lists, fixed windows included)."""
+        ``uwb.dropout_windows_s`` (a :class:`~swarm.core.faults.FaultSchedule` gives both lists, fixed
+        windows included)."""
         self.prm = uwb_fault_vector(self.base_prm, dropouts, nlos_bursts)
 
     def reserve_noise(self, exchanges: int) -> None:
