@@ -121,6 +121,8 @@ class World:
         for i, vid in enumerate(self.ids):
             self.gyro_step_t[i], self.gyro_step[i] = sc.faults.gyro_step_rad_s(vid, sc.chasers)
         self.camera_loss: dict[str, list] = {c: list(sc.faults.camera_loss.windows_s) for c in sc.chasers}
+        self.camera_frames_lost = 0
+        """Camera frames with the target in view dropped by a camera-loss window (a fault's footprint)."""
 
     @property
     def impulse_ns(self) -> dict[str, float]:
@@ -214,6 +216,7 @@ class World:
         if any(w[0] <= frame.t_s < w[1] for w in self.camera_loss.get(chaser, ())):
             # camera lost (a fault): the frame was drawn, so the camera stream stays aligned, and dropped
             frame.vision_kind = frame.vision = None
+            self.camera_frames_lost += 1
 
     # ---- truth-side metrics -------------------------------------------------------------------------
     def contact(self, chaser: str, target: str) -> dict:
