@@ -50,7 +50,7 @@ def faulty_run():
 
 
 def test_no_range_arrives_during_the_dropout_that_reorient_triggered(faulty_run):
-    sim, res, ranges, _ = faulty_run
+    _, res, ranges, _ = faulty_run
     t_reorient = next(m["t_s"] for m in res["modes"] if m["mode"] == "REORIENT")
     (start, end), *_ = res["faults"]["uwb_dropout_s"]
     assert start == pytest.approx(t_reorient + 0.01) and end == pytest.approx(start + 5.0)

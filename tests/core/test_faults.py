@@ -138,7 +138,9 @@ def test_gyro_bias_step_adds_exactly_the_step_from_its_time_on():
     for k in range(100):
         fa, fb = a.step()["chaser"], b.step()["chaser"]
         diff = fb.gyro_body - fa.gyro_body
-        if (k + 1) * DT <= 0.5 + 1e-9:  # the sample of tick k+1 averages [t_k, t_k+1]: stepped once t_k >= 0.5
+        if (
+            k + 1
+        ) * DT <= 0.5 + 1e-9:  # the sample of tick k+1 averages [t_k, t_k+1]: stepped once t_k >= 0.5
             assert np.array_equal(diff, np.zeros(3)), k
         else:
             np.testing.assert_allclose(diff, np.radians(step), rtol=0, atol=1e-12)
@@ -156,7 +158,7 @@ def test_camera_loss_window_drops_frames_without_touching_the_camera_stream():
         xt = w.x["target"]
         from swarm.core.guidance import docking_geometry
 
-        n_ms, p_docked, q_dock = docking_geometry(sc.guidance, xt[0:3], xt[6:10])
+        n_ms, _, q_dock = docking_geometry(sc.guidance, xt[0:3], xt[6:10])
         w.x["chaser"][0:3] = xt[0:3] + 0.3 * n_ms
         w.x["chaser"][6:10] = q_dock
     seen = [[], []]
