@@ -59,7 +59,7 @@ def format_report(rec: dict) -> str:
                 f"{pol}: NEES over {n['samples']} samples (UWB navigation, outside the dropout): mean "
                 f"{n['mean_nees']:.2f}, median {n['median_nees']:.2f}; ensemble mean inside its 95 % "
                 f"bounds at {100 * n['fraction_times_inside_95']:.0f} % of {n['times']} times "
-                f"({n['times_above']} above, {n['times_below']} below); bound of the overall mean if samples were independent "
-                f"[{lo:.2f}, {hi:.2f}]"
+                f"({n['times_above']} above, {n['times_below']} below); bound of the overall mean "
+                f"if samples were independent [{lo:.2f}, {hi:.2f}]"
             )
     return "\n".join(lines)
