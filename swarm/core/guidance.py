@@ -122,6 +122,10 @@ class GuidanceParams:
     """After an ABORT the approach is retried this many times once the estimate is healthy again."""
     stall_timeout_s: float = 2.0
     """REORIENT held at the keep-out boundary this long without reaching r1 switches to ALIGN [s]."""
+    dock_requires_vision: bool = True
+    """ALIGN -> DOCK only with vision: at the alignment point without it (camera lost) the chaser waits
+    there, and aborts after ``abort_after_hold_s``. Entering the corridor on a UWB-only estimate (~1-2 cm)
+    misses the 2 cm lateral contact tolerance or leaves the corridor when vision returns (issue 7)."""
 
     def __post_init__(self) -> None:
         if self.docking_face not in FACES:
@@ -141,6 +145,10 @@ class GuidanceParams:
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ConfigError(f"guidance.{name} must be a non-negative number, got {v!r}")
+        if not isinstance(self.dock_requires_vision, bool):
+            raise ConfigError(
+                f"guidance.dock_requires_vision must be a bool, got {self.dock_requires_vision!r}"
+            )
         if self.align_distance_m <= self.keepout_radius_m + self.keepout_margin_m:
             raise ConfigError(
                 "guidance.align_distance_m must lie outside the keep-out sphere plus margin "
@@ -410,7 +418,17 @@ class ChaserGuidance:
                 and att_err <= p.align_attitude_tolerance_rad
                 and _norm(nav.v_ms) <= p.align_speed_tolerance_m_s
             ):
-                self._switch(t, Mode.DOCK, r, "at the alignment point", events)
+                if nav.vision or not p.dock_requires_vision:
+                    self._switch(t, Mode.DOCK, r, "at the alignment point", events)
+                elif self.stall_since_s is None:
+                    self.stall_since_s = t  # at the point without vision: wait for it
+            if (
+                self.mode is Mode.ALIGN
+                and self.stall_since_s is not None
+                and t - self.stall_since_s > p.abort_after_hold_s
+            ):
+                why = f"no vision at the alignment point for {p.abort_after_hold_s:.0f} s"
+                self._switch(t, Mode.ABORT, r, why, events)
         if self.mode is Mode.DOCK:
             c = contact_state(p, nav.p_ms, nav.v_ms, nav.q_ms_body, p_t, nav.q_ms_target)
             if c["gap_m"] <= p.contact_distance_m:
