@@ -44,7 +44,8 @@ def format_report(rec: dict) -> str:
     from swarm.montecarlo.faults import format_summary
 
     lines = [
-        f"Faults (docking-faults: 10 % NLOS, 5 s UWB dropout in REORIENT, camera lost in ALIGN), "
+        f"Faults (docking-faults: 10 % NLOS, 5 s UWB dropout in REORIENT, camera lost for the first 10 s of "
+        f"ALIGN), "
         f"{rec['runs']} runs per policy, root seed {rec['root_seed']}, {rec['wall_s']:.0f} s wall on "
         f"{rec['workers']} workers",
         "",
