@@ -13,6 +13,10 @@ from swarm.scenario import load_scenario
 from swarm.sim.docking import DockingSim
 
 SEED = 3
+# the camera lost for the whole of ALIGN (the bundled scenario loses it for its first 10 s only, in which
+# the target may not come into view at all), and DOCK allowed without vision, so that frames with the
+# target in view are really dropped and the run still goes on to DOCK
+OVERRIDES = {"faults.camera_loss.duration_s": 400.0, "guidance.dock_requires_vision": False}
 
 
 def _logged_sim(sc, seed: int) -> tuple[DockingSim, list[float], list[float]]:
@@ -43,7 +47,7 @@ def _logged_sim(sc, seed: int) -> tuple[DockingSim, list[float], list[float]]:
 
 @pytest.fixture(scope="module")
 def faulty_run():
-    sc = load_scenario("docking-faults")
+    sc = load_scenario("docking-faults", OVERRIDES)
     sim, ranges, vision = _logged_sim(sc, SEED)
     res = sim.run()["chasers"]["chaser"]
     return sim, res, np.asarray(ranges), np.asarray(vision)
@@ -76,9 +80,8 @@ def test_no_vision_update_while_the_camera_is_lost_in_align(faulty_run):
     modes = [(m["mode"], m["t_s"]) for m in res["modes"]]
     t_align = next(t for m, t in modes if m == "ALIGN")
     t_next = next(t for m, t in modes if t > t_align)
-    # 10 s from the tick after ALIGN began, or until the chaser leaves ALIGN if that is sooner
-    assert start == pytest.approx(t_align + 0.01)
-    assert end == pytest.approx(min(start + 10.0, t_next + 0.01))
+    # from the tick after ALIGN began until the tick after it ended (OVERRIDES: longer than ALIGN)
+    assert start == pytest.approx(t_align + 0.01) and end == pytest.approx(t_next + 0.01)
     assert not np.any((vision >= start) & (vision < end))
     assert sim.world.camera_frames_lost > 0  # the target was in view: frames were really dropped
     assert np.any(vision >= end)  # the camera is back for DOCK
@@ -86,7 +89,7 @@ def test_no_vision_update_while_the_camera_is_lost_in_align(faulty_run):
 
 def test_fast_path_gives_the_per_tick_run_with_mode_triggered_faults(faulty_run):
     _, slow, _, _ = faulty_run
-    sc = load_scenario("docking-faults")
+    sc = load_scenario("docking-faults", OVERRIDES)
     fast = DockingSim(sc, "mdp", SEED, record_series=True, fast=True).run()["chasers"]["chaser"]
     for key in ("docked", "docking_time_s", "total_impulse_ns", "modes", "estimator", "faults"):
         assert fast[key] == slow[key], key
