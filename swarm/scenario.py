@@ -20,6 +20,7 @@ from swarm.core.camera import CameraParams, MarkerParams
 from swarm.core.control import AttitudeControlParams, TranslationLqrParams
 from swarm.core.dynamics import RigidBodyParams
 from swarm.core.estimator import EstimatorParams
+from swarm.core.faults import FaultParams
 from swarm.core.guidance import GuidanceParams, StationParams
 from swarm.core.mdp import FixedParams, MdpParams
 from swarm.core.sensors import AhrsParams, GyroParams, UwbParams
@@ -191,6 +192,9 @@ class Scenario:
     swarm: SwarmParams = field(default_factory=SwarmParams)
     dispersions: DispersionParams = field(default_factory=DispersionParams)
     """Run-to-run dispersions drawn from the seed (Monte Carlo); all off by default."""
+    faults: FaultParams = field(default_factory=FaultParams)
+    """Injected sensor faults (NLOS bursts, UWB dropouts, camera loss, gyro bias step), fixed in time or
+    triggered by a guidance mode (:mod:`swarm.core.faults`); all off by default."""
 
     def __post_init__(self) -> None:
         seq = self.euler_seq

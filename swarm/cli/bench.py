@@ -47,11 +47,19 @@ def _montecarlo(quick: bool) -> tuple[dict, str]:
     return record, montecarlo.format_report(record)
 
 
+def _faults(quick: bool) -> tuple[dict, str]:
+    from swarm.bench import faults
+
+    record = faults.run(quick)
+    return record, faults.format_report(record)
+
+
 BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
     "estimator": (_estimator, "estimator step: tandem vs compounded vs FilterPy (paper Table I)"),
     "sim": (_sim, "one in-process docking: real-time factor and profile"),
     "transport": (_transport, "the swarm over Zenoh: RTT, lockstep tick period (1/4/16 pairs), latency"),
     "montecarlo": (_montecarlo, "Monte Carlo campaign wall time: 1 vs 2 workers, number of runs"),
+    "faults": (_faults, "200 runs under the issue-7 faults: docked / safely aborted / failed, NEES"),
 }
 """Bench name -> (runner taking ``quick``, one-line help). Later issues add sim, montecarlo, transport."""
 

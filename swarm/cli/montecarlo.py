@@ -95,6 +95,12 @@ def run(args: argparse.Namespace) -> int:
     wall = outcome.wall_s if outcome.done > outcome.done_before else None
     rec = write_report(out, wall_s=wall, figures=not args.no_figures)
     _print(rec)
+    if sc.faults.enabled:  # outcome classes and NEES outside the dropouts (swarm.montecarlo.faults)
+        from swarm.montecarlo.campaign import read_runs, read_trajectories
+        from swarm.montecarlo.faults import fault_summary, format_summary
+
+        rec["faults"] = fault_summary(read_runs(out), read_trajectories(out))
+        print(format_summary(rec["faults"]))
     print(f"report: {out / 'report.md'}")
     if args.json is not None:
         try:

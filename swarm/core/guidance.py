@@ -50,6 +50,12 @@ class Mode(enum.StrEnum):
     STATION = "STATION"  # the target keeps station
 
 
+CORRIDOR_MODES = (Mode.DOCK, Mode.DOCKED, Mode.ABORT)
+"""Modes in which the chaser may be inside the keep-out sphere, within the docking corridor: docking, and
+an ABORT backing out of it (it retreats along the line of sight from the target's centre, a ray that
+stays at the same angle to the face normal, so a retreat from the corridor stays in it)."""
+
+
 @dataclass(frozen=True)
 class GuidanceParams:
     """Geometry, speeds and thresholds of the docking guidance (every number a scenario default)."""
@@ -100,6 +106,11 @@ class GuidanceParams:
     """... and resume below this (hysteresis) [m]."""
     hold_rejection_fraction: float = 0.5
     """HOLD when more than this fraction of the recent range updates was rejected."""
+    hold_nis_mean: float = 8.0
+    """HOLD when the mean normalised innovation squared of the recent ranges (each clipped at the gate,
+    the square of Algorithm 1's d) exceeds this; resume at or below it. A consistent filter gives 1
+    (chi-square, 1 dof); 10 % outliers clipped at the 99.99 % gate (15.1) give ~2.4; 8 flags innovations
+    that pass the gate but are systematically large (a filter that has drifted)."""
     abort_after_hold_s: float = 30.0
     """A HOLD (after start) longer than this turns into ABORT [s]."""
     abort_retreat_m: float = 0.3
@@ -112,6 +123,11 @@ class GuidanceParams:
     """After an ABORT the approach is retried this many times once the estimate is healthy again."""
     stall_timeout_s: float = 2.0
     """REORIENT held at the keep-out boundary this long without reaching r1 switches to ALIGN [s]."""
+    dock_requires_vision: bool = False
+    """ALIGN -> DOCK only with vision: at the alignment point without it (camera lost) the chaser waits
+    there, and aborts after ``abort_after_hold_s``. Entering the corridor on a UWB-only estimate (~1-2 cm)
+    can miss the 2 cm lateral contact tolerance (issue 7); off by default (the paper's guidance, and a
+    camera that sees the target at the alignment point makes it moot), on in ``docking-faults.toml``."""
 
     def __post_init__(self) -> None:
         if self.docking_face not in FACES:
@@ -122,7 +138,7 @@ class GuidanceParams:
             "align_attitude_tolerance_rad", "align_speed_tolerance_m_s", "contact_distance_m",
             "contact_lateral_m", "contact_attitude_rad", "contact_speed_m_s", "hold_sigma_pos_m",
             "resume_sigma_pos_m", "abort_after_hold_s", "abort_retreat_m", "stall_timeout_s",
-            "corridor_half_angle_deg", "retry_after_s", "arc_lookahead_rad",
+            "corridor_half_angle_deg", "retry_after_s", "arc_lookahead_rad", "hold_nis_mean",
         ):  # fmt: skip
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -131,6 +147,10 @@ class GuidanceParams:
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ConfigError(f"guidance.{name} must be a non-negative number, got {v!r}")
+        if not isinstance(self.dock_requires_vision, bool):
+            raise ConfigError(
+                f"guidance.dock_requires_vision must be a bool, got {self.dock_requires_vision!r}"
+            )
         if self.align_distance_m <= self.keepout_radius_m + self.keepout_margin_m:
             raise ConfigError(
                 "guidance.align_distance_m must lie outside the keep-out sphere plus margin "
@@ -334,11 +354,16 @@ class ChaserGuidance:
         r = float(_norm(nav.p_ms - p_t))
         qe = rot.quat_mul(rot.quat_conj(q_dock), nav.q_ms_body)
         qe_norm = float(_norm(qe[:3]))
+        nis = nav.mahalanobis_d * nav.mahalanobis_d  # mean NIS of the health window
         unhealthy = (
-            nav.sigma_pos_max_m > p.hold_sigma_pos_m or nav.rejection_fraction > p.hold_rejection_fraction
+            nav.sigma_pos_max_m > p.hold_sigma_pos_m
+            or nav.rejection_fraction > p.hold_rejection_fraction
+            or nis > p.hold_nis_mean
         )
         healthy = (
-            nav.sigma_pos_max_m < p.resume_sigma_pos_m and nav.rejection_fraction <= p.hold_rejection_fraction
+            nav.sigma_pos_max_m < p.resume_sigma_pos_m
+            and nav.rejection_fraction <= p.hold_rejection_fraction
+            and nis <= p.hold_nis_mean
         )
         decision = None
 
@@ -354,11 +379,12 @@ class ChaserGuidance:
                 self._switch(t, Mode.ABORT, r, f"HOLD longer than {p.abort_after_hold_s:.0f} s", events)
         elif self.mode in (Mode.APPROACH, Mode.REORIENT, Mode.ALIGN) and unhealthy:
             self.resume_mode = self.mode
-            why = (
-                f"sigma_pos={nav.sigma_pos_max_m:.3f} m > {p.hold_sigma_pos_m} m"
-                if nav.sigma_pos_max_m > p.hold_sigma_pos_m
-                else f"{nav.rejection_fraction:.0%} of recent ranges rejected"
-            )
+            if nav.sigma_pos_max_m > p.hold_sigma_pos_m:
+                why = f"sigma_pos={nav.sigma_pos_max_m:.3f} m > {p.hold_sigma_pos_m} m"
+            elif nav.rejection_fraction > p.hold_rejection_fraction:
+                why = f"{nav.rejection_fraction:.0%} of recent ranges rejected"
+            else:
+                why = f"mean NIS of recent ranges {nis:.1f} > {p.hold_nis_mean}"
             self.p_ref = nav.p_ms.copy()
             self._switch(t, Mode.HOLD, r, "estimate not trustworthy: " + why, events)
         elif self.mode is Mode.DOCK and unhealthy:
@@ -394,7 +420,17 @@ class ChaserGuidance:
                 and att_err <= p.align_attitude_tolerance_rad
                 and _norm(nav.v_ms) <= p.align_speed_tolerance_m_s
             ):
-                self._switch(t, Mode.DOCK, r, "at the alignment point", events)
+                if nav.vision or not p.dock_requires_vision:
+                    self._switch(t, Mode.DOCK, r, "at the alignment point", events)
+                elif self.stall_since_s is None:
+                    self.stall_since_s = t  # at the point without vision: wait for it
+            if (
+                self.mode is Mode.ALIGN
+                and self.stall_since_s is not None
+                and t - self.stall_since_s > p.abort_after_hold_s
+            ):
+                why = f"no vision at the alignment point for {p.abort_after_hold_s:.0f} s"
+                self._switch(t, Mode.ABORT, r, why, events)
         if self.mode is Mode.DOCK:
             c = contact_state(p, nav.p_ms, nav.v_ms, nav.q_ms_body, p_t, nav.q_ms_target)
             if c["gap_m"] <= p.contact_distance_m:

@@ -319,24 +319,44 @@ class UwbRadio:
             p.nlos_max_m,
             p.clock_drift_start_s,
         )
+        v[UWB_N_DROP] = len(p.dropout_windows_s)
         v[UWB_N:] = np.asarray(p.dropout_windows_s, dtype=np.float64).ravel()
         return v
 
 
-UWB_SIGMA, UWB_P_DROP, UWB_P_NLOS, UWB_NLOS_MIN, UWB_NLOS_MAX, UWB_DRIFT_START = range(6)
-UWB_N = 6  # dropout windows follow as (start, end) pairs
+UWB_SIGMA, UWB_P_DROP, UWB_P_NLOS, UWB_NLOS_MIN, UWB_NLOS_MAX, UWB_DRIFT_START, UWB_N_DROP = range(7)
+UWB_N = 7  # UWB_N_DROP dropout windows follow as (start, end) pairs, then NLOS bursts (start, end, p)
+
+
+def uwb_fault_vector(base: np.ndarray, dropouts, nlos_bursts) -> np.ndarray:
+    """``base`` (a :attr:`UwbRadio.vector`) with extra dropout windows ``(start, end)`` [s] and NLOS burst
+    windows ``(start, end, probability)`` appended (:mod:`swarm.core.faults`); ``base`` itself when there
+    are none, so the fault-free vector is the very same array."""
+    if not len(dropouts) and not len(nlos_bursts):
+        return base
+    n0 = int(base[UWB_N_DROP])
+    head = base[: UWB_N + 2 * n0]
+    old_bursts = base[UWB_N + 2 * n0 :]
+    drops = np.asarray(dropouts, dtype=np.float64).reshape(-1, 2).ravel()
+    bursts = np.asarray(nlos_bursts, dtype=np.float64).reshape(-1, 3).ravel()
+    v = np.concatenate([head, drops, old_bursts, bursts])
+    v[UWB_N_DROP] = n0 + len(drops) // 2
+    return v
 
 
 @numba.njit(cache=True)
 def uwb_exchange(t_s, tag_ms, anchor_ms, z, drift_m_s, prm):
     """One two-way-ranging exchange: ``(lost, range_m, is_outlier)``; the arithmetic of
     :meth:`UwbRadio.sample` (its docstring has the model), compiled so the simulation's inner loop can
-    call it. ``z`` (4,) standard normals: ``z0`` is the range noise; ``z1..z3`` become the dropout,
-    outlier and outlier-size uniforms through the normal CDF (probability integral transform), so an
+    call it. ``prm`` is :attr:`UwbRadio.vector`, possibly with fault windows (:func:`uwb_fault_vector`):
+    inside an NLOS burst window the outlier probability is the window's (when larger). ``z`` (4,)
+    standard normals: ``z0`` is the range noise; ``z1..z3`` become the dropout, outlier and outlier-size
+    uniforms through the normal CDF (probability integral transform), so an
     exchange always consumes four draws whatever happens."""
     if 0.5 * math.erfc(-z[1] * _INV_SQRT2) < prm[UWB_P_DROP]:
         return True, 0.0, False
-    for w in range(UWB_N, prm.shape[0], 2):
+    end_drop = UWB_N + 2 * int(prm[UWB_N_DROP])
+    for w in range(UWB_N, end_drop, 2):
         if prm[w] <= t_s < prm[w + 1]:
             return True, 0.0, False
     dx = tag_ms[0] - anchor_ms[0]
@@ -346,7 +366,11 @@ def uwb_exchange(t_s, tag_ms, anchor_ms, z, drift_m_s, prm):
     elapsed = t_s - prm[UWB_DRIFT_START]
     if elapsed > 0.0:
         r += drift_m_s * elapsed
-    outlier = 0.5 * math.erfc(-z[2] * _INV_SQRT2) < prm[UWB_P_NLOS]
+    u_nlos = 0.5 * math.erfc(-z[2] * _INV_SQRT2)
+    outlier = u_nlos < prm[UWB_P_NLOS]
+    for w in range(end_drop, prm.shape[0], 3):  # NLOS bursts (swarm.core.faults): the same uniform
+        if not outlier and prm[w] <= t_s < prm[w + 1]:
+            outlier = u_nlos < prm[w + 2]
     if outlier:
         r += prm[UWB_NLOS_MIN] + (prm[UWB_NLOS_MAX] - prm[UWB_NLOS_MIN]) * 0.5 * math.erfc(-z[3] * _INV_SQRT2)
     return False, (r if r > 0.0 else 0.0), outlier

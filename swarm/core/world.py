@@ -23,7 +23,14 @@ from swarm.core._rot_nb import qconj, qexp, qlog, qmul, qnormalize, qrotate
 from swarm.core.camera import camera_pose_ms, feature_vectors, project_markers, visible
 from swarm.core.dynamics import propagate
 from swarm.core.guidance import contact_state, pair_geometry
-from swarm.core.sensors import UwbRadio, UwbSample, _gyro_kernel, gyro_init_bias, uwb_exchange
+from swarm.core.sensors import (
+    UwbRadio,
+    UwbSample,
+    _gyro_kernel,
+    gyro_init_bias,
+    uwb_exchange,
+    uwb_fault_vector,
+)
 from swarm.core.thrusters import allocation_matrix
 
 NOISE_BLOCK = 1024
@@ -107,6 +114,15 @@ class World:
         self.markers_target = sc.markers.markers(sc.guidance.docking_face)
         self.vision_every = sc.every(sc.camera.rate_hz)
         self.ahrs_every = sc.every(sc.ahrs.rate_hz)
+        # faults (swarm.core.faults): the gyro bias step per vehicle (time inf: none) and the windows in
+        # which a chaser's camera is lost, fixed ones from the scenario, mode-triggered ones set by a runner
+        self.gyro_step_t = np.full(n, np.inf)
+        self.gyro_step = np.zeros((n, 3))
+        for i, vid in enumerate(self.ids):
+            self.gyro_step_t[i], self.gyro_step[i] = sc.faults.gyro_step_rad_s(vid, sc.chasers)
+        self.camera_loss: dict[str, list] = {c: list(sc.faults.camera_loss.windows_s) for c in sc.chasers}
+        self.camera_frames_lost = 0
+        """Camera frames with the target in view dropped by a camera-loss window (a fault's footprint)."""
 
     @property
     def impulse_ns(self) -> dict[str, float]:
@@ -162,6 +178,7 @@ class World:
         world_tick(
             self.X, self.wrench, self.thrust_sum, self.attached_arr, self.impulse, self.bias, self.gyro_noise,
             self.gi, self.ahrs_noise, self.ai, do_ahrs, self.prm, self.gyro_out, self.ahrs_out,
+            self.k * self.dt, self.gyro_step_t, self.gyro_step,
         )  # fmt: skip
         self.k = k1
         return self.frames() if build_frames else None
@@ -196,6 +213,10 @@ class World:
         else:
             frame.vision_kind = "features"
             frame.vision = feature_vectors(self.markers_target, xt[0:3], xt[6:10], p_cam, q_cam, cam, rng)
+        if any(w[0] <= frame.t_s < w[1] for w in self.camera_loss.get(chaser, ())):
+            # camera lost (a fault): the frame was drawn, so the camera stream stays aligned, and dropped
+            frame.vision_kind = frame.vision = None
+            self.camera_frames_lost += 1
 
     # ---- truth-side metrics -------------------------------------------------------------------------
     def contact(self, chaser: str, target: str) -> dict:
@@ -222,13 +243,15 @@ class World:
 
 @numba.njit(cache=True)
 def world_tick(X, wrench, thrust_sum, attached, impulse, bias, gyro_noise, gi, ahrs_noise, ai, do_ahrs, prm,
-               gyro_out, ahrs_out):  # fmt: skip
+               gyro_out, ahrs_out, t_s, step_t, step):  # fmt: skip
     """Advance every vehicle one tick (in place) and write its sensor samples.
 
     Truth: :func:`swarm.core.dynamics.propagate` with the held wrench (paper eq. 1-2); impulse
     ``+= sum |f| dt``. Gyro: the mean body rate over the tick, ``log(q0^-1 (x) q1) / dt`` (the delta-angle
     an IMU integrates), plus white noise and the Gauss-Markov bias of ``sensors.gyro_sample`` on the next
     pre-drawn normals. AHRS (when ``do_ahrs``): ``q (x) exp(sigma z)`` as ``sensors.ahrs_sample``.
+    A gyro bias step (a fault, :mod:`swarm.core.faults`): ``step[v]`` [rad/s] adds to vehicle ``v``'s
+    sample of the tick starting at ``t_s`` [s] when ``t_s >= step_t[v]`` (``inf``: never).
     """
     dt = prm[W_DT]
     inertia = prm[W_IXX : W_IZZ + 1]
@@ -243,6 +266,9 @@ def world_tick(X, wrench, thrust_sum, attached, impulse, bias, gyro_noise, gi, a
             w[i] /= dt
         z[:] = gyro_noise[v, gi[0]]
         _gyro_kernel(w, bias[v], z, prm[W_SW], prm[W_PHI], prm[W_SB])
+        if t_s >= step_t[v]:
+            for i in range(3):
+                z[i] += step[v, i]
         gyro_out[v] = z[0:3]
         bias[v] = z[3:6]
         if do_ahrs:
@@ -266,7 +292,15 @@ class UwbNetwork:
         self.anchors = np.ascontiguousarray(scenario.anchors_m, dtype=float)
         self.lever = np.asarray(scenario.tag_lever_arm_body_m, dtype=float)
         radio = UwbRadio(self.anchors, scenario.uwb)  # validates the parameters against the anchors
-        self.prm = radio.vector
+        self.base_prm = radio.vector
+        f = scenario.faults
+        self.prm = self.base_prm
+        self.set_fault_windows(
+            f.uwb_dropout.windows_s,
+            [(a, b, f.nlos_burst_probability) for a, b in f.nlos_burst.windows_s]
+            if f.nlos_burst_probability
+            else [],
+        )
         self.drift = np.array([radio.drift_rate(i) for i in range(len(self.anchors))])
         self.rng = {vid: stream(seed, i, "uwb") for i, vid in enumerate(self.ids)}
         self.every = scenario.every(scenario.uwb.rate_hz)
@@ -277,6 +311,13 @@ class UwbNetwork:
         self.anchor_id = np.zeros(n, dtype=np.int64)
         self.range_m = np.zeros(n)
         self.outlier = np.zeros(n, dtype=np.bool_)
+
+    def set_fault_windows(self, dropouts, nlos_bursts) -> None:
+        """Every fault window of the network from now on (:mod:`swarm.core.faults`): dropout windows
+        ``(start, end)`` and NLOS bursts ``(start, end, probability)`` [s], on top of
+        ``uwb.dropout_windows_s`` (a :class:`~swarm.core.faults.FaultSchedule` gives both lists, fixed
+        windows included)."""
+        self.prm = uwb_fault_vector(self.base_prm, dropouts, nlos_bursts)
 
     def reserve_noise(self, exchanges: int) -> None:
         """Pre-draw the normals of the next ``exchanges`` exchanges of every radio (four each)."""

@@ -150,15 +150,19 @@ def run_one(scenario, policy: str, run: int, seed: int, trajectory_period_s: flo
         idx = list(range(0, len(s["t_s"]), every))
         if s["t_s"] and idx[-1] != len(s["t_s"]) - 1:
             idx.append(len(s["t_s"]) - 1)  # keep the last sample: the docked position
-        trajs.append(
-            {
-                "run": int(run),
-                "policy": policy,
-                "chaser": cid,
-                "t_s": [round(s["t_s"][i], 3) for i in idx],
-                "p_ms": [[round(v, 4) for v in s["p_true_ms"][i]] for i in idx],
-            }
-        )
+        traj = {
+            "run": int(run),
+            "policy": policy,
+            "chaser": cid,
+            "t_s": [round(s["t_s"][i], 3) for i in idx],
+            "p_ms": [[round(v, 4) for v in s["p_true_ms"][i]] for i in idx],
+        }
+        if "faults" in c:  # [faults] on: the NEES at the saved samples and the windows (montecarlo.faults)
+            from swarm.montecarlo.faults import nees_samples
+
+            traj["nees_pos"], traj["nees_used"] = nees_samples(s, idx, c["faults"]["uwb_dropout_s"])
+            traj["faults"] = {k: c["faults"][k] for k in ("uwb_dropout_s", "camera_loss_s", "nlos_burst_s")}
+        trajs.append(traj)
     return rows, trajs
 
 

@@ -26,7 +26,7 @@ SENSORS_DONE = 2
 def run_ticks(
     k0, k1, dt, uwb_every, ahrs_every, ahrs_enabled,
     X, wrench, thrust_sum, attached, impulse, bias, gyro_noise, gi, ahrs_noise, ai, wprm, gyro_out, ahrs_out,
-    lever, anchors, drift, uprm, next_anchor, unoise, ui, lost, anchor_id, range_m, outlier,
+    gstep_t, gstep, lever, anchors, drift, uprm, next_anchor, unoise, ui, lost, anchor_id, range_m, outlier,
     AX, AP, AC, AB, PRM, f_body, w_body, mass, ahrs_cov, gate1, gate3, sigma_r, Hok, Hd2, Hmeta,
     last_vision, dock_flag, recent_s, uwb_with_vision, t_agent,
     pairs, done, docking, n_target, q_tc, half, keepout_r, corridor_cos, contact_d,
@@ -78,6 +78,6 @@ def run_ticks(
                 return j, CONTACT
         world_tick(
             X, wrench, thrust_sum, attached, impulse, bias, gyro_noise, gi, ahrs_noise, ai,
-            ahrs_enabled and (j + 1) % ahrs_every == 0, wprm, gyro_out, ahrs_out,
+            ahrs_enabled and (j + 1) % ahrs_every == 0, wprm, gyro_out, ahrs_out, t, gstep_t, gstep,
         )  # fmt: skip
     return k1, REACHED_END

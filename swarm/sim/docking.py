@@ -18,7 +18,8 @@ import numpy as np
 
 from swarm.core import rotations as rot
 from swarm.core.agent import VehicleAgent
-from swarm.core.guidance import Mode
+from swarm.core.faults import FaultSchedule
+from swarm.core.guidance import CORRIDOR_MODES, Mode
 from swarm.core.world import UwbNetwork, World, stream
 from swarm.montecarlo.dispersions import apply_dispersion, draw_dispersion
 from swarm.sim._fastloop import CONTACT, SENSORS_DONE, run_ticks
@@ -60,7 +61,16 @@ class ChaserOutcome:
 
 
 def _new_series() -> dict[str, list]:
-    keys = ("t_s", "p_true_ms", "p_est_ms", "q_true_ms_body", "q_est_ms_body", "cov_pos", "mode")
+    keys = (
+        "t_s",
+        "p_true_ms",
+        "p_est_ms",
+        "q_true_ms_body",
+        "q_est_ms_body",
+        "cov_pos",
+        "mode",
+        "relative_nav",
+    )
     return {k: [] for k in keys}
 
 
@@ -90,6 +100,11 @@ class DockingSim:
             self.agents[vid] = VehicleAgent(scenario, vid, p0, v0, q0, cov0, self.policy)
         self.outcomes = {c: ChaserOutcome(series=_new_series()) for c in scenario.chasers}
         self.done: set[str] = set()
+        # faults (swarm.core.faults): the world and the network hold the fixed windows already; the
+        # schedule adds the mode-triggered ones after the control tick of the mode change
+        self.faults = FaultSchedule(scenario.faults, scenario.dt_s, scenario.chasers)
+        self.world.camera_loss = self.faults.camera  # the same lists: windows opened later reach the world
+        self._mode_faults = scenario.faults.mode_triggered
         self._bind_storage()
 
     def run(self) -> dict:
@@ -159,6 +174,8 @@ class DockingSim:
                     self.world.set_command(vid, cmd.thrusts_n)
                     if vid in self.outcomes:
                         self._log_events(vid, cmd.events)
+                if self._mode_faults:
+                    self._update_faults(t)
             self._check_truth(k, t)
             if len(self.done) == len(self.outcomes):
                 break
@@ -242,12 +259,12 @@ class DockingSim:
         chasers = sc.chasers
         for c, cid in enumerate(chasers):
             done[c] = cid in self.done
-            docking[c] = self.agents[cid].mode in (Mode.DOCK, Mode.DOCKED)
+            docking[c] = self.agents[cid].mode in CORRIDOR_MODES
         ko_before = self.ko_flag.copy()
         k_stop, code = run_ticks(
             k0, k1, sc.dt_s, net.every, w.ahrs_every, sc.ahrs.enabled,
             w.X, w.wrench, w.thrust_sum, w.attached_arr, w.impulse, w.bias, w.gyro_noise, w.gi, w.ahrs_noise,
-            w.ai, w.prm, w.gyro_out, w.ahrs_out,
+            w.ai, w.prm, w.gyro_out, w.ahrs_out, w.gyro_step_t, w.gyro_step,
             net.lever, net.anchors, net.drift, net.prm, net.next_anchor, net.noise, net.ui, net.lost,
             net.anchor_id, net.range_m, net.outlier,
             self.AX, self.AP, self.AC, self.AB, first.est._prm, self.Fb, self.Wb, first.mass_kg,
@@ -275,6 +292,16 @@ class DockingSim:
                 out.events.append(ev | {"range_m": float(self.ko_r[c])})
         return k_stop, code
 
+    def _update_faults(self, t: float) -> None:
+        """After the control tick at ``t``: open (or close) the mode-triggered fault windows; they start
+        at the next tick at the earliest, so no sample already taken is affected, and the compiled
+        stretches that follow check them tick by tick (:mod:`swarm.core.faults`)."""
+        changed = False
+        for cid in self.sc.chasers:
+            changed |= self.faults.on_mode(t, cid, self.agents[cid].mode.value)
+        if changed:
+            self.network.set_fault_windows(self.faults.uwb_dropout, self.faults.nlos)
+
     def _log_events(self, cid: str, events: list[dict]) -> None:
         out = self.outcomes[cid]
         for ev in events:
@@ -297,9 +324,10 @@ class DockingSim:
                 s["q_est_ms_body"].append(agent.est.q_ms_body[0].tolist())
                 s["cov_pos"].append(agent.est.P[0, :3, :3].tolist())
                 s["mode"].append(agent.mode.value)
+                s["relative_nav"].append(bool(agent.relative_nav))
             if cid in self.done:
                 continue
-            call = judge(self.world, g, cid, tid, agent.mode in (Mode.DOCK, Mode.DOCKED), t)
+            call = judge(self.world, g, cid, tid, agent.mode in CORRIDOR_MODES, t)
             if call is None:
                 continue  # far from the target: no contact, no keep-out violation possible
             if call.keepout:
@@ -355,6 +383,13 @@ class DockingSim:
                 d["decisions"] = [dec.as_dict() for dec in sw.decisions]
             if self.record_series:
                 d["series"] = out.series
+            if self.sc.faults.enabled:
+                d["faults"] = {
+                    "events": [ev for ev in self.faults.events if ev["chaser"] == cid],
+                    "uwb_dropout_s": self.faults.dropout_windows() + list(self.sc.uwb.dropout_windows_s),
+                    "camera_loss_s": [tuple(w) for w in self.faults.camera[cid]],
+                    "nlos_burst_s": [tuple(w) for w in self.faults.nlos],
+                }
             chasers[cid] = d
         return {
             "scenario": self.sc.name,

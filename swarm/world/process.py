@@ -46,7 +46,7 @@ from swarm.transport.session import declare_liveliness, subscribe_decoded, watch
 
 _LOG = logging.getLogger("swarm.world")
 
-DOCKING_MODES = ("DOCK", "DOCKED")
+DOCKING_MODES = ("DOCK", "DOCKED", "ABORT")  # swarm.core.guidance.CORRIDOR_MODES
 
 
 class WorldProcess:

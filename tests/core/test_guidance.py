@@ -160,6 +160,18 @@ def test_rejected_ranges_hold_with_the_fraction_in_the_reason():
     assert ref.mode is Mode.APPROACH
 
 
+def test_large_mean_nis_holds_with_the_nis_in_the_reason_and_resumes_when_it_drops():
+    p0 = (1.5, 0.0, 0.0)
+    g = chaser(p0)
+    g.step(nav(0.0, p0), DT)
+    d_bad = np.sqrt(G.hold_nis_mean) * 1.1  # innovations accepted by the gate but consistently large
+    ref = g.step(nav(0.1, p0, d=d_bad), DT)
+    assert ref.mode is Mode.HOLD
+    assert f"mean NIS of recent ranges {d_bad**2:.1f} > {G.hold_nis_mean}" in ref.events[-1]["reason"]
+    ref = g.step(nav(0.2, p0, d=1.0), DT)  # a consistent filter: mean NIS 1
+    assert ref.mode is Mode.APPROACH and "estimate healthy again" in ref.events[-1]["reason"]
+
+
 def test_hold_freezes_the_reference_at_the_estimate():
     p0 = np.array([1.5, 0.0, 0.0])
     g = chaser(p0)
