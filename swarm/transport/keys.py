@@ -31,6 +31,7 @@ _FIXED = {
     ("world", "event"): "world_event",
     ("mothership", "anchors"): "anchors",
     ("control", "run"): "run_control",
+    ("control", "fault"): "fault",
 }
 
 
@@ -129,6 +130,11 @@ class Keys:
     def run_control(self) -> str:
         """Pause / resume / reset / new seed: dashboard or launcher -> world."""
         return f"{self.namespace}/control/run"
+
+    def fault(self) -> str:
+        """A fault to inject at run time (``swarm fault``): operator -> world (camera, gyro) and
+        mothership (UWB)."""
+        return f"{self.namespace}/control/fault"
 
     def alive(self, role: str, process_id: str) -> str:
         """Liveliness token of one process; ``role`` e.g. ``world``, ``mothership``, ``agent``, ``dashboard``,

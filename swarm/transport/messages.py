@@ -43,6 +43,7 @@ __all__ = [
     "CLOCK_STATES",
     "EVENT_KINDS",
     "FACES",
+    "FAULT_KINDS",
     "MAX_ITEMS",
     "MAX_PAYLOAD_BYTES",
     "MESSAGE_FOR_KIND",
@@ -58,6 +59,7 @@ __all__ = [
     "DropCounter",
     "Estimate",
     "Event",
+    "Fault",
     "Guidance",
     "Imu",
     "Message",
@@ -684,16 +686,69 @@ class RunControl(Message):
         _set(self, command=_str(self.command, "command", choices=RUN_COMMANDS), seed=seed)
 
 
+FAULT_KINDS: tuple[str, ...] = ("uwb_dropout", "nlos_burst", "camera_loss", "gyro_bias_step")
+"""Faults that can be injected at run time (:mod:`swarm.core.faults` has their models)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Fault(Message):
+    """A fault to inject at run time: ``<ns>/control/fault`` (``swarm fault``; the world applies camera and
+    gyro faults, the mothership UWB ones). Every window opens no earlier than the receiver's next tick."""
+
+    kind: str
+    """One of :data:`FAULT_KINDS`."""
+    duration_s: float | None = None
+    """Length of the window [s] (> 0); required for every kind but ``gyro_bias_step`` (which lasts)."""
+    start_s: float | None = None
+    """Simulated time the window opens [s] (>= 0); ``None``: at once (the receiver's next tick)."""
+    vehicle: str | None = None
+    """The vehicle (``camera_loss``: a chaser; ``gyro_bias_step``: any); ``None``: every chaser."""
+    probability: float | None = None
+    """``nlos_burst``: probability that an exchange is an NLOS outlier inside the window, in (0, 1]."""
+    rate_rad_s: np.ndarray | None = None
+    """``gyro_bias_step``: the constant rate (3,) [rad/s], body frame, added to the gyro from ``start_s``."""
+
+    def __post_init__(self) -> None:
+        kind = _str(self.kind, "kind", choices=FAULT_KINDS)
+        dur = _float(self.duration_s, "duration_s", positive=True, nullable=True)
+        if dur is None and kind != "gyro_bias_step":
+            raise MessageError(f"duration_s: required for a {kind} fault")
+        prob = _float(self.probability, "probability", lo=0.0, nullable=True)
+        if kind == "nlos_burst" and (prob is None or not 0.0 < prob <= 1.0):
+            raise MessageError(f"probability: an nlos_burst needs one in (0, 1], got {prob}")
+        rate = None if self.rate_rad_s is None else _array(self.rate_rad_s, "rate_rad_s", (3,))
+        if kind == "gyro_bias_step" and rate is None:
+            raise MessageError("rate_rad_s: required for a gyro_bias_step fault")
+        vehicle = None if self.vehicle is None else _str(self.vehicle, "vehicle", pattern=ID_PATTERN)
+        _set(
+            self, kind=kind, duration_s=dur, start_s=_float(self.start_s, "start_s", lo=0.0, nullable=True),
+            vehicle=vehicle, probability=prob, rate_rad_s=rate,
+        )  # fmt: skip
+
+
 MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.__name__: cls
-    for cls in (Imu, Uwb, Vision, Estimate, Guidance, Command, Truth, Event, Clock, Anchors, RunControl)
+    for cls in (
+        Imu,
+        Uwb,
+        Vision,
+        Estimate,
+        Guidance,
+        Command,
+        Truth,
+        Event,
+        Clock,
+        Anchors,
+        RunControl,
+        Fault,
+    )
 }
 """Every message class by its wire ``"type"``."""
 
 MESSAGE_FOR_KIND: dict[str, type[Message]] = {
     "imu": Imu, "uwb": Uwb, "vision": Vision, "estimate": Estimate, "guidance": Guidance, "command": Command,
     "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "anchors": Anchors,
-    "run_control": RunControl,
+    "run_control": RunControl, "fault": Fault,
 }  # fmt: skip
 """The message carried by each key kind of :meth:`swarm.transport.keys.Keys.parse`."""
 

@@ -39,6 +39,7 @@ from swarm.transport.messages import (
     DropCounter,
     Estimate,
     Event,
+    Fault,
     Guidance,
     Imu,
     RunControl,
@@ -71,6 +72,7 @@ VALID = {
     Clock: Clock(8, 0.08, "running", 42),
     Anchors: Anchors((0, 1, 2, 3), ANCHORS_MS),
     RunControl: RunControl("reset", 7),
+    Fault: Fault("nlos_burst", 5.0, 12.5, None, 0.3),
 }  # fmt: skip
 
 SILENT = logging.getLogger("tests.transport.silent")
@@ -176,6 +178,14 @@ STRATEGIES = {
     Clock: st.builds(Clock, ticks, times, st.sampled_from(msgs.CLOCK_STATES), ticks),
     Anchors: marked(3).map(lambda m: Anchors(m[1], m[0])),
     RunControl: st.builds(RunControl, st.sampled_from(msgs.RUN_COMMANDS), st.none() | ticks),
+    Fault: st.one_of(
+        st.builds(Fault, st.sampled_from(("uwb_dropout", "camera_loss")), st.floats(1e-3, 1e3),
+                  st.none() | times, st.none() | ids),
+        st.builds(Fault, st.just("nlos_burst"), st.floats(1e-3, 1e3), st.none() | times, st.none(),
+                  st.floats(1e-6, 1.0)),
+        st.builds(Fault, st.just("gyro_bias_step"), st.none() | st.floats(1e-3, 1e3), st.none() | times,
+                  st.none() | ids, st.none(), vec(3)),
+    ),
 }  # fmt: skip
 
 ALL = list(VALID)
@@ -681,7 +691,14 @@ def test_a_real_decision_record_passes_validation():
 def test_every_key_kind_maps_to_a_message():
     from swarm.transport.keys import AGENT_KINDS
 
-    assert set(MESSAGE_FOR_KIND) == {*AGENT_KINDS, "world_clock", "world_event", "anchors", "run_control"}
+    assert set(MESSAGE_FOR_KIND) == {
+        *AGENT_KINDS,
+        "world_clock",
+        "world_event",
+        "anchors",
+        "run_control",
+        "fault",
+    }
 
 
 def test_the_codec_does_not_import_zenoh_or_the_heavy_core():
