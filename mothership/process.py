@@ -21,11 +21,13 @@ import zenoh
 
 from swarm.core.world import UwbNetwork
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Anchors, Clock, DropCounter, Truth, Uwb, encode
+from swarm.transport.messages import Anchors, Clock, DropCounter, Fault, Truth, Uwb, encode
 from swarm.transport.process import declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded
 
 _LOG = logging.getLogger("swarm.mothership")
+
+_FAULT = "<fault>"  # marks a fault in the truth queue (not a vehicle id: ids cannot contain '<')
 
 
 class MothershipProcess:
@@ -55,6 +57,11 @@ class MothershipProcess:
         # starts at the slot after the first truth it sees (that slot's truths may have come before it)
         self._next_slot: int | None = None if rejoin else self.every
         self.slots = 0
+        self._t_served = 0.0  # time of the last slot served [s]
+        fp = scenario.faults  # the scenario's fixed windows, to which run-time faults are added
+        self._dropouts = list(fp.uwb_dropout.windows_s)
+        self._bursts = [(a, b, fp.nlos_burst_probability) for a, b in fp.nlos_burst.windows_s] if (
+            fp.nlos_burst_probability) else []  # fmt: skip
 
     def _on_truth(self, key: str, msg: Truth) -> None:
         parsed = self.keys.parse(key)
@@ -64,6 +71,22 @@ class MothershipProcess:
             return
         if msg.tick % self.every == 0 and msg.tick > 0:
             self._truth.put((vid, msg))
+
+    def _on_fault(self, _key: str, msg: Fault) -> None:
+        if msg.kind in ("uwb_dropout", "nlos_burst"):
+            self._truth.put((_FAULT, msg))  # applied by the main loop, between two slots
+
+    def _apply_fault(self, f: Fault) -> None:
+        """A run-time UWB fault (``swarm fault``): its window opens no earlier than the next tick after the
+        last slot served, so no range already sent changes; added to the scenario's fixed windows."""
+        now = self._t_served + self.sc.dt_s
+        start = max(f.start_s if f.start_s is not None else now, now)
+        if f.kind == "uwb_dropout":
+            self._dropouts.append((start, start + f.duration_s))
+        else:
+            self._bursts.append((start, start + f.duration_s, f.probability))
+        self.network.set_fault_windows(self._dropouts, self._bursts)
+        _LOG.warning("fault applied: %s from t = %.2f s to %.2f s", f.kind, start, start + f.duration_s)
 
     def _on_query(self, query: zenoh.Query) -> None:
         try:
@@ -82,6 +105,7 @@ class MothershipProcess:
             X[i, 0:3], X[i, 3:6], X[i, 6:10], X[i, 10:13] = m.p_ms, m.v_ms, m.q_ms_body, m.w_body
         t = k * self.sc.dt_s
         self.network.step(k, t, X)
+        self._t_served = t
         net = self.network
         for i, vid in enumerate(self.ids):
             rng = None if net.lost[i] else float(net.range_m[i])
@@ -98,6 +122,7 @@ class MothershipProcess:
         self._queryable = self.session.declare_queryable(k.anchors(), self._on_query)
         subscribe_decoded(self.session, k.agent_all("truth"), Truth, self._on_truth, self.drops)
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
+        subscribe_decoded(self.session, k.fault(), Fault, self._on_fault, self.drops)
         self._token = declare_liveliness(self.session, k, "mothership", "mothership")
         print_ready("mothership", "mothership")
         payload = encode(self.anchors_msg)
@@ -113,6 +138,9 @@ class MothershipProcess:
                 pub_anchors.put(payload)
                 last_anchors = now
             if vid is None:
+                continue
+            if vid == _FAULT:
+                self._apply_fault(msg)
                 continue
             if self._next_slot is None:
                 self._next_slot = msg.tick + self.every

@@ -35,6 +35,7 @@ from swarm.transport.messages import (
     Command,
     DropCounter,
     Event,
+    Fault,
     Imu,
     RunControl,
     Truth,
@@ -90,6 +91,7 @@ class WorldProcess:
         self._lost: list[str] = []  # agents seen lost since the main loop last looked
         self._latest: dict[str, Command] = {}  # realtime: newest command per agent
         self._controls: queue.Queue[RunControl] = queue.Queue()
+        self._faults: queue.Queue[Fault] = queue.Queue()
         self.modes = dict.fromkeys(self.ids, "HOLD")  # each agent's mode, from its last command
         self.done: set[str] = set()
         self.keepout: set[str] = set()
@@ -134,6 +136,39 @@ class WorldProcess:
 
     def _on_control(self, _key: str, msg: RunControl) -> None:
         self._controls.put(msg)
+
+    def _on_fault(self, _key: str, msg: Fault) -> None:
+        if msg.kind in ("camera_loss", "gyro_bias_step"):
+            self._faults.put(msg)
+
+    def _apply_faults(self, tick: int) -> None:
+        """Run-time camera and gyro faults (``swarm fault``): a window opens no earlier than tick
+        ``tick + 1`` (no sample already published changes); a camera loss adds a window to the chaser's,
+        a gyro step sets the vehicle's step (:mod:`swarm.core.faults`)."""
+        while True:
+            try:
+                f = self._faults.get_nowait()
+            except queue.Empty:
+                return
+            now = (tick + 1) * self.sc.dt_s
+            start = max(f.start_s if f.start_s is not None else now, now)
+            if f.vehicle is not None and f.vehicle not in self.world.index:
+                self.drops.drop(
+                    self.keys.fault(), f"vehicle: {f.vehicle!r} is not a vehicle of this scenario"
+                )
+                continue
+            who = [f.vehicle] if f.vehicle is not None else list(self.chasers)
+            if f.kind == "camera_loss":
+                for c in who:
+                    if c in self.world.camera_loss:
+                        self.world.camera_loss[c].append((start, start + f.duration_s))
+            else:
+                for v in who:
+                    i = self.world.index[v]
+                    self.world.gyro_step_t[i], self.world.gyro_step[i] = start, f.rate_rad_s
+            data = {"kind": f.kind, "start_s": start, "duration_s": f.duration_s, "vehicles": who}
+            self._world_event("fault", tick * self.sc.dt_s, data)
+            _LOG.warning("fault applied: %s on %s from t = %.2f s", f.kind, who, start)
 
     # ------------------------------------------------------------------------------ publishing
 
@@ -300,6 +335,7 @@ class WorldProcess:
         self._declare()
         subscribe_decoded(self.session, k.agent_all("command"), Command, self._on_command, self.drops)
         subscribe_decoded(self.session, k.run_control(), RunControl, self._on_control, self.drops)
+        subscribe_decoded(self.session, k.fault(), Fault, self._on_fault, self.drops)
         watch_liveliness(self.session, k, self._on_alive)
         self._token = declare_liveliness(self.session, k, "world", self.process_id)
         from swarm.transport.process import print_ready
@@ -333,6 +369,7 @@ class WorldProcess:
             if not self._take_commands(tick):
                 break
             self._close_lost()
+            self._apply_faults(tick)
             self._referee(tick)
             if len(self.done) == len(self.chasers):
                 self.end_reason = "all_contact"
