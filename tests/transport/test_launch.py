@@ -205,6 +205,35 @@ def test_a_killed_mothership_is_restarted_and_the_agents_fly_on_without_ranges_m
     assert not res["keepout_violated"]
 
 
+def test_faults_injected_at_run_time_reach_the_world_and_the_mothership(tmp_path, sim_result):
+    """``swarm fault`` during a lockstep run: a 5 s UWB dropout (mothership), a gyro bias step on the target
+    and a camera loss of the chaser (world). Each is applied (logged) from the next tick; the dropout costs
+    ranges (fewer accepted than in the fault-free simulation); the run still ends docked or in a safe hold."""
+    ns = _ns()
+    with Procs() as procs:
+        out = tmp_path / "launch.json"
+        proc, endpoint = _launch(procs, ns, "--until-docked", json_path=out)
+        proc.wait_for_line(r"^swarm up:", 120.0)
+        for fault in (["uwb_dropout", "--for", "5"], ["gyro_bias_step", "--vehicle", "target", "--rate-deg-s",
+                      "0.05,0,0"], ["camera_loss", "--vehicle", "chaser", "--for", "3"]):  # fmt: skip
+            cmd = [sys.executable, "-m", "swarm.cli.main", "fault", *fault, "--namespace", ns,
+                   "--mode", "client", "--connect", endpoint]  # fmt: skip
+            r = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+            assert r.returncode == 0 and "fault sent" in r.stdout, r.stderr
+        proc.wait(RUN_S)
+    text = proc.output()
+    assert re.search(r"swarm mothership: fault applied: uwb_dropout from t = [\d.]+ s", text), text
+    assert "fault applied: gyro_bias_step on ['target']" in text
+    assert "fault applied: camera_loss on ['chaser']" in text
+    assert "Traceback" not in text
+    res = json.loads(out.read_text())["chasers"]["chaser"]
+    assert (
+        res["estimator"]["accepted_ranges"] < sim_result["chasers"]["chaser"]["estimator"]["accepted_ranges"]
+    )
+    assert res["docked"] or res["final_mode"] in ("HOLD", "ABORT"), res
+    assert not res["keepout_violated"]
+
+
 def test_sigint_to_the_launcher_leaves_no_child_behind():
     ns = _ns()
     with Procs() as procs:
