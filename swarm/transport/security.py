@@ -11,7 +11,8 @@ each link to an identity by the common name (CN) of the certificate it presented
 - ``mothership``: ``agent/*/uwb`` and ``mothership/anchors`` (a publication, a queryable, its replies);
 - ``agent-<id>``: ``agent/<id>/estimate|guidance|command|event`` only;
 - ``dashboard``: ``control/run`` only;
-- ``launcher``: ``agent/*/event`` (its ``lost`` events) and ``control/run``;
+- ``launcher``: ``agent/*/event`` (its ``lost`` events), ``control/run`` and ``control/fault`` (an operator's
+  ``swarm fault --zenoh-config <dir>/launcher.json5``);
 
 and each may declare the subscribers, queries and liveliness token it needs (:func:`rights` is the whole
 table). Everything else is denied (``default_permission: "deny"``): a certificate with an unknown CN
@@ -100,7 +101,7 @@ def rights(keys: Keys, name: str) -> dict[str, tuple[str, ...]]:
         return {
             "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/vision", "agent/*/truth",
                                                 "agent/*/event", "world/clock", "world/event")),
-            "declare_subscriber": (keys.agent_all("command"), keys.run_control()),
+            "declare_subscriber": (keys.agent_all("command"), keys.run_control(), keys.fault()),
             "liveliness_token": (f"{ns}/alive/world/*",),
             **watch,
         }  # fmt: skip
@@ -109,7 +110,7 @@ def rights(keys: Keys, name: str) -> dict[str, tuple[str, ...]]:
             "put": (keys.agent_all("uwb"), keys.anchors()),
             "declare_queryable": (keys.anchors(),),
             "reply": (keys.anchors(),),
-            "declare_subscriber": (keys.agent_all("truth"), keys.world_clock()),
+            "declare_subscriber": (keys.agent_all("truth"), keys.world_clock(), keys.fault()),
             "liveliness_token": (f"{ns}/alive/mothership/*",),
         }
     if name == "dashboard":
@@ -122,7 +123,7 @@ def rights(keys: Keys, name: str) -> dict[str, tuple[str, ...]]:
         }
     if name == "launcher":
         return {
-            "put": (keys.agent_all("event"), keys.run_control()),
+            "put": (keys.agent_all("event"), keys.run_control(), keys.fault()),
             "declare_subscriber": (keys.world_event(), keys.world_clock(), keys.agent_all("event"),
                                    keys.agent_all("guidance")),
             "liveliness_token": (f"{ns}/alive/launcher/*",),

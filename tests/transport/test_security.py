@@ -53,10 +53,10 @@ MAY_PUT = {
     "agent-chaser": {K.estimate("chaser"), K.guidance("chaser"), K.command("chaser"), K.event("chaser")},
     "agent-target": {K.estimate("target"), K.guidance("target"), K.command("target"), K.event("target")},
     "dashboard": {K.run_control()},
-    "launcher": {K.event(v) for v in VEHICLES} | {K.run_control()},
+    "launcher": {K.event(v) for v in VEHICLES} | {K.run_control(), K.fault()},
 }  # fmt: skip
 ALL_KEYS = sorted({getattr(K, kind)(v) for kind in AGENT_KINDS for v in VEHICLES}
-                  | {K.world_clock(), K.world_event(), K.anchors(), K.run_control()})  # fmt: skip
+                  | {K.world_clock(), K.world_event(), K.anchors(), K.run_control(), K.fault()})  # fmt: skip
 
 
 def _may(acl: dict, name: str, message: str, key: str, flow: str = "ingress") -> bool:
@@ -112,8 +112,8 @@ def test_no_identity_may_delete_and_only_the_mothership_answers_queries(acl):
 
 def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_to_truth(acl):
     want = {
-        "world": {K.command(v) for v in VEHICLES} | {K.run_control()},
-        "mothership": {K.truth(v) for v in VEHICLES} | {K.world_clock()},
+        "world": {K.command(v) for v in VEHICLES} | {K.run_control(), K.fault()},
+        "mothership": {K.truth(v) for v in VEHICLES} | {K.world_clock(), K.fault()},
         "agent-chaser": {K.imu("chaser"), K.uwb("chaser"), K.vision("chaser"), K.world_clock()}
         | {K.estimate(v) for v in VEHICLES},
         "dashboard": set(ALL_KEYS),
