@@ -7,6 +7,7 @@ sample already sent). Examples, against ``swarm launch ... --listen tcp/127.0.0.
     swarm fault nlos_burst --for 10 --probability 0.2 --connect tcp/127.0.0.1:7447
     swarm fault camera_loss --vehicle chaser --for 3 --connect tcp/127.0.0.1:7447
     swarm fault gyro_bias_step --vehicle chaser --rate-deg-s 0.5,0,0 --connect tcp/127.0.0.1:7447
+    swarm fault sensor_delay --vehicle chaser --for 5 --delay 0.05 --connect ...   # realtime/scaled only
 """
 
 from __future__ import annotations
@@ -49,6 +50,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--rate-deg-s", type=_rate, default=None, metavar="X,Y,Z",
                    help="gyro_bias_step: the added rate [deg/s], body frame")  # fmt: skip
+    p.add_argument("--delay", type=positive_float("--delay"), default=None, metavar="S",
+                   help="sensor_delay: samples leave up to this late [s] (free-running clocks)")  # fmt: skip
     p.add_argument("--namespace", default="tpods", help="key namespace of the swarm (default tpods)")
     p.add_argument("--wait", type=positive_float("--wait"), default=5.0, metavar="S",
                    help="how long to wait for the swarm to be listening (default 5 s)")  # fmt: skip
@@ -66,9 +69,9 @@ def run(args: argparse.Namespace) -> int:
 
     rate = None if args.rate_deg_s is None else [math.radians(x) for x in args.rate_deg_s]
     try:
-        msg = Fault(args.kind, args.duration, args.at, args.vehicle, args.probability, rate)
+        msg = Fault(args.kind, args.duration, args.at, args.vehicle, args.probability, rate, args.delay)
     except MessageError as exc:  # name the flag behind the field
-        flags = {"duration_s": "--for", "start_s": "--at", "vehicle": "--vehicle",
+        flags = {"duration_s": "--for", "start_s": "--at", "vehicle": "--vehicle", "delay_s": "--delay",
                  "probability": "--probability", "rate_rad_s": "--rate-deg-s"}  # fmt: skip
         field = str(exc).split(":")[0]
         raise ConfigError(f"{flags.get(field, field)}: {str(exc).split(': ', 1)[-1]}") from None

@@ -174,6 +174,7 @@ def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
                 "wall_s": end.get("wall_s"),
                 "realtime_factor": end.get("realtime_factor"),
                 "restarted": any(e.kind == "restarted" for e in events),
+                "tick_assembly": summary.get("assembler"),  # the agent's drop counters of late/odd messages
             }
             if policy == "mdp":
                 c["decisions"] = decisions

@@ -686,7 +686,7 @@ class RunControl(Message):
         _set(self, command=_str(self.command, "command", choices=RUN_COMMANDS), seed=seed)
 
 
-FAULT_KINDS: tuple[str, ...] = ("uwb_dropout", "nlos_burst", "camera_loss", "gyro_bias_step")
+FAULT_KINDS: tuple[str, ...] = ("uwb_dropout", "nlos_burst", "camera_loss", "gyro_bias_step", "sensor_delay")
 """Faults that can be injected at run time (:mod:`swarm.core.faults` has their models)."""
 
 
@@ -707,6 +707,10 @@ class Fault(Message):
     """``nlos_burst``: probability that an exchange is an NLOS outlier inside the window, in (0, 1]."""
     rate_rad_s: np.ndarray | None = None
     """``gyro_bias_step``: the constant rate (3,) [rad/s], body frame, added to the gyro from ``start_s``."""
+    delay_s: float | None = None
+    """``sensor_delay``: each imu/vision sample of the vehicle(s) inside the window leaves the world late by
+    a uniform random delay in ``[0, delay_s]`` [s of simulated time] (> 0), so samples also arrive out of
+    order. Free-running clocks only: a lockstep world refuses it (it would wait on its own late samples)."""
 
     def __post_init__(self) -> None:
         kind = _str(self.kind, "kind", choices=FAULT_KINDS)
@@ -720,9 +724,12 @@ class Fault(Message):
         if kind == "gyro_bias_step" and rate is None:
             raise MessageError("rate_rad_s: required for a gyro_bias_step fault")
         vehicle = None if self.vehicle is None else _str(self.vehicle, "vehicle", pattern=ID_PATTERN)
+        delay = _float(self.delay_s, "delay_s", positive=True, nullable=True)
+        if kind == "sensor_delay" and delay is None:
+            raise MessageError("delay_s: required for a sensor_delay fault")
         _set(
             self, kind=kind, duration_s=dur, start_s=_float(self.start_s, "start_s", lo=0.0, nullable=True),
-            vehicle=vehicle, probability=prob, rate_rad_s=rate,
+            vehicle=vehicle, probability=prob, rate_rad_s=rate, delay_s=delay,
         )  # fmt: skip
 
 

@@ -18,6 +18,8 @@ computer died does not keep firing); it joins again with its first command for a
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import logging
 import queue
 import threading
@@ -92,6 +94,10 @@ class WorldProcess:
         self._latest: dict[str, Command] = {}  # realtime: newest command per agent
         self._controls: queue.Queue[RunControl] = queue.Queue()
         self._faults: queue.Queue[Fault] = queue.Queue()
+        self._delays: dict[str, list[tuple[float, float, float]]] = {}  # sensor_delay windows per vehicle
+        self._held: list = []  # delayed samples: (release time, seq, publisher, payload), a heap
+        self._held_seq = itertools.count()
+        self._delay_rng = np.random.default_rng(np.random.SeedSequence(entropy=seed, spawn_key=(2**16,)))
         self.modes = dict.fromkeys(self.ids, "HOLD")  # each agent's mode, from its last command
         self.done: set[str] = set()
         self.keepout: set[str] = set()
@@ -138,7 +144,7 @@ class WorldProcess:
         self._controls.put(msg)
 
     def _on_fault(self, _key: str, msg: Fault) -> None:
-        if msg.kind in ("camera_loss", "gyro_bias_step"):
+        if msg.kind in ("camera_loss", "gyro_bias_step", "sensor_delay"):
             self._faults.put(msg)
 
     def _apply_faults(self, tick: int) -> None:
@@ -158,7 +164,15 @@ class WorldProcess:
                 )
                 continue
             who = [f.vehicle] if f.vehicle is not None else list(self.chasers)
-            if f.kind == "camera_loss":
+            if f.kind == "sensor_delay" and self.clock.lockstep:
+                _LOG.warning(
+                    "fault refused: sensor_delay needs a free-running clock (lockstep would wait on it)"
+                )
+                continue
+            if f.kind == "sensor_delay":
+                for v in who:
+                    self._delays.setdefault(v, []).append((start, start + f.duration_s, f.delay_s))
+            elif f.kind == "camera_loss":
                 for c in who:
                     if c in self.world.camera_loss:
                         self.world.camera_loss[c].append((start, start + f.duration_s))
@@ -204,8 +218,27 @@ class WorldProcess:
                     data, kind, ids = np.zeros((0, 3)), "features", ()
                 else:
                     data, kind, ids = fr.vision, fr.vision_kind, tuple(range(len(fr.vision)))
-                self.pub_vision[vid].put(encode(Vision(k, t, target, face, kind, data, ids)))
-            self.pub_imu[vid].put(encode(Imu(k, t, self.sc.dt_s, fr.gyro_body, fr.q_ahrs_ms_body)))
+                self._send(vid, t, self.pub_vision[vid], encode(Vision(k, t, target, face, kind, data, ids)))
+            self._send(
+                vid, t, self.pub_imu[vid], encode(Imu(k, t, self.sc.dt_s, fr.gyro_body, fr.q_ahrs_ms_body))
+            )
+        self._release()
+
+    def _send(self, vid: str, t: float, pub, payload: bytes) -> None:
+        """Publish now, or (a ``sensor_delay`` fault window) hold for a random delay: samples leave late and
+        out of order."""
+        for a, b, delay in self._delays.get(vid, ()):
+            if a <= t < b:
+                wall = self._delay_rng.uniform(0.0, delay) / self.clock.factor
+                heapq.heappush(self._held, (time.monotonic() + wall, next(self._held_seq), pub, payload))
+                return
+        pub.put(payload)
+
+    def _release(self) -> None:
+        now = time.monotonic()
+        while self._held and self._held[0][0] <= now:
+            _, _, pub, payload = heapq.heappop(self._held)
+            pub.put(payload)
 
     # ------------------------------------------------------------------------------ the run
 

@@ -185,6 +185,8 @@ STRATEGIES = {
                   st.floats(1e-6, 1.0)),
         st.builds(Fault, st.just("gyro_bias_step"), st.none() | st.floats(1e-3, 1e3), st.none() | times,
                   st.none() | ids, st.none(), vec(3)),
+        st.builds(Fault, st.just("sensor_delay"), st.floats(1e-3, 1e3), st.none() | times, st.none() | ids,
+                  st.none(), st.none(), st.floats(1e-4, 10.0)),
     ),
 }  # fmt: skip
 
