@@ -268,20 +268,24 @@ class AgentTickAssembler:
                 return None
             if self._closed:
                 return None
-            k = self._next
-            assert k is not None
-            frame = self._frames.pop(k, None) or _Frame()
-            est = None
-            if self.is_chaser:
-                usable = [t for t in self._estimates if t <= max(k - 1, 0)]
-                if usable:
-                    newest = max(usable)
-                    self._held = self._estimates[newest]
-                    for t in usable:
-                        del self._estimates[t]
-                est = self._held
-            self._next = k + 1
-            return TickInputs(tick=k, imu=frame.imu, vision=frame.vision, uwb=frame.uwb, target_estimate=est)
+            return self._take()
+
+    def _take(self) -> TickInputs:
+        """Tick ``k = next`` with what it has (``_cond`` held): pops its frame and the target estimates up
+        to tick ``k - 1`` (the newest is held), advances to ``k + 1``."""
+        k = self._next
+        assert k is not None
+        frame = self._frames.pop(k, None) or _Frame()
+        est = None
+        if self.is_chaser:
+            usable = [t for t in self._estimates if t <= max(k - 1, 0)]
+            if usable:
+                self._held = self._estimates[max(usable)]
+                for t in usable:
+                    del self._estimates[t]
+            est = self._held
+        self._next = k + 1
+        return TickInputs(tick=k, imu=frame.imu, vision=frame.vision, uwb=frame.uwb, target_estimate=est)
 
     def take_partial(self) -> TickInputs | None:
         """A free-running clock's way out of a tick that does not complete in time: the next tick that has
@@ -298,22 +302,7 @@ class AgentTickAssembler:
             self._next = ready[0]
             for t in [t for t in self._frames if t < self._next]:
                 del self._frames[t]
-        return self.next_tick(0) or self._force()
-
-    def _force(self) -> TickInputs | None:
-        with self._cond:
-            k = self._next
-            frame = self._frames.pop(k, None)
-            if frame is None or frame.imu is None:
-                return None
-            usable = [t for t in self._estimates if t <= max(k - 1, 0)]
-            if usable:
-                self._held = self._estimates[max(usable)]
-                for t in usable:
-                    del self._estimates[t]
-            self._next = k + 1
-            est = self._held if self.is_chaser else None
-            return TickInputs(tick=k, imu=frame.imu, vision=frame.vision, uwb=frame.uwb, target_estimate=est)
+            return self._take()
 
     def set_uwb_live(self, live: bool) -> None:
         """The mothership (the ranges' source) was seen lost (``False``: ticks stop waiting for ``uwb``) or
