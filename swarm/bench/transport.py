@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import subprocess
 import sys
 import tempfile
@@ -28,29 +27,17 @@ from pathlib import Path
 import msgpack
 import numpy as np
 
+from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session
+
 QUICK = {"rtt_samples": 500, "pairs": (1, 4), "span_s": 5.0, "latency_s": 4.0}
 FULL = {"rtt_samples": 3000, "pairs": (1, 4, 16), "span_s": 10.0, "latency_s": 10.0}
 
 
-def _free() -> str:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
-
-
 def _client(endpoint: str):
-    import zenoh
-
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(conf)
+    return open_session(ZenohArgs(mode="client", connect=(endpoint,)))
 
 
 def _router(endpoint: str):
-    from swarm.transport.session import ZenohArgs, open_session
-
     return open_session(ZenohArgs(mode="router", listen=(endpoint,)))
 
 
@@ -86,7 +73,7 @@ def _ping(endpoint: str, ns: str, n: int) -> None:
 
 
 def _rtt(n: int) -> dict:
-    endpoint, ns = _free(), f"bench{os.getpid()}"
+    endpoint, ns = free_loopback_endpoint(), f"bench{os.getpid()}"
     with _router(endpoint) as router:
         pong = subprocess.Popen([sys.executable, "-m", "swarm.bench.transport", "pong", endpoint, ns],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
@@ -129,7 +116,7 @@ def _latency(duration_s: float) -> dict:
 
     ns = f"benchlat{os.getpid()}"
     keys = Keys(ns)
-    endpoint = _free()
+    endpoint = free_loopback_endpoint()
     cmd = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--clock", "realtime",
            "--namespace", ns, "--listen", endpoint]  # fmt: skip
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)

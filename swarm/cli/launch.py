@@ -70,14 +70,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _free_loopback() -> str:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
-
-
 def _client_endpoint(listen: str) -> str:
     """The endpoint a local child connects to for a listen endpoint (``0.0.0.0``/``[::]`` -> loopback)."""
     proto, _, addr = listen.partition("/")
@@ -220,17 +212,25 @@ def run(args: argparse.Namespace) -> int:
     from swarm.transport.keys import Keys
     from swarm.transport.messages import Clock, DropCounter, Event, Guidance, encode
     from swarm.transport.process import scenario_from
-    from swarm.transport.session import ZenohArgs, open_session, subscribe_decoded, watch_liveliness
+    from swarm.transport.session import (
+        ZenohArgs,
+        free_loopback_endpoint,
+        open_session,
+        subscribe_decoded,
+        watch_liveliness,
+    )
 
     sc = scenario_from(args)
     keys = Keys(args.namespace)
     policy = args.policy or sc.policy
-    listen = list(args.listen) if args.listen else [_free_loopback()]
+    listen = list(args.listen) if args.listen else [free_loopback_endpoint()]
     args.secure_material = None
     if getattr(args, "secure", False):  # mutual TLS + Zenoh ACL: each process its own certificate and config
         from swarm.transport.security import secure_listen
 
-        listen = secure_listen(args.listen, args.zenoh_config, int(_free_loopback().rpartition(":")[2]))
+        listen = secure_listen(
+            args.listen, args.zenoh_config, int(free_loopback_endpoint().rpartition(":")[2])
+        )
     zargs = ZenohArgs(
         mode="router", connect=tuple(args.connect or ()), listen=tuple(listen), config_file=args.zenoh_config,
         multicast_scouting=args.multicast_scouting, lease_ms=args.lease_ms,

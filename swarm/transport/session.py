@@ -50,6 +50,7 @@ __all__ = [
     "add_zenoh_arguments",
     "check_endpoint",
     "declare_liveliness",
+    "free_loopback_endpoint",
     "listen_endpoints",
     "make_config",
     "open_session",
@@ -260,6 +261,15 @@ def listen_endpoints(config: zenoh.Config) -> tuple[str, ...]:
         mode = json.loads(config.get_json("mode")) or "peer"
         value = value.get(mode) or []
     return tuple(value)
+
+
+def free_loopback_endpoint() -> str:
+    """``tcp/127.0.0.1:<port>`` with a port that was free a moment ago (the OS picks it)."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
 def open_session(args: ZenohArgs) -> zenoh.Session:

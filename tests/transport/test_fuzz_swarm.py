@@ -35,6 +35,7 @@ from swarm.transport.messages import (
     decode,
     encode,
 )
+from swarm.transport.session import ZenohArgs, open_session
 from tests.transport.procs import Procs, free_port, loopback
 
 SEED = 3
@@ -96,8 +97,6 @@ def _attack(draw, keys: list[tuple[str, str]]) -> tuple[str, bytes]:
 
 @pytest.fixture(scope="module")
 def swarm(tmp_path_factory):
-    import zenoh
-
     ns = f"fuzz-{free_port()}"
     out = tmp_path_factory.mktemp("fuzz") / "launch.json"
     endpoint = loopback(free_port())
@@ -106,11 +105,7 @@ def swarm(tmp_path_factory):
                             "--until-docked", "--seed", str(SEED), "--namespace", ns, "--listen", endpoint,
                             "--json", str(out)])  # fmt: skip
         proc.wait_for_line(r"^swarm up:", 180.0)
-        conf = zenoh.Config()
-        conf.insert_json5("mode", '"client"')
-        conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
-        conf.insert_json5("scouting/multicast/enabled", "false")
-        with zenoh.open(conf) as session:
+        with open_session(ZenohArgs(mode="client", connect=(endpoint,))) as session:
             yield {"proc": proc, "session": session, "keys": _keys(ns), "out": out, "sent": [0]}
 
 

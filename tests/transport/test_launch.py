@@ -24,6 +24,7 @@ import pytest
 
 from swarm.scenario import load_scenario
 from swarm.sim.docking import run_docking
+from swarm.transport.session import ZenohArgs, open_session
 from tests.transport.procs import Procs, free_port, loopback, wait_until
 
 SEED = 1
@@ -48,13 +49,7 @@ def _children(ns: str) -> list[str]:
 
 
 def _client(endpoint: str):
-    import zenoh
-
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(conf)
+    return open_session(ZenohArgs(mode="client", connect=(endpoint,)))
 
 
 def _ns() -> str:
@@ -70,7 +65,6 @@ def test_lockstep_launch_docks_and_equals_the_in_process_simulation(tmp_path, si
     """Same seed, lockstep: identical docking time, impulse, errors, modes and Algorithm 1 decisions. Bit
     for bit, not to 1e-9: both runners call the same kernels in the same order on the same float64
     values, and the codec carries arrays as raw little-endian float64."""
-    import zenoh
 
     from swarm.transport.keys import Keys
     from swarm.transport.messages import Event, Guidance, decode
@@ -83,11 +77,7 @@ def test_lockstep_launch_docks_and_equals_the_in_process_simulation(tmp_path, si
         proc, endpoint = _launch(procs, ns, "--until-docked", json_path=out)
         keys = Keys(ns)
         # an outside client on the printed endpoint sees every mode on guidance and event
-        conf = zenoh.Config()
-        conf.insert_json5("mode", '"client"')
-        conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
-        conf.insert_json5("scouting/multicast/enabled", "false")
-        with zenoh.open(conf) as session:
+        with _client(endpoint) as session:
             session.declare_subscriber(
                 keys.guidance("chaser"), lambda s: seen_modes.append(decode(s.payload, Guidance).mode)
             )
@@ -114,8 +104,6 @@ def test_lockstep_launch_docks_and_equals_the_in_process_simulation(tmp_path, si
 def test_garbage_on_every_key_changes_nothing_but_the_drop_counters(tmp_path, sim_result):
     """Bytes, wrong types, NaN, wrong shapes and an unknown schema version on every key of the swarm while
     it runs: no process crashes, the run is still the in-process one, and the drops are logged per key."""
-    import zenoh
-
     from swarm.transport.keys import AGENT_KINDS, Keys
 
     ns = _ns()
@@ -135,12 +123,8 @@ def test_garbage_on_every_key_changes_nothing_but_the_drop_counters(tmp_path, si
         out = tmp_path / "launch.json"
         proc, endpoint = _launch(procs, ns, "--until-docked", json_path=out)
         proc.wait_for_line(r"^swarm up:", 120.0)
-        conf = zenoh.Config()
-        conf.insert_json5("mode", '"client"')
-        conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
-        conf.insert_json5("scouting/multicast/enabled", "false")
         sent = 0
-        with zenoh.open(conf) as session:
+        with _client(endpoint) as session:
             deadline = time.monotonic() + 5.0
             while time.monotonic() < deadline:
                 for key in targets:
