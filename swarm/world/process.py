@@ -91,6 +91,7 @@ class WorldProcess:
         self._alive: set[str] = set()
         self._mothership = False
         self._lost: list[str] = []  # agents seen lost since the main loop last looked
+        self._awaited: set[str] = set()  # lost agents not back yet: a lockstep world waits for them
         self._latest: dict[str, Command] = {}  # realtime: newest command per agent
         self._controls: queue.Queue[RunControl] = queue.Queue()
         self._faults: queue.Queue[Fault] = queue.Queue()
@@ -134,9 +135,11 @@ class WorldProcess:
                 return
             if alive:
                 self._alive.add(pid)
+                self._awaited.discard(pid)
                 return
             self._alive.discard(pid)
             self._lost.append(pid)
+            self._awaited.add(pid)
             self.barrier.set_live(self.barrier.live - {pid})
         _LOG.warning("agent %s lost: its nozzles are closed; the world goes on without it", pid)
 
@@ -291,6 +294,27 @@ class WorldProcess:
                 self._apply(vid, commands[vid])
         return True
 
+    def _await_lost(self) -> None:
+        """Lockstep: while an agent is lost (its token gone, not back yet), do not step: simulated time
+        stands still while the launcher restarts it, as it does before the run starts (at most
+        ``start_timeout_s``, then the run goes on without it, logged). Its vehicle's nozzles are closed."""
+        if not self.clock.lockstep:
+            return
+        deadline = time.monotonic() + self.start_timeout_s
+        while not self.stop.is_set():
+            with self._lock:
+                awaited = sorted(self._awaited)
+            if not awaited:
+                return
+            if time.monotonic() > deadline:
+                _LOG.warning(
+                    "agents %s not back after %.0f s: going on without them", awaited, self.start_timeout_s
+                )
+                with self._lock:
+                    self._awaited.clear()
+                return
+            time.sleep(0.005)
+
     def _handle_controls(self) -> bool:
         """Apply pending run controls; True if any arrived."""
         got = False
@@ -399,6 +423,7 @@ class WorldProcess:
                 time.sleep(0.01)
                 pace0, pace_k = time.monotonic(), tick
                 continue
+            self._await_lost()
             if not self._take_commands(tick):
                 break
             self._close_lost()
