@@ -23,6 +23,7 @@ def test_compiled_inner_loop_gives_the_per_tick_run_bit_for_bit(policy, seed):
         "attitude_error_rad",
         "r1_m",
         "r2_m",
+        "closest_approach_m",
     ):
         assert a[key] == b[key], key
     assert a["modes"] == b["modes"]
@@ -43,3 +44,19 @@ def test_compiled_inner_loop_sees_keepout_and_faults_like_the_per_tick_path():
     assert fast["estimator"] == slow["estimator"]
     assert fast["estimator"]["rejected_ranges"] > 0
     assert fast["modes"] == slow["modes"] and fast["total_impulse_ns"] == slow["total_impulse_ns"]
+
+
+def test_closest_approach_is_the_closest_truth_outside_the_corridor_modes():
+    """``closest_approach_m`` is the minimum true centre distance over the ticks flown outside DOCK/DOCKED/
+    ABORT: never above the minimum of the recorded truth series over those modes' samples (a subset of the
+    ticks), and no more than one series period of approach-speed travel below it."""
+    sc = load_scenario("docking")
+    res = DockingSim(sc, "mdp", 5, record_series=True, fast=True).run()["chasers"]["chaser"]
+    s = res["series"]
+    p_t = np.asarray(sc.vehicles["target"].position_m)
+    d = np.linalg.norm(np.asarray(s["p_true_ms"]) - p_t, axis=1)
+    outside = np.array([m not in ("DOCK", "DOCKED", "ABORT") for m in s["mode"]])
+    series_min = d[outside].min()
+    step = sc.sim.series_every * sc.dt_s * 2 * sc.guidance.approach_speed_m_s
+    assert series_min - step <= res["closest_approach_m"] <= series_min
+    assert res["closest_approach_m"] > sc.guidance.keepout_radius_m

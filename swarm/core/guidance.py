@@ -84,6 +84,16 @@ class GuidanceParams:
     """Reference speed while backing away in ABORT [m/s]."""
     max_lead_m: float = 0.05
     """The reference waits when it leads the estimated position by more than this [m]."""
+    stop_decel_m_s2: float = 0.01
+    """The APPROACH/REORIENT reference brakes into its stop point outside the keep-out sphere at this
+    deceleration [m/s^2]: its speed is ``min(speed, sqrt(2 a d))`` at ``d`` from the stop point
+    (``v^2 = 2 a d``), the deceleration fed forward to the LQR, so the reference's velocity is continuous.
+    A reference that stopped dead from 2 cm/s let the chaser (lagging it, its integral wound up) overshoot
+    by 17-26 mm into the 30 mm keep-out margin: 2 keep-out violations in 200 MDP runs of docking-faults
+    (docs/results/faults-analysis). 0.01 m/s^2 is 12 % of the 0.083 m/s^2 the translation controller may
+    command (0.1 N on 1.2 kg), so feedback keeps its authority; braking takes 2 s over 2 cm. Measured on
+    those 200 runs: closest approach 160.1 mm (was 146.2), MDP docking 1.3 s longer; 0.004 and 0.002 gave
+    163.7 / 166.8 mm for +3.9 / +8.1 s. The fixed radii switch to ALIGN before the braking begins."""
     align_tolerance_m: float = 0.02
     """ALIGN -> DOCK once within this distance of the alignment point [m] ..."""
     align_attitude_tolerance_rad: float = 0.05
@@ -139,6 +149,7 @@ class GuidanceParams:
             "contact_lateral_m", "contact_attitude_rad", "contact_speed_m_s", "hold_sigma_pos_m",
             "resume_sigma_pos_m", "abort_after_hold_s", "abort_retreat_m", "stall_timeout_s",
             "corridor_half_angle_deg", "retry_after_s", "arc_lookahead_rad", "hold_nis_mean",
+            "stop_decel_m_s2",
         ):  # fmt: skip
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -314,17 +325,29 @@ class ChaserGuidance:
         self.mode_since_s = t_s
         self.stall_since_s = None
 
-    def _carrot(self, nav: NavInput, goal: np.ndarray, speed: float, dt: float) -> np.ndarray:
-        """Move the reference toward ``goal`` at ``speed``; wait while it leads the vehicle too far."""
+    def _carrot(
+        self, nav: NavInput, goal: np.ndarray, speed: float, dt: float, decel: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Move the reference toward ``goal`` at ``speed``; wait while it leads the vehicle too far.
+        Returns the reference velocity and acceleration.
+
+        With ``decel > 0`` the reference brakes into the goal: its speed is ``min(speed, sqrt(2 decel
+        d))`` at distance ``d`` (the constant-deceleration stopping profile, ``v^2 = 2 a d``), and while that
+        bound is the active one the braking ``-decel`` along the path is the feed-forward acceleration."""
+        zero = np.zeros(3)
         delta = goal - self.p_ref
         dist = float(_norm(delta))
         lead = float(_norm(self.p_ref - nav.p_ms))
         if dist < 1e-9 or lead > self.p.max_lead_m:
-            return np.zeros(3)
+            return zero, zero
+        braking = decel > 0.0 and 2.0 * decel * dist < speed * speed
+        if braking:
+            speed = math.sqrt(2.0 * decel * dist)
         step = min(dist, speed * dt)
-        v = delta / dist * (step / dt)
+        u = delta / dist
+        v = u * (step / dt)
         self.p_ref = self.p_ref + v * dt
-        return v
+        return v, (-decel * u if braking and step < dist else zero)
 
     def _arc_goal(self, p_t: np.ndarray, n_ms: np.ndarray, goal: np.ndarray, speed: float, dt: float):
         """Next goal on the way to ``goal`` that keeps outside the keep-out sphere: straight when the
@@ -444,35 +467,36 @@ class ChaserGuidance:
 
         # --- reference for the mode ---
         v_ref = np.zeros(3)
+        a_ref = np.zeros(3)
         q_ref = q_dock
         clear = p.keepout_radius_m + p.keepout_margin_m
         if self.mode in (Mode.APPROACH, Mode.REORIENT):
             u = (self.p_ref - p_t) / max(_norm(self.p_ref - p_t), 1e-9)
             stop = clear
             goal = p_t + u * stop
-            v_ref = self._carrot(nav, goal, p.approach_speed_m_s, dt)
+            v_ref, a_ref = self._carrot(nav, goal, p.approach_speed_m_s, dt, p.stop_decel_m_s2)
             if self.mode is Mode.APPROACH:
                 q_ref = self.q_mission
             if self.mode is Mode.REORIENT and _norm(self.p_ref - goal) < 1e-6:
                 self.stall_since_s = t if self.stall_since_s is None else self.stall_since_s
         elif self.mode is Mode.ALIGN:
             p_align = p_t + p.align_distance_m * n_ms
-            v_ref = self._carrot(
+            v_ref, a_ref = self._carrot(
                 nav, self._arc_goal(p_t, n_ms, p_align, p.align_speed_m_s, dt), p.align_speed_m_s, dt
             )
         elif self.mode is Mode.DOCK:
-            v_ref = self._carrot(nav, p_docked - p.dock_overshoot_m * n_ms, p.dock_speed_m_s, dt)
+            v_ref, a_ref = self._carrot(nav, p_docked - p.dock_overshoot_m * n_ms, p.dock_speed_m_s, dt)
         elif self.mode is Mode.ABORT:
             u = (nav.p_ms - p_t) / max(r, 1e-9)
             goal = p_t + u * (p.keepout_radius_m + p.abort_retreat_m)
-            v_ref = self._carrot(nav, goal, p.abort_speed_m_s, dt)
+            v_ref, a_ref = self._carrot(nav, goal, p.abort_speed_m_s, dt)
             q_ref = nav.q_ms_body
         elif self.mode is Mode.HOLD and (not self.started or self.resume_mode is Mode.APPROACH):
             q_ref = self.q_mission  # holding before the start or during APPROACH: the mission attitude
         elif self.mode is Mode.DOCKED:
             self.p_ref = nav.p_ms.copy()
         return Reference(
-            mode=self.mode, p_ms=self.p_ref.copy(), v_ms=v_ref, a_ms=np.zeros(3), q_ms_body=q_ref,
+            mode=self.mode, p_ms=self.p_ref.copy(), v_ms=v_ref, a_ms=a_ref, q_ms_body=q_ref,
             range_m=r, events=events, decision=decision,
         )  # fmt: skip
 

@@ -112,26 +112,39 @@ def fault_summary(rows: list[dict], trajs: list[dict]) -> dict:
             "collisions": sum(1 for r in mine if r["collided"]),
             "runs_with_hold": sum(1 for r in mine if r["n_hold"] > 0),
             "runs_with_abort": sum(1 for r in mine if r["n_abort"] > 0),
+            "closest_approach_m": _closest(mine),
             "nees": nees_consistency([t for t in trajs if t["policy"] == pol]),
         }
     return out
+
+
+def _closest(rows: list[dict]) -> dict | None:
+    """The closest true approach of the chaser to its target outside the corridor modes (``runs.csv``'s
+    ``closest_approach_m``: what the keep-out sphere is judged on): the minimum, 1st percentile and median
+    over the runs, in metres."""
+    v = np.array([r["closest_approach_m"] for r in rows if r.get("closest_approach_m") is not None])
+    if v.size == 0:
+        return None
+    return {"min": float(v.min()), "p1": float(np.percentile(v, 1)), "median": float(np.median(v))}
 
 
 def format_summary(summary: dict) -> str:
     """The summary as a Markdown table (one row per policy)."""
     lines = [
         "| policy | runs | docked | aborted (safe) | failed | safe rate [95 % CI] | runs with HOLD | "
-        "NEES mean | times inside 95 % |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "closest approach [mm] min / 1 % / median | NEES mean | times inside 95 % |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for pol, s in summary.items():
         ci = s["safe_ci95"] or [math.nan, math.nan]
         nees = s["nees"]
         frac = nees.get("fraction_times_inside_95")
+        ca = s.get("closest_approach_m")
+        closest = f"{1e3 * ca['min']:.1f} / {1e3 * ca['p1']:.1f} / {1e3 * ca['median']:.1f}" if ca else "-"
         lines.append(
             f"| {pol} | {s['n_runs']} | {s['docked']} | {s['aborted']} | {s['failed']} | "
             f"{100 * s['safe_rate']:.1f} % [{100 * ci[0]:.1f}, {100 * ci[1]:.1f}] | {s['runs_with_hold']} | "
-            f"{nees.get('mean_nees', math.nan):.2f} (3 ideal) | "
+            f"{closest} | {nees.get('mean_nees', math.nan):.2f} (3 ideal) | "
             + (f"{100 * frac:.0f} % of {nees['times']}" if frac is not None else "-")
             + " |"
         )

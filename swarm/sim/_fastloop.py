@@ -30,7 +30,7 @@ def run_ticks(
     AX, AP, AC, AB, PRM, f_body, w_body, mass, ahrs_cov, gate1, gate3, sigma_r, Hok, Hd2, Hmeta,
     last_vision, dock_flag, recent_s, uwb_with_vision, t_agent,
     pairs, done, docking, n_target, q_tc, half, keepout_r, corridor_cos, contact_d,
-    ko_flag, ko_t, ko_r, sensors_only,
+    ko_flag, ko_t, ko_r, closest, sensors_only,
 ):  # fmt: skip
     """Ticks ``k0 .. k1 - 1`` (module docstring). Returns ``(k, code)``: ``(k1, REACHED_END)``, or
     ``(k, CONTACT)`` when a chaser may touch its target at tick ``k``: tick ``k``'s sensors are processed,
@@ -67,6 +67,8 @@ def run_ticks(
             centre, gap, lateral, _att, _closing, axial = pair_geometry(
                 xc[0:3], xc[3:6], xc[6:10], xt[0:3], xt[3:6], xt[6:10], n_target, q_tc, half
             )
+            if not docking[c] and centre < closest[c]:
+                closest[c] = centre
             if centre > keepout_r + 2.0 * half:
                 continue
             if keepout_from_geometry(centre, axial, keepout_r, corridor_cos, docking[c]) and not ko_flag[c]:

@@ -11,6 +11,7 @@ The order of one tick ``k`` is the contract the distributed swarm (issue 4) foll
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -41,6 +42,10 @@ def initial_estimate(sc, vehicle_index: int, x_true: np.ndarray, seed: int):
     v0 = x_true[3:6] + e[3:6]
     q0 = rot.multiplicative_reset(x_true[6:10], -e[6:9])
     return p0, v0, q0, sig**2
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
 
 
 @dataclass
@@ -224,6 +229,7 @@ class DockingSim:
         self.ko_flag = np.zeros(len(self.pairs), dtype=np.bool_)
         self.ko_t = np.zeros(len(self.pairs))
         self.ko_r = np.zeros(len(self.pairs))
+        self.closest = np.full(len(self.pairs), np.inf)  # closest true centre distance outside the corridor modes
 
     def _camera_possible(self) -> bool:
         """Whether any chaser could see its target before the next control tick (then camera ticks need
@@ -273,7 +279,7 @@ class DockingSim:
             last_vision, dock_flag, ag.vision_recent_s, ag.uwb_with_vision, self.t_agent,
             self.pairs, done, docking, g.face_normal_target, g.q_target_chaser_docked, g.half_size_m,
             g.keepout_radius_m, self._corridor_cos, g.contact_distance_m,
-            self.ko_flag, self.ko_t, self.ko_r, sensors_only,
+            self.ko_flag, self.ko_t, self.ko_r, self.closest, sensors_only,
         )  # fmt: skip
         for b, a in enumerate(agents):
             a.t_s = float(self.t_agent[b])
@@ -327,6 +333,10 @@ class DockingSim:
                 s["relative_nav"].append(bool(agent.relative_nav))
             if cid in self.done:
                 continue
+            if agent.mode not in CORRIDOR_MODES:
+                c = sc.chasers.index(cid)
+                d = self.world.x[cid][0:3] - self.world.x[tid][0:3]
+                self.closest[c] = min(self.closest[c], math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))
             call = judge(self.world, g, cid, tid, agent.mode in CORRIDOR_MODES, t)
             if call is None:
                 continue  # far from the target: no contact, no keep-out violation possible
@@ -370,6 +380,7 @@ class DockingSim:
                 "r1_m": sw.r1_m,
                 "r2_m": sw.r2_m,
                 "keepout_violated": out.keepout_violated,
+                "closest_approach_m": _finite_or_none(self.closest[self.sc.chasers.index(cid)]),
                 "contact": out.contact,
                 "estimator": {
                     "rejected_ranges": int(agent.est.count(0, "rejected")[0]),

@@ -304,6 +304,42 @@ def test_carrot_waits_while_the_vehicle_lags_more_than_max_lead():
     assert np.linalg.norm(ref.v_ms) == pytest.approx(G.approach_speed_m_s)
 
 
+def test_reference_brakes_into_the_keepout_stop_point():
+    """With r1 inside keep-out + margin (MDP's 0.10 m), REORIENT ends at the stop point 0.18 m from the
+    target. The reference must arrive there with a velocity that goes continuously to zero
+    (``|v| <= sqrt(2 a d)``, ``a = stop_decel_m_s2``) and feed the braking forward (``a_ref = -a`` along the
+    path while braking), not stop dead from the approach speed."""
+    g = ChaserGuidance(G, FixedSwitcher(FixedParams(r2_m=0.8, r1_m=0.10)), Q_MISSION, (0.5, 0.0, 0.0))
+    refs = follow(g, (0.5, 0.0, 0.0), 400, until=Mode.ALIGN)
+    stop = G.keepout_radius_m + G.keepout_margin_m
+    a = G.stop_decel_m_s2
+    braking = 0
+    for ref in refs:
+        if ref.mode is not Mode.REORIENT:
+            continue
+        d = np.linalg.norm(ref.p_ms - P_T) - stop  # after this step
+        speed = np.linalg.norm(ref.v_ms)
+        d_before = d + speed * DT
+        assert speed <= np.sqrt(2 * a * d_before) + 1e-12
+        if speed > 0 and np.sqrt(2 * a * d_before) < G.approach_speed_m_s and d > 0:
+            braking += 1
+            np.testing.assert_allclose(ref.a_ms, -a * ref.v_ms / speed, atol=1e-15)
+        else:
+            np.testing.assert_array_equal(ref.a_ms, np.zeros(3))
+    # braking from 2 cm/s at 0.01 m/s^2 takes 2 s: ~20 control steps of 0.1 s
+    assert braking >= 0.8 * G.approach_speed_m_s / a / DT
+    speeds = [np.linalg.norm(r.v_ms) for r in refs if r.mode is Mode.REORIENT]
+    # no velocity step anywhere: a continuous profile changes by a DT per step; the discrete sqrt profile's
+    # last steps (the stop point within one step) drop by up to ~1.6 a DT; the old dead stop dropped 20 a DT
+    assert max(np.abs(np.diff(speeds))) <= 2 * a * DT
+    assert refs[-1].mode is Mode.ALIGN  # reached the stop point, then the stall rule
+
+
+def test_stop_decel_is_validated():
+    with pytest.raises(ConfigError, match="stop_decel_m_s2"):
+        GuidanceParams(stop_decel_m_s2=0.0)
+
+
 def test_approach_keeps_the_mission_attitude_and_reorient_turns_to_docking():
     g = chaser((1.5, 0.0, 0.0))
     assert np.allclose(g.step(nav(0.0, (1.5, 0.0, 0.0)), DT).q_ms_body, Q_MISSION)
