@@ -229,7 +229,8 @@ class DockingSim:
         self.ko_flag = np.zeros(len(self.pairs), dtype=np.bool_)
         self.ko_t = np.zeros(len(self.pairs))
         self.ko_r = np.zeros(len(self.pairs))
-        self.closest = np.full(len(self.pairs), np.inf)  # closest true centre distance outside the corridor modes
+        # closest true centre distance outside the corridor modes, per chaser
+        self.closest = np.full(len(self.pairs), np.inf)
 
     def _camera_possible(self) -> bool:
         """Whether any chaser could see its target before the next control tick (then camera ticks need
