@@ -289,7 +289,7 @@ def test_cli_sim_writes_json_and_plot(runs, tmp_path, capsys):
 
 @pytest.mark.parametrize(
     ("flag", "value"),
-    [("--policy", "markov"), ("--seed", "-1"), ("--seed", "one")],
+    [("--policy", "markov"), ("--seed", "-1"), ("--seed", "one"), ("--seed", str(2**63))],
 )
 def test_cli_bad_flag_is_an_argparse_error_naming_the_flag(capsys, flag, value):
     with pytest.raises(SystemExit) as exc:
@@ -297,6 +297,19 @@ def test_cli_bad_flag_is_an_argparse_error_naming_the_flag(capsys, flag, value):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert flag in err and value in err
+
+
+@pytest.mark.parametrize(
+    "command",
+    [["sim", "docking"], ["montecarlo", "docking"], ["demo"], ["world", "docking"], ["agent", "docking"]],
+)
+def test_every_command_refuses_the_same_seeds(capsys, command):
+    """One seed range for every command (``swarm.cli.args.seed``): a seed that one command accepts must
+    re-run in every other (the processes carry it in an int64)."""
+    with pytest.raises(SystemExit) as exc:
+        main([*command, "--seed", str(2**63)])
+    assert exc.value.code == 2
+    assert "--seed must be an integer in 0..2**63-1" in capsys.readouterr().err
 
 
 def test_cli_bad_override_exits_2_naming_the_field(capsys):

@@ -37,6 +37,24 @@ def count(flag: str) -> Callable[[str], int]:
     return parse
 
 
+SEED_LIMIT = 2**63
+"""Seeds are integers in ``0 .. 2**63 - 1``: numpy's ``SeedSequence`` takes any non-negative integer, but a
+launched run's seed travels in the world's ``Clock`` as a msgpack int64 (docs/protocol.md), and a seed a
+command accepts must be one every command accepts (``swarm sim --seed S`` re-runs a launched or campaign
+run)."""
+
+
+def seed(text: str) -> int:
+    """An argparse type for ``--seed``: an integer in ``0 .. 2**63 - 1`` (:data:`SEED_LIMIT`)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--seed must be an integer in 0..2**63-1, got {text!r}") from None
+    if not 0 <= value < SEED_LIMIT:
+        raise argparse.ArgumentTypeError(f"--seed must be an integer in 0..2**63-1, got {text!r}")
+    return value
+
+
 def add_world_timeouts(p) -> None:
     """``--step-timeout`` and ``--start-timeout``: the world's, also taken by ``swarm launch`` for it."""
     p.add_argument(

@@ -13,6 +13,7 @@ import time
 import numpy as np
 from scipy.stats import chi2
 
+from swarm.cli.args import seed
 from swarm.core.estimator import EstimatorParams, Structure
 from swarm.sim.estimation import EstimationScenario, run_estimation
 
@@ -20,7 +21,7 @@ from swarm.sim.estimation import EstimationScenario, run_estimation
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="run the main demonstration on embedded defaults")
     p.add_argument("--runs", type=_positive_int, default=50, help="estimator Monte Carlo runs (default 50)")
-    p.add_argument("--seed", type=int, default=0, help="root seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="root seed (default 0)")
     p.set_defaults(func=run)
 
 

@@ -14,6 +14,7 @@ import json
 import logging
 from pathlib import Path
 
+from swarm.cli.args import seed
 from swarm.cli.sim import add_scenario_args, load_from_args
 from swarm.errors import ConfigError
 
@@ -47,7 +48,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="fixed or mdp; repeat to compare (default: both); the first is the baseline",
     )
     p.add_argument("--workers", type=_int("--workers"), default=None, help="processes (default: the cores)")
-    p.add_argument("--seed", type=_int("--seed"), default=None, help="root seed (default 0)")
+    p.add_argument("--seed", type=seed, default=None, help="root seed (default 0)")
     p.add_argument(
         "--out", type=Path, default=None, metavar="DIR", help="campaign directory (default mc-SCENARIO-seedS)"
     )

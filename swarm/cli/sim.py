@@ -7,6 +7,7 @@ import json
 import math
 from pathlib import Path
 
+from swarm.cli.args import seed
 from swarm.config import parse_override
 from swarm.errors import ConfigError
 
@@ -31,16 +32,6 @@ def load_from_args(args: argparse.Namespace):
     return load_scenario(args.scenario, overrides)
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--seed must be a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"--seed must be a non-negative integer, got {text!r}")
-    return value
-
-
 def _agents(text: str) -> int:
     from swarm.transport.process import _agents_arg
 
@@ -53,7 +44,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--policy", choices=("fixed", "mdp"), default=None, help="switching policy (default: scenario's)"
     )
-    p.add_argument("--seed", type=_seed, default=0, help="root seed of every random stream (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="root seed of every random stream (default 0)")
     p.add_argument(
         "--agents", type=_agents, default=1, metavar="N", help="copies of the scenario's pairs (default: 1)"
     )

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import zenoh
 
+from swarm.cli.args import seed
 from swarm.errors import ConfigError, SwarmError
 from swarm.transport.keys import Keys
 from swarm.transport.session import add_zenoh_arguments, zenoh_args_from
@@ -88,16 +89,6 @@ def _clock_arg(text: str) -> ClockSpec:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def _seed_arg(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--seed must be an integer in 0..2**63-1, got {text!r}") from None
-    if not 0 <= value < 2**63:
-        raise argparse.ArgumentTypeError(f"--seed must be an integer in 0..2**63-1, got {text!r}")
-    return value
-
-
 def _agents_arg(text: str) -> int:
     try:
         value = int(text)
@@ -120,7 +111,7 @@ def add_process_arguments(p: argparse.ArgumentParser, *, clock: bool = True) -> 
         metavar="N",
         help="copies of the scenario's pairs (default 1)",
     )
-    p.add_argument("--seed", type=_seed_arg, default=0, help="root seed of every random stream (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="root seed of every random stream (default 0)")
     p.add_argument(
         "--policy", choices=("fixed", "mdp"), default=None, help="switching policy (default: scenario's)"
     )
