@@ -261,3 +261,21 @@ def test_writers_on_several_threads_and_a_reader_never_see_a_torn_state() -> Non
     reader.join()
     assert errors == []
     assert state.snapshot().agents["target"].truth.tick == 999
+
+
+def test_run_events_go_to_the_event_log_faults_also_to_the_fault_log_and_run_start_names_the_clock() -> None:
+    state = SwarmState(VEHICLES, ANCHORS)
+    assert state.snapshot().clock_mode is None
+    state.on_run_event("world", Event(t_s=0.0, kind="run_start", data={"seed": 1, "clock": "lockstep"}))
+    fault = Event(t_s=2.0, kind="fault", data={"kind": "uwb_dropout", "start_s": 2.01, "duration_s": 5.0})
+    state.on_run_event("mothership", fault)
+    refused = Event(t_s=3.0, kind="fault_refused", data={"kind": "sensor_delay", "reason": "lockstep"})
+    state.on_run_event("world", refused)
+    snap = state.snapshot()
+    assert snap.clock_mode == "lockstep"
+    assert [(s, e.kind) for s, e in snap.events] == [
+        ("world", "run_start"),
+        ("mothership", "fault"),
+        ("world", "fault_refused"),
+    ]
+    assert snap.faults == (("mothership", fault), ("world", refused)) and snap.faults_version == 2
