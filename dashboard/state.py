@@ -374,9 +374,11 @@ class SwarmState:
             view.radii.add(msg.t_s, (msg.range_m, msg.r1_m, msg.r2_m, msg.r_t_m))
 
     def on_vision(self, agent_id: str, msg: Vision) -> None:
+        """A camera frame: its time if it measured markers (a camera reports every frame, docs/protocol.md
+        "Vision": a frame without a marker says only that the camera works)."""
         with self._lock:
             view = self._add(agent_id, "?", None)
-            if view is not None:
+            if view is not None and len(msg.marker_ids) > 0:
                 view.vision_t_s = msg.t_s
 
     def on_event(self, agent_id: str, msg: Event) -> None:
