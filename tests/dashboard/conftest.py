@@ -22,7 +22,7 @@ import zenoh
 
 from swarm.scenario import load_scenario
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Clock, DropCounter, Event, Fault, Uwb, Vision
+from swarm.transport.messages import Clock, DropCounter, Event, Fault, Uwb
 from swarm.transport.session import ZenohArgs, open_session, subscribe_decoded
 from tests.transport.procs import REPO, Proc, Procs, free_port, loopback, wait_until
 
@@ -160,8 +160,8 @@ class ClockWatch:
 
 class SwarmRecorder(ClockWatch):
     """A :class:`ClockWatch` that also records what the operator's controls cause: every Fault published
-    on ``control/fault``, the events of ``world/event`` and ``mothership/event``, and each chaser's vision
-    frames and UWB exchanges (``(t_s, markers seen)``, ``(t_s, range_m)``).
+    on ``control/fault``, the events of ``world/event`` and ``mothership/event``, and each chaser's UWB
+    exchanges (``(t_s, range_m)``, ``None`` for a lost one).
 
     These subscriptions are declared before the clock's, and a client's declarations reach the router in
     order (README, "Processes and topology"): once :meth:`wait_for` returns a clock, the router routes every
@@ -172,7 +172,6 @@ class SwarmRecorder(ClockWatch):
     ):
         self.faults: list[Fault] = []
         self.events: list[tuple[str, Event]] = []
-        self.vision: dict[str, list[tuple[float, int]]] = {c: [] for c in chasers}
         self.uwb: dict[str, list[tuple[float, float | None]]] = {c: [] for c in chasers}
         super().__init__(endpoint, namespace, zenoh_config)
 
@@ -188,9 +187,7 @@ class SwarmRecorder(ClockWatch):
             subscribe_decoded(
                 session, key, Event, lambda _k, m, s=source: keep(self.events, (s, m)), self.drops
             )
-        for c in self.vision:
-            on_vision = lambda _k, m, c=c: keep(self.vision[c], (m.t_s, len(m.marker_ids)))  # noqa: E731
-            subscribe_decoded(session, keys.vision(c), Vision, on_vision, self.drops)
+        for c in self.uwb:
             on_uwb = lambda _k, m, c=c: keep(self.uwb[c], (m.t_s, m.range_m))  # noqa: E731
             subscribe_decoded(session, keys.uwb(c), Uwb, on_uwb, self.drops)
 
@@ -206,11 +203,10 @@ class SwarmRecorder(ClockWatch):
         wait_until(check, timeout, what, poll_s=0.05)
         return found[0]
 
-    def snapshot(self) -> tuple[list[Fault], dict[str, list], dict[str, list]]:
-        """Copies of the faults, vision frames and UWB exchanges recorded so far."""
+    def snapshot(self) -> tuple[list[Fault], dict[str, list[tuple[float, float | None]]]]:
+        """Copies of the faults and the UWB exchanges recorded so far."""
         with self._cond:
-            return (list(self.faults), {c: list(v) for c, v in self.vision.items()},
-                    {c: list(v) for c, v in self.uwb.items()})  # fmt: skip
+            return list(self.faults), {c: list(v) for c, v in self.uwb.items()}
 
 
 def choose(page, label: str, option: str, timeout_ms: float) -> None:

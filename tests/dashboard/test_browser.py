@@ -143,7 +143,7 @@ def test_fault_panel_refuses_a_bad_value_and_the_world_applies_a_camera_loss(
             timeout=UI_TIMEOUT_MS
         )
         page.screenshot(path=str(ARTIFACTS / "dashboard-fault-applied.png"))
-        faults, _, _ = rec.snapshot()
+        faults, _ = rec.snapshot()
     finally:
         rec.close()
     assert [(f.kind, f.vehicle, f.duration_s) for f in faults] == [("camera_loss", chaser, 2.0)]
