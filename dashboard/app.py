@@ -32,6 +32,7 @@ import viser
 import zenoh
 
 from dashboard import mapping, panels
+from dashboard.faults import FaultPanel
 from dashboard.link import SwarmLink
 from dashboard.state import AgentSnap, FramePacer, RateLimiter, Snapshot, SwarmState
 from swarm.errors import ConfigError
@@ -302,18 +303,19 @@ class SceneView:
 
 class GuiView:
     """The control panel: run status and controls, agents table, the selected chaser's decision panel and
-    plots, the event log, and view settings."""
+    plots, the event log, the Faults panel (:class:`~dashboard.faults.FaultPanel`), and view settings."""
 
     def __init__(
         self,
         server: viser.ViserServer,
-        send: Callable[[str], object],
+        link: SwarmLink,
         chasers: list[str],
+        vehicles: list[str],
         scene: SceneView,
         state: SwarmState,
     ) -> None:
         gui = server.gui
-        self._send = send
+        self._send = link.send
         gui.add_markdown("#### TPODS swarm")
         self.status = gui.add_markdown("**no clock yet**")
         with gui.add_folder("Run"):
@@ -358,6 +360,7 @@ class GuiView:
             self.modes = gui.add_markdown("")
         with gui.add_folder("Events"):
             self.events = gui.add_markdown("no events yet")
+        self.faults = FaultPanel(gui, link.send_fault, link.listeners, vehicles)
         with gui.add_folder("View", expand_by_default=False):
             sigma = gui.add_slider("ellipsoid σ", min=1.0, max=5.0, step=0.5, initial_value=scene.n_sigma)
             trails = gui.add_checkbox("trails", initial_value=True)
@@ -412,6 +415,7 @@ class GuiView:
         if snap.events_version != self._events_version:
             self._events_version = snap.events_version
             _set(self.events, "content", panels.events_markdown(snap.events))
+        self.faults.update(snap)
 
     def update_plots(self, snap: Snapshot) -> None:
         selected = snap.agents.get(self.chaser.value)
@@ -469,7 +473,7 @@ class DashboardApp:
             chasers = sorted(
                 (k for k, v in sc.vehicles.items() if v.role == "chaser"), key=panels.natural_key
             )
-            self.gui = GuiView(self.server, self.link.send, chasers, self.scene, self.state)
+            self.gui = GuiView(self.server, self.link, chasers, list(sc.vehicles), self.scene, self.state)
         except BaseException:
             with contextlib.redirect_stdout(sys.stderr):
                 self.server.stop()

@@ -1,5 +1,5 @@
-"""The dashboard's Zenoh side: it subscribes, watches liveliness and sends run controls; it never runs
-estimator or guidance code.
+"""The dashboard's Zenoh side: it subscribes, watches liveliness and sends the operator's controls (run
+controls on ``control/run``, faults on ``control/fault``); it never runs estimator or guidance code.
 
 The world publishes each vehicle's truth every tick, and agents their estimate and guidance every tick:
 in lockstep that is thousands of samples per second, far more than a browser can show. Those
@@ -8,7 +8,8 @@ subscribed with a Zenoh ``RingChannel(1)``: Zenoh keeps only the newest sample o
 calls no Python per sample; the render loop takes it with :meth:`SwarmLink.poll` once per frame and
 decodes only that one (DESIGN.md section 9: ``RingChannel(1)`` suits latest-value topics). So the
 dashboard's cost follows its frame rate, not the swarm's tick rate. Topics where every sample counts,
-events (mode transitions, contact, loss), anchors and liveliness, use callbacks
+events (mode transitions, contact, loss; the run's and the UWB network's, faults applied or refused),
+anchors and liveliness, use callbacks
 (:func:`~swarm.transport.session.subscribe_decoded`, :func:`~swarm.transport.session.watch_liveliness`).
 
 Every payload is decoded with :func:`~swarm.transport.messages.safe_decode`: an invalid one is counted
@@ -30,6 +31,7 @@ from swarm.transport.messages import (
     DropCounter,
     Estimate,
     Event,
+    Fault,
     Guidance,
     Message,
     RunControl,
@@ -53,14 +55,25 @@ LATEST_KINDS: dict[str, type[Message]] = {
 """Per-vehicle topics of which only the newest sample matters to the dashboard."""
 
 
-class SwarmLink:
-    """Subscriptions, liveliness and the run-control publisher of one dashboard, feeding ``state``.
+def _control_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    """Reliable and blocking: a user's click must reach the world (never dropped under congestion)."""
+    return session.declare_publisher(
+        key,
+        reliability=zenoh.Reliability.RELIABLE,
+        congestion_control=zenoh.CongestionControl.BLOCK,
+        encoding=zenoh.Encoding("application/msgpack"),
+    )
 
-    ``poll()`` (render thread) takes the newest sample of every latest-value topic; callbacks (Zenoh
-    threads) handle events, anchors and liveliness. ``send()`` publishes a RunControl (reliable, block:
-    a user's click must reach the world). The anchors are also asked for with ``get`` in a background
-    thread until one reply comes (a ``get`` right after the mothership declares its queryable can get no
-    reply: DESIGN.md section 9), in case the dashboard starts after they were published.
+
+class SwarmLink:
+    """Subscriptions, liveliness and the control publishers of one dashboard, feeding ``state``.
+
+    ``poll()`` (render thread) takes the newest sample of every latest-value topic; callbacks (Zenoh threads)
+    handle events, anchors and liveliness. ``send()`` publishes a RunControl and ``send_fault()`` a Fault
+    (reliable, block: a user's click must reach the world and the mothership). The anchors are also asked for
+    with ``get`` in a background thread until one reply comes (a ``get`` right after the mothership declares
+    its queryable can get no reply: DESIGN.md section 9), in case the dashboard starts after they were
+    published.
     """
 
     def __init__(
@@ -81,14 +94,12 @@ class SwarmLink:
         self._clock = session.declare_subscriber(keys.world_clock(), zenoh.handlers.RingChannel(1))
         self._add_vehicles(state.take_new_agents())
         subscribe_decoded(session, keys.agent_all("event"), Event, self._on_event, drops)
+        subscribe_decoded(session, keys.world_event(), Event, self._on_world_event, drops)
+        subscribe_decoded(session, keys.mothership_event(), Event, self._on_mothership_event, drops)
         subscribe_decoded(session, keys.anchors(), Anchors, self._on_anchors, drops)
         watch_liveliness(session, keys, self._on_liveliness)
-        self._run_pub = session.declare_publisher(
-            keys.run_control(),
-            reliability=zenoh.Reliability.RELIABLE,
-            congestion_control=zenoh.CongestionControl.BLOCK,
-            encoding=zenoh.Encoding("application/msgpack"),
-        )
+        self._run_pub = _control_publisher(session, keys.run_control())
+        self._fault_pub = _control_publisher(session, keys.fault())
         self._token = declare_liveliness(session, keys, "dashboard", process_id)
         self._have_anchors = threading.Event()
         self._anchors_thread = threading.Thread(
@@ -146,6 +157,18 @@ class SwarmLink:
         _LOG.info("sent run control %s%s", command, "" if seed is None else f" (seed {seed})")
         return msg
 
+    def send_fault(self, msg: Fault) -> Fault:
+        """Publish ``msg`` (already validated: it is a :class:`Fault`) on ``<ns>/control/fault``; returns it.
+        The world and the mothership answer with ``fault`` / ``fault_refused`` events (:meth:`poll` does not
+        wait for them: they arrive in the fault log)."""
+        self._fault_pub.put(encode(msg))
+        _LOG.info("sent fault %s (vehicle %s)", msg.kind, msg.vehicle or "every chaser")
+        return msg
+
+    def listeners(self) -> bool:
+        """Whether anyone (the world, the mothership) subscribes to ``control/fault`` now."""
+        return bool(self._fault_pub.matching_status.matching)
+
     def close(self) -> None:
         """Stop the anchors thread. The subscriptions end when the session closes."""
         self._stop.set()
@@ -157,6 +180,12 @@ class SwarmLink:
         parsed = self.keys.parse(key)
         if parsed is not None and parsed[1] is not None:
             self.state.on_event(parsed[1], msg)
+
+    def _on_world_event(self, _key: str, msg: Event) -> None:
+        self.state.on_run_event("world", msg)
+
+    def _on_mothership_event(self, _key: str, msg: Event) -> None:
+        self.state.on_run_event("mothership", msg)
 
     def _on_anchors(self, _key: str, msg: Anchors) -> None:
         self.state.on_anchors(msg)

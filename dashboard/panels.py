@@ -1,6 +1,7 @@
 """Pure text and plot data of the dashboard's GUI panels, from a :class:`~dashboard.state.Snapshot`: the
-agents table, the run status line, the decision panel (Algorithm 1's latest pass), the mode timeline and
-the event log. Markdown strings and numpy arrays in, no Viser: tested without a server.
+agents table, the run status line, the decision panel (Algorithm 1's latest pass), the mode timeline,
+the event log and the list of run-time faults applied or refused. Markdown strings and numpy arrays in,
+no Viser: tested without a server.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ __all__ = [
     "agents_table",
     "decision_markdown",
     "events_markdown",
+    "fault_text",
+    "faults_markdown",
     "fmt",
     "mode_steps",
     "modes_markdown",
@@ -148,8 +151,38 @@ def mode_steps(
     return np.array(t, dtype=np.float64), np.array(y, dtype=np.float64)
 
 
+def _text(value: object) -> str:
+    if isinstance(value, list | tuple):
+        return ", ".join(str(v) for v in value)
+    return str(value)
+
+
+def fault_text(source: str, ev: Event) -> str:
+    """One line for a ``fault`` (applied) or ``fault_refused`` event of the world or the mothership, from its
+    free-form data (``kind``, ``start_s``, ``duration_s``, ``vehicles``; ``vehicle``, ``reason``)."""
+    d = ev.data
+    kind = _text(d.get("kind", "?"))
+    if ev.kind == "fault_refused":
+        reason = _text(d.get("reason", "?"))
+        return _cell(f"t = {ev.t_s:.2f} s · **{kind} refused** by the {source}: {reason}")
+    start, dur = d.get("start_s"), d.get("duration_s")
+    when = f" from t = {start:.2f} s" if isinstance(start, int | float) else ""
+    when += f" for {dur:g} s" if isinstance(dur, int | float) else " (lasts)"
+    who = "the UWB network" if source == "mothership" else _text(d.get("vehicles", "?"))
+    return _cell(f"t = {ev.t_s:.2f} s · **{kind}** applied by the {source} on {who}{when}")
+
+
+def faults_markdown(faults: Sequence[tuple[str, Event]], last: int = 8) -> str:
+    """The latest ``last`` faults applied or refused (``(source, event)``), newest first."""
+    if not faults:
+        return "no fault applied yet"
+    return "\n".join(f"- {fault_text(s, e)}" for s, e in reversed(list(faults)[-last:]))
+
+
 def _event_text(agent_id: str, ev: Event) -> str:
     d = ev.data
+    if ev.kind in ("fault", "fault_refused"):
+        return fault_text(agent_id, ev).replace("**", "")
     if ev.kind == "mode":
         detail = f"{d.get('from', '?')} → {d.get('to', '?')}"
         if isinstance(d.get("range_m"), int | float):

@@ -270,8 +270,16 @@ class Snapshot:
     anchors: tuple[tuple[int, ...], np.ndarray]
     anchors_version: int
     events: tuple[tuple[str, Event], ...]
-    """Newest last: ``(agent_id, event)``."""
+    """Newest last: ``(agent_id, event)``; run events under the id ``world``, UWB network events under
+    ``mothership``."""
     events_version: int
+    faults: tuple[tuple[str, Event], ...] = ()
+    """Run-time faults applied (``fault``) or refused (``fault_refused``), newest last: ``(source,
+    event)`` with source ``world`` or ``mothership``."""
+    faults_version: int = 0
+    clock_mode: str | None = None
+    """The world's clock (``lockstep``, ``realtime``, ``scaled:N``) from its latest ``run_start``; None
+    before the dashboard saw one."""
 
 
 class SwarmState:
@@ -286,6 +294,7 @@ class SwarmState:
         trail_step_m: float = 0.002,
         series_cap: int = 600,
         events_cap: int = 100,
+        faults_cap: int = 20,
         max_agents: int = 256,
     ) -> None:
         self._lock = threading.Lock()
@@ -304,6 +313,9 @@ class SwarmState:
         self._processes: dict[tuple[str, str], str] = {}
         self._events: deque[tuple[str, Event]] = deque(maxlen=events_cap)
         self._events_version = 0
+        self._faults: deque[tuple[str, Event]] = deque(maxlen=faults_cap)
+        self._faults_version = 0
+        self.clock_mode: str | None = None
 
     def _add(self, agent_id: str, role: str, target: str | None) -> AgentView | None:
         if agent_id in self.agents:
@@ -362,9 +374,11 @@ class SwarmState:
             view.radii.add(msg.t_s, (msg.range_m, msg.r1_m, msg.r2_m, msg.r_t_m))
 
     def on_vision(self, agent_id: str, msg: Vision) -> None:
+        """A camera frame: its time if it measured markers (a camera reports every frame, docs/protocol.md
+        "Vision": a frame without a marker says only that the camera works)."""
         with self._lock:
             view = self._add(agent_id, "?", None)
-            if view is not None:
+            if view is not None and len(msg.marker_ids) > 0:
                 view.vision_t_s = msg.t_s
 
     def on_event(self, agent_id: str, msg: Event) -> None:
@@ -381,6 +395,19 @@ class SwarmState:
                     float(rng) if isinstance(rng, int | float) else None,
                     reason if isinstance(reason, str) else "",
                 )
+
+    def on_run_event(self, source: str, msg: Event) -> None:
+        """An event of the run (``world/event``, ``source`` ``world``) or of the UWB network
+        (``mothership/event``, ``source`` ``mothership``): into the event log; a fault applied or refused
+        also into the fault log; a ``run_start`` names the world's clock."""
+        with self._lock:
+            self._events.append((source, msg))
+            self._events_version += 1
+            if msg.kind in ("fault", "fault_refused"):
+                self._faults.append((source, msg))
+                self._faults_version += 1
+            elif msg.kind == "run_start" and isinstance(msg.data.get("clock"), str):
+                self.clock_mode = msg.data["clock"]
 
     def on_clock(self, msg: Clock) -> bool:
         """Store the world's clock; True (and every vehicle's run data cleared) if it starts a new run."""
@@ -459,4 +486,7 @@ class SwarmState:
                 anchors_version=self._anchors_version,
                 events=tuple(self._events),
                 events_version=self._events_version,
+                faults=tuple(self._faults),
+                faults_version=self._faults_version,
+                clock_mode=self.clock_mode,
             )

@@ -7,6 +7,9 @@
   tick ``k`` it publishes one ``uwb(k)`` per vehicle, with ``range_m`` nil when the reply was lost, so a
   lockstep agent knows not to wait. Slots are processed in tick order: the radios' random streams are
   consumed exactly as in the in-process simulation (same seed, same ranges).
+- Run-time UWB faults (``control/fault``: ``uwb_dropout``, ``nlos_burst``) are added to the network's
+  fault windows between two slots, logged and announced as a ``fault`` event on ``mothership/event``
+  (the dashboard lists them).
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ import zenoh
 
 from swarm.core.world import UwbNetwork
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Anchors, Clock, DropCounter, Fault, Truth, Uwb, encode
+from swarm.transport.messages import Anchors, Clock, DropCounter, Event, Fault, Truth, Uwb, encode
 from swarm.transport.process import declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded
 
@@ -87,6 +90,10 @@ class MothershipProcess:
             self._bursts.append((start, start + f.duration_s, f.probability))
         self.network.set_fault_windows(self._dropouts, self._bursts)
         _LOG.warning("fault applied: %s from t = %.2f s to %.2f s", f.kind, start, start + f.duration_s)
+        data = {"kind": f.kind, "start_s": start, "duration_s": f.duration_s, "vehicles": self.ids}
+        if f.probability is not None:
+            data["probability"] = f.probability
+        self.pub_event.put(encode(Event(self._t_served, "fault", data)))
 
     def _on_query(self, query: zenoh.Query) -> None:
         try:
@@ -118,6 +125,7 @@ class MothershipProcess:
         X[:, 9] = 1.0  # identity attitudes
         UwbNetwork(self.sc, self.seed).step(self.every, 0.0, X)  # compile (or load) the kernel before "ready"
         self.pub_uwb = {v: declare_reliable(self.session, k.uwb(v)) for v in self.ids}
+        self.pub_event = declare_reliable(self.session, k.mothership_event())
         pub_anchors = declare_reliable(self.session, k.anchors(), express=False)
         self._queryable = self.session.declare_queryable(k.anchors(), self._on_query)
         subscribe_decoded(self.session, k.agent_all("truth"), Truth, self._on_truth, self.drops)

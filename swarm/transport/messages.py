@@ -115,6 +115,8 @@ EVENT_KINDS: tuple[str, ...] = (
     "run_start",
     "run_end",
     "agent_missing",
+    "fault",
+    "fault_refused",
 )
 """Event kinds in use; the set is open (any ``[a-z][a-z0-9_]*`` name is accepted)."""
 
@@ -615,7 +617,9 @@ class Truth(Message):
 class Event(Message):
     """Something that happened to one vehicle, ``<ns>/agent/<id>/event`` (published by its agent, and by the
     world for what only the truth shows: ``contact``, ``collision``, ``keepout_violation``), or to the
-    run, ``<ns>/world/event`` (the world: ``run_start``, ``run_end``, ``agent_missing``)."""
+    run, ``<ns>/world/event`` (the world: ``run_start``, ``run_end``, ``agent_missing``, ``fault`` and
+    ``fault_refused`` for a run-time fault), or to the UWB network, ``<ns>/mothership/event`` (the mothership:
+    ``fault``)."""
 
     t_s: float
     """Time [s] (>= 0)."""
@@ -755,7 +759,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
 MESSAGE_FOR_KIND: dict[str, type[Message]] = {
     "imu": Imu, "uwb": Uwb, "vision": Vision, "estimate": Estimate, "guidance": Guidance, "command": Command,
     "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "anchors": Anchors,
-    "run_control": RunControl, "fault": Fault,
+    "mothership_event": Event, "run_control": RunControl, "fault": Fault,
 }  # fmt: skip
 """The message carried by each key kind of :meth:`swarm.transport.keys.Keys.parse`."""
 

@@ -8,9 +8,12 @@ each link to an identity by the common name (CN) of the certificate it presented
 
 - ``world``: sensors (``agent/*/imu``, ``agent/*/vision``), ``agent/*/truth``, ``world/clock``,
   ``world/event``, and ``agent/*/event`` (contact, collision and keep-out events on the chaser's key);
-- ``mothership``: ``agent/*/uwb`` and ``mothership/anchors`` (a publication, a queryable, its replies);
+- ``mothership``: ``agent/*/uwb``, ``mothership/anchors`` (a publication, a queryable, its replies) and
+  ``mothership/event`` (the UWB faults it applied);
 - ``agent-<id>``: ``agent/<id>/estimate|guidance|command|event`` only;
-- ``dashboard``: ``control/run`` only;
+- ``dashboard``: the operator's controls only, ``control/run`` (pause, resume, reset, new seed) and
+  ``control/fault`` (its Faults panel injects the faults ``swarm fault`` does: an operator's console may
+  degrade the sensors on purpose, but it can never fly a vehicle, forge a sensor sample or an event);
 - ``launcher``: ``agent/*/event`` (its ``lost`` events), ``control/run`` and ``control/fault`` (an operator's
   ``swarm fault --zenoh-config <dir>/launcher.json5``);
 
@@ -107,7 +110,7 @@ def rights(keys: Keys, name: str) -> dict[str, tuple[str, ...]]:
         }  # fmt: skip
     if name == "mothership":
         return {
-            "put": (keys.agent_all("uwb"), keys.anchors()),
+            "put": (keys.agent_all("uwb"), keys.anchors(), keys.mothership_event()),
             "declare_queryable": (keys.anchors(),),
             "reply": (keys.anchors(),),
             "declare_subscriber": (keys.agent_all("truth"), keys.world_clock(), keys.fault()),
@@ -115,7 +118,7 @@ def rights(keys: Keys, name: str) -> dict[str, tuple[str, ...]]:
         }
     if name == "dashboard":
         return {
-            "put": (keys.run_control(),),
+            "put": (keys.run_control(), keys.fault()),
             "declare_subscriber": (keys.everything(),),
             "query": (keys.anchors(),),
             "liveliness_token": (f"{ns}/alive/dashboard/*",),

@@ -161,17 +161,13 @@ class WorldProcess:
                 return
             now = (tick + 1) * self.sc.dt_s
             start = max(f.start_s if f.start_s is not None else now, now)
-            if f.vehicle is not None and f.vehicle not in self.world.index:
-                self.drops.drop(
-                    self.keys.fault(), f"vehicle: {f.vehicle!r} is not a vehicle of this scenario"
-                )
+            refused = self._fault_refusal(f)
+            if refused is not None:
+                _LOG.warning("fault refused: %s: %s", f.kind, refused)
+                data = {"kind": f.kind, "vehicle": f.vehicle, "reason": refused}
+                self._world_event("fault_refused", tick * self.sc.dt_s, data)
                 continue
             who = [f.vehicle] if f.vehicle is not None else list(self.chasers)
-            if f.kind == "sensor_delay" and self.clock.lockstep:
-                _LOG.warning(
-                    "fault refused: sensor_delay needs a free-running clock (lockstep would wait on it)"
-                )
-                continue
             if f.kind == "sensor_delay":
                 for v in who:
                     self._delays.setdefault(v, []).append((start, start + f.duration_s, f.delay_s))
@@ -186,6 +182,17 @@ class WorldProcess:
             data = {"kind": f.kind, "start_s": start, "duration_s": f.duration_s, "vehicles": who}
             self._world_event("fault", tick * self.sc.dt_s, data)
             _LOG.warning("fault applied: %s on %s from t = %.2f s", f.kind, who, start)
+
+    def _fault_refusal(self, f: Fault) -> str | None:
+        """Why the world cannot apply ``f`` (published as a ``fault_refused`` event), or None."""
+        if f.vehicle is not None and f.vehicle not in self.world.index:
+            self.drops.drop(self.keys.fault(), f"vehicle: {f.vehicle!r} is not a vehicle of this scenario")
+            return f"vehicle: {f.vehicle!r} is not a vehicle of this scenario"
+        if f.kind == "camera_loss" and f.vehicle is not None and f.vehicle not in self.world.camera_loss:
+            return f"vehicle: {f.vehicle!r} has no camera (only chasers do)"
+        if f.kind == "sensor_delay" and self.clock.lockstep:
+            return "needs a free-running clock (realtime or scaled:N): a lockstep world would wait on it"
+        return None
 
     # ------------------------------------------------------------------------------ publishing
 

@@ -18,10 +18,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import zenoh
 
 from swarm.scenario import load_scenario
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Clock, DropCounter
+from swarm.transport.messages import Clock, DropCounter, Event, Fault, Uwb
 from swarm.transport.session import ZenohArgs, open_session, subscribe_decoded
 from tests.transport.procs import REPO, Proc, Procs, free_port, loopback, wait_until
 
@@ -79,34 +80,54 @@ class LaunchedSwarm:
     namespace: str
     agent_ids: tuple[str, ...]
     dashboard: Proc
+    """The launcher (the dashboard is its child: its log lines are in the launcher's output)."""
+    zenoh_config: str | None = None
+    """``--secure``: the Zenoh configuration of the dashboard's identity (its certificate), with which a
+    test's own session may connect and subscribe to anything of the swarm; else None (plain TCP)."""
 
 
-def launch_swarm(procs: Procs, workdir: Path, pairs: int = 2) -> LaunchedSwarm:
+def launch_swarm(
+    procs: Procs, workdir: Path, pairs: int = 2, secure: bool = False, timeout_s: float | None = None
+) -> LaunchedSwarm:
     """``swarm launch docking --agents PAIRS`` (lockstep) with its dashboard on a free port (module
     docstring). The chasers approach at a tenth of the scenario's speed so that the run lasts longer than
     the browser tests (a lockstep docking otherwise ends within ~30 s of wall time here), and the run may
-    last 1000 simulated seconds."""
-    endpoint = loopback(free_port())
+    last 1000 simulated seconds. ``secure``: ``--secure`` (mutual TLS and Zenoh's ACL, certificates made by
+    the launcher; its router listens on a free TLS port); ``timeout_s``: the launcher's ``--timeout``."""
     namespace = new_namespace("dash")
+    listen = [] if secure else ["--listen", loopback(free_port())]
+    extra = (["--secure"] if secure else []) + ([] if timeout_s is None else ["--timeout", str(timeout_s)])
     proc = procs.start(
         [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--agents", str(pairs),
-         "--clock", "lockstep", "--dashboard-port", "0", "--namespace", namespace, "--listen", endpoint,
+         "--clock", "lockstep", "--dashboard-port", "0", "--namespace", namespace, *listen, *extra,
          "--set", "guidance.approach_speed_m_s=0.002", "--set", "sim.max_duration_s=1000"]
     )  # fmt: skip
+    config = None
+    if secure:
+        certs = proc.wait_for_line(r"^swarm secure: certificates and Zenoh configs in (\S+) ", 60.0).group(1)
+        config = str(Path(certs) / "dashboard.json5")
+    endpoint = proc.wait_for_line(r"^swarm listening on (\S+) ", 60.0).group(1)
     url = proc.wait_for_line(r"^dashboard on (http://\S+)$", 120.0).group(1)
     proc.wait_for_line(r"^swarm up:", 120.0)
     sc = load_scenario("docking").with_pairs(pairs)
-    return LaunchedSwarm(url, endpoint, namespace, tuple(sc.vehicles), proc)
+    return LaunchedSwarm(url, endpoint, namespace, tuple(sc.vehicles), proc, config)
 
 
 class ClockWatch:
-    """The world's clock as a test sees it, over its own Zenoh session."""
+    """The world's clock as a test sees it, over its own Zenoh session (``zenoh_config``: a secure swarm's
+    client configuration, :attr:`LaunchedSwarm.zenoh_config`)."""
 
-    def __init__(self, endpoint: str, namespace: str) -> None:
+    def __init__(self, endpoint: str, namespace: str, zenoh_config: str | None = None) -> None:
         self._cond = threading.Condition()
         self.clocks: list[Clock] = []
-        self._session = open_session(ZenohArgs(connect=(endpoint,)))
-        subscribe_decoded(self._session, Keys(namespace).world_clock(), Clock, self._on_clock, DropCounter())
+        self.drops = DropCounter()
+        mode = None if zenoh_config is None else "client"
+        self._session = open_session(ZenohArgs(mode=mode, connect=(endpoint,), config_file=zenoh_config))
+        self._declare(self._session, Keys(namespace))
+        subscribe_decoded(self._session, Keys(namespace).world_clock(), Clock, self._on_clock, self.drops)
+
+    def _declare(self, session: zenoh.Session, keys: Keys) -> None:
+        """Subscriptions of a subclass, declared before the clock's (see :class:`SwarmRecorder`)."""
 
     def _on_clock(self, _key: str, msg: Clock) -> None:
         with self._cond:
@@ -135,6 +156,71 @@ class ClockWatch:
 
     def close(self) -> None:
         self._session.close()
+
+
+class SwarmRecorder(ClockWatch):
+    """A :class:`ClockWatch` that also records what the operator's controls cause: every Fault published
+    on ``control/fault``, the events of ``world/event`` and ``mothership/event``, and each chaser's UWB
+    exchanges (``(t_s, range_m)``, ``None`` for a lost one).
+
+    These subscriptions are declared before the clock's, and a client's declarations reach the router in
+    order (README, "Processes and topology"): once :meth:`wait_for` returns a clock, the router routes every
+    one of them to this session, so a fault published after that cannot pass unseen."""
+
+    def __init__(
+        self, endpoint: str, namespace: str, chasers: tuple[str, ...], zenoh_config: str | None = None
+    ):
+        self.faults: list[Fault] = []
+        self.events: list[tuple[str, Event]] = []
+        self.uwb: dict[str, list[tuple[float, float | None]]] = {c: [] for c in chasers}
+        super().__init__(endpoint, namespace, zenoh_config)
+
+    def _declare(self, session: zenoh.Session, keys: Keys) -> None:
+        def keep(into: list, item: object) -> None:
+            with self._cond:
+                into.append(item)
+                del into[:-20000]
+                self._cond.notify_all()
+
+        subscribe_decoded(session, keys.fault(), Fault, lambda _k, m: keep(self.faults, m), self.drops)
+        for source, key in (("world", keys.world_event()), ("mothership", keys.mothership_event())):
+            subscribe_decoded(
+                session, key, Event, lambda _k, m, s=source: keep(self.events, (s, m)), self.drops
+            )
+        for c in self.uwb:
+            on_uwb = lambda _k, m, c=c: keep(self.uwb[c], (m.t_s, m.range_m))  # noqa: E731
+            subscribe_decoded(session, keys.uwb(c), Uwb, on_uwb, self.drops)
+
+    def wait_event(self, predicate: Callable[[str, Event], bool], timeout: float, what: str) -> Event:
+        """The first recorded ``(source, event)`` that satisfies ``predicate``."""
+        found: list[Event] = []
+
+        def check() -> bool:
+            with self._cond:
+                found.extend(e for s, e in self.events if predicate(s, e))
+            return bool(found)
+
+        wait_until(check, timeout, what, poll_s=0.05)
+        return found[0]
+
+    def snapshot(self) -> tuple[list[Fault], dict[str, list[tuple[float, float | None]]]]:
+        """Copies of the faults and the UWB exchanges recorded so far."""
+        with self._cond:
+            return list(self.faults), {c: list(v) for c, v in self.uwb.items()}
+
+
+def choose(page, label: str, option: str, timeout_ms: float) -> None:
+    """Pick ``option`` in the Viser dropdown labelled ``label`` (a Mantine Select: open it, click the
+    option)."""
+    page.get_by_label(label, exact=True).click(timeout=timeout_ms)
+    page.get_by_role("option", name=option, exact=True).click(timeout=timeout_ms)
+
+
+def fill_number(page, label: str, text: str, timeout_ms: float) -> None:
+    """Type ``text`` into the Viser number input labelled ``label`` and leave it (Tab), as a user does."""
+    field = page.get_by_label(label, exact=True)
+    field.fill(text, timeout=timeout_ms)
+    field.press("Tab")
 
 
 @pytest.fixture

@@ -12,12 +12,14 @@ import time
 from collections.abc import Iterator
 
 import pytest
+import zenoh
 
 from dashboard.app import DashboardApp
 from dashboard.mapping import FOV_COLORS
 from swarm.scenario import load_scenario
 from swarm.transport.keys import Keys
-from swarm.transport.session import ZenohArgs, open_session
+from swarm.transport.messages import DropCounter, Event, Fault, encode
+from swarm.transport.session import ZenohArgs, open_session, subscribe_decoded
 from tests.dashboard.conftest import ClockWatch, new_namespace, start_fake_swarm
 from tests.transport.procs import Proc, Procs, free_port, loopback, wait_until
 
@@ -206,3 +208,55 @@ def test_hiding_trails_keeps_their_history(harness: Harness) -> None:
     app.scene.set_show_trails(True)
     harness.wait_for(lambda: nodes.trail_truth.visible, "the trail shown again")
     assert len(app.state.agents["chaser"].truth_trail) > 5
+
+
+def test_fault_panel_publishes_nothing_for_a_bad_value_and_the_fault_for_a_good_one(harness: Harness) -> None:
+    """Inject with a negative duration: the panel names the input, the field and the value, and nothing
+    is published; then a valid camera loss is. The dashboard has one publisher on control/fault and Zenoh
+    keeps one publisher's order, so the first Fault the test receives being the valid one shows that the
+    refused one never left."""
+    harness.swarm()
+    app = harness.start_app()
+    received: list[Fault] = []
+    with open_session(ZenohArgs(connect=(harness.endpoint,))) as session:
+        drops = DropCounter()
+        subscribe_decoded(
+            session, Keys(harness.namespace).fault(), Fault, lambda _k, m: received.append(m), drops
+        )
+        panel = app.gui.faults
+        harness.wait_for(panel.listening, "the dashboard hearing of the test's subscriber")
+        panel.kind.value = "camera_loss"
+        panel.inputs["vehicle"].value = "chaser"
+        panel.inputs["duration"].value = -1.0
+        assert panel.inject() is None
+        assert "**not sent**" in panel.sent.content
+        assert "duration [s] (duration_s): must be > 0, got -1.0" in panel.sent.content
+        panel.inputs["duration"].value = 3.0
+        sent = panel.inject()
+        assert sent is not None and "sent **camera_loss** on chaser for 3 s" in panel.sent.content
+        harness.wait_for(lambda: len(received) >= 1, "the fault on control/fault")
+    assert received[0] == sent and (received[0].kind, received[0].vehicle) == ("camera_loss", "chaser")
+    assert drops.total == 0
+
+
+def test_faults_announced_by_the_world_and_the_mothership_are_listed(harness: Harness) -> None:
+    harness.swarm()
+    app = harness.start_app()
+    keys = Keys(harness.namespace)
+    applied = Event(7.0, "fault", {"kind": "uwb_dropout", "start_s": 7.01, "duration_s": 5.0, "vehicles": []})
+    refused = Event(8.0, "fault_refused", {"kind": "sensor_delay", "vehicle": None, "reason": "lockstep run"})
+    start = Event(0.0, "run_start", {"seed": 1, "clock": "lockstep", "vehicles": ["chaser", "target"]})
+    with open_session(ZenohArgs(connect=(harness.endpoint,))) as session:
+        for key, msg in ((keys.world_event(), start), (keys.mothership_event(), applied),
+                         (keys.world_event(), refused)):  # fmt: skip
+            pub = session.declare_publisher(key, reliability=zenoh.Reliability.RELIABLE)
+            wait_until(lambda pub=pub: pub.matching_status.matching, TIMEOUT_S, f"the dashboard on {key}")
+            pub.put(encode(msg))
+        panel = app.gui.faults
+        harness.wait_for(lambda: "sensor_delay refused" in panel.log.content, "the refusal listed")
+    assert "**uwb_dropout** applied by the mothership on the UWB network" in panel.log.content
+    assert "by the world: lockstep run" in app.gui.events.content  # the event log has it too
+    panel.kind.value = "sensor_delay"
+    harness.wait_for(lambda: "This run is lockstep" in panel.hint.content, "the hint naming the clock")
+    assert panel.inputs["vehicle"].visible and panel.inputs["delay"].visible
+    assert not panel.inputs["probability"].visible

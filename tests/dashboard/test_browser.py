@@ -1,6 +1,8 @@
 """The dashboard in a real browser (issue 5, "must show"): with a launched swarm, headless Chromium loads
 the page, the rendered DOM names every agent and shows a mode, a screenshot of the 3D view is not blank,
-and clicking Pause stops the world's clock while Resume restarts it.
+and clicking Pause stops the world's clock while Resume restarts it. The Faults panel (issue 7): a bad
+value is refused in the page and publishes nothing, a camera loss injected from the page is applied by the
+world, and a sensor delay in this lockstep run is refused by the world, which the page says.
 
 The swarm and its dashboard are real processes on loopback Zenoh (:func:`conftest.launch_swarm`), started
 once for this module; the browser is Debian's ``chromium`` driven by Playwright. Screenshots are kept in
@@ -17,11 +19,20 @@ import numpy as np
 import pytest
 
 from swarm.transport.messages import MODES
-from tests.dashboard.conftest import ARTIFACTS, ClockWatch, LaunchedSwarm, launch_swarm
+from tests.dashboard.conftest import (
+    ARTIFACTS,
+    ClockWatch,
+    LaunchedSwarm,
+    SwarmRecorder,
+    choose,
+    fill_number,
+    launch_swarm,
+)
 from tests.transport.procs import Procs
 
 UI_TIMEOUT_MS = 40_000  # page load, websocket connect and software-GL rendering on a loaded 2-core machine
 CLOCK_TIMEOUT_S = 15.0
+EVENT_TIMEOUT_S = 30.0  # a click, the dashboard's publication, the world's next tick and its event
 STILL_S = 1.0  # how long a paused clock must stay still (the fake world ticks at 100 Hz when running)
 
 # Grey-level variance of the 3D view (the part of the screenshot left of the GUI panel, below the
@@ -101,3 +112,59 @@ def test_pause_click_stops_the_world_clock_and_resume_restarts_it(page, swarm: L
         page.screenshot(path=str(ARTIFACTS / "dashboard-after-resume.png"))
     finally:
         watch.close()
+
+
+def _chasers(swarm: LaunchedSwarm) -> tuple[str, ...]:
+    return tuple(a for a in swarm.agent_ids if a.startswith("chaser"))
+
+
+def test_fault_panel_refuses_a_bad_value_and_the_world_applies_a_camera_loss(
+    page, swarm: LaunchedSwarm
+) -> None:
+    """Inject with duration -1: the page names the input, the field and the value, and nothing is
+    published; then a 2 s camera loss of the first chaser: the first Fault on control/fault is that one
+    (the dashboard has one publisher, whose order Zenoh keeps, so the refused one never left), the world
+    announces it, and the page lists it as applied."""
+    chaser = _chasers(swarm)[0]
+    rec = SwarmRecorder(swarm.endpoint, swarm.namespace, _chasers(swarm))
+    try:
+        rec.wait_for(lambda c: c.state == "running", CLOCK_TIMEOUT_S, "a running clock (routes in place)")
+        choose(page, "fault", "camera_loss", UI_TIMEOUT_MS)
+        choose(page, "vehicle", chaser, UI_TIMEOUT_MS)
+        fill_number(page, "duration [s]", "-1", UI_TIMEOUT_MS)
+        page.get_by_role("button", name="Inject").click()
+        page.get_by_text("duration [s] (duration_s): must be > 0, got -1.0").wait_for(timeout=UI_TIMEOUT_MS)
+        assert "not sent" in page.inner_text("body")
+        fill_number(page, "duration [s]", "2", UI_TIMEOUT_MS)
+        page.get_by_role("button", name="Inject").click()
+        is_ours = lambda s, e: s == "world" and e.kind == "fault" and e.data.get("kind") == "camera_loss"  # noqa: E731
+        applied = rec.wait_event(is_ours, EVENT_TIMEOUT_S, "the world applying the camera loss")
+        page.get_by_text(f"camera_loss applied by the world on {chaser}").first.wait_for(
+            timeout=UI_TIMEOUT_MS
+        )
+        page.screenshot(path=str(ARTIFACTS / "dashboard-fault-applied.png"))
+        faults, _ = rec.snapshot()
+    finally:
+        rec.close()
+    assert [(f.kind, f.vehicle, f.duration_s) for f in faults] == [("camera_loss", chaser, 2.0)]
+    assert applied.data["vehicles"] == [chaser] and applied.data["duration_s"] == 2.0
+
+
+def test_a_sensor_delay_in_this_lockstep_run_is_refused_by_the_world_and_the_page_says_so(
+    page, swarm: LaunchedSwarm
+) -> None:
+    rec = SwarmRecorder(swarm.endpoint, swarm.namespace, _chasers(swarm))
+    try:
+        rec.wait_for(lambda c: c.state == "running", CLOCK_TIMEOUT_S, "a running clock (routes in place)")
+        choose(page, "fault", "sensor_delay", UI_TIMEOUT_MS)
+        page.get_by_text("Free-running clocks only").first.wait_for(timeout=UI_TIMEOUT_MS)  # the hint
+        page.get_by_role("button", name="Inject").click()
+        refused = rec.wait_event(
+            lambda s, e: e.kind == "fault_refused" and e.data.get("kind") == "sensor_delay",
+            EVENT_TIMEOUT_S,
+            "the world refusing the sensor delay",
+        )
+        page.get_by_text("sensor_delay refused by the world").first.wait_for(timeout=UI_TIMEOUT_MS)
+    finally:
+        rec.close()
+    assert "free-running clock" in refused.data["reason"]

@@ -103,3 +103,41 @@ def test_agents_are_listed_in_natural_order() -> None:
     vehicles = {f"chaser{i}": ("chaser", f"target{i}") for i in (10, 2, 1)}
     table = panels.agents_table(SwarmState(vehicles, ANCHORS).snapshot())
     assert [line.split(" | ")[0][2:] for line in table.splitlines()[2:]] == ["chaser1", "chaser2", "chaser10"]
+
+
+def test_faults_applied_and_refused_are_listed_newest_first_with_who_and_when() -> None:
+    applied = Event(
+        t_s=3.2,
+        kind="fault",
+        data={"kind": "camera_loss", "start_s": 3.21, "duration_s": 3.0, "vehicles": ["chaser"]},
+    )
+    uwb = Event(t_s=4.0, kind="fault", data={"kind": "uwb_dropout", "start_s": 4.01, "duration_s": 5.0})
+    gyro = Event(
+        t_s=4.5, kind="fault", data={"kind": "gyro_bias_step", "start_s": 4.51, "vehicles": ["target"]}
+    )
+    refused = Event(
+        t_s=5.0,
+        kind="fault_refused",
+        data={"kind": "sensor_delay", "vehicle": None, "reason": "needs a free-running clock"},
+    )
+    faults = [("world", applied), ("mothership", uwb), ("world", gyro), ("world", refused)]
+    lines = panels.faults_markdown(faults).splitlines()
+    assert lines == [
+        "- t = 5.00 s · **sensor_delay refused** by the world: needs a free-running clock",
+        "- t = 4.50 s · **gyro_bias_step** applied by the world on target from t = 4.51 s (lasts)",
+        "- t = 4.00 s · **uwb_dropout** applied by the mothership on the UWB network from t = 4.01 s for 5 s",
+        "- t = 3.20 s · **camera_loss** applied by the world on chaser from t = 3.21 s for 3 s",
+    ]
+    assert panels.faults_markdown([]) == "no fault applied yet"
+    # the event log says the same, without the emphasis
+    assert panels.events_markdown([("world", refused)]) == (
+        "- t = 5.00 s · sensor_delay refused by the world: needs a free-running clock"
+    )
+
+
+def test_a_fault_event_with_odd_data_still_gives_a_line() -> None:
+    odd = Event(t_s=1.0, kind="fault", data={"kind": 7, "start_s": "soon", "vehicles": "x|y"})
+    assert (
+        panels.faults_markdown([("world", odd)])
+        == "- t = 1.00 s · **7** applied by the world on x\\|y (lasts)"
+    )

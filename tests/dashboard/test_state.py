@@ -16,7 +16,7 @@ from dashboard.state import (
     Trail,
     is_new_run,
 )
-from swarm.transport.messages import Clock, Estimate, Event, Guidance, Truth
+from swarm.transport.messages import Clock, Estimate, Event, Guidance, Truth, Vision
 
 VEHICLES = {"chaser": ("chaser", "target"), "target": ("target", None)}
 ANCHORS = np.array([[1, -0.2, 0.5], [1, 0.2, -0.5], [-1, 0.2, -0.5], [-1, -0.2, 0.5]])
@@ -261,3 +261,36 @@ def test_writers_on_several_threads_and_a_reader_never_see_a_torn_state() -> Non
     reader.join()
     assert errors == []
     assert state.snapshot().agents["target"].truth.tick == 999
+
+
+def test_run_events_go_to_the_event_log_faults_also_to_the_fault_log_and_run_start_names_the_clock() -> None:
+    state = SwarmState(VEHICLES, ANCHORS)
+    assert state.snapshot().clock_mode is None
+    state.on_run_event("world", Event(t_s=0.0, kind="run_start", data={"seed": 1, "clock": "lockstep"}))
+    fault = Event(t_s=2.0, kind="fault", data={"kind": "uwb_dropout", "start_s": 2.01, "duration_s": 5.0})
+    state.on_run_event("mothership", fault)
+    refused = Event(t_s=3.0, kind="fault_refused", data={"kind": "sensor_delay", "reason": "lockstep"})
+    state.on_run_event("world", refused)
+    snap = state.snapshot()
+    assert snap.clock_mode == "lockstep"
+    assert [(s, e.kind) for s, e in snap.events] == [
+        ("world", "run_start"),
+        ("mothership", "fault"),
+        ("world", "fault_refused"),
+    ]
+    assert snap.faults == (("mothership", fault), ("world", refused)) and snap.faults_version == 2
+
+
+def test_only_a_camera_frame_with_markers_counts_as_seen() -> None:
+    """A camera reports every frame, with zero markers when the target is not seen: the chaser's cone must
+    not turn green for those."""
+    state = SwarmState(VEHICLES, ANCHORS)
+    empty = Vision(tick=5, t_s=0.05, target_id="target", face="+x", kind="features", data=np.zeros((0, 3)),
+                   marker_ids=())  # fmt: skip
+    state.on_vision("chaser", empty)
+    assert state.snapshot().agents["chaser"].vision_t_s is None
+    seen = Vision(tick=10, t_s=0.1, target_id="target", face="+x", kind="features", data=np.zeros((1, 3)),
+                  marker_ids=(0,))  # fmt: skip
+    state.on_vision("chaser", seen)
+    state.on_vision("chaser", Vision(11, 0.11, "target", "+x", "features", np.zeros((0, 3)), ()))
+    assert state.snapshot().agents["chaser"].vision_t_s == 0.1

@@ -698,6 +698,7 @@ def test_every_key_kind_maps_to_a_message():
         "world_clock",
         "world_event",
         "anchors",
+        "mothership_event",
         "run_control",
         "fault",
     }

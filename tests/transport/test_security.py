@@ -49,14 +49,15 @@ K = Keys(NS)
 MAY_PUT = {
     "world": {K.imu(v) for v in VEHICLES} | {K.vision(v) for v in VEHICLES} | {K.truth(v) for v in VEHICLES}
     | {K.event(v) for v in VEHICLES} | {K.world_clock(), K.world_event()},
-    "mothership": {K.uwb(v) for v in VEHICLES} | {K.anchors()},
+    "mothership": {K.uwb(v) for v in VEHICLES} | {K.anchors(), K.mothership_event()},
     "agent-chaser": {K.estimate("chaser"), K.guidance("chaser"), K.command("chaser"), K.event("chaser")},
     "agent-target": {K.estimate("target"), K.guidance("target"), K.command("target"), K.event("target")},
-    "dashboard": {K.run_control()},
+    "dashboard": {K.run_control(), K.fault()},  # the operator's console: run controls and faults
     "launcher": {K.event(v) for v in VEHICLES} | {K.run_control(), K.fault()},
 }  # fmt: skip
 ALL_KEYS = sorted({getattr(K, kind)(v) for kind in AGENT_KINDS for v in VEHICLES}
-                  | {K.world_clock(), K.world_event(), K.anchors(), K.run_control(), K.fault()})  # fmt: skip
+                  | {K.world_clock(), K.world_event(), K.anchors(), K.mothership_event(), K.run_control(),
+                     K.fault()})  # fmt: skip
 
 
 def _may(acl: dict, name: str, message: str, key: str, flow: str = "ingress") -> bool:

@@ -1,0 +1,240 @@
+"""The dashboard's Faults panel: inject a run-time fault (issue 7) from the browser, as ``swarm fault`` does
+from a shell, and see what the world and the mothership made of it.
+
+The panel's inputs (:class:`FaultForm`, GUI units) become a :class:`~swarm.transport.messages.Fault`
+through :func:`fault_of`, which keeps only the inputs the chosen kind uses and lets the ``Fault`` message
+validate them: the same checks every receiver applies, no second validator. A refused value is reported
+with the panel input's label, the wire field and the value (``duration [s] (duration_s): must be > 0, got
+-1.0``) and nothing is published. A valid fault goes out on ``<ns>/control/fault``; the world (camera, gyro,
+sensor delay) and the mothership (UWB) answer with ``fault`` events when they apply it, the world with a
+``fault_refused`` event when it cannot (a ``sensor_delay`` in a lockstep run, a vehicle it does not know,
+a camera loss on a vehicle without a camera); the panel lists both (:func:`dashboard.panels.faults_markdown`).
+
+:func:`fault_of` and :func:`kind_hint` are pure (tested without a server); :class:`FaultPanel` is the Viser
+side.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import viser
+
+from dashboard import panels
+from dashboard.state import Snapshot
+from swarm.errors import ConfigError, MessageError
+from swarm.transport.messages import FAULT_KINDS, Fault
+
+__all__ = ["EVERY_CHASER", "FAULT_INPUTS", "FaultForm", "FaultPanel", "fault_of", "kind_hint", "sent_text"]
+
+_LOG = logging.getLogger("dashboard.faults")
+
+EVERY_CHASER = "every chaser"
+"""The vehicle choice that sends ``vehicle = None`` (the world applies the fault to every chaser)."""
+
+FAULT_INPUTS: dict[str, tuple[str, ...]] = {
+    "uwb_dropout": ("duration", "start"),
+    "nlos_burst": ("duration", "start", "probability"),
+    "camera_loss": ("vehicle", "duration", "start"),
+    "gyro_bias_step": ("vehicle", "start", "rate"),
+    "sensor_delay": ("vehicle", "duration", "start", "delay"),
+}
+"""The panel inputs each fault kind uses (the others are hidden and not sent). UWB faults have no vehicle:
+the mothership applies them to the whole radio network."""
+
+LABELS: dict[str, str] = {
+    "vehicle": "vehicle",
+    "duration": "duration [s]",
+    "start": "start at t [s]",
+    "probability": "NLOS probability",
+    "rate": "gyro step [deg/s]",
+    "delay": "max delay [s]",
+}
+"""The label of each panel input."""
+
+_INPUT_OF_FIELD = {
+    "vehicle": "vehicle", "duration_s": "duration", "start_s": "start", "probability": "probability",
+    "rate_rad_s": "rate", "delay_s": "delay",
+}  # fmt: skip
+
+_HINTS = {
+    "uwb_dropout": "every UWB exchange of every vehicle fails (the mothership applies it)",
+    "nlos_burst": "each UWB exchange of every vehicle is an NLOS outlier with this probability (mothership)",
+    "camera_loss": "the camera sees no marker (the world applies it; chasers only)",
+    "gyro_bias_step": "a constant rate added to the gyro from the start on, for good (world)",
+    "sensor_delay": (
+        "imu and vision samples leave the world up to this late, so also out of order (world). "
+        "Free-running clocks only (realtime, scaled:N): a lockstep world refuses it"
+    ),
+}
+
+
+@dataclass(frozen=True)
+class FaultForm:
+    """What the panel's inputs hold, in the panel's units."""
+
+    kind: str
+    """One of :data:`~swarm.transport.messages.FAULT_KINDS`."""
+    vehicle: str = EVERY_CHASER
+    """A vehicle id, or :data:`EVERY_CHASER`."""
+    duration_s: object = 5.0
+    """Length of the window [s] (the GUI's number; validated by ``Fault``)."""
+    start_s: object = 0.0
+    """Simulated time the window opens [s]; 0 means at once (the receiver's next tick)."""
+    probability: object = 0.2
+    """``nlos_burst``: outlier probability in (0, 1]."""
+    rate_deg_s: Sequence[object] = (0.5, 0.0, 0.0)
+    """``gyro_bias_step``: the added rate [deg/s], body frame."""
+    delay_s: object = 0.05
+    """``sensor_delay``: largest delay of a sample [s]."""
+
+
+def _error(field: str, why: str) -> ConfigError:
+    label = LABELS.get(_INPUT_OF_FIELD.get(field, ""), None)
+    return ConfigError(f"{label} ({field}): {why}" if label else f"{field}: {why}")
+
+
+def fault_of(form: FaultForm) -> Fault:
+    """The :class:`Fault` the panel sends for ``form``: the inputs of its kind only (:data:`FAULT_INPUTS`),
+    ``start_s`` 0 as "at once", the gyro rate converted from deg/s to rad/s, validated by ``Fault`` itself.
+    ConfigError naming the panel input, the wire field and the value, e.g. ``NLOS probability (probability):
+    an nlos_burst needs one in (0, 1], got 1.5``."""
+    uses = FAULT_INPUTS.get(form.kind, ())
+    rate = None
+    if "rate" in uses:
+        try:
+            rate = [math.radians(float(x)) for x in form.rate_deg_s]  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            raise _error("rate_rad_s", f"expected three numbers, got {form.rate_deg_s!r}") from None
+    start = form.start_s if "start" in uses else None
+    vehicle = form.vehicle if "vehicle" in uses and form.vehicle != EVERY_CHASER else None
+    try:
+        return Fault(
+            kind=form.kind,
+            duration_s=form.duration_s if "duration" in uses else None,  # type: ignore[arg-type]
+            start_s=None if start == 0 else start,  # type: ignore[arg-type]
+            vehicle=vehicle,
+            probability=form.probability if "probability" in uses else None,  # type: ignore[arg-type]
+            rate_rad_s=rate,  # type: ignore[arg-type]
+            delay_s=form.delay_s if "delay" in uses else None,  # type: ignore[arg-type]
+        )
+    except MessageError as exc:
+        field, _, why = str(exc).partition(": ")
+        raise _error(field, why) from None
+
+
+def kind_hint(kind: str, clock_mode: str | None) -> str:
+    """One line on what ``kind`` does, who applies it, and (``sensor_delay``) whether this run's clock,
+    as the world announced it in ``run_start``, lets it."""
+    text = f"_{_HINTS.get(kind, '')}._"
+    if kind == "sensor_delay" and clock_mode == "lockstep":
+        text += " **This run is lockstep: the world will refuse it.**"
+    elif kind == "sensor_delay" and clock_mode is not None:
+        text += f" This run's clock: {clock_mode}."
+    return text
+
+
+def sent_text(msg: Fault, listening: bool, at: str) -> str:
+    """The panel's line after a fault was published at wall time ``at``."""
+    who = "" if msg.kind in ("uwb_dropout", "nlos_burst") else f" on {msg.vehicle or EVERY_CHASER}"
+    dur = "" if msg.duration_s is None else f" for {msg.duration_s:g} s"
+    head = f"sent **{msg.kind}**{who}{dur} at {at}"
+    if not listening:
+        return f"{head}, but nobody listens on control/fault (is the swarm up?)"
+    return f"{head}: the world or mothership lists it below once applied"
+
+
+class FaultPanel:
+    """The Faults folder of the GUI: kind, vehicle, the kind's parameters, Inject, the last action and the
+    faults applied or refused. ``send`` publishes a :class:`Fault`; ``listening`` says whether anyone
+    subscribes to ``control/fault``."""
+
+    def __init__(
+        self,
+        gui: viser.GuiApi,
+        send: Callable[[Fault], object],
+        listening: Callable[[], bool],
+        vehicles: Sequence[str],
+    ) -> None:
+        self._send = send
+        self.listening = listening
+        with gui.add_folder("Faults"):
+            self.kind = gui.add_dropdown("fault", FAULT_KINDS, initial_value="camera_loss")
+            self.hint = gui.add_markdown(kind_hint("camera_loss", None))
+            options = [EVERY_CHASER, *sorted(vehicles, key=panels.natural_key)]
+            self.inputs: dict[str, viser.GuiInputHandle] = {
+                "vehicle": gui.add_dropdown(LABELS["vehicle"], options, initial_value=EVERY_CHASER),
+                "duration": gui.add_number(LABELS["duration"], 5.0, step=0.1),
+                "start": gui.add_number(LABELS["start"], 0.0, step=0.1, hint="0: at once"),
+                "probability": gui.add_number(LABELS["probability"], 0.2, step=0.05),
+                "rate": gui.add_vector3(LABELS["rate"], (0.5, 0.0, 0.0), step=0.1),
+                "delay": gui.add_number(LABELS["delay"], 0.05, step=0.01),
+            }  # fmt: skip
+            self.button = gui.add_button("Inject", color="red")
+            self.sent = gui.add_markdown("")
+            self.log = gui.add_markdown(panels.faults_markdown(()))
+        self._clock_mode: str | None = None
+        self._faults_version: int | None = None
+        self._show_inputs()
+
+        @self.kind.on_update
+        def _(_event: object) -> None:
+            self._show_inputs()
+
+        @self.button.on_click
+        def _(_event: object) -> None:
+            self.inject()
+
+    def _show_inputs(self) -> None:
+        uses = FAULT_INPUTS.get(str(self.kind.value), ())
+        for name, handle in self.inputs.items():
+            if handle.visible != (name in uses):
+                handle.visible = name in uses
+        self.hint.content = kind_hint(str(self.kind.value), self._clock_mode)
+
+    def form(self) -> FaultForm:
+        """The inputs as they are now."""
+        v = {name: handle.value for name, handle in self.inputs.items()}
+        return FaultForm(
+            kind=str(self.kind.value), vehicle=str(v["vehicle"]), duration_s=v["duration"],
+            start_s=v["start"], probability=v["probability"], rate_deg_s=tuple(v["rate"]), delay_s=v["delay"],
+        )  # fmt: skip
+
+    def inject(self, form: FaultForm | None = None) -> Fault | None:
+        """What a click on Inject does: validate ``form`` (default: the inputs) and publish the fault, or
+        say why not (and publish nothing). Returns the fault sent, or None."""
+        form = self.form() if form is None else form
+        at = time.strftime("%H:%M:%S")
+        try:
+            msg = fault_of(form)
+        except ConfigError as exc:
+            self.sent.content = f"**not sent** ({at}): {exc}"
+            _LOG.info("fault not sent: %s", exc)
+            return None
+        try:
+            self._send(msg)
+        except Exception as exc:  # a closed session at shutdown: say so, never raise into Viser
+            self.sent.content = f"could not send {form.kind}: {exc}"
+            _LOG.warning("could not send fault %s: %s", form.kind, exc)
+            return None
+        self.sent.content = sent_text(msg, self.listening(), at)
+        return msg
+
+    def update(self, snap: Snapshot) -> None:
+        """Vehicles seen for the first time join the vehicle choice; the hint follows the run's clock; the
+        list follows the faults the world and the mothership announced."""
+        vehicle = self.inputs["vehicle"]
+        known = [o for o in vehicle.options if o != EVERY_CHASER]  # type: ignore[attr-defined]
+        if any(a not in known for a in snap.agents):
+            ids = sorted(set(known) | set(snap.agents), key=panels.natural_key)
+            vehicle.options = [EVERY_CHASER, *ids]  # type: ignore[attr-defined]
+        if snap.clock_mode != self._clock_mode:
+            self._clock_mode = snap.clock_mode
+            self.hint.content = kind_hint(str(self.kind.value), self._clock_mode)
+        if snap.faults_version != self._faults_version:
+            self._faults_version = snap.faults_version
+            self.log.content = panels.faults_markdown(snap.faults)

@@ -1,0 +1,92 @@
+"""The Faults panel's pure part (dashboard.faults): panel inputs -> the Fault message, validated by the
+message itself, errors naming the panel input, the wire field and the value. No server."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dashboard.faults import EVERY_CHASER, FAULT_INPUTS, FaultForm, fault_of, kind_hint, sent_text
+from swarm.errors import ConfigError, MessageError
+from swarm.transport.messages import FAULT_KINDS, Fault, decode, encode
+
+
+def test_every_fault_kind_has_its_inputs() -> None:
+    assert set(FAULT_INPUTS) == set(FAULT_KINDS)
+
+
+def test_a_camera_loss_on_one_chaser_sends_only_its_fields() -> None:
+    form = FaultForm("camera_loss", vehicle="chaser", duration_s=3.0, probability=7.0, delay_s=-1.0)
+    msg = fault_of(form)
+    assert (msg.kind, msg.vehicle, msg.duration_s, msg.start_s) == ("camera_loss", "chaser", 3.0, None)
+    # the other kinds' inputs are not sent (a bad value there cannot refuse a camera loss)
+    assert msg.probability is None and msg.delay_s is None and msg.rate_rad_s is None
+    assert decode(encode(msg), Fault).vehicle == "chaser"
+
+
+def test_uwb_faults_have_no_vehicle_and_every_chaser_means_none() -> None:
+    assert fault_of(FaultForm("uwb_dropout", vehicle="chaser", duration_s=5.0)).vehicle is None
+    assert fault_of(FaultForm("camera_loss", vehicle=EVERY_CHASER)).vehicle is None
+
+
+def test_start_zero_means_at_once_and_a_later_start_is_kept() -> None:
+    assert fault_of(FaultForm("uwb_dropout", start_s=0.0)).start_s is None
+    assert fault_of(FaultForm("uwb_dropout", start_s=12.5)).start_s == 12.5
+
+
+def test_the_gyro_step_is_converted_from_deg_s_to_rad_s() -> None:
+    msg = fault_of(FaultForm("gyro_bias_step", vehicle="target", rate_deg_s=(1.0, 0.0, -2.0), duration_s=-1))
+    assert msg.duration_s is None  # a gyro step lasts: its duration input is not sent
+    np.testing.assert_allclose(msg.rate_rad_s, [math.pi / 180.0, 0.0, -math.pi / 90.0])
+
+
+@pytest.mark.parametrize(
+    ("form", "expected"),
+    [
+        (FaultForm("camera_loss", duration_s=-1.0), "duration [s] (duration_s): must be > 0, got -1.0"),
+        (FaultForm("uwb_dropout", duration_s=0), "duration [s] (duration_s): must be > 0, got 0"),
+        (FaultForm("uwb_dropout", start_s=-2.0), "start at t [s] (start_s): must be >= 0, got -2.0"),
+        (
+            FaultForm("nlos_burst", probability=1.5),
+            "NLOS probability (probability): an nlos_burst needs one in (0, 1], got 1.5",
+        ),
+        (FaultForm("sensor_delay", delay_s=0.0), "max delay [s] (delay_s): must be > 0, got 0.0"),
+        (FaultForm("camera_loss", duration_s=None), "duration [s] (duration_s): required for a camera_loss"),
+        (FaultForm("gyro_bias_step", rate_deg_s=("a", 0, 0)), "gyro step [deg/s] (rate_rad_s): expected"),
+        (FaultForm("camera_loss", vehicle="a b"), "vehicle (vehicle): must match"),
+    ],
+)
+def test_a_bad_input_is_refused_naming_the_input_the_field_and_the_value(form, expected) -> None:
+    with pytest.raises(ConfigError) as info:
+        fault_of(form)
+    assert str(info.value).startswith(expected), str(info.value)
+
+
+def test_the_panel_refuses_exactly_what_the_message_refuses() -> None:
+    """No second validator: for each bad value, the message built directly raises too, with the same
+    reason after the field name."""
+    for kind, field, value in (("camera_loss", "duration_s", -1.0), ("nlos_burst", "probability", 0.0)):
+        kwargs = {"duration_s": 1.0, "probability": 0.5, field: value}
+        with pytest.raises(MessageError) as direct:
+            Fault(kind, **kwargs)
+        form = FaultForm(kind, **kwargs)
+        with pytest.raises(ConfigError) as panel:
+            fault_of(form)
+        direct_field, _, reason = str(direct.value).partition(": ")
+        assert direct_field == field and str(panel.value).endswith(f"({field}): {reason}")
+
+
+def test_the_sensor_delay_hint_says_a_lockstep_run_refuses_it() -> None:
+    assert "Free-running clocks only" in kind_hint("sensor_delay", None)
+    assert "This run is lockstep: the world will refuse it" in kind_hint("sensor_delay", "lockstep")
+    assert "This run's clock: scaled:4" in kind_hint("sensor_delay", "scaled:4")
+    assert "lockstep" not in kind_hint("camera_loss", "lockstep")
+
+
+def test_the_sent_line_names_the_fault_and_warns_when_nobody_listens() -> None:
+    msg = fault_of(FaultForm("camera_loss", vehicle="chaser", duration_s=3.0))
+    assert sent_text(msg, True, "12:00:00").startswith("sent **camera_loss** on chaser for 3 s at 12:00:00")
+    assert "nobody listens on control/fault" in sent_text(msg, False, "12:00:00")
+    assert " on " not in sent_text(fault_of(FaultForm("uwb_dropout")), True, "12:00:00")
