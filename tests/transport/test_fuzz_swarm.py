@@ -27,6 +27,7 @@ from swarm.transport.messages import (
     Clock,
     Command,
     Estimate,
+    Fault,
     Imu,
     MessageError,
     RunControl,
@@ -57,6 +58,7 @@ _VALID = {
     "estimate": Estimate(7, 0.07, np.zeros(3), np.zeros(3), _Q, np.eye(9), 0.1, 0.0, 0.0, {}),
     "world_clock": Clock(7, 0.07, "running", 0),
     "run_control": RunControl("pause"),
+    "fault": Fault("camera_loss", duration_s=1.0, vehicle="chaser"),
 }
 
 
@@ -64,7 +66,8 @@ def _keys(ns: str) -> list[tuple[str, str]]:
     k = Keys(ns)
     out = [(kind, getattr(k, kind)(vid)) for kind in AGENT_KINDS for vid in ("chaser", "target")]
     fixed = [("world_clock", k.world_clock()), ("world_event", k.world_event()), ("anchors", k.anchors()),
-             ("run_control", k.run_control())]  # fmt: skip
+             ("run_control", k.run_control()), ("fault", k.fault()),
+             ("mothership_event", k.mothership_event())]  # fmt: skip
     return [*out, *fixed]
 
 
