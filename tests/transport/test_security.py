@@ -115,7 +115,7 @@ def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_
         "world": {K.command(v) for v in VEHICLES} | {K.run_control(), K.fault()},
         "mothership": {K.truth(v) for v in VEHICLES} | {K.world_clock(), K.fault()},
         "agent-chaser": {K.imu("chaser"), K.uwb("chaser"), K.vision("chaser"), K.world_clock()}
-        | {K.estimate(v) for v in VEHICLES},
+        | {K.estimate(v) for v in VEHICLES} | {K.world_event()},
         "dashboard": set(ALL_KEYS),
         "launcher": {K.world_event(), K.world_clock()} | {K.event(v) for v in VEHICLES}
         | {K.guidance(v) for v in VEHICLES},
@@ -138,7 +138,7 @@ def test_liveliness_tokens_only_under_the_identitys_own_role_and_id(acl):
     for role in ("world", "mothership", "dashboard", "launcher"):
         assert _may(acl, role, "liveliness_token", token(role, role))
         assert not _may(acl, role, "liveliness_token", token("agent", "chaser")), role
-    for name in ("world", "agent-chaser", "dashboard", "launcher"):  # the processes that watch liveliness
+    for name in ("world", "mothership", "agent-chaser", "dashboard", "launcher"):  # they watch liveliness
         assert _may(acl, name, "declare_liveliness_subscriber", K.alive_all()), name
         assert _may(acl, name, "liveliness_query", K.alive_all()), name
 
