@@ -44,12 +44,17 @@ def checkpoint_path(directory: str | os.PathLike) -> Path:
 def save(path: Path, state: dict) -> int:
     """Write ``state`` to ``path`` atomically (a temporary file renamed over it); returns its size [bytes]."""
     body = pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+    data = _HEADER.pack(MAGIC, len(body), zlib.crc32(body)) + body
     tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        f.write(_HEADER.pack(MAGIC, len(body), zlib.crc32(body)))
-        f.write(body)
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)  # readable by its owner only
+    try:
+        written = os.write(fd, data)
+        if written != len(data):  # tmpfs and disks write it whole; a short write is an error, not a retry
+            raise OSError(f"short write: {written} of {len(data)} bytes")
+    finally:
+        os.close(fd)
     os.replace(tmp, path)
-    return _HEADER.size + len(body)
+    return len(data)
 
 
 def load(path: Path) -> dict:
