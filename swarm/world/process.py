@@ -522,6 +522,9 @@ class WorldProcess:
         subscribe_decoded(self.session, k.run_control(), RunControl, self._on_control, self.drops)
         subscribe_decoded(self.session, k.fault(), Fault, self._on_fault, self.drops)
         watch_liveliness(self.session, k, self._on_alive)
+        if self.resumed_at is None:
+            self._wall0, self._cpu0 = time.perf_counter(), time.process_time()
+            self._checkpoint()  # tick 0, before the world shows up: one lost at any time can be resumed
         self._token = declare_liveliness(self.session, k, "world", self.process_id)
         from swarm.transport.process import print_ready
 
@@ -538,7 +541,6 @@ class WorldProcess:
         self._cpu0 = cpu0 = time.process_time()
         tick = self.world.k
         if self.resumed_at is None:
-            self._checkpoint()  # tick 0: a world lost before its first step resumes from the start
             start = {"seed": self.seed, "vehicles": self.ids, "clock": str(self.clock),
                      "scenario": self.sc.name}  # fmt: skip
             self._world_event("run_start", 0.0, start)
