@@ -218,7 +218,8 @@ def _kill_world(ns: str, after_s: float, sig: int = signal.SIGKILL) -> tuple[flo
 
 def _assert_world_restarted(text: str, killed_at: float) -> dict[str, float]:
     """The launcher's log names the loss, the restart and the resumption; returns their delays [s]."""
-    lost, _ = _stamp(text, r"WARNING swarm.launch: world lost \(liveliness token gone\); restart 1/\d+ in")
+    why = r"(liveliness token gone|exited with status -9)"  # whichever the launcher notices first
+    lost, _ = _stamp(text, rf"WARNING swarm.launch: world lost \({why}\); restart 1/\d+ in")
     restarted, _ = _stamp(
         text, r"WARNING swarm.launch: world restarted \(pid \d+\), resuming from its checkpoint"
     )
