@@ -12,6 +12,11 @@ of tick ``k - 1``, then gyro (+ AHRS), range, vision of tick ``k``; ``estimate(k
 on control ticks; ``command(k)``. Tick 0 (no sensor yet) starts when the world announces the run.
 Realtime or scaled: every message is processed as it arrives.
 
+A restarted world (``world/event`` ``world_resumed`` at tick ``k``) publishes tick ``k``'s samples again:
+the assembler drops those the agent already has (counted ``stale`` or ``duplicates``), and an agent whose
+last command is of tick ``k`` sends it again, since the new world never received it. While the world is
+gone (its liveliness token went) the agent says so and waits: no sample, no tick.
+
 A restarted agent (``--rejoin``) joins the run in progress: it publishes zero-thrust HOLD commands while it
 re-initialises from its own sensors (the AHRS attitude, and its position by least squares on one range to
 each anchor, :func:`position_from_ranges`), then flies again from that estimate.
@@ -134,6 +139,9 @@ class AgentProcess:
         self.ticks = 0
         self._last_tick: int | None = None
         self._cpu0: float | None = None
+        self._command_lock = threading.Lock()  # the main loop sends commands, a Zenoh thread re-sends one
+        self._last_command: tuple[int, bytes] | None = None  # (tick, payload) of the last command sent
+        self.resent = 0  # commands sent again for a resumed world
 
     # ------------------------------------------------------------------------------ Zenoh side
 
@@ -149,7 +157,29 @@ class AgentProcess:
         elif msg.state == "stopped" and self._started.is_set():
             self._ended.set()
 
+    def _on_world_event(self, _key: str, msg: Event) -> None:
+        """``world_resumed`` at tick ``k``: send ``command(k)`` again if it is the last one sent (the world
+        that got it is gone); a command not computed yet goes out as usual once tick ``k`` is processed."""
+        if msg.kind != "world_resumed":
+            return
+        k = msg.data.get("tick")
+        with self._command_lock:
+            last = self._last_command
+            if last is not None and last[0] == k:
+                self.pub_command.put(last[1])
+                self.resent += 1
+        _LOG.warning(
+            "%s: world resumed at tick %s%s", self.id, k,
+            f"; command({k}) sent again" if last is not None and last[0] == k else "",
+        )  # fmt: skip
+
     def _on_alive(self, role: str, pid: str, alive: bool) -> None:
+        if role == "world":
+            if alive:
+                _LOG.info("%s: world %s is alive", self.id, pid)
+            else:
+                _LOG.warning("%s: world %s lost; no samples (no ticks) until it is back", self.id, pid)
+            return
         if role == "mothership":
             if not alive:
                 _LOG.warning("%s: mothership lost; flying without ranges until it is back", self.id)
@@ -197,9 +227,10 @@ class AgentProcess:
         self.pub_estimate.put(encode(msg))
 
     def _publish_command(self, k: int) -> None:
-        thrusts = self._thrusts
-        msg = Command(k, k * self.dt, thrusts, self._force, self._torque, self._mode)
-        self.pub_command.put(encode(msg))
+        payload = encode(Command(k, k * self.dt, self._thrusts, self._force, self._torque, self._mode))
+        with self._command_lock:
+            self.pub_command.put(payload)
+            self._last_command = (k, payload)
 
     def _control(self, k: int) -> None:
         a = self.agent
@@ -353,6 +384,7 @@ class AgentProcess:
             subscribe_decoded(self.session, k.estimate(self.target_id), Estimate, self._on_target, self.drops)
         watch_liveliness(self.session, k, self._on_alive, history=False)
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
+        subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.drops)
         self._token = declare_liveliness(self.session, k, "agent", self.id)
         print_ready("agent", self.id)
         if self.clock.lockstep:
@@ -367,7 +399,7 @@ class AgentProcess:
             data = {
                 "final_mode": a.mode.value, "counts": self._counts(), "ticks": self.ticks,
                 "r1_m": None if sw is None else sw.r1_m, "r2_m": None if sw is None else sw.r2_m,
-                "dropped": self.drops.total, "assembler": self.assembler.counts(),
+                "dropped": self.drops.total, "assembler": self.assembler.counts(), "resent": self.resent,
                 "cpu_s": time.process_time() - (self._cpu0 or time.process_time()),
             }  # fmt: skip
             self.pub_event.put(encode(Event(a.t_s, "summary", data)))

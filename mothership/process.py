@@ -6,10 +6,12 @@
   fault models of :mod:`swarm.core.sensors`). From the world's ``truth`` of every vehicle at a UWB slot
   tick ``k`` it publishes one ``uwb(k)`` per vehicle, with ``range_m`` nil when the reply was lost, so a
   lockstep agent knows not to wait. Slots are processed in tick order: the radios' random streams are
-  consumed exactly as in the in-process simulation (same seed, same ranges).
+  consumed exactly as in the in-process simulation (same seed, same ranges). A truth of a slot already
+  served (a resumed world publishes its checkpointed tick again) is dropped: a slot is served once.
 - Run-time UWB faults (``control/fault``: ``uwb_dropout``, ``nlos_burst``) are added to the network's
   fault windows between two slots, logged and announced as a ``fault`` event on ``mothership/event``
   (the dashboard lists them).
+- While the world is gone (its liveliness token went) it says so and serves nothing: no truth, no range.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from swarm.core.world import UwbNetwork
 from swarm.transport.keys import Keys
 from swarm.transport.messages import Anchors, Clock, DropCounter, Event, Fault, Truth, Uwb, encode
 from swarm.transport.process import declare_reliable, print_ready
-from swarm.transport.session import declare_liveliness, subscribe_decoded
+from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
 
 _LOG = logging.getLogger("swarm.mothership")
 
@@ -105,6 +107,13 @@ class MothershipProcess:
         if msg.state == "stopped" and msg.tick > 0:
             _LOG.debug("world stopped at tick %d", msg.tick)
 
+    def _on_alive(self, role: str, pid: str, alive: bool) -> None:
+        if role == "world":
+            if alive:
+                _LOG.info("world %s is alive", pid)
+            else:
+                _LOG.warning("world %s lost; no truth, so no ranges, until it is back", pid)
+
     def _slot(self, k: int, truths: dict[str, Truth]) -> None:
         X = np.zeros((len(self.ids), 13))
         for vid, m in truths.items():
@@ -131,6 +140,7 @@ class MothershipProcess:
         subscribe_decoded(self.session, k.agent_all("truth"), Truth, self._on_truth, self.drops)
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
         subscribe_decoded(self.session, k.fault(), Fault, self._on_fault, self.drops)
+        watch_liveliness(self.session, k, self._on_alive, history=False)
         self._token = declare_liveliness(self.session, k, "mothership", "mothership")
         print_ready("mothership", "mothership")
         payload = encode(self.anchors_msg)

@@ -54,12 +54,20 @@ def _faults(quick: bool) -> tuple[dict, str]:
     return record, faults.format_report(record)
 
 
+def _checkpoint(quick: bool) -> tuple[dict, str]:
+    from swarm.bench import checkpoint
+
+    record = checkpoint.run(checkpoint.QUICK if quick else checkpoint.FULL)
+    return record, checkpoint.format_report(record)
+
+
 BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
     "estimator": (_estimator, "estimator step: tandem vs compounded vs FilterPy (paper Table I)"),
     "sim": (_sim, "one in-process docking: real-time factor and profile"),
     "transport": (_transport, "the swarm over Zenoh: RTT, lockstep tick period (1/4/16 pairs), latency"),
     "montecarlo": (_montecarlo, "Monte Carlo campaign wall time: 1 vs 2 workers, number of runs"),
     "faults": (_faults, "200 runs under the issue-7 faults: docked / safely aborted / failed, NEES"),
+    "checkpoint": (_checkpoint, "the world's checkpoint per tick (1/4/16 pairs), in memory and on disk"),
 }
 """Bench name -> (runner taking ``quick``, one-line help). Later issues add sim, montecarlo, transport."""
 

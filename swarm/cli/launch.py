@@ -6,12 +6,14 @@ group, the mothership, one agent per vehicle, the world and (unless ``--headless
 Zenoh clients of that router: a star, in which every declaration reaches every process through one node in
 order (a chaser's subscription to its target's estimate is in place before the world announces the run).
 
-It waits for every liveliness token (not for a time), supervises the children (an agent whose token goes
-or that exits is reported lost and restarted with ``--rejoin``, with exponential backoff, at most
-``--max-restarts`` times), and collects the run from ``world/event``, ``agent/*/event`` and
-``agent/*/guidance``. The summary has ``swarm sim``'s fields per chaser (DESIGN.md section 8). After the
-run: ``--until-docked`` exits; ``--repeat`` starts the next run with a new seed; otherwise the swarm stays
-up (for the dashboard) until Ctrl-C or ``--timeout``. Ctrl-C, SIGTERM or the end stop every child: SIGTERM,
+It waits for every liveliness token (not for a time), supervises the children (an agent or the mothership
+whose token goes or that exits is reported lost and restarted with ``--rejoin``, the world with
+``--resume`` from the checkpoint it writes every tick into a private directory of the launcher; each with
+exponential backoff, at most ``--max-restarts`` times), and collects the run from ``world/event``,
+``agent/*/event`` and ``agent/*/guidance``. The summary has ``swarm sim``'s fields per chaser (DESIGN.md
+section 8) and the restarts of each process. After the run: ``--until-docked`` exits; ``--repeat`` starts
+the next run with a new seed; otherwise the swarm stays up (for the dashboard) until Ctrl-C or
+``--timeout``. Ctrl-C, SIGTERM or the end stop every child: SIGTERM,
 then SIGKILL of its process group after a grace period.
 
 Exit status: 0 every chaser docked, 1 not (or the run failed), 2 bad input, 130 interrupted.
@@ -20,15 +22,20 @@ Exit status: 0 every chaser docked, 1 not (or the run failed), 2 bad input, 130 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import logging
+import os
 import queue
+import shutil
 import signal
+import tempfile
 import threading
 import time
 from pathlib import Path
 
 from swarm.errors import ConfigError, SwarmError
+from swarm.world.checkpoint import EXIT_BAD_CHECKPOINT
 
 _LOG = logging.getLogger("swarm.launch")
 
@@ -42,7 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "launch",
         help="run the swarm as separate processes over Zenoh (world, mothership, agents, dashboard)",
-        description=__doc__.split("\n\n")[1],
+        description=" ".join(__doc__.split("\n\n")[1:3]).replace("``", "").replace("**", ""),
     )
     add_process_arguments(p)
     g = p.add_argument_group("launcher")
@@ -64,7 +71,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     g.add_argument(
         "--max-restarts", type=count("--max-restarts"), default=3, metavar="N",
-        help="restarts of one agent before giving up on it (default 3)",
+        help="restarts of one process (an agent, the mothership or the world) before giving up on it "
+        "(default 3); a world restarts from its checkpoint of the last tick and the run goes on",
     )  # fmt: skip
     add_world_timeouts(g)
     p.set_defaults(func=run)
@@ -92,6 +100,7 @@ class RunLog:
         self.summaries: dict[str, dict] = {}
         self.ended = threading.Event()
         self.t_s = 0.0  # the world's latest clock time [s]
+        self.resumed: list[dict] = []  # the data of each world_resumed
 
     def on_clock(self, _key: str, msg) -> None:
         self.t_s = msg.t_s
@@ -103,6 +112,11 @@ class RunLog:
             elif msg.kind == "run_end":
                 self.run_end = msg.data
                 self.ended.set()
+            elif msg.kind == "world_resumed":
+                self.resumed.append(msg.data)
+        if msg.kind == "world_resumed":
+            _LOG.warning("world resumed from its checkpoint at tick %s (t = %.2f s)", msg.data.get("tick"),
+                         msg.t_s)  # fmt: skip
 
     def on_event(self, key: str, msg, keys) -> None:
         vid = (keys.parse(key) or (None, None))[1]
@@ -250,6 +264,8 @@ def run(args: argparse.Namespace) -> int:
     seed = args.seed
     result: dict | None = None
     wall0 = time.monotonic()
+    args.checkpoint_root = _checkpoint_root()
+    runs = itertools.count()
     try:
         if getattr(args, "secure", False):
             from dataclasses import replace
@@ -284,11 +300,15 @@ def run(args: argparse.Namespace) -> int:
             watch_liveliness(session, keys, lambda r, p, a: alive_changes.put((r, p, a, time.monotonic())))
             _token = session.liveliness().declare_token(keys.alive("launcher", "launcher"))
 
-            def announce(vid: str, kind: str, data: dict) -> None:  # an event on the agent's key, for all
-                session.put(keys.event(vid), encode(Event(box[0].t_s, kind, data)))
+            def announce(vid: str | None, kind: str, data: dict) -> None:
+                """An event for all: on the agent's key, or (``vid`` None: the world) on ``world/event``."""
+                key = keys.event(vid) if vid is not None else keys.world_event()
+                session.put(key, encode(Event(box[0].t_s, kind, data)))
 
             while True:  # one iteration per run
                 log = box[0]
+                args.checkpoint_dir = args.checkpoint_root / f"run-{next(runs)}"
+                args.checkpoint_dir.mkdir()
                 _start_run(args, sc, seed, endpoint, sup, Child)
                 ok = _wait_alive(sc, sup, alive_changes, args.start_timeout, stop)
                 if not ok:
@@ -300,7 +320,12 @@ def run(args: argparse.Namespace) -> int:
                 if outcome == "ended":
                     _wait_summaries(sc, log, sup)
                     result = summarize(sc, policy, seed, log, time.monotonic() - wall0)
+                    result["restarts"] = {c.name: c.restarts for c in sup.children.values()}
+                    result["world_resumed_at"] = [d.get("tick") for d in log.resumed]
                     print_summary(result)
+                    restarted = {n: r for n, r in result["restarts"].items() if r}
+                    if restarted:
+                        print("  restarts: " + ", ".join(f"{n} {r}" for n, r in restarted.items()))
                     if args.json is not None:
                         args.json.write_text(json.dumps(result, indent=1))
                     end = log.run_end or {}
@@ -324,6 +349,7 @@ def run(args: argparse.Namespace) -> int:
             _ = (_token, zenoh)
     finally:
         sup.stop_all()
+        shutil.rmtree(args.checkpoint_root, ignore_errors=True)
         if args.secure_material is not None:
             args.secure_material.close()
         for s, h in previous.items():
@@ -333,6 +359,16 @@ def run(args: argparse.Namespace) -> int:
     if result is None:
         return 1
     return 0 if result["chasers"] and all(c["docked"] for c in result["chasers"].values()) else 1
+
+
+def _checkpoint_root() -> Path:
+    """A private directory (mode 0700: the checkpoints are pickles) for the world's checkpoints, outside
+    the source tree, removed at exit. In memory (``/dev/shm``) where there is one: a checkpoint must
+    survive a killed process, not a machine crash, and a write to tmpfs costs ~20 us per tick where one to
+    an ext4 disk cost 1-3 ms here (``BENCHMARKS.md``)."""
+    shm = Path("/dev/shm")
+    base = str(shm) if shm.is_dir() and os.access(shm, os.W_OK | os.X_OK) else None
+    return Path(tempfile.mkdtemp(prefix="swarm-world-", dir=base))
 
 
 def _start_run(args, sc, seed, endpoint, sup, Child):
@@ -346,8 +382,10 @@ def _start_run(args, sc, seed, endpoint, sup, Child):
                  *_config_args(args, agent_name(vid))]  # fmt: skip
         sup.start(Child(f"agent/{vid}", agent, restartable=True, rejoin_args=["--rejoin"]))
     world = ["swarm.world", "--clock", str(args.clock), "--step-timeout", str(args.step_timeout),
-             "--start-timeout", str(args.start_timeout)]  # fmt: skip
-    sup.start(Child("world", [*world, *common, *_config_args(args, "world")]))
+             "--start-timeout", str(args.start_timeout),
+             "--checkpoint-dir", str(args.checkpoint_dir)]  # fmt: skip
+    world += [*common, *_config_args(args, "world")]
+    sup.start(Child("world", world, restartable=True, rejoin_args=["--resume"]))
     if not args.headless and not (sup.children.get("dashboard") and sup.children["dashboard"].running):
         dash = [str(args.scenario), "--agents", str(args.agents), "--namespace", args.namespace,
                 "--port", str(args.dashboard_port), "--mode", "client", "--connect", endpoint]  # fmt: skip
@@ -406,32 +444,41 @@ def _supervise(
         if role is not None and not alive and role in ("agent", "world", "mothership"):
             name = _name(role, pid)
             if name in sup.children:
+                if role == "world" and log.ended.is_set():
+                    continue  # the run is over: nothing to resume
                 what = sup.lost(name, "liveliness token gone")
-                _LOG.warning("%s (seen %.0f ms after the loss)", what, 1000 * (time.monotonic() - t_seen))
-                if role == "agent" and announce is not None:
-                    announce(pid, "lost", {"why": "liveliness token gone", "action": what})
-                if role == "world":  # the truth itself: a world is not restarted mid-run
-                    if log.ended.wait(0.5):  # its run_end may still be on its way
-                        return "ended"
-                    _LOG.error("the world is gone: the run cannot go on")
+                if what:
+                    _LOG.warning("%s (seen %.0f ms after the loss)", what, 1000 * (time.monotonic() - t_seen))
+                if role in ("agent", "world") and announce is not None and what:
+                    data = {"why": "liveliness token gone", "action": what}
+                    announce(pid if role == "agent" else None, "lost", {**data, "role": role, "id": pid})
+                if role == "world" and what and sup.children[name].next_start_s is None:
+                    _LOG.error("the world is gone for good: the run cannot go on")
                     return "failed"
-        elif role is not None and alive and role == "agent":
-            _LOG.info("agent %s is alive", pid)
+        elif role is not None and alive and role in ("agent", "world"):
+            _LOG.info("%s %s is alive", role, pid)
         for c in sup.exited():
-            if c.name == "world":
-                if not log.ended.is_set():
-                    _LOG.error("%s exited with status %s", c.name, c.popen.returncode)
-                    return "failed"
+            code = c.popen.returncode
+            if c.name == "world" and log.ended.is_set():
                 continue
+            if c.name == "world" and code == EXIT_BAD_CHECKPOINT:
+                _LOG.error("world exited with status %d: it could not resume from its checkpoint (its log "
+                           "says why); giving up rather than resuming from a bad state", code)  # fmt: skip
+                c.popen = None
+                return "failed"
             if c.name == "dashboard":
-                _LOG.warning("the dashboard exited with status %s", c.popen.returncode)
+                _LOG.warning("the dashboard exited with status %s", code)
                 c.popen = None
                 continue
-            what = sup.lost(c.name, f"exited with status {c.popen.returncode}")
+            what = sup.lost(c.name, f"exited with status {code}")
             if what:
                 _LOG.warning("%s", what)
+            if c.name == "world" and c.next_start_s is None:
+                _LOG.error("the world is gone for good: the run cannot go on")
+                return "failed"
         for c in sup.due_restarts():
-            _LOG.warning("%s restarted (pid %d), rejoining the run", c.name, c.popen.pid)
+            how = "resuming from its checkpoint" if c.name == "world" else "rejoining the run"
+            _LOG.warning("%s restarted (pid %d), %s", c.name, c.popen.pid, how)
     return "stopped"
 
 

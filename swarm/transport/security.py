@@ -15,7 +15,8 @@ each link to an identity by the common name (CN) of the certificate it presented
   ``control/fault`` (its Faults panel injects the faults ``swarm fault`` does: an operator's console may
   degrade the sensors on purpose, but it can never fly a vehicle, forge a sensor sample or an event);
 - ``launcher``: ``agent/*/event`` (its ``lost`` events), ``control/run`` and ``control/fault`` (an operator's
-  ``swarm fault --zenoh-config <dir>/launcher.json5``);
+  ``swarm fault --zenoh-config <dir>/launcher.json5``); the launcher's own session is the router, which
+  the ACL does not filter (it also announces a lost world on ``world/event``);
 
 and each may declare the subscribers, queries and liveliness token it needs (:func:`rights` is the whole
 table). Everything else is denied (``default_permission: "deny"``): a certificate with an unknown CN
@@ -115,6 +116,7 @@ def rights(keys: Keys, name: str) -> dict[str, tuple[str, ...]]:
             "reply": (keys.anchors(),),
             "declare_subscriber": (keys.agent_all("truth"), keys.world_clock(), keys.fault()),
             "liveliness_token": (f"{ns}/alive/mothership/*",),
+            **watch,  # to say when the world is lost
         }
     if name == "dashboard":
         return {
@@ -137,7 +139,7 @@ def rights(keys: Keys, name: str) -> dict[str, tuple[str, ...]]:
         return {
             "put": (keys.estimate(vid), keys.guidance(vid), keys.command(vid), keys.event(vid)),
             "declare_subscriber": (keys.imu(vid), keys.uwb(vid), keys.vision(vid), keys.agent_all("estimate"),
-                                   keys.world_clock()),
+                                   keys.world_clock(), keys.world_event()),  # world_resumed
             "liveliness_token": (keys.alive("agent", vid),),
             **watch,
         }  # fmt: skip

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import threading
 
 from swarm.errors import ConfigError
@@ -23,23 +24,44 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--clock-every", type=int, default=10, metavar="TICKS",
         help="publish world/clock every this many ticks (default 10)",
     )  # fmt: skip
+    p.add_argument(
+        "--checkpoint-dir", default=None, metavar="DIR",
+        help="write the world's complete state to DIR/world.ckpt at every tick (a private directory: the "
+        "file is a pickle), so that a restart with --resume continues the run",
+    )  # fmt: skip
+    p.add_argument(
+        "--resume", action="store_true",
+        help="continue the run from the checkpoint in --checkpoint-dir (announced as world_resumed); a "
+        "missing, torn or foreign checkpoint is an error naming the file (exit status 3)",
+    )  # fmt: skip
 
 
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     from swarm.transport.process import keys_from, scenario_from, zenoh_args
     from swarm.transport.session import open_session
+    from swarm.world import checkpoint
     from swarm.world.process import WorldProcess
 
     if args.clock_every < 1:
         raise ConfigError(f"--clock-every must be an integer >= 1, got {args.clock_every!r}")
+    if args.resume and args.checkpoint_dir is None:
+        raise ConfigError("--resume needs --checkpoint-dir (the directory of the checkpoint to resume)")
     sc = scenario_from(args)
     stop = stop if stop is not None else threading.Event()
-    with open_session(zenoh_args(args)) as session:
-        proc = WorldProcess(
-            sc, args.seed, session, keys_from(args), args.clock, stop, step_timeout_s=args.step_timeout,
-            start_timeout_s=args.start_timeout, clock_every=args.clock_every,
-        )  # fmt: skip
-        end = proc.run()
+    resume = None
+    try:
+        if args.resume:  # read before joining the swarm: a bad checkpoint never shows up as a world
+            resume = checkpoint.load(checkpoint.checkpoint_path(args.checkpoint_dir))
+        with open_session(zenoh_args(args)) as session:
+            proc = WorldProcess(
+                sc, args.seed, session, keys_from(args), args.clock, stop, step_timeout_s=args.step_timeout,
+                start_timeout_s=args.start_timeout, clock_every=args.clock_every,
+                checkpoint_dir=args.checkpoint_dir, resume=resume,
+            )  # fmt: skip
+            end = proc.run()
+    except checkpoint.CheckpointError as exc:
+        print(f"swarm world: error: {exc}; not resuming", file=sys.stderr, flush=True)
+        return checkpoint.EXIT_BAD_CHECKPOINT
     return 0 if end["reason"] != "not_started" else 1
 
 

@@ -14,16 +14,25 @@ A thin adapter around :class:`swarm.core.world.World` and the referee (:mod:`swa
 
 An agent whose liveliness token goes is dropped from the lockstep and its nozzles closed (a vehicle whose
 computer died does not keep firing); it joins again with its first command for a tick not yet stepped.
+
+With a checkpoint directory (``--checkpoint-dir``) the world writes its complete state at every tick ``k``
+(:mod:`swarm.world.checkpoint`) *before* it publishes that tick's sensors, so no process ever saw a sample
+of a tick later than the checkpoint. A world restarted with ``--resume`` continues from it: it announces
+``world/event`` ``world_resumed`` and its clock, re-publishes tick ``k``'s samples (an agent drops those it
+already has) and waits for the commands of tick ``k`` (an agent that already sent its command re-sends it
+on ``world_resumed``). A lockstep run with a world killed and resumed is the uninterrupted run, bit for bit.
 """
 
 from __future__ import annotations
 
+import hashlib
 import heapq
 import itertools
 import logging
 import queue
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -46,6 +55,8 @@ from swarm.transport.messages import (
 )
 from swarm.transport.process import ClockSpec, declare_reliable
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
+from swarm.world import checkpoint
+from swarm.world.checkpoint import CheckpointError
 
 _LOG = logging.getLogger("swarm.world")
 
@@ -68,7 +79,12 @@ class WorldProcess:
         start_timeout_s: float = 180.0,
         clock_every: int = 10,
         process_id: str = "world",
+        checkpoint_dir: str | Path | None = None,
+        resume: dict | None = None,
     ) -> None:
+        """``checkpoint_dir``: write the state there every tick (``None``: never); ``resume``: a state
+        :func:`swarm.world.checkpoint.load` read, to continue from (:class:`CheckpointError` if it is not a
+        state of this run: another scenario, seed or vehicle set)."""
         sc = scenario
         self.sc, self.seed, self.session, self.keys, self.clock, self.stop = (
             sc,
@@ -96,7 +112,7 @@ class WorldProcess:
         self._controls: queue.Queue[RunControl] = queue.Queue()
         self._faults: queue.Queue[Fault] = queue.Queue()
         self._delays: dict[str, list[tuple[float, float, float]]] = {}  # sensor_delay windows per vehicle
-        self._held: list = []  # delayed samples: (release time, seq, publisher, payload), a heap
+        self._held: list = []  # delayed samples: (release time, seq, kind, vehicle, payload), a heap
         self._held_seq = itertools.count()
         self._delay_rng = np.random.default_rng(np.random.SeedSequence(entropy=seed, spawn_key=(2**16,)))
         self.modes = dict.fromkeys(self.ids, "HOLD")  # each agent's mode, from its last command
@@ -104,6 +120,90 @@ class WorldProcess:
         self.keepout: set[str] = set()
         self.missing_ticks = 0  # lockstep ticks stepped without some live agent's command
         self.state = "running"
+        self.ckpt_path = None if checkpoint_dir is None else checkpoint.checkpoint_path(checkpoint_dir)
+        if self.ckpt_path is not None:
+            self.ckpt_path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+        self.ckpt_s = 0.0  # wall time spent writing checkpoints [s], and how many
+        self.ckpt_n = 0
+        self.ckpt_bytes = 0
+        self._sensors: list[tuple[str, str, bytes]] = []  # the current tick's samples, as published
+        self._wall_before = self._cpu_before = 0.0  # a resumed run's wall and CPU time before the restart
+        self._wall0, self._cpu0 = time.perf_counter(), time.process_time()  # reset when the run starts
+        self.resumed_at: int | None = None
+        self._run_id_cache: dict | None = None
+        if resume is not None:
+            self._restore(resume)
+
+    # ------------------------------------------------------------------------------ checkpoints
+
+    def _run_id(self) -> dict:
+        """What a checkpoint must share with this world to be resumed by it."""
+        if self._run_id_cache is None:
+            digest = hashlib.sha256(repr(self.sc).encode()).hexdigest()[:16]  # the scenario, with overrides
+            self._run_id_cache = {"scenario": self.sc.name, "fingerprint": digest, "seed": self.seed,
+                                  "vehicles": self.ids}  # fmt: skip
+        return self._run_id_cache
+
+    def _state(self, wall_s: float, cpu_s: float) -> dict:
+        now = time.monotonic()
+        return {
+            "run": self._run_id(), "tick": self.world.k, "world": self.world.snapshot(),
+            "sensors": self._sensors, "modes": dict(self.modes), "done": sorted(self.done),
+            "keepout": sorted(self.keepout), "missing_ticks": self.missing_ticks, "state": self.state,
+            "delays": {v: list(w) for v, w in self._delays.items()},
+            "delay_rng": self._delay_rng.bit_generator.state,
+            "held": [(max(0.0, t - now), kind, vid, payload) for t, _, kind, vid, payload in self._held],
+            "wall_s": wall_s, "cpu_s": cpu_s,
+        }  # fmt: skip
+
+    def _checkpoint(self) -> None:
+        """Write the state of the current tick (its samples encoded, not yet published), if asked to."""
+        if self.ckpt_path is None:
+            return
+        t0 = time.perf_counter()
+        wall = self._wall_before + t0 - self._wall0
+        cpu = self._cpu_before + time.process_time() - self._cpu0
+        try:
+            self.ckpt_bytes = checkpoint.save(self.ckpt_path, self._state(wall, cpu))
+        except OSError as exc:
+            # an older checkpoint would resume behind the agents (they would never send its commands):
+            # remove it, so that a restart says "no checkpoint" and the launcher gives up on the world
+            _LOG.error("checkpoint %s not written (%s): checkpoints off, this run cannot survive a restart "
+                       "of the world", self.ckpt_path, exc)  # fmt: skip
+            self.ckpt_path.unlink(missing_ok=True)
+            self.ckpt_path = None
+            return
+        self.ckpt_s += time.perf_counter() - t0
+        self.ckpt_n += 1
+
+    def _restore(self, st: dict) -> None:
+        where = f"checkpoint {self.ckpt_path}" if self.ckpt_path is not None else "checkpoint"
+        try:
+            run, mine = st["run"], self._run_id()
+            if run != mine:
+                diff = ", ".join(f"{k} {run.get(k)!r} (this world: {mine[k]!r})" for k in mine
+                                 if run.get(k) != mine[k])  # fmt: skip
+                raise CheckpointError(f"{where}: of another run: {diff}")
+            self.world.restore(st["world"])
+            self.modes.update(st["modes"])
+            self.done, self.keepout = set(st["done"]), set(st["keepout"])
+            self.missing_ticks, self.state = int(st["missing_ticks"]), str(st["state"])
+            self._delays = {v: list(w) for v, w in st["delays"].items()}
+            self._delay_rng.bit_generator.state = st["delay_rng"]
+            now = time.monotonic()
+            for left, kind, vid, payload in st["held"]:
+                heapq.heappush(self._held, (now + left, next(self._held_seq), kind, vid, payload))
+            self._sensors = list(st["sensors"])
+            self._wall_before, self._cpu_before = float(st["wall_s"]), float(st["cpu_s"])
+            tick = int(st["tick"])
+        except CheckpointError:
+            raise
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise CheckpointError(f"{where}: not a state this world can resume: {exc!r}") from None
+        if tick != self.world.k:
+            raise CheckpointError(f"{where}: tick {tick} but its world is at tick {self.world.k}")
+        self.barrier.reset(tick)  # commands of earlier ticks are stale; later ones are buffered
+        self.resumed_at = tick
 
     # ------------------------------------------------------------------------------ Zenoh side
 
@@ -211,44 +311,58 @@ class WorldProcess:
     def _world_event(self, kind: str, t_s: float, data: dict) -> None:
         self.pub_world_event.put(encode(Event(t_s, kind, data)))
 
-    def _publish_tick(self, k: int, frames) -> None:
-        """truth(k), vision(k) (camera ticks, chasers) and imu(k) of every vehicle, in that order."""
+    def _encode_tick(self, k: int, frames) -> list[tuple[str, str, bytes]]:
+        """The samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle, then per
+        vehicle vision(k) (camera ticks, chasers) and imu(k): ``(kind, vehicle, payload)``."""
         w, t = self.world, k * self.sc.dt_s
         camera_tick = k % w.vision_every == 0
         face = self.sc.guidance.docking_face
+        out = []
         for i, vid in enumerate(self.ids):
             x = w.X[i]
             truth = Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], impulse_ns=float(w.impulse[i]))
-            self.pub_truth[vid].put(encode(truth))
+            out.append(("truth", vid, encode(truth)))
         for vid in self.ids:
             fr = frames[vid]
-            if camera_tick and vid in self.pub_vision:
+            if camera_tick and vid in self.chasers:
                 target = self.sc.vehicles[vid].target
                 if fr.vision is None:
                     data, kind, ids = np.zeros((0, 3)), "features", ()
                 else:
                     data, kind, ids = fr.vision, fr.vision_kind, tuple(range(len(fr.vision)))
-                self._send(vid, t, self.pub_vision[vid], encode(Vision(k, t, target, face, kind, data, ids)))
-            self._send(
-                vid, t, self.pub_imu[vid], encode(Imu(k, t, self.sc.dt_s, fr.gyro_body, fr.q_ahrs_ms_body))
-            )
+                out.append(("vision", vid, encode(Vision(k, t, target, face, kind, data, ids))))
+            out.append(("imu", vid, encode(Imu(k, t, self.sc.dt_s, fr.gyro_body, fr.q_ahrs_ms_body))))
+        return out
+
+    def _pub(self, kind: str, vid: str):
+        return {"truth": self.pub_truth, "vision": self.pub_vision, "imu": self.pub_imu}[kind][vid]
+
+    def _publish_tick(self, k: int, sensors: list[tuple[str, str, bytes]]) -> None:
+        """Publish tick ``k``'s samples (:meth:`_encode_tick`); imu and vision through :meth:`_send`."""
+        t = k * self.sc.dt_s
+        for kind, vid, payload in sensors:
+            if kind == "truth":
+                self.pub_truth[vid].put(payload)
+            else:
+                self._send(vid, t, kind, payload)
         self._release()
 
-    def _send(self, vid: str, t: float, pub, payload: bytes) -> None:
+    def _send(self, vid: str, t: float, kind: str, payload: bytes) -> None:
         """Publish now, or (a ``sensor_delay`` fault window) hold for a random delay: samples leave late and
         out of order."""
         for a, b, delay in self._delays.get(vid, ()):
             if a <= t < b:
                 wall = self._delay_rng.uniform(0.0, delay) / self.clock.factor
-                heapq.heappush(self._held, (time.monotonic() + wall, next(self._held_seq), pub, payload))
+                item = (time.monotonic() + wall, next(self._held_seq), kind, vid, payload)
+                heapq.heappush(self._held, item)
                 return
-        pub.put(payload)
+        self._pub(kind, vid).put(payload)
 
     def _release(self) -> None:
         now = time.monotonic()
         while self._held and self._held[0][0] <= now:
-            _, _, pub, payload = heapq.heappop(self._held)
-            pub.put(payload)
+            _, _, kind, vid, payload = heapq.heappop(self._held)
+            self._pub(kind, vid).put(payload)
 
     # ------------------------------------------------------------------------------ the run
 
@@ -267,6 +381,18 @@ class WorldProcess:
                 return False
             time.sleep(0.005)
         return False
+
+    def _announce_resume(self, k: int) -> None:
+        """A resumed world's first words: ``world_resumed`` and its clock, then tick ``k``'s samples again."""
+        t = k * self.sc.dt_s
+        data = {"tick": k, "t_s": t, "seed": self.seed, "clock": str(self.clock), "state": self.state,
+                "scenario": self.sc.name}  # fmt: skip
+        self._world_event("world_resumed", t, data)
+        self._publish_clock(k)
+        for kind, vid, payload in self._sensors:
+            self._pub(kind, vid).put(payload)
+        _LOG.warning("resumed from %s at tick %d (t = %.2f s): %d samples of the tick published again",
+                     self.ckpt_path, k, t, len(self._sensors))  # fmt: skip
 
     def _apply(self, vid: str, cmd: Command) -> None:
         self.modes[vid] = cmd.mode
@@ -340,6 +466,8 @@ class WorldProcess:
                 self.next_seed = msg.seed
                 self.state = "stopped"
             _LOG.info("run control %s: clock %s", msg.command, self.state)
+            if self.state != "stopped":
+                self._checkpoint()  # a restart resumes paused if it was paused
             self._publish_clock(self.world.k)
 
     def _referee(self, k: int) -> None:
@@ -401,24 +529,32 @@ class WorldProcess:
         subscribe_decoded(self.session, k.run_control(), RunControl, self._on_control, self.drops)
         subscribe_decoded(self.session, k.fault(), Fault, self._on_fault, self.drops)
         watch_liveliness(self.session, k, self._on_alive)
+        if self.resumed_at is None:
+            self._wall0, self._cpu0 = time.perf_counter(), time.process_time()
+            self._checkpoint()  # tick 0, before the world shows up: one lost at any time can be resumed
         self._token = declare_liveliness(self.session, k, "world", self.process_id)
         from swarm.transport.process import print_ready
 
         print_ready("world", self.process_id)
         self.end_reason, self.next_seed = "stopped", None
         if not self._wait_for_start():
-            self.state = "stopped"
-            self._publish_clock(0)
+            state, self.state = self.state, "stopped"
+            self._publish_clock(self.world.k)
+            self.state = state  # a resumed world that gave up leaves its checkpoint as it was
             return {"reason": "not_started"}
         dt = self.sc.dt_s
         max_k = round(self.sc.sim.max_duration_s / dt)
-        start = {"seed": self.seed, "vehicles": self.ids, "clock": str(self.clock), "scenario": self.sc.name}
-        self._world_event("run_start", 0.0, start)
-        self._publish_clock(0)
-        wall0 = time.perf_counter()
-        cpu0 = time.process_time()
-        pace0, pace_k = time.monotonic(), 0
-        tick = 0
+        self._wall0 = wall0 = time.perf_counter()
+        self._cpu0 = cpu0 = time.process_time()
+        tick = self.world.k
+        if self.resumed_at is None:
+            start = {"seed": self.seed, "vehicles": self.ids, "clock": str(self.clock),
+                     "scenario": self.sc.name}  # fmt: skip
+            self._world_event("run_start", 0.0, start)
+            self._publish_clock(0)
+        else:
+            self._announce_resume(tick)
+        pace0, pace_k = time.monotonic(), tick
         while True:
             if self.stop.is_set():
                 self.end_reason = "stopped"
@@ -444,7 +580,9 @@ class WorldProcess:
                 break
             frames = self.world.step()
             tick += 1
-            self._publish_tick(tick, frames)
+            self._sensors = self._encode_tick(tick, frames)
+            self._checkpoint()  # before any sample of the tick leaves: a restart resumes at this tick
+            self._publish_tick(tick, self._sensors)
             if tick % self.clock_every == 0:
                 self._publish_clock(tick)
             if not self.clock.lockstep:
@@ -452,8 +590,8 @@ class WorldProcess:
                 left = due - time.monotonic()
                 if left > 0:
                     self.stop.wait(left)
-        wall = time.perf_counter() - wall0
-        cpu = time.process_time() - cpu0
+        wall = self._wall_before + time.perf_counter() - wall0
+        cpu = self._cpu_before + time.process_time() - cpu0
         self.state = "stopped"
         t_end = tick * dt
         end = {
@@ -461,11 +599,15 @@ class WorldProcess:
             "realtime_factor": t_end / wall if wall > 0 else None, "cpu_s": cpu,
             "impulse_ns": self.world.impulse_ns, "done": sorted(self.done),
             "missing_ticks": self.missing_ticks, "next_seed": self.next_seed,
-            "dropped": self.drops.total,
+            "dropped": self.drops.total, "resumed_at": self.resumed_at,
+            "checkpoint_us": 1e6 * self.ckpt_s / self.ckpt_n if self.ckpt_n else None,
         }  # fmt: skip
         self._world_event("run_end", t_end, end)
         self._publish_clock(tick)
         _LOG.info("run ended (%s) at t = %.2f s after %.2f s wall", self.end_reason, t_end, wall)
+        if self.ckpt_n:
+            _LOG.info("checkpoints: %d written, %.0f us each on average, %d bytes", self.ckpt_n,
+                      1e6 * self.ckpt_s / self.ckpt_n, self.ckpt_bytes)  # fmt: skip
         self.drops.flush()
         self.stop.wait()
         return end

@@ -18,6 +18,7 @@ import sys
 import time
 import uuid
 from datetime import datetime
+from pathlib import Path
 
 import msgpack
 import pytest
@@ -197,6 +198,114 @@ def test_a_killed_mothership_is_restarted_and_the_agents_fly_on_without_ranges_m
     res = json.loads(out.read_text())["chasers"]["chaser"]
     assert res["docked"] or res["final_mode"] in ("HOLD", "ABORT"), res
     assert not res["keepout_violated"]
+
+
+def _stamp(text: str, pattern: str) -> tuple[float, re.Match[str]]:
+    """The wall time of the first log line matching ``pattern`` (after its ``date time`` prefix)."""
+    m = re.search(rf"^(\S+ \S+) {pattern}", text, re.M)
+    assert m is not None, f"no log line {pattern!r}\n{text}"
+    return datetime.strptime(m.group(1), "%Y-%m-%d %H:%M:%S,%f").timestamp(), m
+
+
+def _kill_world(ns: str, after_s: float, sig: int = signal.SIGKILL) -> tuple[float, str]:
+    """Kill the world process of namespace ``ns`` ``after_s`` into the run; (when, its command line)."""
+    time.sleep(after_s)
+    victim = next(c for c in _children(ns) if "-m swarm.world" in c)
+    killed_at = time.time()
+    os.kill(int(victim.split()[0]), sig)
+    return killed_at, victim
+
+
+def _assert_world_restarted(text: str, killed_at: float) -> dict[str, float]:
+    """The launcher's log names the loss, the restart and the resumption; returns their delays [s]."""
+    why = r"(liveliness token gone|exited with status -9)"  # whichever the launcher notices first
+    lost, _ = _stamp(text, rf"WARNING swarm.launch: world lost \({why}\); restart 1/\d+ in")
+    restarted, _ = _stamp(
+        text, r"WARNING swarm.launch: world restarted \(pid \d+\), resuming from its checkpoint"
+    )
+    resumed, m = _stamp(text, r"WARNING swarm.launch: world resumed from its checkpoint at tick (\d+)")
+    assert int(m.group(2)) > 0
+    for who in ("chaser", "target"):  # the others say what they lost, and carry on
+        assert f"swarm agent: {who}: world world lost; no samples" in text, who
+    assert "swarm mothership: world world lost" in text
+    # nobody else was lost or crashed
+    assert not re.search(r"swarm.launch: (agent/\w+|mothership) lost", text), text
+    assert "Traceback" not in text
+    return {"seen_s": lost - killed_at, "restarted_s": restarted - killed_at,
+            "resumed_s": resumed - killed_at}  # fmt: skip
+
+
+def test_a_killed_world_resumes_from_its_checkpoint_and_the_run_equals_the_simulation(tmp_path, sim_result):
+    """SIGKILL of the world mid-run (lockstep): the launcher restarts it with --resume; it continues from
+    its checkpoint of the last tick it published, the agents drop the samples they had and send the
+    command it lacked, and the run is the in-process simulation's, bit for bit."""
+    ns = _ns()
+    with Procs() as procs:
+        out = tmp_path / "launch.json"
+        proc, _ = _launch(procs, ns, "--until-docked", json_path=out)
+        proc.wait_for_line(r"^swarm up:", 120.0)
+        killed_at, _ = _kill_world(ns, 3.0)
+        rc = proc.wait(RUN_S)
+    text = proc.output()
+    assert rc == 0, text
+    delays = _assert_world_restarted(text, killed_at)
+    print(f"world restart (lockstep): {delays}")
+    res = json.loads(out.read_text())
+    assert res["restarts"] == {"mothership": 0, "agent/chaser": 0, "agent/target": 0, "world": 1}
+    assert len(res["world_resumed_at"]) == 1 and res["world_resumed_at"][0] > 0
+    got, want = res["chasers"]["chaser"], sim_result["chasers"]["chaser"]
+    assert got["docked"] and want["docked"]
+    fields = ("docking_time_s", "total_impulse_ns", "position_error_m", "attitude_error_rad", "r1_m", "r2_m",
+              "keepout_violated", "final_mode", "modes", "decisions", "estimator")  # fmt: skip
+    for field in fields:
+        assert got[field] == want[field], field
+    assert res["target_impulse_ns"] == sim_result["target_impulse_ns"]
+    assert re.search(r"  restarts: world 1$", text, re.M), text
+
+
+def test_a_killed_world_in_a_scaled_run_resumes_where_it_was_and_the_run_ends_safely(tmp_path):
+    """A free-running clock (scaled:4): the restarted world resumes at the simulated time of its checkpoint
+    (the vehicles did not move meanwhile); the agents saw a gap of wall time and no samples, and fly on
+    from the samples that follow. The run ends docked or in a safe hold, without a keep-out violation."""
+    ns = _ns()
+    with Procs() as procs:
+        out = tmp_path / "launch.json"
+        proc, _ = _launch(procs, ns, "--until-docked", "--clock", "scaled:4", json_path=out)
+        proc.wait_for_line(r"^swarm up:", 120.0)
+        killed_at, _ = _kill_world(ns, 4.0)
+        proc.wait(RUN_S)
+    text = proc.output()
+    delays = _assert_world_restarted(text, killed_at)
+    res = json.loads(out.read_text())
+    assert res["restarts"]["world"] == 1
+    c = res["chasers"]["chaser"]
+    print(f"world restart (scaled:4): {delays}; docked {c['docked']}, final mode {c['final_mode']}")
+    assert c["docked"] or c["final_mode"] in ("HOLD", "ABORT"), c
+    assert not c["keepout_violated"]
+
+
+def test_a_world_whose_checkpoint_is_damaged_is_not_resumed_and_the_launcher_gives_up(tmp_path):
+    """The world stopped (SIGSTOP) so that it writes no more, its checkpoint overwritten with garbage, then
+    killed: the restarted world refuses the file (exit status 3, naming it) and the launcher gives up on
+    the run instead of restarting it again or resuming from garbage; every process is stopped."""
+    ns = _ns()
+    with Procs() as procs:
+        proc, _ = _launch(procs, ns, "--until-docked")
+        proc.wait_for_line(r"^swarm up:", 120.0)
+        _, victim = _kill_world(ns, 2.0, signal.SIGSTOP)
+        path = Path(re.search(r"--checkpoint-dir (\S+)", victim).group(1)) / "world.ckpt"
+        path.write_bytes(b"garbage, not a checkpoint")
+        os.kill(int(victim.split()[0]), signal.SIGKILL)
+        rc = proc.wait(RUN_S)
+        wait_until(lambda: not _children(ns), 10.0, f"every process of {ns} to be gone: {_children(ns)}")
+    text = proc.output()
+    assert rc == 1, text
+    assert f"swarm world: error: checkpoint {path}: not a world checkpoint" in text
+    gave_up = r"ERROR swarm.launch: world exited with status 3: it could not resume from its checkpoint"
+    assert re.search(gave_up, text), text
+    assert "world restarted" in text and "restart 2/" not in text  # one attempt, then no more
+    assert not path.parent.parent.exists()  # the launcher removed its checkpoint directory
+    assert "Traceback" not in text
 
 
 def test_faults_injected_at_run_time_reach_the_world_and_the_mothership(tmp_path, sim_result):

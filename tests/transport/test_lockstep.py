@@ -226,6 +226,31 @@ def test_duplicate_estimate_is_counted():
     assert asm.duplicates == 1
 
 
+def test_samples_published_again_by_a_resumed_world_change_no_tick():
+    """A world resumed at tick k publishes tick k's samples again (docs/protocol.md, "Restart and loss").
+    An agent that already processed tick k drops them as stale; one that had part of tick k keeps the
+    first of each and completes the tick with the part it lacked. Either way each tick comes out once,
+    with the first samples, as without the restart."""
+    done = camera(uwb_every=2, vision_every=2, start=2)  # processed tick 2 before the world was killed
+    for msg in (imu(2, w=1.0), uwb(2), vision(2)):
+        done.add(msg)
+    assert done.next_tick(0).tick == 2
+    for msg in (imu(2, w=9.0), uwb(2), vision(2)):  # the resumed world's copies
+        assert not done.add(msg)
+    assert done.counts() == {**ALL_ZERO, "stale": 3}
+    assert done.next_tick(SHORT) is None  # nothing new to process: it waits for tick 3
+
+    partial = camera(uwb_every=2, vision_every=2, start=2)  # had imu(2) only when the world was killed
+    partial.add(imu(2, w=1.0))
+    assert partial.next_tick(SHORT) is None
+    for msg in (imu(2, w=9.0), uwb(2), vision(2)):
+        partial.add(msg)
+    got = partial.next_tick(0)
+    assert (got.tick, got.imu.gyro_body[0]) == (2, 1.0)  # the first imu of the tick
+    assert got.uwb is not None and got.vision is not None
+    assert partial.counts() == {**ALL_ZERO, "duplicates": 1}
+
+
 def test_far_future_messages_are_dropped_and_counted():
     asm = chaser(uwb_every=1, max_ahead=10)
     assert asm.add(imu(11))  # next is 1: 10 ahead is still buffered

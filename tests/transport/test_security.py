@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import signal
 import stat
 import subprocess
 import sys
@@ -116,7 +117,7 @@ def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_
         "world": {K.command(v) for v in VEHICLES} | {K.run_control(), K.fault()},
         "mothership": {K.truth(v) for v in VEHICLES} | {K.world_clock(), K.fault()},
         "agent-chaser": {K.imu("chaser"), K.uwb("chaser"), K.vision("chaser"), K.world_clock()}
-        | {K.estimate(v) for v in VEHICLES},
+        | {K.estimate(v) for v in VEHICLES} | {K.world_event()},
         "dashboard": set(ALL_KEYS),
         "launcher": {K.world_event(), K.world_clock()} | {K.event(v) for v in VEHICLES}
         | {K.guidance(v) for v in VEHICLES},
@@ -139,7 +140,7 @@ def test_liveliness_tokens_only_under_the_identitys_own_role_and_id(acl):
     for role in ("world", "mothership", "dashboard", "launcher"):
         assert _may(acl, role, "liveliness_token", token(role, role))
         assert not _may(acl, role, "liveliness_token", token("agent", "chaser")), role
-    for name in ("world", "agent-chaser", "dashboard", "launcher"):  # the processes that watch liveliness
+    for name in ("world", "mothership", "agent-chaser", "dashboard", "launcher"):  # they watch liveliness
         assert _may(acl, name, "declare_liveliness_subscriber", K.alive_all()), name
         assert _may(acl, name, "liveliness_query", K.alive_all()), name
 
@@ -549,3 +550,46 @@ def test_secure_launch_docks_as_the_simulation_while_intruders_are_denied_by_zen
     assert matched and not any(matched)  # its session never hears of the world's subscriber
     assert "Traceback" not in text
     assert not d.exists()  # the launcher removed its certificates and keys
+
+
+def test_a_world_killed_in_a_secure_run_resumes_with_its_identity_and_the_run_equals_the_simulation(
+    tmp_path,
+):
+    """``--secure``: the restarted world gets the same certificate and configuration (the same arguments,
+    ``--resume`` added), so the ACL lets it publish the sensors again and the lockstep run is still the
+    in-process one; the launcher's log names the loss and the resumption."""
+    ns = f"sec-{uuid.uuid4().hex[:8]}"
+    out = tmp_path / "launch.json"
+    sim = run_docking(load_scenario("docking"), seed=SEED, record_series=False)["chasers"]["chaser"]
+
+    def world() -> list[str]:
+        ps = subprocess.run(["ps", "-ww", "-eo", "pid,stat,args"], capture_output=True, text=True).stdout
+        mine = [line for line in ps.splitlines() if f"--namespace {ns}" in line and " Z" not in line[:12]]
+        return [line.split() for line in mine if "-m swarm.world" in line]
+
+    with Procs() as procs:
+        args = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--secure",
+                "--until-docked", "--seed", str(SEED), "--namespace", ns, "--json", str(out)]  # fmt: skip
+        proc = procs.start(args)
+        proc.wait_for_line(r"^swarm up:", 180.0)
+        time.sleep(3.0)
+        (first,) = world()
+        os.kill(int(first[0]), signal.SIGKILL)
+        wait_until(lambda: len(world()) == 1 and world()[0][0] != first[0], 60.0, "the restarted world")
+        (second,) = world()
+        rc = proc.wait(RUN_S)
+        text = proc.output()
+    assert rc == 0, text
+    config = first[first.index("--zenoh-config") + 1]
+    assert config.endswith("/world.json5") and second[second.index("--zenoh-config") + 1] == config
+    assert "--resume" in second and "--resume" not in first
+    assert re.search(r"WARNING swarm.launch: world lost \((liveliness token gone|exited with status -9)\); "
+                     r"restart 1/", text), text  # fmt: skip
+    assert re.search(r"WARNING swarm.launch: world resumed from its checkpoint at tick \d+", text), text
+    got = json.loads(out.read_text())
+    assert got["restarts"]["world"] == 1
+    got = got["chasers"]["chaser"]
+    assert got["docked"] and sim["docked"]
+    for field in ("docking_time_s", "total_impulse_ns", "position_error_m", "attitude_error_rad", "modes"):
+        assert got[field] == sim[field], field
+    assert "Traceback" not in text

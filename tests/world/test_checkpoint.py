@@ -1,0 +1,185 @@
+"""The world's checkpoint: a world resumed from the file continues as the uninterrupted one, bit for bit;
+a file of another run, torn, damaged or missing is refused with an error naming it.
+
+Oracle: self-consistency against the same world run without interruption (same scenario, seed and
+commands), compared on the encoded samples each tick publishes (the bytes the agents receive) and on the
+world's full snapshot. The ticks compared cross a refill of the pre-drawn gyro noise (every 1024 ticks),
+AHRS samples and camera frames, the parts a checkpoint re-draws or restores rather than copies.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+
+import numpy as np
+import pytest
+
+from swarm.core.guidance import docking_geometry
+from swarm.core.world import NOISE_BLOCK, World
+from swarm.scenario import load_scenario
+from swarm.transport.keys import Keys
+from swarm.transport.messages import Vision, decode
+from swarm.transport.process import ClockSpec
+from swarm.world import checkpoint
+from swarm.world.checkpoint import CheckpointError
+from swarm.world.process import WorldProcess
+from tests.transport.procs import REPO
+
+SEED = 3
+RESUME_AT = NOISE_BLOCK - 9  # the gyro's noise block is re-drawn 9 ticks after the restart
+
+
+@pytest.fixture(scope="module")
+def sc():
+    return load_scenario("docking")
+
+
+def _world(sc, directory, seed=SEED, resume=None) -> WorldProcess:
+    """A world process without a session: the tests drive its tick by hand, as :meth:`WorldProcess.run`.
+    The chaser starts 0.3 m in front of its docked pose, facing the target: its camera sees the markers
+    (every frame draws camera noise), as it does not from the scenario's start."""
+    wp = WorldProcess(sc, seed, None, Keys("ckpt"), ClockSpec(), threading.Event(),
+                      checkpoint_dir=directory, resume=resume)  # fmt: skip
+    if resume is None:
+        xt, xc = wp.world.x["target"], wp.world.x["chaser"]
+        n_ms, p_docked, q_dock = docking_geometry(sc.guidance, xt[0:3], xt[6:10])
+        xc[0:3], xc[6:10] = p_docked + 0.3 * n_ms, q_dock
+    return wp
+
+
+def _tick(wp: WorldProcess) -> list[tuple[str, str, bytes]]:
+    """One tick as the run loop does it: commands (some nozzles on, from a stream fixed by the tick),
+    step, encode, checkpoint before publishing. Returns the tick's samples."""
+    k = wp.world.k
+    rng = np.random.default_rng(k)
+    for vid in wp.ids:
+        n = wp.world.thrusts.shape[1]
+        wp.world.set_command(vid, rng.uniform(0.0, 0.002, n) * (rng.random(n) < 0.3))
+    frames = wp.world.step()
+    wp._sensors = wp._encode_tick(wp.world.k, frames)
+    wp._checkpoint()
+    return wp._sensors
+
+
+def _same_snapshot(a: dict, b: dict) -> None:
+    assert a.keys() == b.keys()
+    for key in a:
+        if key == "blocks":
+            for name in a[key]:
+                sa, sb = a[key][name], b[key][name]
+                assert (sa is None) == (sb is None), name
+                if sa is not None:
+                    assert sa[0] == sb[0] and sa[1:] == sb[1:], name
+        else:
+            assert a[key] == b[key], key
+
+
+def test_a_resumed_world_publishes_the_same_samples_as_the_uninterrupted_one(sc, tmp_path):
+    a = _world(sc, tmp_path)
+    for _ in range(RESUME_AT):
+        _tick(a)
+    state = checkpoint.load(checkpoint.checkpoint_path(tmp_path))
+    b = _world(sc, tmp_path / "unused", resume=state)
+    assert b.resumed_at == RESUME_AT == b.world.k
+    assert b._sensors == a._sensors  # the samples of the resumed tick, published again as they were
+    _same_snapshot(b.world.snapshot(), a.world.snapshot())
+    markers_seen = 0
+    for k in range(RESUME_AT + 1, RESUME_AT + 40):
+        got, want = _tick(b), _tick(a)
+        assert got == want, f"tick {k}: the samples differ"
+        markers_seen += sum(decode(p, Vision).seen for kind, _, p in want if kind == "vision")
+    assert markers_seen > 0 and a.world.k > NOISE_BLOCK  # camera frames and a noise refill were compared
+    _same_snapshot(b.world.snapshot(), a.world.snapshot())
+    np.testing.assert_array_equal(b.world.X, a.world.X)
+
+
+def test_the_referee_state_and_faults_are_restored(sc, tmp_path):
+    a = _world(sc, tmp_path)
+    _tick(a)
+    a.done, a.keepout, a.missing_ticks = {"chaser"}, {"chaser"}, 4
+    a.modes["chaser"] = "DOCK"
+    a.world.camera_loss["chaser"].append((2.0, 3.0))
+    a._delays["chaser"] = [(1.0, 2.0, 0.03)]
+    a._checkpoint()
+    b = _world(sc, tmp_path / "unused", resume=checkpoint.load(checkpoint.checkpoint_path(tmp_path)))
+    assert (b.done, b.keepout, b.missing_ticks, b.modes) == (a.done, a.keepout, 4, a.modes)
+    assert b.world.camera_loss == a.world.camera_loss and b._delays == a._delays
+    assert b.barrier.next_tick == 1  # commands of tick 0 are stale for the resumed world
+
+
+def test_a_world_resumes_only_its_own_runs_checkpoint(sc, tmp_path):
+    a = _world(sc, tmp_path)
+    _tick(a)
+    state = checkpoint.load(checkpoint.checkpoint_path(tmp_path))
+    with pytest.raises(CheckpointError, match=r"checkpoint .*of another run: seed 3 \(this world: 4\)"):
+        _world(sc, tmp_path, seed=4, resume=state)
+    other = load_scenario("docking", overrides={"uwb.sigma_m": 0.2})
+    with pytest.raises(CheckpointError, match=r"of another run: fingerprint"):
+        _world(other, tmp_path, resume=state)
+
+
+def test_a_checkpoint_write_replaces_the_file_whole(sc, tmp_path):
+    a = _world(sc, tmp_path)
+    _tick(a)
+    path = checkpoint.checkpoint_path(tmp_path)
+    first = path.read_bytes()
+    _tick(a)
+    assert path.read_bytes() != first
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["world.ckpt"]  # no temporary file left over
+
+
+@pytest.mark.parametrize(
+    ("damage", "why"),
+    [
+        (lambda b: b[: len(b) // 2], "torn: "),
+        (lambda b: b[:-1] + bytes([b[-1] ^ 1]), "damaged: CRC-32 mismatch"),
+        (lambda b: b"not a checkpoint at all", "not a world checkpoint"),
+        (lambda b: b"", "not a world checkpoint"),
+    ],
+)
+def test_a_torn_or_damaged_checkpoint_is_refused_naming_the_file(sc, tmp_path, damage, why):
+    _tick(_world(sc, tmp_path))
+    path = checkpoint.checkpoint_path(tmp_path)
+    path.write_bytes(damage(path.read_bytes()))
+    with pytest.raises(CheckpointError, match=f"checkpoint {path}: {why}"):
+        checkpoint.load(path)
+
+
+def test_a_missing_checkpoint_is_refused_naming_the_file(tmp_path):
+    with pytest.raises(CheckpointError, match=f"checkpoint {tmp_path}/world.ckpt: no such file"):
+        checkpoint.load(checkpoint.checkpoint_path(tmp_path))
+
+
+def test_the_world_process_exits_3_without_joining_on_a_torn_checkpoint(sc, tmp_path):
+    """The launcher tells a bad checkpoint from a crash by the exit status, and gives up on the world."""
+    _tick(_world(sc, tmp_path))
+    path = checkpoint.checkpoint_path(tmp_path)
+    path.write_bytes(path.read_bytes()[:100])
+    cmd = [sys.executable, "-m", "swarm.world", "docking", "--seed", str(SEED), "--checkpoint-dir",
+           str(tmp_path), "--resume", "--mode", "client", "--connect", "tcp/127.0.0.1:9"]  # fmt: skip
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert r.returncode == checkpoint.EXIT_BAD_CHECKPOINT == 3, r.stderr
+    assert f"swarm world: error: checkpoint {path}: torn: " in r.stderr and "not resuming" in r.stderr
+    assert "Traceback" not in r.stderr and "ready" not in r.stdout
+
+
+def test_resume_without_a_checkpoint_directory_is_a_flag_error():
+    cmd = [sys.executable, "-m", "swarm.world", "docking", "--resume"]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert r.returncode == 2 and "--resume needs --checkpoint-dir" in r.stderr, r.stderr
+
+
+def test_a_world_snapshot_does_not_copy_the_noise_blocks(sc):
+    """A snapshot holds the streams' states at the block's draw, not the ~1024 pre-drawn rows: small."""
+    w = World(sc, SEED)
+    for _ in range(5):
+        w.step(build_frames=False)
+    assert w.gyro_noise.nbytes >= NOISE_BLOCK * 6 * 8 * len(w.ids)
+    snap = w.snapshot()
+    assert sum(len(v) for v in snap.values() if isinstance(v, bytes)) < 2000
+    restored = World(sc, SEED)
+    restored.restore(snap)
+    np.testing.assert_array_equal(restored.gyro_noise, w.gyro_noise)
+    np.testing.assert_array_equal(restored.ahrs_noise, w.ahrs_noise)
