@@ -171,6 +171,7 @@ def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
                 "r1_m": last.r1_m if last is not None else summary.get("r1_m"),
                 "r2_m": last.r2_m if last is not None else summary.get("r2_m"),
                 "keepout_violated": any(e.kind == "keepout_violation" for e in events),
+                "closest_approach_m": end.get("closest_approach_m", {}).get(cid),
                 "contact": None if contact is None else contact.data["contact"],
                 "estimator": {  # absent counters are zero; no summary at all: unknown
                     "rejected_ranges": counts.get("range_rejected", 0) if summary else None,

@@ -29,6 +29,7 @@ import hashlib
 import heapq
 import itertools
 import logging
+import math
 import queue
 import threading
 import time
@@ -118,6 +119,7 @@ class WorldProcess:
         self.modes = dict.fromkeys(self.ids, "HOLD")  # each agent's mode, from its last command
         self.done: set[str] = set()
         self.keepout: set[str] = set()
+        self.closest: dict[str, float] = {}  # closest true centre distance outside DOCKING_MODES, per chaser
         self.missing_ticks = 0  # lockstep ticks stepped without some live agent's command
         self.state = "running"
         self.ckpt_path = None if checkpoint_dir is None else checkpoint.checkpoint_path(checkpoint_dir)
@@ -149,7 +151,8 @@ class WorldProcess:
         return {
             "run": self._run_id(), "tick": self.world.k, "world": self.world.snapshot(),
             "sensors": self._sensors, "modes": dict(self.modes), "done": sorted(self.done),
-            "keepout": sorted(self.keepout), "missing_ticks": self.missing_ticks, "state": self.state,
+            "keepout": sorted(self.keepout), "closest": dict(self.closest),
+            "missing_ticks": self.missing_ticks, "state": self.state,
             "delays": {v: list(w) for v, w in self._delays.items()},
             "delay_rng": self._delay_rng.bit_generator.state,
             "held": [(max(0.0, t - now), kind, vid, payload) for t, _, kind, vid, payload in self._held],
@@ -187,6 +190,7 @@ class WorldProcess:
             self.world.restore(st["world"])
             self.modes.update(st["modes"])
             self.done, self.keepout = set(st["done"]), set(st["keepout"])
+            self.closest = {v: float(d) for v, d in st["closest"].items()}
             self.missing_ticks, self.state = int(st["missing_ticks"]), str(st["state"])
             self._delays = {v: list(w) for v, w in st["delays"].items()}
             self._delay_rng.bit_generator.state = st["delay_rng"]
@@ -477,6 +481,10 @@ class WorldProcess:
                 continue
             tid = self.sc.vehicles[cid].target
             mode = self.modes[cid]
+            if mode not in DOCKING_MODES:  # as swarm.sim.docking's closest_approach_m, same arithmetic
+                d = self.world.x[cid][0:3] - self.world.x[tid][0:3]
+                centre = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+                self.closest[cid] = min(self.closest.get(cid, math.inf), centre)
             call = judge(self.world, g, cid, tid, mode in DOCKING_MODES, t)
             if call is None:
                 continue
@@ -598,7 +606,8 @@ class WorldProcess:
             "reason": self.end_reason, "tick": tick, "t_s": t_end, "seed": self.seed, "wall_s": wall,
             "realtime_factor": t_end / wall if wall > 0 else None, "cpu_s": cpu,
             "impulse_ns": self.world.impulse_ns, "done": sorted(self.done),
-            "missing_ticks": self.missing_ticks, "next_seed": self.next_seed,
+            "closest_approach_m": self.closest, "missing_ticks": self.missing_ticks,
+            "next_seed": self.next_seed,
             "dropped": self.drops.total, "resumed_at": self.resumed_at,
             "checkpoint_us": 1e6 * self.ckpt_s / self.ckpt_n if self.ckpt_n else None,
         }  # fmt: skip

@@ -91,7 +91,8 @@ def test_lockstep_launch_docks_and_equals_the_in_process_simulation(tmp_path, si
     want = sim_result["chasers"]["chaser"]
     assert got["docked"] and want["docked"]
     fields = ("docking_time_s", "total_impulse_ns", "position_error_m", "attitude_error_rad", "r1_m", "r2_m",
-              "keepout_violated", "final_mode", "modes", "decisions", "estimator")  # fmt: skip
+              "keepout_violated", "closest_approach_m", "final_mode", "modes", "decisions",
+              "estimator")  # fmt: skip
     for field in fields:
         assert got[field] == want[field], field
     transitions = [m["mode"] for m in want["modes"]]
@@ -256,7 +257,8 @@ def test_a_killed_world_resumes_from_its_checkpoint_and_the_run_equals_the_simul
     got, want = res["chasers"]["chaser"], sim_result["chasers"]["chaser"]
     assert got["docked"] and want["docked"]
     fields = ("docking_time_s", "total_impulse_ns", "position_error_m", "attitude_error_rad", "r1_m", "r2_m",
-              "keepout_violated", "final_mode", "modes", "decisions", "estimator")  # fmt: skip
+              "keepout_violated", "closest_approach_m", "final_mode", "modes", "decisions",
+              "estimator")  # fmt: skip
     for field in fields:
         assert got[field] == want[field], field
     assert res["target_impulse_ns"] == sim_result["target_impulse_ns"]
