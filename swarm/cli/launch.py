@@ -398,8 +398,9 @@ def _start_run(args, sc, seed, endpoint, sup, Child):
             if line.startswith("dashboard listening on "):
                 print(f"dashboard on {line.split()[-1]}", flush=True)
 
-        # kept across runs: the browser stays connected
-        sup.start(Child("dashboard", ["dashboard", *dash], on_line=on_line))
+        # kept across runs: the browser stays connected; restarted like the others when it dies (the page
+        # reconnects to the same port and rebuilds its state from the next messages)
+        sup.start(Child("dashboard", ["dashboard", *dash], restartable=True, on_line=on_line))
 
 
 def _name(role: str, pid: str) -> str:
@@ -467,8 +468,9 @@ def _supervise(
                            "says why); giving up rather than resuming from a bad state", code)  # fmt: skip
                 c.popen = None
                 return "failed"
-            if c.name == "dashboard":
-                _LOG.warning("the dashboard exited with status %s", code)
+            if c.name == "dashboard":  # the run does not need it: restarted while the budget lasts
+                what = sup.lost(c.name, f"exited with status {code}")
+                _LOG.warning("%s", what or f"dashboard exited with status {code}")
                 c.popen = None
                 continue
             what = sup.lost(c.name, f"exited with status {code}")
@@ -478,7 +480,9 @@ def _supervise(
                 _LOG.error("the world is gone for good: the run cannot go on")
                 return "failed"
         for c in sup.due_restarts():
-            how = "resuming from its checkpoint" if c.name == "world" else "rejoining the run"
+            how = {"world": "resuming from its checkpoint", "dashboard": "serving the page again"}.get(
+                c.name, "rejoining the run"
+            )
             _LOG.warning("%s restarted (pid %d), %s", c.name, c.popen.pid, how)
     return "stopped"
 

@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+import urllib.request
 import uuid
 from datetime import datetime
 from pathlib import Path
@@ -170,6 +171,37 @@ def test_a_killed_agent_is_seen_lost_within_a_second_and_restarted(tmp_path):
     assert re.search(r"agent/chaser restarted \(pid \d+\), rejoining the run", text), text
     assert "re-initialised from its sensors" in text
     assert "Traceback" not in text
+    res = json.loads(out.read_text())["chasers"]["chaser"]
+    assert res["docked"] or res["final_mode"] in ("HOLD", "ABORT"), (rc, res)
+    assert not res["keepout_violated"]
+
+
+def test_a_killed_dashboard_is_restarted_and_the_run_goes_on(tmp_path):
+    """The dashboard is a process of the swarm too: SIGKILLed mid-run, the launcher says so, starts it again
+    on the same port (the page serves again) and the run docks as if nothing had happened."""
+    ns = _ns()
+    port = free_port()
+    with Procs() as procs:
+        out = tmp_path / "launch.json"
+        args = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--seed", str(SEED),
+                "--namespace", ns, "--listen", loopback(free_port()), "--dashboard-port", str(port),
+                "--until-docked", "--clock", "scaled:4", "--json", str(out)]  # fmt: skip
+        # scaled:4 (~30 s of docking) leaves the restart time to happen during the run
+        proc = procs.start(args)
+        proc.wait_for_line(r"^dashboard on http://\S+", 120.0)
+        proc.wait_for_line(r"^swarm up:", 120.0)
+        victim = next(c for c in _children(ns) if " dashboard " in c)
+        os.kill(int(victim.split()[0]), signal.SIGKILL)
+        wait_until(lambda: len(re.findall(r"^dashboard on http://", proc.output(), re.M)) >= 2, 60.0,
+                   "the restarted dashboard's URL")  # fmt: skip
+        page = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10).read()
+        rc = proc.wait(RUN_S)
+    text = proc.output()
+    lost = r"WARNING swarm.launch: dashboard lost \(exited with status -9\); restart 1/\d"
+    assert re.search(lost, text), text
+    assert re.search(r"dashboard restarted \(pid \d+\), serving the page again", text), text
+    assert "Traceback" not in text
+    assert b"<html" in page.lower()
     res = json.loads(out.read_text())["chasers"]["chaser"]
     assert res["docked"] or res["final_mode"] in ("HOLD", "ABORT"), (rc, res)
     assert not res["keepout_violated"]
