@@ -306,10 +306,12 @@ def test_cli_bad_flag_is_an_argparse_error_naming_the_flag(capsys, flag, value):
 def test_every_command_refuses_the_same_seeds(capsys, command):
     """One seed range for every command (``swarm.cli.args.seed``): a seed that one command accepts must
     re-run in every other (the processes carry it in an int64)."""
-    with pytest.raises(SystemExit) as exc:
-        main([*command, "--seed", str(2**63)])
-    assert exc.value.code == 2
-    assert "--seed must be an integer in 0..2**63-1" in capsys.readouterr().err
+    for bad in ("-3", str(2**63), "x"):
+        with pytest.raises(SystemExit) as exc:
+            main([*command, "--seed", bad])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert "--seed must be an integer in 0..2**63-1" in err and repr(bad) in err
 
 
 def test_cli_bad_override_exits_2_naming_the_field(capsys):

@@ -293,8 +293,7 @@ def test_new_campaign_refuses_a_non_empty_directory(tmp_path):
         (["--workers", "-1"], "--workers"),
         (["--policy", "markov"], "--policy"),
         (["--policy", "mdp", "--policy", "mdp"], "--policy"),
-        (["--seed", "-3"], "--seed"),
-    ],
+    ],  # --seed: tests/test_docking.py::test_every_command_refuses_the_same_seeds (one type for all)
 )
 def test_cli_bad_flag_exits_2_naming_flag_and_value(argv, named, tmp_path, capsys):
     assert main(["montecarlo", "docking", "--out", str(tmp_path / "o"), *argv]) == 2
