@@ -57,7 +57,8 @@ def format_report(rec: dict) -> str:
         if n.get("samples"):
             lo, hi = n["mean_bounds_95_independent"]
             lines.append(
-                f"{pol}: NEES over {n['samples']} samples (UWB navigation, outside the dropout): mean "
+                f"{pol}: NEES over {n['samples']} samples (UWB navigation before the first vision update, "
+                f"outside the dropout): mean "
                 f"{n['mean_nees']:.2f}, median {n['median_nees']:.2f}; ensemble mean inside its 95 % "
                 f"bounds at {100 * n['fraction_times_inside_95']:.0f} % of {n['times']} times "
                 f"({n['times_above']} above, {n['times_below']} below); bound of the overall mean "

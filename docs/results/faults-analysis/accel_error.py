@@ -1,6 +1,7 @@
 """The chaser's unmodelled acceleration in the closed loop: what the filter's process noise must cover.
 
-usage (from the repository root): PYTHONPATH=. python docs/results/faults-analysis/accel_error.py SCENARIO RUNS [POLICY] [--set K=V ...]
+usage (from the repository root):
+    PYTHONPATH=. python docs/results/faults-analysis/accel_error.py SCENARIO RUNS [POLICY] [--set K=V ...]
 
 The truth (swarm/core/dynamics.py) accelerates by ``R(q_true) F_body / m``: the nozzles' wrench, with no
 noise, quantisation or misalignment (``[dispersions]`` off), no gravity, no drag. The filter predicts with
@@ -67,7 +68,7 @@ WINDOWS_S = (2.0, 5.0, 10.0, 20.0)
 
 def diffusion(a: np.ndarray, dt: float, window_s: float = 10.0) -> float:
     """var(int a dt) / T over non-overlapping windows of ``window_s`` (per axis, then averaged) [m^2/s^3]."""
-    n = int(round(window_s / dt))
+    n = round(window_s / dt)
     k = a.shape[0] // n
     if k < 1:
         return float("nan")
@@ -107,7 +108,10 @@ def main(argv) -> None:
             "sigma_a_m_s2": sigma_a,
             "q_white_m2_s3": sigma_a**2 * dt,
             **(
-                {f"q_diffusion_{w:g}s_m2_s3": float(np.nanmean(np.asarray(diff)[:, i])) for i, w in enumerate(WINDOWS_S)}
+                {
+                    f"q_diffusion_{w:g}s_m2_s3": float(np.nanmean(np.asarray(diff)[:, i]))
+                    for i, w in enumerate(WINDOWS_S)
+                }
                 if diff
                 else {}
             ),

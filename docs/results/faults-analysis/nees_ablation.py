@@ -1,7 +1,8 @@
 """Ablation of the chaser filter's tuning against its position NEES and the campaign's safety (issue 7).
 
-usage (from the repository root): PYTHONPATH=. python docs/results/faults-analysis/nees_ablation.py SCENARIO RUNS OUT_DIR LABEL [K=V ...]
-       PYTHONPATH=. python docs/results/faults-analysis/nees_ablation.py --table OUT_DIR
+usage (from the repository root; ``PYTHONPATH=.`` so that this checkout's ``swarm`` is the one imported):
+    PYTHONPATH=. python docs/results/faults-analysis/nees_ablation.py SCENARIO RUNS OUT_DIR LABEL [K=V ...]
+    PYTHONPATH=. python docs/results/faults-analysis/nees_ablation.py --table OUT_DIR
 
 Runs ``RUNS`` paired runs of both policies (root seed 0, 2 workers) of ``SCENARIO`` with the overrides
 ``K=V`` (as ``swarm montecarlo --set``) into ``OUT_DIR/LABEL``, and writes ``OUT_DIR/LABEL.json``: per policy
@@ -49,8 +50,8 @@ def run(scenario: str, runs: int, out_dir: Path, label: str, sets: list[str]) ->
 
 def table(recs) -> str:
     lines = [
-        "| config | scenario | policy | safe | KO viol. | coll. | closest [mm] | NEES mean | median | inside 95 % | above | below "
-        "| dock time [s] | impulse [N s] | pos. err [mm] |",
+        "| config | scenario | policy | safe | KO viol. | coll. | closest [mm] | NEES mean | median "
+        "| inside 95 % | above | below | dock time [s] | impulse [N s] | pos. err [mm] |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for label, rec in recs:
