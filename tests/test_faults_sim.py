@@ -129,3 +129,61 @@ def test_small_campaign_of_the_issue_fault_set_docks_or_aborts_safely(tmp_path):
         inside = [u for t, u in zip(tr["t_s"], tr["nees_used"], strict=True) if a <= t < b]
         assert inside and not any(inside)
     assert summary["nees"]["samples"] > 100
+
+
+# ---- consistency of the chaser's position estimate in the closed loop -------------------------------------
+
+
+def _run_means_t_test(means: np.ndarray, dof: int = 3, alpha: float = 1e-3) -> tuple[float, float]:
+    """``(mean, half-width)``: the mean over independent runs of each run's time-averaged NEES and the
+    two-sided ``1 - alpha`` Student-t half-width around it. The runs are independent (one seed each),
+    so the t-test of "expected NEES = dof" is exact up to the central limit theorem, whereas the samples
+    inside one run are strongly correlated (the error of a filter with a small process noise decorrelates
+    over tens of seconds), which is why the run, not the sample, is the unit here."""
+    from scipy.stats import t as student
+
+    n = means.size
+    half = float(student.ppf(1 - alpha / 2, n - 1) * means.std(ddof=1) / np.sqrt(n))
+    return float(means.mean()), half
+
+
+def test_chaser_position_nees_is_consistent_in_the_closed_loop_on_uwb():
+    """32 seeded runs of the fault-free docking, the first 40 s (APPROACH on UWB, no vision): the mean of
+    the runs' time-averaged position NEES is 3 (the chi-square mean for 3 dof) within a 99.9 % t-interval
+    of the run-to-run spread. Measured: 3.09 +- 0.65 (s = 1.01 over runs); the tuning before issue 7
+    (accel_psd 1e-6, a covariance ~25 % too large) gives 2.39 +- 0.27 (s = 0.42) and fails."""
+    sc = load_scenario("docking", {"sim.max_duration_s": 40.0})
+    means = []
+    for k in range(32):
+        s = DockingSim(sc, "fixed", 100 + k).run()["chasers"]["chaser"]["series"]
+        assert not any(s["relative_nav"])  # UWB navigation throughout
+        e = np.asarray(s["p_est_ms"]) - np.asarray(s["p_true_ms"])
+        nees = np.einsum("ki,ki->k", e, np.linalg.solve(np.asarray(s["cov_pos"]), e[..., None])[..., 0])
+        means.append(nees[::10].mean())  # 1 s samples
+    mean, half = _run_means_t_test(np.asarray(means))
+    assert abs(mean - 3.0) <= half, f"mean NEES {mean:.2f} +- {half:.2f} excludes 3"
+
+
+@pytest.mark.slow
+def test_fault_campaign_is_safe_and_its_nees_consistent_outside_the_dropout(tmp_path):
+    """The issue's campaign at 80 runs per policy: every run docked or aborted safely, and the position
+    NEES (UWB navigation before the first vision update, outside the dropout) consistent: the mean of the
+    runs' time-averaged NEES is 3 within a 99.9 % t-interval (see the fast test), and the ensemble mean
+    inside its 95 % chi-square band at >= 75 % of the sample times. 95 % of the times is what a consistent
+    filter gives on average, but neighbouring times 1 s apart are strongly correlated, so the observed
+    fraction scatters widely around it (tests/core/test_estimator_statistics.py uses the same 75 %);
+    measured at 100 runs: 92 % (fixed) and 92 % (mdp), against 28 % for the tuning before issue 7."""
+    sc = load_scenario("docking-faults")
+    run_campaign(CampaignSpec(sc, ("fixed", "mdp"), 80, 0), tmp_path / "c", workers=2, progress=False)
+    rows, trajs = read_runs(tmp_path / "c"), read_trajectories(tmp_path / "c")
+    summary = fault_summary(rows, trajs)
+    for pol, s in summary.items():
+        assert s["failed"] == 0 and s["docked"] + s["aborted"] == 80, pol
+        assert s["nees"]["fraction_times_inside_95"] >= 0.75, (pol, s["nees"])
+        means = []
+        for tr in trajs:
+            if tr["policy"] == pol:
+                used = [v for v, u in zip(tr["nees_pos"], tr["nees_used"], strict=True) if u]
+                means.append(np.mean(used))
+        mean, half = _run_means_t_test(np.asarray(means))
+        assert abs(mean - 3.0) <= half, f"{pol}: mean NEES {mean:.2f} +- {half:.2f} excludes 3"

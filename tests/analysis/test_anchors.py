@@ -36,7 +36,7 @@ HAND_PICKED = [(0.0, 1.0, 0.0), (1.0, 2.0, 1.0)]  # the paper's chaser start and
 def direct_sigma(point) -> float:
     """Written out independently: the filter DARE over one 80 ms round-robin cycle, with scipy."""
     T = 4 / 50.0
-    q, sr = 1e-6, 0.02
+    q, sr = 5e-11, 0.02
     F = np.eye(6)
     F[0:3, 3:6] = T * np.eye(3)
     Q = np.zeros((6, 6))
@@ -55,7 +55,7 @@ def direct_sigma(point) -> float:
 
 
 def test_the_scenario_numbers_the_direct_dare_assumes():
-    assert SC.estimator.accel_psd_m2_s3 == 1e-6 and SC.estimator.sigma_range_m == 0.02
+    assert SC.estimator.accel_psd_m2_s3 == 5e-11 and SC.estimator.sigma_range_m == 0.02
     assert SC.uwb.rate_hz == 50.0 and len(SC.anchors_m) == 4
 
 
@@ -64,7 +64,7 @@ def test_map_agrees_with_a_direct_dare_at_two_hand_picked_points(method):
     got = sigma_map(SC, np.array(HAND_PICKED), method=method)
     want = [direct_sigma(p) for p in HAND_PICKED]
     np.testing.assert_allclose(got, want, rtol=1e-9)
-    assert 0.003 < want[0] < 0.02 and want[0] != want[1]  # millimetres, and the geometry matters
+    assert 0.001 < want[0] < 0.02 and want[0] != want[1]  # millimetres, and the geometry matters
 
 
 def test_the_study_csv_holds_the_direct_dare_at_grid_points(tmp_path):
@@ -102,9 +102,11 @@ def test_doubling_agrees_with_scipy_on_random_points():
 
 
 def test_stacked_cycle_is_within_a_few_percent_of_the_filters_round_robin():
-    # the ranges of a cycle arrive 20 ms apart instead of together: the DARE is an approximation; 3 % bound
+    # the ranges of a cycle arrive 20 ms apart instead of together: the DARE is an approximation; 3 % bound.
+    # With the scenario's small process noise the filter settles slowly: 1500 cycles (120 s) from P0 leave
+    # it 2-8 % above its steady state, 4000 (320 s) within 0.1 %.
     for p in HAND_PICKED:
-        before, after = periodic_steady_state(SC, p, cycles=1500)
+        before, after = periodic_steady_state(SC, p, cycles=4000)
         dare = direct_sigma(p)
         assert after <= before
         assert abs(after / dare - 1.0) < 0.03 and abs(before / dare - 1.0) < 0.03

@@ -50,9 +50,9 @@ def run(scenario: str, runs: int, out_dir: Path, label: str, sets: list[str]) ->
 
 def table(recs) -> str:
     lines = [
-        "| config | scenario | policy | safe | KO viol. | coll. | closest [mm] | NEES mean | median "
+        "| config | scenario | policy | safe | KO viol. | coll. | HOLD | closest [mm] | NEES mean | median "
         "| inside 95 % | above | below | dock time [s] | impulse [N s] | pos. err [mm] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for label, rec in recs:
         for pol, s in rec["policies"].items():
@@ -61,6 +61,7 @@ def table(recs) -> str:
             lines.append(
                 f"| {label} | {rec['scenario']} | {pol} | {s['docked'] + s['aborted']}/{s['n_runs']} "
                 f"({s['aborted']} ab.) | {s['keepout_violations']} | {s['collisions']} | "
+                f"{s['runs_with_hold']} | "
                 f"{1e3 * ca['min'] if ca else float('nan'):.1f} | {n['mean_nees']:.2f} | "
                 f"{n['median_nees']:.2f} | {100 * n['fraction_times_inside_95']:.0f} % of {n['times']} | "
                 f"{n['times_above']} | {n['times_below']} | {s['docking_time_s']:.2f} | "
