@@ -147,13 +147,14 @@ class SwarmParams:
 # thrust-direction error of the attitude estimate error, a_err = -R [F_body x] dtheta / m. Measured tick by
 # tick over 40 runs of each scenario and policy (faults-analysis/accel_error.py), its low-frequency PSD,
 # S_a(0) = E[(int_0^T a_err dt)^2] / T (the q of a white acceleration, Bar-Shalom, Li & Kirubarajan 2001
-# sec. 6.2.2, for which E[dv^2] = q T; the same for T = 2..20 s), is 3.5e-11..4.4e-11 m^2/s^3 over whole
+# sec. 6.2, for which E[dv^2] = q T; the same for T = 2..20 s), is 3.5e-11..4.4e-11 m^2/s^3 over whole
 # runs, dominated by the first seconds (2 deg initial attitude error while the controller accelerates),
 # and 3e-12..1e-11 after them: q = 5e-11 covers the whole-run value. (It was 1e-6, "ten times the
 # truth's": 2e4 times it, which made the position NEES 2.4 instead of 3 and the estimate noisier, so the
-# controller fired more.) A scenario whose truth has more (nozzle misalignment, mass error dispersions, a
-# real vehicle) needs its own q: see NEES.md. Attitude: the gyro's Gauss-Markov bias (10 deg/h, tau 100 s)
-# is absorbed as extra attitude random walk sigma_b sqrt(tau) ~ 5e-4 rad/sqrt(s).
+# controller fired more.) A scenario whose truth has more (mass or nozzle dispersions, a real vehicle)
+# needs its own q: with 3 % mass and 0.5 deg nozzle errors the PSD is ~1e-8, and with q = 5e-11 8-18 % of
+# such runs collide in the blind end of DOCK (NEES.md, table 4). Attitude: the gyro's Gauss-Markov bias
+# (10 deg/h, tau 100 s) is absorbed as extra attitude random walk sigma_b sqrt(tau) ~ 5e-4 rad/sqrt(s).
 DOCKING_ESTIMATOR = EstimatorParams(accel_psd_m2_s3=5e-11, attitude_rw_extra_rad_rts=5e-4)
 
 

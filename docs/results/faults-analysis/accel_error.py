@@ -20,7 +20,7 @@ on which the chaser navigates on UWB (not relative to the target), and reduced t
 * ``q_white = sigma_a^2 dt``: the PSD if ``a_err`` were independent from tick to tick;
 * ``q_diffusion_T``: the diffusion rate of its integral, ``E[(int_0^T a_err dt)^2] / T`` per axis over
   non-overlapping windows of ``T`` s. A white acceleration of PSD ``q`` (the filter's model, Bar-Shalom,
-  Li & Kirubarajan 2001 sec. 6.2.2) gives ``E[dv^2] = q T`` for every ``T``; for a correlated one this
+  Li & Kirubarajan 2001 sec. 6.2) gives ``E[dv^2] = q T`` for every ``T``; for a correlated one this
   is ``int R_a(tau) dtau = S_a(0)`` once ``T`` exceeds the correlation time, the value the filter's
   ``q`` must match. Reported over whole runs and without the first 5 s (the initial 2 deg attitude
   error while the controller accelerates dominates the whole-run value).
