@@ -9,6 +9,7 @@ one (:mod:`swarm.config`).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -234,6 +235,19 @@ class Scenario:
                 raise ConfigError(
                     f"{name} must divide sim.imu_rate_hz ({self.sim.imu_rate_hz} Hz) evenly, got {rate!r}"
                 )
+        d = self.dispersions
+        if (d.mass_sigma_frac > 0 or d.thruster_misalignment_deg > 0) and (
+            self.estimator.accel_psd_m2_s3 <= DOCKING_ESTIMATOR.accel_psd_m2_s3
+        ):
+            warnings.warn(
+                f"estimator.accel_psd_m2_s3 = {self.estimator.accel_psd_m2_s3!r} is sized for a truth "
+                f"without thrust errors, but dispersions.mass_sigma_frac = {d.mass_sigma_frac!r} and "
+                f"dispersions.thruster_misalignment_deg = {d.thruster_misalignment_deg!r} add an "
+                "acceleration the filter does not model: raise it to that truth's PSD (1e-8 for 3 % and 0.5 deg), or the "
+                "filter is overconfident (docs/results/faults-analysis/NEES.md, table 4)",
+                UserWarning,
+                stacklevel=2,
+            )
         if self.thrusters.half_size_m != self.guidance.half_size_m:
             raise ConfigError(
                 "thrusters.half_size_m must equal guidance.half_size_m "

@@ -355,3 +355,19 @@ def test_with_pairs_copies_every_vehicle_on_a_grid_of_the_configured_spacing():
     assert np.allclose(np.mean(offsets, axis=0), 0.0)  # centred on the original pair
     with pytest.raises(ConfigError, match=r"--agents must be an integer in 1\.\.64, got 0"):
         sc.with_pairs(0)
+
+
+def test_thrust_dispersions_with_the_nominal_acceleration_psd_warn():
+    """A truth with mass or nozzle errors has an unmodelled acceleration ~200x the nominal filter's q
+    (NEES.md, table 4: 8-18 % collisions): loading such a scenario says so, naming the fields; raising q
+    (or no thrust dispersion) is silent."""
+    import warnings as w
+
+    from swarm.scenario import load_scenario
+
+    with pytest.warns(UserWarning, match="estimator.accel_psd_m2_s3.*dispersions.mass_sigma_frac = 0.03"):
+        load_scenario("docking", {"dispersions.mass_sigma_frac": 0.03})
+    with w.catch_warnings():
+        w.simplefilter("error")
+        load_scenario("docking", {"dispersions.mass_sigma_frac": 0.03, "estimator.accel_psd_m2_s3": 1e-8})
+        load_scenario("docking", {"dispersions.position_sigma_m": 0.03})
