@@ -243,8 +243,8 @@ class Scenario:
                 f"estimator.accel_psd_m2_s3 = {self.estimator.accel_psd_m2_s3!r} is sized for a truth "
                 f"without thrust errors, but dispersions.mass_sigma_frac = {d.mass_sigma_frac!r} and "
                 f"dispersions.thruster_misalignment_deg = {d.thruster_misalignment_deg!r} add an "
-                "acceleration the filter does not model: raise it to that truth's PSD (1e-8 for 3 % and 0.5 deg), or the "
-                "filter is overconfident (docs/results/faults-analysis/NEES.md, table 4)",
+                "acceleration the filter does not model: raise it to that truth's PSD (1e-8 for 3 % and "
+                "0.5 deg), or the filter is overconfident (docs/results/faults-analysis/NEES.md, table 4)",
                 UserWarning,
                 stacklevel=2,
             )
