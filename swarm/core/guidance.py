@@ -526,8 +526,9 @@ class StationParams:
     """Translation control starts only when the estimated offset from the station rejects "the target is
     at its station" at this probability: ``|dp|^2 / sigma_max^2 > chi2.ppf(p, 3)`` (:class:`StationKeeping`).
     The false-alarm probability per control step is at most ``1 - p``; 0.9999 is the estimator's own
-    gate probability (paper section IV-D) and puts the test at 4.6 sigma: 3.9 cm at the target's
-    steady-state 8.4 mm (docs/results/anchors-docking), just inside the 4 cm dead band."""
+    gate probability (paper section IV-D) and puts the test at 4.6 sigma: 1.1 cm at the target's
+    steady-state 2.45 mm (docs/results/anchors-docking), well inside the 4 cm dead band (with the earlier,
+    over-sized process noise: 3.9 cm at 8.4 mm)."""
 
     def __post_init__(self) -> None:
         for name in (
