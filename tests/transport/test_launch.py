@@ -58,6 +58,16 @@ def _ns() -> str:
     return f"test-{uuid.uuid4().hex[:8]}"
 
 
+def _assert_same_run(got: dict, want: dict) -> None:
+    """A launched chaser's summary is ``swarm sim``'s, bit for bit, field by field (DESIGN.md section 8)."""
+    assert got["docked"] and want["docked"]
+    fields = ("docking_time_s", "total_impulse_ns", "position_error_m", "attitude_error_rad", "r1_m", "r2_m",
+              "keepout_violated", "closest_approach_m", "final_mode", "modes", "decisions",
+              "estimator")  # fmt: skip
+    for field in fields:
+        assert got[field] == want[field], field
+
+
 @pytest.fixture(scope="module")
 def sim_result():
     return run_docking(load_scenario("docking"), seed=SEED, record_series=False)
@@ -90,12 +100,7 @@ def test_lockstep_launch_docks_and_equals_the_in_process_simulation(tmp_path, si
             assert proc.wait(RUN_S) == 0, proc.output()
     got = json.loads(out.read_text())["chasers"]["chaser"]
     want = sim_result["chasers"]["chaser"]
-    assert got["docked"] and want["docked"]
-    fields = ("docking_time_s", "total_impulse_ns", "position_error_m", "attitude_error_rad", "r1_m", "r2_m",
-              "keepout_violated", "closest_approach_m", "final_mode", "modes", "decisions",
-              "estimator")  # fmt: skip
-    for field in fields:
-        assert got[field] == want[field], field
+    _assert_same_run(got, want)
     transitions = [m["mode"] for m in want["modes"]]
     assert [
         e for e in seen_events if e
@@ -287,12 +292,7 @@ def test_a_killed_world_resumes_from_its_checkpoint_and_the_run_equals_the_simul
     assert res["restarts"] == {"mothership": 0, "agent/chaser": 0, "agent/target": 0, "world": 1}
     assert len(res["world_resumed_at"]) == 1 and res["world_resumed_at"][0] > 0
     got, want = res["chasers"]["chaser"], sim_result["chasers"]["chaser"]
-    assert got["docked"] and want["docked"]
-    fields = ("docking_time_s", "total_impulse_ns", "position_error_m", "attitude_error_rad", "r1_m", "r2_m",
-              "keepout_violated", "closest_approach_m", "final_mode", "modes", "decisions",
-              "estimator")  # fmt: skip
-    for field in fields:
-        assert got[field] == want[field], field
+    _assert_same_run(got, want)
     assert res["target_impulse_ns"] == sim_result["target_impulse_ns"]
     assert re.search(r"  restarts: world 1$", text, re.M), text
 
