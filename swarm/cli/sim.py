@@ -75,6 +75,9 @@ def print_summary(res: dict) -> None:
         print(f"    attitude error    {_fmt(c['attitude_error_rad'], ' rad', digits=4)}")
         print(f"    radii chosen      r2 = {c['r2_m']:.3f} m, r1 = {c['r1_m']:.3f} m")
         print(f"    keep-out violated {c['keepout_violated']}")
+        if c.get("closest_approach_m") is not None:
+            closest = _fmt(c["closest_approach_m"], " mm", 1000.0, 1)
+            print(f"    closest approach  {closest} (centres, outside DOCK)")
         print("    modes:")
         for m in c["modes"]:
             print(f"      t = {m['t_s']:7.2f} s  r = {m['range_m']:.3f} m  -> {m['mode']:<9} {m['reason']}")
