@@ -246,7 +246,7 @@ class Scenario:
                 "acceleration the filter does not model: raise it to that truth's PSD (1e-8 for 3 % and "
                 "0.5 deg), or the filter is overconfident (docs/results/faults-analysis/NEES.md, table 4)",
                 UserWarning,
-                stacklevel=2,
+                stacklevel=3,  # the caller of the dataclass's __init__
             )
         if self.thrusters.half_size_m != self.guidance.half_size_m:
             raise ConfigError(
