@@ -63,6 +63,7 @@ class MothershipProcess:
         self._next_slot: int | None = None if rejoin else self.every
         self.slots = 0
         self._t_served = 0.0  # time of the last slot served [s]
+        self._world_stopped = False  # the world's last Clock said "stopped": its run is over
         fp = scenario.faults  # the scenario's fixed windows, to which run-time faults are added
         self._dropouts = list(fp.uwb_dropout.windows_s)
         self._bursts = [(a, b, fp.nlos_burst_probability) for a, b in fp.nlos_burst.windows_s] if (
@@ -104,13 +105,18 @@ class MothershipProcess:
             _LOG.warning("anchors query not answered: %s", exc)
 
     def _on_clock(self, _key: str, msg: Clock) -> None:
-        if msg.state == "stopped" and msg.tick > 0:
+        # the world's clock says whether its going is the end of a run (it publishes "stopped" after
+        # run_end, then exits) or a loss: only a loss is worth a warning
+        self._world_stopped = msg.state == "stopped" and msg.tick > 0
+        if self._world_stopped:
             _LOG.debug("world stopped at tick %d", msg.tick)
 
     def _on_alive(self, role: str, pid: str, alive: bool) -> None:
         if role == "world":
             if alive:
                 _LOG.info("world %s is alive", pid)
+            elif self._world_stopped:
+                _LOG.info("world %s gone after the end of its run", pid)
             else:
                 _LOG.warning("world %s lost; no truth, so no ranges, until it is back", pid)
 
