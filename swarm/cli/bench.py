@@ -8,6 +8,7 @@ and ``--json`` gets one object keyed by bench name.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import logging
 import math
@@ -19,57 +20,42 @@ from swarm.errors import ConfigError
 log = logging.getLogger(__name__)
 
 
-def _estimator(quick: bool) -> tuple[dict, str]:
-    from swarm.bench import estimator
+def _bench(module: str, presets: bool) -> Callable[[bool], tuple[dict, str]]:
+    """The runner of ``swarm.bench.<module>``, imported only when it runs (a bench's imports are heavy):
+    ``run(QUICK or FULL)`` for a bench with presets, ``run(quick)`` for the others; then its report."""
 
-    record = estimator.run(estimator.QUICK if quick else estimator.FULL)
-    return record, estimator.format_report(record)
+    def runner(quick: bool) -> tuple[dict, str]:
+        bench = importlib.import_module(f"swarm.bench.{module}")
+        record = bench.run((bench.QUICK if quick else bench.FULL) if presets else quick)
+        return record, bench.format_report(record)
 
-
-def _sim(quick: bool) -> tuple[dict, str]:
-    from swarm.bench import sim
-
-    record = sim.run(quick)
-    return record, sim.format_report(record)
-
-
-def _transport(quick: bool) -> tuple[dict, str]:
-    from swarm.bench import transport
-
-    record = transport.run(transport.QUICK if quick else transport.FULL)
-    return record, transport.format_report(record)
-
-
-def _montecarlo(quick: bool) -> tuple[dict, str]:
-    from swarm.bench import montecarlo
-
-    record = montecarlo.run(quick)
-    return record, montecarlo.format_report(record)
-
-
-def _faults(quick: bool) -> tuple[dict, str]:
-    from swarm.bench import faults
-
-    record = faults.run(quick)
-    return record, faults.format_report(record)
-
-
-def _checkpoint(quick: bool) -> tuple[dict, str]:
-    from swarm.bench import checkpoint
-
-    record = checkpoint.run(checkpoint.QUICK if quick else checkpoint.FULL)
-    return record, checkpoint.format_report(record)
+    return runner
 
 
 BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
-    "estimator": (_estimator, "estimator step: tandem vs compounded vs FilterPy (paper Table I)"),
-    "sim": (_sim, "one in-process docking: real-time factor and profile"),
-    "transport": (_transport, "the swarm over Zenoh: RTT, lockstep tick period (1/4/16 pairs), latency"),
-    "montecarlo": (_montecarlo, "Monte Carlo campaign wall time: 1 vs 2 workers, number of runs"),
-    "faults": (_faults, "200 runs under the issue-7 faults: docked / safely aborted / failed, NEES"),
-    "checkpoint": (_checkpoint, "the world's checkpoint per tick (1/4/16 pairs), in memory and on disk"),
+    "estimator": (
+        _bench("estimator", presets=True),
+        "estimator step: tandem vs compounded vs FilterPy (paper Table I)",
+    ),
+    "sim": (_bench("sim", presets=False), "one in-process docking: real-time factor and profile"),
+    "transport": (
+        _bench("transport", presets=True),
+        "the swarm over Zenoh: RTT, lockstep tick period (1/4/16 pairs), latency",
+    ),
+    "montecarlo": (
+        _bench("montecarlo", presets=False),
+        "Monte Carlo campaign wall time: 1 vs 2 workers, number of runs",
+    ),
+    "faults": (
+        _bench("faults", presets=False),
+        "200 runs under the issue-7 faults: docked / safely aborted / failed, NEES",
+    ),
+    "checkpoint": (
+        _bench("checkpoint", presets=True),
+        "the world's checkpoint per tick (1/4/16 pairs), in memory and on disk",
+    ),
 }
-"""Bench name -> (runner taking ``quick``, one-line help). Later issues add sim, montecarlo, transport."""
+"""Bench name -> (runner taking ``quick``, one-line help)."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
