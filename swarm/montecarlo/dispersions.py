@@ -40,6 +40,17 @@ MAX_FRACTION_SIGMA = 0.1
 moments a valid inertia (triangle inequality) short of a 10-sigma draw."""
 
 
+SIGMAS = (
+    "position_sigma_m",
+    "velocity_sigma_m_s",
+    "attitude_sigma_deg",
+    "mass_sigma_frac",
+    "inertia_sigma_frac",
+    "thruster_misalignment_deg",
+)
+"""The dispersion sizes of :class:`DispersionParams` (each >= 0; zero switches it off)."""
+
+
 @dataclass(frozen=True)
 class DispersionParams:
     """Run-to-run dispersions drawn from the run's seed (module docstring). Zero switches one off."""
@@ -69,14 +80,7 @@ class DispersionParams:
             raise ConfigError(
                 f"dispersions.distribution must be 'normal' or 'uniform', got {self.distribution!r}"
             )
-        for name in (
-            "position_sigma_m",
-            "velocity_sigma_m_s",
-            "attitude_sigma_deg",
-            "mass_sigma_frac",
-            "inertia_sigma_frac",
-            "thruster_misalignment_deg",
-        ):
+        for name in SIGMAS:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
                 raise ConfigError(f"dispersions.{name} must be a non-negative finite number, got {v!r}")
@@ -88,17 +92,7 @@ class DispersionParams:
     @property
     def enabled(self) -> bool:
         """Whether any dispersion of this table is on."""
-        return any(
-            getattr(self, n) > 0
-            for n in (
-                "position_sigma_m",
-                "velocity_sigma_m_s",
-                "attitude_sigma_deg",
-                "mass_sigma_frac",
-                "inertia_sigma_frac",
-                "thruster_misalignment_deg",
-            )
-        )
+        return any(getattr(self, n) > 0 for n in SIGMAS)
 
 
 def dispersion_rng(seed: int, quantity: str, vehicle_index: int = 0) -> np.random.Generator:
