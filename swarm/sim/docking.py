@@ -334,13 +334,10 @@ class DockingSim:
                 s["relative_nav"].append(bool(agent.relative_nav))
             if cid in self.done:
                 continue
+            call = judge(self.world, g, cid, tid, agent.mode in CORRIDOR_MODES, t)
             if agent.mode not in CORRIDOR_MODES:
                 c = sc.chasers.index(cid)
-                d = self.world.x[cid][0:3] - self.world.x[tid][0:3]
-                self.closest[c] = min(self.closest[c], math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))
-            call = judge(self.world, g, cid, tid, agent.mode in CORRIDOR_MODES, t)
-            if call is None:
-                continue  # far from the target: no contact, no keep-out violation possible
+                self.closest[c] = min(self.closest[c], call.centre_m)
             if call.keepout:
                 if not out.keepout_violated:
                     out.events.append(

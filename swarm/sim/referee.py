@@ -51,15 +51,22 @@ class Call:
     contact: Contact | None
 
 
-def judge(world, g, chaser: str, target: str, docking: bool, t_s: float) -> Call | None:
-    """Keep-out and contact of ``chaser`` on ``target`` in ``world`` at ``t_s``; ``None`` when the chaser is
-    too far for either (the common case, decided on the centre distance alone). ``g`` is the scenario's
-    :class:`~swarm.core.guidance.GuidanceParams`; ``docking`` whether the chaser's mode is DOCK/DOCKED (the
-    corridor then is allowed)."""
+def centre_distance(world, chaser: str, target: str) -> float:
+    """True centre-to-centre distance of ``chaser`` and ``target``, with the arithmetic of
+    :func:`swarm.core.guidance.pair_geometry` (the compiled loop's), so that its minimum over the ticks
+    (``closest_approach_m``) is the same bit for bit in every runner."""
     d = world.x[chaser][0:3] - world.x[target][0:3]
-    centre_m = math.sqrt(d.dot(d))  # = np.linalg.norm, without its overhead
+    return math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+
+
+def judge(world, g, chaser: str, target: str, docking: bool, t_s: float) -> Call:
+    """Keep-out and contact of ``chaser`` on ``target`` in ``world`` at ``t_s``: neither is possible when the
+    chaser is far (the common case, decided on the centre distance alone, which the call always carries).
+    ``g`` is the scenario's :class:`~swarm.core.guidance.GuidanceParams`; ``docking`` whether the chaser's
+    mode is DOCK/DOCKED (the corridor then is allowed)."""
+    centre_m = centre_distance(world, chaser, target)
     if centre_m > g.keepout_radius_m + 2 * g.half_size_m:
-        return None
+        return Call(centre_m, False, None)
     keepout = world.keepout_violated(chaser, target, docking=docking)
     c = world.contact(chaser, target)
     # the chaser's docking face reaches the target's docking face (in front of it, the faces overlapping),

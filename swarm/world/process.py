@@ -481,13 +481,9 @@ class WorldProcess:
                 continue
             tid = self.sc.vehicles[cid].target
             mode = self.modes[cid]
-            if mode not in DOCKING_MODES:  # as swarm.sim.docking's closest_approach_m, same arithmetic
-                d = self.world.x[cid][0:3] - self.world.x[tid][0:3]
-                centre = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-                self.closest[cid] = min(self.closest.get(cid, math.inf), centre)
             call = judge(self.world, g, cid, tid, mode in DOCKING_MODES, t)
-            if call is None:
-                continue
+            if mode not in DOCKING_MODES:  # as swarm.sim.docking's closest_approach_m
+                self.closest[cid] = min(self.closest.get(cid, math.inf), call.centre_m)
             if call.keepout and cid not in self.keepout:
                 self.keepout.add(cid)
                 ev = Event(t, "keepout_violation", {"t_s": t, "mode": mode, "range_m": call.centre_m})
