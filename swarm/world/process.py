@@ -290,8 +290,9 @@ class WorldProcess:
     def _fault_refusal(self, f: Fault) -> str | None:
         """Why the world cannot apply ``f`` (published as a ``fault_refused`` event), or None."""
         if f.vehicle is not None and f.vehicle not in self.world.index:
-            self.drops.drop(self.keys.fault(), f"vehicle: {f.vehicle!r} is not a vehicle of this scenario")
-            return f"vehicle: {f.vehicle!r} is not a vehicle of this scenario"
+            why = f"vehicle: {f.vehicle!r} is not a vehicle of this scenario"
+            self.drops.drop(self.keys.fault(), why)
+            return why
         if f.kind == "camera_loss" and f.vehicle is not None and f.vehicle not in self.world.camera_loss:
             return f"vehicle: {f.vehicle!r} has no camera (only chasers do)"
         if f.kind == "sensor_delay" and self.clock.lockstep:
@@ -305,6 +306,7 @@ class WorldProcess:
         self.pub_truth = {v: declare_reliable(self.session, k.truth(v)) for v in self.ids}
         self.pub_imu = {v: declare_reliable(self.session, k.imu(v)) for v in self.ids}
         self.pub_vision = {v: declare_reliable(self.session, k.vision(v)) for v in self.chasers}
+        self._pubs = {"truth": self.pub_truth, "vision": self.pub_vision, "imu": self.pub_imu}  # by kind
         self.pub_event = {v: declare_reliable(self.session, k.event(v)) for v in self.chasers}
         self.pub_clock = declare_reliable(self.session, k.world_clock())
         self.pub_world_event = declare_reliable(self.session, k.world_event())
@@ -339,7 +341,7 @@ class WorldProcess:
         return out
 
     def _pub(self, kind: str, vid: str):
-        return {"truth": self.pub_truth, "vision": self.pub_vision, "imu": self.pub_imu}[kind][vid]
+        return self._pubs[kind][vid]
 
     def _publish_tick(self, k: int, sensors: list[tuple[str, str, bytes]]) -> None:
         """Publish tick ``k``'s samples (:meth:`_encode_tick`); imu and vision through :meth:`_send`."""
