@@ -29,12 +29,12 @@ import os
 import queue
 import shutil
 import signal
-import tempfile
 import threading
 import time
 from pathlib import Path
 
 from swarm.errors import ConfigError, SwarmError
+from swarm.private_dirs import private_dir
 from swarm.world.checkpoint import EXIT_BAD_CHECKPOINT
 
 _LOG = logging.getLogger("swarm.launch")
@@ -366,10 +366,11 @@ def _checkpoint_root() -> Path:
     """A private directory (mode 0700: the checkpoints are pickles) for the world's checkpoints, outside
     the source tree, removed at exit. In memory (``/dev/shm``) where there is one: a checkpoint must
     survive a killed process, not a machine crash, and a write to tmpfs costs ~20 us per tick where one to
-    an ext4 disk cost 1-3 ms here (``BENCHMARKS.md``)."""
+    an ext4 disk cost 1-3 ms here (``BENCHMARKS.md``). One a SIGKILLed launcher left is removed by the next
+    (:func:`swarm.private_dirs.private_dir`)."""
     shm = Path("/dev/shm")
     base = str(shm) if shm.is_dir() and os.access(shm, os.W_OK | os.X_OK) else None
-    return Path(tempfile.mkdtemp(prefix="swarm-world-", dir=base))
+    return private_dir("swarm-world-", base)
 
 
 def _start_run(args, sc, seed, endpoint, sup, Child):

@@ -46,11 +46,11 @@ import os
 import secrets
 import shutil
 import subprocess
-import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from swarm.errors import ConfigError, SwarmError
+from swarm.private_dirs import private_dir
 from swarm.transport.keys import Keys, check_id
 
 __all__ = [
@@ -321,7 +321,7 @@ class SecureMaterial:
         self.keys = keys
         self.names = identities(vehicle_ids)
         self.hosts = (*DEFAULT_HOSTS, *_listen_hosts(listen))
-        self.directory = Path(tempfile.mkdtemp(prefix="tpods-secure-")).resolve()  # mode 0700
+        self.directory = private_dir("tpods-secure-").resolve()  # mode 0700; a SIGKILLed owner's: removed
         try:
             if self.directory.is_relative_to(_SOURCE_TREE):
                 raise ConfigError(
