@@ -66,22 +66,22 @@ _KINDS = {
 }
 
 
-def position_from_ranges(anchors_ms: np.ndarray, ranges: dict[int, float], lever_ms: np.ndarray, guess_ms):
-    """Centre-of-mass position [m] (3,), frame ms, and its covariance factor ``(J^T J)^-1`` from one or
+def position_from_ranges(anchors_nav: np.ndarray, ranges: dict[int, float], lever_nav: np.ndarray, guess_nav):
+    """Centre-of-mass position [m] (3,), frame nav, and its covariance factor ``(J^T J)^-1`` from one or
     more ranges to each of at least four anchors: nonlinear least squares (scipy ``least_squares``, soft-L1
-    loss against an NLOS range) on ``|p + lever_ms - a_i| = rho_i``, started from ``guess_ms``.
+    loss against an NLOS range) on ``|p + lever_nav - a_i| = rho_i``, started from ``guess_nav``.
 
-    ``lever_ms`` is the tag's lever arm rotated into ms (``R(q) P1``). The paper's four anchors are coplanar
+    ``lever_nav`` is the tag's lever arm rotated into nav (``R(q) P1``). The paper's four anchors are coplanar
     (``2 y + 0.8 z = 0``), so ranges alone have a mirror solution across that plane: the start decides,
     and the scenario's start position of the vehicle lies on the side it flies on."""
     ids = sorted(ranges)
-    A = anchors_ms[ids]
+    A = anchors_nav[ids]
     rho = np.array([ranges[i] for i in ids])
 
     def residual(p):
-        return np.linalg.norm(p + lever_ms - A, axis=1) - rho
+        return np.linalg.norm(p + lever_nav - A, axis=1) - rho
 
-    sol = least_squares(residual, np.asarray(guess_ms, dtype=float), loss="soft_l1", f_scale=0.05)
+    sol = least_squares(residual, np.asarray(guess_nav, dtype=float), loss="soft_l1", f_scale=0.05)
     J = sol.jac
     return sol.x, np.linalg.pinv(J.T @ J)
 
@@ -216,7 +216,7 @@ class AgentProcess:
         a = self.agent
         e = a.est
         args = (
-            k, a.t_s, e.p_ms[0], e.v_ms[0], e.q_ms_body[0], e.P[0], a.sigma_pos_max_m, a.mahalanobis_d,
+            k, a.t_s, e.p_nav[0], e.v_nav[0], e.q_nav_body[0], e.P[0], a.sigma_pos_max_m, a.mahalanobis_d,
             a.rejection_fraction, self._counts(),
         )  # fmt: skip
         try:
@@ -247,7 +247,7 @@ class AgentProcess:
         sw = a.switcher
         range_m = decision = r_t = None
         if a.target is not None and self.chaser:
-            range_m = float(np.linalg.norm(a.est.p_ms[0] - a.target.p_ms))
+            range_m = float(np.linalg.norm(a.est.p_nav[0] - a.target.p_nav))
         if sw is not None and self.policy == "mdp":
             r_t = float(self.sc.mdp.r_t_m)
             if sw.decisions:
@@ -263,18 +263,18 @@ class AgentProcess:
 
     def _collect_init(self, imu: Imu | None, uwb: Uwb | None) -> bool:
         """Gather the AHRS attitude and ranges; build the agent once there is one range per anchor."""
-        if imu is not None and imu.q_ahrs_ms_body is not None:
-            self._init_q = imu.q_ahrs_ms_body
+        if imu is not None and imu.q_ahrs_nav_body is not None:
+            self._init_q = imu.q_ahrs_nav_body
         if uwb is not None and uwb.range_m is not None and uwb.anchor_id < len(self.sc.anchors_m):
             self._init_ranges[uwb.anchor_id] = uwb.range_m
         if self._init_q is None or len(self._init_ranges) < len(self.sc.anchors_m):
             return False
         sc = self.sc
-        lever_ms = rot.quat_rotate(self._init_q, np.asarray(sc.estimator.lever_arm_body_m, dtype=float))
+        lever_nav = rot.quat_rotate(self._init_q, np.asarray(sc.estimator.lever_arm_body_m, dtype=float))
         p0, JtJ_inv = position_from_ranges(
             np.asarray(sc.anchors_m, dtype=float),
             self._init_ranges,
-            lever_ms,
+            lever_nav,
             sc.vehicles[self.id].position_m,
         )
         sig = sc.initial.sigmas
@@ -284,7 +284,9 @@ class AgentProcess:
         cov0 = np.array([var_pos] * 3 + [var_vel] * 3 + [var_att] * 3)
         self.agent = VehicleAgent(sc, self.id, p0, np.zeros(3), self._init_q, cov0, self.policy)
         _LOG.info("%s re-initialised from its sensors at p = %s m", self.id, np.round(p0, 3).tolist())
-        self.pub_event.put(encode(Event(0.0 if imu is None else imu.t_s, "restarted", {"p_ms": p0.tolist()})))
+        self.pub_event.put(
+            encode(Event(0.0 if imu is None else imu.t_s, "restarted", {"p_nav": p0.tolist()}))
+        )
         return True
 
     # ------------------------------------------------------------------------------ the loops
@@ -310,7 +312,7 @@ class AgentProcess:
         if inp.imu is not None:
             # a free-running agent that skipped ticks propagates over the whole gap
             gap = k - self._last_tick if self._last_tick is not None and k > self._last_tick else 1
-            a.on_imu(t, gap * self.dt, inp.imu.gyro_body, inp.imu.q_ahrs_ms_body)
+            a.on_imu(t, gap * self.dt, inp.imu.gyro_body, inp.imu.q_ahrs_nav_body)
         self._last_tick = k
         if inp.uwb is not None and inp.uwb.range_m is not None:
             a.on_uwb(inp.uwb.anchor_id, inp.uwb.range_m)
@@ -323,7 +325,7 @@ class AgentProcess:
         self.ticks += 1
 
     def _set_target(self, e: Estimate) -> None:
-        self.agent.set_target_estimate(TargetEstimate(e.t_s, e.p_ms, e.q_ms_body, e.cov[:3, :3].copy()))
+        self.agent.set_target_estimate(TargetEstimate(e.t_s, e.p_nav, e.q_nav_body, e.cov[:3, :3].copy()))
 
     def _run_lockstep(self) -> None:
         if not self.rejoin:

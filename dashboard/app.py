@@ -224,11 +224,11 @@ class SceneView:
         if a.truth is not nodes.truth_msg:
             nodes.truth_msg = a.truth
             if a.truth is not None:
-                nodes.truth.position, nodes.truth.wxyz = mapping.pose_wxyz(a.truth.p_ms, a.truth.q_ms_body)
+                nodes.truth.position, nodes.truth.wxyz = mapping.pose_wxyz(a.truth.p_nav, a.truth.q_nav_body)
             _set(nodes.truth, "visible", a.truth is not None)
             if nodes.keepout is not None:
                 if a.truth is not None:
-                    nodes.keepout.position = a.truth.p_ms
+                    nodes.keepout.position = a.truth.p_nav
                 _set(nodes.keepout, "visible", a.truth is not None)
         color = mapping.mode_color(a.guidance.mode if a.guidance is not None else None, a.role)
         if color != nodes.color:
@@ -240,8 +240,8 @@ class SceneView:
             _set(nodes.estimate, "visible", est is not None)
             _set(nodes.cov, "visible", est is not None)
             if est is not None:
-                nodes.estimate.position, nodes.estimate.wxyz = mapping.pose_wxyz(est.p_ms, est.q_ms_body)
-                nodes.cov.position = est.p_ms
+                nodes.estimate.position, nodes.estimate.wxyz = mapping.pose_wxyz(est.p_nav, est.q_nav_body)
+                nodes.cov.position = est.p_nav
             else:
                 nodes.cov_key = None
         # The covariance changes slowly: the ellipsoid's shape (an eigen-decomposition and two messages per
@@ -270,7 +270,7 @@ class SceneView:
         if a.truth is not None and target is not None and target.truth is not None:
             cam = self.sc.camera
             in_cone = mapping.target_in_cone(
-                a.truth.p_ms, a.truth.q_ms_body, target.truth.p_ms, cam.pos_body_m, cam.q_body_cam,
+                a.truth.p_nav, a.truth.q_nav_body, target.truth.p_nav, cam.pos_body_m, cam.q_body_cam,
                 cam.fov_half_angle_deg, cam.min_range_m, cam.max_range_m,
             )  # fmt: skip
         state = mapping.fov_state(a.vision_t_s, a.latest_t_s(), in_cone, self.params.vision_recent_s)
@@ -284,7 +284,7 @@ class SceneView:
         centre = None
         if target is not None:
             src = target.truth if target.truth is not None else target.estimate
-            centre = None if src is None else tuple(float(x) for x in src.p_ms)
+            centre = None if src is None else tuple(float(x) for x in src.p_nav)
         g = a.guidance
         radii = mapping.radii_of(g.r_t_m, g.r2_m, g.r1_m) if g is not None else dict.fromkeys(nodes.radii)
         key = (centre, tuple(radii.values()))

@@ -6,8 +6,9 @@ Quaternions on the wire are scalar-last ``(x, y, z, w)`` (``docs/protocol.md``);
 ``wxyz``. :func:`wxyz_from_xyzw` is the one place that converts: every other function here that returns
 an orientation goes through it.
 
-Frames: ``ms`` is the mothership frame, the Viser world frame of the dashboard (``+z`` up); ``body`` a
-vehicle's body frame; the camera frame is OpenCV's (``+z`` optical axis).
+Frames: ``nav`` is the navigation frame (the mothership's, a table's, a landing site's), the Viser world
+frame of the dashboard (``+z`` up); ``body`` a vehicle's body frame; the camera frame is OpenCV's (``+z``
+optical axis).
 """
 
 from __future__ import annotations
@@ -136,11 +137,11 @@ def anchor_node(anchor_id: int) -> str:
     return f"/mothership/anchors/{anchor_id}"
 
 
-def pose_wxyz(p_ms: np.ndarray, q_ms_body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The Viser pose ``(position (3,) [m], wxyz (4,))`` of a vehicle at ``p_ms`` with attitude ``q_ms_body``
-    (x, y, z, w; body -> ms), as in a Truth or an Estimate message. Viser's node orientation maps local
-    (body) vectors into the parent (ms) frame, like ``q_ms_body``."""
-    return np.asarray(p_ms, dtype=np.float64).reshape(3).copy(), wxyz_from_xyzw(q_ms_body)
+def pose_wxyz(p_nav: np.ndarray, q_nav_body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Viser pose ``(position (3,) [m], wxyz (4,))`` of a vehicle at ``p_nav`` with attitude
+    ``q_nav_body`` (x, y, z, w; body -> nav), as in a Truth or an Estimate message. Viser's node orientation
+    maps local (body) vectors into the parent (nav) frame, like ``q_nav_body``."""
+    return np.asarray(p_nav, dtype=np.float64).reshape(3).copy(), wxyz_from_xyzw(q_nav_body)
 
 
 def mode_color(mode: str | None, role: str = "chaser") -> Rgb:
@@ -164,7 +165,7 @@ def covariance_ellipsoid(
     """The ``n_sigma`` ellipsoid of a position covariance: ``(radii (3,) [m], wxyz (4,))`` for a unit sphere
     scaled by ``radii`` along its local axes, then rotated by ``wxyz``.
 
-    ``cov_pos`` (3, 3) [m^2] in the ms frame (the ``d_p`` block of ``Estimate.cov``). With the eigen-
+    ``cov_pos`` (3, 3) [m^2] in the nav frame (the ``d_p`` block of ``Estimate.cov``). With the eigen-
     decomposition ``P = V diag(lambda) V^T`` (V a rotation, det +1), the surface ``x^T P^-1 x = n^2`` is
     the unit sphere scaled by ``n sqrt(lambda_i)`` along ``V``'s columns. Radii are floored at
     ``min_radius_m`` so a collapsed axis still draws.
@@ -212,9 +213,9 @@ def fov_cone_mesh(
 
 
 def target_in_cone(
-    p_chaser_ms: np.ndarray,
-    q_ms_chaser: np.ndarray,
-    p_target_ms: np.ndarray,
+    p_chaser_nav: np.ndarray,
+    q_nav_chaser: np.ndarray,
+    p_target_nav: np.ndarray,
     pos_body_m: Sequence[float],
     q_body_cam: Sequence[float],
     half_angle_deg: float,
@@ -224,11 +225,11 @@ def target_in_cone(
     """Whether the target's centre lies inside the chaser camera's visibility cone: within ``half_angle_deg``
     of the optical axis and at a range in ``[min_range_m, max_range_m]`` from the optical centre.
 
-    ``p_cam = R_body_cam^T (R_ms_chaser^T (p_target - p_chaser) - pos_body)``, ``R(q)`` the matrix of a
+    ``p_cam = R_body_cam^T (R_nav_chaser^T (p_target - p_chaser) - pos_body)``, ``R(q)`` the matrix of a
     scalar-last quaternion (camera frame: OpenCV, ``+z`` optical axis)."""
-    r_ms_body = quat_to_matrix(np.asarray(q_ms_chaser, dtype=np.float64))
+    r_nav_body = quat_to_matrix(np.asarray(q_nav_chaser, dtype=np.float64))
     r_body_cam = quat_to_matrix(np.asarray(q_body_cam, dtype=np.float64))
-    d_body = r_ms_body.T @ (np.asarray(p_target_ms, float) - np.asarray(p_chaser_ms, float))
+    d_body = r_nav_body.T @ (np.asarray(p_target_nav, float) - np.asarray(p_chaser_nav, float))
     p_cam = r_body_cam.T @ (d_body - np.asarray(pos_body_m, dtype=np.float64))
     rng = float(np.linalg.norm(p_cam))
     if not (min_range_m <= rng <= max_range_m) or rng == 0.0:
@@ -254,13 +255,13 @@ def radii_of(r_t_m: float | None, r2_m: float | None, r1_m: float | None) -> dic
     }
 
 
-def mothership_outline(anchors_ms: np.ndarray, pad_m: float = 0.05) -> np.ndarray:
-    """Line segments (12, 2, 3) [m, ms] of the mothership's outline: the box around its UWB anchors (the
+def mothership_outline(anchors_nav: np.ndarray, pad_m: float = 0.05) -> np.ndarray:
+    """Line segments (12, 2, 3) [m, nav] of the mothership's outline: the box around its UWB anchors (the
     anchors sit on the mothership's hull; the scenario has no other geometry), grown by ``pad_m`` on each
     side so that a flat anchor layout still draws a box."""
-    a = np.asarray(anchors_ms, dtype=np.float64).reshape(-1, 3)
+    a = np.asarray(anchors_nav, dtype=np.float64).reshape(-1, 3)
     if a.shape[0] == 0 or not np.isfinite(a).all():
-        raise ValueError(f"anchors_ms must be a non-empty finite (N, 3) array, got shape {a.shape}")
+        raise ValueError(f"anchors_nav must be a non-empty finite (N, 3) array, got shape {a.shape}")
     lo, hi = a.min(axis=0) - pad_m, a.max(axis=0) + pad_m
     corners = np.array([[(lo, hi)[(k >> i) & 1][i] for i in range(3)] for k in range(8)])
     edges = [(k, k | (1 << i)) for k in range(8) for i in range(3) if not k & (1 << i)]

@@ -61,10 +61,10 @@ class Trail:
     def __len__(self) -> int:
         return self._n
 
-    def add(self, p_ms: np.ndarray) -> bool:
-        """Make ``p_ms`` (3,) [m] the trail's end: a new point if the current end is ``min_step_m`` or more
+    def add(self, p_nav: np.ndarray) -> bool:
+        """Make ``p_nav`` (3,) [m] the trail's end: a new point if the current end is ``min_step_m`` or more
         from the point before it, else the end moves there. True if the trail changed."""
-        p = np.asarray(p_ms, dtype=np.float64).reshape(3)
+        p = np.asarray(p_nav, dtype=np.float64).reshape(3)
         n = self._n
         if n and np.array_equal(p, self._buf[n - 1]):
             return False
@@ -289,7 +289,7 @@ class SwarmState:
     def __init__(
         self,
         vehicles: Mapping[str, tuple[str, str | None]],
-        anchors_ms: np.ndarray,
+        anchors_nav: np.ndarray,
         trail_cap: int = 1000,
         trail_step_m: float = 0.002,
         series_cap: int = 600,
@@ -305,7 +305,7 @@ class SwarmState:
         self._new_agents: list[str] = []
         for agent_id, (role, target) in vehicles.items():
             self._add(agent_id, role, target)
-        a = np.asarray(anchors_ms, dtype=np.float64).reshape(-1, 3)
+        a = np.asarray(anchors_nav, dtype=np.float64).reshape(-1, 3)
         self._anchors: tuple[tuple[int, ...], np.ndarray] = (tuple(range(len(a))), a)
         self._anchors_version = 0
         self.clock: Clock | None = None
@@ -350,7 +350,7 @@ class SwarmState:
             if view.truth is not None and msg.t_s < view.truth.t_s:
                 view.truth_trail.clear()
             view.truth = msg
-            view.truth_trail.add(msg.p_ms)
+            view.truth_trail.add(msg.p_nav)
 
     def on_estimate(self, agent_id: str, msg: Estimate) -> None:
         with self._lock:
@@ -360,7 +360,7 @@ class SwarmState:
             if view.estimate is not None and msg.t_s < view.estimate.t_s:
                 view.estimate_trail.clear()
             view.estimate = msg
-            view.estimate_trail.add(msg.p_ms)
+            view.estimate_trail.add(msg.p_nav)
 
     def on_guidance(self, agent_id: str, msg: Guidance) -> None:
         with self._lock:
@@ -422,7 +422,7 @@ class SwarmState:
 
     def on_anchors(self, msg: Anchors) -> None:
         with self._lock:
-            self._anchors = (tuple(msg.anchor_ids), msg.positions_ms.copy())
+            self._anchors = (tuple(msg.anchor_ids), msg.positions_nav.copy())
             self._anchors_version += 1
 
     def on_liveliness(self, role: str, process_id: str, alive: bool) -> str | None:

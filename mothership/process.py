@@ -124,7 +124,7 @@ class MothershipProcess:
         X = np.zeros((len(self.ids), 13))
         for vid, m in truths.items():
             i = self.index[vid]
-            X[i, 0:3], X[i, 3:6], X[i, 6:10], X[i, 10:13] = m.p_ms, m.v_ms, m.q_ms_body, m.w_body
+            X[i, 0:3], X[i, 3:6], X[i, 6:10], X[i, 10:13] = m.p_nav, m.v_nav, m.q_nav_body, m.w_body
         t = k * self.sc.dt_s
         self.network.step(k, t, X)
         self._t_served = t

@@ -35,7 +35,7 @@ A key missing from a table keeps its default: the value in the enclosing field's
 there is one (``chaser: Vehicle = Vehicle(mass_kg=3.0)`` keeps 3.0 when ``[chaser]`` sets only other
 keys), else the dataclass's own default. Unknown keys are errors. Every error is a
 :class:`swarm.errors.ConfigError` whose message names the dotted path of the field (``chaser.dynamics.
-mass_kg``, ``markers_ms[2][0]``) and quotes the bad value. A dataclass's own ``__post_init__`` error
+mass_kg``, ``markers_nav[2][0]``) and quotes the bad value. A dataclass's own ``__post_init__`` error
 (``estimator.sigma_range_m must be ...``, by the project's convention) is re-rooted at the field's real
 path (``agents.a1.sigma_range_m must be ...``), or prefixed with the path if it does not follow it.
 """

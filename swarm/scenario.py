@@ -41,7 +41,7 @@ class VehicleSpec:
     role: Literal["chaser", "target"]
     """A chaser docks on its target; a target keeps station."""
     position_m: Vec3
-    """Initial centre-of-mass position in the mothership frame [m]."""
+    """Initial centre-of-mass position in the navigation frame [m]."""
     euler_deg: Vec3
     """Initial attitude, Euler angles in the scenario's ``euler_seq`` [deg]. For a chaser this is also the
     mission attitude it keeps during APPROACH."""
@@ -128,7 +128,7 @@ class SwarmParams:
     """Distance between neighbouring copies [m]. With the paper's pair, 0.8 m keeps every chaser's path
     more than its target's keep-out radius away from the other copies' targets."""
     grid_axes: tuple[Vec3, Vec3] = ((0.70710678, -0.70710678, 0.0), (0.40824829, 0.40824829, -0.81649658))
-    """The two axes of the square grid of copies, frame ms (unit, orthogonal): by default the plane
+    """The two axes of the square grid of copies, frame nav (unit, orthogonal): by default the plane
     perpendicular to the paper's line of approach (1, 1, 1), so copies sit beside each other's paths."""
 
     def __post_init__(self) -> None:
@@ -177,7 +177,7 @@ class Scenario:
     policy: Literal["fixed", "mdp"] = "mdp"
     """Default switching policy (the CLI's ``--policy`` overrides it)."""
     anchors_m: tuple[Vec3, ...] = PAPER_ANCHORS_M
-    """UWB anchors on the mothership, frame ms [m] (paper sec. III)."""
+    """UWB anchors on the mothership, frame nav [m] (paper sec. III)."""
     tag_lever_arm_body_m: Vec3 = (0.05, 0.05, 0.0)
     """True UWB tag position P1 in the body frame [m] (paper sec. III); the filter's model of it is
     ``estimator.lever_arm_body_m``."""
@@ -306,7 +306,7 @@ class Scenario:
         return replace(self, vehicles=vehicles)
 
     def q0(self, vehicle_id: str) -> np.ndarray:
-        """Initial attitude q_ms_body of a vehicle."""
+        """Initial attitude q_nav_body of a vehicle."""
         from swarm.core.rotations import euler_to_quat
 
         return euler_to_quat(np.radians(self.vehicles[vehicle_id].euler_deg), self.euler_seq)

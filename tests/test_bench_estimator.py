@@ -68,20 +68,20 @@ def test_filterpy_model_equals_the_compounded_filter(steps):
     pytest.importorskip("filterpy")
     params = EstimatorParams(structure=Structure.COMPOUNDED)
     inp = bench.make_inputs(steps, 0.01, params, seed=3)
-    ours = PoseEstimator.create(params, inp.p0_ms, inp.v0_ms, inp.q0_ms_body, inp.cov0)
-    fp = FilterPyMekf(params, inp.p0_ms, inp.v0_ms, inp.q0_ms_body, inp.cov0, 0.01)
-    q_gyro_only = inp.q0_ms_body
+    ours = PoseEstimator.create(params, inp.p0_nav, inp.v0_nav, inp.q0_nav_body, inp.cov0)
+    fp = FilterPyMekf(params, inp.p0_nav, inp.v0_nav, inp.q0_nav_body, inp.cov0, 0.01)
+    q_gyro_only = inp.q0_nav_body
     for k in range(steps):
         q_gyro_only = rot.quat_normalize(rot.quat_mul(q_gyro_only, rot.rotvec_exp(inp.w_body[k] * 0.01)))
-        ours.predict(inp.w_body[k], inp.a_ms[k], 0.01)
-        assert ours.update_range(inp.anchor_ms[k], inp.range_m[k])[0] == UpdateStatus.ACCEPTED
-        fp.step(inp.w_body[k], inp.a_ms[k], inp.anchor_ms[k], inp.range_m[k])
-    np.testing.assert_allclose(fp.ekf.x[:3, 0], ours.p_ms[0], rtol=0, atol=1e-9)
-    np.testing.assert_allclose(fp.ekf.x[3:6, 0], ours.v_ms[0], rtol=0, atol=1e-9)
-    np.testing.assert_allclose(fp.q_ms_body, ours.q_ms_body[0], rtol=0, atol=1e-9)
+        ours.predict(inp.w_body[k], inp.a_nav[k], 0.01)
+        assert ours.update_range(inp.anchor_nav[k], inp.range_m[k])[0] == UpdateStatus.ACCEPTED
+        fp.step(inp.w_body[k], inp.a_nav[k], inp.anchor_nav[k], inp.range_m[k])
+    np.testing.assert_allclose(fp.ekf.x[:3, 0], ours.p_nav[0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(fp.ekf.x[3:6, 0], ours.v_nav[0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(fp.q_nav_body, ours.q_nav_body[0], rtol=0, atol=1e-9)
     np.testing.assert_array_equal(fp.ekf.x[6:, 0], 0.0)
     # the ranges moved the attitude by far more than the tolerance: the reset is covered too
-    assert np.linalg.norm(rot.attitude_error(q_gyro_only, fp.q_ms_body)) > 1e-6
+    assert np.linalg.norm(rot.attitude_error(q_gyro_only, fp.q_nav_body)) > 1e-6
     # P entries are ~1e-4 .. 1e-9: a relative tolerance, so that an error in a small block still shows
     np.testing.assert_allclose(fp.ekf.P, ours.P[0], rtol=1e-9, atol=1e-18)
 
@@ -215,12 +215,12 @@ def test_executed_flop_model_counts_what_the_kernels_execute(monkeypatch, struct
     params = EstimatorParams(structure=Structure(structure))
     prm = params.param_vector()
     inp = bench.make_inputs(1, 0.01, params, seed=0)
-    x0 = np.concatenate([inp.p0_ms, inp.v0_ms, inp.q0_ms_body])
+    x0 = np.concatenate([inp.p0_nav, inp.v0_nav, inp.q0_nav_body])
     w_body, dt = np.array([0.02, -0.05, 0.04]), 0.01  # |w| dt = 6.7e-4 rad
     # compiled, before patching: the predicted range, so that the counted update sees a 1 mm innovation
     x1, stat = x0.copy(), (np.zeros((3, nb.N_TYPES), dtype=np.int64), np.zeros(nb.N_STF))
-    nb.predict_one(x1, inp.cov0.copy(), *stat, w_body, inp.a_ms[0], dt, prm)
-    h, _ = nb.range_model(x1, inp.anchor_ms[0], np.asarray(params.lever_arm_body_m))
+    nb.predict_one(x1, inp.cov0.copy(), *stat, w_body, inp.a_nav[0], dt, prm)
+    h, _ = nb.range_model(x1, inp.anchor_nav[0], np.asarray(params.lever_arm_body_m))
     X, P = _counted(x0), _counted(inp.cov0)
     counts, book = np.zeros((3, nb.N_TYPES), dtype=np.int64), _counted(np.zeros(nb.N_STF))
     model = bench.flops_per_step(structure)
@@ -228,13 +228,13 @@ def test_executed_flop_model_counts_what_the_kernels_execute(monkeypatch, struct
 
     _Counted.flops = 0
     status = nb.predict_one.py_func(
-        X, P, counts, book, _counted(w_body), _counted(inp.a_ms[0]), _Counted(dt), prm
+        X, P, counts, book, _counted(w_body), _counted(inp.a_nav[0]), _Counted(dt), prm
     )
     assert status == nb.ST_ACCEPTED
     assert _Counted.flops == model["predict"]
     _Counted.flops = 0
     z, sigma = _Counted(h + 0.001), _Counted(params.sigma_range_m)
-    status = nb.update_range_one.py_func(X, P, counts, book, prm, inp.anchor_ms[0], z, sigma, 20.0)
+    status = nb.update_range_one.py_func(X, P, counts, book, prm, inp.anchor_nav[0], z, sigma, 20.0)
     assert status == nb.ST_ACCEPTED
     assert _Counted.flops == model["update"] + model["correction"]
 

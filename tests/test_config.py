@@ -53,8 +53,8 @@ class Vehicle:
     """Display name."""
     dynamics: Dynamics = Dynamics()
     """Rigid-body parameters."""
-    p0_ms: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    """Initial position [m], frame ms."""
+    p0_nav: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Initial position [m], frame nav."""
 
 
 @dataclass(frozen=True)
@@ -63,8 +63,8 @@ class Agent:
     """Controller gain."""
     level: Level = Level.LOW
     """Autonomy level."""
-    markers_ms: tuple[tuple[float, float, float], ...] = ()
-    """Marker positions [m], frame ms."""
+    markers_nav: tuple[tuple[float, float, float], ...] = ()
+    """Marker positions [m], frame nav."""
 
     def __post_init__(self) -> None:
         if self.gain < 0:  # a message that does not follow the convention: the loader prefixes the path
@@ -130,7 +130,7 @@ timeout_s = 30.0
 
 [chaser]
 name = "c1"
-p0_ms = [1.0, 2.0, 1.0]
+p0_nav = [1.0, 2.0, 1.0]
 
 [chaser.dynamics]
 mass_kg = 4.5
@@ -142,7 +142,7 @@ mass_kg = 2.0
 [agents.a1]
 gain = 0.5
 level = 2
-markers_ms = [[0.0, 0.0, 0.1], [0.1, 0.0, 0.0]]
+markers_nav = [[0.0, 0.0, 0.1], [0.1, 0.0, 0.0]]
 
 [agents."agent two"]
 """
@@ -161,10 +161,10 @@ def test_every_supported_type_loads() -> None:
         face="+x",
         weights=(0.5, 1.0, 2.5),
         timeout_s=30.0,
-        chaser=Vehicle(name="c1", dynamics=Dynamics(4.5, (0.2, 0.3, 0.4)), p0_ms=(1.0, 2.0, 1.0)),
+        chaser=Vehicle(name="c1", dynamics=Dynamics(4.5, (0.2, 0.3, 0.4)), p0_nav=(1.0, 2.0, 1.0)),
         target=Vehicle(dynamics=Dynamics(mass_kg=2.0)),
         agents={
-            "a1": Agent(gain=0.5, level=Level.HIGH, markers_ms=((0.0, 0.0, 0.1), (0.1, 0.0, 0.0))),
+            "a1": Agent(gain=0.5, level=Level.HIGH, markers_nav=((0.0, 0.0, 0.1), (0.1, 0.0, 0.0))),
             "agent two": Agent(),
         },
     )
@@ -174,7 +174,7 @@ def test_loaded_values_have_the_declared_python_types() -> None:
     toy = from_mapping(Toy, tomllib.loads(FULL_TOML))
     assert type(toy.duration_s) is float and type(toy.weights[1]) is float
     assert type(toy.mode) is Mode and type(toy.agents["a1"].level) is Level
-    assert type(toy.chaser.p0_ms) is tuple and type(toy.agents["a1"].markers_ms[0]) is tuple
+    assert type(toy.chaser.p0_nav) is tuple and type(toy.agents["a1"].markers_nav[0]) is tuple
 
 
 def test_empty_mapping_gives_the_defaults() -> None:
@@ -183,7 +183,7 @@ def test_empty_mapping_gives_the_defaults() -> None:
 
 def test_missing_keys_keep_the_enclosing_default_instance() -> None:
     # Toy.chaser defaults to Vehicle(name="chaser", mass 3.0), unlike Vehicle() (name "vehicle", mass 1.0).
-    toy = from_mapping(Toy, {"chaser": {"p0_ms": [1, 2, 3], "dynamics": {"inertia_kg_m2": [1, 1, 1]}}})
+    toy = from_mapping(Toy, {"chaser": {"p0_nav": [1, 2, 3], "dynamics": {"inertia_kg_m2": [1, 1, 1]}}})
     assert toy.chaser.name == "chaser"
     assert toy.chaser.dynamics.mass_kg == 3.0
 
@@ -212,9 +212,9 @@ BAD_INPUTS = [
     ("weights = [1.0, -inf]", ["weights[1]: expected a finite number, got -inf"]),
     ("verbose = 1", ["verbose: expected true or false, got 1"]),
     ("[chaser]\nname = 5", ["chaser.name: expected a string, got 5"]),
-    ("[chaser]\np0_ms = [1.0, 2.0]", ["chaser.p0_ms: expected an array of 3 items, got 2: [1.0, 2.0]"]),
-    ("[chaser]\np0_ms = 1.0", ["chaser.p0_ms: expected an array, got 1.0"]),
-    ("[agents.a1]\nmarkers_ms = [[0, 0, 1], [0, 1]]", ["agents.a1.markers_ms[1]: expected an array of 3"]),
+    ("[chaser]\np0_nav = [1.0, 2.0]", ["chaser.p0_nav: expected an array of 3 items, got 2: [1.0, 2.0]"]),
+    ("[chaser]\np0_nav = 1.0", ["chaser.p0_nav: expected an array, got 1.0"]),
+    ("[agents.a1]\nmarkers_nav = [[0, 0, 1], [0, 1]]", ["agents.a1.markers_nav[1]: expected an array of 3"]),
     ('mode = "medium"', ["mode: expected one of 'fast', 'slow', got 'medium'"]),
     ("[agents.a1]\nlevel = 3", ["agents.a1.level: expected one of 1, 2, got 3"]),
     ("[agents.a1]\nlevel = true", ["agents.a1.level: expected one of 1, 2, got True"]),
@@ -328,8 +328,8 @@ def test_override_through_a_scalar_is_rejected() -> None:
 
 
 def test_table_override_merges_into_the_existing_table() -> None:
-    merged = apply_overrides({"chaser": {"name": "c", "p0_ms": [1, 2, 3]}}, {"chaser": {"name": "d"}})
-    assert merged == {"chaser": {"name": "d", "p0_ms": [1, 2, 3]}}
+    merged = apply_overrides({"chaser": {"name": "c", "p0_nav": [1, 2, 3]}}, {"chaser": {"name": "d"}})
+    assert merged == {"chaser": {"name": "d", "p0_nav": [1, 2, 3]}}
 
 
 def test_apply_overrides_leaves_the_input_unchanged() -> None:
@@ -401,8 +401,8 @@ def test_dump_toml_refuses_none_when_the_default_is_not_none() -> None:
 
 
 def test_dump_toml_refuses_non_finite_floats() -> None:
-    with pytest.raises(ConfigError, match=r"^chaser\.p0_ms\[2\]: expected a finite number, got nan"):
-        dump_toml(Toy(chaser=Vehicle(p0_ms=(0.0, 0.0, math.nan))))
+    with pytest.raises(ConfigError, match=r"^chaser\.p0_nav\[2\]: expected a finite number, got nan"):
+        dump_toml(Toy(chaser=Vehicle(p0_nav=(0.0, 0.0, math.nan))))
 
 
 def test_to_mapping_gives_plain_json_data() -> None:
@@ -410,7 +410,7 @@ def test_to_mapping_gives_plain_json_data() -> None:
     data = to_mapping(toy)
     assert data["mode"] == "slow" and type(data["mode"]) is str
     assert data["agents"]["a1"]["level"] == 2 and type(data["agents"]["a1"]["level"]) is int
-    assert data["chaser"]["p0_ms"] == [1.0, 2.0, 1.0]
+    assert data["chaser"]["p0_nav"] == [1.0, 2.0, 1.0]
     assert from_mapping(Toy, json.loads(json.dumps(data))) == toy
 
 
@@ -426,12 +426,12 @@ _vec3 = st.tuples(_finite, _finite, _finite)
 _text = st.text(st.characters(exclude_categories=("Cs",)), max_size=12)  # TOML cannot hold lone surrogates
 _positive = st.floats(min_value=0.0, exclude_min=True, allow_infinity=False)
 _dynamics = st.builds(Dynamics, mass_kg=_positive, inertia_kg_m2=_vec3)
-_vehicle = st.builds(Vehicle, name=_text, dynamics=_dynamics, p0_ms=_vec3)
+_vehicle = st.builds(Vehicle, name=_text, dynamics=_dynamics, p0_nav=_vec3)
 _agent = st.builds(
     Agent,
     gain=st.floats(min_value=0.0, allow_infinity=False),
     level=st.sampled_from(Level),
-    markers_ms=st.lists(_vec3, max_size=3).map(tuple),
+    markers_nav=st.lists(_vec3, max_size=3).map(tuple),
 )
 _toys = st.builds(
     Toy,

@@ -118,7 +118,7 @@ def _fingerprint(res: dict) -> dict:
     )
     out = {k: c[k] for k in keys}
     out["decisions"] = c.get("decisions")
-    out["p_true_ms"] = c["series"]["p_true_ms"]
+    out["p_true_nav"] = c["series"]["p_true_nav"]
     out["target_impulse_ns"] = res["target_impulse_ns"]
     return out
 
@@ -136,7 +136,7 @@ def test_different_seed_gives_a_different_run(runs, policy):
     a, b = chaser(runs(policy, SEEDS[0])), chaser(runs(policy, SEEDS[1]))
     assert a["total_impulse_ns"] != b["total_impulse_ns"]
     assert a["position_error_m"] != b["position_error_m"]
-    assert a["series"]["p_true_ms"] != b["series"]["p_true_ms"]
+    assert a["series"]["p_true_nav"] != b["series"]["p_true_nav"]
 
 
 # ---- (c) the summary: DESIGN.md section 8 ------------------------------------------------------------------
@@ -155,10 +155,10 @@ CHASER_FIELDS = {
 }
 SERIES_SHAPES = {
     "t_s": (),
-    "p_true_ms": (3,),
-    "p_est_ms": (3,),
-    "q_true_ms_body": (4,),
-    "q_est_ms_body": (4,),
+    "p_true_nav": (3,),
+    "p_est_nav": (3,),
+    "q_true_nav_body": (4,),
+    "q_est_nav_body": (4,),
     "cov_pos": (3, 3),
     "mode": (),
 }
@@ -190,7 +190,7 @@ def test_series_fields_have_consistent_lengths_and_shapes(runs, policy):
             assert np.asarray(s[key], dtype=float).shape == (n, *shape), key
     dt = np.diff(s["t_s"])
     np.testing.assert_allclose(dt, SC.sim.series_every * SC.dt_s, rtol=1e-9)
-    q = np.asarray(s["q_true_ms_body"])
+    q = np.asarray(s["q_true_nav_body"])
     np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-9)
     cov = np.asarray(s["cov_pos"])
     np.testing.assert_allclose(cov, np.transpose(cov, (0, 2, 1)), atol=1e-15)

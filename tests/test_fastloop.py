@@ -28,7 +28,7 @@ def test_compiled_inner_loop_gives_the_per_tick_run_bit_for_bit(policy, seed):
         assert a[key] == b[key], key
     assert a["modes"] == b["modes"]
     assert a["estimator"] == b["estimator"]
-    for key in ("p_true_ms", "p_est_ms", "q_est_ms_body", "cov_pos"):
+    for key in ("p_true_nav", "p_est_nav", "q_est_nav_body", "cov_pos"):
         assert np.array_equal(np.asarray(a["series"][key]), np.asarray(b["series"][key])), key
     assert fast["target_impulse_ns"] == slow["target_impulse_ns"]
 
@@ -54,7 +54,7 @@ def test_closest_approach_is_the_closest_truth_outside_the_corridor_modes():
     res = DockingSim(sc, "mdp", 5, record_series=True, fast=True).run()["chasers"]["chaser"]
     s = res["series"]
     p_t = np.asarray(sc.vehicles["target"].position_m)
-    d = np.linalg.norm(np.asarray(s["p_true_ms"]) - p_t, axis=1)
+    d = np.linalg.norm(np.asarray(s["p_true_nav"]) - p_t, axis=1)
     outside = np.array([m not in ("DOCK", "DOCKED", "ABORT") for m in s["mode"]])
     series_min = d[outside].min()
     step = sc.sim.series_every * sc.dt_s * 2 * sc.guidance.approach_speed_m_s

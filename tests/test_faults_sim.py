@@ -93,7 +93,7 @@ def test_fast_path_gives_the_per_tick_run_with_mode_triggered_faults(faulty_run)
     fast = DockingSim(sc, "mdp", SEED, record_series=True, fast=True).run()["chasers"]["chaser"]
     for key in ("docked", "docking_time_s", "total_impulse_ns", "modes", "estimator", "faults"):
         assert fast[key] == slow[key], key
-    for key in ("p_true_ms", "p_est_ms", "cov_pos"):
+    for key in ("p_true_nav", "p_est_nav", "cov_pos"):
         assert np.array_equal(np.asarray(fast["series"][key]), np.asarray(slow["series"][key])), key
 
 
@@ -103,10 +103,10 @@ def test_gyro_bias_step_in_the_closed_loop_matches_per_tick_and_changes_the_run(
     fast = DockingSim(sc, "mdp", 1, record_series=True, fast=True).run()["chasers"]["chaser"]
     slow = DockingSim(sc, "mdp", 1, record_series=True, fast=False).run()["chasers"]["chaser"]
     nominal = DockingSim(load_scenario("docking", {"sim.max_duration_s": 40.0}), "mdp", 1).run()
-    q = np.asarray(fast["series"]["q_est_ms_body"])
-    assert np.array_equal(q, np.asarray(slow["series"]["q_est_ms_body"]))
+    q = np.asarray(fast["series"]["q_est_nav_body"])
+    assert np.array_equal(q, np.asarray(slow["series"]["q_est_nav_body"]))
     t = np.asarray(fast["series"]["t_s"])
-    q_nom = np.asarray(nominal["chasers"]["chaser"]["series"]["q_est_ms_body"])
+    q_nom = np.asarray(nominal["chasers"]["chaser"]["series"]["q_est_nav_body"])
     assert np.array_equal(q[t <= 20.0], q_nom[t <= 20.0])  # bit for bit before the step
     assert not np.array_equal(q[t > 20.0], q_nom[t > 20.0])
 
@@ -157,7 +157,7 @@ def test_chaser_position_nees_is_consistent_in_the_closed_loop_on_uwb():
     for k in range(32):
         s = DockingSim(sc, "fixed", 100 + k).run()["chasers"]["chaser"]["series"]
         assert not any(s["relative_nav"])  # UWB navigation throughout
-        e = np.asarray(s["p_est_ms"]) - np.asarray(s["p_true_ms"])
+        e = np.asarray(s["p_est_nav"]) - np.asarray(s["p_true_nav"])
         nees = np.einsum("ki,ki->k", e, np.linalg.solve(np.asarray(s["cov_pos"]), e[..., None])[..., 0])
         means.append(nees[::10].mean())  # 1 s samples
     mean, half = _run_means_t_test(np.asarray(means))

@@ -2,7 +2,7 @@
 steady-state probabilities of Algorithm 1's [REORIENT, ALIGN] chain, over a grid of deployment points.
 
 **Filter model.** The translation filter of the estimator (paper sec. IV, tandem structure): state
-``(p, v)`` in the mothership frame, white-noise acceleration of PSD ``q`` (``estimator.accel_psd_m2_s3``),
+``(p, v)`` in the navigation frame, white-noise acceleration of PSD ``q`` (``estimator.accel_psd_m2_s3``),
 ranges to the anchors with noise ``sigma_r`` (``estimator.sigma_range_m``). The ranges come in round robin,
 one anchor per exchange at ``uwb.rate_hz``; over one cycle of the ``m`` anchors (``T = m / rate``) the
 filter sees every anchor once, which the steady-state analysis takes as one stacked measurement per cycle:
@@ -103,7 +103,7 @@ def cycle_model(sc) -> tuple[np.ndarray, np.ndarray, float, float]:
 
 
 def range_jacobians(points_m: np.ndarray, anchors_m: np.ndarray) -> np.ndarray:
-    """``(N, m, 6)`` range Jacobians ``[u^T, 0]`` at ``points_m (N, 3)`` for ``anchors_m (m, 3)`` (ms)."""
+    """``(N, m, 6)`` range Jacobians ``[u^T, 0]`` at ``points_m (N, 3)`` for ``anchors_m (m, 3)`` (nav)."""
     d = np.asarray(points_m, dtype=float)[:, None, :] - np.asarray(anchors_m, dtype=float)[None, :, :]
     u = d / np.linalg.norm(d, axis=-1, keepdims=True)
     return np.concatenate([u, np.zeros_like(u)], axis=-1)

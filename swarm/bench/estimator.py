@@ -92,13 +92,13 @@ QUICK = BenchConfig(steps=200, repeats=5, batch_sizes=(10, 100), batch_steps=20,
 class Inputs:
     """A precomputed run of ``K`` steps; every filter under test starts from the same estimate."""
 
-    p0_ms: np.ndarray  # (3,) initial position estimate [m], frame c
-    v0_ms: np.ndarray  # (3,) initial velocity estimate [m/s]
-    q0_ms_body: np.ndarray  # (4,) initial attitude estimate, scalar-last
+    p0_nav: np.ndarray  # (3,) initial position estimate [m], frame c
+    v0_nav: np.ndarray  # (3,) initial velocity estimate [m/s]
+    q0_nav_body: np.ndarray  # (4,) initial attitude estimate, scalar-last
     cov0: np.ndarray  # (9, 9) initial error covariance, order (d_p, d_v, d_theta)
     w_body: np.ndarray  # (K, 3) gyro rates [rad/s]
-    a_ms: np.ndarray  # (K, 3) known (commanded) acceleration [m/s^2], frame c
-    anchor_ms: np.ndarray  # (K, 3) anchor ranged after step k's prediction
+    a_nav: np.ndarray  # (K, 3) known (commanded) acceleration [m/s^2], frame c
+    anchor_nav: np.ndarray  # (K, 3) anchor ranged after step k's prediction
     range_true_m: np.ndarray  # (K,) noise-free range of that anchor [m]
     range_m: np.ndarray  # (K,) measured range, 2 cm white noise [m]
     dt_s: float
@@ -111,7 +111,7 @@ def make_inputs(steps: int, dt_s: float, params: EstimatorParams, seed: int = 0)
     rng_init, rng_gyro, rng_uwb = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
     t = dt_s * np.arange(steps)[:, None]
     w_true = 0.1 * np.concatenate([np.sin(0.5 * t), np.cos(0.4 * t), np.sin(0.3 * t + 1.0)], axis=-1)
-    a_ms = 0.01 * np.concatenate([np.sin(0.3 * t), np.cos(0.2 * t), -np.sin(0.25 * t)], axis=-1)
+    a_nav = 0.01 * np.concatenate([np.sin(0.3 * t), np.cos(0.2 * t), -np.sin(0.25 * t)], axis=-1)
     p, v = np.array([-0.2, 0.0, 0.1]), np.array([0.02, 0.005, -0.01])
     q = rot.rotvec_exp(np.array([0.1, -0.2, 0.3]))
     sig0 = np.array([0.02] * 3 + [0.01] * 3 + [0.02] * 3)
@@ -121,19 +121,19 @@ def make_inputs(steps: int, dt_s: float, params: EstimatorParams, seed: int = 0)
     anchors = PAPER_ANCHORS_MS[np.arange(steps) % len(PAPER_ANCHORS_MS)]
     r_true = np.empty(steps)
     for k in range(steps):
-        p = p + v * dt_s + 0.5 * a_ms[k] * dt_s**2
-        v = v + a_ms[k] * dt_s
+        p = p + v * dt_s + 0.5 * a_nav[k] * dt_s**2
+        v = v + a_nav[k] * dt_s
         q = rot.quat_normalize(rot.quat_mul(q, rot.rotvec_exp(w_true[k] * dt_s)))
         r_true[k] = np.linalg.norm(p + rot.quat_rotate(q, lever) - anchors[k])
     gyro = w_true + rng_gyro.normal(0.0, params.gyro_arw_rad_rts / np.sqrt(dt_s), w_true.shape)
     return Inputs(
-        p0_ms=p0,
-        v0_ms=v0,
-        q0_ms_body=q0,
+        p0_nav=p0,
+        v0_nav=v0,
+        q0_nav_body=q0,
         cov0=np.diag(sig0**2),
         w_body=np.ascontiguousarray(gyro),
-        a_ms=np.ascontiguousarray(a_ms),
-        anchor_ms=np.ascontiguousarray(anchors),
+        a_nav=np.ascontiguousarray(a_nav),
+        anchor_nav=np.ascontiguousarray(anchors),
         range_true_m=r_true,
         range_m=r_true + rng_uwb.normal(0.0, params.sigma_range_m, steps),
         dt_s=dt_s,
@@ -209,7 +209,7 @@ def _timed(loop: Callable[[], None]) -> float:
 
 
 def _create(params: EstimatorParams, inp: Inputs, n: int = 1) -> PoseEstimator:
-    return PoseEstimator.create(params, inp.p0_ms, inp.v0_ms, inp.q0_ms_body, inp.cov0, n=n)
+    return PoseEstimator.create(params, inp.p0_nav, inp.v0_nav, inp.q0_nav_body, inp.cov0, n=n)
 
 
 def _accepted(est: PoseEstimator) -> int:
@@ -219,7 +219,7 @@ def _accepted(est: PoseEstimator) -> int:
 def _api_block(params: EstimatorParams, inp: Inputs) -> Block:
     def block():
         est = _create(params, inp)
-        W, A, anc, Z, dt = inp.w_body, inp.a_ms, inp.anchor_ms, inp.range_m, inp.dt_s
+        W, A, anc, Z, dt = inp.w_body, inp.a_nav, inp.anchor_nav, inp.range_m, inp.dt_s
 
         def loop():
             for k in range(len(Z)):
@@ -233,8 +233,8 @@ def _api_block(params: EstimatorParams, inp: Inputs) -> Block:
 
 def _dispatch_block(params: EstimatorParams, inp: Inputs) -> Block:
     K = len(inp.range_m)
-    W, A = inp.w_body.reshape(K, 1, 3), inp.a_ms.reshape(K, 1, 3)
-    anc, Z = inp.anchor_ms.reshape(K, 1, 3), inp.range_m.reshape(K, 1)
+    W, A = inp.w_body.reshape(K, 1, 3), inp.a_nav.reshape(K, 1, 3)
+    anc, Z = inp.anchor_nav.reshape(K, 1, 3), inp.range_m.reshape(K, 1)
     sigma, mask = np.full(1, params.sigma_range_m), np.ones(1, dtype=np.bool_)
     gate, prm, dt = chi2_gate(1, params.gate_probability), params.param_vector(), inp.dt_s
 
@@ -255,7 +255,7 @@ def _dispatch_block(params: EstimatorParams, inp: Inputs) -> Block:
 def _compiled_block(params: EstimatorParams, inp: Inputs, piece: str = "step") -> Block:
     """The whole step (:func:`_kernel_loop`) or one of :data:`PIECES` (:func:`_piece_loop`)."""
     gate, prm, K = chi2_gate(1, params.gate_probability), params.param_vector(), len(inp.range_m)
-    run_ = (inp.w_body, inp.a_ms, inp.dt_s, inp.anchor_ms)
+    run_ = (inp.w_body, inp.a_nav, inp.dt_s, inp.anchor_nav)
 
     def block():
         est = _create(params, inp)
@@ -273,8 +273,8 @@ def _compiled_block(params: EstimatorParams, inp: Inputs, piece: str = "step") -
 
 def _filterpy_block(params: EstimatorParams, inp: Inputs) -> Block:
     def block():
-        f = FilterPyMekf(params, inp.p0_ms, inp.v0_ms, inp.q0_ms_body, inp.cov0, inp.dt_s)
-        W, A, anc, Z = inp.w_body, inp.a_ms, inp.anchor_ms, inp.range_m
+        f = FilterPyMekf(params, inp.p0_nav, inp.v0_nav, inp.q0_nav_body, inp.cov0, inp.dt_s)
+        W, A, anc, Z = inp.w_body, inp.a_nav, inp.anchor_nav, inp.range_m
 
         def loop():
             for k in range(len(Z)):
@@ -288,7 +288,7 @@ def _filterpy_block(params: EstimatorParams, inp: Inputs) -> Block:
 def _batched_block(params: EstimatorParams, inp: Inputs, n: int, seed: int) -> Block:
     K = len(inp.range_m)
     W = np.ascontiguousarray(np.broadcast_to(inp.w_body[:, None, :], (K, n, 3)))
-    A = np.ascontiguousarray(np.broadcast_to(inp.a_ms[:, None, :], (K, n, 3)))
+    A = np.ascontiguousarray(np.broadcast_to(inp.a_nav[:, None, :], (K, n, 3)))
     rng = np.random.default_rng(seed)
     Z = inp.range_true_m[:, None] + rng.normal(0.0, params.sigma_range_m, (K, n))  # own noise per filter
 
@@ -298,7 +298,7 @@ def _batched_block(params: EstimatorParams, inp: Inputs, n: int, seed: int) -> B
         def loop():
             for k in range(K):
                 est.predict(W[k], A[k], inp.dt_s)
-                est.update_range(inp.anchor_ms[k], Z[k])
+                est.update_range(inp.anchor_nav[k], Z[k])
 
         return _timed(loop), K * n, _accepted(est)
 

@@ -28,7 +28,7 @@ def filterpy_available() -> bool:
 class FilterPyMekf:
     """FilterPy's ``ExtendedKalmanFilter`` (dim_x=9, dim_z=1) running the compounded filter's model.
 
-    The state is the error state ``(p, v, d_theta)`` around a reference quaternion ``q_ms_body`` that is
+    The state is the error state ``(p, v, d_theta)`` around a reference quaternion ``q_nav_body`` that is
     propagated with the gyro outside FilterPy (paper eq. 3). Per step: ``F = [[I, dt I, 0], [0, I, 0],
     [0, 0, Phi]]`` with ``Phi = R(exp(w dt))^T`` (Crassidis & Junkins 2011 sec. 7.2.4), the known
     acceleration through ``B = [dt^2/2 I; dt I; 0]``, ``Q`` the white-noise-acceleration blocks
@@ -40,17 +40,17 @@ class FilterPyMekf:
     ``F`` changes with the gyro each step; ``Q`` and ``B`` depend only on ``dt`` and are built once.
     FilterPy has no gate: with every range accepted both filters do the same algebra.
 
-    Arguments: ``p_ms`` (3,) [m] and ``v_ms`` (3,) [m/s] in frame c, ``q_ms_body`` (4,) scalar-last,
+    Arguments: ``p_nav`` (3,) [m] and ``v_nav`` (3,) [m/s] in frame c, ``q_nav_body`` (4,) scalar-last,
     ``cov0`` (9, 9) of ``(d_p, d_v, d_theta)``, ``dt_s`` the fixed step [s].
     """
 
-    def __init__(self, params: EstimatorParams, p_ms, v_ms, q_ms_body, cov0, dt_s: float) -> None:
+    def __init__(self, params: EstimatorParams, p_nav, v_nav, q_nav_body, cov0, dt_s: float) -> None:
         from filterpy.kalman import ExtendedKalmanFilter
 
         self.ekf = ExtendedKalmanFilter(dim_x=9, dim_z=1)
-        self.ekf.x = np.concatenate([p_ms, v_ms, np.zeros(3)]).reshape(9, 1)
+        self.ekf.x = np.concatenate([p_nav, v_nav, np.zeros(3)]).reshape(9, 1)
         self.ekf.P = np.array(cov0, dtype=float)
-        self.q_ms_body = np.array(q_ms_body, dtype=float)
+        self.q_nav_body = np.array(q_nav_body, dtype=float)
         self.dt_s = dt_s
         self.sigma_range_m = params.sigma_range_m
         self.lever_body_m = np.asarray(params.lever_arm_body_m, dtype=float)
@@ -65,40 +65,40 @@ class FilterPyMekf:
         self.ekf.B = np.vstack([0.5 * dt_s**2 * eye3, dt_s * eye3, np.zeros((3, 3))])
         self._F = np.eye(9)
         self._F[:3, 3:6] = dt_s * eye3
-        self._R_ms_body = rot.quat_to_matrix(self.q_ms_body)
+        self._R_nav_body = rot.quat_to_matrix(self.q_nav_body)
 
-    def _tag_offset(self, x: np.ndarray, anchor_ms: np.ndarray) -> np.ndarray:
-        return x[:3, 0] + self._R_ms_body @ self.lever_body_m - anchor_ms
+    def _tag_offset(self, x: np.ndarray, anchor_nav: np.ndarray) -> np.ndarray:
+        return x[:3, 0] + self._R_nav_body @ self.lever_body_m - anchor_nav
 
-    def _hx(self, x: np.ndarray, anchor_ms: np.ndarray) -> np.ndarray:
-        d = self._tag_offset(x, anchor_ms)
+    def _hx(self, x: np.ndarray, anchor_nav: np.ndarray) -> np.ndarray:
+        d = self._tag_offset(x, anchor_nav)
         return np.array([[np.sqrt(d @ d)]])
 
-    def _h_jacobian(self, x: np.ndarray, anchor_ms: np.ndarray) -> np.ndarray:
-        d = self._tag_offset(x, anchor_ms)
+    def _h_jacobian(self, x: np.ndarray, anchor_nav: np.ndarray) -> np.ndarray:
+        d = self._tag_offset(x, anchor_nav)
         u = d / np.sqrt(d @ d)
         H = np.zeros((1, 9))
         H[0, :3] = u
-        H[0, 6:] = -(u @ self._R_ms_body) @ self._skew_lever
+        H[0, 6:] = -(u @ self._R_nav_body) @ self._skew_lever
         return H
 
-    def step(self, w_body: np.ndarray, a_ms: np.ndarray, anchor_ms: np.ndarray, range_m: float) -> None:
-        """One predict with gyro ``w_body`` [rad/s] and acceleration ``a_ms`` [m/s^2], then one range
-        ``range_m`` [m] to the anchor at ``anchor_ms`` (frame c)."""
+    def step(self, w_body: np.ndarray, a_nav: np.ndarray, anchor_nav: np.ndarray, range_m: float) -> None:
+        """One predict with gyro ``w_body`` [rad/s] and acceleration ``a_nav`` [m/s^2], then one range
+        ``range_m`` [m] to the anchor at ``anchor_nav`` (frame c)."""
         ekf = self.ekf
         dq = rot.rotvec_exp(w_body * self.dt_s)
-        self.q_ms_body = rot.quat_normalize(rot.quat_mul(self.q_ms_body, dq))
-        self._R_ms_body = rot.quat_to_matrix(self.q_ms_body)
+        self.q_nav_body = rot.quat_normalize(rot.quat_mul(self.q_nav_body, dq))
+        self._R_nav_body = rot.quat_to_matrix(self.q_nav_body)
         self._F[6:, 6:] = rot.quat_to_matrix(dq).T
         ekf.F = self._F
-        ekf.predict(u=a_ms.reshape(3, 1))
+        ekf.predict(u=a_nav.reshape(3, 1))
         ekf.update(
             np.array([range_m]), self._h_jacobian, self._hx, R=self.sigma_range_m**2,
-            args=(anchor_ms,), hx_args=(anchor_ms,),
+            args=(anchor_nav,), hx_args=(anchor_nav,),
         )  # fmt: skip
         dth = ekf.x[6:, 0].copy()
-        self.q_ms_body = rot.multiplicative_reset(self.q_ms_body, dth)
-        self._R_ms_body = rot.quat_to_matrix(self.q_ms_body)
+        self.q_nav_body = rot.multiplicative_reset(self.q_nav_body, dth)
+        self._R_nav_body = rot.quat_to_matrix(self.q_nav_body)
         x, y, z = 0.5 * dth
         T = np.eye(9)
         T[6:, 6:] = ((1.0, z, -y), (-z, 1.0, x), (y, -x, 1.0))  # I - [dth x] / 2 (rot.skew is slow)

@@ -7,7 +7,7 @@ and a batch of a thousand give bit-identical results per filter.
 Array layout of one filter (all float64 unless said otherwise):
 
 ``X`` (10,)
-    ``[p_ms(3), v_ms(3), q_ms_body(4)]``: centre-of-mass position [m] and velocity [m/s] in the mothership
+    ``[p_nav(3), v_nav(3), q_nav_body(4)]``: centre-of-mass position [m] and velocity [m/s] in the mothership
     frame ``c`` and the reference attitude quaternion, scalar-last (x, y, z, w), Hamilton product, mapping
     body vectors into ``c``.
 ``P`` (9, 9)
@@ -105,9 +105,9 @@ def _sandwich(F, P):
 
 
 @njit(cache=True)
-def predict_one(X, P, ST_I, ST_F, w_body, a_ms, dt, PRM):
+def predict_one(X, P, ST_I, ST_F, w_body, a_nav, dt, PRM):
     """Propagate one filter over ``dt`` [s] with gyro rate ``w_body`` [rad/s] (paper eq. 3, an input,
-    not a state) and known acceleration ``a_ms`` [m/s^2] (commanded thrust / mass, frame ``c``).
+    not a state) and known acceleration ``a_nav`` [m/s^2] (commanded thrust / mass, frame ``c``).
 
     Translation: constant-acceleration kinematics over the step, ``F = [[I, dt I], [0, I]]``. Attitude:
     ``q <- q (x) exp(w dt)``; the error transition is ``Phi = exp(-[w dt x])`` (Crassidis & Junkins 2011,
@@ -115,15 +115,15 @@ def predict_one(X, P, ST_I, ST_F, w_body, a_ms, dt, PRM):
     structure of ``F``: tandem updates the 6x6 and 3x3 blocks, compounded also the 6x3 cross blocks (the
     extra work the paper's Table I charges to the compounded structure).
     """
-    if not (np.isfinite(dt) and _finite3(w_body) and _finite3(a_ms)):
+    if not (np.isfinite(dt) and _finite3(w_body) and _finite3(a_nav)):
         ST_I[COUNT_REFUSED, TYPE_PREDICT] += 1
         return ST_REFUSED_NONFINITE
     if dt < 0.0:
         ST_I[COUNT_REFUSED, TYPE_PREDICT] += 1
         return ST_REFUSED_INVALID
     for i in range(3):
-        X[i] += X[3 + i] * dt + 0.5 * a_ms[i] * dt * dt
-        X[3 + i] += a_ms[i] * dt
+        X[i] += X[3 + i] * dt + 0.5 * a_nav[i] * dt * dt
+        X[3 + i] += a_nav[i] * dt
     bx, by, bz, bw = qexp3(w_body[0] * dt, w_body[1] * dt, w_body[2] * dt)
     ax, ay, az, aw = X[6], X[7], X[8], X[9]
     # q <- q (x) dq (Hamilton product, as _rot_nb.qmul), renormalised
@@ -412,7 +412,7 @@ def _all_nonzero(H):
 
 
 @njit(cache=True)
-def range_model(X, anchor_ms, lever_body):
+def range_model(X, anchor_nav, lever_body):
     """UWB range to an anchor with the tag lever arm ``P1`` (paper eq. 1, Fig. 2).
 
     ``h = || p + R(q) P1 - a ||``; ``dh/dp = u^T``, ``dh/dv = 0``,
@@ -420,18 +420,18 @@ def range_model(X, anchor_ms, lever_body):
     Returns ``(h, H (1, 9))``; the arithmetic is :func:`_range_row`'s.
     """
     H = np.zeros((1, 9))
-    h = _range_row(X, anchor_ms, lever_body, H[0])
+    h = _range_row(X, anchor_nav, lever_body, H[0])
     return h, H
 
 
 @njit(cache=True)
-def _range_row(X, anchor_ms, lever_body, H, ho=0):
+def _range_row(X, anchor_nav, lever_body, H, ho=0):
     """:func:`range_model` written out in scalars, filling ``H[ho : ho + 9]`` in place; returns ``h``."""
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = qmat9(X[6], X[7], X[8], X[9])
     lx, ly, lz = lever_body[0], lever_body[1], lever_body[2]
-    dx = X[0] + r00 * lx + r01 * ly + r02 * lz - anchor_ms[0]
-    dy = X[1] + r10 * lx + r11 * ly + r12 * lz - anchor_ms[1]
-    dz = X[2] + r20 * lx + r21 * ly + r22 * lz - anchor_ms[2]
+    dx = X[0] + r00 * lx + r01 * ly + r02 * lz - anchor_nav[0]
+    dy = X[1] + r10 * lx + r11 * ly + r12 * lz - anchor_nav[1]
+    dz = X[2] + r20 * lx + r21 * ly + r22 * lz - anchor_nav[2]
     h = np.sqrt(dx * dx + dy * dy + dz * dz)
     for i in range(9):
         H[ho + i] = 0.0
@@ -449,14 +449,14 @@ def _range_row(X, anchor_ms, lever_body, H, ho=0):
 
 
 @njit(cache=True)
-def update_range_one(X, P, ST_I, ST_F, PRM, anchor_ms, z_m, sigma_m, gate):
-    if not (np.isfinite(z_m) and np.isfinite(sigma_m) and _finite3(anchor_ms)):
+def update_range_one(X, P, ST_I, ST_F, PRM, anchor_nav, z_m, sigma_m, gate):
+    if not (np.isfinite(z_m) and np.isfinite(sigma_m) and _finite3(anchor_nav)):
         ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
         return ST_REFUSED_NONFINITE
     if z_m < 0.0 or sigma_m <= 0.0:
         ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
         return ST_REFUSED_INVALID
-    h = _range_row(X, anchor_ms, PRM[PRM_LEVER : PRM_LEVER + 3], ST_F, STF_WORK + 18)
+    h = _range_row(X, anchor_nav, PRM[PRM_LEVER : PRM_LEVER + 3], ST_F, STF_WORK + 18)
     if h == 0.0:
         ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
         return ST_REFUSED_INVALID
@@ -464,14 +464,14 @@ def update_range_one(X, P, ST_I, ST_F, PRM, anchor_ms, z_m, sigma_m, gate):
 
 
 @njit(cache=True)
-def camera_point_model(X, w_ms, cam_pos_body, R_body_cam):
+def camera_point_model(X, w_nav, cam_pos_body, R_body_cam):
     """A point ``w`` (frame ``c``) seen in the camera frame: ``f = R_bc^T (R(q)^T (w - p) - c_b)``.
 
     ``df/dp = -R_bc^T R(q)^T``, ``df/dtheta = R_bc^T [y x]`` with ``y = R(q)^T (w - p)`` (from
     ``R(q (x) exp(dth))^T = (I - [dth x]) R(q)^T``). Returns ``(f (3,), H (3, 9))``.
     """
     Rq = qmat(X[6:10])
-    y = Rq.T @ (w_ms - X[0:3])
+    y = Rq.T @ (w_nav - X[0:3])
     f = R_body_cam.T @ (y - cam_pos_body)
     H = np.zeros((3, 9))
     H[:, 0:3] = -(R_body_cam.T @ Rq.T)
@@ -481,28 +481,31 @@ def camera_point_model(X, w_ms, cam_pos_body, R_body_cam):
 
 @njit(cache=True)
 def update_features_one(
-    X, P, ST_I, ST_F, PRM, markers_ms, f_cam, sigma_m, target_cov_ms, cam_pos_body, R_body_cam, gate
+    X, P, ST_I, ST_F, PRM, markers_nav, f_cam, sigma_m, target_cov_nav, cam_pos_body, R_body_cam, gate
 ):
     """Marker feature vectors in the camera frame (paper sec. III and IV-D, 1 mm noise), all markers
-    stacked into one vector measurement. The target position uncertainty ``target_cov_ms`` (3x3, frame c)
+    stacked into one vector measurement. The target position uncertainty ``target_cov_nav`` (3x3, frame c)
     shifts every marker alike, so it enters every block of ``R``, cross blocks included."""
     if not (
-        _all_finite(markers_ms) and _all_finite(f_cam) and np.isfinite(sigma_m) and _all_finite(target_cov_ms)
+        _all_finite(markers_nav)
+        and _all_finite(f_cam)
+        and np.isfinite(sigma_m)
+        and _all_finite(target_cov_nav)
     ):
         ST_I[COUNT_REFUSED, TYPE_FEATURES] += 1
         return ST_REFUSED_NONFINITE
-    n = markers_ms.shape[0]
+    n = markers_nav.shape[0]
     if n == 0 or sigma_m <= 0.0:
         ST_I[COUNT_REFUSED, TYPE_FEATURES] += 1
         return ST_REFUSED_INVALID
     H = np.zeros((3 * n, 9))
     nu = np.zeros(3 * n)
     for j in range(n):
-        f, Hj = camera_point_model(X, markers_ms[j], cam_pos_body, R_body_cam)
+        f, Hj = camera_point_model(X, markers_nav[j], cam_pos_body, R_body_cam)
         H[3 * j : 3 * j + 3, :] = Hj
         nu[3 * j : 3 * j + 3] = f_cam[j] - f
     M = R_body_cam.T @ qmat(X[6:10]).T
-    C = M @ target_cov_ms @ M.T
+    C = M @ target_cov_nav @ M.T
     R = np.zeros((3 * n, 3 * n))
     for j in range(n):
         for k in range(n):
@@ -513,12 +516,12 @@ def update_features_one(
 
 
 @njit(cache=True)
-def pose_residual(X, p_target_ms, q_ms_target, t_cam, q_cam_target, cam_pos_body, R_body_cam, q_body_cam):
+def pose_residual(X, p_target_nav, q_nav_target, t_cam, q_cam_target, cam_pos_body, R_body_cam, q_body_cam):
     """Residual ``(nu (6,), H (6, 9))`` of a PnP pose: ``nu[:3] = t_cam - f(p_target)`` (camera point model)
     and ``nu[3:] = log(q_ref^-1 (x) q_meas)`` with the implied body attitude
-    ``q_meas = q_ms_target (x) q_cam_target^-1 (x) q_body_cam^-1``; ``H[3:] = [0 0 I]``."""
-    f, Hp = camera_point_model(X, p_target_ms, cam_pos_body, R_body_cam)
-    q_meas = qmul(qmul(q_ms_target, qconj(qnormalize(q_cam_target))), qconj(q_body_cam))
+    ``q_meas = q_nav_target (x) q_cam_target^-1 (x) q_body_cam^-1``; ``H[3:] = [0 0 I]``."""
+    f, Hp = camera_point_model(X, p_target_nav, cam_pos_body, R_body_cam)
+    q_meas = qmul(qmul(q_nav_target, qconj(qnormalize(q_cam_target))), qconj(q_body_cam))
     H = np.zeros((6, 9))
     H[0:3, :] = Hp
     for i in range(3):
@@ -542,21 +545,21 @@ def attitude_residual(X, q_meas):
 
 @njit(cache=True)
 def update_pose_one(
-    X, P, ST_I, ST_F, PRM, p_target_ms, q_ms_target, t_cam, q_cam_target, cov_cam, target_cov_ms,
+    X, P, ST_I, ST_F, PRM, p_target_nav, q_nav_target, t_cam, q_cam_target, cov_cam, target_cov_nav,
     cam_pos_body, R_body_cam, q_body_cam, gate,
 ):  # fmt: skip
     """Relative pose of the target from PnP: position ``t_cam`` of the target origin in the camera frame
     and attitude ``q_cam_target``, with covariance ``cov_cam`` (6x6) of ``(dt_cam, dphi_cam)`` where
     ``R_ct_meas = exp([dphi_cam x]) R_ct``. The attitude residual is the body-frame rotation vector
     ``log(q_ref^-1 (x) q_meas)`` of the implied body attitude
-    ``q_meas = q_ms_target (x) q_cam_target^-1 (x) q_body_cam^-1``, whose noise is ``-R_bc dphi_cam``."""
+    ``q_meas = q_nav_target (x) q_cam_target^-1 (x) q_body_cam^-1``, whose noise is ``-R_bc dphi_cam``."""
     if not (
-        _all_finite(p_target_ms)
-        and _all_finite(q_ms_target)
+        _all_finite(p_target_nav)
+        and _all_finite(q_nav_target)
         and _all_finite(t_cam)
         and _all_finite(q_cam_target)
         and _all_finite(cov_cam)
-        and _all_finite(target_cov_ms)
+        and _all_finite(target_cov_nav)
     ):
         ST_I[COUNT_REFUSED, TYPE_POSE] += 1
         return ST_REFUSED_NONFINITE
@@ -565,13 +568,13 @@ def update_pose_one(
         ST_I[COUNT_REFUSED, TYPE_POSE] += 1
         return ST_REFUSED_INVALID
     nu, H = pose_residual(
-        X, p_target_ms, q_ms_target, t_cam, q_cam_target, cam_pos_body, R_body_cam, q_body_cam
+        X, p_target_nav, q_nav_target, t_cam, q_cam_target, cam_pos_body, R_body_cam, q_body_cam
     )
     T = np.eye(6)
     T[3:, 3:] = -R_body_cam
     R = T @ cov_cam @ T.T
     M = R_body_cam.T @ qmat(X[6:10]).T
-    R[0:3, 0:3] += M @ target_cov_ms @ M.T
+    R[0:3, 0:3] += M @ target_cov_nav @ M.T
     R = 0.5 * (R + R.T)
     return _update(X, P, ST_I, ST_F, PRM, TYPE_POSE, H, nu, R, gate, True)
 

@@ -30,11 +30,11 @@ from swarm.core.thrusters import allocate, allocation_matrix
 
 @dataclass
 class TargetEstimate:
-    """The target's published estimate as the chaser uses it (frame ms)."""
+    """The target's published estimate as the chaser uses it (frame nav)."""
 
     t_s: float
-    p_ms: np.ndarray
-    q_ms_body: np.ndarray
+    p_nav: np.ndarray
+    q_nav_body: np.ndarray
     cov_pos: np.ndarray
 
 
@@ -55,10 +55,10 @@ class VehicleAgent:
     """Estimator + switcher + guidance + control of one vehicle (module docstring).
 
     ``scenario`` is a :class:`swarm.scenario.Scenario`; ``vehicle_id`` names the vehicle in it;
-    ``p0_ms``/``v0_ms``/``q0_ms_body`` is the initial estimate and ``cov0`` its covariance (9,).
+    ``p0_nav``/``v0_nav``/``q0_nav_body`` is the initial estimate and ``cov0`` its covariance (9,).
     """
 
-    def __init__(self, scenario, vehicle_id: str, p0_ms, v0_ms, q0_ms_body, cov0, policy: str) -> None:
+    def __init__(self, scenario, vehicle_id: str, p0_nav, v0_nav, q0_nav_body, cov0, policy: str) -> None:
         sc = scenario
         spec = sc.vehicles[vehicle_id]
         self.id = vehicle_id
@@ -67,7 +67,7 @@ class VehicleAgent:
         self.sc = sc
         self.mass_kg = sc.dynamics.mass_kg
         self.inertia = np.asarray(sc.dynamics.inertia_diag_kgm2, dtype=float)
-        self.est = PoseEstimator.create(sc.estimator, p0_ms, v0_ms, q0_ms_body, cov0)
+        self.est = PoseEstimator.create(sc.estimator, p0_nav, v0_nav, q0_nav_body, cov0)
         self.translation = TranslationController(self.mass_kg, sc.translation_control)
         self.B = allocation_matrix(sc.thrusters)
         self.max_thrust = sc.thrusters.max_thrust_n
@@ -76,7 +76,7 @@ class VehicleAgent:
         if self.role == "chaser":
             self.switcher = make_switcher(policy, sc.mdp, sc.fixed)
             q_mission = rot.euler_to_quat(np.radians(spec.euler_deg), sc.euler_seq)
-            self.guidance = ChaserGuidance(sc.guidance, self.switcher, q_mission, p0_ms)
+            self.guidance = ChaserGuidance(sc.guidance, self.switcher, q_mission, p0_nav)
         else:
             self.switcher = None
             q_nom = rot.euler_to_quat(np.radians(spec.euler_deg), sc.euler_seq)
@@ -99,13 +99,13 @@ class VehicleAgent:
         self.t_s = 0.0
 
     # ---- sensor inputs ------------------------------------------------------------------------------
-    def on_imu(self, t_s: float, dt_s: float, gyro_body, q_ahrs_ms_body=None) -> int:
+    def on_imu(self, t_s: float, dt_s: float, gyro_body, q_ahrs_nav_body=None) -> int:
         """Propagate the filter with the gyro over ``dt_s`` (paper eq. 3) and the known acceleration of
         the command in force; fuse the AHRS attitude when the vehicle has one."""
         self.t_s = t_s
         gyro = np.ascontiguousarray(gyro_body, dtype=np.float64)
-        has_ahrs = q_ahrs_ms_body is not None
-        q = np.ascontiguousarray(q_ahrs_ms_body, dtype=np.float64) if has_ahrs else _NO_Q
+        has_ahrs = q_ahrs_nav_body is not None
+        q = np.ascontiguousarray(q_ahrs_nav_body, dtype=np.float64) if has_ahrs else _NO_Q
         if gyro.shape != (3,) or q.shape != (4,):
             return int(UpdateStatus.REFUSED_INVALID)
         e = self.est
@@ -134,15 +134,15 @@ class VehicleAgent:
         tgt = self.target
         cov_t = tgt.cov_pos if self.sc.agent.vision_target_cov else np.zeros((3, 3))
         if kind == "features":
-            markers_ms = tgt.p_ms + rot.quat_rotate(tgt.q_ms_body, self.markers_target)
-            status = int(self.est.update_features(markers_ms, data, target_cov_ms=cov_t)[0])
+            markers_nav = tgt.p_nav + rot.quat_rotate(tgt.q_nav_body, self.markers_target)
+            status = int(self.est.update_features(markers_nav, data, target_cov_nav=cov_t)[0])
         elif kind == "pixels":
             pnp = solve_pnp(np.asarray(data, dtype=float), self.markers_target, self.sc.camera)
             if pnp is None:
                 return int(UpdateStatus.REFUSED_INVALID)
             status = int(
                 self.est.update_pose(
-                    tgt.p_ms, tgt.q_ms_body, pnp.t_cam_m, pnp.q_cam_target, pnp.cov_cam, cov_t
+                    tgt.p_nav, tgt.q_nav_body, pnp.t_cam_m, pnp.q_cam_target, pnp.cov_cam, cov_t
                 )[0]
             )
         else:
@@ -172,7 +172,7 @@ class VehicleAgent:
     def estimate(self) -> TargetEstimate:
         """This vehicle's estimate in the form another agent consumes."""
         return TargetEstimate(
-            self.t_s, self.est.p_ms[0].copy(), self.est.q_ms_body[0].copy(), self.est.P[0, :3, :3].copy()
+            self.t_s, self.est.p_nav[0].copy(), self.est.q_nav_body[0].copy(), self.est.P[0, :3, :3].copy()
         )
 
     @property
@@ -191,20 +191,20 @@ class VehicleAgent:
     def control(self, t_s: float, dt_s: float) -> Command:
         """Guidance, switcher and controllers on the current estimate; returns the nozzle thrusts."""
         est = self.est
-        p, v, q = est.p_ms[0].copy(), est.v_ms[0].copy(), est.q_ms_body[0].copy()
+        p, v, q = est.p_nav[0].copy(), est.v_nav[0].copy(), est.q_nav_body[0].copy()
         tgt = self.target
         nav = NavInput(
             t_s=t_s,
-            p_ms=p,
-            v_ms=v,
-            q_ms_body=q,
+            p_nav=p,
+            v_nav=v,
+            q_nav_body=q,
             sigma_pos_max_m=self.sigma_pos_max_m,
             # the target's station keeping reads neither: spare it the two window means
             mahalanobis_d=self.mahalanobis_d if self.role == "chaser" else 0.0,
             rejection_fraction=self.rejection_fraction if self.role == "chaser" else 0.0,
             vision=self.vision_recent,
-            p_target_ms=tgt.p_ms if tgt is not None else p,
-            q_ms_target=tgt.q_ms_body if tgt is not None else q,
+            p_target_nav=tgt.p_nav if tgt is not None else p,
+            q_nav_target=tgt.q_nav_body if tgt is not None else q,
         )
         if self.role == "chaser" and tgt is None:  # nothing to fly to yet: hold still
             ref = Reference(Mode.HOLD, p, np.zeros(3), np.zeros(3), q, 0.0)
@@ -222,15 +222,17 @@ class VehicleAgent:
             wrench = np.zeros(6)
             saturated = False
         else:
-            F_ms = self.translation.step(p, v, ref.p_ms, ref.v_ms, ref.a_ms)
-            tau = attitude_torque(q, self.w_body, ref.q_ms_body, None, self.inertia, self.sc.attitude_control)
+            F_nav = self.translation.step(p, v, ref.p_nav, ref.v_nav, ref.a_nav)
+            tau = attitude_torque(
+                q, self.w_body, ref.q_nav_body, None, self.inertia, self.sc.attitude_control
+            )
             if station is not None:  # dead band per loop: hold still inside it
                 if not station.translate:
-                    F_ms = np.zeros(3)
+                    F_nav = np.zeros(3)
                     self.translation.reset()
                 if not station.rotate:
                     tau = np.zeros(3)
-            F_body = rot.quat_rotate(rot.quat_conj(q), F_ms)
+            F_body = rot.quat_rotate(rot.quat_conj(q), F_nav)
             alloc = allocate(np.concatenate([F_body, tau]), self.B, self.max_thrust)
             thrusts, wrench, saturated = alloc.thrusts_n, alloc.wrench_achieved, bool(alloc.saturated)
         self.f_body[:] = wrench[:3]
@@ -245,7 +247,7 @@ _NO_Q = np.zeros(4)
 @njit(cache=True)
 def agent_imu(X, P, ST_I, ST_F, PRM, gyro, dt, f_body, mass, w_body, has_ahrs, q_ahrs, ahrs_cov, gate3):
     """One IMU sample of one filter: predict with the gyro (paper eq. 3) and the known acceleration of the
-    thrust in force, ``a_ms = R(q) f_body / m`` (the commanded force acts along the body axes, expressed
+    thrust in force, ``a_nav = R(q) f_body / m`` (the commanded force acts along the body axes, expressed
     with the current attitude estimate); then the AHRS attitude when there is one. Keeps the latest finite
     gyro rate in ``w_body`` for the attitude law's rate damping. Returns the predict status."""
     if np.isfinite(gyro[0]) and np.isfinite(gyro[1]) and np.isfinite(gyro[2]):
@@ -260,10 +262,10 @@ def agent_imu(X, P, ST_I, ST_F, PRM, gyro, dt, f_body, mass, w_body, has_ahrs, q
 
 
 @njit(cache=True)
-def agent_uwb(X, P, ST_I, ST_F, PRM, anchor_ms, range_m, sigma_m, gate1, h_ok, h_d2, h_meta):
+def agent_uwb(X, P, ST_I, ST_F, PRM, anchor_nav, range_m, sigma_m, gate1, h_ok, h_d2, h_meta):
     """One UWB range of one filter; a gated outcome (accepted or rejected) enters the health ring:
     accepted or not, and the squared Mahalanobis distance clipped at the gate (Algorithm 1's d)."""
-    status = nb.update_range_one(X, P, ST_I, ST_F, PRM, anchor_ms, range_m, sigma_m, gate1)
+    status = nb.update_range_one(X, P, ST_I, ST_F, PRM, anchor_nav, range_m, sigma_m, gate1)
     if status == nb.ST_ACCEPTED or status == nb.ST_REJECTED:
         i = h_meta[1]
         h_ok[i] = status == nb.ST_ACCEPTED

@@ -48,7 +48,7 @@ __all__ = [
     "CameraParams",
     "MarkerParams",
     "PnpResult",
-    "camera_pose_ms",
+    "camera_pose_nav",
     "face_markers",
     "face_normal",
     "facing_face",
@@ -323,24 +323,24 @@ def _f64(x: ArrayLike) -> np.ndarray:
     return np.asarray(x, dtype=np.float64)
 
 
-def camera_pose_ms(
-    p_ms: ArrayLike, q_ms_body: ArrayLike, params: CameraParams
+def camera_pose_nav(
+    p_nav: ArrayLike, q_nav_body: ArrayLike, params: CameraParams
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Camera pose ``(p_cam_ms (3,) [m], q_ms_cam (4,))`` of a vehicle at ``p_ms`` (3,) [m] with attitude
-    ``q_ms_body`` (4,): ``p_cam = p + R(q_ms_body) pos_body``, ``q_ms_cam = q_ms_body (x) q_body_cam``."""
-    p = _vec(p_ms, 3)
-    q = _vec(q_ms_body, 4)
+    """Camera pose ``(p_cam_nav (3,) [m], q_nav_cam (4,))`` of a vehicle at ``p_nav`` (3,) [m] with attitude
+    ``q_nav_body`` (4,): ``p_cam = p + R(q_nav_body) pos_body``, ``q_nav_cam = q_nav_body (x) q_body_cam``."""
+    p = _vec(p_nav, 3)
+    q = _vec(q_nav_body, 4)
     return p + qmat(q) @ params.pos_body, qmul(q, params.q_body_cam_arr)
 
 
 def relative_pose(
-    p_cam_ms: ArrayLike, q_ms_cam: ArrayLike, p_target_ms: ArrayLike, q_ms_target: ArrayLike
+    p_cam_nav: ArrayLike, q_nav_cam: ArrayLike, p_target_nav: ArrayLike, q_nav_target: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray]:
     """The target's pose in the camera frame ``(t_cam_m (3,) [m], q_cam_target (4,))``:
-    ``t = R(q_ms_cam)^T (p_target - p_cam)``, ``q_cam_target = q_ms_cam^-1 (x) q_ms_target``."""
-    q_c = _vec(q_ms_cam, 4)
-    t = qmat(q_c).T @ (_vec(p_target_ms, 3) - _vec(p_cam_ms, 3))
-    return t, qmul(qconj(q_c), _vec(q_ms_target, 4))
+    ``t = R(q_nav_cam)^T (p_target - p_cam)``, ``q_cam_target = q_nav_cam^-1 (x) q_nav_target``."""
+    q_c = _vec(q_nav_cam, 4)
+    t = qmat(q_c).T @ (_vec(p_target_nav, 3) - _vec(p_cam_nav, 3))
+    return t, qmul(qconj(q_c), _vec(q_nav_target, 4))
 
 
 # The kernels below run once per camera frame (20 Hz per vehicle). Compiled although the project compiles
@@ -370,7 +370,7 @@ def _visible_kernel(markers, centre_t, normal_t, p_t, q_t, p_c, q_c, cam):
     """:func:`visible` for one face; ``cam = [fx, fy, cx, cy, width, height, r_min, r_max, cos_half]``."""
     R_t = qmat(q_t)
     R_c = qmat(q_c)
-    los = p_t - p_c + R_t @ centre_t  # optical centre -> face centre, frame ms
+    los = p_t - p_c + R_t @ centre_t  # optical centre -> face centre, frame nav
     if (R_t @ normal_t) @ los >= 0.0:  # face turned away
         return False
     los_c = R_c.T @ los
@@ -398,20 +398,20 @@ def pinhole(points_cam: ArrayLike, params: CameraParams) -> np.ndarray:
     )
 
 
-def facing_face(p_cam_ms: ArrayLike, p_target_ms: ArrayLike, q_ms_target: ArrayLike) -> str:
+def facing_face(p_cam_nav: ArrayLike, p_target_nav: ArrayLike, q_nav_target: ArrayLike) -> str:
     """The target face whose outward normal points most nearly at the camera (the one worth testing with
     :func:`visible`)."""
-    q_t = _vec(q_ms_target, 4)
-    v = qmat(q_t).T @ (_vec(p_cam_ms, 3) - _vec(p_target_ms, 3))  # camera seen from the target
+    q_t = _vec(q_nav_target, 4)
+    v = qmat(q_t).T @ (_vec(p_cam_nav, 3) - _vec(p_target_nav, 3))  # camera seen from the target
     i = int(np.argmax(np.abs(v)))
     return ("+" if v[i] >= 0 else "-") + "xyz"[i]
 
 
 def visible(
-    p_cam_ms: ArrayLike,
-    q_ms_cam: ArrayLike,
-    p_target_ms: ArrayLike,
-    q_ms_target: ArrayLike,
+    p_cam_nav: ArrayLike,
+    q_nav_cam: ArrayLike,
+    p_target_nav: ArrayLike,
+    q_nav_target: ArrayLike,
     face: str,
     params: CameraParams,
     marker_params: MarkerParams | None = None,
@@ -427,8 +427,8 @@ def visible(
     normal = _FACE_NORMALS[face] if face in _FACE_NORMALS else face_normal(face)
     return bool(
         _visible_kernel(
-            mp._markers_ro(face), mp.half_size_m * normal, normal, _f64(p_target_ms), _f64(q_ms_target),
-            _f64(p_cam_ms), _f64(q_ms_cam), params.visibility_vector,
+            mp._markers_ro(face), mp.half_size_m * normal, normal, _f64(p_target_nav), _f64(q_nav_target),
+            _f64(p_cam_nav), _f64(q_nav_cam), params.visibility_vector,
         )
     )  # fmt: skip
 
@@ -438,19 +438,19 @@ def visible(
 
 def feature_vectors(
     markers_target: ArrayLike,
-    p_target_ms: ArrayLike,
-    q_ms_target: ArrayLike,
-    p_cam_ms: ArrayLike,
-    q_ms_cam: ArrayLike,
+    p_target_nav: ArrayLike,
+    q_nav_target: ArrayLike,
+    p_cam_nav: ArrayLike,
+    q_nav_cam: ArrayLike,
     params: CameraParams,
     rng: np.random.Generator | None,
 ) -> np.ndarray:
     """The paper's vision measurement: marker positions (N, 3) [m] in the camera frame plus white noise
     ``N(0, feature_sigma^2)`` per axis (paper sec. III: the pixels converted to camera-frame position
     vectors, then 1 mm noise; sec. IV-D). ``markers_target`` (N, 3) [m] in the target body frame; the
-    target and camera poses in frame ``ms``. ``rng=None`` gives the noiseless vectors."""
+    target and camera poses in frame ``nav``. ``rng=None`` gives the noiseless vectors."""
     f = _markers_in_camera(
-        _f64(markers_target), _f64(p_target_ms), _f64(q_ms_target), _f64(p_cam_ms), _f64(q_ms_cam)
+        _f64(markers_target), _f64(p_target_nav), _f64(q_nav_target), _f64(p_cam_nav), _f64(q_nav_cam)
     )
     if rng is not None:
         f += params.feature_sigma_m * rng.standard_normal(f.shape)
@@ -459,10 +459,10 @@ def feature_vectors(
 
 def project_markers(
     markers_target: ArrayLike,
-    p_target_ms: ArrayLike,
-    q_ms_target: ArrayLike,
-    p_cam_ms: ArrayLike,
-    q_ms_cam: ArrayLike,
+    p_target_nav: ArrayLike,
+    q_nav_target: ArrayLike,
+    p_cam_nav: ArrayLike,
+    q_nav_cam: ArrayLike,
     params: CameraParams,
     rng: np.random.Generator | None,
 ) -> np.ndarray:
@@ -470,7 +470,7 @@ def project_markers(
     frame] with the target's pose in the camera frame as ``(rvec, tvec)`` and zero distortion, plus white
     noise ``N(0, pixel_sigma^2)`` per coordinate. ``rng=None`` gives the noiseless pixels. Whether the
     markers are in view is :func:`visible`'s business."""
-    t, q = relative_pose(p_cam_ms, q_ms_cam, p_target_ms, q_ms_target)
+    t, q = relative_pose(p_cam_nav, q_nav_cam, p_target_nav, q_nav_target)
     obj = np.ascontiguousarray(markers_target, dtype=np.float64)
     uv, _ = cv2.projectPoints(obj, qlog(q), t, params.K, None)
     uv = uv.reshape(-1, 2)

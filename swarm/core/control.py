@@ -1,7 +1,7 @@
 """Attitude and translation controllers of one TPODS module, or of many at once (paper section IV-B).
 
 Both act on the *estimated* state and run at the controller rate (``TranslationLqrParams.rate_hz``); their
-outputs, a force ``F_ms`` [N] in the mothership frame and a torque ``tau_body`` [N m] in the body frame,
+outputs, a force ``F_nav`` [N] in the navigation frame and a torque ``tau_body`` [N m] in the body frame,
 go to the thruster allocator, which maps them to nozzle thrusts and saturates.
 
 * Attitude: quaternion feedback (Wie & Barba 1985, "Quaternion feedback for spacecraft large angle
@@ -9,12 +9,12 @@ go to the thruster allocator, which maps them to nozzle thrusts and saturates.
   quaternion error directly: no Euler angles and no other attitude parameters anywhere (paper IV-B).
 * Translation: a discrete, steady-state LQR with feed-forward and integral action (Ogata, "Discrete-time
   Control Systems", 2nd ed., 1995, ch. 8) on the plant of paper eq. (1) linearised about a stationary point.
-  At rest (``w = 0``, ``dw/dt = 0``) the lever-arm terms of eq. (1) vanish, and in the mothership frame
-  (inertial for our purposes, no gravity) the centre of mass obeys ``m d2p/dt2 = F_ms``: per axis a double
+  At rest (``w = 0``, ``dw/dt = 0``) the lever-arm terms of eq. (1) vanish, and in the navigation frame
+  (inertial for our purposes, no gravity) the centre of mass obeys ``m d2p/dt2 = F_nav``: per axis a double
   integrator, the same on all three axes, so one scalar-input design serves every axis.
 
 Quaternions are scalar-last ``(x, y, z, w)`` with the Hamilton product, like ``scipy.spatial.transform``;
-``q_ms_body`` maps body vectors into the mothership frame. Every function broadcasts over leading batch
+``q_nav_body`` maps body vectors into the navigation frame. Every function broadcasts over leading batch
 axes; :class:`TranslationController` holds one integrator per vehicle of a batch of ``n``.
 """
 
@@ -110,9 +110,9 @@ class AttitudeControlParams:
 
 
 def attitude_torque(
-    q_ms_body: ArrayLike,
+    q_nav_body: ArrayLike,
     w_body: ArrayLike,
-    q_ref_ms_body: ArrayLike,
+    q_ref_nav_body: ArrayLike,
     w_ref_body: ArrayLike | None,
     inertia_diag: ArrayLike,
     params: AttitudeControlParams,
@@ -133,9 +133,9 @@ def attitude_torque(
     ``-q_ref``.
 
     Args:
-        q_ms_body: estimated attitude, unit quaternion (..., 4), scalar-last, body -> mothership.
+        q_nav_body: estimated attitude, unit quaternion (..., 4), scalar-last, body -> mothership.
         w_body: estimated body rate (..., 3) [rad/s], body frame.
-        q_ref_ms_body: reference attitude, unit quaternion (..., 4), body -> mothership.
+        q_ref_nav_body: reference attitude, unit quaternion (..., 4), body -> mothership.
         w_ref_body: reference rate (..., 3) [rad/s] expressed in the current body frame, or None for
             zero (a regulator). No angular-acceleration feed-forward is applied.
         inertia_diag: principal moments of inertia (3,) or (..., 3) [kg m^2], body axes.
@@ -143,18 +143,18 @@ def attitude_torque(
     """
     if (
         _single3(w_body, inertia_diag)
-        and _single4(q_ms_body, q_ref_ms_body)
+        and _single4(q_nav_body, q_ref_nav_body)
         and (w_ref_body is None or _single3(w_ref_body))
         and inertia_diag[0] > 0
         and inertia_diag[1] > 0
         and inertia_diag[2] > 0
     ):
         w_ref = _ZERO3 if w_ref_body is None else w_ref_body
-        return _attitude_torque1(q_ms_body, w_body, q_ref_ms_body, w_ref, inertia_diag, params.kp_nm,
+        return _attitude_torque1(q_nav_body, w_body, q_ref_nav_body, w_ref, inertia_diag, params.kp_nm,
                                  params.kd_nms, params.max_torque_nm)  # fmt: skip
-    q = as_last(q_ms_body, 4, "q_ms_body")
+    q = as_last(q_nav_body, 4, "q_nav_body")
     w = as_last(w_body, 3, "w_body")
-    q_ref = as_last(q_ref_ms_body, 4, "q_ref_ms_body")
+    q_ref = as_last(q_ref_nav_body, 4, "q_ref_nav_body")
     w_ref = np.zeros(3) if w_ref_body is None else as_last(w_ref_body, 3, "w_ref_body")
     inertia = as_last(inertia_diag, 3, "inertia_diag")
     if not np.all(inertia > 0):
@@ -242,7 +242,7 @@ class LqrDesign:
 
     @property
     def K(self) -> FloatArray:
-        """Full gain (3, 9) on ``(dp_ms(3), dv_ms(3), integral_ms(3))``: ``F_fb = -K x``."""
+        """Full gain (3, 9) on ``(dp_nav(3), dv_nav(3), integral_nav(3))``: ``F_fb = -K x``."""
         return np.kron(self.K_axis, np.eye(3))
 
 
@@ -326,7 +326,7 @@ class TranslationController:
             raise ValueError(f"n must be a positive integer or None, got {n!r}")
         self._shape = (3,) if n is None else (int(n), 3)
         self.integral_m_s = np.zeros(self._shape)
-        """Integrated position error ``z`` (3,) or (n, 3) [m s], mothership frame."""
+        """Integrated position error ``z`` (3,) or (n, 3) [m s], navigation frame."""
 
     def reset(self, mask: ArrayLike | None = None) -> None:
         """Zero the integrator of every vehicle, or of those where the boolean ``mask`` (n,) is True."""
@@ -337,35 +337,35 @@ class TranslationController:
 
     def step(
         self,
-        p_ms: ArrayLike,
-        v_ms: ArrayLike,
-        p_ref_ms: ArrayLike,
-        v_ref_ms: ArrayLike,
-        a_ref_ms: ArrayLike | None = None,
+        p_nav: ArrayLike,
+        v_nav: ArrayLike,
+        p_ref_nav: ArrayLike,
+        v_ref_nav: ArrayLike,
+        a_ref_nav: ArrayLike | None = None,
     ) -> FloatArray:
-        """Force command ``F_ms`` [N], mothership frame, shape (3,) or (n, 3); advances the integrator.
+        """Force command ``F_nav`` [N], mothership frame, shape (3,) or (n, 3); advances the integrator.
 
         Args:
-            p_ms, v_ms: estimated centre-of-mass position [m] and velocity [m/s], frame ms.
-            p_ref_ms, v_ref_ms: reference position [m] and velocity [m/s], frame ms.
-            a_ref_ms: reference acceleration [m/s^2], frame ms, for the feed-forward (None: zero).
+            p_nav, v_nav: estimated centre-of-mass position [m] and velocity [m/s], frame nav.
+            p_ref_nav, v_ref_nav: reference position [m] and velocity [m/s], frame nav.
+            a_ref_nav: reference acceleration [m/s^2], frame nav, for the feed-forward (None: zero).
         Inputs broadcast against the controller's batch shape.
         """
         if (
             self._shape == (3,)
-            and _single3(p_ms, v_ms, p_ref_ms, v_ref_ms)
-            and (a_ref_ms is None or _single3(a_ref_ms))
+            and _single3(p_nav, v_nav, p_ref_nav, v_ref_nav)
+            and (a_ref_nav is None or _single3(a_ref_nav))
         ):
             k_p, k_v, k_i = self.design.K_axis[0]
-            a_ref = _ZERO3 if a_ref_ms is None else a_ref_ms
+            a_ref = _ZERO3 if a_ref_nav is None else a_ref_nav
             lim = self.params.integral_limit_m_s if self.params.integral_enabled else -1.0
             return _lqr_step1(
-                p_ms, v_ms, p_ref_ms, v_ref_ms, a_ref, self.integral_m_s, self.mass_kg, k_p, k_v, k_i,
+                p_nav, v_nav, p_ref_nav, v_ref_nav, a_ref, self.integral_m_s, self.mass_kg, k_p, k_v, k_i,
                 self.params.dt_s, lim, self.params.max_force_n,
             )  # fmt: skip
-        e_p = np.broadcast_to(as_last(p_ms, 3, "p_ms") - as_last(p_ref_ms, 3, "p_ref_ms"), self._shape)
-        e_v = np.broadcast_to(as_last(v_ms, 3, "v_ms") - as_last(v_ref_ms, 3, "v_ref_ms"), self._shape)
-        a_ref = np.zeros(3) if a_ref_ms is None else as_last(a_ref_ms, 3, "a_ref_ms")
+        e_p = np.broadcast_to(as_last(p_nav, 3, "p_nav") - as_last(p_ref_nav, 3, "p_ref_nav"), self._shape)
+        e_v = np.broadcast_to(as_last(v_nav, 3, "v_nav") - as_last(v_ref_nav, 3, "v_ref_nav"), self._shape)
+        a_ref = np.zeros(3) if a_ref_nav is None else as_last(a_ref_nav, 3, "a_ref_nav")
         k_p, k_v, k_i = self.design.K_axis[0]
         F = self.mass_kg * a_ref - (k_p * e_p + k_v * e_v + k_i * self.integral_m_s)
         if self.params.integral_enabled:

@@ -1,19 +1,20 @@
-"""6-DOF rigid-body truth dynamics of one TPODS module in the mothership frame (paper eqs. 1-2).
+"""6-DOF rigid-body truth dynamics of one TPODS module in the navigation frame (paper eqs. 1-2).
 
-State (13,): ``x = [p_ms(3), v_ms(3), q_ms_body(4), w_body(3)]``: centre-of-mass position [m] and velocity
-[m/s] in the mothership frame ``ms`` (the paper's ``c``, stationary and inertial for our purposes), the
-attitude quaternion mapping body vectors into ``ms`` (scalar-last ``(x, y, z, w)``, Hamilton product, like
-``scipy.spatial.transform.Rotation``) and the body angular rate relative to ``ms``, in the body frame
-[rad/s]. Inputs are the thrust force ``F_body`` [N] and the torque about the centre of mass ``tau_body``
-[N m], both in the body frame: cold-gas nozzles are fixed to the body, so their force turns with it.
+State (13,): ``x = [p_nav(3), v_nav(3), q_nav_body(4), w_body(3)]``: centre-of-mass position [m] and velocity
+[m/s] in the navigation frame ``nav`` (the paper's mothership frame ``c``, stationary and inertial for our
+purposes), the attitude quaternion mapping body vectors into ``nav`` (scalar-last ``(x, y, z, w)``,
+Hamilton product, like ``scipy.spatial.transform.Rotation``) and the body angular rate relative to
+``nav``, in the body frame [rad/s]. Inputs are the thrust force ``F_body`` [N] and the torque about the
+centre of mass ``tau_body`` [N m], both in the body frame: cold-gas nozzles are fixed to the body, so their
+force turns with it.
 
-Equations of motion (``R = R(q_ms_body)``, ``I = diag(inertia_diag)`` the principal inertia):
+Equations of motion (``R = R(q_nav_body)``, ``I = diag(inertia_diag)`` the principal inertia):
 
-* translation: ``m dv_ms/dt = R F_body``, ``dp_ms/dt = v_ms`` (Newton's second law for the centre of mass);
+* translation: ``m dv_nav/dt = R F_body``, ``dp_nav/dt = v_nav`` (Newton's second law for the centre of mass);
 * rotation: Euler's equation in the body frame, ``I dw_body/dt = tau_body - w_body x I w_body``
   (Schaub & Junkins, *Analytical Mechanics of Space Systems*, ch. 4). Paper eq. (2) writes the same law in
   the mothership frame: ``I_0 w_dot = I_0 D I_1^-1 [N_1 - D^T w x I_1 D^T w]``, with ``D = R`` the
-  body -> ms rotation, ``w = D w_body`` and ``N_1 = tau_body``; ``I_0`` cancels and ``D^T w_dot_ms`` is
+  body -> nav rotation, ``w = D w_body`` and ``N_1 = tau_body``; ``I_0`` cancels and ``D^T w_dot_nav`` is
   our ``dw_body/dt`` (the two frames' derivatives of ``w`` agree because ``w x w = 0``);
 * attitude kinematics: ``dq/dt = 1/2 q (x) [w_body, 0]`` (Sola 2017, "Quaternion kinematics for the
   error-state Kalman filter", time derivative with local rates).
@@ -50,7 +51,7 @@ __all__ = [
 ]
 
 STATE_DIM = 13
-"""Length of the truth state ``[p_ms(3), v_ms(3), q_ms_body(4), w_body(3)]``."""
+"""Length of the truth state ``[p_nav(3), v_nav(3), q_nav_body(4), w_body(3)]``."""
 
 FloatArray = NDArray[np.float64]
 
@@ -149,7 +150,7 @@ def derivative(
 ) -> np.ndarray:
     """Time derivative (13,) of the state ``x`` (13,) under body force ``F_body`` [N] and torque
     ``tau_body`` [N m] (both (3,), body frame), ``mass`` [kg], principal inertia ``inertia_diag`` (3,)
-    [kg m^2]. Layout ``[v_ms, a_ms, q_dot, w_dot_body]``; the equations are in the module docstring.
+    [kg m^2]. Layout ``[v_nav, a_nav, q_dot, w_dot_body]``; the equations are in the module docstring.
 
     ``q`` need not be unit: ``R`` is scaled by ``2 / |q|^2``, so it is a rotation for any ``q != 0``.
     """
@@ -222,7 +223,7 @@ def step(
 ) -> FloatArray:
     """Checked wrapper of :func:`propagate`: state (13,) after ``dt_s`` [s] >= 0.
 
-    ``x`` (13,) ``[p_ms, v_ms, q_ms_body, w_body]`` (``q`` must be unit to 1e-6), ``F_body`` (3,) [N] and
+    ``x`` (13,) ``[p_nav, v_nav, q_nav_body, w_body]`` (``q`` must be unit to 1e-6), ``F_body`` (3,) [N] and
     ``tau_body`` (3,) [N m] in the body frame, held constant over ``dt_s``. Raises ``ValueError`` on bad
     shapes, non-finite values, a non-unit quaternion or a negative step.
     """
@@ -238,9 +239,9 @@ def step(
 
 
 def tag_position(x: ArrayLike, lever_body: ArrayLike) -> FloatArray:
-    """Position of a body-fixed point (the UWB tag) in ``ms`` [m], shape ``(..., 3)``.
+    """Position of a body-fixed point (the UWB tag) in ``nav`` [m], shape ``(..., 3)``.
 
-    ``p_tag = p_ms + R(q_ms_body) P1`` (paper sec. II and Fig. 2: ``rho_ij = rho + D P1``). ``x`` is
+    ``p_tag = p_nav + R(q_nav_body) P1`` (paper sec. II and Fig. 2: ``rho_ij = rho + D P1``). ``x`` is
     ``(..., 13)`` states, ``lever_body`` the point ``P1`` (3,) in the body frame [m] (paper: (0.05, 0.05, 0)).
     """
     x = np.asarray(x, dtype=np.float64)
@@ -251,18 +252,18 @@ def tag_position(x: ArrayLike, lever_body: ArrayLike) -> FloatArray:
 
 
 def tag_acceleration(
-    x: ArrayLike, wdot_body: ArrayLike, a_ms: ArrayLike, lever_body: ArrayLike
+    x: ArrayLike, wdot_body: ArrayLike, a_nav: ArrayLike, lever_body: ArrayLike
 ) -> FloatArray:
-    """Inertial acceleration of the body-fixed point ``P1`` in ``ms`` [m/s^2], shape (3,) (paper eq. 1).
+    """Inertial acceleration of the body-fixed point ``P1`` in ``nav`` [m/s^2], shape (3,) (paper eq. 1).
 
-    ``a_tag = a_ms + R(q) (w_dot x P1 + w x (w x P1))`` with ``w = w_body`` from ``x`` (13,) [rad/s],
-    ``wdot_body`` (3,) its time derivative [rad/s^2] (body frame), ``a_ms`` (3,) the centre-of-mass
-    acceleration in ``ms`` [m/s^2] and ``lever_body`` (3,) [m]. Paper eq. (1) writes the bracket with the
+    ``a_tag = a_nav + R(q) (w_dot x P1 + w x (w x P1))`` with ``w = w_body`` from ``x`` (13,) [rad/s],
+    ``wdot_body`` (3,) its time derivative [rad/s^2] (body frame), ``a_nav`` (3,) the centre-of-mass
+    acceleration in ``nav`` [m/s^2] and ``lever_body`` (3,) [m]. Paper eq. (1) writes the bracket with the
     vectors in ``c``; rotating it into the body frame, where ``P1`` is constant, gives this form.
     """
     xv = _vec(x, STATE_DIM, "x")
     wdot = _vec(wdot_body, 3, "wdot_body")
-    a = _vec(a_ms, 3, "a_ms")
+    a = _vec(a_nav, 3, "a_nav")
     lever = _vec(lever_body, 3, "lever_body")
     w = xv[10:13]
     rel_body = np.cross(wdot, lever) + np.cross(w, np.cross(w, lever))

@@ -1,10 +1,11 @@
 """Multiplicative (error-state) EKF for the pose of one TPODS module, or of many at once.
 
 Paper section IV-A: the state is ``zeta = (rho, rho_dot, delta_theta)`` (eq. 4): the centre-of-mass
-position and velocity in the mothership frame ``c`` and a 3-parameter attitude error about a reference
-quaternion propagated with the gyro as an input (eq. 3). Quaternions are scalar-last (x, y, z, w) with
-the Hamilton product, like ``scipy.spatial.transform.Rotation``; ``q_ms_body`` maps body vectors into
-``c``; the attitude error is body-frame, ``q = q_ref (x) exp(delta_theta)`` (Markley 2003).
+position and velocity in the navigation frame ``nav`` (the paper's ``c``, a mothership) and a 3-parameter
+attitude error about a reference quaternion propagated with the gyro as an input (eq. 3). Quaternions are
+scalar-last (x, y, z, w) with the Hamilton product, like ``scipy.spatial.transform.Rotation``;
+``q_nav_body`` maps body vectors into ``nav``; the attitude error is body-frame,
+``q = q_ref (x) exp(delta_theta)`` (Markley 2003).
 
 Two structures share all measurement models and the Joseph update (:mod:`swarm.core._ekf_nb`):
 
@@ -184,7 +185,7 @@ class PoseEstimator:
     def __init__(self, params: EstimatorParams, X: np.ndarray, P: np.ndarray) -> None:
         self.params = params
         self.n = X.shape[0]
-        self.X = X  # (n, 10): p_ms, v_ms, q_ms_body
+        self.X = X  # (n, 10): p_nav, v_nav, q_nav_body
         self.P = P  # (n, 9, 9)
         self.counts = np.zeros((self.n, 3, nb.N_TYPES), dtype=np.int64)  # [accepted, rejected, refused]
         self.book = np.zeros((self.n, nb.N_STF))
@@ -201,30 +202,30 @@ class PoseEstimator:
     def create(
         cls,
         params: EstimatorParams,
-        p_ms,
-        v_ms,
-        q_ms_body,
+        p_nav,
+        v_nav,
+        q_nav_body,
         cov0,
         n: int | None = None,
     ) -> PoseEstimator:
-        """Filters initialised at position ``p_ms`` [m], velocity ``v_ms`` [m/s], attitude ``q_ms_body``
+        """Filters initialised at position ``p_nav`` [m], velocity ``v_nav`` [m/s], attitude ``q_nav_body``
         and error covariance ``cov0`` (9x9, or its diagonal (9,), order ``(d_p, d_v, d_theta)``).
         Each argument is one item or a batch; ``n`` defaults to the largest batch given (or 1)."""
-        shapes = [np.shape(a) for a in (p_ms, v_ms, q_ms_body)]
+        shapes = [np.shape(a) for a in (p_nav, v_nav, q_nav_body)]
         if n is None:
             n = max([s[0] for s in shapes if len(s) == 2] + [1])
-        p = _batch("p_ms", p_ms, n, (3,))
-        v = _batch("v_ms", v_ms, n, (3,))
-        q = _batch("q_ms_body", q_ms_body, n, (4,))
+        p = _batch("p_nav", p_nav, n, (3,))
+        v = _batch("v_nav", v_nav, n, (3,))
+        q = _batch("q_nav_body", q_nav_body, n, (4,))
         c = np.asarray(cov0, dtype=np.float64)
         if c.shape in ((9,), (n, 9)):
             c = np.einsum("...i,ij->...ij", c, np.eye(9))
         P = _batch("cov0", c, n, (9, 9)).copy()
-        for name, a in (("p_ms", p), ("v_ms", v), ("q_ms_body", q), ("cov0", P)):
+        for name, a in (("p_nav", p), ("v_nav", v), ("q_nav_body", q), ("cov0", P)):
             if not np.all(np.isfinite(a)):
                 raise ValueError(f"{name} must be finite, got {a}")
         if np.any(np.abs(np.linalg.norm(q, axis=-1) - 1.0) > 1e-6):
-            raise ValueError(f"q_ms_body must be unit quaternions, got {q}")
+            raise ValueError(f"q_nav_body must be unit quaternions, got {q}")
         if np.any(np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2))) <= 0):
             raise ValueError("cov0 must be symmetric positive definite")
         if params.structure is Structure.TANDEM:
@@ -235,17 +236,17 @@ class PoseEstimator:
 
     # ---- state views -------------------------------------------------------------------------------
     @property
-    def p_ms(self) -> np.ndarray:
+    def p_nav(self) -> np.ndarray:
         """Position estimates (n, 3) [m], frame c (a view)."""
         return self.X[:, 0:3]
 
     @property
-    def v_ms(self) -> np.ndarray:
+    def v_nav(self) -> np.ndarray:
         """Velocity estimates (n, 3) [m/s], frame c (a view)."""
         return self.X[:, 3:6]
 
     @property
-    def q_ms_body(self) -> np.ndarray:
+    def q_nav_body(self) -> np.ndarray:
         """Attitude estimates (n, 4), scalar-last (a view)."""
         return self.X[:, 6:10]
 
@@ -267,20 +268,20 @@ class PoseEstimator:
         return self.counts[:, row[what], int(kind)]
 
     # ---- steps -------------------------------------------------------------------------------------
-    def predict(self, w_body, a_ms, dt_s: float) -> np.ndarray:
+    def predict(self, w_body, a_nav, dt_s: float) -> np.ndarray:
         """Propagate over ``dt_s`` [s] with gyro rates ``w_body`` [rad/s] and known acceleration
-        ``a_ms`` [m/s^2] (frame c). Returns the status per filter; a non-finite input is refused and the
+        ``a_nav`` [m/s^2] (frame c). Returns the status per filter; a non-finite input is refused and the
         filter left unchanged."""
         n = self.n
         W = _batch("w_body", w_body, n, (3,))
-        A = _batch("a_ms", a_ms, n, (3,))
+        A = _batch("a_nav", a_nav, n, (3,))
         nb.predict_batch(self.X, self.P, self.counts, self.book, W, A, float(dt_s), self._prm, self._status)
         return self._status.copy()
 
-    def update_range(self, anchor_ms, range_m, sigma_m=None, mask=None) -> np.ndarray:
-        """One UWB two-way range [m] to the anchor at ``anchor_ms`` (frame c) per filter."""
+    def update_range(self, anchor_nav, range_m, sigma_m=None, mask=None) -> np.ndarray:
+        """One UWB two-way range [m] to the anchor at ``anchor_nav`` (frame c) per filter."""
         n = self.n
-        anchors = _batch("anchor_ms", anchor_ms, n, (3,))
+        anchors = _batch("anchor_nav", anchor_nav, n, (3,))
         z = _batch("range_m", range_m, n, ())
         s = self._sigma_range if sigma_m is None else _batch("sigma_m", sigma_m, n, ())
         gate = self._gate_range
@@ -299,19 +300,21 @@ class PoseEstimator:
         )
         return self._status.copy()
 
-    def update_features(self, markers_ms, f_cam_m, target_cov_ms=None, sigma_m=None, mask=None):
+    def update_features(self, markers_nav, f_cam_m, target_cov_nav=None, sigma_m=None, mask=None):
         """Feature vectors ``f_cam_m`` (n, M, 3) [m] of markers whose positions in frame c are
-        ``markers_ms`` (n, M, 3), e.g. from the target's estimated pose with position covariance
-        ``target_cov_ms`` (n, 3, 3) (paper sec. IV-D, 1 mm noise by default)."""
+        ``markers_nav`` (n, M, 3), e.g. from the target's estimated pose with position covariance
+        ``target_cov_nav`` (n, 3, 3) (paper sec. IV-D, 1 mm noise by default)."""
         n = self.n
-        mk = np.ascontiguousarray(np.asarray(markers_ms, dtype=np.float64))
+        mk = np.ascontiguousarray(np.asarray(markers_nav, dtype=np.float64))
         if mk.ndim == 2:
             mk = np.ascontiguousarray(np.broadcast_to(mk, (n, *mk.shape)))
         m = mk.shape[1] if mk.ndim == 3 else -1
         if mk.ndim != 3 or mk.shape[0] != n or mk.shape[2] != 3:
-            raise ValueError(f"markers_ms must have shape (M, 3) or ({n}, M, 3), got {mk.shape}")
+            raise ValueError(f"markers_nav must have shape (M, 3) or ({n}, M, 3), got {mk.shape}")
         f = _batch("f_cam_m", f_cam_m, n, (m, 3))
-        tc = _batch("target_cov_ms", np.zeros((3, 3)) if target_cov_ms is None else target_cov_ms, n, (3, 3))
+        tc = _batch(
+            "target_cov_nav", np.zeros((3, 3)) if target_cov_nav is None else target_cov_nav, n, (3, 3)
+        )
         s = _batch("sigma_m", self.params.sigma_feature_m if sigma_m is None else sigma_m, n, ())
         gate = chi2_gate(3 * m, self.params.gate_probability)
         nb.update_features_batch(
@@ -321,20 +324,22 @@ class PoseEstimator:
         return self._status.copy()
 
     def update_pose(
-        self, p_target_ms, q_ms_target, t_cam_m, q_cam_target, cov_cam, target_cov_ms=None, mask=None
+        self, p_target_nav, q_nav_target, t_cam_m, q_cam_target, cov_cam, target_cov_nav=None, mask=None
     ) -> np.ndarray:
         """Relative pose from PnP: the target's origin ``t_cam_m`` (n, 3) and attitude ``q_cam_target``
         (n, 4) in the camera frame, covariance ``cov_cam`` (n, 6, 6) of ``(dt_cam, dphi_cam)``; the
-        target's pose ``(p_target_ms, q_ms_target)`` in frame c with position covariance
-        ``target_cov_ms``."""
+        target's pose ``(p_target_nav, q_nav_target)`` in frame c with position covariance
+        ``target_cov_nav``."""
         n = self.n
         args = (
-            _batch("p_target_ms", p_target_ms, n, (3,)),
-            _batch("q_ms_target", q_ms_target, n, (4,)),
+            _batch("p_target_nav", p_target_nav, n, (3,)),
+            _batch("q_nav_target", q_nav_target, n, (4,)),
             _batch("t_cam_m", t_cam_m, n, (3,)),
             _batch("q_cam_target", q_cam_target, n, (4,)),
             _batch("cov_cam", cov_cam, n, (6, 6)),
-            _batch("target_cov_ms", np.zeros((3, 3)) if target_cov_ms is None else target_cov_ms, n, (3, 3)),
+            _batch(
+                "target_cov_nav", np.zeros((3, 3)) if target_cov_nav is None else target_cov_nav, n, (3, 3)
+            ),
         )
         gate = chi2_gate(6, self.params.gate_probability)
         nb.update_pose_batch(
@@ -343,11 +348,11 @@ class PoseEstimator:
         )  # fmt: skip
         return self._status.copy()
 
-    def update_attitude(self, q_meas_ms_body, cov_body, mask=None) -> np.ndarray:
-        """An AHRS attitude ``q_meas_ms_body`` (n, 4) with body-frame rotation-vector covariance
+    def update_attitude(self, q_meas_nav_body, cov_body, mask=None) -> np.ndarray:
+        """An AHRS attitude ``q_meas_nav_body`` (n, 4) with body-frame rotation-vector covariance
         ``cov_body`` (n, 3, 3) [rad^2]."""
         n = self.n
-        q = _batch("q_meas_ms_body", q_meas_ms_body, n, (4,))
+        q = _batch("q_meas_nav_body", q_meas_nav_body, n, (4,))
         c = _batch("cov_body", cov_body, n, (3, 3))
         gate = chi2_gate(3, self.params.gate_probability)
         nb.update_attitude_batch(

@@ -213,12 +213,12 @@ class GuidanceParams:
 
 @dataclass(frozen=True)
 class NavInput:
-    """What the guidance knows at one evaluation (all estimates, frame ms)."""
+    """What the guidance knows at one evaluation (all estimates, frame nav)."""
 
     t_s: float
-    p_ms: np.ndarray
-    v_ms: np.ndarray
-    q_ms_body: np.ndarray
+    p_nav: np.ndarray
+    v_nav: np.ndarray
+    q_nav_body: np.ndarray
     sigma_pos_max_m: float
     mahalanobis_d: float
     """Mahalanobis distance of the recent range innovations (RMS of sqrt(d^2)); Algorithm 1's d."""
@@ -226,8 +226,8 @@ class NavInput:
     """Fraction of the recent range updates rejected by the gate."""
     vision: bool
     """A vision update was accepted recently."""
-    p_target_ms: np.ndarray
-    q_ms_target: np.ndarray
+    p_target_nav: np.ndarray
+    q_nav_target: np.ndarray
 
 
 @dataclass
@@ -235,23 +235,23 @@ class Reference:
     """Output of one guidance evaluation: the controllers' reference and the mode bookkeeping."""
 
     mode: Mode
-    p_ms: np.ndarray
-    v_ms: np.ndarray
-    a_ms: np.ndarray
-    q_ms_body: np.ndarray
+    p_nav: np.ndarray
+    v_nav: np.ndarray
+    a_nav: np.ndarray
+    q_nav_body: np.ndarray
     range_m: float
     events: list[dict] = field(default_factory=list)
     decision: object | None = None
 
 
 def docking_geometry(
-    p: GuidanceParams, p_target_ms, q_ms_target
+    p: GuidanceParams, p_target_nav, q_nav_target
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Face normal (ms), docked chaser centre (ms) and docking attitude q_ms_body for a target pose."""
-    n_ms = rot.quat_rotate(q_ms_target, p.face_normal_target)
-    p_docked = np.asarray(p_target_ms) + 2.0 * p.half_size_m * n_ms
-    q_dock = rot.quat_normalize(rot.quat_mul(q_ms_target, p.q_target_chaser_docked))
-    return n_ms, p_docked, q_dock
+    """Face normal (nav), docked chaser centre (nav) and docking attitude q_nav_body for a target pose."""
+    n_nav = rot.quat_rotate(q_nav_target, p.face_normal_target)
+    p_docked = np.asarray(p_target_nav) + 2.0 * p.half_size_m * n_nav
+    q_dock = rot.quat_normalize(rot.quat_mul(q_nav_target, p.q_target_chaser_docked))
+    return n_nav, p_docked, q_dock
 
 
 def contact_state(p: GuidanceParams, p_c, v_c, q_c, p_t, q_t, v_t=None) -> dict:
@@ -269,7 +269,7 @@ def contact_state(p: GuidanceParams, p_c, v_c, q_c, p_t, q_t, v_t=None) -> dict:
 
 @njit(cache=True)
 def pair_geometry(p_c, v_c, q_c, p_t, v_t, q_t, n_target, q_tc, half):
-    """``(centre, gap, lateral, attitude, closing, axial)`` of a chaser/target pair, frame ms: centre
+    """``(centre, gap, lateral, attitude, closing, axial)`` of a chaser/target pair, frame nav: centre
     distance; with ``n`` the docking-face normal ``R(q_t) n_target`` and the docked chaser centre
     ``p_t + 2 half n``: the gap along ``n``, the lateral offset, the attitude error to the docking
     attitude ``q_t (x) q_tc``, the closing speed ``-(v_c - v_t) . n``, and ``axial = (p_c - p_t) . n``
@@ -290,10 +290,10 @@ def pair_geometry(p_c, v_c, q_c, p_t, v_t, q_t, n_target, q_tc, half):
     return centre, gap, lateral, att, closing, axial
 
 
-def in_corridor(p: GuidanceParams, p_c, p_t, n_ms) -> bool:
+def in_corridor(p: GuidanceParams, p_c, p_t, n_nav) -> bool:
     rel = np.asarray(p_c) - np.asarray(p_t)
     r = _norm(rel)
-    return bool(r > 0 and rel @ n_ms >= r * p.corridor_cos)
+    return bool(r > 0 and rel @ n_nav >= r * p.corridor_cos)
 
 
 class ChaserGuidance:
@@ -303,14 +303,14 @@ class ChaserGuidance:
     asked at every evaluation inside ``r_t`` (``evaluate``) and supplies ``r1_m`` and ``r2_m``.
     """
 
-    def __init__(self, params: GuidanceParams, switcher, q_mission_ms_body, p_start_ms) -> None:
+    def __init__(self, params: GuidanceParams, switcher, q_mission_nav_body, p_start_nav) -> None:
         self.p = params
         self.switcher = switcher
-        self.q_mission = rot.quat_normalize(np.asarray(q_mission_ms_body, dtype=float))
+        self.q_mission = rot.quat_normalize(np.asarray(q_mission_nav_body, dtype=float))
         self.mode = Mode.HOLD
         self.resume_mode = Mode.APPROACH
         self.started = False
-        self.p_ref = np.asarray(p_start_ms, dtype=float).copy()
+        self.p_ref = np.asarray(p_start_nav, dtype=float).copy()
         self.mode_since_s = 0.0
         self.stall_since_s: float | None = None
         self.retries = 0
@@ -337,7 +337,7 @@ class ChaserGuidance:
         zero = np.zeros(3)
         delta = goal - self.p_ref
         dist = float(_norm(delta))
-        lead = float(_norm(self.p_ref - nav.p_ms))
+        lead = float(_norm(self.p_ref - nav.p_nav))
         if dist < 1e-9 or lead > self.p.max_lead_m:
             return zero, zero
         braking = decel > 0.0 and 2.0 * decel * dist < speed * speed
@@ -349,7 +349,7 @@ class ChaserGuidance:
         self.p_ref = self.p_ref + v * dt
         return v, (-decel * u if braking and step < dist else zero)
 
-    def _arc_goal(self, p_t: np.ndarray, n_ms: np.ndarray, goal: np.ndarray, speed: float, dt: float):
+    def _arc_goal(self, p_t: np.ndarray, n_nav: np.ndarray, goal: np.ndarray, speed: float, dt: float):
         """Next goal on the way to ``goal`` that keeps outside the keep-out sphere: straight when the
         segment clears the sphere, else along the great circle through the reference toward the normal."""
         clear = self.p.keepout_radius_m + self.p.keepout_margin_m
@@ -360,11 +360,11 @@ class ChaserGuidance:
             return goal
         radius = max(_norm(a), clear)
         u = a / _norm(a)
-        axis = np.cross(u, n_ms)
+        axis = np.cross(u, n_nav)
         if _norm(axis) < 1e-9:  # exactly opposite the face: any perpendicular axis will do
             axis = np.cross(u, np.eye(3)[np.argmin(np.abs(u))])
         axis /= _norm(axis)
-        ang = min(np.arccos(np.clip(u @ n_ms, -1.0, 1.0)), self.p.arc_lookahead_rad)
+        ang = min(np.arccos(np.clip(u @ n_nav, -1.0, 1.0)), self.p.arc_lookahead_rad)
         return p_t + radius * rot.quat_rotate(rot.rotvec_exp(axis * ang), u)
 
     # ---- one evaluation -------------------------------------------------------------------------
@@ -372,10 +372,10 @@ class ChaserGuidance:
         p = self.p
         events: list[dict] = []
         t = nav.t_s
-        p_t = np.asarray(nav.p_target_ms, dtype=float)
-        n_ms, p_docked, q_dock = docking_geometry(p, p_t, nav.q_ms_target)
-        r = float(_norm(nav.p_ms - p_t))
-        qe = rot.quat_mul(rot.quat_conj(q_dock), nav.q_ms_body)
+        p_t = np.asarray(nav.p_target_nav, dtype=float)
+        n_nav, p_docked, q_dock = docking_geometry(p, p_t, nav.q_nav_target)
+        r = float(_norm(nav.p_nav - p_t))
+        qe = rot.quat_mul(rot.quat_conj(q_dock), nav.q_nav_body)
         qe_norm = float(_norm(qe[:3]))
         nis = nav.mahalanobis_d * nav.mahalanobis_d  # mean NIS of the health window
         unhealthy = (
@@ -396,7 +396,7 @@ class ChaserGuidance:
                 reason = "initial estimate converged" if not self.started else "estimate healthy again"
                 reason += f" (sigma_pos={nav.sigma_pos_max_m:.3f} m)"
                 self.started = True
-                self.p_ref = nav.p_ms.copy()
+                self.p_ref = nav.p_nav.copy()
                 self._switch(t, self.resume_mode, r, reason, events)
             elif self.started and t - self.mode_since_s > p.abort_after_hold_s:
                 self._switch(t, Mode.ABORT, r, f"HOLD longer than {p.abort_after_hold_s:.0f} s", events)
@@ -408,7 +408,7 @@ class ChaserGuidance:
                 why = f"{nav.rejection_fraction:.0%} of recent ranges rejected"
             else:
                 why = f"mean NIS of recent ranges {nis:.1f} > {p.hold_nis_mean}"
-            self.p_ref = nav.p_ms.copy()
+            self.p_ref = nav.p_nav.copy()
             self._switch(t, Mode.HOLD, r, "estimate not trustworthy: " + why, events)
         elif self.mode is Mode.DOCK and unhealthy:
             self._switch(t, Mode.ABORT, r, "estimate not trustworthy inside the keep-out sphere", events)
@@ -417,7 +417,7 @@ class ChaserGuidance:
         if self.mode in (Mode.APPROACH, Mode.REORIENT):
             decision = self.switcher.evaluate(t, r, nav.mahalanobis_d, qe_norm, nav.sigma_pos_max_m)
         r1, r2 = self.switcher.r1_m, self.switcher.r2_m
-        corridor = in_corridor(p, nav.p_ms, p_t, n_ms)
+        corridor = in_corridor(p, nav.p_nav, p_t, n_nav)
 
         if self.mode is Mode.APPROACH and r <= r2:
             self._switch(t, Mode.REORIENT, r, f"r={r:.3f} m <= r2={r2:.3f} m", events)
@@ -436,12 +436,12 @@ class ChaserGuidance:
                     f"held at the keep-out boundary {p.stall_timeout_s:.0f} s above r1={r1:.3f} m", events,
                 )  # fmt: skip
         if self.mode is Mode.ALIGN:
-            p_align = p_t + p.align_distance_m * n_ms
+            p_align = p_t + p.align_distance_m * n_nav
             att_err = 2.0 * np.arcsin(min(qe_norm, 1.0))
             if (
-                _norm(nav.p_ms - p_align) <= p.align_tolerance_m
+                _norm(nav.p_nav - p_align) <= p.align_tolerance_m
                 and att_err <= p.align_attitude_tolerance_rad
-                and _norm(nav.v_ms) <= p.align_speed_tolerance_m_s
+                and _norm(nav.v_nav) <= p.align_speed_tolerance_m_s
             ):
                 if nav.vision or not p.dock_requires_vision:
                     self._switch(t, Mode.DOCK, r, "at the alignment point", events)
@@ -455,14 +455,14 @@ class ChaserGuidance:
                 why = f"no vision at the alignment point for {p.abort_after_hold_s:.0f} s"
                 self._switch(t, Mode.ABORT, r, why, events)
         if self.mode is Mode.DOCK:
-            c = contact_state(p, nav.p_ms, nav.v_ms, nav.q_ms_body, p_t, nav.q_ms_target)
+            c = contact_state(p, nav.p_nav, nav.v_nav, nav.q_nav_body, p_t, nav.q_nav_target)
             if c["gap_m"] <= p.contact_distance_m:
                 self._switch(t, Mode.DOCKED, r, f"estimated port gap {c['gap_m'] * 1000:.1f} mm", events)
         if self.mode is Mode.ABORT and self.retries < p.max_retries and healthy:
             retreat = _norm(self.p_ref - p_t) >= p.keepout_radius_m + p.abort_retreat_m - 1e-3
             if retreat and t - self.mode_since_s > p.retry_after_s:
                 self.retries += 1
-                self.p_ref = nav.p_ms.copy()
+                self.p_ref = nav.p_nav.copy()
                 self._switch(t, Mode.APPROACH, r, f"retry {self.retries} after abort", events)
 
         # --- reference for the mode ---
@@ -480,23 +480,23 @@ class ChaserGuidance:
             if self.mode is Mode.REORIENT and _norm(self.p_ref - goal) < 1e-6:
                 self.stall_since_s = t if self.stall_since_s is None else self.stall_since_s
         elif self.mode is Mode.ALIGN:
-            p_align = p_t + p.align_distance_m * n_ms
+            p_align = p_t + p.align_distance_m * n_nav
             v_ref, a_ref = self._carrot(
-                nav, self._arc_goal(p_t, n_ms, p_align, p.align_speed_m_s, dt), p.align_speed_m_s, dt
+                nav, self._arc_goal(p_t, n_nav, p_align, p.align_speed_m_s, dt), p.align_speed_m_s, dt
             )
         elif self.mode is Mode.DOCK:
-            v_ref, a_ref = self._carrot(nav, p_docked - p.dock_overshoot_m * n_ms, p.dock_speed_m_s, dt)
+            v_ref, a_ref = self._carrot(nav, p_docked - p.dock_overshoot_m * n_nav, p.dock_speed_m_s, dt)
         elif self.mode is Mode.ABORT:
-            u = (nav.p_ms - p_t) / max(r, 1e-9)
+            u = (nav.p_nav - p_t) / max(r, 1e-9)
             goal = p_t + u * (p.keepout_radius_m + p.abort_retreat_m)
             v_ref, a_ref = self._carrot(nav, goal, p.abort_speed_m_s, dt)
-            q_ref = nav.q_ms_body
+            q_ref = nav.q_nav_body
         elif self.mode is Mode.HOLD and (not self.started or self.resume_mode is Mode.APPROACH):
             q_ref = self.q_mission  # holding before the start or during APPROACH: the mission attitude
         elif self.mode is Mode.DOCKED:
-            self.p_ref = nav.p_ms.copy()
+            self.p_ref = nav.p_nav.copy()
         return Reference(
-            mode=self.mode, p_ms=self.p_ref.copy(), v_ms=v_ref, a_ms=a_ref, q_ms_body=q_ref,
+            mode=self.mode, p_nav=self.p_ref.copy(), v_nav=v_ref, a_nav=a_ref, q_nav_body=q_ref,
             range_m=r, events=events, decision=decision,
         )  # fmt: skip
 
@@ -581,10 +581,10 @@ class StationKeeping:
     scales with the filter's own covariance wherever the target is.
     """
 
-    def __init__(self, p_ms, q_ms_body, params: StationParams | None = None) -> None:
+    def __init__(self, p_nav, q_nav_body, params: StationParams | None = None) -> None:
         self.params = params or StationParams()
-        self.p_ref = np.asarray(p_ms, dtype=float).copy()
-        self.q_ref = rot.quat_normalize(np.asarray(q_ms_body, dtype=float))
+        self.p_ref = np.asarray(p_nav, dtype=float).copy()
+        self.q_ref = rot.quat_normalize(np.asarray(q_nav_body, dtype=float))
         self.mode = Mode.STATION
         self.history: list[dict] = []
         self.translate = False
@@ -597,12 +597,12 @@ class StationKeeping:
 
     def step(self, nav: NavInput, dt: float) -> Reference:
         p = self.params
-        r = float(_norm(nav.p_ms - self.p_ref))
-        att = float(_norm(rot.attitude_error(self.q_ref, nav.q_ms_body)))
+        r = float(_norm(nav.p_nav - self.p_ref))
+        att = float(_norm(rot.attitude_error(self.q_ref, nav.q_nav_body)))
         if nav.sigma_pos_max_m > p.converged_sigma_m:
             self.translate = self.rotate = False
         else:
-            speed = float(_norm(nav.v_ms))
+            speed = float(_norm(nav.v_nav))
             if self.translate:
                 self.translate = not (r < p.settle_m and speed < p.settle_speed_m_s)
             else:

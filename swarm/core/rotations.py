@@ -3,7 +3,7 @@
 Convention. Quaternions are scalar-last ``(x, y, z, w)`` and compose with the Hamilton product, as in
 ``scipy.spatial.transform.Rotation``: ``quat_to_matrix(q) == Rotation.from_quat(q).as_matrix()`` and
 ``quat_to_matrix(quat_mul(p, q)) == quat_to_matrix(p) @ quat_to_matrix(q)``. A quaternion named
-``q_ms_body`` maps body-frame vectors into the mothership frame: ``v_ms = quat_rotate(q_ms_body, v_body)``.
+``q_nav_body`` maps body-frame vectors into the navigation frame: ``v_nav = quat_rotate(q_nav_body, v_body)``.
 
 Markley 2003 and Crassidis & Junkins ("Optimal Estimation of Dynamic Systems") write the same four
 numbers in the same order, but compose with the Shuster (reversed) product, ``p (x)_S q == q (x)_H p``,
@@ -137,7 +137,7 @@ def quat_canonical(q: ArrayLike) -> FloatArray:
 
 
 def quat_rotate(q: ArrayLike, v: ArrayLike) -> FloatArray:
-    """``R(q) v``, shape ``(..., 3)``: e.g. ``v_ms = quat_rotate(q_ms_body, v_body)``.
+    """``R(q) v``, shape ``(..., 3)``: e.g. ``v_nav = quat_rotate(q_nav_body, v_body)``.
 
     ``v + (2 / |q|^2) (w (u x v) + u x (u x v))``, ``u`` the vector part: ``q v q*`` expanded, equal to
     ``quat_to_matrix(q) @ v`` also for non-unit ``q``. Broadcasts ``q (..., 4)`` against ``v (..., 3)``.

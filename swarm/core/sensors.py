@@ -250,13 +250,13 @@ class UwbSample(NamedTuple):
 
 
 class UwbRadio:
-    """The UWB tag of one vehicle ranging the anchors ``anchors_ms`` (N, 3) [m], frame ``ms``, in round
+    """The UWB tag of one vehicle ranging the anchors ``anchors_nav`` (N, 3) [m], frame ``nav``, in round
     robin: call :meth:`sample` once per exchange, every ``params.period_s``."""
 
-    def __init__(self, anchors_ms: ArrayLike, params: UwbParams) -> None:
-        a = np.array(anchors_ms, dtype=np.float64)
+    def __init__(self, anchors_nav: ArrayLike, params: UwbParams) -> None:
+        a = np.array(anchors_nav, dtype=np.float64)
         if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] == 0 or not np.all(np.isfinite(a)):
-            raise ValueError(f"anchors_ms must be a finite (N, 3) array with N >= 1, got shape {a.shape}")
+            raise ValueError(f"anchors_nav must be a finite (N, 3) array with N >= 1, got shape {a.shape}")
         drift = params.clock_drift_m_s
         if len(drift) == 1:
             drift = drift[0]
@@ -269,8 +269,8 @@ class UwbRadio:
         else:
             self._drift_m_s = (float(drift),) * a.shape[0]
         self.params = params
-        self.anchors_ms = a
-        self.anchors_ms.setflags(write=False)
+        self.anchors_nav = a
+        self.anchors_nav.setflags(write=False)
         self._anchor_rows = [tuple(row) for row in a.tolist()]
         self._next = 0
         self._vector = self.vector
@@ -285,9 +285,9 @@ class UwbRadio:
         elapsed = t_s - self.params.clock_drift_start_s
         return self._drift_m_s[anchor_id] * elapsed if elapsed > 0.0 else 0.0
 
-    def sample(self, t_s: float, tag_ms: ArrayLike, rng: np.random.Generator) -> UwbSample | None:
-        """One exchange at time ``t_s`` [s] with the tag at ``tag_ms`` (3,) [m], frame ``ms`` (the tag, not
-        the centre of mass: ``p_ms + R(q_ms_body) P1``). Returns None when the reply is lost.
+    def sample(self, t_s: float, tag_nav: ArrayLike, rng: np.random.Generator) -> UwbSample | None:
+        """One exchange at time ``t_s`` [s] with the tag at ``tag_nav`` (3,) [m], frame ``nav`` (the tag, not
+        the centre of mass: ``p_nav + R(q_nav_body) P1``). Returns None when the reply is lost.
 
         ``range = |tag - anchor| + n + b_drift(t) + [outlier] U(nlos_min, nlos_max)``, ``n ~ N(0, sigma^2)``,
         clipped at zero. NLOS and multipath replies travel a longer path, so outliers only add length
@@ -300,8 +300,8 @@ class UwbRadio:
         self._next = (i + 1) % len(self._anchor_rows)
         # One draw of four normals per exchange whatever happens (see uwb_exchange).
         z = rng.standard_normal(4)
-        tag = np.asarray(tag_ms, dtype=np.float64)
-        lost, r, outlier = uwb_exchange(t_s, tag, self.anchors_ms[i], z, self._drift_m_s[i], self._vector)
+        tag = np.asarray(tag_nav, dtype=np.float64)
+        lost, r, outlier = uwb_exchange(t_s, tag, self.anchors_nav[i], z, self._drift_m_s[i], self._vector)
         return None if lost else UwbSample(t_s, i, r, outlier)
 
     def drift_rate(self, anchor_id: int) -> float:
@@ -345,7 +345,7 @@ def uwb_fault_vector(base: np.ndarray, dropouts, nlos_bursts) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def uwb_exchange(t_s, tag_ms, anchor_ms, z, drift_m_s, prm):
+def uwb_exchange(t_s, tag_nav, anchor_nav, z, drift_m_s, prm):
     """One two-way-ranging exchange: ``(lost, range_m, is_outlier)``; the arithmetic of
     :meth:`UwbRadio.sample` (its docstring has the model), compiled so the simulation's inner loop can
     call it. ``prm`` is :attr:`UwbRadio.vector`, possibly with fault windows (:func:`uwb_fault_vector`):
@@ -359,9 +359,9 @@ def uwb_exchange(t_s, tag_ms, anchor_ms, z, drift_m_s, prm):
     for w in range(UWB_N, end_drop, 2):
         if prm[w] <= t_s < prm[w + 1]:
             return True, 0.0, False
-    dx = tag_ms[0] - anchor_ms[0]
-    dy = tag_ms[1] - anchor_ms[1]
-    dz = tag_ms[2] - anchor_ms[2]
+    dx = tag_nav[0] - anchor_nav[0]
+    dy = tag_nav[1] - anchor_nav[1]
+    dz = tag_nav[2] - anchor_nav[2]
     r = math.sqrt(dx * dx + dy * dy + dz * dz) + prm[UWB_SIGMA] * z[0]
     elapsed = t_s - prm[UWB_DRIFT_START]
     if elapsed > 0.0:
@@ -407,9 +407,9 @@ class AhrsParams:
         return self.sigma_rad**2 * np.eye(3)
 
 
-def ahrs_sample(q_true_ms_body: ArrayLike, params: AhrsParams, rng: np.random.Generator) -> np.ndarray:
+def ahrs_sample(q_true_nav_body: ArrayLike, params: AhrsParams, rng: np.random.Generator) -> np.ndarray:
     """Measured attitude ``q_meas = q_true (x) exp(dtheta)`` (4,), scalar-last, with body-frame
     ``dtheta ~ N(0, sigma^2 I)``: the multiplicative error that ``PoseEstimator.update_attitude`` assumes
-    (Markley 2003, written with the Hamilton product). ``q_true_ms_body`` (4,) unit quaternion."""
-    q = np.asarray(q_true_ms_body, dtype=np.float64)
+    (Markley 2003, written with the Hamilton product). ``q_true_nav_body`` (4,) unit quaternion."""
+    q = np.asarray(q_true_nav_body, dtype=np.float64)
     return qnormalize(qmul(q, qexp(params.sigma_rad * rng.standard_normal(3))))

@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from swarm.core._rot_nb import qconj, qexp, qlog, qmul, qnormalize, qrotate
-from swarm.core.camera import camera_pose_ms, feature_vectors, project_markers, visible
+from swarm.core.camera import camera_pose_nav, feature_vectors, project_markers, visible
 from swarm.core.dynamics import propagate
 from swarm.core.guidance import contact_state, pair_geometry
 from swarm.core.sensors import (
@@ -52,7 +52,7 @@ def stream(seed: int, vehicle_index: int, name: str) -> np.random.Generator:
 
 def initial_state(scenario, vehicle_id: str) -> np.ndarray:
     """Truth state (13,) of ``vehicle_id`` at tick 0: at rest at its scenario position and attitude,
-    ``[p_ms, v_ms, q_ms_body, w_body]``. An agent process derives its initial estimate from it exactly as
+    ``[p_nav, v_nav, q_nav_body, w_body]``. An agent process derives its initial estimate from it exactly as
     :class:`World` starts, so neither runner needs the other's objects."""
     x = np.zeros(13)
     x[0:3] = scenario.vehicles[vehicle_id].position_m
@@ -66,7 +66,7 @@ class SensorFrame:
 
     t_s: float
     gyro_body: np.ndarray
-    q_ahrs_ms_body: np.ndarray | None = None
+    q_ahrs_nav_body: np.ndarray | None = None
     vision_kind: str | None = None  # "features" or "pixels"
     vision: np.ndarray | None = None
 
@@ -266,7 +266,7 @@ class World:
     def _vision(self, chaser: str, target: str, frame: SensorFrame) -> None:
         cam = self.sc.camera
         xc, xt = self.x[chaser], self.x[target]
-        p_cam, q_cam = camera_pose_ms(xc[0:3], xc[6:10], cam)
+        p_cam, q_cam = camera_pose_nav(xc[0:3], xc[6:10], cam)
         if not visible(p_cam, q_cam, xt[0:3], xt[6:10], self.sc.guidance.docking_face, cam, self.sc.markers):
             return
         rng = self.rng[chaser, "camera"]

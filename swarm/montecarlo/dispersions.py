@@ -114,9 +114,9 @@ class Dispersion:
     """The dispersions of one run, as drawn (zeros / ones where a quantity is off)."""
 
     position_m: dict[str, np.ndarray]
-    """Chaser id -> (3,) offset of the initial true position, frame ms [m]."""
+    """Chaser id -> (3,) offset of the initial true position, frame nav [m]."""
     velocity_m_s: dict[str, np.ndarray]
-    """Chaser id -> (3,) initial true velocity, frame ms [m/s]."""
+    """Chaser id -> (3,) initial true velocity, frame nav [m/s]."""
     attitude_rad: dict[str, np.ndarray]
     """Chaser id -> (3,) body-frame rotation vector applied to the initial true attitude [rad]."""
     mass_factor: float

@@ -13,7 +13,7 @@ samples (:func:`nees_samples`) and the fault windows of the run, and this module
   outside every UWB dropout window and before the chaser first navigated relative to the target. The
   samples from the first vision update on are left out: under vision the estimate and its covariance are
   relative to the target's *estimated* pose (``agent.vision_target_cov`` off, as in the paper), so the
-  truth in the mothership frame is not what the covariance describes, and when the markers leave the
+  truth in the navigation frame is not what the covariance describes, and when the markers leave the
   image again (intermittently in ALIGN) the estimate keeps that offset (the target's own estimate error,
   millimetres) with a covariance shrunk by the 1 mm features until the ranges re-anchor it, over the
   filter's time constant (tens of seconds): those samples are not UWB navigation either, although
@@ -44,7 +44,7 @@ def nees_samples(series: dict, idx: list[int], dropouts) -> tuple[list, list]:
     first_rel = next((i for i, r in enumerate(rel) if r), len(rel))
     nees, used = [], []
     for i in idx:
-        e = np.asarray(series["p_est_ms"][i]) - np.asarray(series["p_true_ms"][i])
+        e = np.asarray(series["p_est_nav"][i]) - np.asarray(series["p_true_nav"][i])
         P = np.asarray(series["cov_pos"][i])
         nees.append(round(float(e @ np.linalg.solve(P, e)), 5))
         t = series["t_s"][i]

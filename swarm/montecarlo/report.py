@@ -398,11 +398,11 @@ def _fig5(plt, out_dir, sc, by_key, trajs, policies) -> None:
     fig = plt.figure(figsize=(5.5 * k_pol, 10))
     chaser = next(v for v in sc.vehicles.values() if v.role == "chaser")
     p_t = np.asarray(sc.vehicles[chaser.target].position_m)
-    n_ms, _, _ = docking_geometry(sc.guidance, p_t, sc.q0(chaser.target))
+    n_nav, _, _ = docking_geometry(sc.guidance, p_t, sc.q0(chaser.target))
     los = np.asarray(chaser.position_m) - p_t
-    e2 = los - (los @ n_ms) * n_ms
+    e2 = los - (los @ n_nav) * n_nav
     e2 /= np.linalg.norm(e2)
-    basis = np.vstack([e2, n_ms])  # plane coordinates: along the LOS (normal removed), along n
+    basis = np.vstack([e2, n_nav])  # plane coordinates: along the LOS (normal removed), along n
     g = sc.guidance
     for k, pol in enumerate(policies):
         segs: dict[int, list] = {i: [] for i in range(len(names))}
@@ -412,7 +412,7 @@ def _fig5(plt, out_dir, sc, by_key, trajs, policies) -> None:
             if tr["policy"] != pol or row is None:
                 continue
             n += 1
-            t, p = np.asarray(tr["t_s"]), np.asarray(tr["p_ms"])
+            t, p = np.asarray(tr["t_s"]), np.asarray(tr["p_nav"])
             m = _mode_at(row, t)
             for a in range(len(t) - 1):
                 if m[a] >= 0:
@@ -425,7 +425,7 @@ def _fig5(plt, out_dir, sc, by_key, trajs, policies) -> None:
                     Line3DCollection(segs[i], colors=MODE_COLOURS[name], linewidths=0.5, alpha=alpha)
                 )
         ax.scatter(*p_t, color="k", marker="s", s=40)
-        ax.plot(*np.c_[p_t, p_t + g.align_distance_m * n_ms], color="k", lw=1.5)
+        ax.plot(*np.c_[p_t, p_t + g.align_distance_m * n_nav], color="k", lw=1.5)
         ax.scatter(*chaser.position_m, color="k", marker="o", s=20)
         lo = np.minimum(p_t, chaser.position_m) - 0.2
         hi = np.maximum(p_t, chaser.position_m) + 0.2

@@ -88,7 +88,7 @@ FIELDS: dict[str, str] = {
 
 def run_one(scenario, policy: str, run: int, seed: int, trajectory_period_s: float = 1.0):
     """Run ``run`` of ``policy`` with ``seed``: ``(rows, trajectories)``, one CSV row (:data:`FIELDS`) and
-    one decimated trajectory (``{"run", "policy", "chaser", "t_s", "p_ms"}``, every
+    one decimated trajectory (``{"run", "policy", "chaser", "t_s", "p_nav"}``, every
     ``trajectory_period_s``, positions rounded to 0.1 mm) per chaser. Runs in a worker process."""
     from swarm.core import rotations as rot
     from swarm.montecarlo.dispersions import dispersion_columns
@@ -100,8 +100,8 @@ def run_one(scenario, policy: str, run: int, seed: int, trajectory_period_s: flo
         x, est = sim.world.x[cid], sim.agents[cid].est
         start[cid] = (
             x[0:3].copy(),
-            est.p_ms[0] - x[0:3],
-            float(np.linalg.norm(rot.attitude_error(x[6:10], est.q_ms_body[0]))),
+            est.p_nav[0] - x[0:3],
+            float(np.linalg.norm(rot.attitude_error(x[6:10], est.q_nav_body[0]))),
         )
     t0 = time.perf_counter()
     res = sim.run()
@@ -157,7 +157,7 @@ def run_one(scenario, policy: str, run: int, seed: int, trajectory_period_s: flo
             "policy": policy,
             "chaser": cid,
             "t_s": [round(s["t_s"][i], 3) for i in idx],
-            "p_ms": [[round(v, 4) for v in s["p_true_ms"][i]] for i in idx],
+            "p_nav": [[round(v, 4) for v in s["p_true_nav"][i]] for i in idx],
         }
         if "faults" in c:  # [faults] on: the NEES at the saved samples and the windows (montecarlo.faults)
             from swarm.montecarlo.faults import nees_samples
@@ -194,7 +194,7 @@ def _mode_columns(modes: list[dict]) -> dict:
 def _path_columns(series: dict, modes: list[dict], t_end: float | None) -> dict:
     """Distance flown (truth) in each main mode [m], from the recorded series."""
     t = np.asarray(series["t_s"])
-    p = np.asarray(series["p_true_ms"]).reshape(-1, 3)
+    p = np.asarray(series["p_true_nav"]).reshape(-1, 3)
     step = np.r_[0.0, np.linalg.norm(np.diff(p, axis=0), axis=1)]  # step ending at sample k
     entry = {}
     for m in modes:

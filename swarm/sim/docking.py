@@ -68,10 +68,10 @@ class ChaserOutcome:
 def _new_series() -> dict[str, list]:
     keys = (
         "t_s",
-        "p_true_ms",
-        "p_est_ms",
-        "q_true_ms_body",
-        "q_est_ms_body",
+        "p_true_nav",
+        "p_est_nav",
+        "q_true_nav_body",
+        "q_est_nav_body",
         "cov_pos",
         "mode",
         "relative_nav",
@@ -166,7 +166,7 @@ class DockingSim:
                 ranges = self.network.step(k, t, self.world.x)
                 for vid, agent in self.agents.items():
                     fr = frames[vid]
-                    agent.on_imu(t, dt, fr.gyro_body, fr.q_ahrs_ms_body)
+                    agent.on_imu(t, dt, fr.gyro_body, fr.q_ahrs_nav_body)
                     if vid in ranges:
                         agent.on_uwb(ranges[vid].anchor_id, ranges[vid].range_m)
                     if fr.vision is not None:
@@ -246,8 +246,8 @@ class DockingSim:
             dist2 = d.dot(d)
             if dist2 > reach * reach:
                 continue
-            axis_ms = rot.quat_rotate(X[c, 6:10], self._cam_axis_body)
-            if axis_ms.dot(d) >= cos_fov * np.sqrt(dist2):
+            axis_nav = rot.quat_rotate(X[c, 6:10], self._cam_axis_body)
+            if axis_nav.dot(d) >= cos_fov * np.sqrt(dist2):
                 return True
         return False
 
@@ -325,10 +325,10 @@ class DockingSim:
             if self.record_series and k % sc.sim.series_every == 0 and cid not in self.done:
                 s = out.series
                 s["t_s"].append(t)
-                s["p_true_ms"].append(self.world.x[cid][0:3].tolist())
-                s["p_est_ms"].append(agent.est.p_ms[0].tolist())
-                s["q_true_ms_body"].append(self.world.x[cid][6:10].tolist())
-                s["q_est_ms_body"].append(agent.est.q_ms_body[0].tolist())
+                s["p_true_nav"].append(self.world.x[cid][0:3].tolist())
+                s["p_est_nav"].append(agent.est.p_nav[0].tolist())
+                s["q_true_nav_body"].append(self.world.x[cid][6:10].tolist())
+                s["q_est_nav_body"].append(agent.est.q_nav_body[0].tolist())
                 s["cov_pos"].append(agent.est.P[0, :3, :3].tolist())
                 s["mode"].append(agent.mode.value)
                 s["relative_nav"].append(bool(agent.relative_nav))

@@ -30,10 +30,10 @@ class EstimationScenario:
     imu_rate_hz: float = 100.0
     uwb_every: int = 2
     """A range every ``uwb_every`` IMU steps (100 Hz / 2 = the hardware's ~50 Hz)."""
-    anchors_ms: np.ndarray = field(default_factory=lambda: PAPER_ANCHORS_MS.copy())
-    centre_ms: tuple[float, float, float] = (0.0, 0.5, 0.0)
+    anchors_nav: np.ndarray = field(default_factory=lambda: PAPER_ANCHORS_MS.copy())
+    centre_nav: tuple[float, float, float] = (0.0, 0.5, 0.0)
     pull_rate_rad_s: float = 0.5
-    """Natural frequency of the commanded pull towards ``centre_ms`` [rad/s]."""
+    """Natural frequency of the commanded pull towards ``centre_nav`` [rad/s]."""
     pull_damping: float = 0.7
     """Damping ratio of that pull."""
     excitation_m_s2: float = 0.02
@@ -45,7 +45,7 @@ class EstimationScenario:
     body_rate_freqs_rad_s: tuple[float, float, float] = (0.5, 0.4, 0.3)
     """... and their angular frequencies per body axis [rad/s]."""
     start_box_m: float = 0.3
-    """True start positions are uniform within +- this of ``centre_ms`` per axis [m] ..."""
+    """True start positions are uniform within +- this of ``centre_nav`` per axis [m] ..."""
     start_attitude_rad: float = 0.5
     """... and true start attitudes have this standard deviation per rotation-vector axis [rad]."""
     ahrs_every: int = 0
@@ -80,7 +80,7 @@ class EstimationResult:
 
 def _truth_accel(t: float, p: np.ndarray, v: np.ndarray, sc: EstimationScenario, phase: np.ndarray):
     w0 = sc.pull_rate_rad_s
-    c = np.asarray(sc.centre_ms)
+    c = np.asarray(sc.centre_nav)
     excitation = sc.excitation_m_s2 * np.sin(sc.excitation_rad_s * t + phase)
     return -(w0**2) * (p - c) - 2.0 * sc.pull_damping * w0 * v + excitation
 
@@ -92,7 +92,7 @@ def run_estimation(params: EstimatorParams, sc: EstimationScenario) -> Estimatio
     ss = np.random.SeedSequence(sc.seed)
     rng_init, rng_proc, rng_gyro, rng_uwb, rng_out, rng_ahrs = (np.random.default_rng(s) for s in ss.spawn(6))
 
-    p = np.tile(np.asarray(sc.centre_ms), (n, 1)) + rng_init.uniform(-sc.start_box_m, sc.start_box_m, (n, 3))
+    p = np.tile(np.asarray(sc.centre_nav), (n, 1)) + rng_init.uniform(-sc.start_box_m, sc.start_box_m, (n, 3))
     v = np.zeros((n, 3))
     q = rot.rotvec_exp(rng_init.normal(0.0, sc.start_attitude_rad, (n, 3)))
     phase = rng_init.uniform(0, 2 * np.pi, (n, 3))
@@ -112,7 +112,7 @@ def run_estimation(params: EstimatorParams, sc: EstimationScenario) -> Estimatio
     Lq = np.linalg.cholesky(Qd)
     sig_g = params.gyro_arw_rad_rts / np.sqrt(dt)
     lever = np.asarray(params.lever_arm_body_m)
-    n_anchor = len(sc.anchors_ms)
+    n_anchor = len(sc.anchors_nav)
     f0, f1, f2 = sc.body_rate_freqs_rad_s
 
     ks, errs, covs, perr, aerr, nis = [], [], [], [], [], []
@@ -132,7 +132,7 @@ def run_estimation(params: EstimatorParams, sc: EstimationScenario) -> Estimatio
         est.predict(gyro, a_cmd, dt)
 
         if k % sc.uwb_every == 0:
-            anchor = sc.anchors_ms[(k // sc.uwb_every) % n_anchor]
+            anchor = sc.anchors_nav[(k // sc.uwb_every) % n_anchor]
             true_range = np.linalg.norm(p + rot.quat_rotate(q, lever) - anchor, axis=-1)
             z = true_range + rng_uwb.normal(0.0, params.sigma_range_m, n)
             is_out = rng_out.random(n) < sc.outlier_probability
@@ -151,7 +151,7 @@ def run_estimation(params: EstimatorParams, sc: EstimationScenario) -> Estimatio
 
         if (k + 1) % 10 == 0:
             # error-state convention: truth = estimate (+) error, q = q_est (x) exp(d_theta)
-            e = np.concatenate([p - est.p_ms, v - est.v_ms, rot.attitude_error(est.q_ms_body, q)], axis=-1)
+            e = np.concatenate([p - est.p_nav, v - est.v_nav, rot.attitude_error(est.q_nav_body, q)], axis=-1)
             errs.append(e)
             covs.append(est.P.copy())
             perr.append(np.linalg.norm(e[:, :3], axis=-1))

@@ -47,8 +47,8 @@ def plot_run(res: dict, scenario, path: str | Path) -> None:
         if not s or not s["t_s"]:
             continue
         t = np.asarray(s["t_s"])
-        pt = np.asarray(s["p_true_ms"])
-        pe = np.asarray(s["p_est_ms"])
+        pt = np.asarray(s["p_true_nav"])
+        pe = np.asarray(s["p_est_nav"])
         cov = np.asarray(s["cov_pos"])
         modes = np.asarray(s["mode"])
         ax = fig.add_subplot(rows, 2, 2 * row + 1, projection="3d")
@@ -63,9 +63,9 @@ def plot_run(res: dict, scenario, path: str | Path) -> None:
         tid = scenario.vehicles[cid].target
         spec = scenario.vehicles[tid]
         p_t = np.asarray(spec.position_m)
-        n_ms, _, _ = docking_geometry(scenario.guidance, p_t, scenario.q0(tid))
+        n_nav, _, _ = docking_geometry(scenario.guidance, p_t, scenario.q0(tid))
         ax.scatter(*p_t, marker="s", s=60, color="k", label="target")
-        ax.quiver(*p_t, *(0.3 * n_ms), color="k")
+        ax.quiver(*p_t, *(0.3 * n_nav), color="k")
         if res["policy"] == "mdp":
             _sphere(ax, p_t, scenario.mdp.r_t_m, "#bbbbbb", "r_t")
         _sphere(ax, p_t, c["r2_m"], MODE_COLOURS["REORIENT"], "r2")
@@ -90,7 +90,7 @@ def plot_run(res: dict, scenario, path: str | Path) -> None:
             ax2.text(ev["t_s"], ax2.get_ylim()[1] * 0.9, ev["mode"], fontsize=6, rotation=90, va="top")
         ax2.set_xlabel("t [s]")
         ax2.set_ylabel("position error [cm] (dashed: +-3 sigma)")
-        ax2.set_title("estimation error per axis, frame ms")
+        ax2.set_title("estimation error per axis, frame nav")
         ax2.legend(fontsize=7)
         ax2.grid(alpha=0.3)
     fig.tight_layout()

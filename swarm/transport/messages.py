@@ -17,8 +17,8 @@ read-only ``frombuffer`` view of the payload). :func:`safe_decode` is what a Zen
 never raises; a bad message is dropped, counted per key in a :class:`DropCounter` and logged at a
 limited rate, so it never reaches a filter.
 
-Conventions (notes/conventions.md): frames ``ms`` (mothership, inertial) and ``body``; quaternions
-scalar-last ``(x, y, z, w)``, ``q_ms_body`` maps body vectors into ``ms``; SI units.
+Conventions (notes/conventions.md): frames ``nav`` (mothership, inertial) and ``body``; quaternions
+scalar-last ``(x, y, z, w)``, ``q_nav_body`` maps body vectors into ``nav``; SI units.
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ __all__ = [
 
 _LOG = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 """Value of the ``"v"`` key of every message; a receiver drops any other version."""
 
 MAX_PAYLOAD_BYTES = 65536
@@ -398,8 +398,8 @@ class Imu(Message):
     """Integration interval [s] (> 0) ending at ``t_s``, over which the estimator propagates this rate."""
     gyro_body: np.ndarray
     """Measured angular rate (3,) [rad/s], body frame, with the sensor's bias and noise."""
-    q_ahrs_ms_body: np.ndarray | None = None
-    """AHRS attitude (4,), unit quaternion (x, y, z, w) mapping body into ms; ``None`` when the vehicle has
+    q_ahrs_nav_body: np.ndarray | None = None
+    """AHRS attitude (4,), unit quaternion (x, y, z, w) mapping body into nav; ``None`` when the vehicle has
     no AHRS or on ticks without an AHRS output (it runs at 10 Hz of the 100 Hz)."""
 
     def __post_init__(self) -> None:
@@ -407,7 +407,7 @@ class Imu(Message):
             self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
             dt_s=_float(self.dt_s, "dt_s", positive=True),
             gyro_body=_array(self.gyro_body, "gyro_body", (3,)),
-            q_ahrs_ms_body=_quat(self.q_ahrs_ms_body, "q_ahrs_ms_body", nullable=True),
+            q_ahrs_nav_body=_quat(self.q_ahrs_nav_body, "q_ahrs_nav_body", nullable=True),
         )  # fmt: skip
 
 
@@ -483,12 +483,12 @@ class Estimate(Message):
     """Tick ``k`` of the last measurement processed (>= 0)."""
     t_s: float
     """Time of the estimate [s] (>= 0)."""
-    p_ms: np.ndarray
-    """Centre-of-mass position (3,) [m], frame ms."""
-    v_ms: np.ndarray
-    """Centre-of-mass velocity (3,) [m/s], frame ms."""
-    q_ms_body: np.ndarray
-    """Attitude (4,), unit quaternion (x, y, z, w) mapping body into ms."""
+    p_nav: np.ndarray
+    """Centre-of-mass position (3,) [m], frame nav."""
+    v_nav: np.ndarray
+    """Centre-of-mass velocity (3,) [m/s], frame nav."""
+    q_nav_body: np.ndarray
+    """Attitude (4,), unit quaternion (x, y, z, w) mapping body into nav."""
     cov: np.ndarray
     """Error-state covariance (9, 9) of ``(d_p [m], d_v [m/s], d_theta [rad])``, ``d_theta`` a body-frame
     rotation vector (``q = q_est (x) exp(d_theta)``); symmetric, non-negative diagonal. The tandem
@@ -509,8 +509,8 @@ class Estimate(Message):
             raise MessageError(f"rejection_fraction: must be in [0, 1], got {rf}")
         _set(
             self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
-            p_ms=_array(self.p_ms, "p_ms", (3,)), v_ms=_array(self.v_ms, "v_ms", (3,)),
-            q_ms_body=_quat(self.q_ms_body, "q_ms_body"), cov=_cov(self.cov, "cov", 9),
+            p_nav=_array(self.p_nav, "p_nav", (3,)), v_nav=_array(self.v_nav, "v_nav", (3,)),
+            q_nav_body=_quat(self.q_nav_body, "q_nav_body"), cov=_cov(self.cov, "cov", 9),
             sigma_pos_max_m=_float(self.sigma_pos_max_m, "sigma_pos_max_m", lo=0.0),
             mahalanobis_d=_float(self.mahalanobis_d, "mahalanobis_d", lo=0.0),
             rejection_fraction=rf, counts=_counts(self.counts, "counts"),
@@ -593,12 +593,12 @@ class Truth(Message):
     """Tick ``k`` (>= 0)."""
     t_s: float
     """Time [s] (>= 0)."""
-    p_ms: np.ndarray
-    """Centre-of-mass position (3,) [m], frame ms."""
-    v_ms: np.ndarray
-    """Centre-of-mass velocity (3,) [m/s], frame ms."""
-    q_ms_body: np.ndarray
-    """Attitude (4,), unit quaternion (x, y, z, w) mapping body into ms."""
+    p_nav: np.ndarray
+    """Centre-of-mass position (3,) [m], frame nav."""
+    v_nav: np.ndarray
+    """Centre-of-mass velocity (3,) [m/s], frame nav."""
+    q_nav_body: np.ndarray
+    """Attitude (4,), unit quaternion (x, y, z, w) mapping body into nav."""
     w_body: np.ndarray
     """Angular rate (3,) [rad/s], body frame."""
     impulse_ns: float = 0.0
@@ -607,8 +607,8 @@ class Truth(Message):
     def __post_init__(self) -> None:
         _set(
             self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
-            p_ms=_array(self.p_ms, "p_ms", (3,)), v_ms=_array(self.v_ms, "v_ms", (3,)),
-            q_ms_body=_quat(self.q_ms_body, "q_ms_body"), w_body=_array(self.w_body, "w_body", (3,)),
+            p_nav=_array(self.p_nav, "p_nav", (3,)), v_nav=_array(self.v_nav, "v_nav", (3,)),
+            q_nav_body=_quat(self.q_nav_body, "q_nav_body"), w_body=_array(self.w_body, "w_body", (3,)),
             impulse_ns=_float(self.impulse_ns, "impulse_ns", lo=0.0),
         )  # fmt: skip
 
@@ -664,15 +664,15 @@ class Anchors(Message):
 
     anchor_ids: tuple[int, ...]
     """Id of each anchor (>= 0, distinct), N entries, 1 <= N <= :data:`MAX_ITEMS`."""
-    positions_ms: np.ndarray
-    """Antenna position of each anchor (N, 3) [m], frame ms; row i is ``anchor_ids[i]``."""
+    positions_nav: np.ndarray
+    """Antenna position of each anchor (N, 3) [m], frame nav; row i is ``anchor_ids[i]``."""
 
     def __post_init__(self) -> None:
         ids = _ids(self.anchor_ids, "anchor_ids")
-        pos = _array(self.positions_ms, "positions_ms", (None, 3))
+        pos = _array(self.positions_nav, "positions_nav", (None, 3))
         if pos.shape[0] != len(ids):
-            raise MessageError(f"positions_ms: {pos.shape[0]} rows for {len(ids)} anchor ids")
-        _set(self, anchor_ids=ids, positions_ms=pos)
+            raise MessageError(f"positions_nav: {pos.shape[0]} rows for {len(ids)} anchor ids")
+        _set(self, anchor_ids=ids, positions_nav=pos)
 
 
 @dataclass(frozen=True, eq=False)

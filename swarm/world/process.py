@@ -337,7 +337,7 @@ class WorldProcess:
                 else:
                     data, kind, ids = fr.vision, fr.vision_kind, tuple(range(len(fr.vision)))
                 out.append(("vision", vid, encode(Vision(k, t, target, face, kind, data, ids))))
-            out.append(("imu", vid, encode(Imu(k, t, self.sc.dt_s, fr.gyro_body, fr.q_ahrs_ms_body))))
+            out.append(("imu", vid, encode(Imu(k, t, self.sc.dt_s, fr.gyro_body, fr.q_ahrs_nav_body))))
         return out
 
     def _pub(self, kind: str, vid: str):

@@ -25,7 +25,7 @@ from swarm.core.camera import (
     CameraModel,
     CameraParams,
     MarkerParams,
-    camera_pose_ms,
+    camera_pose_nav,
     face_markers,
     face_normal,
     facing_face,
@@ -49,7 +49,7 @@ Q_CHASER_MS_BODY = Rotation.from_euler("xyz", [0.1, -0.05, 0.4]).as_quat()
 def _scene(d_m=0.3, tilt_rotvec=(0.2, -0.1, 0.0), offset_cam_m=(0.0, 0.0), face="+z"):
     """A target whose ``face`` centre sits at ``(ox, oy, d)`` in the chaser's camera frame, the face
     turned back at the camera and then tilted by ``tilt_rotvec`` (camera frame). Built with scipy.
-    Returns ``(p_cam_ms, q_ms_cam, p_target_ms, q_ms_target)``."""
+    Returns ``(p_cam_nav, q_nav_cam, p_target_nav, q_nav_target)``."""
     R_b = Rotation.from_quat(Q_CHASER_MS_BODY)
     R_c = R_b * Rotation.from_quat(CAM.q_body_cam)
     p_cam = P_CHASER_MS + R_b.apply(CAM.pos_body_m)
@@ -75,7 +75,7 @@ def _rotation_error_rad(q_est, q_true) -> np.ndarray:
 
 
 def test_default_camera_looks_out_of_the_bottom_face():
-    p_cam, q_cam = camera_pose_ms(P_CHASER_MS, Q_CHASER_MS_BODY, CAM)
+    p_cam, q_cam = camera_pose_nav(P_CHASER_MS, Q_CHASER_MS_BODY, CAM)
     R_b = Rotation.from_quat(Q_CHASER_MS_BODY)
     np.testing.assert_allclose(p_cam, P_CHASER_MS + R_b.apply([0.0, 0.0, -0.05]), atol=1e-15)
     R_c = Rotation.from_quat(q_cam)
@@ -278,9 +278,9 @@ def _pnp_update_batch(structure: Structure, cov_map=None):
         np.array(covs),
     )
     e = np.c_[
-        P_CHASER_MS - est.p_ms,
-        -est.v_ms,
-        rot.attitude_error(est.q_ms_body, np.broadcast_to(Q_CHASER_MS_BODY, (runs, 4))),
+        P_CHASER_MS - est.p_nav,
+        -est.v_nav,
+        rot.attitude_error(est.q_nav_body, np.broadcast_to(Q_CHASER_MS_BODY, (runs, 4))),
     ]
     return status, est.last_d2[:, int(MeasKind.POSE)].copy(), e, est.P.copy()
 

@@ -482,9 +482,9 @@ def test_invalid_mass_raises_config_error():
 
 
 def test_wrong_shapes_are_named():
-    with pytest.raises(ValueError, match="q_ref_ms_body"):
+    with pytest.raises(ValueError, match="q_ref_nav_body"):
         attitude_torque(
             rot.IDENTITY_QUAT, np.zeros(3), np.zeros(3), None, INERTIA_KG_M2, AttitudeControlParams()
         )
-    with pytest.raises(ValueError, match="p_ref_ms"):
+    with pytest.raises(ValueError, match="p_ref_nav"):
         TranslationController(MASS_KG).step(np.zeros(3), np.zeros(3), np.zeros(2), np.zeros(3))

@@ -66,9 +66,9 @@ def test_constant_body_force_without_rotation_gives_constant_acceleration_kinema
     F_body = np.array([0.05, -0.02, 0.08])
     t = 3.7
     x = _run(x0, F_body, ZERO3, 0.01, 370, params)
-    a_ms = q0.apply(F_body) / params.mass_kg
-    np.testing.assert_allclose(x[0:3], x0[0:3] + x0[3:6] * t + 0.5 * a_ms * t**2, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(x[3:6], x0[3:6] + a_ms * t, rtol=0, atol=1e-12)
+    a_nav = q0.apply(F_body) / params.mass_kg
+    np.testing.assert_allclose(x[0:3], x0[0:3] + x0[3:6] * t + 0.5 * a_nav * t**2, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(x[3:6], x0[3:6] + a_nav * t, rtol=0, atol=1e-12)
     np.testing.assert_allclose(x[6:10], x0[6:10], rtol=0, atol=1e-15)
 
 
@@ -89,7 +89,7 @@ def test_constant_torque_about_a_principal_axis_from_rest_gives_quadratic_angle(
 
 def test_body_force_turns_with_the_body() -> None:
     # Spin at constant rate W about body z (symmetric inertia, no torque) with a constant body-x force:
-    # in ms the force rotates, v(t) = F / (m W) (sin Wt, 1 - cos Wt, 0).
+    # in nav the force rotates, v(t) = F / (m W) (sin Wt, 1 - cos Wt, 0).
     params = dyn.RigidBodyParams()
     W, F, t = 0.8, 0.05, 5.0
     x = _run(_state(w=(0.0, 0.0, W)), np.array([F, 0.0, 0.0]), ZERO3, 0.01, 500, params)

@@ -5,7 +5,7 @@ a textbook EKF written out here in numpy (Joseph form, Crassidis & Junkins 2011 
 reset, Markley 2003) for predict and update; closed-form chi-square quantiles and scipy.stats.chi2 for
 the gate; n separate filters for the batch.
 
-Error-state convention: ``X = [p_ms, v_ms, q_ms_body]`` (scalar-last), ``dx = (dp, dv, dtheta)`` and
+Error-state convention: ``X = [p_nav, v_nav, q_nav_body]`` (scalar-last), ``dx = (dp, dv, dtheta)`` and
 truth ``= X (+) dx = (p + dp, v + dv, q (x) exp(dtheta))``: Hamilton product, body-frame error.
 """
 
@@ -146,31 +146,31 @@ def measurements(X: np.ndarray, prm: EstimatorParams, rng: np.random.Generator, 
         R_ct = Rotation.from_rotvec(rng.normal(0.0, 1e-2, 3)) * R_ct  # R_ct_meas = exp([dphi x]) R_ct
         q_meas = R * Rotation.from_rotvec(rng.normal(0.0, 1e-2, 3))
     return {
-        "predict": {"w_body": rng.normal(0.0, 0.3, 3), "a_ms": rng.normal(0.0, 0.05, 3), "dt_s": 0.01},
-        "update_range": {"anchor_ms": anchor, "range_m": z, "sigma_m": prm.sigma_range_m},
+        "predict": {"w_body": rng.normal(0.0, 0.3, 3), "a_nav": rng.normal(0.0, 0.05, 3), "dt_s": 0.01},
+        "update_range": {"anchor_nav": anchor, "range_m": z, "sigma_m": prm.sigma_range_m},
         "update_features": {
-            "markers_ms": markers,
+            "markers_nav": markers,
             "f_cam_m": feats,
-            "target_cov_ms": np.zeros((3, 3)),
+            "target_cov_nav": np.zeros((3, 3)),
             "sigma_m": prm.sigma_feature_m,
         },
         "update_pose": {
-            "p_target_ms": p_t,
-            "q_ms_target": R_t.as_quat(),
+            "p_target_nav": p_t,
+            "q_nav_target": R_t.as_quat(),
             "t_cam_m": t_cam,
             "q_cam_target": R_ct.as_quat(),
             "cov_cam": np.diag([1e-6] * 3 + [1e-4] * 3),
-            "target_cov_ms": np.zeros((3, 3)),
+            "target_cov_nav": np.zeros((3, 3)),
         },
-        "update_attitude": {"q_meas_ms_body": q_meas.as_quat(), "cov_body": 1e-4 * np.eye(3)},
+        "update_attitude": {"q_meas_nav_body": q_meas.as_quat(), "cov_body": 1e-4 * np.eye(3)},
     }
 
 
-def propagate_truth(X: np.ndarray, w_body, a_ms, dt_s: float) -> np.ndarray:
+def propagate_truth(X: np.ndarray, w_body, a_nav, dt_s: float) -> np.ndarray:
     """Constant-acceleration kinematics and ``q (x) exp(w dt)`` (scipy), the filter's process model."""
     out = X.copy()
-    out[:3] = X[:3] + X[3:6] * dt_s + 0.5 * np.asarray(a_ms) * dt_s**2
-    out[3:6] = X[3:6] + np.asarray(a_ms) * dt_s
+    out[:3] = X[:3] + X[3:6] * dt_s + 0.5 * np.asarray(a_nav) * dt_s**2
+    out[3:6] = X[3:6] + np.asarray(a_nav) * dt_s
     out[6:] = (Rotation.from_quat(X[6:]) * Rotation.from_rotvec(np.asarray(w_body) * dt_s)).as_quat()
     return out
 
@@ -322,11 +322,11 @@ def test_predict_moves_state_by_constant_acceleration_and_gyro_rotation(structur
     est = make(X, np.diag(SIGMA0**2), structure=structure, accel_psd_m2_s3=0.0, gyro_arw_rad_rts=0.0)
     status = est.predict(w, a, dt)
     assert np.all(status == UpdateStatus.ACCEPTED)
-    np.testing.assert_allclose(est.p_ms, X[:, :3] + X[:, 3:6] * dt + 0.5 * a * dt**2, rtol=1e-15, atol=1e-15)
-    np.testing.assert_allclose(est.v_ms, X[:, 3:6] + a * dt, rtol=1e-15, atol=1e-15)
+    np.testing.assert_allclose(est.p_nav, X[:, :3] + X[:, 3:6] * dt + 0.5 * a * dt**2, rtol=1e-15, atol=1e-15)
+    np.testing.assert_allclose(est.v_nav, X[:, 3:6] + a * dt, rtol=1e-15, atol=1e-15)
     for b in range(n):
         expected = (Rotation.from_quat(X[b, 6:]) * Rotation.from_rotvec(w[b] * dt)).as_quat()
-        assert_same_rotation(est.q_ms_body[b], expected, atol=2e-15)
+        assert_same_rotation(est.q_nav_body[b], expected, atol=2e-15)
 
 
 def _expected_predicted_cov(P: np.ndarray, w: np.ndarray, dt: float, prm: EstimatorParams) -> np.ndarray:
@@ -393,7 +393,7 @@ def test_compounded_range_update_is_textbook_ekf_with_multiplicative_reset(seed)
     assert np.linalg.norm(dx[6:]) > 1e-3  # the reset matters at this tolerance
     X_exp, P_exp = reset(X, P_j, dx)
     np.testing.assert_allclose(est.X[0, :6], X_exp[:6], rtol=0.0, atol=1e-12)
-    assert_same_rotation(est.q_ms_body[0], X_exp[6:], atol=1e-12)
+    assert_same_rotation(est.q_nav_body[0], X_exp[6:], atol=1e-12)
     np.testing.assert_allclose(est.P[0], P_exp, rtol=0.0, atol=1e-12 * np.max(np.abs(P0)))
 
 
@@ -414,9 +414,9 @@ def test_tandem_range_updates_translation_with_attitude_considered_as_noise(seed
 def test_tandem_range_leaves_attitude_and_its_covariance_bitwise_unchanged():
     X, P0, anchor, z, _ = _range_case(0)
     est = make(X, P0, structure="tandem")
-    q0, Pa0 = est.q_ms_body.copy(), est.P[:, 6:, 6:].copy()
+    q0, Pa0 = est.q_nav_body.copy(), est.P[:, 6:, 6:].copy()
     assert est.update_range(anchor, z)[0] == UpdateStatus.ACCEPTED
-    assert np.array_equal(est.q_ms_body, q0)
+    assert np.array_equal(est.q_nav_body, q0)
     assert np.array_equal(est.P[:, 6:, 6:], Pa0)
     assert np.all(est.P[0, :6, 6:] == 0.0) and np.all(est.P[0, 6:, :6] == 0.0)
 
@@ -486,11 +486,18 @@ def test_huge_range_error_is_rejected_and_leaves_state_unchanged(structure):
 
 def _poison_cases():
     args = {
-        "predict": ("w_body", "a_ms", "dt_s"),
-        "update_range": ("anchor_ms", "range_m", "sigma_m"),
-        "update_features": ("markers_ms", "f_cam_m", "target_cov_ms", "sigma_m"),
-        "update_pose": ("p_target_ms", "q_ms_target", "t_cam_m", "q_cam_target", "cov_cam", "target_cov_ms"),
-        "update_attitude": ("q_meas_ms_body", "cov_body"),
+        "predict": ("w_body", "a_nav", "dt_s"),
+        "update_range": ("anchor_nav", "range_m", "sigma_m"),
+        "update_features": ("markers_nav", "f_cam_m", "target_cov_nav", "sigma_m"),
+        "update_pose": (
+            "p_target_nav",
+            "q_nav_target",
+            "t_cam_m",
+            "q_cam_target",
+            "cov_cam",
+            "target_cov_nav",
+        ),
+        "update_attitude": ("q_meas_nav_body", "cov_body"),
     }
     return [(m, a, bad) for m, names in args.items() for a in names for bad in (np.nan, np.inf, -np.inf)]
 
@@ -528,7 +535,7 @@ def test_nonfinite_input_is_refused_and_counted_without_touching_the_state(struc
         ("update_range", {"sigma_m": -0.02}),
         ("update_features", {"sigma_m": 0.0}),
         ("update_pose", {"q_cam_target": np.zeros(4)}),
-        ("update_attitude", {"q_meas_ms_body": np.zeros(4)}),
+        ("update_attitude", {"q_meas_nav_body": np.zeros(4)}),
         ("predict", {"dt_s": -0.01}),
     ],
 )
@@ -569,7 +576,7 @@ def test_batch_of_seven_is_bit_identical_to_seven_single_filters(structure):
         kw = {k: np.stack([np.asarray(c[k]) for c in calls]) for k in calls[0]}
         if method == "predict":
             kw["dt_s"], mask = 0.01, np.ones(n, dtype=bool)
-            truth = [propagate_truth(truth[b], calls[b]["w_body"], calls[b]["a_ms"], 0.01) for b in range(n)]
+            truth = [propagate_truth(truth[b], calls[b]["w_body"], calls[b]["a_nav"], 0.01) for b in range(n)]
             status = batch.predict(**kw)
         else:
             mask = rng.random(n) < 0.7
@@ -681,8 +688,8 @@ def long_run(request):
         call = measurements(truth, est.params, rng, noisy=True)[method]
         if method == "predict":
             call["dt_s"] = 2.0 if rng.random() < 0.002 else 0.01
-            call["a_ms"] = -0.5 * (truth[:3] - [0.0, 0.5, 0.0]) - truth[3:6]  # stay in the workspace
-            truth = propagate_truth(truth, call["w_body"], call["a_ms"], call["dt_s"])
+            call["a_nav"] = -0.5 * (truth[:3] - [0.0, 0.5, 0.0]) - truth[3:6]  # stay in the workspace
+            truth = propagate_truth(truth, call["w_body"], call["a_nav"], call["dt_s"])
         getattr(est, method)(**call)
         P = est.P[0]
         asym.append(np.max(np.abs(P - P.T)) / np.max(np.abs(P)))
@@ -721,16 +728,16 @@ def test_tandem_cross_covariance_stays_zero_over_10000_mixed_steps(long_run):
     ("method", "arg", "bad_shape"),
     [
         ("predict", "w_body", (4,)),
-        ("predict", "a_ms", (2,)),
-        ("update_range", "anchor_ms", (2,)),
+        ("predict", "a_nav", (2,)),
+        ("update_range", "anchor_nav", (2,)),
         ("update_range", "range_m", (2,)),
         ("update_range", "sigma_m", (3,)),
-        ("update_features", "markers_ms", (6, 2)),
+        ("update_features", "markers_nav", (6, 2)),
         ("update_features", "f_cam_m", (5, 3)),
-        ("update_features", "target_cov_ms", (2, 2)),
+        ("update_features", "target_cov_nav", (2, 2)),
         ("update_pose", "q_cam_target", (3,)),
         ("update_pose", "cov_cam", (3, 3)),
-        ("update_attitude", "q_meas_ms_body", (3,)),
+        ("update_attitude", "q_meas_nav_body", (3,)),
         ("update_attitude", "cov_body", (3,)),
     ],
 )
@@ -749,7 +756,7 @@ def test_wrong_mask_shape_raises_value_error_naming_mask():
 def test_wrong_batch_size_raises_value_error_naming_the_argument():
     rng = np.random.default_rng(20)
     est = make(np.stack([random_state(rng) for _ in range(3)]), np.diag(SIGMA0**2))
-    with pytest.raises(ValueError, match="anchor_ms"):
+    with pytest.raises(ValueError, match="anchor_nav"):
         est.update_range(np.zeros((2, 3)), 1.0)
 
 
@@ -760,7 +767,7 @@ def test_negative_noise_parameter_raises_config_error_naming_the_field(field):
 
 
 def test_create_rejects_non_unit_quaternion():
-    with pytest.raises(ValueError, match="q_ms_body"):
+    with pytest.raises(ValueError, match="q_nav_body"):
         PoseEstimator.create(EstimatorParams(), np.zeros(3), np.zeros(3), [0.0, 0.0, 0.0, 1.1], SIGMA0**2)
 
 
@@ -790,7 +797,7 @@ def _vision_case(structure, seed: int):
 
 def _errors(est: PoseEstimator, truth: np.ndarray) -> np.ndarray:
     """(|p error| [m], |attitude error| [rad])."""
-    return np.array([np.linalg.norm(est.p_ms[0] - truth[:3]), attitude_error(est.q_ms_body[0], truth[6:])])
+    return np.array([np.linalg.norm(est.p_nav[0] - truth[:3]), attitude_error(est.q_nav_body[0], truth[6:])])
 
 
 @pytest.mark.parametrize("structure", STRUCTURES)
@@ -815,7 +822,7 @@ def test_noise_free_vision_at_the_true_state_leaves_the_estimate_there(structure
     est.X[0] = truth
     assert getattr(est, method)(**calls[method])[0] == UpdateStatus.ACCEPTED
     np.testing.assert_allclose(est.X[0, :6], truth[:6], rtol=0.0, atol=1e-12)
-    assert attitude_error(est.q_ms_body[0], truth[6:]) < 1e-12
+    assert attitude_error(est.q_nav_body[0], truth[6:]) < 1e-12
 
 
 def test_compounded_feature_update_is_textbook_ekf_with_shared_target_noise():
@@ -824,20 +831,20 @@ def test_compounded_feature_update_is_textbook_ekf_with_shared_target_noise():
     est = make(boxplus(truth, rng.normal(size=9) * SIGMA0), random_cov(rng, SIGMA0), structure="compounded")
     X, P, prm = est.X[0].copy(), est.P[0].copy(), est.params
     call = measurements(truth, prm, rng, noisy=True)["update_features"]
-    call["target_cov_ms"] = random_cov(rng, np.full(3, 0.002))
+    call["target_cov_nav"] = random_cov(rng, np.full(3, 0.002))
     R_bc, cam = Rotation.from_quat(prm.q_body_cam).as_matrix(), np.asarray(prm.camera_pos_body_m)
     Rq = Rotation.from_quat(X[6:]).as_matrix()
     H, nu = np.zeros((18, 9)), np.zeros(18)
-    for j, (m, f) in enumerate(zip(call["markers_ms"], call["f_cam_m"], strict=True)):
+    for j, (m, f) in enumerate(zip(call["markers_nav"], call["f_cam_m"], strict=True)):
         y = Rq.T @ (m - X[:3])
         H[3 * j : 3 * j + 3, :3] = -R_bc.T @ Rq.T
         H[3 * j : 3 * j + 3, 6:] = R_bc.T @ skew(y)
         nu[3 * j : 3 * j + 3] = f - R_bc.T @ (y - cam)
     M = R_bc.T @ Rq.T  # a target position error moves every marker alike
-    R = prm.sigma_feature_m**2 * np.eye(18) + np.kron(np.ones((6, 6)), M @ call["target_cov_ms"] @ M.T)
+    R = prm.sigma_feature_m**2 * np.eye(18) + np.kron(np.ones((6, 6)), M @ call["target_cov_nav"] @ M.T)
     assert est.update_features(**call)[0] == UpdateStatus.ACCEPTED
     dx, P_j = joseph(P, H, R, nu)
     X_exp, P_exp = reset(X, P_j, dx)
     np.testing.assert_allclose(est.X[0, :6], X_exp[:6], rtol=0.0, atol=1e-12)
-    assert_same_rotation(est.q_ms_body[0], X_exp[6:], atol=1e-12)
+    assert_same_rotation(est.q_nav_body[0], X_exp[6:], atol=1e-12)
     np.testing.assert_allclose(est.P[0], P_exp, rtol=0.0, atol=1e-10 * np.max(np.abs(P)))

@@ -158,8 +158,8 @@ def test_camera_loss_window_drops_frames_without_touching_the_camera_stream():
         xt = w.x["target"]
         from swarm.core.guidance import docking_geometry
 
-        n_ms, _, q_dock = docking_geometry(sc.guidance, xt[0:3], xt[6:10])
-        w.x["chaser"][0:3] = xt[0:3] + 0.3 * n_ms
+        n_nav, _, q_dock = docking_geometry(sc.guidance, xt[0:3], xt[6:10])
+        w.x["chaser"][0:3] = xt[0:3] + 0.3 * n_nav
         w.x["chaser"][6:10] = q_dock
     seen = [[], []]
     for _ in range(10):

@@ -1,7 +1,7 @@
 """Tests of swarm.core.guidance on synthetic NavInput sequences (no simulation, no estimator).
 
 Set-up shared by most tests: the target sits at the origin with the identity attitude and docks on its +x
-face, so the face normal is +x in ms, the alignment point is (0.25, 0, 0) m and the docked chaser centre is
+face, so the face normal is +x in nav, the alignment point is (0.25, 0, 0) m and the docked chaser centre is
 (0.1, 0, 0) m. Switching uses the paper's fixed radii (r2 = 0.8 m, r1 = 0.3 m) unless a test says otherwise.
 A "perfect follower" sets the next navigation position to the last reference position, so the reference
 path is the vehicle path.
@@ -47,19 +47,21 @@ SPEED = {
 }
 
 
-def nav(t_s, p_ms, *, v=(0.0, 0.0, 0.0), q=Q_DOCK, sigma=0.01, rejected=0.0, vision=False, d=0.0) -> NavInput:
+def nav(
+    t_s, p_nav, *, v=(0.0, 0.0, 0.0), q=Q_DOCK, sigma=0.01, rejected=0.0, vision=False, d=0.0
+) -> NavInput:
     """A navigation input around the fixed target; healthy (sigma 1 cm, nothing rejected) by default."""
     return NavInput(
         t_s=float(t_s),
-        p_ms=np.asarray(p_ms, dtype=float),
-        v_ms=np.asarray(v, dtype=float),
-        q_ms_body=np.asarray(q, dtype=float),
+        p_nav=np.asarray(p_nav, dtype=float),
+        v_nav=np.asarray(v, dtype=float),
+        q_nav_body=np.asarray(q, dtype=float),
         sigma_pos_max_m=float(sigma),
         mahalanobis_d=float(d),
         rejection_fraction=float(rejected),
         vision=vision,
-        p_target_ms=P_T.copy(),
-        q_ms_target=Q_T.copy(),
+        p_target_nav=P_T.copy(),
+        q_nav_target=Q_T.copy(),
     )
 
 
@@ -75,7 +77,7 @@ def follow(g: ChaserGuidance, p0, n_steps: int, t0: float = 0.0, until: Mode | N
     for i in range(n_steps):
         ref = g.step(nav(t0 + i * DT, p, **kw), DT)
         refs.append(ref)
-        p = ref.p_ms
+        p = ref.p_nav
         if until is not None and ref.mode is until:
             break
     return refs
@@ -101,8 +103,8 @@ def test_starts_in_hold_and_keeps_the_reference_until_sigma_below_resume():
         ref = g.step(nav(0.0, p0 + 0.01, sigma=sigma), DT)
         assert ref.mode is Mode.HOLD, sigma
         assert ref.events == []
-        np.testing.assert_array_equal(ref.p_ms, p0)
-        np.testing.assert_array_equal(ref.v_ms, np.zeros(3))
+        np.testing.assert_array_equal(ref.p_nav, p0)
+        np.testing.assert_array_equal(ref.v_nav, np.zeros(3))
     ref = g.step(nav(0.1, p0, sigma=G.resume_sigma_pos_m - 1e-3), DT)
     assert ref.mode is Mode.APPROACH
     assert [ev["to"] for ev in ref.events] == ["APPROACH"]
@@ -112,7 +114,7 @@ def test_starts_in_hold_and_keeps_the_reference_until_sigma_below_resume():
 def test_initial_hold_keeps_the_mission_attitude():
     g = chaser([1.5, 0.0, 0.0])
     ref = g.step(nav(0.0, [1.5, 0.0, 0.0], sigma=0.1, q=Q_DOCK), DT)
-    np.testing.assert_allclose(ref.q_ms_body, Q_MISSION)
+    np.testing.assert_allclose(ref.q_nav_body, Q_MISSION)
 
 
 def test_initial_hold_never_aborts_however_long():
@@ -179,8 +181,8 @@ def test_hold_freezes_the_reference_at_the_estimate():
     p_now = np.array([1.47, 0.01, 0.0])
     ref = g.step(nav(2.0, p_now, sigma=0.1), DT)
     assert ref.mode is Mode.HOLD
-    np.testing.assert_array_equal(ref.p_ms, p_now)
-    np.testing.assert_array_equal(ref.v_ms, np.zeros(3))
+    np.testing.assert_array_equal(ref.p_nav, p_now)
+    np.testing.assert_array_equal(ref.v_nav, np.zeros(3))
 
 
 def test_hold_longer_than_the_limit_after_start_aborts():
@@ -214,7 +216,7 @@ def test_abort_backs_away_from_the_target():
     g = _in_dock()
     refs = follow(g, P_ALIGN, 200, t0=0.1, sigma=0.07)
     assert refs[0].mode is Mode.ABORT
-    r = [float(np.linalg.norm(ref.p_ms - P_T)) for ref in refs]
+    r = [float(np.linalg.norm(ref.p_nav - P_T)) for ref in refs]
     assert all(b >= a - 1e-12 for a, b in itertools.pairwise(r))
     assert r[-1] == pytest.approx(G.keepout_radius_m + G.abort_retreat_m, abs=1e-9)
 
@@ -258,7 +260,7 @@ def test_align_from_behind_the_target_goes_around_the_keepout_sphere(p0):
     g = chaser(p0)
     refs = follow(g, p0, 2000, until=Mode.DOCK)
     assert refs[0].mode is Mode.ALIGN
-    path = np.array([p0] + [ref.p_ms for ref in refs])
+    path = np.array([p0] + [ref.p_nav for ref in refs])
     dist = np.linalg.norm(path - P_T, axis=1)
     assert dist.min() >= G.keepout_radius_m
     assert refs[-1].mode is Mode.DOCK
@@ -271,9 +273,9 @@ def test_dock_stays_in_the_corridor_down_to_contact():
     refs = follow(g, P_ALIGN, 1000, t0=0.1, until=Mode.DOCKED)
     assert refs[-1].mode is Mode.DOCKED
     for ref in refs:
-        if np.linalg.norm(ref.p_ms - P_T) < G.keepout_radius_m:
-            assert in_corridor(G, ref.p_ms, P_T, N_MS)
-    c = contact_state(G, refs[-1].p_ms, np.zeros(3), Q_DOCK, P_T, Q_T)
+        if np.linalg.norm(ref.p_nav - P_T) < G.keepout_radius_m:
+            assert in_corridor(G, ref.p_nav, P_T, N_MS)
+    c = contact_state(G, refs[-1].p_nav, np.zeros(3), Q_DOCK, P_T, Q_T)
     assert c["gap_m"] <= G.contact_distance_m and c["lateral_m"] < 1e-9
 
 
@@ -286,9 +288,9 @@ def test_reference_speed_never_exceeds_the_mode_speed():
         if ref.mode in SPEED:
             seen.add(ref.mode)
             limit = SPEED[ref.mode] + 1e-12
-            assert np.linalg.norm(ref.v_ms) <= limit, ref.mode
-            assert np.linalg.norm(ref.p_ms - prev) <= limit * DT, ref.mode
-        prev = ref.p_ms
+            assert np.linalg.norm(ref.v_nav) <= limit, ref.mode
+            assert np.linalg.norm(ref.p_nav - prev) <= limit * DT, ref.mode
+        prev = ref.p_nav
     assert seen == {Mode.APPROACH, Mode.REORIENT, Mode.ALIGN, Mode.DOCK}
 
 
@@ -296,12 +298,12 @@ def test_carrot_waits_while_the_vehicle_lags_more_than_max_lead():
     p0 = np.array([1.5, 0.0, 0.0])
     g = chaser(p0)
     refs = [g.step(nav(i * DT, p0), DT) for i in range(100)]  # the vehicle does not move
-    lead = np.linalg.norm(refs[-1].p_ms - p0)
+    lead = np.linalg.norm(refs[-1].p_nav - p0)
     assert G.max_lead_m < lead <= G.max_lead_m + G.approach_speed_m_s * DT + 1e-12
-    np.testing.assert_array_equal(refs[-1].v_ms, np.zeros(3))
-    np.testing.assert_array_equal(refs[-1].p_ms, refs[-2].p_ms)
-    ref = g.step(nav(10.0, refs[-1].p_ms), DT)  # the vehicle catches up: the carrot moves again
-    assert np.linalg.norm(ref.v_ms) == pytest.approx(G.approach_speed_m_s)
+    np.testing.assert_array_equal(refs[-1].v_nav, np.zeros(3))
+    np.testing.assert_array_equal(refs[-1].p_nav, refs[-2].p_nav)
+    ref = g.step(nav(10.0, refs[-1].p_nav), DT)  # the vehicle catches up: the carrot moves again
+    assert np.linalg.norm(ref.v_nav) == pytest.approx(G.approach_speed_m_s)
 
 
 def test_reference_brakes_into_the_keepout_stop_point():
@@ -317,18 +319,18 @@ def test_reference_brakes_into_the_keepout_stop_point():
     for ref in refs:
         if ref.mode is not Mode.REORIENT:
             continue
-        d = np.linalg.norm(ref.p_ms - P_T) - stop  # after this step
-        speed = np.linalg.norm(ref.v_ms)
+        d = np.linalg.norm(ref.p_nav - P_T) - stop  # after this step
+        speed = np.linalg.norm(ref.v_nav)
         d_before = d + speed * DT
         assert speed <= np.sqrt(2 * a * d_before) + 1e-12
         if speed > 0 and np.sqrt(2 * a * d_before) < G.approach_speed_m_s and d > 0:
             braking += 1
-            np.testing.assert_allclose(ref.a_ms, -a * ref.v_ms / speed, atol=1e-15)
+            np.testing.assert_allclose(ref.a_nav, -a * ref.v_nav / speed, atol=1e-15)
         else:
-            np.testing.assert_array_equal(ref.a_ms, np.zeros(3))
+            np.testing.assert_array_equal(ref.a_nav, np.zeros(3))
     # braking from 2 cm/s at 0.01 m/s^2 takes 2 s: ~20 control steps of 0.1 s
     assert braking >= 0.8 * G.approach_speed_m_s / a / DT
-    speeds = [np.linalg.norm(r.v_ms) for r in refs if r.mode is Mode.REORIENT]
+    speeds = [np.linalg.norm(r.v_nav) for r in refs if r.mode is Mode.REORIENT]
     # no velocity step anywhere: a continuous profile changes by a DT per step; the discrete sqrt profile's
     # last steps (the stop point within one step) drop by up to ~1.6 a DT; the old dead stop dropped 20 a DT
     assert max(np.abs(np.diff(speeds))) <= 2 * a * DT
@@ -342,11 +344,11 @@ def test_stop_decel_is_validated():
 
 def test_approach_keeps_the_mission_attitude_and_reorient_turns_to_docking():
     g = chaser((1.5, 0.0, 0.0))
-    assert np.allclose(g.step(nav(0.0, (1.5, 0.0, 0.0)), DT).q_ms_body, Q_MISSION)
+    assert np.allclose(g.step(nav(0.0, (1.5, 0.0, 0.0)), DT).q_nav_body, Q_MISSION)
     g = chaser((0.5, 0.0, 0.0))
     ref = g.step(nav(0.0, (0.5, 0.0, 0.0)), DT)
     assert ref.mode is Mode.REORIENT
-    np.testing.assert_allclose(ref.q_ms_body, Q_DOCK)
+    np.testing.assert_allclose(ref.q_nav_body, Q_DOCK)
 
 
 # ---- docking geometry -------------------------------------------------------------------------------------
@@ -358,20 +360,20 @@ Q_PAPER_TARGET = Rotation.from_euler("xyz", [-90.0, 0.0, -90.0], degrees=True).a
 def test_docked_chaser_z_axis_is_the_face_normal_and_centres_are_two_half_sizes_apart(face):
     p = GuidanceParams(docking_face=face)
     p_t = np.array([1.0, 2.0, 1.0])
-    n_ms, p_docked, q_dock = docking_geometry(p, p_t, Q_PAPER_TARGET)
+    n_nav, p_docked, q_dock = docking_geometry(p, p_t, Q_PAPER_TARGET)
     n_target = np.zeros(3)
     n_target["xyz".index(face[1])] = 1.0 if face[0] == "+" else -1.0
-    np.testing.assert_allclose(n_ms, Rotation.from_quat(Q_PAPER_TARGET).apply(n_target), atol=1e-12)
+    np.testing.assert_allclose(n_nav, Rotation.from_quat(Q_PAPER_TARGET).apply(n_target), atol=1e-12)
     R = Rotation.from_quat(q_dock).as_matrix()
-    np.testing.assert_allclose(R[:, 2], n_ms, atol=1e-12)
+    np.testing.assert_allclose(R[:, 2], n_nav, atol=1e-12)
     assert np.linalg.det(R) == pytest.approx(1.0)
-    np.testing.assert_allclose(p_docked - p_t, 2 * p.half_size_m * n_ms, atol=1e-12)
+    np.testing.assert_allclose(p_docked - p_t, 2 * p.half_size_m * n_nav, atol=1e-12)
 
 
 def test_paper_target_docking_face_normal_is_minus_y():
-    # scenarios/docking.toml: the target's +x face points along -y in ms for Euler (-90, 0, -90) deg xyz
-    n_ms, _, _ = docking_geometry(G, np.array([1.0, 2.0, 1.0]), Q_PAPER_TARGET)
-    np.testing.assert_allclose(n_ms, [0.0, -1.0, 0.0], atol=1e-12)
+    # scenarios/docking.toml: the target's +x face points along -y in nav for Euler (-90, 0, -90) deg xyz
+    n_nav, _, _ = docking_geometry(G, np.array([1.0, 2.0, 1.0]), Q_PAPER_TARGET)
+    np.testing.assert_allclose(n_nav, [0.0, -1.0, 0.0], atol=1e-12)
 
 
 def test_contact_state_of_the_exactly_docked_pose_is_zero():
@@ -432,7 +434,7 @@ def test_station_keeping_does_nothing_before_the_estimate_converges():
     ref = s.step(station_nav(0.2, att_deg=10.0, sigma=SP.converged_sigma_m + 0.01), DT)
     assert not s.translate and not s.rotate
     assert ref.mode is Mode.STATION
-    np.testing.assert_array_equal(ref.p_ms, P_STATION)
+    np.testing.assert_array_equal(ref.p_nav, P_STATION)
 
 
 def test_station_keeping_translation_has_hysteresis():
@@ -514,8 +516,8 @@ def test_insignificant_offset_does_not_start_but_a_started_correction_completes(
 def test_station_keeping_reference_is_the_initial_pose():
     s = StationKeeping(P_STATION, Q_STATION, SP)
     ref = s.step(station_nav(0.1, att_deg=5.0), DT)
-    np.testing.assert_array_equal(ref.p_ms, P_STATION)
-    np.testing.assert_allclose(ref.q_ms_body, Q_STATION)
+    np.testing.assert_array_equal(ref.p_nav, P_STATION)
+    np.testing.assert_allclose(ref.q_nav_body, Q_STATION)
     assert ref.range_m == pytest.approx(0.1)
 
 

@@ -241,7 +241,7 @@ def test_uwb_drift_tuple_must_match_anchor_count():
 
 
 def test_uwb_rejects_bad_anchor_array():
-    with pytest.raises(ValueError, match="anchors_ms"):
+    with pytest.raises(ValueError, match="anchors_nav"):
         UwbRadio(np.zeros((4, 2)), UwbParams())
 
 

@@ -53,10 +53,10 @@ REORIENT_AT, ALIGN_AT, DOCK_AT = 0.7, 0.45, 0.25  # ranges [m] where the scripte
 
 GARBAGE: tuple[bytes, ...] = (
     b"\x00\xffnot msgpack at all",
-    msgpack.packb({"v": 1, "type": "Nonsense", "tick": 1}),
+    msgpack.packb({"v": 2, "type": "Nonsense", "tick": 1}),
     msgpack.packb({"v": 99, "type": "Truth"}),
     msgpack.packb([1, 2, 3]),
-    msgpack.packb({"v": 1, "type": "Truth", "tick": -4, "t_s": float("nan")}),
+    msgpack.packb({"v": 2, "type": "Truth", "tick": -4, "t_s": float("nan")}),
 )
 
 
@@ -158,7 +158,7 @@ def _estimate(tick: int, t_s: float, p: np.ndarray, q: np.ndarray, wobble: float
     sigma = float(np.sqrt(np.max(np.linalg.eigvalsh(cov[:3, :3]))))
     counts = {"range_accepted": tick // 2, "range_rejected": tick // 100}
     return Estimate(
-        tick=tick, t_s=t_s, p_ms=p + err, v_ms=np.zeros(3), q_ms_body=q, cov=cov, sigma_pos_max_m=sigma,
+        tick=tick, t_s=t_s, p_nav=p + err, v_nav=np.zeros(3), q_nav_body=q, cov=cov, sigma_pos_max_m=sigma,
         mahalanobis_d=0.8, rejection_fraction=0.02, counts=counts,
     )  # fmt: skip
 
@@ -174,7 +174,7 @@ class FakeSwarm:
         self.paused = False
         self.controls: queue.Queue[RunControl] = queue.Queue()
         self._pubs: dict[str, zenoh.Publisher] = {}
-        self.anchors = encode(Anchors(anchor_ids=(0, 1, 2, 3), positions_ms=np.array(ANCHORS_M)))
+        self.anchors = encode(Anchors(anchor_ids=(0, 1, 2, 3), positions_nav=np.array(ANCHORS_M)))
         self.drops = DropCounter()
         subscribe_decoded(
             session, keys.run_control(), RunControl, lambda _k, m: self.controls.put(m), self.drops
@@ -237,7 +237,7 @@ class FakeSwarm:
                     self.put(self.keys.event(pair.chaser), encode(Event(t_s=t, kind="contact", data={})))
             p_c, q_c = pair.chaser_pose(t)
             for vid, p, q in ((pair.chaser, p_c, q_c), (pair.target, pair.p_target, np.array(Q_TARGET))):
-                truth = Truth(tick=k, t_s=t, p_ms=p, v_ms=np.zeros(3), q_ms_body=q, w_body=np.zeros(3))
+                truth = Truth(tick=k, t_s=t, p_nav=p, v_nav=np.zeros(3), q_nav_body=q, w_body=np.zeros(3))
                 self.put(self.keys.truth(vid), encode(truth))
                 self.put(self.keys.estimate(vid), encode(_estimate(k, t, p, q, float(i))))
             r = pair.range_at(t)

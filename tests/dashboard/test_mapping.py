@@ -48,10 +48,12 @@ def test_wxyz_refuses_a_zero_quaternion() -> None:
         mapping.wxyz_from_xyzw([0.0, 0.0, 0.0, 0.0])
 
 
-def test_pose_of_a_truth_rotates_body_vectors_like_q_ms_body() -> None:
+def test_pose_of_a_truth_rotates_body_vectors_like_q_nav_body() -> None:
     q = Rotation.from_euler("xyz", [-90.0, 0.0, -90.0], degrees=True).as_quat()  # the paper's target
-    truth = Truth(tick=1, t_s=0.01, p_ms=[1.0, 2.0, 1.0], v_ms=np.zeros(3), q_ms_body=q, w_body=np.zeros(3))
-    position, wxyz = mapping.pose_wxyz(truth.p_ms, truth.q_ms_body)
+    truth = Truth(
+        tick=1, t_s=0.01, p_nav=[1.0, 2.0, 1.0], v_nav=np.zeros(3), q_nav_body=q, w_body=np.zeros(3)
+    )
+    position, wxyz = mapping.pose_wxyz(truth.p_nav, truth.q_nav_body)
     v_body = np.array([0.3, -0.2, 0.9])
     viser_rotation = Rotation.from_quat(wxyz, scalar_first=True)  # how Viser reads a node's wxyz
     np.testing.assert_allclose(viser_rotation.apply(v_body), Rotation.from_quat(q).apply(v_body), atol=1e-12)

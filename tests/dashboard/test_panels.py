@@ -15,7 +15,7 @@ ANCHORS = np.zeros((4, 3))
 
 def _estimate(counts: dict[str, int], fraction: float = 0.25) -> Estimate:
     return Estimate(
-        tick=3, t_s=0.03, p_ms=np.zeros(3), v_ms=np.zeros(3), q_ms_body=[0, 0, 0, 1], cov=np.eye(9) * 1e-4,
+        tick=3, t_s=0.03, p_nav=np.zeros(3), v_nav=np.zeros(3), q_nav_body=[0, 0, 0, 1], cov=np.eye(9) * 1e-4,
         sigma_pos_max_m=0.0123, mahalanobis_d=0.5, rejection_fraction=fraction, counts=counts,
     )  # fmt: skip
 

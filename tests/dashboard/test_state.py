@@ -24,12 +24,12 @@ ANCHORS = np.array([[1, -0.2, 0.5], [1, 0.2, -0.5], [-1, 0.2, -0.5], [-1, -0.2, 
 
 def _truth(tick: int, p=(0.0, 0.0, 0.0)) -> Truth:
     zero = np.zeros(3)
-    return Truth(tick=tick, t_s=0.01 * tick, p_ms=p, v_ms=zero, q_ms_body=[0, 0, 0, 1], w_body=zero)
+    return Truth(tick=tick, t_s=0.01 * tick, p_nav=p, v_nav=zero, q_nav_body=[0, 0, 0, 1], w_body=zero)
 
 
 def _estimate(tick: int, p=(0.0, 0.0, 0.0)) -> Estimate:
     return Estimate(
-        tick=tick, t_s=0.01 * tick, p_ms=p, v_ms=np.zeros(3), q_ms_body=[0, 0, 0, 1], cov=np.eye(9) * 1e-4,
+        tick=tick, t_s=0.01 * tick, p_nav=p, v_nav=np.zeros(3), q_nav_body=[0, 0, 0, 1], cov=np.eye(9) * 1e-4,
         sigma_pos_max_m=0.01, mahalanobis_d=0.5, rejection_fraction=0.0, counts={},
     )  # fmt: skip
 

@@ -61,7 +61,7 @@ def test_dispersions_change_the_truth_and_the_initial_estimate_follows_it():
     np.testing.assert_allclose(sim.world.B, np.vstack([d_true.T, np.cross(r, d_true).T]), atol=1e-15)
     assert not np.allclose(sim.world.B, allocation_matrix(sc.thrusters))
     # the agents keep the nominal models; the initial estimate is the dispersed truth plus the [initial] error
-    err = sim.agents["chaser"].est.p_ms[0] - sim.world.X[c, 0:3]
+    err = sim.agents["chaser"].est.p_nav[0] - sim.world.X[c, 0:3]
     assert np.linalg.norm(err) < 5 * math.sqrt(3) * sc.initial.sigma_pos_m
     assert sim.agents["chaser"].mass_kg == sc.dynamics.mass_kg
 

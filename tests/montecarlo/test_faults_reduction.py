@@ -15,8 +15,8 @@ def _series(rel: list[bool]) -> dict:
     n = len(rel)
     return {
         "t_s": [float(i) for i in range(n)],
-        "p_est_ms": [[1.0, 0.0, 0.0]] * n,
-        "p_true_ms": [[0.0, 0.0, 0.0]] * n,
+        "p_est_nav": [[1.0, 0.0, 0.0]] * n,
+        "p_true_nav": [[0.0, 0.0, 0.0]] * n,
         "cov_pos": [np.eye(3).tolist()] * n,
         "relative_nav": rel,
     }

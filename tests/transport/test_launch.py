@@ -116,7 +116,7 @@ def test_garbage_on_every_key_changes_nothing_but_the_drop_counters(tmp_path, si
 
     ns = _ns()
     keys = Keys(ns)
-    imu_ok = {"v": 1, "type": "Imu", "tick": 5, "t_s": 0.05, "dt_s": 0.01, "gyro_body": [0.0, 0.0, 0.0]}
+    imu_ok = {"v": 2, "type": "Imu", "tick": 5, "t_s": 0.05, "dt_s": 0.01, "gyro_body": [0.0, 0.0, 0.0]}
     bad = [
         b"\x00\xff garbage",
         msgpack.packb([1, 2, 3]),

@@ -42,8 +42,8 @@ def vision(k: int) -> Vision:
 
 def estimate(k: int, x: float = 0.0) -> Estimate:
     return Estimate(
-        tick=k, t_s=k * DT, p_ms=np.array([x, 0.0, 0.0]), v_ms=np.zeros(3),
-        q_ms_body=np.array([0.0, 0.0, 0.0, 1.0]), cov=np.eye(9), sigma_pos_max_m=1.0,
+        tick=k, t_s=k * DT, p_nav=np.array([x, 0.0, 0.0]), v_nav=np.zeros(3),
+        q_nav_body=np.array([0.0, 0.0, 0.0, 1.0]), cov=np.eye(9), sigma_pos_max_m=1.0,
         mahalanobis_d=0.0, rejection_fraction=0.0, counts={},
     )  # fmt: skip
 
@@ -81,7 +81,7 @@ def test_tick_zero_needs_no_sensor_and_a_chaser_waits_for_the_targets_initial_es
     assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["estimate"]
     asm.add(estimate(0, x=3.0), "target")
     got = asm.next_tick(0)
-    assert got.tick == 0 and got.imu is None and got.target_estimate.p_ms[0] == 3.0
+    assert got.tick == 0 and got.imu is None and got.target_estimate.p_nav[0] == 3.0
     asm.add(imu(1))
     got = asm.next_tick(0)  # tick 1 also uses estimate(0), as DockingSim does
     assert got.tick == 1 and got.target_estimate.tick == 0
@@ -130,7 +130,7 @@ def test_chaser_waits_for_target_estimate_of_previous_tick():
     asm.add(estimate(0, x=7.0), "target")
     got = asm.next_tick(0)
     assert got is not None and got.tick == 1 and got.target_estimate.tick == 0
-    assert got.target_estimate.p_ms[0] == 7.0
+    assert got.target_estimate.p_nav[0] == 7.0
     asm.add(imu(2))
     got = asm.next_tick(0)
     assert got is not None and got.target_estimate.tick == 1
@@ -334,7 +334,7 @@ def test_a_lost_target_stops_the_wait_and_its_last_estimate_is_held():
     assert asm.next_tick(SHORT) is None  # waits for estimate(1)
     asm.set_target_live(False)
     got = asm.next_tick(0)
-    assert got.tick == 2 and got.target_estimate.tick == 0 and got.target_estimate.p_ms[0] == 4.0
+    assert got.tick == 2 and got.target_estimate.tick == 0 and got.target_estimate.p_nav[0] == 4.0
     asm.set_target_live(True)  # back (restarted): waits again from its first new estimate
     assert asm.next_tick(0).tick == 3  # nothing from it yet
     asm.add(estimate(3, x=5.0))
@@ -417,7 +417,7 @@ def test_concurrent_producers_in_shuffled_order_give_the_in_process_tick_sequenc
     assert [g.tick for g in got if g.uwb is not None] == list(range(uwb_every, n + 1, uwb_every))
     assert all(g.uwb is None or g.uwb.range_m == g.tick for g in got)
     assert [g.tick for g in got if g.vision is not None] == list(range(vision_every, n + 1, vision_every))
-    assert all(g.target_estimate.p_ms[0] == max(g.tick - 1, 0) for g in got)
+    assert all(g.target_estimate.p_nav[0] == max(g.tick - 1, 0) for g in got)
     assert asm.counts() == ALL_ZERO
 
 

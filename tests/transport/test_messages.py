@@ -226,14 +226,14 @@ def test_wire_map_has_version_type_and_raw_little_endian_arrays():
         "shape": [3],
         "data": np.array([0.01, -0.02, 0.0], "<f8").tobytes(),
     }
-    assert w["q_ahrs_ms_body"] is None
+    assert w["q_ahrs_nav_body"] is None
 
 
 @pytest.mark.parametrize("dtype", ["<f8", ">f8", "<f4", ">f4", "<f2", "<i4", ">i2", "<u8", "|u1", "|i1"])
 def test_any_int_or_float_dtype_and_byte_order_decodes_to_float64(dtype):
     w = wire(VALID[Truth])
-    w["p_ms"] = array_map([1, 2, 3], dtype)
-    p = decode(pack(w), Truth).p_ms
+    w["p_nav"] = array_map([1, 2, 3], dtype)
+    p = decode(pack(w), Truth).p_nav
     assert p.dtype == np.float64 and p.tolist() == [1.0, 2.0, 3.0]
 
 
@@ -258,7 +258,7 @@ def test_unknown_keys_are_ignored_for_forward_compatibility():
 
 @pytest.mark.parametrize(
     "cls, field, default",
-    [(Imu, "q_ahrs_ms_body", None), (Uwb, "range_m", None), (Guidance, "decision", None),
+    [(Imu, "q_ahrs_nav_body", None), (Uwb, "range_m", None), (Guidance, "decision", None),
      (Guidance, "reason", ""), (Event, "data", {}), (RunControl, "seed", None)],
 )  # fmt: skip
 def test_a_field_with_a_default_may_be_left_out(cls, field, default):
@@ -322,9 +322,9 @@ CASES = [
     (Imu, "gyro_body", {"dtype": "<f8", "shape": [-3], "data": bytes(24)}, "gyro_body.shape:"),
     (Imu, "gyro_body", {"dtype": "<f8", "shape": [1, 1, 3], "data": bytes(24)}, "gyro_body.shape:"),
     (Imu, "gyro_body", {"dtype": "<f8", "shape": [3]}, "gyro_body: an array map needs"),
-    (Imu, "q_ahrs_ms_body", [0.0, 0.0, 0.0, 2.0], "q_ahrs_ms_body: norm 2 is not within 0.001 of 1"),
-    (Imu, "q_ahrs_ms_body", [0.0, 0.0, 0.0, 0.998], "q_ahrs_ms_body: norm 0.998"),
-    (Imu, "q_ahrs_ms_body", [0.0, 0.0, INF, 1.0], "q_ahrs_ms_body: not finite"),
+    (Imu, "q_ahrs_nav_body", [0.0, 0.0, 0.0, 2.0], "q_ahrs_nav_body: norm 2 is not within 0.001 of 1"),
+    (Imu, "q_ahrs_nav_body", [0.0, 0.0, 0.0, 0.998], "q_ahrs_nav_body: norm 0.998"),
+    (Imu, "q_ahrs_nav_body", [0.0, 0.0, INF, 1.0], "q_ahrs_nav_body: not finite"),
     (Uwb, "anchor_id", -1, "anchor_id: must be >= 0"),
     (Uwb, "anchor_id", 2**31, "anchor_id: must be <="),
     (Uwb, "range_m", -0.1, "range_m: must be >= 0"),
@@ -345,9 +345,9 @@ CASES = [
     (Estimate, "cov", (np.eye(9) + np.triu(np.ones((9, 9)), 1) * 1e-3).tolist(), "cov: not symmetric"),
     (Estimate, "cov", (-np.eye(9)).tolist(), "cov: negative diagonal entry -1 at index 0"),
     (Estimate, "cov", np.eye(6).tolist(), "cov: expected shape (9, 9), got (6, 6)"),
-    (Estimate, "p_ms", [1.0, 2.0], "p_ms: expected shape (3,), got (2,)"),
-    (Estimate, "v_ms", [0.0, NAN, 0.0], "v_ms: not finite"),
-    (Estimate, "q_ms_body", [0.0, 0.0, 0.0, 0.0], "q_ms_body: norm 0"),
+    (Estimate, "p_nav", [1.0, 2.0], "p_nav: expected shape (3,), got (2,)"),
+    (Estimate, "v_nav", [0.0, NAN, 0.0], "v_nav: not finite"),
+    (Estimate, "q_nav_body", [0.0, 0.0, 0.0, 0.0], "q_nav_body: norm 0"),
     (Estimate, "rejection_fraction", 1.5, "rejection_fraction: must be in [0, 1]"),
     (Estimate, "sigma_pos_max_m", -1.0, "sigma_pos_max_m: must be >= 0"),
     (Estimate, "mahalanobis_d", NAN, "mahalanobis_d: not finite"),
@@ -373,7 +373,7 @@ CASES = [
     (Command, "force_body_n", [0.0, 0.0], "force_body_n: expected shape (3,), got (2,)"),
     (Command, "torque_body_nm", [0.0, 0.0, NAN], "torque_body_nm: not finite"),
     (Command, "mode", "approach", "mode: expected one of"),
-    (Truth, "q_ms_body", [1.0, 1.0, 0.0, 0.0], "q_ms_body: norm 1.41421"),
+    (Truth, "q_nav_body", [1.0, 1.0, 0.0, 0.0], "q_nav_body: norm 1.41421"),
     (Truth, "w_body", [0.0, 0.0, INF], "w_body: not finite"),
     (Event, "kind", "", "kind: must match"),
     (Event, "kind", "Mode", "kind: must match"),
@@ -386,9 +386,9 @@ CASES = [
     (Clock, "state", "flying", "state: expected one of ('running', 'paused', 'stopped')"),
     (Clock, "seed", -1, "seed: must be >= 0"),
     (Clock, "seed", 1.0, "seed: expected an integer"),
-    (Anchors, "anchor_ids", [0, 1, 2], "positions_ms: 4 rows for 3 anchor ids"),
+    (Anchors, "anchor_ids", [0, 1, 2], "positions_nav: 4 rows for 3 anchor ids"),
     (Anchors, "anchor_ids", [0, 0, 1, 2], "anchor_ids: duplicate ids"),
-    (Anchors, "positions_ms", [[1.0, 2.0]] * 4, "positions_ms: expected shape (N, 3), got (4, 2)"),
+    (Anchors, "positions_nav", [[1.0, 2.0]] * 4, "positions_nav: expected shape (N, 3), got (4, 2)"),
     (RunControl, "command", "explode", "command: expected one of ('pause', 'resume', 'reset', 'new_seed')"),
     (RunControl, "seed", -1, "seed: must be >= 0"),
 ]  # fmt: skip
@@ -457,7 +457,7 @@ def test_covariance_asymmetry_within_the_relative_tolerance_is_accepted():
 
 def test_quaternion_norm_within_tolerance_is_accepted_as_sent():
     q = [0.0, 0.0, 0.0, 1.0009]
-    assert decode(encode(Truth(0, 0.0, [0, 0, 0], [0, 0, 0], q, [0, 0, 0])), Truth).q_ms_body[3] == 1.0009
+    assert decode(encode(Truth(0, 0.0, [0, 0, 0], [0, 0, 0], q, [0, 0, 0])), Truth).q_nav_body[3] == 1.0009
 
 
 @pytest.mark.parametrize(

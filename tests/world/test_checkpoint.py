@@ -44,8 +44,8 @@ def _world(sc, directory, seed=SEED, resume=None) -> WorldProcess:
                       checkpoint_dir=directory, resume=resume)  # fmt: skip
     if resume is None:
         xt, xc = wp.world.x["target"], wp.world.x["chaser"]
-        n_ms, p_docked, q_dock = docking_geometry(sc.guidance, xt[0:3], xt[6:10])
-        xc[0:3], xc[6:10] = p_docked + 0.3 * n_ms, q_dock
+        n_nav, p_docked, q_dock = docking_geometry(sc.guidance, xt[0:3], xt[6:10])
+        xc[0:3], xc[6:10] = p_docked + 0.3 * n_nav, q_dock
     return wp
 
 
