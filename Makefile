@@ -18,9 +18,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/swarm launch docking --clock scaled:2 --repeat
 
+# ruff, then the import layers of docs/architecture.md (.importlinter)
 lint: $(STAMP)
 	$(PY) -m ruff check .
 	$(PY) -m ruff format --check .
+	$(VENV)/bin/lint-imports --no-cache
 
 # The dashboard's browser tests drive Debian's chromium through playwright (no browser download). Install it
 # when missing (apt, as root or through sudo); if that is impossible, those tests skip and say why.

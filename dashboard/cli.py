@@ -35,9 +35,9 @@ _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def _agents(text: str) -> int:
-    from swarm.transport.process import _agents_arg
+    from swarm.args import agents
 
-    return _agents_arg(text)
+    return agents(text)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -87,7 +87,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     line) until SIGINT or SIGTERM, whose handlers it installs and restores. Returns 0 after a clean close;
     ConfigError / SwarmError for bad input or a session that cannot open."""
     from dashboard.app import DashboardApp, DashboardParams
-    from swarm.cli.sim import load_from_args
+    from swarm.args import load_from_args
     from swarm.errors import ConfigError
     from swarm.transport.keys import Keys, check_id
     from swarm.transport.session import open_session, zenoh_args_from

@@ -2,7 +2,7 @@
 
 Each core module owns a frozen params dataclass (``EstimatorParams`` next to the estimator, ...); a
 :class:`Scenario` composes them, one TOML table each (``[estimator]``, ``[guidance]``, ...), plus the
-vehicles, the anchors and the simulation rates. ``scenarios/docking.toml`` is the paper's docking case;
+vehicles, the anchors and the simulation rates. ``swarm/scenarios/docking.toml`` is the paper's docking case;
 :func:`load_scenario` reads a file or a bundled scenario by name and validates every field, naming the bad
 one (:mod:`swarm.config`).
 """
@@ -27,10 +27,11 @@ from swarm.core.mdp import FixedParams, MdpParams
 from swarm.core.sensors import AhrsParams, GyroParams, UwbParams
 from swarm.core.thrusters import ThrusterParams
 from swarm.errors import ConfigError
-from swarm.montecarlo.dispersions import DispersionParams
+from swarm.kinds.dispersions import DispersionParams
 
 Vec3 = tuple[float, float, float]
-SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+"""The bundled scenarios (package data: a non-editable install has them too)."""
 PAPER_ANCHORS_M: tuple[Vec3, ...] = ((1.0, -0.2, 0.5), (1.0, 0.2, -0.5), (-1.0, 0.2, -0.5), (-1.0, -0.2, 0.5))
 
 
@@ -313,7 +314,7 @@ class Scenario:
 
 
 def load_scenario(name_or_path: str | Path, overrides: dict | None = None) -> Scenario:
-    """Load a scenario file, or a bundled one by name (``"docking"`` -> ``scenarios/docking.toml``)."""
+    """Load a scenario file, or a bundled one by name (``"docking"`` -> ``swarm/scenarios/docking.toml``)."""
     path = Path(name_or_path)
     if not path.suffix and not path.exists():
         path = SCENARIO_DIR / f"{name_or_path}.toml"

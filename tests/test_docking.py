@@ -1,5 +1,5 @@
 """Closed-loop docking (issue 3): swarm.sim.docking.run_docking and ``swarm sim`` from the paper's initial
-conditions (scenarios/docking.toml), both switching policies, several seeds.
+conditions (swarm/scenarios/docking.toml), both switching policies, several seeds.
 
 One docking takes ~1-2 s, so each (policy, seed) run is made once per module (:func:`runs`) and every
 test that inspects it reads the cached summary.
@@ -304,7 +304,7 @@ def test_cli_bad_flag_is_an_argparse_error_naming_the_flag(capsys, flag, value):
     [["sim", "docking"], ["montecarlo", "docking"], ["demo"], ["world", "docking"], ["agent", "docking"]],
 )
 def test_every_command_refuses_the_same_seeds(capsys, command):
-    """One seed range for every command (``swarm.cli.args.seed``): a seed that one command accepts must
+    """One seed range for every command (``swarm.args.seed``): a seed that one command accepts must
     re-run in every other (the processes carry it in an int64)."""
     for bad in ("-3", str(2**63), "x"):
         with pytest.raises(SystemExit) as exc:

@@ -1,5 +1,5 @@
 """Tests of swarm.scenario: the bundled paper scenario, validation of every table, cross-field checks and
-overrides. Bad files are the bundled ``scenarios/docking.toml`` with one line changed, so each error comes
+overrides. Bad files are the bundled ``docking.toml`` with one line changed, so each error comes
 from an otherwise valid, complete scenario."""
 
 from __future__ import annotations

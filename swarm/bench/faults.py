@@ -1,4 +1,4 @@
-"""``swarm bench faults``: a Monte Carlo campaign of the issue-7 fault set (``scenarios/docking-faults.toml``:
+"""``swarm bench faults``: a Monte Carlo campaign of the issue-7 fault set (``docking-faults.toml``:
 10 % NLOS outliers, a 5 s UWB dropout from the start of REORIENT, the camera lost in ALIGN), 200 runs of
 each policy on the ordinary campaign runner (2 workers), reduced by :mod:`swarm.montecarlo.faults`: how
 many runs docked, aborted safely or failed (keep-out violation or collision), and the chaser's position

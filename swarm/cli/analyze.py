@@ -6,8 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from swarm.cli.args import positive_float
-from swarm.cli.sim import add_scenario_args, load_from_args
+from swarm.args import add_scenario_args, load_from_args, positive_float
 from swarm.errors import ConfigError
 
 

@@ -13,7 +13,7 @@ import time
 import numpy as np
 from scipy.stats import chi2
 
-from swarm.cli.args import seed
+from swarm.args import seed
 from swarm.core.estimator import EstimatorParams, Structure
 from swarm.sim.estimation import EstimationScenario, run_estimation
 

@@ -32,7 +32,7 @@ def _rate(text: str) -> tuple[float, float, float]:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from swarm.cli.args import positive_float
+    from swarm.args import positive_float
     from swarm.transport.messages import FAULT_KINDS
     from swarm.transport.session import add_zenoh_arguments
 

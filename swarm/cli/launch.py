@@ -43,7 +43,7 @@ VISION_COUNTS = ("features_accepted", "pose_accepted")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from swarm.cli.args import add_world_timeouts, count, positive_float
+    from swarm.args import add_world_timeouts, count, positive_float
     from swarm.transport.process import add_process_arguments
 
     p = sub.add_parser(

@@ -14,8 +14,7 @@ import json
 import logging
 from pathlib import Path
 
-from swarm.cli.args import seed
-from swarm.cli.sim import add_scenario_args, load_from_args
+from swarm.args import add_scenario_args, load_from_args, seed
 from swarm.errors import ConfigError
 
 log = logging.getLogger(__name__)

@@ -7,35 +7,8 @@ import json
 import math
 from pathlib import Path
 
-from swarm.cli.args import seed
-from swarm.config import parse_override
+from swarm.args import add_scenario_args, agents, load_from_args, seed
 from swarm.errors import ConfigError
-
-
-def add_scenario_args(p: argparse.ArgumentParser) -> None:
-    """Arguments every command that loads a scenario shares."""
-    p.add_argument("scenario", help="bundled scenario name (docking) or a TOML file")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override one scenario field, e.g. --set estimator.sigma_range_m=0.03 (repeatable)",
-    )
-
-
-def load_from_args(args: argparse.Namespace):
-    from swarm.scenario import load_scenario
-
-    overrides = dict(parse_override(text) for text in args.overrides)
-    return load_scenario(args.scenario, overrides)
-
-
-def _agents(text: str) -> int:
-    from swarm.transport.process import _agents_arg
-
-    return _agents_arg(text)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -46,7 +19,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seed", type=seed, default=0, help="root seed of every random stream (default 0)")
     p.add_argument(
-        "--agents", type=_agents, default=1, metavar="N", help="copies of the scenario's pairs (default: 1)"
+        "--agents", type=agents, default=1, metavar="N", help="copies of the scenario's pairs (default: 1)"
     )
     p.add_argument(
         "--json", type=Path, default=None, metavar="FILE", help="write the summary and time series"

@@ -4,7 +4,7 @@ Design:
 
 * **Paired runs.** Run ``i`` of every policy uses the same seed, :func:`run_seed` ``(root, i)``, an integer
   derived from the root seed with ``SeedSequence.spawn``; every random quantity of a run (initial
-  estimate errors, sensor noise, the ``[dispersions]`` of :mod:`swarm.montecarlo.dispersions`) is drawn
+  estimate errors, sensor noise, the ``[dispersions]`` of :mod:`swarm.kinds.dispersions`) is drawn
   from that seed inside :class:`swarm.sim.docking.DockingSim`, whatever the policy. So the policies see the
   same dispersions run by run and their difference is a paired comparison; and ``swarm sim
   DIR/scenario.toml --policy P --seed S`` re-runs any single run exactly.

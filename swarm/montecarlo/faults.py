@@ -1,6 +1,6 @@
 """Monte Carlo under injected faults (issue 7): outcome classes and the chaser's position NEES.
 
-A campaign of a scenario with a ``[faults]`` table (``scenarios/docking-faults.toml``) runs through the
+A campaign of a scenario with a ``[faults]`` table (``swarm/scenarios/docking-faults.toml``) runs through the
 ordinary campaign runner (:func:`swarm.montecarlo.campaign.run_campaign`); with faults on,
 :func:`swarm.montecarlo.run.run_one` adds to each trajectory line the chaser's position NEES at the saved
 samples (:func:`nees_samples`) and the fault windows of the run, and this module reduces them:

@@ -91,7 +91,7 @@ def run_one(scenario, policy: str, run: int, seed: int, trajectory_period_s: flo
     one decimated trajectory (``{"run", "policy", "chaser", "t_s", "p_nav"}``, every
     ``trajectory_period_s``, positions rounded to 0.1 mm) per chaser. Runs in a worker process."""
     from swarm.core import rotations as rot
-    from swarm.montecarlo.dispersions import dispersion_columns
+    from swarm.kinds.dispersions import dispersion_columns
     from swarm.sim.docking import DockingSim
 
     sim = DockingSim(scenario, policy, seed, record_series=True)

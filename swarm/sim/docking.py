@@ -22,7 +22,7 @@ from swarm.core.agent import VehicleAgent
 from swarm.core.faults import FaultSchedule
 from swarm.core.guidance import CORRIDOR_MODES, Mode
 from swarm.core.world import UwbNetwork, World, stream
-from swarm.montecarlo.dispersions import apply_dispersion, draw_dispersion
+from swarm.kinds.dispersions import apply_dispersion, draw_dispersion
 from swarm.sim._fastloop import CONTACT, SENSORS_DONE, run_ticks
 from swarm.sim.referee import judge
 

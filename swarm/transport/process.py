@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from swarm.cli.args import seed
+from swarm.args import add_scenario_args, agents, load_from_args, seed
 from swarm.errors import ConfigError, SwarmError
 from swarm.transport.keys import Keys
 from swarm.transport.session import add_zenoh_arguments, zenoh_args_from
@@ -89,24 +89,12 @@ def _clock_arg(text: str) -> ClockSpec:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def _agents_arg(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--agents must be an integer in 1..64, got {text!r}") from None
-    if not 1 <= value <= 64:
-        raise argparse.ArgumentTypeError(f"--agents must be an integer in 1..64, got {text!r}")
-    return value
-
-
 def add_process_arguments(p: argparse.ArgumentParser, *, clock: bool = True) -> None:
     """The scenario, seed, namespace, clock and Zenoh flags every swarm process takes."""
-    from swarm.cli.sim import add_scenario_args
-
     add_scenario_args(p)
     p.add_argument(
         "--agents",
-        type=_agents_arg,
+        type=agents,
         default=1,
         metavar="N",
         help="copies of the scenario's pairs (default 1)",
@@ -136,8 +124,6 @@ def add_process_arguments(p: argparse.ArgumentParser, *, clock: bool = True) -> 
 
 def scenario_from(args: argparse.Namespace):
     """The scenario the flags name, with ``--set`` overrides and ``--agents`` copies."""
-    from swarm.cli.sim import load_from_args
-
     return load_from_args(args).with_pairs(args.agents)
 
 

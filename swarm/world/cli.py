@@ -15,7 +15,7 @@ DESCRIPTION = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from swarm.cli.args import add_world_timeouts
+    from swarm.args import add_world_timeouts
     from swarm.transport.process import add_process_arguments
 
     add_process_arguments(p)

@@ -371,7 +371,7 @@ def test_docked_chaser_z_axis_is_the_face_normal_and_centres_are_two_half_sizes_
 
 
 def test_paper_target_docking_face_normal_is_minus_y():
-    # scenarios/docking.toml: the target's +x face points along -y in nav for Euler (-90, 0, -90) deg xyz
+    # docking.toml: the target's +x face points along -y in nav for Euler (-90, 0, -90) deg xyz
     n_nav, _, _ = docking_geometry(G, np.array([1.0, 2.0, 1.0]), Q_PAPER_TARGET)
     np.testing.assert_allclose(n_nav, [0.0, -1.0, 0.0], atol=1e-12)
 

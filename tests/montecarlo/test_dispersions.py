@@ -1,4 +1,4 @@
-"""Dispersions declared in the scenario (swarm.montecarlo.dispersions) and applied inside DockingSim."""
+"""Dispersions declared in the scenario (swarm.kinds.dispersions) and applied inside DockingSim."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from swarm.core import rotations as rot
 from swarm.core.thrusters import allocation_matrix, nozzle_geometry
 from swarm.core.world import W_IXX, W_IZZ, W_MASS, World
 from swarm.errors import ConfigError
-from swarm.montecarlo.dispersions import DispersionParams, draw_dispersion
+from swarm.kinds.dispersions import DispersionParams, draw_dispersion
 from swarm.scenario import Scenario, load_scenario
 from swarm.sim.docking import DockingSim
 

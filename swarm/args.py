@@ -1,4 +1,8 @@
-"""Argument types the ``swarm`` commands and processes share: each names the flag and the value it refuses."""
+"""Argument types and scenario flags that the ``swarm`` commands and the processes share.
+
+Each type names the flag and the value it refuses. This module sits in the scenario layer
+(``docs/architecture.md``), below the runners, the transport and the command line, so that any of them may
+use it without an import cycle."""
 
 from __future__ import annotations
 
@@ -65,3 +69,36 @@ def add_world_timeouts(p) -> None:
         "--start-timeout", type=positive_float("--start-timeout"), default=180.0, metavar="S",
         help="give up if the processes are not all up after this long (default 180 s: a first run compiles)",
     )  # fmt: skip
+
+
+def agents(text: str) -> int:
+    """An argparse type for ``--agents``: copies of the scenario's pairs, an integer in ``1..64``."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--agents must be an integer in 1..64, got {text!r}") from None
+    if not 1 <= value <= 64:
+        raise argparse.ArgumentTypeError(f"--agents must be an integer in 1..64, got {text!r}")
+    return value
+
+
+def add_scenario_args(p: argparse.ArgumentParser) -> None:
+    """Arguments every command that loads a scenario shares."""
+    p.add_argument("scenario", help="bundled scenario name (docking, ground-docking, ...) or a TOML file")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override one scenario field, e.g. --set estimator.sigma_range_m=0.03 (repeatable)",
+    )
+
+
+def load_from_args(args: argparse.Namespace):
+    """The scenario that ``args.scenario`` and ``args.overrides`` (``--set``) name."""
+    from swarm.config import parse_override
+    from swarm.scenario import load_scenario
+
+    overrides = dict(parse_override(text) for text in args.overrides)
+    return load_scenario(args.scenario, overrides)
