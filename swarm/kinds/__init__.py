@@ -1,0 +1,1 @@
+"""Vehicle kinds as plug-ins (docs/architecture.md, "Vehicle kinds")."""
