@@ -1,15 +1,17 @@
 """The agent process: one vehicle's estimator, switcher, guidance and control over Zenoh.
 
-A thin adapter around :class:`swarm.core.agent.VehicleAgent`, the object the in-process simulation steps.
+A thin adapter around the agent step, :class:`swarm.step.agent.VehicleAgent`, the object the in-process
+simulation steps.
 It subscribes only to its own sensors (``imu``, ``uwb``, ``vision`` for a chaser), its target's
 ``estimate`` (a chaser), ``world/clock`` and liveliness; it publishes ``estimate`` (every tick),
 ``guidance`` (every control tick), ``command`` (every tick: thrusts change at the control rate and are held
 in between) and ``event`` (mode transitions; a ``summary`` when the run ends).
 
 Lockstep (``--clock lockstep``): ticks come from :class:`swarm.transport.lockstep.AgentTickAssembler`,
-complete and in order, and each is processed exactly as ``DockingSim.run`` does: the target's estimate
-of tick ``k - 1``, then gyro (+ AHRS), range, vision of tick ``k``; ``estimate(k)``; guidance and control
-on control ticks; ``command(k)``. Tick 0 (no sensor yet) starts when the world announces the run.
+complete and in order, and each goes through :meth:`~swarm.step.agent.VehicleAgent.tick` as in the
+in-process run: the target's estimate of tick ``k - 1``, then gyro (+ AHRS), range, vision of tick ``k``;
+guidance and the kind's controller on control ticks; then ``estimate(k)`` and ``command(k)``. Tick 0 (no
+sensor yet) starts when the world announces the run.
 Realtime or scaled: every message is processed as it arrives.
 
 A restarted world (``world/event`` ``world_resumed`` at tick ``k``) publishes tick ``k``'s samples again:
@@ -19,7 +21,7 @@ gone (its liveliness token went) the agent says so and waits: no sample, no tick
 
 A restarted agent (``--rejoin``) joins the run in progress: it publishes zero-thrust HOLD commands while it
 re-initialises from its own sensors (the AHRS attitude, and its position by least squares on one range to
-each anchor, :func:`position_from_ranges`), then flies again from that estimate.
+each anchor, :func:`swarm.step.initial.position_from_ranges`), then flies again from that estimate.
 """
 
 from __future__ import annotations
@@ -29,15 +31,13 @@ import threading
 import time
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from swarm.core import rotations as rot
-from swarm.core.agent import TargetEstimate, VehicleAgent
 from swarm.core.estimator import MeasKind
-from swarm.core.thrusters import allocation_matrix
-from swarm.core.world import initial_state
 from swarm.errors import ConfigError, MessageError
-from swarm.sim.docking import initial_estimate
+from swarm.step.agent import AgentInputs, TargetEstimate, VehicleAgent
+from swarm.step.initial import initial_estimate, position_from_ranges
+from swarm.step.world import initial_truth
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import AgentTickAssembler, TickInputs
 from swarm.transport.messages import (
@@ -66,24 +66,9 @@ _KINDS = {
 }
 
 
-def position_from_ranges(anchors_nav: np.ndarray, ranges: dict[int, float], lever_nav: np.ndarray, guess_nav):
-    """Centre-of-mass position [m] (3,), frame nav, and its covariance factor ``(J^T J)^-1`` from one or
-    more ranges to each of at least four anchors: nonlinear least squares (scipy ``least_squares``, soft-L1
-    loss against an NLOS range) on ``|p + lever_nav - a_i| = rho_i``, started from ``guess_nav``.
-
-    ``lever_nav`` is the tag's lever arm rotated into nav (``R(q) P1``). The paper's four anchors are coplanar
-    (``2 y + 0.8 z = 0``), so ranges alone have a mirror solution across that plane: the start decides,
-    and the scenario's start position of the vehicle lies on the side it flies on."""
-    ids = sorted(ranges)
-    A = anchors_nav[ids]
-    rho = np.array([ranges[i] for i in ids])
-
-    def residual(p):
-        return np.linalg.norm(p + lever_nav - A, axis=1) - rho
-
-    sol = least_squares(residual, np.asarray(guess_nav, dtype=float), loss="soft_l1", f_scale=0.05)
-    J = sol.jac
-    return sol.x, np.linalg.pinv(J.T @ J)
+def _target(e: Estimate) -> TargetEstimate:
+    """A target's published estimate as the chaser's agent step takes it."""
+    return TargetEstimate(e.t_s, e.p_nav, e.q_nav_body, e.cov[:3, :3].copy())
 
 
 class AgentProcess:
@@ -114,7 +99,7 @@ class AgentProcess:
         self.chaser = spec.role == "chaser"
         self.target_id = spec.target
         self.dt = sc.dt_s
-        self.control_every = sc.every(sc.translation_control.rate_hz)
+        self.control_every = sc.control_every(vehicle_id)
         self.vision_every = sc.every(sc.camera.rate_hz) if self.chaser else None
         self.drops = DropCounter()
         self.assembler = AgentTickAssembler(
@@ -123,13 +108,13 @@ class AgentProcess:
         )  # fmt: skip
         self.agent: VehicleAgent | None = None
         if not rejoin:
-            p0, v0, q0, cov0 = initial_estimate(
-                sc, list(sc.vehicles).index(vehicle_id), initial_state(sc, vehicle_id), seed
-            )
+            # the dispersed truth this run starts from, as the world builds it: the same initial estimate
+            x0 = initial_truth(sc, seed, vehicle_id)
+            p0, v0, q0, cov0 = initial_estimate(sc, list(sc.vehicles).index(vehicle_id), x0, seed)
             self.agent = VehicleAgent(sc, vehicle_id, p0, v0, q0, cov0, policy)
-        self._thrusts = np.zeros(allocation_matrix(sc.thrusters).shape[1])
-        self._force = np.zeros(3)
-        self._torque = np.zeros(3)
+        self._u = np.zeros(sc.kind(vehicle_id).U_N)
+        self._force: np.ndarray | None = None
+        self._torque: np.ndarray | None = None
         self._mode = "HOLD" if self.chaser else "STATION"
         self._started = threading.Event()
         self._ended = threading.Event()
@@ -227,16 +212,15 @@ class AgentProcess:
         self.pub_estimate.put(encode(msg))
 
     def _publish_command(self, k: int) -> None:
-        payload = encode(Command(k, k * self.dt, self._thrusts, self._force, self._torque, self._mode))
+        payload = encode(Command(k, k * self.dt, self._u, self._mode, self._force, self._torque))
         with self._command_lock:
             self.pub_command.put(payload)
             self._last_command = (k, payload)
 
-    def _control(self, k: int) -> None:
+    def _commanded(self, k: int, cmd) -> None:
+        """A control tick's command: held and published from now on; its events and guidance out."""
         a = self.agent
-        t = k * self.dt
-        cmd = a.control(t, self.control_every * self.dt)
-        self._thrusts, self._force, self._torque = cmd.thrusts_n, cmd.force_body_n, cmd.torque_body_nm
+        self._u, self._force, self._torque = cmd.u, cmd.force_body_n, cmd.torque_body_nm
         self._mode = a.mode.value
         for ev in cmd.events:
             self.pub_event.put(encode(Event(float(ev["t_s"]), "mode", dict(ev))))
@@ -270,7 +254,8 @@ class AgentProcess:
         if self._init_q is None or len(self._init_ranges) < len(self.sc.anchors_m):
             return False
         sc = self.sc
-        lever_nav = rot.quat_rotate(self._init_q, np.asarray(sc.estimator.lever_arm_body_m, dtype=float))
+        lever_body = np.asarray(sc.kind(self.id).mounts.tag_lever_arm_body_m, dtype=float)
+        lever_nav = rot.quat_rotate(self._init_q, lever_body)
         p0, JtJ_inv = position_from_ranges(
             np.asarray(sc.anchors_m, dtype=float),
             self._init_ranges,
@@ -306,26 +291,25 @@ class AgentProcess:
             self._publish_estimate(k)
             self._publish_command(k)
             return
-        a = self.agent
-        if self.chaser and inp.target_estimate is not None:
-            self._set_target(inp.target_estimate)
-        if inp.imu is not None:
-            # a free-running agent that skipped ticks propagates over the whole gap
-            gap = k - self._last_tick if self._last_tick is not None and k > self._last_tick else 1
-            a.on_imu(t, gap * self.dt, inp.imu.gyro_body, inp.imu.q_ahrs_nav_body)
+        # a free-running agent that skipped ticks propagates over the whole gap
+        gap = k - self._last_tick if self._last_tick is not None and k > self._last_tick else 1
         self._last_tick = k
-        if inp.uwb is not None and inp.uwb.range_m is not None:
-            a.on_uwb(inp.uwb.anchor_id, inp.uwb.range_m)
-        if inp.vision is not None and inp.vision.seen:
-            a.on_vision(t, inp.vision.kind, inp.vision.data)
+        imu, uwb, vis, te = inp.imu, inp.uwb, inp.vision, inp.target_estimate
+        cmd = self.agent.tick(AgentInputs(
+            k, t, gap * self.dt,
+            None if imu is None else imu.gyro_body, None if imu is None else imu.q_ahrs_nav_body,
+            None if uwb is None or uwb.range_m is None else (uwb.anchor_id, uwb.range_m),
+            None if vis is None or not vis.seen else (vis.kind, vis.data),
+            None if te is None or not self.chaser else _target(te),
+        ))  # fmt: skip
         self._publish_estimate(k)
-        if k % self.control_every == 0:
-            self._control(k)
+        if cmd is not None:
+            self._commanded(k, cmd)
         self._publish_command(k)
         self.ticks += 1
 
     def _set_target(self, e: Estimate) -> None:
-        self.agent.set_target_estimate(TargetEstimate(e.t_s, e.p_nav, e.q_nav_body, e.cov[:3, :3].copy()))
+        self.agent.set_target_estimate(_target(e))
 
     def _run_lockstep(self) -> None:
         if not self.rejoin:
@@ -363,7 +347,7 @@ class AgentProcess:
         """Run every compiled kernel once on a throwaway agent, so that numba's compilation (or cache
         load) happens before this process says it is ready, not inside the first lockstep ticks."""
         sc, dt = self.sc, self.dt
-        x = initial_state(sc, self.id)
+        x = initial_truth(sc, self.seed, self.id)
         scratch = VehicleAgent(sc, self.id, x[0:3], x[3:6], x[6:10], np.full(9, 1e-4), self.policy)
         scratch.on_imu(dt, dt, np.zeros(3), x[6:10])
         scratch.on_uwb(0, float(np.linalg.norm(np.asarray(sc.anchors_m[0]) - x[0:3])))

@@ -31,7 +31,7 @@ import numpy as np
 import viser
 import zenoh
 
-from dashboard import mapping, panels
+from dashboard import kinds, mapping, panels
 from dashboard.faults import FaultPanel
 from dashboard.link import SwarmLink
 from dashboard.state import AgentSnap, FramePacer, RateLimiter, Snapshot, SwarmState
@@ -111,15 +111,15 @@ class _AgentNodes:
         size = 2.0 * sc.guidance.half_size_m
         chaser = a.role == "chaser"
         self.truth = scene.add_frame(n("truth"), show_axes=False, visible=False)
-        self.body = scene.add_box(
-            n("truth/body"), color=mapping.mode_color(None, a.role), dimensions=(size,) * 3, opacity=0.85
-        )
+        # drawn as what it is: its kind's drawer (dashboard/kinds.py); the body's colour follows the mode
+        self.body = kinds.draw(scene, n("truth"), sc, a.agent_id, mapping.mode_color(None, a.role))
         scene.add_frame(n("truth/axes"), axes_length=1.5 * size, axes_radius=0.04 * size)
         scene.add_label(n("truth/label"), a.agent_id, position=(0.0, 0.0, 1.2 * size))
         self.fov = None
         if chaser:
             vertices, faces = mapping.fov_cone_mesh(sc.camera.fov_half_angle_deg, sc.camera.max_range_m)
-            pos, wxyz = mapping.camera_pose_in_body(sc.camera.pos_body_m, sc.camera.q_body_cam)
+            cam = sc.camera_for(a.agent_id) if a.agent_id in sc.vehicles else sc.camera
+            pos, wxyz = mapping.camera_pose_in_body(cam.pos_body_m, cam.q_body_cam)
             self.fov = scene.add_mesh_simple(
                 n("truth/fov"), vertices, faces, color=mapping.FOV_COLORS["out"], opacity=0.18,
                 side="double", position=pos, wxyz=wxyz, cast_shadow=False, receive_shadow=False,
@@ -268,7 +268,7 @@ class SceneView:
         target = snap.agents.get(a.target) if a.target is not None else None
         in_cone = False
         if a.truth is not None and target is not None and target.truth is not None:
-            cam = self.sc.camera
+            cam = self.sc.camera_for(a.agent_id) if a.agent_id in self.sc.vehicles else self.sc.camera
             in_cone = mapping.target_in_cone(
                 a.truth.p_nav, a.truth.q_nav_body, target.truth.p_nav, cam.pos_body_m, cam.q_body_cam,
                 cam.fov_half_angle_deg, cam.min_range_m, cam.max_range_m,

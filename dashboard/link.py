@@ -95,7 +95,6 @@ class SwarmLink:
         self._add_vehicles(state.take_new_agents())
         subscribe_decoded(session, keys.agent_all("event"), Event, self._on_event, drops)
         subscribe_decoded(session, keys.world_event(), Event, self._on_world_event, drops)
-        subscribe_decoded(session, keys.mothership_event(), Event, self._on_mothership_event, drops)
         subscribe_decoded(session, keys.anchors(), Anchors, self._on_anchors, drops)
         watch_liveliness(session, keys, self._on_liveliness)
         self._run_pub = _control_publisher(session, keys.run_control())
@@ -183,9 +182,6 @@ class SwarmLink:
 
     def _on_world_event(self, _key: str, msg: Event) -> None:
         self.state.on_run_event("world", msg)
-
-    def _on_mothership_event(self, _key: str, msg: Event) -> None:
-        self.state.on_run_event("mothership", msg)
 
     def _on_anchors(self, _key: str, msg: Anchors) -> None:
         self.state.on_anchors(msg)

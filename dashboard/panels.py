@@ -158,8 +158,8 @@ def _text(value: object) -> str:
 
 
 def fault_text(source: str, ev: Event) -> str:
-    """One line for a ``fault`` (applied) or ``fault_refused`` event of the world or the mothership, from its
-    free-form data (``kind``, ``start_s``, ``duration_s``, ``vehicles``; ``vehicle``, ``reason``)."""
+    """One line for a ``fault`` (applied) or ``fault_refused`` event of the world, from its free-form data
+    (``kind``, ``start_s``, ``duration_s``, ``vehicles``; ``vehicle``, ``reason``)."""
     d = ev.data
     kind = _text(d.get("kind", "?"))
     if ev.kind == "fault_refused":
@@ -168,7 +168,7 @@ def fault_text(source: str, ev: Event) -> str:
     start, dur = d.get("start_s"), d.get("duration_s")
     when = f" from t = {start:.2f} s" if isinstance(start, int | float) else ""
     when += f" for {dur:g} s" if isinstance(dur, int | float) else " (lasts)"
-    who = "the UWB network" if source == "mothership" else _text(d.get("vehicles", "?"))
+    who = "the UWB network" if kind in ("uwb_dropout", "nlos_burst") else _text(d.get("vehicles", "?"))
     return _cell(f"t = {ev.t_s:.2f} s · **{kind}** applied by the {source} on {who}{when}")
 
 

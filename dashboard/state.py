@@ -397,9 +397,8 @@ class SwarmState:
                 )
 
     def on_run_event(self, source: str, msg: Event) -> None:
-        """An event of the run (``world/event``, ``source`` ``world``) or of the UWB network
-        (``mothership/event``, ``source`` ``mothership``): into the event log; a fault applied or refused
-        also into the fault log; a ``run_start`` names the world's clock."""
+        """An event of the run (``world/event``, ``source`` ``world``): into the event log; a fault applied
+        or refused also into the fault log; a ``run_start`` names the world's clock."""
         with self._lock:
             self._events.append((source, msg))
             self._events_version += 1

@@ -2,15 +2,15 @@
 
 - Anchors: published once on ``mothership/anchors`` when the process is up (and every
   ``anchors_every_s``), and answered to any query on that key (``session.get``), so a late joiner asks.
-- Radio network: :class:`swarm.core.world.UwbNetwork` (one round-robin radio per vehicle, the sensor and
-  fault models of :mod:`swarm.core.sensors`). From the world's ``truth`` of every vehicle at a UWB slot
-  tick ``k`` it publishes one ``uwb(k)`` per vehicle, with ``range_m`` nil when the reply was lost, so a
-  lockstep agent knows not to wait. Slots are processed in tick order: the radios' random streams are
+- Radio network: the radio step, :class:`swarm.step.radio.UwbNetwork` (one round-robin radio per vehicle,
+  the sensor model of :mod:`swarm.core.sensors`). From the world's ``truth`` of every vehicle at a UWB
+  slot tick ``k`` it publishes one ``uwb(k)`` per vehicle, with ``range_m`` nil when the reply was lost, so
+  a lockstep agent knows not to wait. Slots are processed in tick order: the radios' random streams are
   consumed exactly as in the in-process simulation (same seed, same ranges). A truth of a slot already
   served (a resumed world publishes its checkpointed tick again) is dropped: a slot is served once.
-- Run-time UWB faults (``control/fault``: ``uwb_dropout``, ``nlos_burst``) are added to the network's
-  fault windows between two slots, logged and announced as a ``fault`` event on ``mothership/event``
-  (the dashboard lists them).
+- Faults: none of its own. Each truth carries its tag's radio environment at that tick (``uwb_lost``,
+  ``nlos_probability``: the world's fault schedule, fixed, mode-triggered and run-time windows alike),
+  and the radios apply it, as the in-process radio step does.
 - While the world is gone (its liveliness token went) it says so and serves nothing: no truth, no range.
 """
 
@@ -24,15 +24,13 @@ import time
 import numpy as np
 import zenoh
 
-from swarm.core.world import UwbNetwork
+from swarm.step.radio import UwbNetwork
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Anchors, Clock, DropCounter, Event, Fault, Truth, Uwb, encode
+from swarm.transport.messages import Anchors, Clock, DropCounter, Truth, Uwb, encode
 from swarm.transport.process import declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
 
 _LOG = logging.getLogger("swarm.mothership")
-
-_FAULT = "<fault>"  # marks a fault in the truth queue (not a vehicle id: ids cannot contain '<')
 
 
 class MothershipProcess:
@@ -62,12 +60,7 @@ class MothershipProcess:
         # starts at the slot after the first truth it sees (that slot's truths may have come before it)
         self._next_slot: int | None = None if rejoin else self.every
         self.slots = 0
-        self._t_served = 0.0  # time of the last slot served [s]
         self._world_stopped = False  # the world's last Clock said "stopped": its run is over
-        fp = scenario.faults  # the scenario's fixed windows, to which run-time faults are added
-        self._dropouts = list(fp.uwb_dropout.windows_s)
-        self._bursts = [(a, b, fp.nlos_burst_probability) for a, b in fp.nlos_burst.windows_s] if (
-            fp.nlos_burst_probability) else []  # fmt: skip
 
     def _on_truth(self, key: str, msg: Truth) -> None:
         parsed = self.keys.parse(key)
@@ -77,26 +70,6 @@ class MothershipProcess:
             return
         if msg.tick % self.every == 0 and msg.tick > 0:
             self._truth.put((vid, msg))
-
-    def _on_fault(self, _key: str, msg: Fault) -> None:
-        if msg.kind in ("uwb_dropout", "nlos_burst"):
-            self._truth.put((_FAULT, msg))  # applied by the main loop, between two slots
-
-    def _apply_fault(self, f: Fault) -> None:
-        """A run-time UWB fault (``swarm fault``): its window opens no earlier than the next tick after the
-        last slot served, so no range already sent changes; added to the scenario's fixed windows."""
-        now = self._t_served + self.sc.dt_s
-        start = max(f.start_s if f.start_s is not None else now, now)
-        if f.kind == "uwb_dropout":
-            self._dropouts.append((start, start + f.duration_s))
-        else:
-            self._bursts.append((start, start + f.duration_s, f.probability))
-        self.network.set_fault_windows(self._dropouts, self._bursts)
-        _LOG.warning("fault applied: %s from t = %.2f s to %.2f s", f.kind, start, start + f.duration_s)
-        data = {"kind": f.kind, "start_s": start, "duration_s": f.duration_s, "vehicles": self.ids}
-        if f.probability is not None:
-            data["probability"] = f.probability
-        self.pub_event.put(encode(Event(self._t_served, "fault", data)))
 
     def _on_query(self, query: zenoh.Query) -> None:
         try:
@@ -122,12 +95,14 @@ class MothershipProcess:
 
     def _slot(self, k: int, truths: dict[str, Truth]) -> None:
         X = np.zeros((len(self.ids), 13))
+        lost = np.zeros(len(self.ids), dtype=np.bool_)
+        p_nlos = np.zeros(len(self.ids))
         for vid, m in truths.items():
             i = self.index[vid]
             X[i, 0:3], X[i, 3:6], X[i, 6:10], X[i, 10:13] = m.p_nav, m.v_nav, m.q_nav_body, m.w_body
+            lost[i], p_nlos[i] = m.uwb_lost, m.nlos_probability
         t = k * self.sc.dt_s
-        self.network.step(k, t, X)
-        self._t_served = t
+        self.network.step(k, t, X, lost, p_nlos)
         net = self.network
         for i, vid in enumerate(self.ids):
             rng = None if net.lost[i] else float(net.range_m[i])
@@ -140,12 +115,10 @@ class MothershipProcess:
         X[:, 9] = 1.0  # identity attitudes
         UwbNetwork(self.sc, self.seed).step(self.every, 0.0, X)  # compile (or load) the kernel before "ready"
         self.pub_uwb = {v: declare_reliable(self.session, k.uwb(v)) for v in self.ids}
-        self.pub_event = declare_reliable(self.session, k.mothership_event())
         pub_anchors = declare_reliable(self.session, k.anchors(), express=False)
         self._queryable = self.session.declare_queryable(k.anchors(), self._on_query)
         subscribe_decoded(self.session, k.agent_all("truth"), Truth, self._on_truth, self.drops)
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
-        subscribe_decoded(self.session, k.fault(), Fault, self._on_fault, self.drops)
         watch_liveliness(self.session, k, self._on_alive, history=False)
         self._token = declare_liveliness(self.session, k, "mothership", "mothership")
         print_ready("mothership", "mothership")
@@ -162,9 +135,6 @@ class MothershipProcess:
                 pub_anchors.put(payload)
                 last_anchors = now
             if vid is None:
-                continue
-            if vid == _FAULT:
-                self._apply_fault(msg)
                 continue
             if self._next_slot is None:
                 self._next_slot = msg.tick + self.every

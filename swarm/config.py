@@ -53,7 +53,7 @@ import reprlib
 import tomllib
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, Literal, TypeVar, get_args, get_origin
 
 from swarm.errors import ConfigError
@@ -116,11 +116,19 @@ def dump_toml(obj: Any) -> str:
     return "\n".join(lines) + "\n" if lines else ""
 
 
-def load_toml(cls: type[T], path: str | os.PathLike[str], overrides: Mapping[str, object] | None = None) -> T:
+def load_toml(
+    cls: type[T],
+    path: str | os.PathLike[str],
+    overrides: Mapping[str, object] | None = None,
+    migrate: Callable[[dict[str, Any], str], dict[str, Any]] | None = None,
+    migrate_key: Callable[[str], str] | None = None,
+) -> T:
     """Read the TOML file at ``path`` into the dataclass ``cls``.
 
     ``overrides`` maps dotted keys to values (``{"estimator.sigma_range_m": 0.03}``, e.g. from
     :func:`parse_override`) applied on top of the file (:func:`apply_overrides`) before validation.
+    ``migrate(data, name)`` and ``migrate_key(key)``, if given, rewrite the file's parsed mapping and each
+    override's key from an older format (before the overrides are applied).
     A missing or unreadable file, a TOML syntax error (with its line and column) and every invalid field
     raise ConfigError naming the file; an invalid overridden value is reported as coming from the override.
     """
@@ -134,8 +142,12 @@ def load_toml(cls: type[T], path: str | os.PathLike[str], overrides: Mapping[str
         raise ConfigError(f"{name}: not UTF-8 text: {exc}") from exc
     except OSError as exc:
         raise ConfigError(f"{name}: cannot read the scenario file: {exc.strerror or exc}") from exc
+    if migrate is not None:
+        data = migrate(data, name)
     keys: list[str] = []
     if overrides:
+        if migrate_key is not None:
+            overrides = {migrate_key(k): v for k, v in overrides.items()}
         data = apply_overrides(data, overrides)
         keys = [_join_parts(_split_key(k)) for k in overrides]
     try:

@@ -1,8 +1,10 @@
-"""A scenario: the composition of every module's parameters, loaded from one TOML file.
+"""A scenario: the composition of every module's and vehicle kind's parameters, loaded from one TOML file.
 
-Each core module owns a frozen params dataclass (``EstimatorParams`` next to the estimator, ...); a
-:class:`Scenario` composes them, one TOML table each (``[estimator]``, ``[guidance]``, ...), plus the
-vehicles, the anchors and the simulation rates. ``swarm/scenarios/docking.toml`` is the paper's docking case;
+Each core module owns a frozen params dataclass (``EstimatorParams`` next to the estimator, ...); each
+vehicle kind owns its tables (``[kinds.cubesat.dynamics]``, ``[kinds.ground.wheels]``, ...,
+:mod:`swarm.kinds`). A :class:`Scenario` composes them, one TOML table each (``[estimator]``,
+``[guidance]``, ``[kinds]``, ...), plus the vehicles (each naming its ``kind``), the anchors and the
+simulation rates. ``swarm/scenarios/docking.toml`` is the paper's docking case;
 :func:`load_scenario` reads a file or a bundled scenario by name and validates every field, naming the bad
 one (:mod:`swarm.config`).
 """
@@ -18,15 +20,13 @@ import numpy as np
 
 from swarm.config import load_toml
 from swarm.core.camera import CameraParams, MarkerParams
-from swarm.core.control import AttitudeControlParams, TranslationLqrParams
-from swarm.core.dynamics import RigidBodyParams
 from swarm.core.estimator import EstimatorParams
 from swarm.core.faults import FaultParams
 from swarm.core.guidance import GuidanceParams, StationParams
 from swarm.core.mdp import FixedParams, MdpParams
 from swarm.core.sensors import AhrsParams, GyroParams, UwbParams
-from swarm.core.thrusters import ThrusterParams
 from swarm.errors import ConfigError
+from swarm.kinds import KINDS, KindsParams, VehicleKind
 from swarm.kinds.dispersions import DispersionParams
 
 Vec3 = tuple[float, float, float]
@@ -37,7 +37,7 @@ PAPER_ANCHORS_M: tuple[Vec3, ...] = ((1.0, -0.2, 0.5), (1.0, 0.2, -0.5), (-1.0, 
 
 @dataclass(frozen=True)
 class VehicleSpec:
-    """One TPODS module of the scenario."""
+    """One vehicle of the scenario."""
 
     role: Literal["chaser", "target"]
     """A chaser docks on its target; a target keeps station."""
@@ -48,6 +48,9 @@ class VehicleSpec:
     mission attitude it keeps during APPROACH."""
     target: str | None = None
     """For a chaser: the id of the target it docks on."""
+    kind: str = "cubesat"
+    """The vehicle's kind (:data:`swarm.kinds.KINDS`: ``cubesat``, ``ground``); its tables are
+    ``[kinds.<kind>]``."""
 
 
 @dataclass(frozen=True)
@@ -178,26 +181,24 @@ class Scenario:
     policy: Literal["fixed", "mdp"] = "mdp"
     """Default switching policy (the CLI's ``--policy`` overrides it)."""
     anchors_m: tuple[Vec3, ...] = PAPER_ANCHORS_M
-    """UWB anchors on the mothership, frame nav [m] (paper sec. III)."""
-    tag_lever_arm_body_m: Vec3 = (0.05, 0.05, 0.0)
-    """True UWB tag position P1 in the body frame [m] (paper sec. III); the filter's model of it is
-    ``estimator.lever_arm_body_m``."""
+    """UWB anchors fixed in the nav frame [m]: the mothership's (paper sec. III), a table's corners, ..."""
     vehicles: dict[str, VehicleSpec] = field(default_factory=_paper_vehicles)
     sim: SimParams = field(default_factory=SimParams)
     initial: InitialEstimateParams = field(default_factory=InitialEstimateParams)
     agent: AgentParams = field(default_factory=AgentParams)
-    dynamics: RigidBodyParams = field(default_factory=RigidBodyParams)
-    thrusters: ThrusterParams = field(default_factory=ThrusterParams)
+    kinds: KindsParams = field(default_factory=KindsParams)
+    """Each vehicle kind's tables (``[kinds.cubesat]``, ``[kinds.ground]``): dynamics, actuators,
+    controller, sensor mounts, the kind's own dispersions."""
     gyro: GyroParams = field(default_factory=GyroParams)
     uwb: UwbParams = field(default_factory=UwbParams)
     ahrs: AhrsParams = field(default_factory=lambda: AhrsParams(enabled=True))
     """On: the hardware's VN-100 gives an attitude (paper sec. VI-A); the filter needs it to keep the
     target's and its own attitude good to the ~0.5 deg the 1 mm vision features demand."""
     camera: CameraParams = field(default_factory=CameraParams)
+    """The camera's optics and model; where it sits is the vehicle kind's (``kinds.<kind>.mounts``)."""
     markers: MarkerParams = field(default_factory=MarkerParams)
     estimator: EstimatorParams = field(default_factory=lambda: DOCKING_ESTIMATOR)
-    attitude_control: AttitudeControlParams = field(default_factory=AttitudeControlParams)
-    translation_control: TranslationLqrParams = field(default_factory=TranslationLqrParams)
+    """The filter's tuning; its model of the tag and camera mounts is each vehicle kind's ``mounts``."""
     guidance: GuidanceParams = field(default_factory=GuidanceParams)
     station: StationParams = field(default_factory=StationParams)
     mdp: MdpParams = field(default_factory=lambda: MdpParams(r_d_m=0.10))
@@ -219,41 +220,41 @@ class Scenario:
         if not self.vehicles:
             raise ConfigError("vehicles must define at least one vehicle, got none")
         for vid, v in self.vehicles.items():
+            if v.kind not in KINDS:
+                raise ConfigError(f"vehicles.{vid}.kind must be one of {sorted(KINDS)}, got {v.kind!r}")
             if v.role == "chaser":
                 tgt = self.vehicles.get(v.target) if v.target is not None else None
                 if tgt is None or tgt.role != "target":
                     raise ConfigError(
                         f"vehicles.{vid}.target must name a vehicle with role 'target', got {v.target!r}"
                     )
-        for name, rate in (
-            ("uwb.rate_hz", self.uwb.rate_hz),
-            ("camera.rate_hz", self.camera.rate_hz),
-            ("translation_control.rate_hz", self.translation_control.rate_hz),
-            ("ahrs.rate_hz", self.ahrs.rate_hz),
-        ):
+        kinds = {name: KINDS[name](getattr(self.kinds, name), self) for name in self.kinds_used}
+        object.__setattr__(self, "_kinds", kinds)  # bound kind objects (not fields: no repr, no equality)
+        rates = [("uwb.rate_hz", self.uwb.rate_hz), ("camera.rate_hz", self.camera.rate_hz),
+                 ("ahrs.rate_hz", self.ahrs.rate_hz)]  # fmt: skip
+        rates += [(k.control_rate_field, k.control_rate_hz) for k in kinds.values()]
+        for name, rate in rates:
             ratio = self.sim.imu_rate_hz / rate
             if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
                 raise ConfigError(
                     f"{name} must divide sim.imu_rate_hz ({self.sim.imu_rate_hz} Hz) evenly, got {rate!r}"
                 )
+        cube = kinds.get("cubesat")
         d = self.dispersions
-        if (d.mass_sigma_frac > 0 or d.thruster_misalignment_deg > 0) and (
-            self.estimator.accel_psd_m2_s3 <= DOCKING_ESTIMATOR.accel_psd_m2_s3
+        misalign = 0.0 if cube is None else cube.p.dispersions.thruster_misalignment_deg
+        if (
+            cube is not None
+            and (d.mass_sigma_frac > 0 or misalign > 0)
+            and (self.estimator.accel_psd_m2_s3 <= DOCKING_ESTIMATOR.accel_psd_m2_s3)
         ):
             warnings.warn(
                 f"estimator.accel_psd_m2_s3 = {self.estimator.accel_psd_m2_s3!r} is sized for a truth "
                 f"without thrust errors, but dispersions.mass_sigma_frac = {d.mass_sigma_frac!r} and "
-                f"dispersions.thruster_misalignment_deg = {d.thruster_misalignment_deg!r} add an "
+                f"kinds.cubesat.dispersions.thruster_misalignment_deg = {misalign!r} add an "
                 "acceleration the filter does not model: raise it to that truth's PSD (1e-8 for 3 % and "
                 "0.5 deg), or the filter is overconfident (docs/results/faults-analysis/NEES.md, table 4)",
                 UserWarning,
                 stacklevel=3,  # the caller of the dataclass's __init__
-            )
-        if self.thrusters.half_size_m != self.guidance.half_size_m:
-            raise ConfigError(
-                "thrusters.half_size_m must equal guidance.half_size_m "
-                f"({self.guidance.half_size_m!r}: the nozzles sit on the same cube), "
-                f"got {self.thrusters.half_size_m!r}"
             )
         if self.markers.half_size_m != self.guidance.half_size_m:
             raise ConfigError(
@@ -261,13 +262,23 @@ class Scenario:
                 f"({self.guidance.half_size_m!r}: one cube), "
                 f"got {self.markers.half_size_m!r}"
             )
-        cam_pos, cam_q = tuple(self.camera.pos_body_m), tuple(self.camera.q_body_cam)
-        if cam_pos != tuple(self.estimator.camera_pos_body_m) or cam_q != tuple(self.estimator.q_body_cam):
-            raise ConfigError(
-                "estimator.camera_pos_body_m/q_body_cam must equal camera.pos_body_m/q_body_cam "
-                f"(the filter's model of the camera mounting), got {self.estimator.camera_pos_body_m!r}, "
-                f"{self.estimator.q_body_cam!r} vs {cam_pos!r}, {cam_q!r}"
-            )
+        e, e0 = self.estimator, EstimatorParams()
+        for name, mount in _MOUNT_FIELDS.items():
+            if tuple(getattr(e, name)) != tuple(getattr(e0, name)):
+                raise ConfigError(
+                    f"estimator.{name}: the filter's model of the mount is the vehicle kind's "
+                    f"kinds.<kind>.mounts.{mount} (one source for the truth and the filter), got "
+                    f"{getattr(e, name)!r}"
+                )
+        c, c0 = self.camera, CameraParams()
+        for name, mount in (("pos_body_m", "camera_pos_body_m"), ("q_body_cam", "q_body_cam")):
+            if tuple(getattr(c, name)) != tuple(getattr(c0, name)):
+                raise ConfigError(
+                    f"camera.{name}: where the camera sits is the vehicle kind's "
+                    f"kinds.<kind>.mounts.{mount}, got {getattr(c, name)!r}"
+                )
+        for kind in kinds.values():
+            kind.validate()
 
     # ---- derived ---------------------------------------------------------------------------------------
     @property
@@ -281,6 +292,45 @@ class Scenario:
     @property
     def chasers(self) -> list[str]:
         return [vid for vid, v in self.vehicles.items() if v.role == "chaser"]
+
+    @property
+    def kinds_used(self) -> list[str]:
+        """The kinds of the scenario's vehicles, in vehicle order, each once."""
+        return list(dict.fromkeys(v.kind for v in self.vehicles.values()))
+
+    def kind(self, vehicle_id: str) -> VehicleKind:
+        """The kind of ``vehicle_id``, bound to this scenario's ``[kinds.<kind>]`` tables."""
+        return self._kinds[self.vehicles[vehicle_id].kind]
+
+    def control_every(self, vehicle_id: str) -> int:
+        """Ticks between two control steps of ``vehicle_id`` (its kind's controller rate)."""
+        return self.every(self.kind(vehicle_id).control_rate_hz)
+
+    def estimator_for(self, vehicle_id: str) -> EstimatorParams:
+        """The filter parameters of ``vehicle_id``: ``[estimator]`` with its kind's mounts as the model of
+        the tag lever arm and the camera mounting."""
+        from dataclasses import replace
+
+        m = self.kind(vehicle_id).mounts
+        return replace(self.estimator, lever_arm_body_m=m.tag_lever_arm_body_m,
+                       camera_pos_body_m=m.camera_pos_body_m, q_body_cam=m.q_body_cam)  # fmt: skip
+
+    def guidance_for(self, vehicle_id: str) -> GuidanceParams:
+        """``[guidance]`` for ``vehicle_id``, its docked attitude that of its kind's docking port
+        (:meth:`swarm.kinds.base.VehicleKind.q_target_chaser_docked`)."""
+        cache = self.__dict__.setdefault("_guidance_for", {})
+        name = self.vehicles[vehicle_id].kind
+        if name not in cache:
+            kind = self.kind(vehicle_id)
+            cache[name] = self.guidance.with_port(kind.q_target_chaser_docked(self.guidance.docking_face))
+        return cache[name]
+
+    def camera_for(self, vehicle_id: str) -> CameraParams:
+        """The camera of ``vehicle_id``: ``[camera]`` mounted where its kind's mounts say."""
+        from dataclasses import replace
+
+        m = self.kind(vehicle_id).mounts
+        return replace(self.camera, pos_body_m=m.camera_pos_body_m, q_body_cam=m.q_body_cam)
 
     def with_pairs(self, n: int) -> Scenario:
         """This scenario with its vehicles copied ``n`` times (``swarm launch --agents N``): copy ``i`` of
@@ -313,9 +363,104 @@ class Scenario:
         return euler_to_quat(np.radians(self.vehicles[vehicle_id].euler_deg), self.euler_seq)
 
 
+_MOUNT_FIELDS = {
+    "lever_arm_body_m": "tag_lever_arm_body_m",
+    "camera_pos_body_m": "camera_pos_body_m",
+    "q_body_cam": "q_body_cam",
+}
+"""``[estimator]`` fields that are the filter's model of a mount -> the field of ``kinds.<kind>.mounts``."""
+
+LEGACY_KEYS = {
+    ("dynamics",): ("kinds", "cubesat", "dynamics"),
+    ("thrusters",): ("kinds", "cubesat", "thrusters"),
+    ("attitude_control",): ("kinds", "cubesat", "attitude_control"),
+    ("translation_control",): ("kinds", "cubesat", "translation_control"),
+    ("tag_lever_arm_body_m",): ("kinds", "cubesat", "mounts", "tag_lever_arm_body_m"),
+    ("camera", "pos_body_m"): ("kinds", "cubesat", "mounts", "camera_pos_body_m"),
+    ("camera", "q_body_cam"): ("kinds", "cubesat", "mounts", "q_body_cam"),
+    ("dispersions", "thruster_misalignment_deg"): (
+        "kinds",
+        "cubesat",
+        "dispersions",
+        "thruster_misalignment_deg",
+    ),
+}
+"""Keys of the scenario format before vehicle kinds (issue 12), where every vehicle was a cube, and where
+they live now. :func:`migrate_legacy` moves them, with a warning naming each."""
+
+
+def migrate_legacy(data: dict, name: str = "scenario") -> dict:
+    """``data`` (a parsed scenario) with the keys of :data:`LEGACY_KEYS` moved to their tables under
+    ``[kinds.cubesat]``, and ``[estimator]``'s copies of the mounts dropped when they equal the mount they
+    model; a FutureWarning lists what moved. A key given both ways is an error naming both. A file with a
+    ``[kinds]`` table is of the current format and is left as it is."""
+    if "kinds" in data:
+        return data
+    moved = []
+    for old, new in LEGACY_KEYS.items():
+        node = data
+        for part in old[:-1]:
+            node = node.get(part) if isinstance(node, dict) else None
+        if not isinstance(node, dict) or old[-1] not in node:
+            continue
+        value = node.pop(old[-1])
+        dst = data
+        for part in new[:-1]:
+            dst = dst.setdefault(part, {})
+        if new[-1] in dst:
+            raise ConfigError(f"{name}: {'.'.join(old)} and {'.'.join(new)} are the same field: give only "
+                              f"{'.'.join(new)}")  # fmt: skip
+        dst[new[-1]] = value
+        moved.append(f"{'.'.join(old)} -> {'.'.join(new)}")
+    est = data.get("estimator")
+    if isinstance(est, dict):
+        mounts = {**_mount_defaults(), **data.get("kinds", {}).get("cubesat", {}).get("mounts", {})}
+        for field_name, mount in _MOUNT_FIELDS.items():
+            if field_name in est and _same(est[field_name], mounts[mount]):
+                est.pop(field_name)
+                moved.append(
+                    f"estimator.{field_name} (dropped: kinds.cubesat.mounts.{mount} is the filter's model)"
+                )
+    if moved:
+        warnings.warn(f"{name}: keys of the scenario format before vehicle kinds moved: " + "; ".join(moved)
+                      + " (docs/architecture.md)", FutureWarning, stacklevel=3)  # fmt: skip
+    return data
+
+
+def migrate_override_key(key: str) -> str:
+    """An override's dotted key (``--set``) in the format before vehicle kinds, moved as
+    :func:`migrate_legacy` moves a file's, with a FutureWarning; any other key as it is."""
+    parts = tuple(key.split("."))
+    for old, new in LEGACY_KEYS.items():
+        if parts[: len(old)] == old:
+            moved = ".".join(new + parts[len(old) :])
+            msg = f"--set {key}: moved to {moved} (vehicle kinds, docs/architecture.md)"
+            warnings.warn(msg, FutureWarning, stacklevel=4)
+            return moved
+    return key
+
+
+def _mount_defaults() -> dict:
+    from swarm.kinds.cubesat import CubesatParams
+
+    m = CubesatParams().mounts
+    return {"tag_lever_arm_body_m": m.tag_lever_arm_body_m, "camera_pos_body_m": m.camera_pos_body_m,
+            "q_body_cam": m.q_body_cam}  # fmt: skip
+
+
+def _same(a, b) -> bool:
+    try:
+        return tuple(float(x) for x in a) == tuple(float(x) for x in b)
+    except (TypeError, ValueError):
+        return False
+
+
 def load_scenario(name_or_path: str | Path, overrides: dict | None = None) -> Scenario:
-    """Load a scenario file, or a bundled one by name (``"docking"`` -> ``swarm/scenarios/docking.toml``)."""
+    """Load a scenario file, or a bundled one by name (``"docking"`` -> ``swarm/scenarios/docking.toml``).
+    A file in the format before vehicle kinds is read too (:func:`migrate_legacy`)."""
     path = Path(name_or_path)
     if not path.suffix and not path.exists():
         path = SCENARIO_DIR / f"{name_or_path}.toml"
-    return load_toml(Scenario, path, overrides=overrides)
+    return load_toml(
+        Scenario, path, overrides=overrides, migrate=migrate_legacy, migrate_key=migrate_override_key
+    )

@@ -26,8 +26,8 @@ def _logged_sim(sc, seed: int) -> tuple[DockingSim, list[float], list[float]]:
     ranges, vision = [], []
     net_step = sim.network.step
 
-    def step(k, t, truth):
-        out = net_step(k, t, truth)
+    def step(k, t, truth, *env):
+        out = net_step(k, t, truth, *env)
         if "chaser" in out:
             ranges.append(t)
         return out

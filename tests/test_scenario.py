@@ -116,8 +116,8 @@ def test_paper_numbers_are_in_the_docking_scenario():
     sc = load_scenario("docking")
     # paper sec. III: anchors and the tag position P1 = (0.05, 0.05, 0) m; 2 cm range noise
     assert sc.anchors_m == ((1.0, -0.2, 0.5), (1.0, 0.2, -0.5), (-1.0, 0.2, -0.5), (-1.0, -0.2, 0.5))
-    assert sc.tag_lever_arm_body_m == (0.05, 0.05, 0.0)
-    assert sc.estimator.lever_arm_body_m == sc.tag_lever_arm_body_m
+    assert sc.kind("chaser").mounts.tag_lever_arm_body_m == (0.05, 0.05, 0.0)
+    assert sc.estimator_for("chaser").lever_arm_body_m == sc.kind("chaser").mounts.tag_lever_arm_body_m
     assert sc.uwb.sigma_m == 0.02
     assert sc.camera.feature_sigma_m == 0.001
     # paper Fig. 5: chaser at (0, 1, 0) m, (0, 0, 0) deg; target at (1, 2, 1) m, (-90, 0, -90) deg
@@ -261,7 +261,7 @@ def test_chaser_without_target_is_an_error(tmp_path):
     [
         ("uwb", "30.0", "uwb.rate_hz"),
         ("camera", "7.0", "camera.rate_hz"),
-        ("translation_control", "3.0", "translation_control.rate_hz"),
+        ("kinds.cubesat.translation_control", "3.0", "kinds.cubesat.translation_control.rate_hz"),
         ("ahrs", "40.0", "ahrs.rate_hz"),
         ("ahrs", "200.0", "ahrs.rate_hz"),  # faster than the tick
     ],
@@ -276,16 +276,68 @@ def test_rates_that_divide_the_imu_rate_are_accepted(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("key", "value", "named"),
+    ("key", "value", "mount"),
     [
-        ("pos_body_m", "[0.0, 0.0, -0.04]", "camera.pos_body_m"),
-        ("q_body_cam", "[0.0, 1.0, 0.0, 0.0]", "q_body_cam"),
+        ("pos_body_m", "[0.0, 0.0, -0.04]", "kinds.cubesat.mounts.camera_pos_body_m"),
+        ("q_body_cam", "[0.0, 1.0, 0.0, 0.0]", "kinds.cubesat.mounts.q_body_cam"),
     ],
 )
-def test_camera_mounting_must_match_the_estimator_model(tmp_path, key, value, named):
-    with pytest.raises(ConfigError, match=r"estimator\.camera_pos_body_m") as exc:
+def test_the_camera_mount_is_given_once_in_the_kinds_mounts(tmp_path, key, value, mount):
+    """Where the camera sits is the kind's: a [camera] mount in a file of the current format is an error
+    naming the kind's field (a file of the older format has its [camera] mount moved there, below)."""
+    with pytest.raises(ConfigError, match=rf"camera\.{key}: where the camera sits is the vehicle kind's"):
         load_variant(tmp_path, "camera", key, value)
-    assert named in str(exc.value)
+
+
+@pytest.mark.parametrize(
+    ("key", "value"), [("lever_arm_body_m", "[0.0, 0.05, 0.0]"), ("camera_pos_body_m", "[0.0, 0.0, -0.04]")]
+)
+def test_the_filters_mount_model_is_the_kinds_mount(tmp_path, key, value):
+    with pytest.raises(ConfigError, match=rf"estimator\.{key}: the filter's model of the mount is"):
+        load_variant(tmp_path, "estimator", key, value)
+
+
+def test_a_scenario_of_the_format_before_kinds_loads_with_a_warning_naming_the_moves(tmp_path):
+    """A file written before vehicle kinds (top-level [dynamics], [thrusters], ..., the tag lever arm, the
+    camera mount, the nozzle misalignment) is the same scenario, and a FutureWarning names each move."""
+    old = TEXT
+    for block in ("[kinds.cubesat.mounts]", "[kinds.cubesat.dispersions]"):  # the blocks that were not tables
+        start = old.index(block)
+        old = old[:start] + old[old.index("\n[", start + 1) + 1 :]
+    for table in ("dynamics", "thrusters", "attitude_control", "translation_control"):
+        old = old.replace(f"[kinds.cubesat.{table}]", f"[{table}]")
+    old = old.replace('policy = "mdp"\n', 'policy = "mdp"\ntag_lever_arm_body_m = [0.05, 0.05, 0.0]\n')
+    old = old.replace(
+        'model = "features"',
+        'pos_body_m = [0.0, 0.0, -0.05]\nq_body_cam = [1.0, 0.0, 0.0, 0.0]\nmodel = "features"',
+    )
+    old = re.sub(r"(\[estimator\][^\n]*\n)", r"\1lever_arm_body_m = [0.05, 0.05, 0.0]\n", old)
+    old = old.replace('distribution = "normal"', 'distribution = "normal"\nthruster_misalignment_deg = 0.0')
+    assert "[kinds." not in old
+    path = tmp_path / "old.toml"
+    path.write_text(old)
+    with pytest.warns(FutureWarning, match="dynamics -> kinds.cubesat.dynamics") as rec:
+        sc = load_scenario(path)
+    text = str(rec[0].message)
+    for moved in ("tag_lever_arm_body_m -> kinds.cubesat.mounts.tag_lever_arm_body_m",
+                  "camera.pos_body_m -> kinds.cubesat.mounts.camera_pos_body_m",
+                  "dispersions.thruster_misalignment_deg -> kinds.cubesat.dispersions.",
+                  "estimator.lever_arm_body_m (dropped"):  # fmt: skip
+        assert moved in text
+    assert sc == load_scenario("docking")
+
+
+def test_an_override_of_a_key_before_kinds_is_moved_with_a_warning():
+    with pytest.warns(FutureWarning, match="--set dynamics.mass_kg: moved to kinds.cubesat.dynamics.mass_kg"):
+        sc = load_scenario("docking", {"dynamics.mass_kg": 1.3})
+    assert sc.kinds.cubesat.dynamics.mass_kg == 1.3
+
+
+def test_a_vehicle_of_an_unknown_kind_is_named(tmp_path):
+    with pytest.raises(
+        ConfigError, match=r"vehicles\.chaser\.kind must be one of \['cubesat', 'ground'\], got 'boat'"
+    ):
+        load_variant(tmp_path, "vehicles.chaser", "kind", '"boat"')
 
 
 def test_marker_cube_must_match_the_guidance_cube(tmp_path):
@@ -330,8 +382,8 @@ def test_override_can_break_a_cross_field_check():
 
 
 def test_thruster_cube_size_must_match_the_guidance_cube():
-    with pytest.raises(ConfigError, match=r"thrusters\.half_size_m"):
-        load_scenario("docking", {"thrusters.half_size_m": 0.06})
+    with pytest.raises(ConfigError, match=r"kinds\.cubesat\.thrusters\.half_size_m must equal guidance"):
+        load_scenario("docking", {"kinds.cubesat.thrusters.half_size_m": 0.06})
 
 
 def test_with_pairs_copies_every_vehicle_on_a_grid_of_the_configured_spacing():

@@ -35,6 +35,7 @@ from pathlib import Path
 
 from swarm.errors import ConfigError, SwarmError
 from swarm.private_dirs import private_dir
+from swarm.step.outcome import chaser_summary, run_summary
 from swarm.world.checkpoint import EXIT_BAD_CHECKPOINT
 
 _LOG = logging.getLogger("swarm.launch")
@@ -159,41 +160,40 @@ def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
                     decisions.append(dec)
             summary = log.summaries.get(cid, {})
             counts = summary.get("counts", {})
-            c = {
-                "docked": bool(contact is not None and contact.data["docked"]),
-                "collided": bool(contact is not None and not contact.data["docked"]),
-                "docking_time_s": None if contact is None else contact.data["docking_time_s"],
-                "total_impulse_ns": end.get("impulse_ns", {}).get(cid),
-                "position_error_m": None if contact is None else contact.data["position_error_m"],
-                "attitude_error_rad": None if contact is None else contact.data["attitude_error_rad"],
-                "final_mode": last.mode if last is not None else summary.get("final_mode"),
-                "modes": modes,
-                "r1_m": last.r1_m if last is not None else summary.get("r1_m"),
-                "r2_m": last.r2_m if last is not None else summary.get("r2_m"),
-                "keepout_violated": any(e.kind == "keepout_violation" for e in events),
-                "closest_approach_m": end.get("closest_approach_m", {}).get(cid),
-                "contact": None if contact is None else contact.data["contact"],
-                "estimator": {  # absent counters are zero; no summary at all: unknown
+            c = chaser_summary(
+                sc, cid,
+                docked=bool(contact is not None and contact.data["docked"]),
+                collided=bool(contact is not None and not contact.data["docked"]),
+                docking_time_s=None if contact is None else contact.data["docking_time_s"],
+                effort=end.get("effort", {}).get(cid),
+                position_error_m=None if contact is None else contact.data["position_error_m"],
+                attitude_error_rad=None if contact is None else contact.data["attitude_error_rad"],
+                final_mode=last.mode if last is not None else summary.get("final_mode"),
+                modes=modes,
+                r1_m=last.r1_m if last is not None else summary.get("r1_m"),
+                r2_m=last.r2_m if last is not None else summary.get("r2_m"),
+                keepout_violated=any(e.kind == "keepout_violation" for e in events),
+                closest_approach_m=end.get("closest_approach_m", {}).get(cid),
+                contact=None if contact is None else contact.data["contact"],
+                estimator={  # absent counters are zero; no summary at all: unknown
                     "rejected_ranges": counts.get("range_rejected", 0) if summary else None,
                     "accepted_ranges": counts.get("range_accepted", 0) if summary else None,
                     "accepted_vision": sum(counts.get(k, 0) for k in VISION_COUNTS) if summary else None,
                 },
-                "wall_s": end.get("wall_s"),
-                "realtime_factor": end.get("realtime_factor"),
-                "restarted": any(e.kind == "restarted" for e in events),
-                "tick_assembly": summary.get("assembler"),  # the agent's drop counters of late/odd messages
-            }
+                wall_s=end.get("wall_s"),
+                realtime_factor=end.get("realtime_factor"),
+                restarted=any(e.kind == "restarted" for e in events),
+                tick_assembly=summary.get("assembler"),  # the agent's drop counters of late/odd messages
+            )  # fmt: skip
             if policy == "mdp":
                 c["decisions"] = decisions
             chasers[cid] = c
-    return {
-        "scenario": sc.name, "policy": policy, "seed": seed, "sim_time_s": end.get("t_s"),
-        "wall_s": end.get("wall_s", wall_s), "realtime_factor": end.get("realtime_factor"),
-        "end_reason": end.get("reason", "no run_end received"),
-        "cpu_s": {"world": end.get("cpu_s"), **{v: s.get("cpu_s") for v, s in log.summaries.items()}},
-        "target_impulse_ns": {v: i for v, i in end.get("impulse_ns", {}).items() if v not in chasers},
-        "chasers": chasers,
-    }  # fmt: skip
+    cpu = {"world": end.get("cpu_s"), **{v: s.get("cpu_s") for v, s in log.summaries.items()}}
+    out = run_summary(sc, policy, seed, end.get("t_s"), end.get("wall_s", wall_s), end.get("effort", {}),
+                      chasers, end_reason=end.get("reason", "no run_end received"), cpu_s=cpu)  # fmt: skip
+    if end.get("realtime_factor") is not None:
+        out["realtime_factor"] = end["realtime_factor"]
+    return out
 
 
 def _child_args(args: argparse.Namespace, endpoint: str, seed: int) -> list[str]:

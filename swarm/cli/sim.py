@@ -43,7 +43,11 @@ def print_summary(res: dict) -> None:
         )
         print(f"  {cid}: {status}")
         print(f"    docking time      {_fmt(c['docking_time_s'], ' s', digits=2)}")
-        print(f"    total impulse     {_fmt(c['total_impulse_ns'], ' N s', digits=4)}")
+        effort = (
+            c.get("effort_key", "total_impulse_ns").removesuffix("_ns").removesuffix("_rad").replace("_", " ")
+        )
+        unit = c.get("effort_unit", "N s")
+        print(f"    {effort:<18}{_fmt(c.get('effort', c.get('total_impulse_ns')), ' ' + unit, digits=4)}")
         print(f"    position error    {_fmt(c['position_error_m'], ' cm', 100.0, 3)}")
         print(f"    attitude error    {_fmt(c['attitude_error_rad'], ' rad', digits=4)}")
         print(f"    radii chosen      r2 = {c['r2_m']:.3f} m, r1 = {c['r1_m']:.3f} m")

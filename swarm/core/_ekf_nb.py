@@ -282,6 +282,37 @@ def _reset_attitude3(X, P, d0, d1, d2):
 
 
 @njit(cache=True)
+def constrain_plane_one(X, P, PRM, z0, sigma_z, sigma_vz):
+    """A vehicle that moves in a horizontal plane (a module on a table): the pseudo-measurements
+    ``p_z = z0`` and ``v_z = 0`` with standard deviations ``sigma_z`` [m] and ``sigma_vz`` [m/s], each a
+    scalar Kalman update ``K = P h^T / s``, ``s = h P h^T + sigma^2``, ``P <- P - K s K^T`` (the
+    measurement-augmentation way of imposing a state constraint, Simon 2010, "Kalman filtering with state
+    constraints: a survey of linear and nonlinear algorithms", IET Control Theory Appl. 4(8), sec. 2.1).
+    Not gated, not counted, and it leaves the underweighting book-keeping alone: it is a model of the
+    vehicle, not a sensor. ``sigma_z == 0`` does nothing. Tandem: the translation filter only."""
+    if not sigma_z > 0.0:
+        return
+    n = 6 if PRM[PRM_TANDEM] != 0.0 else 9
+    K = np.empty(9)
+    for idx, target, sig in ((2, z0, sigma_z), (5, 0.0, sigma_vz)):
+        s = P[idx, idx] + sig * sig
+        if not (s > 0.0 and np.isfinite(s)):
+            continue
+        nu = target - X[idx]
+        for i in range(n):
+            K[i] = P[i, idx] / s
+        for i in range(n):
+            for j in range(i, n):
+                v = P[i, j] - K[i] * K[j] * s
+                P[i, j] = v
+                P[j, i] = v
+        for i in range(6):
+            X[i] += K[i] * nu
+        if n == 9:
+            _reset_attitude3(X, P, K[6] * nu, K[7] * nu, K[8] * nu)
+
+
+@njit(cache=True)
 def _reset_attitude(X, P, dth):
     """:func:`_reset_attitude3` for a rotation-vector array."""
     _reset_attitude3(X, P, dth[0], dth[1], dth[2])

@@ -164,10 +164,15 @@ class FaultSchedule:
     (:meth:`swarm.core.world.UwbNetwork.set_fault_windows` with :attr:`uwb_dropout`, :attr:`nlos`).
     """
 
-    def __init__(self, params: FaultParams, dt_s: float, chasers: list[str]) -> None:
+    def __init__(
+        self, params: FaultParams, dt_s: float, chasers: list[str], uwb_windows_s: tuple = ()
+    ) -> None:
+        """``uwb_windows_s``: the radio's own fixed dropout windows (``uwb.dropout_windows_s``), kept with
+        the fault windows so that one list says when the network is quiet."""
         self.p = params
         self.dt = float(dt_s)
         self.uwb_dropout: list[list[float]] = [list(w) for w in params.uwb_dropout.windows_s]
+        self.uwb_dropout += [list(w) for w in uwb_windows_s]
         prob = params.nlos_burst_probability
         self.nlos: list[list[float]] = [[a, b, prob] for a, b in params.nlos_burst.windows_s] if prob else []
         self.camera: dict[str, list[list[float]]] = {
@@ -217,6 +222,58 @@ class FaultSchedule:
             self.events.append({"t_s": t_s, "fault": kind, "chaser": chaser, "mode": mode, "window_s": w})
             changed = True
         return changed
+
+    def add(self, kind: str, start_s: float, end_s: float, vehicles=(), probability: float = 0.0) -> None:
+        """A window opened at run time (``control/fault``): ``uwb_dropout`` and ``nlos_burst`` (with its
+        outlier ``probability``) for the whole radio network, ``camera_loss`` for each of ``vehicles``
+        that has a camera. The caller makes sure it opens after every sample already taken."""
+        w = [float(start_s), float(end_s)]
+        if kind == "uwb_dropout":
+            self.uwb_dropout.append(w)
+        elif kind == "nlos_burst":
+            self.nlos.append([*w, float(probability)])
+        elif kind == "camera_loss":
+            for v in vehicles:
+                if v in self.camera:
+                    self.camera[v].append(list(w))
+        else:
+            raise ValueError(f"not a fault window kind: {kind!r}")
+
+    def state(self) -> dict:
+        """Everything that changes as the run goes (plain lists and dicts, picklable): :meth:`restore`
+        continues from it."""
+        return {
+            "uwb_dropout": [list(w) for w in self.uwb_dropout], "nlos": [list(w) for w in self.nlos],
+            "camera": {c: [list(w) for w in ws] for c, ws in self.camera.items()},
+            "mode": dict(self._mode), "entered": [[*k, n] for k, n in self._entered.items()],
+            "open": [[c, m, self._index(w)] for c, m, w in self._open],
+            "events": [dict(e) for e in self.events],
+        }  # fmt: skip
+
+    def _index(self, w: list[float]) -> list:
+        """Where a window that closes on a mode exit lives: ``[list name, (chaser,) index]``."""
+        for name, lst in (("uwb_dropout", self.uwb_dropout), ("nlos", self.nlos)):
+            for i, x in enumerate(lst):
+                if x is w:
+                    return [name, i]
+        for c, lst in self.camera.items():
+            for i, x in enumerate(lst):
+                if x is w:
+                    return ["camera", c, i]
+        raise ValueError("an open window that is in no list")
+
+    def restore(self, st: dict) -> None:
+        """Continue from :meth:`state` (of a schedule of the same scenario)."""
+        self.uwb_dropout = [list(w) for w in st["uwb_dropout"]]
+        self.nlos = [list(w) for w in st["nlos"]]
+        self.camera = {c: [list(w) for w in ws] for c, ws in st["camera"].items()}
+        self._mode = dict(st["mode"])
+        self._entered = {(c, k): int(n) for c, k, n in st["entered"]}
+        self._open = []
+        for c, m, where in st["open"]:
+            w = self.camera[where[1]][where[2]] if where[0] == "camera" else getattr(self, where[0])[where[1]]
+            self._open.append((c, m, w))
+        self.events = [dict(e) for e in st["events"]]
 
     def dropout_windows(self) -> list[tuple[float, float]]:
         """Every UWB dropout window so far, ``(start, end)`` [s] (window ends may still shrink)."""

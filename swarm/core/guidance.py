@@ -16,6 +16,7 @@ vehicle by more than ``max_lead_m``, so the LQR (section IV-B) tracks a smooth, 
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 from dataclasses import dataclass, field
@@ -198,11 +199,21 @@ class GuidanceParams:
         n["xyz".index(self.docking_face[1])] = 1.0 if self.docking_face[0] == "+" else -1.0
         return n
 
+    def with_port(self, q_target_chaser_docked) -> GuidanceParams:
+        """This guidance for a chaser whose docked attitude relative to the target is
+        ``q_target_chaser_docked`` (scalar-last): its vehicle kind's port
+        (:meth:`swarm.kinds.base.VehicleKind.q_target_chaser_docked`)."""
+        g = dataclasses.replace(self)
+        q = np.array(q_target_chaser_docked, dtype=float)
+        q.setflags(write=False)
+        g.__dict__["q_target_chaser_docked"] = q  # the cached property's slot, as cached_property fills it
+        return g
+
     @cached_property
     def q_target_chaser_docked(self) -> np.ndarray:
-        """Chaser attitude relative to the target when docked, scalar-last: chaser +z along the face
-        normal (its bottom face and camera against the docking face), chaser +x along the next target
-        axis in x -> y -> z order (the port's clocking)."""
+        """Chaser attitude relative to the target when docked, scalar-last. By default a cube's: chaser +z
+        along the face normal (its bottom face and camera against the docking face), chaser +x along the
+        next target axis in x -> y -> z order (the port's clocking); :meth:`with_port` sets another kind's."""
         n = self.face_normal_target
         axis = "xyz".index(self.docking_face[1])
         x_c = np.zeros(3)

@@ -301,7 +301,10 @@ class UwbRadio:
         # One draw of four normals per exchange whatever happens (see uwb_exchange).
         z = rng.standard_normal(4)
         tag = np.asarray(tag_nav, dtype=np.float64)
-        lost, r, outlier = uwb_exchange(t_s, tag, self.anchors_nav[i], z, self._drift_m_s[i], self._vector)
+        quiet = any(a <= t_s < b for a, b in self.params.dropout_windows_s)
+        lost, r, outlier = uwb_exchange(
+            t_s, tag, self.anchors_nav[i], z, self._drift_m_s[i], self._vector, quiet, 0.0
+        )
         return None if lost else UwbSample(t_s, i, r, outlier)
 
     def drift_rate(self, anchor_id: int) -> float:
@@ -310,55 +313,37 @@ class UwbRadio:
 
     @property
     def vector(self) -> np.ndarray:
-        """The parameters as the flat vector :func:`uwb_exchange` reads (``UWB_*`` indices)."""
+        """The parameters as the flat vector :func:`uwb_exchange` reads (``UWB_*`` indices). The dropout
+        windows are not in it: they are the radio environment (``env_lost``), which the world decides."""
         p = self.params
-        v = np.empty(UWB_N + 2 * len(p.dropout_windows_s))
+        v = np.empty(UWB_N)
         v[UWB_SIGMA], v[UWB_P_DROP], v[UWB_P_NLOS] = p.sigma_m, p.dropout_probability, p.nlos_probability
         v[UWB_NLOS_MIN], v[UWB_NLOS_MAX], v[UWB_DRIFT_START] = (
             p.nlos_min_m,
             p.nlos_max_m,
             p.clock_drift_start_s,
         )
-        v[UWB_N_DROP] = len(p.dropout_windows_s)
-        v[UWB_N:] = np.asarray(p.dropout_windows_s, dtype=np.float64).ravel()
         return v
 
 
-UWB_SIGMA, UWB_P_DROP, UWB_P_NLOS, UWB_NLOS_MIN, UWB_NLOS_MAX, UWB_DRIFT_START, UWB_N_DROP = range(7)
-UWB_N = 7  # UWB_N_DROP dropout windows follow as (start, end) pairs, then NLOS bursts (start, end, p)
-
-
-def uwb_fault_vector(base: np.ndarray, dropouts, nlos_bursts) -> np.ndarray:
-    """``base`` (a :attr:`UwbRadio.vector`) with extra dropout windows ``(start, end)`` [s] and NLOS burst
-    windows ``(start, end, probability)`` appended (:mod:`swarm.core.faults`); ``base`` itself when there
-    are none, so the fault-free vector is the very same array."""
-    if not len(dropouts) and not len(nlos_bursts):
-        return base
-    n0 = int(base[UWB_N_DROP])
-    head = base[: UWB_N + 2 * n0]
-    old_bursts = base[UWB_N + 2 * n0 :]
-    drops = np.asarray(dropouts, dtype=np.float64).reshape(-1, 2).ravel()
-    bursts = np.asarray(nlos_bursts, dtype=np.float64).reshape(-1, 3).ravel()
-    v = np.concatenate([head, drops, old_bursts, bursts])
-    v[UWB_N_DROP] = n0 + len(drops) // 2
-    return v
+UWB_SIGMA, UWB_P_DROP, UWB_P_NLOS, UWB_NLOS_MIN, UWB_NLOS_MAX, UWB_DRIFT_START = range(6)
+UWB_N = 6
 
 
 @numba.njit(cache=True)
-def uwb_exchange(t_s, tag_nav, anchor_nav, z, drift_m_s, prm):
+def uwb_exchange(t_s, tag_nav, anchor_nav, z, drift_m_s, prm, env_lost, env_nlos_p):
     """One two-way-ranging exchange: ``(lost, range_m, is_outlier)``; the arithmetic of
     :meth:`UwbRadio.sample` (its docstring has the model), compiled so the simulation's inner loop can
-    call it. ``prm`` is :attr:`UwbRadio.vector`, possibly with fault windows (:func:`uwb_fault_vector`):
-    inside an NLOS burst window the outlier probability is the window's (when larger). ``z`` (4,)
+    call it. ``prm`` is :attr:`UwbRadio.vector`. The radio environment of the exchange
+    (:func:`swarm.step.radio.radio_env`): ``env_lost`` loses the reply (a dropout window); inside an NLOS
+    burst window the outlier probability is ``env_nlos_p`` when larger than the radio's own. ``z`` (4,)
     standard normals: ``z0`` is the range noise; ``z1..z3`` become the dropout, outlier and outlier-size
-    uniforms through the normal CDF (probability integral transform), so an
-    exchange always consumes four draws whatever happens."""
+    uniforms through the normal CDF (probability integral transform), so an exchange always consumes four
+    draws whatever happens."""
     if 0.5 * math.erfc(-z[1] * _INV_SQRT2) < prm[UWB_P_DROP]:
         return True, 0.0, False
-    end_drop = UWB_N + 2 * int(prm[UWB_N_DROP])
-    for w in range(UWB_N, end_drop, 2):
-        if prm[w] <= t_s < prm[w + 1]:
-            return True, 0.0, False
+    if env_lost:
+        return True, 0.0, False
     dx = tag_nav[0] - anchor_nav[0]
     dy = tag_nav[1] - anchor_nav[1]
     dz = tag_nav[2] - anchor_nav[2]
@@ -368,9 +353,8 @@ def uwb_exchange(t_s, tag_nav, anchor_nav, z, drift_m_s, prm):
         r += drift_m_s * elapsed
     u_nlos = 0.5 * math.erfc(-z[2] * _INV_SQRT2)
     outlier = u_nlos < prm[UWB_P_NLOS]
-    for w in range(end_drop, prm.shape[0], 3):  # NLOS bursts (swarm.core.faults): the same uniform
-        if not outlier and prm[w] <= t_s < prm[w + 1]:
-            outlier = u_nlos < prm[w + 2]
+    if not outlier and env_nlos_p > 0.0:  # an NLOS burst (swarm.core.faults): the same uniform
+        outlier = u_nlos < env_nlos_p
     if outlier:
         r += prm[UWB_NLOS_MIN] + (prm[UWB_NLOS_MAX] - prm[UWB_NLOS_MIN]) * 0.5 * math.erfc(-z[3] * _INV_SQRT2)
     return False, (r if r > 0.0 else 0.0), outlier

@@ -1,1 +1,29 @@
-"""Vehicle kinds as plug-ins (docs/architecture.md, "Vehicle kinds")."""
+"""Vehicle kinds as plug-ins (docs/architecture.md, "Vehicle kinds").
+
+:data:`KINDS` maps a scenario's ``kind = "..."`` to its :class:`~swarm.kinds.base.VehicleKind` class;
+:class:`KindsParams` is the scenario's ``[kinds]`` table, one sub-table per registered kind, built from
+:data:`KINDS` so that a new kind needs only its entry here (and its branch in :mod:`swarm.kinds._dispatch`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import field, make_dataclass
+
+from swarm.kinds.base import VehicleKind
+from swarm.kinds.cubesat import CubesatKind
+from swarm.kinds.ground import GroundKind
+
+KINDS: dict[str, type[VehicleKind]] = {k.name: k for k in (CubesatKind, GroundKind)}
+"""Every registered kind by name."""
+
+assert len({k.code for k in KINDS.values()}) == len(KINDS), "kind codes must be distinct"
+
+KindsParams = make_dataclass(
+    "KindsParams",
+    [(name, kind.Params, field(default_factory=kind.Params)) for name, kind in KINDS.items()],
+    frozen=True,
+)
+KindsParams.__doc__ = "The ``[kinds]`` table: each registered kind's parameter tables (``[kinds.<name>]``)."
+KindsParams.__module__ = __name__
+
+__all__ = ["KINDS", "KindsParams", "VehicleKind"]

@@ -1,19 +1,25 @@
-"""Per-run dispersions of a Monte Carlo campaign, declared in the scenario's ``[dispersions]`` table.
+"""Per-run dispersions of a Monte Carlo campaign, declared in the scenario's ``[dispersions]`` table and in
+each kind's ``[kinds.<kind>.dispersions]``.
 
 What varies from run to run, and where it is declared:
 
 * initial estimate errors: ``[initial]`` (Gaussian, standard deviations ``sigma_*``), each vehicle's
-  ``init`` stream (:func:`swarm.sim.docking.initial_estimate`), always on;
+  ``init`` stream (:func:`swarm.step.initial.initial_estimate`), always on;
 * sensor noise realisations: every sensor table (gyro, AHRS, UWB, camera), one stream per vehicle and
-  sensor (:func:`swarm.core.world.stream`), always on;
+  sensor (:func:`swarm.step.streams.stream`), always on;
 * everything in :class:`DispersionParams` below, off (all zero) by default: the chasers' initial true
-  pose and velocity, and the truth's mass, inertia and nozzle directions (the vehicles' own models keep
-  the nominal values, so these are model errors the closed loop has to absorb).
+  pose and velocity, and every vehicle's own true mass and inertia (the vehicles' own models keep the
+  nominal values, so these are model errors the closed loop has to absorb);
+* each kind's own, off by default: a cube's nozzle misalignment
+  (``kinds.cubesat.dispersions.thruster_misalignment_deg``), a wheeled module's wheel slip
+  (``kinds.ground.dispersions.wheel_slip_sigma_frac``).
 
-All of them derive from the run's seed alone, and :class:`swarm.sim.docking.DockingSim` applies them
-itself, so a run is a function of (scenario, policy, seed): ``swarm sim SCENARIO --seed S`` re-runs it.
-Each quantity has its own stream (:func:`dispersion_rng`), so switching one dispersion on does not
-change the draws of another, and a quantity draws the same numbers whatever the policy (paired runs).
+All of them derive from the run's seed alone, and the world applies them itself when it is built
+(:class:`swarm.step.world.World`), so no runner can leave them out and a run is a function of (scenario,
+policy, seed): ``swarm sim SCENARIO --seed S`` re-runs it. Each quantity of each vehicle has its own
+stream (:func:`dispersion_rng`), so switching one dispersion on does not change the draws of another, and
+a quantity draws the same numbers whatever the policy (paired runs). A planar kind (a ground module) draws
+the same numbers and keeps their in-plane part: no height, roll or pitch.
 """
 
 from __future__ import annotations
@@ -24,16 +30,15 @@ from typing import Literal
 
 import numpy as np
 
-from swarm.core import rotations as rot
-from swarm.core.thrusters import N_NOZZLES
 from swarm.errors import ConfigError
+from swarm.kinds.base import VehicleDispersion
 
 DISPERSION_KEY = 1000
 """First word of the dispersion streams' spawn keys ``(1000, quantity, vehicle)``: three words, so they
-never coincide with the two-word ``(vehicle, sensor)`` keys of :func:`swarm.core.world.stream`."""
+never coincide with the two-word ``(vehicle, sensor)`` keys of :func:`swarm.step.streams.stream`."""
 
-QUANTITIES = ("position", "velocity", "attitude", "mass", "inertia", "thrusters")
-"""The quantities in stream order (the second word of the spawn key)."""
+QUANTITIES = ("position", "velocity", "attitude", "mass", "inertia", "thrusters", "wheel_slip")
+"""The quantities in stream order (the second word of the spawn key); a kind's own quantities too."""
 
 MAX_FRACTION_SIGMA = 0.1
 """Largest relative standard deviation of mass and inertia: keeps ``1 + e`` positive and the principal
@@ -46,34 +51,32 @@ SIGMAS = (
     "attitude_sigma_deg",
     "mass_sigma_frac",
     "inertia_sigma_frac",
-    "thruster_misalignment_deg",
 )
 """The dispersion sizes of :class:`DispersionParams` (each >= 0; zero switches it off)."""
 
 
 @dataclass(frozen=True)
 class DispersionParams:
-    """Run-to-run dispersions drawn from the run's seed (module docstring). Zero switches one off."""
+    """Run-to-run dispersions shared by every kind, drawn from the run's seed (module docstring). Zero
+    switches one off."""
 
     distribution: Literal["normal", "uniform"] = "normal"
-    """Distribution of every draw below, zero mean with the given standard deviation: ``"normal"``
-    (Gaussian) or ``"uniform"`` on ``[-sqrt(3) sigma, +sqrt(3) sigma]`` (the same standard deviation)."""
+    """Distribution of every draw (the kinds' own too), zero mean with the given standard deviation:
+    ``"normal"`` (Gaussian) or ``"uniform"`` on ``[-sqrt(3) sigma, +sqrt(3) sigma]`` (the same standard
+    deviation)."""
     position_sigma_m: float = 0.0
-    """Initial true position of every chaser, per mothership axis [m]. The initial estimate follows the
-    truth (plus the ``[initial]`` error), the mission attitude and the target do not move."""
+    """Initial true position of every chaser, per nav axis [m]. The initial estimate follows the truth
+    (plus the ``[initial]`` error); the mission attitude and the target do not move."""
     velocity_sigma_m_s: float = 0.0
-    """Initial true velocity of every chaser, per mothership axis [m/s] (nominally at rest)."""
+    """Initial true velocity of every chaser, per nav axis [m/s] (nominally at rest)."""
     attitude_sigma_deg: float = 0.0
     """Initial true attitude of every chaser: ``q0 (x) exp(e)``, ``e`` per body axis [deg]."""
     mass_sigma_frac: float = 0.0
-    """Truth mass of every vehicle times ``1 + e`` (one draw per run: the world has one mass model);
-    the agents keep the nominal mass. At most ``MAX_FRACTION_SIGMA``."""
+    """Truth mass of each vehicle times its own ``1 + e``; the agents keep the nominal mass. At most
+    ``MAX_FRACTION_SIGMA``."""
     inertia_sigma_frac: float = 0.0
-    """Truth principal moments times ``1 + e_i``, one ``e_i`` per axis (per run, every vehicle); the
-    agents keep the nominal inertia. At most ``MAX_FRACTION_SIGMA``."""
-    thruster_misalignment_deg: float = 0.0
-    """Each nozzle's true thrust direction turned by a rotation vector with this standard deviation per
-    axis [deg] (per run, every vehicle); allocation uses the nominal directions."""
+    """Truth principal moments of each vehicle times ``1 + e_i``, one ``e_i`` per axis; the agents keep the
+    nominal inertia. At most ``MAX_FRACTION_SIGMA``."""
 
     def __post_init__(self) -> None:
         if self.distribution not in ("normal", "uniform"):
@@ -91,18 +94,26 @@ class DispersionParams:
 
     @property
     def enabled(self) -> bool:
-        """Whether any dispersion of this table is on."""
+        """Whether any dispersion of this table is on (the kinds' own: :func:`enabled`)."""
         return any(getattr(self, n) > 0 for n in SIGMAS)
+
+
+def enabled(scenario) -> bool:
+    """Whether any dispersion of the scenario is on: its ``[dispersions]`` or a used kind's own."""
+    return scenario.dispersions.enabled or any(
+        scenario.kind(vid).dispersion_enabled() for vid in scenario.vehicles
+    )
 
 
 def dispersion_rng(seed: int, quantity: str, vehicle_index: int = 0) -> np.random.Generator:
     """The stream of one dispersed ``quantity`` (one of :data:`QUANTITIES`) of one vehicle for root
-    ``seed``; per-run quantities (mass, inertia, thrusters) use ``vehicle_index = 0``."""
+    ``seed``."""
     key = (DISPERSION_KEY, QUANTITIES.index(quantity), int(vehicle_index))
     return np.random.default_rng(np.random.SeedSequence(entropy=int(seed), spawn_key=key))
 
 
-def _draw(rng: np.random.Generator, sigma: float, size: int, distribution: str) -> np.ndarray:
+def draw(rng: np.random.Generator, sigma: float, size: int, distribution: str) -> np.ndarray:
+    """``size`` zero-mean draws with standard deviation ``sigma`` (``"normal"`` or ``"uniform"``)."""
     if distribution == "uniform":
         half = math.sqrt(3.0) * sigma
         return rng.uniform(-half, half, size=size)
@@ -113,101 +124,62 @@ def _draw(rng: np.random.Generator, sigma: float, size: int, distribution: str) 
 class Dispersion:
     """The dispersions of one run, as drawn (zeros / ones where a quantity is off)."""
 
-    position_m: dict[str, np.ndarray]
-    """Chaser id -> (3,) offset of the initial true position, frame nav [m]."""
-    velocity_m_s: dict[str, np.ndarray]
-    """Chaser id -> (3,) initial true velocity, frame nav [m/s]."""
-    attitude_rad: dict[str, np.ndarray]
-    """Chaser id -> (3,) body-frame rotation vector applied to the initial true attitude [rad]."""
-    mass_factor: float
-    """Truth mass / nominal mass."""
-    inertia_factor: np.ndarray
-    """(3,) truth principal moments / nominal."""
-    thruster_rotvec_rad: np.ndarray
-    """(10, 3) body-frame rotation vector turning each nozzle's thrust direction [rad]."""
+    vehicles: dict[str, VehicleDispersion]
+    """Vehicle id -> its draws."""
+
+    # the chasers' views the campaign tables and the tests read
+    @property
+    def position_m(self) -> dict[str, np.ndarray]:
+        return {v: d.position_m for v, d in self.vehicles.items()}
+
+    @property
+    def velocity_m_s(self) -> dict[str, np.ndarray]:
+        return {v: d.velocity_m_s for v, d in self.vehicles.items()}
+
+    @property
+    def attitude_rad(self) -> dict[str, np.ndarray]:
+        return {v: d.attitude_rad for v, d in self.vehicles.items()}
 
 
 def draw_dispersion(scenario, seed: int) -> Dispersion:
-    """Draw one run's dispersions from its ``seed`` (:func:`dispersion_rng`, one stream per quantity).
-
-    A quantity whose standard deviation is zero draws nothing and is exactly nominal.
-    """
+    """Draw one run's dispersions from its ``seed`` (:func:`dispersion_rng`, one stream per quantity and
+    vehicle). A quantity whose standard deviation is zero draws nothing and is exactly nominal."""
     p: DispersionParams = scenario.dispersions
     dist = p.distribution
-    ids = list(scenario.vehicles)
-    pos, vel, att = {}, {}, {}
-    for cid in scenario.chasers:
-        i = ids.index(cid)
-        pos[cid] = (
-            _draw(dispersion_rng(seed, "position", i), p.position_sigma_m, 3, dist)
-            if p.position_sigma_m > 0
-            else np.zeros(3)
-        )
-        vel[cid] = (
-            _draw(dispersion_rng(seed, "velocity", i), p.velocity_sigma_m_s, 3, dist)
-            if p.velocity_sigma_m_s > 0
-            else np.zeros(3)
-        )
-        att[cid] = (
-            _draw(dispersion_rng(seed, "attitude", i), math.radians(p.attitude_sigma_deg), 3, dist)
-            if p.attitude_sigma_deg > 0
-            else np.zeros(3)
-        )
-    mass = 1.0
-    if p.mass_sigma_frac > 0:
-        mass += float(_draw(dispersion_rng(seed, "mass"), p.mass_sigma_frac, 1, dist)[0])
-    inertia = (
-        1.0 + _draw(dispersion_rng(seed, "inertia"), p.inertia_sigma_frac, 3, dist)
-        if p.inertia_sigma_frac > 0
-        else np.ones(3)
-    )
-    sigma_thr = math.radians(p.thruster_misalignment_deg)
-    thr = (
-        _draw(dispersion_rng(seed, "thrusters"), sigma_thr, 3 * N_NOZZLES, dist)
-        if sigma_thr > 0
-        else np.zeros(3 * N_NOZZLES)
-    ).reshape(N_NOZZLES, 3)
-    return Dispersion(pos, vel, att, mass, inertia, thr)
-
-
-def apply_dispersion(world, scenario, disp: Dispersion) -> None:
-    """Apply a run's dispersions to the truth of ``world`` (:class:`swarm.core.world.World`) before the
-    first tick: the chasers' initial state, and the world's mass, inertia and nozzle directions. A
-    quantity that is off leaves the world untouched (bit for bit)."""
-    from swarm.core.thrusters import nozzle_geometry
-    from swarm.core.world import W_IXX, W_IZZ, W_MASS
-
-    p: DispersionParams = scenario.dispersions
-    for cid in scenario.chasers:
-        x = world.x[cid]
-        if p.position_sigma_m > 0:
-            x[0:3] += disp.position_m[cid]
-        if p.velocity_sigma_m_s > 0:
-            x[3:6] += disp.velocity_m_s[cid]
-        if p.attitude_sigma_deg > 0:
-            x[6:10] = rot.multiplicative_reset(x[6:10], disp.attitude_rad[cid])
-    if p.mass_sigma_frac > 0:
-        world.prm[W_MASS] *= disp.mass_factor
-    if p.inertia_sigma_frac > 0:
-        world.prm[W_IXX : W_IZZ + 1] *= disp.inertia_factor
-    if p.thruster_misalignment_deg > 0:
-        r, d = nozzle_geometry(scenario.thrusters)
-        d_true = rot.quat_rotate(rot.rotvec_exp(disp.thruster_rotvec_rad), d)
-        world.B = np.vstack([d_true.T, np.cross(r, d_true).T])
+    chasers = set(scenario.chasers)
+    out = {}
+    for i, vid in enumerate(scenario.vehicles):
+        kind = scenario.kind(vid)
+        d = VehicleDispersion()
+        if vid in chasers:
+            if p.position_sigma_m > 0:
+                d.position_m = draw(dispersion_rng(seed, "position", i), p.position_sigma_m, 3, dist)
+            if p.velocity_sigma_m_s > 0:
+                d.velocity_m_s = draw(dispersion_rng(seed, "velocity", i), p.velocity_sigma_m_s, 3, dist)
+            if p.attitude_sigma_deg > 0:
+                sigma = math.radians(p.attitude_sigma_deg)
+                d.attitude_rad = draw(dispersion_rng(seed, "attitude", i), sigma, 3, dist)
+            if kind.planar:  # the same draws, in the table's plane: no height, roll or pitch
+                d.position_m[2] = d.velocity_m_s[2] = 0.0
+                d.attitude_rad[0:2] = 0.0
+        if p.mass_sigma_frac > 0:
+            d.mass_factor = 1.0 + float(draw(dispersion_rng(seed, "mass", i), p.mass_sigma_frac, 1, dist)[0])
+        if p.inertia_sigma_frac > 0:
+            d.inertia_factor = 1.0 + draw(dispersion_rng(seed, "inertia", i), p.inertia_sigma_frac, 3, dist)
+        d.kind = kind.draw_dispersion(seed, i, dist)
+        out[vid] = d
+    return Dispersion(out)
 
 
 def dispersion_columns(scenario, disp: Dispersion, chaser: str) -> dict[str, float]:
     """The drawn values of one chaser's run as flat CSV columns (``disp_*``)."""
+    d = disp.vehicles[chaser]
     out = {}
-    for name, vec in (
-        ("pos", disp.position_m[chaser]),
-        ("vel", disp.velocity_m_s[chaser]),
-        ("att", disp.attitude_rad[chaser]),
-    ):
+    for name, vec in (("pos", d.position_m), ("vel", d.velocity_m_s), ("att", d.attitude_rad)):
         for axis, v in zip("xyz", vec, strict=True):
             out[f"disp_{name}_{axis}"] = float(v)
-    out["disp_mass_factor"] = float(disp.mass_factor)
-    for axis, v in zip("xyz", disp.inertia_factor, strict=True):
+    out["disp_mass_factor"] = float(d.mass_factor)
+    for axis, v in zip("xyz", d.inertia_factor, strict=True):
         out[f"disp_inertia_factor_{axis}"] = float(v)
-    out["disp_thruster_rms_rad"] = float(np.sqrt(np.mean(np.sum(disp.thruster_rotvec_rad**2, axis=1))))
+    out.update(scenario.kind(chaser).dispersion_columns(d.kind))
     return out

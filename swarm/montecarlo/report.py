@@ -15,6 +15,7 @@ Figures (PNG, matplotlib's Agg backend):
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -336,13 +337,20 @@ def _dispersion_table(sc) -> list[str]:
         ("attitude_sigma_deg", "deg"),
         ("mass_sigma_frac", ""),
         ("inertia_sigma_frac", ""),
-        ("thruster_misalignment_deg", "deg"),
     ):
         v = getattr(d, name)
         L.append(
             f"| {name.rsplit('_sigma', 1)[0].replace('_', ' ')} | {dist if v > 0 else 'off'} | "
             f"{v} {unit} | `[dispersions] {name}` |"
         )
+    for kind_name in sc.kinds_used:  # each kind's own dispersions
+        kd = getattr(sc.kinds, kind_name).dispersions
+        for f in dataclasses.fields(kd):
+            v = getattr(kd, f.name)
+            L.append(
+                f"| {f.name.split('_sigma')[0].replace('_deg', '').replace('_', ' ')} ({kind_name}) | "
+                f"{dist if v > 0 else 'off'} | {v} | `[kinds.{kind_name}.dispersions] {f.name}` |"
+            )
     return L
 
 

@@ -2,7 +2,7 @@
 
 DESIGN.md section 4: one namespace per swarm (default ``tpods``) so that two swarms can share a router.
 Per-vehicle topics are ``<ns>/agent/<id>/<kind>``; the rest are ``<ns>/world/clock``,
-``<ns>/mothership/anchors``, ``<ns>/mothership/event``, ``<ns>/control/run``, ``<ns>/control/fault`` and the
+``<ns>/mothership/anchors``, ``<ns>/control/run``, ``<ns>/control/fault`` and the
 liveliness tokens ``<ns>/alive/<role>/<id>``.
 Agent ids and roles are single key chunks of ``[A-Za-z0-9_-]`` (1 to 64 characters), so that no id can
 smuggle a ``/`` or a wildcard into a key. ``docs/protocol.md`` lists every key with its publisher,
@@ -31,7 +31,6 @@ _FIXED = {
     ("world", "clock"): "world_clock",
     ("world", "event"): "world_event",
     ("mothership", "anchors"): "anchors",
-    ("mothership", "event"): "mothership_event",
     ("control", "run"): "run_control",
     ("control", "fault"): "fault",
 }
@@ -129,11 +128,6 @@ class Keys:
         """Anchor ids and positions: mothership (publisher and queryable) -> agents, dashboard."""
         return f"{self.namespace}/mothership/anchors"
 
-    def mothership_event(self) -> str:
-        """What the mothership did to the UWB network (a run-time ``fault`` it applied): mothership ->
-        dashboard."""
-        return f"{self.namespace}/mothership/event"
-
     def run_control(self) -> str:
         """Pause / resume / reset / new seed: dashboard or launcher -> world."""
         return f"{self.namespace}/control/run"
@@ -167,7 +161,7 @@ class Keys:
 
     def parse(self, key: object) -> tuple[str, str | None] | None:
         """Inverse of the builders: ``(kind, agent_id)`` for ``<ns>/agent/<id>/<kind>``; ``("world_clock",
-        None)``, ``("world_event", None)``, ``("anchors", None)``, ``("mothership_event", None)``,
+        None)``, ``("world_event", None)``, ``("anchors", None)``,
         ``("run_control", None)``, ``("fault", None)`` for the swarm-wide keys; ``("alive", process_id)`` for
         a liveliness token (its role: :meth:`parse_alive`). ``None`` for a key outside this namespace, a
         wildcard or anything this protocol does not define. ``key`` may be a ``str`` or any object whose

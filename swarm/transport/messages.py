@@ -142,6 +142,12 @@ def _is_real(x: object) -> bool:
     return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool | np.bool_)
 
 
+def _bool(value: object, name: str) -> bool:
+    if not isinstance(value, bool | np.bool_):
+        raise MessageError(f"{name}: expected true or false, got {_show(value)}")
+    return bool(value)
+
+
 def _int(value: object, name: str, lo: int = 0, hi: int = _U64_MAX) -> int:
     if not _is_int(value):
         raise MessageError(f"{name}: expected an integer, got {_show(value)}")
@@ -239,9 +245,11 @@ def _nested_numbers(value: list | tuple, name: str, ndim: int) -> np.ndarray:
         raise MessageError(f"{name}: ragged or out-of-range nested arrays ({exc})") from None
 
 
-def _array(value: object, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
+def _array(value: object, name: str, shape: tuple[int | None, ...], nullable: bool = False) -> Any:
     """A finite float64 array of ``shape`` (``None``: any length up to :data:`MAX_ITEMS`), a writable copy.
-    Accepts an ndarray, nested lists/tuples or the wire map."""
+    Accepts an ndarray, nested lists/tuples or the wire map; ``None`` too when ``nullable``."""
+    if value is None and nullable:
+        return None
     if isinstance(value, np.ndarray):
         arr = value
         if arr.dtype.kind not in "iuf":
@@ -563,25 +571,26 @@ class Command(Message):
     """Tick ``k`` this command answers (>= 0): in lockstep the world steps to ``k + 1`` once it has it."""
     t_s: float
     """Time [s] (>= 0)."""
-    thrusts_n: np.ndarray
-    """Thrust of each nozzle (N,) [N] (>= 0) in the vehicle's allocation order, 0 <= N <= :data:`MAX_ITEMS`;
-    the world holds it until the next command."""
-    force_body_n: np.ndarray
-    """Net force the thrusts produce (3,) [N], body frame."""
-    torque_body_nm: np.ndarray
-    """Net torque about the centre of mass (3,) [N m], body frame."""
+    actuators: np.ndarray
+    """The vehicle kind's actuator command (N,), 0 <= N <= :data:`MAX_ITEMS`, finite, in the kind's order
+    and units: a ``cubesat``'s ten nozzle thrusts [N] (>= 0), a ``ground`` module's four wheel speeds
+    [rad/s] (front-left, front-right, rear-right, rear-left). The world holds it until the next command and
+    brings it into the actuators' range (a nozzle cannot pull, a wheel cannot pass its top speed); a
+    command of the wrong length for the vehicle's kind is dropped and counted."""
     mode: str
     """Guidance mode that produced it, one of :data:`MODES`."""
+    force_body_n: np.ndarray | None = None
+    """Net force the command produces (3,) [N], body frame, where the kind has one (the nozzles)."""
+    torque_body_nm: np.ndarray | None = None
+    """Net torque about the centre of mass (3,) [N m], body frame, where the kind has one."""
 
     def __post_init__(self) -> None:
-        thrusts = _array(self.thrusts_n, "thrusts_n", (None,))
-        if np.any(thrusts < 0.0):
-            raise MessageError(f"thrusts_n: must be >= 0, got {float(thrusts.min())}")
         _set(
-            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0), thrusts_n=thrusts,
-            force_body_n=_array(self.force_body_n, "force_body_n", (3,)),
-            torque_body_nm=_array(self.torque_body_nm, "torque_body_nm", (3,)),
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+            actuators=_array(self.actuators, "actuators", (None,)),
             mode=_str(self.mode, "mode", choices=MODES),
+            force_body_n=_array(self.force_body_n, "force_body_n", (3,), nullable=True),
+            torque_body_nm=_array(self.torque_body_nm, "torque_body_nm", (3,), nullable=True),
         )  # fmt: skip
 
 
@@ -601,15 +610,26 @@ class Truth(Message):
     """Attitude (4,), unit quaternion (x, y, z, w) mapping body into nav."""
     w_body: np.ndarray
     """Angular rate (3,) [rad/s], body frame."""
-    impulse_ns: float = 0.0
-    """Total impulse the vehicle's nozzles have delivered since the run began, sum of ``|f| dt`` [N s]."""
+    effort: float = 0.0
+    """The vehicle's effort since the run began (>= 0), in its kind's measure: a ``cubesat``'s total impulse
+    ``sum |f| dt`` [N s], a ``ground`` module's wheel travel ``sum |omega| dt`` [rad]."""
+    uwb_lost: bool = False
+    """The radio environment of the vehicle's UWB tag at tick ``k``: every reply lost (a dropout window of
+    the world's fault schedule). The mothership's simulated radios apply it to the exchange of this tick."""
+    nlos_probability: float = 0.0
+    """... and the NLOS outlier probability of an exchange inside a burst window, in [0, 1] (0: none; the
+    radio's own ``uwb.nlos_probability`` applies anyway)."""
 
     def __post_init__(self) -> None:
+        p = _float(self.nlos_probability, "nlos_probability", lo=0.0)
+        if p > 1.0:
+            raise MessageError(f"nlos_probability: must be in [0, 1], got {p}")
         _set(
             self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
             p_nav=_array(self.p_nav, "p_nav", (3,)), v_nav=_array(self.v_nav, "v_nav", (3,)),
             q_nav_body=_quat(self.q_nav_body, "q_nav_body"), w_body=_array(self.w_body, "w_body", (3,)),
-            impulse_ns=_float(self.impulse_ns, "impulse_ns", lo=0.0),
+            effort=_float(self.effort, "effort", lo=0.0), uwb_lost=_bool(self.uwb_lost, "uwb_lost"),
+            nlos_probability=p,
         )  # fmt: skip
 
 
@@ -618,8 +638,7 @@ class Event(Message):
     """Something that happened to one vehicle, ``<ns>/agent/<id>/event`` (published by its agent, and by the
     world for what only the truth shows: ``contact``, ``collision``, ``keepout_violation``), or to the
     run, ``<ns>/world/event`` (the world: ``run_start``, ``run_end``, ``agent_missing``, ``fault`` and
-    ``fault_refused`` for a run-time fault), or to the UWB network, ``<ns>/mothership/event`` (the mothership:
-    ``fault``)."""
+    ``fault_refused`` for a run-time fault, UWB faults included: the world's schedule drives the radios)."""
 
     t_s: float
     """Time [s] (>= 0)."""
@@ -759,7 +778,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
 MESSAGE_FOR_KIND: dict[str, type[Message]] = {
     "imu": Imu, "uwb": Uwb, "vision": Vision, "estimate": Estimate, "guidance": Guidance, "command": Command,
     "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "anchors": Anchors,
-    "mothership_event": Event, "run_control": RunControl, "fault": Fault,
+    "run_control": RunControl, "fault": Fault,
 }  # fmt: skip
 """The message carried by each key kind of :meth:`swarm.transport.keys.Keys.parse`."""
 

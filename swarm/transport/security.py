@@ -8,8 +8,7 @@ each link to an identity by the common name (CN) of the certificate it presented
 
 - ``world``: sensors (``agent/*/imu``, ``agent/*/vision``), ``agent/*/truth``, ``world/clock``,
   ``world/event``, and ``agent/*/event`` (contact, collision and keep-out events on the chaser's key);
-- ``mothership``: ``agent/*/uwb``, ``mothership/anchors`` (a publication, a queryable, its replies) and
-  ``mothership/event`` (the UWB faults it applied);
+- ``mothership``: ``agent/*/uwb`` and ``mothership/anchors`` (a publication, a queryable, its replies);
 - ``agent-<id>``: ``agent/<id>/estimate|guidance|command|event`` only;
 - ``dashboard``: the operator's controls only, ``control/run`` (pause, resume, reset, new seed) and
   ``control/fault`` (its Faults panel injects the faults ``swarm fault`` does: an operator's console may
@@ -111,10 +110,10 @@ def rights(keys: Keys, name: str) -> dict[str, tuple[str, ...]]:
         }  # fmt: skip
     if name == "mothership":
         return {
-            "put": (keys.agent_all("uwb"), keys.anchors(), keys.mothership_event()),
+            "put": (keys.agent_all("uwb"), keys.anchors()),
             "declare_queryable": (keys.anchors(),),
             "reply": (keys.anchors(),),
-            "declare_subscriber": (keys.agent_all("truth"), keys.world_clock(), keys.fault()),
+            "declare_subscriber": (keys.agent_all("truth"), keys.world_clock()),
             "liveliness_token": (f"{ns}/alive/mothership/*",),
             **watch,  # to say when the world is lost
         }

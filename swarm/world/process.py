@@ -1,14 +1,17 @@
 """The world process: truth dynamics and on-board sensors of every vehicle, over Zenoh.
 
-A thin adapter around :class:`swarm.core.world.World` and the referee (:mod:`swarm.sim.referee`), following
-:meth:`swarm.sim.docking.DockingSim.run`'s tick order so that a lockstep run is the in-process run:
+A thin adapter around the world step (:class:`swarm.step.world.World`) and the referee
+(:class:`swarm.step.referee.Referee`), in the tick order of docs/architecture.md, so that a lockstep run is
+the in-process run:
 
 1. wait until every agent of the scenario and the mothership are alive (liveliness), then announce the
    run (``world/event`` ``run_start``, ``world/clock`` tick 0 ``running``);
 2. tick ``k``: take every live agent's ``command(k)`` (lockstep: wait for them, or a timeout; realtime:
-   the latest of each), judge each chaser on the truth (keep-out, contact: ``agent/<id>/event``), then
-   step to ``k + 1`` and publish, per vehicle, ``truth(k+1)``, its camera frame ``vision(k+1)`` on camera
-   ticks (chasers; zero markers when the target is not in view) and ``imu(k+1)``;
+   the latest of each) into the world, whose fault schedule opens the windows the chasers' modes trigger,
+   judge each chaser on the truth (keep-out, contact: ``agent/<id>/event``), then step to ``k + 1`` and
+   publish, per vehicle, ``truth(k+1)`` (with its tag's radio environment, which the mothership's radios
+   apply), its camera frame ``vision(k+1)`` on camera ticks (chasers; zero markers when the target is not
+   in view) and ``imu(k+1)``;
 3. the run ends when every chaser has made contact, at ``sim.max_duration_s``, on a ``reset``/``new_seed``
    run control or a stop signal: ``run_end`` (with each vehicle's total impulse), then clock ``stopped``.
 
@@ -29,7 +32,6 @@ import hashlib
 import heapq
 import itertools
 import logging
-import math
 import queue
 import threading
 import time
@@ -37,9 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from swarm.core.camera import feature_vectors
-from swarm.core.world import World
-from swarm.sim.referee import judge
+from swarm.step.referee import Referee
+from swarm.step.world import World
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import CommandBarrier
 from swarm.transport.messages import (
@@ -60,8 +61,6 @@ from swarm.world import checkpoint
 from swarm.world.checkpoint import CheckpointError
 
 _LOG = logging.getLogger("swarm.world")
-
-DOCKING_MODES = ("DOCK", "DOCKED", "ABORT")  # swarm.core.guidance.CORRIDOR_MODES
 
 
 class WorldProcess:
@@ -99,7 +98,8 @@ class WorldProcess:
         self.start_timeout_s = start_timeout_s
         self.clock_every = max(1, int(clock_every))
         self.process_id = process_id
-        self.world = World(sc, seed)
+        self.world = World(sc, seed)  # with the run's dispersions and its fault schedule
+        self.referee = Referee(sc)
         self.ids = list(sc.vehicles)
         self.chasers = sc.chasers
         self.drops = DropCounter()
@@ -117,9 +117,6 @@ class WorldProcess:
         self._held_seq = itertools.count()
         self._delay_rng = np.random.default_rng(np.random.SeedSequence(entropy=seed, spawn_key=(2**16,)))
         self.modes = dict.fromkeys(self.ids, "HOLD")  # each agent's mode, from its last command
-        self.done: set[str] = set()
-        self.keepout: set[str] = set()
-        self.closest: dict[str, float] = {}  # closest true centre distance outside DOCKING_MODES, per chaser
         self.missing_ticks = 0  # lockstep ticks stepped without some live agent's command
         self.state = "running"
         self.ckpt_path = None if checkpoint_dir is None else checkpoint.checkpoint_path(checkpoint_dir)
@@ -150,8 +147,7 @@ class WorldProcess:
         now = time.monotonic()
         return {
             "run": self._run_id(), "tick": self.world.k, "world": self.world.snapshot(),
-            "sensors": self._sensors, "modes": dict(self.modes), "done": sorted(self.done),
-            "keepout": sorted(self.keepout), "closest": dict(self.closest),
+            "sensors": self._sensors, "modes": dict(self.modes), "referee": self.referee.snapshot(),
             "missing_ticks": self.missing_ticks, "state": self.state,
             "delays": {v: list(w) for v, w in self._delays.items()},
             "delay_rng": self._delay_rng.bit_generator.state,
@@ -189,8 +185,7 @@ class WorldProcess:
                 raise CheckpointError(f"{where}: of another run: {diff}")
             self.world.restore(st["world"])
             self.modes.update(st["modes"])
-            self.done, self.keepout = set(st["done"]), set(st["keepout"])
-            self.closest = {v: float(d) for v, d in st["closest"].items()}
+            self.referee.restore(st["referee"])
             self.missing_ticks, self.state = int(st["missing_ticks"]), str(st["state"])
             self._delays = {v: list(w) for v, w in st["delays"].items()}
             self._delay_rng.bit_generator.state = st["delay_rng"]
@@ -216,6 +211,11 @@ class WorldProcess:
         vid = parsed[1] if parsed else None
         if vid not in self.world.index:
             self.drops.drop(key, "command: not a vehicle of this scenario")
+            return
+        n = self.world.command_size(vid)
+        if cmd.actuators.shape != (n,):
+            why = f"command: actuators has {cmd.actuators.shape[0]} entries, {vid}'s kind takes {n}"
+            self.drops.drop(key, why)
             return
         if not self.clock.lockstep:
             with self._lock:
@@ -251,13 +251,13 @@ class WorldProcess:
         self._controls.put(msg)
 
     def _on_fault(self, _key: str, msg: Fault) -> None:
-        if msg.kind in ("camera_loss", "gyro_bias_step", "sensor_delay"):
-            self._faults.put(msg)
+        self._faults.put(msg)
 
     def _apply_faults(self, tick: int) -> None:
-        """Run-time camera and gyro faults (``swarm fault``): a window opens no earlier than tick
-        ``tick + 1`` (no sample already published changes); a camera loss adds a window to the chaser's,
-        a gyro step sets the vehicle's step (:mod:`swarm.core.faults`)."""
+        """Run-time faults (``swarm fault``, the dashboard): a window opens no earlier than tick ``tick + 1``
+        (no sample already published changes). UWB dropouts and NLOS bursts go into the world's schedule
+        (the truth carries them to the mothership's radios), a camera loss adds a window to the chaser's, a
+        gyro step sets the vehicle's step (:mod:`swarm.core.faults`), a sensor delay holds samples back."""
         while True:
             try:
                 f = self._faults.get_nowait()
@@ -271,19 +271,19 @@ class WorldProcess:
                 data = {"kind": f.kind, "vehicle": f.vehicle, "reason": refused}
                 self._world_event("fault_refused", tick * self.sc.dt_s, data)
                 continue
-            who = [f.vehicle] if f.vehicle is not None else list(self.chasers)
+            if f.kind in ("uwb_dropout", "nlos_burst"):
+                who = list(self.ids)  # the whole radio network
+            else:
+                who = [f.vehicle] if f.vehicle is not None else list(self.chasers)
             if f.kind == "sensor_delay":
                 for v in who:
                     self._delays.setdefault(v, []).append((start, start + f.duration_s, f.delay_s))
-            elif f.kind == "camera_loss":
-                for c in who:
-                    if c in self.world.camera_loss:
-                        self.world.camera_loss[c].append((start, start + f.duration_s))
             else:
-                for v in who:
-                    i = self.world.index[v]
-                    self.world.gyro_step_t[i], self.world.gyro_step[i] = start, f.rate_rad_s
+                value = {"nlos_burst": f.probability, "gyro_bias_step": f.rate_rad_s}.get(f.kind)
+                self.world.add_fault(f.kind, start, f.duration_s, who, value)
             data = {"kind": f.kind, "start_s": start, "duration_s": f.duration_s, "vehicles": who}
+            if f.kind == "nlos_burst":
+                data["probability"] = f.probability
             self._world_event("fault", tick * self.sc.dt_s, data)
             _LOG.warning("fault applied: %s on %s from t = %.2f s", f.kind, who, start)
 
@@ -324,9 +324,11 @@ class WorldProcess:
         camera_tick = k % w.vision_every == 0
         face = self.sc.guidance.docking_face
         out = []
+        lost, p_nlos = w.radio_env(t)
         for i, vid in enumerate(self.ids):
             x = w.X[i]
-            truth = Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], impulse_ns=float(w.impulse[i]))
+            truth = Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], effort=float(w.effort[i]),
+                          uwb_lost=bool(lost), nlos_probability=float(p_nlos))  # fmt: skip
             out.append(("truth", vid, encode(truth)))
         for vid in self.ids:
             fr = frames[vid]
@@ -400,17 +402,18 @@ class WorldProcess:
         _LOG.warning("resumed from %s at tick %d (t = %.2f s): %d samples of the tick published again",
                      self.ckpt_path, k, t, len(self._sensors))  # fmt: skip
 
-    def _apply(self, vid: str, cmd: Command) -> None:
-        self.modes[vid] = cmd.mode
-        self.world.set_command(vid, cmd.thrusts_n)
+    def _apply(self, k: int, commands: dict[str, Command]) -> None:
+        """Tick ``k``'s commands into the world step (which opens the mode-triggered fault windows)."""
+        for vid, cmd in commands.items():
+            self.modes[vid] = cmd.mode
+        self.world.take_commands(k, {vid: (cmd.actuators, cmd.mode) for vid, cmd in commands.items()})
 
     def _take_commands(self, k: int) -> bool:
         """Apply the commands of tick ``k``; False if a stop or an end-of-run control came first."""
         if not self.clock.lockstep:
             with self._lock:
                 latest, self._latest = self._latest, {}
-            for vid, cmd in latest.items():
-                self._apply(vid, cmd)
+            self._apply(k, latest)
             return True
         deadline = time.monotonic() + self.step_timeout_s
         while not self.barrier.poll(k, 0.05):
@@ -428,9 +431,7 @@ class WorldProcess:
                 "tick %d: no command from %s after %.1f s; holding theirs", k, missing, self.step_timeout_s
             )
             self._world_event("agent_missing", k * self.sc.dt_s, {"tick": k, "agents": missing})
-        for vid in self.ids:  # in vehicle order, as the simulation applies them
-            if vid in commands:
-                self._apply(vid, commands[vid])
+        self._apply(k, commands)
         return True
 
     def _await_lost(self) -> None:
@@ -476,37 +477,33 @@ class WorldProcess:
                 self._checkpoint()  # a restart resumes paused if it was paused
             self._publish_clock(self.world.k)
 
+    @property
+    def done(self) -> set[str]:
+        """The chasers whose run is over (contact)."""
+        return {c for c, d in zip(self.referee.chasers, self.referee.done, strict=True) if d}
+
     def _referee(self, k: int) -> None:
-        t, g = k * self.sc.dt_s, self.sc.guidance
-        for cid in self.chasers:
-            if cid in self.done:
-                continue
-            tid = self.sc.vehicles[cid].target
+        t = k * self.sc.dt_s
+        keepouts, contacts = self.referee.judge(self.world.X, t, self.modes)
+        for cid, range_m in keepouts:
+            ev = Event(t, "keepout_violation", {"t_s": t, "mode": self.modes[cid], "range_m": range_m})
+            self.pub_event[cid].put(encode(ev))
+        for cid, ct in contacts:
             mode = self.modes[cid]
-            call = judge(self.world, g, cid, tid, mode in DOCKING_MODES, t)
-            if mode not in DOCKING_MODES:  # as swarm.sim.docking's closest_approach_m
-                self.closest[cid] = min(self.closest.get(cid, math.inf), call.centre_m)
-            if call.keepout and cid not in self.keepout:
-                self.keepout.add(cid)
-                ev = Event(t, "keepout_violation", {"t_s": t, "mode": mode, "range_m": call.centre_m})
-                self.pub_event[cid].put(encode(ev))
-            ct = call.contact
-            if ct is not None:
-                self.world.attach(cid, tid)
-                self.done.add(cid)
-                data = {
-                    **ct.event(mode), "docked": ct.docked, "docking_time_s": t, "contact": ct.contact,
-                    "position_error_m": ct.position_error_m, "attitude_error_rad": ct.attitude_error_rad,
-                }  # fmt: skip
-                kind = "contact" if ct.docked else "collision"
-                self.pub_event[cid].put(encode(Event(t, kind, data)))
-                _LOG.info("%s: %s at t = %.2f s", cid, kind, t)
+            self.world.attach(cid, self.sc.vehicles[cid].target)
+            data = {
+                **ct.event(mode), "docked": ct.docked, "docking_time_s": t, "contact": ct.contact,
+                "position_error_m": ct.position_error_m, "attitude_error_rad": ct.attitude_error_rad,
+            }  # fmt: skip
+            kind = "contact" if ct.docked else "collision"
+            self.pub_event[cid].put(encode(Event(t, kind, data)))
+            _LOG.info("%s: %s at t = %.2f s", cid, kind, t)
 
     def _close_lost(self) -> None:
         with self._lock:
             lost, self._lost = self._lost, []
         for vid in lost:
-            self.world.set_command(vid, np.zeros(self.world.thrusts.shape[1]))
+            self.world.set_command(vid, np.zeros(self.world.command_size(vid)))
             self.modes[vid] = "HOLD"
 
     def _warm_up(self) -> None:
@@ -517,13 +514,12 @@ class WorldProcess:
         w.step(build_frames=False)
         w.k = w.vision_every  # a camera tick: every chaser's visibility test runs
         w.frames()
-        x = w.X[0]
-        feature_vectors(w.markers_target, x[0:3], x[6:10], x[0:3] - np.array([0.0, 0.0, 0.3]), x[6:10],
-                        self.sc.camera, None)  # fmt: skip
-        for cid in self.chasers[:1]:
-            tid = self.sc.vehicles[cid].target
-            w.keepout_violated(cid, tid, docking=False)
-            w.contact(cid, tid)
+        w.radio_env(0.0)
+        ref = Referee(self.sc)
+        X = w.X.copy()
+        for c, t in ref.pairs:  # every chaser next to its target: the whole referee runs
+            X[c, 0:3] = X[t, 0:3] + 0.5 * ref.g.keepout_radius_m
+        ref.judge(X, 0.0, dict.fromkeys(self.chasers, "APPROACH"))
 
     def run(self) -> dict:
         """Serve one run; returns the ``run_end`` data once stopped (a world whose run ended stays up,
@@ -603,8 +599,9 @@ class WorldProcess:
         end = {
             "reason": self.end_reason, "tick": tick, "t_s": t_end, "seed": self.seed, "wall_s": wall,
             "realtime_factor": t_end / wall if wall > 0 else None, "cpu_s": cpu,
-            "impulse_ns": self.world.impulse_ns, "done": sorted(self.done),
-            "closest_approach_m": self.closest, "missing_ticks": self.missing_ticks,
+            "effort": self.world.effort_by_vehicle, "done": sorted(self.done),
+            "closest_approach_m": {c: self.referee.closest_approach(c) for c in self.chasers},
+            "missing_ticks": self.missing_ticks,
             "next_seed": self.next_seed,
             "dropped": self.drops.total, "resumed_at": self.resumed_at,
             "checkpoint_us": 1e6 * self.ckpt_s / self.ckpt_n if self.ckpt_n else None,

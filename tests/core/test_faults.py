@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from swarm.core.faults import FaultParams, FaultSchedule, FaultWindows
-from swarm.core.sensors import UWB_N_DROP, uwb_exchange, uwb_fault_vector
-from swarm.core.world import UwbNetwork, World
+from swarm.core.sensors import uwb_exchange
 from swarm.errors import ConfigError
 from swarm.scenario import Scenario
+from swarm.step.radio import UwbNetwork, radio_env
+from swarm.step.world import World
 
 DT = 0.01
 
@@ -89,31 +90,46 @@ def test_first_entry_only_triggers_once_and_every_entry_triggers_again():
 # ---- UWB exchange -----------------------------------------------------------------------------------
 
 
-def _exchange(prm, t, z):
-    return uwb_exchange(t, np.zeros(3), np.array([1.0, 0.0, 0.0]), z, 0.0, prm)
+def _exchange(prm, t, z, drop=(), nlos=()):
+    """One exchange at ``t`` in the radio environment of the dropout windows ``drop`` and NLOS bursts
+    ``nlos`` (:func:`swarm.step.radio.radio_env`, what the world hands the radio step)."""
+    lost, p = radio_env(
+        t, np.array(drop, dtype=float).reshape(-1, 2), np.array(nlos, dtype=float).reshape(-1, 3)
+    )
+    return uwb_exchange(t, np.zeros(3), np.array([1.0, 0.0, 0.0]), z, 0.0, prm, lost, p)
 
 
-def test_fault_vector_without_windows_is_the_base_vector():
-    base = UwbNetwork(Scenario(), 0).base_prm
-    assert uwb_fault_vector(base, [], []) is base
+def test_a_clear_channel_is_the_fault_free_exchange():
+    prm = UwbNetwork(Scenario(), 0).prm
+    z = np.array([0.3, 0.0, 1.0, 0.0])
+    assert radio_env(0.5, np.zeros((0, 2)), np.zeros((0, 3))) == (False, 0.0)
+    assert _exchange(prm, 0.5, z) == uwb_exchange(
+        0.5, np.zeros(3), np.array([1.0, 0.0, 0.0]), z, 0.0, prm, False, 0.0
+    )
 
 
 def test_dropout_window_loses_every_reply_inside_and_none_outside():
-    base = UwbNetwork(Scenario(), 0).base_prm
-    prm = uwb_fault_vector(base, [(1.0, 2.0)], [])
-    assert prm[UWB_N_DROP] == 1
+    prm = UwbNetwork(Scenario(), 0).prm
     z = np.zeros(4)
-    assert _exchange(prm, 1.0, z)[0] and _exchange(prm, 1.99, z)[0]
-    assert not _exchange(prm, 0.99, z)[0] and not _exchange(prm, 2.0, z)[0]
+    w = [(1.0, 2.0)]
+    assert _exchange(prm, 1.0, z, w)[0] and _exchange(prm, 1.99, z, w)[0]
+    assert not _exchange(prm, 0.99, z, w)[0] and not _exchange(prm, 2.0, z, w)[0]
+
+
+def test_overlapping_nlos_bursts_take_the_largest_probability():
+    nlos = np.array([[0.0, 10.0, 0.2], [5.0, 8.0, 0.6], [9.0, 12.0, 0.4]])
+    assert radio_env(6.0, np.zeros((0, 2)), nlos) == (False, 0.6)
+    assert radio_env(9.5, np.zeros((0, 2)), nlos) == (False, 0.4)
+    assert radio_env(12.0, np.zeros((0, 2)), nlos) == (False, 0.0)
 
 
 def test_nlos_burst_makes_outliers_at_its_probability_only_inside_the_window():
-    base = UwbNetwork(Scenario(), 0).base_prm
-    prm = uwb_fault_vector(base, [], [(10.0, 20.0, 0.3)])
+    prm = UwbNetwork(Scenario(), 0).prm
     rng = np.random.default_rng(3)
     zs = rng.standard_normal((4000, 4))
-    inside = np.mean([_exchange(prm, 15.0, z)[2] for z in zs])
-    outside = np.mean([_exchange(prm, 25.0, z)[2] for z in zs])
+    burst = [(10.0, 20.0, 0.3)]
+    inside = np.mean([_exchange(prm, 15.0, z, nlos=burst)[2] for z in zs])
+    outside = np.mean([_exchange(prm, 25.0, z, nlos=burst)[2] for z in zs])
     # binomial(4000, 0.3): sigma = 0.0072, so +-0.03 is a > 4-sigma band
     assert inside == pytest.approx(0.3, abs=0.03)
     assert outside == 0.0
@@ -121,10 +137,9 @@ def test_nlos_burst_makes_outliers_at_its_probability_only_inside_the_window():
 
 def test_nlos_burst_changes_no_random_draw_of_an_inlier():
     """Common random numbers: an exchange that is no outlier returns the very range of the fault-free one."""
-    base = UwbNetwork(Scenario(), 0).base_prm
-    prm = uwb_fault_vector(base, [], [(0.0, 1.0, 0.5)])
+    prm = UwbNetwork(Scenario(), 0).prm
     z = np.array([0.3, 0.0, 1.0, 0.0])  # the outlier uniform Phi(1) = 0.84 > 0.5: no outlier
-    assert _exchange(prm, 0.5, z) == _exchange(base, 0.5, z)
+    assert _exchange(prm, 0.5, z, nlos=[(0.0, 1.0, 0.5)]) == _exchange(prm, 0.5, z)
 
 
 # ---- world: gyro step and camera loss ---------------------------------------------------------------

@@ -183,10 +183,9 @@ class SwarmRecorder(ClockWatch):
                 self._cond.notify_all()
 
         subscribe_decoded(session, keys.fault(), Fault, lambda _k, m: keep(self.faults, m), self.drops)
-        for source, key in (("world", keys.world_event()), ("mothership", keys.mothership_event())):
-            subscribe_decoded(
-                session, key, Event, lambda _k, m, s=source: keep(self.events, (s, m)), self.drops
-            )
+        subscribe_decoded(
+            session, keys.world_event(), Event, lambda _k, m: keep(self.events, ("world", m)), self.drops
+        )
         for c in self.uwb:
             on_uwb = lambda _k, m, c=c: keep(self.uwb[c], (m.t_s, m.range_m))  # noqa: E731
             subscribe_decoded(session, keys.uwb(c), Uwb, on_uwb, self.drops)

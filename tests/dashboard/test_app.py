@@ -239,7 +239,7 @@ def test_fault_panel_publishes_nothing_for_a_bad_value_and_the_fault_for_a_good_
     assert drops.total == 0
 
 
-def test_faults_announced_by_the_world_and_the_mothership_are_listed(harness: Harness) -> None:
+def test_faults_announced_by_the_world_are_listed(harness: Harness) -> None:
     harness.swarm()
     app = harness.start_app()
     keys = Keys(harness.namespace)
@@ -247,14 +247,14 @@ def test_faults_announced_by_the_world_and_the_mothership_are_listed(harness: Ha
     refused = Event(8.0, "fault_refused", {"kind": "sensor_delay", "vehicle": None, "reason": "lockstep run"})
     start = Event(0.0, "run_start", {"seed": 1, "clock": "lockstep", "vehicles": ["chaser", "target"]})
     with open_session(ZenohArgs(connect=(harness.endpoint,))) as session:
-        for key, msg in ((keys.world_event(), start), (keys.mothership_event(), applied),
+        for key, msg in ((keys.world_event(), start), (keys.world_event(), applied),
                          (keys.world_event(), refused)):  # fmt: skip
             pub = session.declare_publisher(key, reliability=zenoh.Reliability.RELIABLE)
             wait_until(lambda pub=pub: pub.matching_status.matching, TIMEOUT_S, f"the dashboard on {key}")
             pub.put(encode(msg))
         panel = app.gui.faults
         harness.wait_for(lambda: "sensor_delay refused" in panel.log.content, "the refusal listed")
-    assert "**uwb_dropout** applied by the mothership on the UWB network" in panel.log.content
+    assert "**uwb_dropout** applied by the world on the UWB network" in panel.log.content
     assert "by the world: lockstep run" in app.gui.events.content  # the event log has it too
     panel.kind.value = "sensor_delay"
     harness.wait_for(lambda: "This run is lockstep" in panel.hint.content, "the hint naming the clock")

@@ -84,12 +84,12 @@ def test_faults_injected_from_the_page_pass_the_acl_and_happen(page, swarm: Laun
         fill_number(page, "duration [s]", f"{DURATION_S:g}", UI_TIMEOUT_MS)
         page.get_by_role("button", name="Inject").click()
         uwb = rec.wait_event(
-            lambda s, e: s == "mothership" and e.kind == "fault" and e.data.get("kind") == "uwb_dropout",
+            lambda s, e: s == "world" and e.kind == "fault" and e.data.get("kind") == "uwb_dropout",
             EVENT_TIMEOUT_S,
-            "the mothership applying the UWB dropout",
+            "the world applying the UWB dropout",
         )
         page.get_by_text("camera_loss applied by the world on chaser").first.wait_for(timeout=UI_TIMEOUT_MS)
-        page.get_by_text("uwb_dropout applied by the mothership").first.wait_for(timeout=UI_TIMEOUT_MS)
+        page.get_by_text("uwb_dropout applied by the world").first.wait_for(timeout=UI_TIMEOUT_MS)
         ARTIFACTS.mkdir(exist_ok=True)
         page.screenshot(path=str(ARTIFACTS / "dashboard-secure-faults.png"))
         # both windows closed: the world's clock is past their ends

@@ -120,12 +120,12 @@ def test_faults_applied_and_refused_are_listed_newest_first_with_who_and_when() 
         kind="fault_refused",
         data={"kind": "sensor_delay", "vehicle": None, "reason": "needs a free-running clock"},
     )
-    faults = [("world", applied), ("mothership", uwb), ("world", gyro), ("world", refused)]
+    faults = [("world", applied), ("world", uwb), ("world", gyro), ("world", refused)]
     lines = panels.faults_markdown(faults).splitlines()
     assert lines == [
         "- t = 5.00 s · **sensor_delay refused** by the world: needs a free-running clock",
         "- t = 4.50 s · **gyro_bias_step** applied by the world on target from t = 4.51 s (lasts)",
-        "- t = 4.00 s · **uwb_dropout** applied by the mothership on the UWB network from t = 4.01 s for 5 s",
+        "- t = 4.00 s · **uwb_dropout** applied by the world on the UWB network from t = 4.01 s for 5 s",
         "- t = 3.20 s · **camera_loss** applied by the world on chaser from t = 3.21 s for 3 s",
     ]
     assert panels.faults_markdown([]) == "no fault applied yet"

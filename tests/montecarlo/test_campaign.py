@@ -29,7 +29,7 @@ DISPERSED = {
     "dispersions.position_sigma_m": 0.03,
     "dispersions.attitude_sigma_deg": 2.0,
     "dispersions.mass_sigma_frac": 0.03,
-    "dispersions.thruster_misalignment_deg": 0.5,
+    "kinds.cubesat.dispersions.thruster_misalignment_deg": 0.5,
     # the filter's process noise for this truth: the mass and nozzle errors are unmodelled accelerations of
     # PSD ~5e-9..1e-8 m^2/s^3 (docs/results/faults-analysis/NEES.md), 100-200 times the bundled scenario's
     # (5e-11, where the truth's thrust is exactly the filter's); with 5e-11, 8 % (fixed) and 18 % (mdp) of
@@ -97,7 +97,10 @@ def test_pairing_holds_inside_the_simulator_for_every_random_stream():
         DockingSim(sc, "fixed", seed, record_series=False),
         DockingSim(sc, "mdp", seed, record_series=False),
     )
-    assert np.array_equal(a.world.X, b.world.X) and np.array_equal(a.world.B, b.world.B)
+    assert np.array_equal(a.world.X, b.world.X) and np.array_equal(a.world.KP, b.world.KP)
+    assert all(
+        np.array_equal(ta.B, tb.B) for ta, tb in zip(a.world.truth_act, b.world.truth_act, strict=True)
+    )
     assert np.array_equal(a.world.prm, b.world.prm)
     for vid in sc.vehicles:
         assert np.array_equal(a.agents[vid].est.X, b.agents[vid].est.X)

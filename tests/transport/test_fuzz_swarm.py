@@ -53,7 +53,7 @@ _Q = np.array([0.0, 0.0, 0.0, 1.0])
 _VALID = {
     "imu": Imu(7, 0.07, 0.01, np.zeros(3), _Q),
     "uwb": Uwb(8, 0.08, 1, 1.5),
-    "command": Command(7, 0.07, np.zeros(10), np.zeros(3), np.zeros(3), "HOLD"),
+    "command": Command(7, 0.07, np.zeros(10), "HOLD", np.zeros(3), np.zeros(3)),
     "truth": Truth(7, 0.07, np.zeros(3), np.zeros(3), _Q, np.zeros(3)),
     "estimate": Estimate(7, 0.07, np.zeros(3), np.zeros(3), _Q, np.eye(9), 0.1, 0.0, 0.0, {}),
     "world_clock": Clock(7, 0.07, "running", 0),
@@ -66,8 +66,7 @@ def _keys(ns: str) -> list[tuple[str, str]]:
     k = Keys(ns)
     out = [(kind, getattr(k, kind)(vid)) for kind in AGENT_KINDS for vid in ("chaser", "target")]
     fixed = [("world_clock", k.world_clock()), ("world_event", k.world_event()), ("anchors", k.anchors()),
-             ("run_control", k.run_control()), ("fault", k.fault()),
-             ("mothership_event", k.mothership_event())]  # fmt: skip
+             ("run_control", k.run_control()), ("fault", k.fault())]  # fmt: skip
     return [*out, *fixed]
 
 

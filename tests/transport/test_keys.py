@@ -52,9 +52,7 @@ def test_parse_inverts_every_per_vehicle_key(ns, kind):
     assert k.parse(getattr(k, kind)("chaser_1")) == (kind, "chaser_1")
 
 
-@pytest.mark.parametrize(
-    "method", ["world_clock", "world_event", "anchors", "mothership_event", "run_control", "fault"]
-)
+@pytest.mark.parametrize("method", ["world_clock", "world_event", "anchors", "run_control", "fault"])
 def test_parse_names_swarm_wide_keys_by_their_builder(method):
     k = Keys("lab/swarm-2")
     assert k.parse(getattr(k, method)()) == (method, None)

@@ -342,10 +342,11 @@ def test_a_world_whose_checkpoint_is_damaged_is_not_resumed_and_the_launcher_giv
     assert "Traceback" not in text
 
 
-def test_faults_injected_at_run_time_reach_the_world_and_the_mothership(tmp_path, sim_result):
-    """``swarm fault`` during a lockstep run: a 5 s UWB dropout (mothership), a gyro bias step on the target
-    and a camera loss of the chaser (world). Each is applied (logged) from the next tick; the dropout costs
-    ranges (fewer accepted than in the fault-free simulation); the run still ends docked or in a safe hold."""
+def test_faults_injected_at_run_time_reach_the_world_and_the_radios(tmp_path, sim_result):
+    """``swarm fault`` during a lockstep run: a 5 s UWB dropout, a gyro bias step on the target and a camera
+    loss of the chaser. The world applies each (logged) from the next tick, the dropout through the radio
+    environment its truth carries to the mothership's radios, and so it costs ranges (fewer accepted than
+    in the fault-free simulation); the run still ends docked or in a safe hold."""
     ns = _ns()
     with Procs() as procs:
         out = tmp_path / "launch.json"
@@ -367,7 +368,7 @@ def test_faults_injected_at_run_time_reach_the_world_and_the_mothership(tmp_path
             time.sleep(0.3)  # let the samples leave before the session closes
         proc.wait(RUN_S)
     text = proc.output()
-    assert re.search(r"swarm mothership: fault applied: uwb_dropout from t = [\d.]+ s", text), text
+    assert re.search(r"swarm world: fault applied: uwb_dropout on \[.*\] from t = [\d.]+ s", text), text
     assert "fault applied: gyro_bias_step on ['target']" in text
     assert "fault applied: camera_loss on ['chaser']" in text
     assert "Traceback" not in text

@@ -50,7 +50,7 @@ def estimate(k: int, x: float = 0.0) -> Estimate:
 
 def command(k: int) -> Command:
     return Command(
-        tick=k, t_s=k * DT, thrusts_n=np.zeros(4), force_body_n=np.zeros(3),
+        tick=k, t_s=k * DT, actuators=np.zeros(4), force_body_n=np.zeros(3),
         torque_body_nm=np.zeros(3), mode="HOLD",
     )  # fmt: skip
 

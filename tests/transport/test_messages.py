@@ -66,7 +66,7 @@ VALID = {
         {"range_accepted": 3, "range_rejected": 1},
     ),
     Guidance: Guidance(5, 0.05, "REORIENT", 0.25, 0.1, 0.3, 1.0, DECISION, "A22=0.5 > 0.4"),
-    Command: Command(6, 0.06, np.zeros(10), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], "APPROACH"),
+    Command: Command(6, 0.06, np.zeros(10), "APPROACH", [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
     Truth: Truth(7, 0.07, [1.0, 2.0, 1.0], [0.0, 0.0, 0.0], Q, [0.0, 0.0, 0.0]),
     Event: Event(0.08, "mode", {"from": "HOLD", "to": "APPROACH", "range_m": 1.0}),
     Clock: Clock(8, 0.08, "running", 42),
@@ -170,10 +170,12 @@ STRATEGIES = {
         st.none() | nonneg, st.none() | nonneg, st.none() | decisions, st.text(max_size=40),
     ),
     Command: st.builds(
-        Command, ticks, times, arrays(np.float64, st.integers(0, MAX_ITEMS), elements=nonneg), vec(3), vec(3),
-        st.sampled_from(msgs.MODES),
+        Command, ticks, times, arrays(np.float64, st.integers(0, MAX_ITEMS), elements=finite),
+        st.sampled_from(msgs.MODES), st.none() | vec(3), st.none() | vec(3),
     ),
-    Truth: st.builds(Truth, ticks, times, vec(3), vec(3), quats, vec(3)),
+    Truth: st.builds(
+        Truth, ticks, times, vec(3), vec(3), quats, vec(3), nonneg, st.booleans(), st.floats(0.0, 1.0)
+    ),
     Event: st.builds(Event, times, st.from_regex(r"[a-z][a-z0-9_]{0,20}", fullmatch=True), event_data),
     Clock: st.builds(Clock, ticks, times, st.sampled_from(msgs.CLOCK_STATES), ticks),
     Anchors: marked(3).map(lambda m: Anchors(m[1], m[0])),
@@ -368,8 +370,10 @@ CASES = [
     (Guidance, "decision.A22", DELETE, "decision.A22: missing"),
     (Guidance, "reason", 123, "reason: expected a string"),
     (Guidance, "reason", "x" * 1025, "reason: 1025 characters, more than the 1024"),
-    (Command, "thrusts_n", [-0.1] + [0.0] * 9, "thrusts_n: must be >= 0, got -0.1"),
-    (Command, "thrusts_n", [0.0] * (MAX_ITEMS + 1), "thrusts_n: 65 rows, more than the 64 allowed"),
+    (Command, "actuators", [float("nan")] + [0.0] * 9, "actuators: not finite"),
+    (Command, "actuators", [0.0] * (MAX_ITEMS + 1), "actuators: 65 rows, more than the 64 allowed"),
+    (Truth, "nlos_probability", 1.5, "nlos_probability: must be in [0, 1], got 1.5"),
+    (Truth, "uwb_lost", 1, "uwb_lost: expected true or false, got 1"),
     (Command, "force_body_n", [0.0, 0.0], "force_body_n: expected shape (3,), got (2,)"),
     (Command, "torque_body_nm", [0.0, 0.0, NAN], "torque_body_nm: not finite"),
     (Command, "mode", "approach", "mode: expected one of"),
@@ -698,7 +702,6 @@ def test_every_key_kind_maps_to_a_message():
         "world_clock",
         "world_event",
         "anchors",
-        "mothership_event",
         "run_control",
         "fault",
     }
@@ -728,8 +731,8 @@ def test_a_vision_frame_without_markers_round_trips_from_lists_and_arrays():
     assert seen.seen
 
 
-def test_truth_carries_the_total_impulse_and_refuses_a_negative_one():
-    t = Truth(1, 0.01, np.zeros(3), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), impulse_ns=0.25)
-    assert decode(encode(t), Truth).impulse_ns == 0.25
-    with pytest.raises(MessageError, match="impulse_ns: must be >= 0"):
-        Truth(1, 0.01, np.zeros(3), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), impulse_ns=-1.0)
+def test_truth_carries_the_effort_and_refuses_a_negative_one():
+    t = Truth(1, 0.01, np.zeros(3), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), effort=0.25)
+    assert decode(encode(t), Truth).effort == 0.25
+    with pytest.raises(MessageError, match="effort: must be >= 0"):
+        Truth(1, 0.01, np.zeros(3), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), effort=-1.0)

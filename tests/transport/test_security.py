@@ -50,14 +50,14 @@ K = Keys(NS)
 MAY_PUT = {
     "world": {K.imu(v) for v in VEHICLES} | {K.vision(v) for v in VEHICLES} | {K.truth(v) for v in VEHICLES}
     | {K.event(v) for v in VEHICLES} | {K.world_clock(), K.world_event()},
-    "mothership": {K.uwb(v) for v in VEHICLES} | {K.anchors(), K.mothership_event()},
+    "mothership": {K.uwb(v) for v in VEHICLES} | {K.anchors()},
     "agent-chaser": {K.estimate("chaser"), K.guidance("chaser"), K.command("chaser"), K.event("chaser")},
     "agent-target": {K.estimate("target"), K.guidance("target"), K.command("target"), K.event("target")},
     "dashboard": {K.run_control(), K.fault()},  # the operator's console: run controls and faults
     "launcher": {K.event(v) for v in VEHICLES} | {K.run_control(), K.fault()},
 }  # fmt: skip
 ALL_KEYS = sorted({getattr(K, kind)(v) for kind in AGENT_KINDS for v in VEHICLES}
-                  | {K.world_clock(), K.world_event(), K.anchors(), K.mothership_event(), K.run_control(),
+                  | {K.world_clock(), K.world_event(), K.anchors(), K.run_control(),
                      K.fault()})  # fmt: skip
 
 
@@ -451,7 +451,7 @@ def _hostile(pubs: list[tuple[zenoh.Publisher, zenoh.Publisher]], nozzles: int, 
     while not stop.is_set():
         for tick in range(clock[0], clock[0] + 8):  # the clock is sent every 10 ticks
             cmd = Command(
-                tick, 0.01 * tick, np.full(nozzles, 1.0), np.array(HOSTILE_FORCE), np.zeros(3), "DOCK"
+                tick, 0.01 * tick, np.full(nozzles, 1.0), "DOCK", np.array(HOSTILE_FORCE), np.zeros(3)
             )
             imu = Imu(tick, 0.01 * tick, 0.01, np.array(HOSTILE_GYRO))
             for pub_command, pub_imu in pubs:

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from swarm.core.guidance import docking_geometry
-from swarm.core.world import NOISE_BLOCK, World
 from swarm.scenario import load_scenario
+from swarm.step.world import NOISE_BLOCK, World
 from swarm.transport.keys import Keys
 from swarm.transport.messages import Vision, decode
 from swarm.transport.process import ClockSpec
@@ -55,7 +55,7 @@ def _tick(wp: WorldProcess) -> list[tuple[str, str, bytes]]:
     k = wp.world.k
     rng = np.random.default_rng(k)
     for vid in wp.ids:
-        n = wp.world.thrusts.shape[1]
+        n = wp.world.command_size(vid)
         wp.world.set_command(vid, rng.uniform(0.0, 0.002, n) * (rng.random(n) < 0.3))
     frames = wp.world.step()
     wp._sensors = wp._encode_tick(wp.world.k, frames)
@@ -98,14 +98,20 @@ def test_a_resumed_world_publishes_the_same_samples_as_the_uninterrupted_one(sc,
 def test_the_referee_state_and_faults_are_restored(sc, tmp_path):
     a = _world(sc, tmp_path)
     _tick(a)
-    a.done, a.keepout, a.missing_ticks = {"chaser"}, {"chaser"}, 4
+    a.referee.done[0] = a.referee.ko_flag[0] = True
+    a.referee.closest[0], a.missing_ticks = 0.123, 4
     a.modes["chaser"] = "DOCK"
-    a.world.camera_loss["chaser"].append((2.0, 3.0))
+    a.world.take_commands(1, {"chaser": (np.zeros(10), "ALIGN")})  # the schedule records the mode
+    a.world.add_fault("camera_loss", 2.0, 1.0, ["chaser"])
+    a.world.add_fault("nlos_burst", 2.5, 1.0, a.ids, 0.3)
     a._delays["chaser"] = [(1.0, 2.0, 0.03)]
     a._checkpoint()
     b = _world(sc, tmp_path / "unused", resume=checkpoint.load(checkpoint.checkpoint_path(tmp_path)))
-    assert (b.done, b.keepout, b.missing_ticks, b.modes) == (a.done, a.keepout, 4, a.modes)
+    assert (b.done, b.missing_ticks, b.modes) == ({"chaser"}, 4, a.modes)
+    assert b.referee.snapshot() == a.referee.snapshot()
+    assert b.world.faults.state() == a.world.faults.state()
     assert b.world.camera_loss == a.world.camera_loss and b._delays == a._delays
+    assert b.world.radio_env(3.0) == (False, 0.3)
     assert b.barrier.next_tick == 1  # commands of tick 0 are stale for the resumed world
 
 

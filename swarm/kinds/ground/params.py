@@ -61,9 +61,14 @@ class GroundBodyParams:
     force ``f = m a`` of the known acceleration (:class:`~swarm.kinds.ground.control.GroundCommand`)."""
     half_size_m: float = 0.05
     """Half the side of the cube [m] (keep-out, contact and drawing)."""
+    height_sigma_m: float = 0.001
+    """The filter's planar constraint: the table holds the module's centre at its start height, to this
+    standard deviation [m] (table flatness, suspension)."""
+    vertical_speed_sigma_m_s: float = 0.001
+    """... and its vertical speed at zero, to this standard deviation [m/s]."""
 
     def __post_init__(self) -> None:
-        _check("body", self, ("mass_kg", "half_size_m"))
+        _check("body", self, ("mass_kg", "half_size_m", "height_sigma_m", "vertical_speed_sigma_m_s"))
 
 
 @dataclass(frozen=True)

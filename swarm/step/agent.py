@@ -1,13 +1,17 @@
-"""One vehicle's on-board software: estimator, switcher, guidance, controllers and thruster allocation.
+"""The agent step: one vehicle's on-board software (estimator, switcher, guidance, its kind's controller).
 
-This object is what runs inside an agent process (``python -m agents``) and, unchanged, inside the
-in-process simulation (:mod:`swarm.sim.docking`): both feed it the same sensor samples in the same order
-and read the same commands, so one seed gives one trajectory in either runner. It does no I/O.
+:class:`VehicleAgent` is what runs inside an agent process (``python -m agents``), inside the in-process
+simulation (:mod:`swarm.sim.docking`) and over a log in replay: each feeds it the same inputs in the same
+order through :meth:`VehicleAgent.tick` and reads the same command, so one seed gives one trajectory in
+every runner. It does no I/O.
 
-Per tick (the IMU period) the runner calls :meth:`VehicleAgent.on_imu`, then :meth:`on_uwb` /
-:meth:`on_vision` for the samples of that tick, and at control ticks :meth:`control`, which returns the
-nozzle thrusts to hold until the next control tick. The chaser's guidance and vision use the target's
-*published estimate* (:meth:`set_target_estimate`), never the truth.
+Per tick ``k`` (the IMU period) :meth:`~VehicleAgent.tick` takes, in this order (docs/architecture.md, "The
+one tick"): the target's published estimate of tick ``k - 1`` (a chaser), the gyro (+ AHRS) sample, the UWB
+range, the camera frame; then, on the vehicle's control ticks, guidance, Algorithm 1 and the controller of
+its kind, whose actuator command the world holds until the next control tick. The sensor part on the
+filter's arrays is :func:`agent_sensors`, compiled; the in-process runner's fast path calls that very
+function for the ticks without control or camera (:mod:`swarm.step.tick`). The chaser's guidance and vision
+use the target's *published estimate*, never the truth.
 """
 
 from __future__ import annotations
@@ -21,11 +25,9 @@ from swarm.core import _ekf_nb as nb
 from swarm.core import rotations as rot
 from swarm.core._rot_nb import qrotate
 from swarm.core.camera import solve_pnp
-from swarm.core.control import TranslationController, attitude_torque
 from swarm.core.estimator import PoseEstimator, UpdateStatus, chi2_gate
 from swarm.core.guidance import ChaserGuidance, Mode, NavInput, Reference, StationKeeping
 from swarm.core.mdp import make_switcher
-from swarm.core.thrusters import allocate, allocation_matrix
 
 
 @dataclass
@@ -43,16 +45,44 @@ class Command:
     """Output of one control step."""
 
     t_s: float
-    thrusts_n: np.ndarray  # (n_nozzles,) [N], held until the next control step
-    force_body_n: np.ndarray  # achieved force (3,) [N], body frame
-    torque_body_nm: np.ndarray  # achieved torque (3,) [N m], body frame
+    u: np.ndarray
+    """The kind's actuator command (nozzle thrusts [N], wheel speeds [rad/s]), held until the next."""
+    force_body_n: np.ndarray | None
+    """Achieved net force (3,) [N], body frame, where the kind has one (the nozzles)."""
+    torque_body_nm: np.ndarray | None
+    """Achieved net torque (3,) [N m], body frame, where the kind has one."""
     saturated: bool
     reference: Reference
     events: list[dict] = field(default_factory=list)
 
+    @property
+    def thrusts_n(self) -> np.ndarray:
+        """A cube's command: its nozzle thrusts [N] (``u``)."""
+        return self.u
+
+
+@dataclass
+class AgentInputs:
+    """Everything one agent takes at tick ``k`` (module docstring), ``None`` where a sample is absent."""
+
+    tick: int
+    t_s: float
+    dt_s: float
+    """Interval the gyro sample integrates over [s] (a free-running agent that skipped ticks: the gap)."""
+    gyro_body: np.ndarray | None = None
+    q_ahrs_nav_body: np.ndarray | None = None
+    uwb: tuple[int, float] | None = None
+    """``(anchor_id, range_m)`` of the tick's exchange; ``None`` without one or when the reply was lost."""
+    vision: tuple[str, np.ndarray] | None = None
+    """``(kind, data)`` of a camera frame that saw markers (``"features"`` (N, 3) or ``"pixels"`` (N, 2))."""
+    target: TargetEstimate | None = None
+    """A chaser's target estimate of tick ``k - 1``."""
+    control: bool = True
+    """False: take the inputs only, decide nothing (a chaser whose run is over)."""
+
 
 class VehicleAgent:
-    """Estimator + switcher + guidance + control of one vehicle (module docstring).
+    """Estimator + switcher + guidance + the kind's controller of one vehicle (module docstring).
 
     ``scenario`` is a :class:`swarm.scenario.Scenario`; ``vehicle_id`` names the vehicle in it;
     ``p0_nav``/``v0_nav``/``q0_nav_body`` is the initial estimate and ``cov0`` its covariance (9,).
@@ -65,25 +95,31 @@ class VehicleAgent:
         self.role = spec.role
         self.target_id = spec.target
         self.sc = sc
-        self.mass_kg = sc.dynamics.mass_kg
-        self.inertia = np.asarray(sc.dynamics.inertia_diag_kgm2, dtype=float)
-        self.est = PoseEstimator.create(sc.estimator, p0_nav, v0_nav, q0_nav_body, cov0)
-        self.translation = TranslationController(self.mass_kg, sc.translation_control)
-        self.B = allocation_matrix(sc.thrusters)
-        self.max_thrust = sc.thrusters.max_thrust_n
+        self.kind = sc.kind(vehicle_id)
+        self.mass_kg = float(self.kind.mass_kg)
+        self.control_every = sc.control_every(vehicle_id)
+        self.control_dt = self.control_every * sc.dt_s
+        est_params = sc.estimator_for(vehicle_id)
+        self.est = PoseEstimator.create(est_params, p0_nav, v0_nav, q0_nav_body, cov0)
+        self.controller = self.kind.controller()
+        self.camera = sc.camera_for(vehicle_id)
         self.anchors = np.asarray(sc.anchors_m, dtype=float)
         self.markers_target = sc.markers.markers(sc.guidance.docking_face)
         if self.role == "chaser":
             self.switcher = make_switcher(policy, sc.mdp, sc.fixed)
             q_mission = rot.euler_to_quat(np.radians(spec.euler_deg), sc.euler_seq)
-            self.guidance = ChaserGuidance(sc.guidance, self.switcher, q_mission, p0_nav)
+            self.guidance = ChaserGuidance(sc.guidance_for(vehicle_id), self.switcher, q_mission, p0_nav)
         else:
             self.switcher = None
             q_nom = rot.euler_to_quat(np.radians(spec.euler_deg), sc.euler_seq)
             self.guidance = StationKeeping(spec.position_m, q_nom, sc.station)
         self.target: TargetEstimate | None = None
-        self.w_body = np.zeros(3)  # latest gyro rate, for the rate damping of the attitude law
-        self.f_body = np.zeros(3)  # achieved thrust [N], body frame: the filter's known input is f / m
+        self.w_body = np.zeros(3)  # latest gyro rate, for the rate damping of an attitude law
+        self.f_body = np.zeros(3)  # the filter's known input: it predicts with R(q) f_body / m
+        self.plane = np.zeros(3)  # [z0, sigma_z, sigma_vz] of a planar kind's constraint; sigma 0: none
+        constraint = self.kind.plane_constraint()
+        if constraint is not None:
+            self.plane[:] = (spec.position_m[2], *constraint)
         window = max(1, round(sc.agent.health_window_s * sc.uwb.rate_hz))
         self._gate_1d = chi2_gate(1, sc.estimator.gate_probability)
         self._gate_3d = chi2_gate(3, sc.estimator.gate_probability)
@@ -98,6 +134,22 @@ class VehicleAgent:
         self.last_command: Command | None = None
         self.t_s = 0.0
 
+    # ---- the one step ---------------------------------------------------------------------------
+    def tick(self, inp: AgentInputs) -> Command | None:
+        """Tick ``inp.tick`` (module docstring): the inputs in order, then control on a control tick.
+        Returns the new command on control ticks, else ``None`` (the last one is held)."""
+        if inp.target is not None and self.role == "chaser":
+            self.set_target_estimate(inp.target)
+        if inp.gyro_body is not None:
+            self.on_imu(inp.t_s, inp.dt_s, inp.gyro_body, inp.q_ahrs_nav_body)
+        if inp.uwb is not None:
+            self.on_uwb(*inp.uwb)
+        if inp.vision is not None:
+            self.on_vision(inp.t_s, *inp.vision)
+        if inp.control and inp.tick % self.control_every == 0:
+            return self.control(inp.t_s, self.control_dt)
+        return None
+
     # ---- sensor inputs ------------------------------------------------------------------------------
     def on_imu(self, t_s: float, dt_s: float, gyro_body, q_ahrs_nav_body=None) -> int:
         """Propagate the filter with the gyro over ``dt_s`` (paper eq. 3) and the known acceleration of
@@ -111,7 +163,7 @@ class VehicleAgent:
         e = self.est
         return agent_imu(
             e.X[0], e.P[0], e.counts[0], e.book[0], e._prm, gyro, float(dt_s), self.f_body, self.mass_kg,
-            self.w_body, has_ahrs, q, self._ahrs_cov, self._gate_3d,
+            self.w_body, has_ahrs, q, self._ahrs_cov, self._gate_3d, self.plane,
         )  # fmt: skip
 
     def on_uwb(self, anchor_id: int, range_m: float) -> int:
@@ -137,7 +189,7 @@ class VehicleAgent:
             markers_nav = tgt.p_nav + rot.quat_rotate(tgt.q_nav_body, self.markers_target)
             status = int(self.est.update_features(markers_nav, data, target_cov_nav=cov_t)[0])
         elif kind == "pixels":
-            pnp = solve_pnp(np.asarray(data, dtype=float), self.markers_target, self.sc.camera)
+            pnp = solve_pnp(np.asarray(data, dtype=float), self.markers_target, self.camera)
             if pnp is None:
                 return int(UpdateStatus.REFUSED_INVALID)
             status = int(
@@ -156,10 +208,16 @@ class VehicleAgent:
         return self.t_s - self._last_vision_s <= self.sc.agent.vision_recent_s
 
     @property
+    def docking_on_vision(self) -> bool:
+        """In the final approach (DOCK, DOCKED) with vision acquired during it at some point."""
+        return self.mode in (Mode.DOCK, Mode.DOCKED) and self._last_vision_s > -np.inf
+
+    @property
     def relative_nav(self) -> bool:
-        """Navigating relative to the target: vision is available, or it was during this final approach
-        (the camera loses the markers in the last centimetres, which are flown on the IMU)."""
-        return self.vision_recent or (self.mode in (Mode.DOCK, Mode.DOCKED) and self._last_vision_s > -np.inf)
+        """Navigating relative to the target (:func:`relative_nav`)."""
+        return relative_nav(
+            self.t_s, self._last_vision_s, self.sc.agent.vision_recent_s, self.docking_on_vision
+        )
 
     def set_target_estimate(self, est: TargetEstimate) -> None:
         """The target's latest published estimate; held fixed while vision is available when
@@ -189,7 +247,7 @@ class VehicleAgent:
         return window_stats(self.h_ok, self.h_d2, self.h_meta)[1]
 
     def control(self, t_s: float, dt_s: float) -> Command:
-        """Guidance, switcher and controllers on the current estimate; returns the nozzle thrusts."""
+        """Guidance, switcher and the kind's controller on the current estimate; returns the command."""
         est = self.est
         p, v, q = est.p_nav[0].copy(), est.v_nav[0].copy(), est.q_nav_body[0].copy()
         tgt = self.target
@@ -211,32 +269,21 @@ class VehicleAgent:
         else:
             ref = self.guidance.step(nav, dt_s)
         if ref.events:
-            self.translation.reset()
+            self.controller.reset()
         self.mode = ref.mode
         station = self.guidance if isinstance(self.guidance, StationKeeping) else None
         idle = station is not None and not (station.translate or station.rotate)
-        if ref.mode is Mode.DOCKED or idle:  # docked, or a target inside its dead band: no thrust
-            if idle:
-                self.translation.reset()
-            thrusts = np.zeros(self.B.shape[1])
-            wrench = np.zeros(6)
-            saturated = False
+        if ref.mode is Mode.DOCKED:  # the kind's last act: drift in (a cube) or drive in (a rover)
+            act = self.controller.docked(self.sc.guidance.dock_speed_m_s)
+        elif idle:  # a target inside its dead band: actuators off
+            self.controller.reset()
+            act = self.controller.idle()
         else:
-            F_nav = self.translation.step(p, v, ref.p_nav, ref.v_nav, ref.a_nav)
-            tau = attitude_torque(
-                q, self.w_body, ref.q_nav_body, None, self.inertia, self.sc.attitude_control
-            )
-            if station is not None:  # dead band per loop: hold still inside it
-                if not station.translate:
-                    F_nav = np.zeros(3)
-                    self.translation.reset()
-                if not station.rotate:
-                    tau = np.zeros(3)
-            F_body = rot.quat_rotate(rot.quat_conj(q), F_nav)
-            alloc = allocate(np.concatenate([F_body, tau]), self.B, self.max_thrust)
-            thrusts, wrench, saturated = alloc.thrusts_n, alloc.wrench_achieved, bool(alloc.saturated)
-        self.f_body[:] = wrench[:3]
-        cmd = Command(t_s, thrusts, wrench[:3], wrench[3:], saturated, ref, list(ref.events))
+            translate = station is None or station.translate
+            rotate = station is None or station.rotate
+            act = self.controller.step(p, v, q, self.w_body, ref, translate, rotate)
+        self.f_body[:] = act.f_body_known_n
+        cmd = Command(t_s, act.u, act.force_body_n, act.torque_body_nm, act.saturated, ref, list(ref.events))
         self.last_command = cmd
         return cmd
 
@@ -245,11 +292,24 @@ _NO_Q = np.zeros(4)
 
 
 @njit(cache=True)
-def agent_imu(X, P, ST_I, ST_F, PRM, gyro, dt, f_body, mass, w_body, has_ahrs, q_ahrs, ahrs_cov, gate3):
+def relative_nav(t_s, last_vision_s, recent_s, docking_on_vision):
+    """Whether an agent navigates relative to its target at ``t_s``: a vision update was accepted within
+    ``recent_s`` [s], or it docks on vision acquired during this final approach (the camera loses the
+    markers in the last centimetres, which are flown on the IMU). Then its ranges are skipped unless
+    ``agent.uwb_with_vision``."""
+    return t_s - last_vision_s <= recent_s or docking_on_vision
+
+
+@njit(cache=True)
+def agent_imu(
+    X, P, ST_I, ST_F, PRM, gyro, dt, f_body, mass, w_body, has_ahrs, q_ahrs, ahrs_cov, gate3, plane
+):
     """One IMU sample of one filter: predict with the gyro (paper eq. 3) and the known acceleration of the
-    thrust in force, ``a_nav = R(q) f_body / m`` (the commanded force acts along the body axes, expressed
-    with the current attitude estimate); then the AHRS attitude when there is one. Keeps the latest finite
-    gyro rate in ``w_body`` for the attitude law's rate damping. Returns the predict status."""
+    command in force, ``a_nav = R(q) f_body / m`` (the force acts along the body axes, expressed with the
+    current attitude estimate); then the AHRS attitude when there is one; then, for a planar vehicle
+    (``plane = [z0, sigma_z, sigma_vz]``, ``sigma_z > 0``), the table's constraint
+    (:func:`swarm.core._ekf_nb.constrain_plane_one`). Keeps the latest finite gyro rate in ``w_body`` for
+    the attitude law's rate damping. Returns the predict status."""
     if np.isfinite(gyro[0]) and np.isfinite(gyro[1]) and np.isfinite(gyro[2]):
         w_body[:] = gyro
     a = qrotate(X[6:10], f_body)
@@ -258,6 +318,8 @@ def agent_imu(X, P, ST_I, ST_F, PRM, gyro, dt, f_body, mass, w_body, has_ahrs, q
     status = nb.predict_one(X, P, ST_I, ST_F, gyro, a, dt, PRM)
     if has_ahrs:
         nb.update_attitude_one(X, P, ST_I, ST_F, PRM, q_ahrs, ahrs_cov, gate3)
+    if plane[1] > 0.0:
+        nb.constrain_plane_one(X, P, PRM, plane[0], plane[1], plane[2])
     return status
 
 

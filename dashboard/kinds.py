@@ -1,0 +1,84 @@
+"""How the dashboard draws each vehicle kind (docs/architecture.md, "Adding a kind", step 3).
+
+A drawer adds a vehicle's parts under its ``truth`` frame (body axes, metres) and returns the node whose
+colour follows the guidance mode. The geometry comes from the kind's own tables, so a scenario that changes
+a wheel or a nozzle sees it drawn. A kind without a drawer is drawn as a box of the scenario's
+``guidance.half_size_m``: the quadrotor of issue 15 needs no dashboard edit to appear, only to look like one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import viser
+
+from dashboard.mapping import wxyz_from_xyzw
+from swarm.core import rotations as rot
+
+Drawer = Callable[[viser.SceneApi, str, object, tuple[int, int, int]], object]
+"""``(scene, prefix, kind, colour) -> the body node`` (:class:`swarm.kinds.base.VehicleKind` ``kind``)."""
+
+_GREY = (70, 70, 70)
+_NOZZLE = (200, 200, 200)
+
+
+def _box(scene: viser.SceneApi, prefix: str, size: float, color) -> object:
+    return scene.add_box(f"{prefix}/body", color=color, dimensions=(size,) * 3, opacity=0.85)
+
+
+def draw_box(scene: viser.SceneApi, prefix: str, size: float, color) -> object:
+    """The fallback: a cube of side ``size`` [m]."""
+    return _box(scene, prefix, size, color)
+
+
+def draw_cubesat(scene: viser.SceneApi, prefix: str, kind, color) -> object:
+    """A TPODS cube: the body, a dot at each of its ten nozzles (:mod:`swarm.core.thrusters`)."""
+    from swarm.core.thrusters import nozzle_geometry
+
+    p = kind.p
+    body = _box(scene, prefix, 2.0 * p.thrusters.half_size_m, color)
+    r, _ = nozzle_geometry(p.thrusters)
+    for i, pos in enumerate(r):
+        scene.add_icosphere(f"{prefix}/nozzle{i}", radius=0.006, color=_NOZZLE, position=tuple(pos),
+                            cast_shadow=False)  # fmt: skip
+    return body
+
+
+def draw_ground(scene: viser.SceneApi, prefix: str, kind, color) -> object:
+    """An MK-E module: the body on four mecanum wheels (cylinders along body y, at the contact points of
+    :mod:`swarm.kinds.ground.dynamics`), and the UWB node on its mast."""
+    p = kind.p
+    h = p.body.half_size_m
+    w = p.wheels
+    body = _box(scene, prefix, 2.0 * h, color)
+    # a cylinder's axis is its local y: it already lies along the body's y axis, the wheels' axles
+    for i, (sx, sy) in enumerate(((1, 1), (1, -1), (-1, -1), (-1, 1))):  # front-left, front-right, ...
+        centre = (sx * w.half_length_m, sy * (w.half_width_m + 0.01), -h + w.radius_m - 0.02)
+        scene.add_cylinder(f"{prefix}/wheel{i + 1}", radius=w.radius_m, height=0.018, color=_GREY,
+                           position=centre)  # fmt: skip
+    tag = np.asarray(p.mounts.tag_lever_arm_body_m, dtype=float)
+    base = np.array([tag[0], tag[1], h])
+    length = max(float(tag[2] - h), 0.005)
+    q_mast = rot.matrix_to_quat(np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]))  # y -> z
+    mid = base.copy()
+    mid[2] += length / 2
+    scene.add_cylinder(f"{prefix}/mast", radius=0.003, height=length, color=_GREY, position=tuple(mid),
+                       wxyz=wxyz_from_xyzw(q_mast))  # fmt: skip
+    scene.add_icosphere(f"{prefix}/uwb_node", radius=0.008, color=(230, 126, 34), position=tuple(tag),
+                        cast_shadow=False)  # fmt: skip
+    return body
+
+
+DRAWERS: dict[str, Drawer] = {"cubesat": draw_cubesat, "ground": draw_ground}
+"""Drawer of each kind that has one (the others: :func:`draw_box`)."""
+
+
+def draw(scene: viser.SceneApi, prefix: str, sc, vehicle_id: str, color) -> object:
+    """Draw ``vehicle_id`` of scenario ``sc`` under ``prefix`` as what its kind is; the body node."""
+    if vehicle_id in sc.vehicles:
+        kind = sc.kind(vehicle_id)
+        drawer = DRAWERS.get(kind.name)
+        if drawer is not None:
+            return drawer(scene, prefix, kind, color)
+    return draw_box(scene, prefix, 2.0 * sc.guidance.half_size_m, color)

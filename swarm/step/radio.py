@@ -1,0 +1,122 @@
+"""The radio step: the UWB network's two-way-ranging exchanges of one tick (paper sec. III).
+
+:class:`UwbNetwork` is the mothership's simulated radio network: one round-robin radio per vehicle, each
+with its own ``uwb`` random stream (:func:`swarm.step.streams.stream`), its tag where the vehicle kind's
+mounts put it. The mothership process wraps it, the in-process simulation calls it directly, and the
+compiled fast path calls its kernel :func:`uwb_tick`, the same code.
+
+Faults do not live here. The world owns the fault schedule and hands the radio step the *radio
+environment* of each vehicle at the tick (:func:`radio_env`: every reply lost inside a dropout window, the
+NLOS outlier probability inside a burst window), in the truth message it sends the mothership, so one
+schedule decides for every runner.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from swarm.core._rot_nb import qrotate
+from swarm.core.sensors import UwbRadio, UwbSample, uwb_exchange
+from swarm.step.streams import stream
+
+NOISE_BLOCK = 1024
+
+
+@numba.njit(cache=True)
+def radio_env(t_s, drop_w, nlos_w):
+    """``(lost, nlos_probability)`` at ``t_s`` [s]: inside one of the dropout windows ``drop_w`` (m, 2)
+    ``[start, end)``, and the largest outlier probability of the NLOS burst windows ``nlos_w`` (m, 3)
+    ``[start, end, p]`` that contain ``t_s`` (0 outside every one). An exchange is an outlier when its
+    uniform is below the probability of any window that holds it, i.e. below their largest."""
+    lost = False
+    for i in range(drop_w.shape[0]):
+        if drop_w[i, 0] <= t_s < drop_w[i, 1]:
+            lost = True
+            break
+    p = 0.0
+    for i in range(nlos_w.shape[0]):
+        if nlos_w[i, 0] <= t_s < nlos_w[i, 1] and nlos_w[i, 2] > p:
+            p = nlos_w[i, 2]
+    return lost, p
+
+
+class UwbNetwork:
+    """The mothership's simulated radio network (module docstring)."""
+
+    def __init__(self, scenario, seed: int) -> None:
+        self.sc = scenario
+        self.ids = list(scenario.vehicles)
+        n = len(self.ids)
+        self.anchors = np.ascontiguousarray(scenario.anchors_m, dtype=float)
+        self.lever = np.array([scenario.kind(v).mounts.tag_lever_arm_body_m for v in self.ids], dtype=float)
+        radio = UwbRadio(self.anchors, scenario.uwb)  # validates the parameters against the anchors
+        self.prm = radio.vector
+        self.drift = np.array([radio.drift_rate(i) for i in range(len(self.anchors))])
+        self.rng = {vid: stream(seed, i, "uwb") for i, vid in enumerate(self.ids)}
+        self.every = scenario.every(scenario.uwb.rate_hz)
+        self.next_anchor = np.zeros(n, dtype=np.int64)
+        self.noise = np.zeros((n, 0, 4))
+        self.ui = np.zeros(1, dtype=np.int64)
+        self.lost = np.zeros(n, dtype=np.bool_)
+        self.anchor_id = np.zeros(n, dtype=np.int64)
+        self.range_m = np.zeros(n)
+        self.outlier = np.zeros(n, dtype=np.bool_)
+        self.env_lost = np.zeros(n, dtype=np.bool_)
+        self.env_p = np.zeros(n)
+
+    def reserve_noise(self, exchanges: int) -> None:
+        """Pre-draw the normals of the next ``exchanges`` exchanges of every radio (four each)."""
+        used = int(self.ui[0])
+        if used + exchanges <= self.noise.shape[1]:
+            return
+        rows = max(NOISE_BLOCK, exchanges)
+        new = np.empty((self.noise.shape[0], rows, 4))
+        left = self.noise.shape[1] - used
+        for i, vid in enumerate(self.ids):
+            new[i, :left] = self.noise[i, used:]
+            new[i, left:] = self.rng[vid].standard_normal((rows - left, 4))
+        self.noise, self.ui[0] = new, 0
+
+    def step(self, k: int, t_s: float, truth, env_lost=None, env_p=None) -> dict[str, UwbSample]:
+        """Ranges of tick ``k`` from the truth states (13,) of each vehicle (a ``{id: state}`` map or an
+        ``(n, 13)`` array in vehicle order) in the radio environment ``env_lost`` / ``env_p`` ((n,) each,
+        or one value for all; :func:`radio_env`; ``None``: a clear channel): ``{id: UwbSample}``; a vehicle
+        is missing when it has no exchange this tick or the reply was lost."""
+        if k % self.every:
+            return {}
+        X = np.ascontiguousarray([truth[v] for v in self.ids]) if isinstance(truth, dict) else truth
+        self.env_lost[:] = False if env_lost is None else env_lost
+        self.env_p[:] = 0.0 if env_p is None else env_p
+        self.reserve_noise(1)
+        uwb_tick(
+            t_s, X, self.lever, self.anchors, self.drift, self.prm, self.next_anchor, self.noise, self.ui,
+            self.env_lost, self.env_p, self.lost, self.anchor_id, self.range_m, self.outlier,
+        )  # fmt: skip
+        return {
+            vid: UwbSample(t_s, int(self.anchor_id[i]), float(self.range_m[i]), bool(self.outlier[i]))
+            for i, vid in enumerate(self.ids)
+            if not self.lost[i]
+        }
+
+
+@numba.njit(cache=True)
+def uwb_tick(t_s, X, lever, anchors, drift, prm, next_anchor, noise, ui, env_lost, env_p, lost, anchor_id,
+             range_m, outlier):  # fmt: skip
+    """One exchange of every radio at ``t_s`` from the truth ``X`` (n, 13) in the radio environment
+    ``env_lost``/``env_p`` (n,): the tag is ``p + R(q) P1`` (paper Fig. 2, ``lever`` (n, 3) per vehicle),
+    the anchor the next in round robin (which advances even when the reply is lost)."""
+    for v in range(X.shape[0]):
+        tag = X[v, 0:3] + qrotate(X[v, 6:10], lever[v])
+        i = next_anchor[v]
+        next_anchor[v] = (i + 1) % anchors.shape[0]
+        anchor_id[v] = i
+        lost[v], range_m[v], outlier[v] = uwb_exchange(
+            t_s, tag, anchors[i], noise[v, ui[0]], drift[i], prm, env_lost[v], env_p[v]
+        )
+    ui[0] += 1
+
+
+def clear_env(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The radio environment of ``n`` vehicles on a clear channel: nothing lost, no NLOS burst."""
+    return np.zeros(n, dtype=np.bool_), np.zeros(n)
