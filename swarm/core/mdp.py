@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
@@ -390,9 +390,8 @@ class Decision:
     def as_dict(self, diagnostics: bool = False) -> dict[str, float | str | None]:
         """The DESIGN.md section 8 record: exactly :data:`DECISION_KEYS`; with ``diagnostics`` also
         ``branch``, ``switched`` and ``reason``."""
-        full = asdict(self)
         keys = (*DECISION_KEYS, "branch", "switched", "reason") if diagnostics else DECISION_KEYS
-        return {k: full[k] for k in keys}
+        return {k: getattr(self, k) for k in keys}  # the fields are plain values: no deep copy needed
 
 
 # ---------------------------------------------------------------------------------------------- switchers

@@ -158,6 +158,10 @@ class VehicleKind(ABC):
     effort_key: ClassVar[str]
     """Name of the kind's effort metric in run summaries (``total_impulse_ns``, ``wheel_travel_rad``)."""
     effort_unit: ClassVar[str]
+    effort_label: ClassVar[str]
+    """The effort metric's name in reports (``total impulse``)."""
+    target_effort_key: ClassVar[str]
+    """Its campaign column for the chaser's target (``target_impulse_ns``)."""
 
     def __init__(self, params, scenario) -> None:
         self.p = params

@@ -156,6 +156,8 @@ class CubesatKind(VehicleKind):
     planar = False
     effort_key = "total_impulse_ns"
     effort_unit = "N s"
+    effort_label = "total impulse"
+    target_effort_key = "target_impulse_ns"
 
     def validate(self) -> None:
         g = self.sc.guidance

@@ -42,7 +42,7 @@ import numpy as np
 
 from swarm.config import dump_toml, to_mapping
 from swarm.errors import ConfigError
-from swarm.montecarlo.run import FIELDS, run_one
+from swarm.montecarlo.run import fields_for, run_one
 
 log = logging.getLogger(__name__)
 
@@ -204,10 +204,16 @@ def _format(value) -> str:
     return str(value)
 
 
-def read_runs(out_dir: Path) -> list[dict]:
-    """The typed rows of ``DIR/runs.csv`` (:data:`FIELDS`), in file order. A last line cut short (a
+def read_runs(out_dir: Path, scenario=None) -> list[dict]:
+    """The typed rows of ``DIR/runs.csv`` (the columns of :func:`swarm.montecarlo.run.fields_for` the
+    campaign's scenario, ``DIR/scenario.toml`` unless given), in file order. A last line cut short (a
     campaign killed mid-write) is dropped; any other malformed line is an error."""
     path = Path(out_dir) / RUNS_FILE
+    if scenario is None and path.exists():
+        from swarm.scenario import load_scenario
+
+        scenario = load_scenario(Path(out_dir) / SCENARIO_FILE)
+    fields = fields_for(scenario) if scenario is not None else {}
     if not path.exists():
         return []
     text = path.read_text()
@@ -215,12 +221,12 @@ def read_runs(out_dir: Path) -> list[dict]:
     if lines and not lines[-1].endswith("\n"):
         lines = lines[:-1]
     reader = csv.DictReader(lines)
-    if reader.fieldnames is not None and list(reader.fieldnames) != list(FIELDS):
-        raise ConfigError(f"{path}: its columns are not those of this version ({len(FIELDS)} expected)")
+    if reader.fieldnames is not None and list(reader.fieldnames) != list(fields):
+        raise ConfigError(f"{path}: its columns are not those of this version ({len(fields)} expected)")
     rows = []
     for n, raw in enumerate(reader, start=2):
         try:
-            rows.append({k: _parse(raw[k], kind) for k, kind in FIELDS.items()})
+            rows.append({k: _parse(raw[k], kind) for k, kind in fields.items()})
         except (ValueError, TypeError, KeyError) as exc:
             raise ConfigError(f"{path}: line {n} is malformed: {exc}") from None
     return rows
@@ -304,7 +310,8 @@ def run_campaign(
     runs_path, traj_path = out_dir / RUNS_FILE, out_dir / TRAJ_FILE
     _truncate_partial_line(runs_path)
     _truncate_partial_line(traj_path)
-    done_keys = {(r["run"], r["policy"]) for r in read_runs(out_dir)}
+    fields = fields_for(spec.scenario)
+    done_keys = {(r["run"], r["policy"]) for r in read_runs(out_dir, spec.scenario)}
     todo = [
         (i, p) for i in range(runs) for p in spec.policies if (i, p) not in done_keys
     ]  # paired runs side by side: an interrupted campaign leaves few unpaired runs
@@ -324,7 +331,7 @@ def run_campaign(
     futures: dict[cf.Future, tuple[int, str]] = {}
     written: set[cf.Future] = set()
     with runs_path.open("a", newline="") as fr, traj_path.open("a") as ft:
-        writer = csv.DictWriter(fr, fieldnames=list(FIELDS))
+        writer = csv.DictWriter(fr, fieldnames=list(fields))
         if new_file:
             writer.writeheader()
             fr.flush()
@@ -342,7 +349,7 @@ def run_campaign(
                 ft.write(json.dumps(tr, separators=(",", ":")) + "\n")
             ft.flush()
             for row in rows:
-                writer.writerow({k: _format(row[k]) for k in FIELDS})
+                writer.writerow({k: _format(row[k]) for k in fields})
             fr.flush()  # the row is the record that the run is done: written last
             outcome.done += 1
             bar.update(1)

@@ -24,7 +24,7 @@ import numpy as np
 
 from swarm.montecarlo.campaign import SCENARIO_FILE, read_manifest, read_runs, read_trajectories
 from swarm.montecarlo.run import MAIN_MODES
-from swarm.montecarlo.stats import METRICS, PAPER_TABLE_II, PHASES, summarize
+from swarm.montecarlo.stats import PAPER_TABLE_II, PHASES, metrics_for, summarize
 
 MODE_COLOURS = {
     "HOLD": "#999999",
@@ -53,7 +53,7 @@ def write_report(out_dir: str | Path, wall_s: float | None = None, figures: bool
     policies = tuple(man["policies"])
     sc = load_scenario(out_dir / SCENARIO_FILE)
     rows = read_runs(out_dir)
-    rec = summarize(rows, policies, int(man["runs"]), man.get("wall_s"))
+    rec = summarize(rows, policies, int(man["runs"]), man.get("wall_s"), metrics_for(sc))
     rec["root_seed"] = man["root_seed"]
     rec["seed_rule"] = man["seed_rule"]
     rec["paper_table_ii"] = PAPER_TABLE_II
@@ -96,7 +96,14 @@ def _p(v) -> str:
     return f"{v:.2e}" if v < 1e-3 else f"{v:.3f}"
 
 
+def _paper(pol: str, metrics: dict) -> dict | None:
+    """The paper's Table II row of ``pol`` when it has every metric (the cube's campaigns), else None."""
+    row = PAPER_TABLE_II.get(pol)
+    return row if row is not None and all(m in row for m in metrics) else None
+
+
 def _markdown(rec: dict, man: dict, sc, rows: list[dict], policies: tuple[str, ...], figures: bool) -> str:
+    METRICS = {m: tuple(v) for m, v in rec["metrics"].items()}
     n_runs = rec["runs"]
     L = [f"# Monte Carlo: scenario `{sc.name}`, {n_runs} paired runs of {' and '.join(policies)}", ""]
     L.append(
@@ -128,8 +135,8 @@ def _markdown(rec: dict, man: dict, sc, rows: list[dict], policies: tuple[str, .
         cells = [_cell(p[m], scale, dig) for m, (_, _, scale, dig) in METRICS.items()]
         L.append(f"| {pol} | {p['n_runs']} | {succ} | " + " | ".join(cells) + " |")
     for pol in policies:
-        if pol in PAPER_TABLE_II:
-            paper = PAPER_TABLE_II[pol]
+        paper = _paper(pol, METRICS)
+        if paper is not None:
             cells = [_f(paper[m], dig, scale) for m, (_, _, scale, dig) in METRICS.items()]
             L.append(f"| paper {pol} | 500 | 100 % | " + " | ".join(cells) + " |")
     L.append("")
@@ -165,7 +172,7 @@ def _markdown(rec: dict, man: dict, sc, rows: list[dict], policies: tuple[str, .
                 else f"[{_f(d['ci95'][0], dig, scale)}, {_f(d['ci95'][1], dig, scale)}]"
             )
             paper = "-"
-            if base in PAPER_TABLE_II and other in PAPER_TABLE_II:
+            if _paper(base, METRICS) is not None and _paper(other, METRICS) is not None:
                 pa, pb = PAPER_TABLE_II[base][m], PAPER_TABLE_II[other][m]
                 paper = _pct((pb - pa) / pa)
             L.append(
@@ -254,6 +261,7 @@ def _failures(rows: list[dict], policies: tuple[str, ...], sc) -> list[str]:
     if not bad:
         return []
     g = sc.guidance
+    target_effort = sc.kind(sc.chasers[0]).target_effort_key
     L = ["### Runs that did not dock", ""]
     L += [
         "| policy | not docked | contact outside tolerance: lateral / attitude / speed | no contact "
@@ -269,9 +277,9 @@ def _failures(rows: list[dict], policies: tuple[str, ...], sc) -> list[str]:
         spd = sum(1 for r in col if (r["contact_closing_m_s"] or 0.0) > g.contact_speed_m_s)
         none = [r for r in b if not r["collided"]]
         modes = ", ".join(sorted({r["final_mode"] for r in none})) or "-"
-        fired_bad = sum(1 for r in b if r["target_impulse_ns"] > 0)
+        fired_bad = sum(1 for r in b if r[target_effort] > 0)
         ok = [r for r in mine if r["docked"]]
-        fired_ok = sum(1 for r in ok if r["target_impulse_ns"] > 0)
+        fired_ok = sum(1 for r in ok if r[target_effort] > 0)
         L.append(
             f"| {pol} | {len(b)} | {lat} / {att} / {spd} | {len(none)} ({modes}) | {fired_bad} of {len(b)} "
             f"| {fired_ok} of {len(ok)} |"
@@ -390,7 +398,7 @@ def _figures(out_dir: Path, sc, rows: list[dict], trajs: list[dict], policies: t
     _fig5(plt, out_dir, sc, by_key, trajs, policies)
     _fig6(plt, out_dir, sc, rows, policies)
     _timelines(plt, out_dir, rows, policies)
-    _paired(plt, out_dir, rows, policies)
+    _paired(plt, out_dir, rows, policies, sc)
 
 
 def _fig5(plt, out_dir, sc, by_key, trajs, policies) -> None:
@@ -520,12 +528,13 @@ def _timelines(plt, out_dir, rows, policies) -> None:
     plt.close(fig)
 
 
-def _paired(plt, out_dir, rows, policies) -> None:
+def _paired(plt, out_dir, rows, policies, sc) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    kind = sc.kind(sc.chasers[0])
     if len(policies) >= 2:
         base, other = policies[0], policies[1]
         by = {(r["run"], r["chaser"], r["policy"]): r for r in rows}
-        for ax, m, unit in ((axes[0], "docking_time_s", "s"), (axes[1], "total_impulse_ns", "N s")):
+        for ax, m, unit in ((axes[0], "docking_time_s", "s"), (axes[1], kind.effort_key, kind.effort_unit)):
             d = []
             for (run, ch, pol), r in by.items():
                 s = by.get((run, ch, other))
@@ -534,7 +543,7 @@ def _paired(plt, out_dir, rows, policies) -> None:
             if d:
                 ax.hist(d, bins=40, color="#555555")
                 ax.axvline(np.mean(d), color="r", lw=1.5, label=f"mean {np.mean(d):+.3g} {unit}")
-            if base in PAPER_TABLE_II and other in PAPER_TABLE_II:
+            if m in PAPER_TABLE_II.get(base, {}) and m in PAPER_TABLE_II.get(other, {}):
                 rel = PAPER_TABLE_II[other][m] / PAPER_TABLE_II[base][m] - 1.0
                 ref = np.mean([r[m] for r in rows if r["policy"] == base and r["docked"]] or [np.nan])
                 ax.axvline(

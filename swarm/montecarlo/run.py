@@ -12,6 +12,8 @@ import time
 
 import numpy as np
 
+from swarm.errors import ConfigError
+
 MAIN_MODES = ("APPROACH", "REORIENT", "ALIGN", "DOCK")
 
 # Columns of runs.csv and how each is read back. "float?" may be empty (None: e.g. no docking time when
@@ -86,6 +88,27 @@ FIELDS: dict[str, str] = {
 """``runs.csv`` columns (section 8 names where DESIGN.md has them) and their types."""
 
 
+def fields_for(scenario) -> dict[str, str]:
+    """The ``runs.csv`` columns of a campaign of ``scenario``: :data:`FIELDS` with its chasers' kind's
+    effort (``total_impulse_ns`` and ``target_impulse_ns`` for a cube, as before kinds) and own dispersions
+    (``disp_thruster_rms_rad`` for a cube). A campaign's chasers are of one kind."""
+    kinds = {scenario.kind(c) for c in scenario.chasers}
+    if len({k.name for k in kinds}) != 1:
+        raise ConfigError(f"a campaign needs chasers of one kind, got {sorted(k.name for k in kinds)}")
+    kind = kinds.pop()
+    out = {}
+    for name, typ in FIELDS.items():
+        if name == "total_impulse_ns":
+            out[kind.effort_key] = typ
+        elif name == "target_impulse_ns":
+            out[kind.target_effort_key] = typ
+        elif name == "disp_thruster_rms_rad":
+            out.update(dict.fromkeys(kind.dispersion_columns({}), "float"))
+        else:
+            out[name] = typ
+    return out
+
+
 def run_one(scenario, policy: str, run: int, seed: int, trajectory_period_s: float = 1.0):
     """Run ``run`` of ``policy`` with ``seed``: ``(rows, trajectories)``, one CSV row (:data:`FIELDS`) and
     one decimated trajectory (``{"run", "policy", "chaser", "t_s", "p_nav"}``, every
@@ -110,6 +133,7 @@ def run_one(scenario, policy: str, run: int, seed: int, trajectory_period_s: flo
     every = max(1, round(trajectory_period_s / period))
     rows, trajs = [], []
     for cid, c in res["chasers"].items():
+        kind = scenario.kind(cid)
         p0, err0, att0 = start[cid]
         row = {
             "run": int(run),
@@ -122,7 +146,7 @@ def run_one(scenario, policy: str, run: int, seed: int, trajectory_period_s: flo
             "closest_approach_m": c["closest_approach_m"],
             "final_mode": c["final_mode"],
             "docking_time_s": c["docking_time_s"],
-            "total_impulse_ns": c["total_impulse_ns"],
+            kind.effort_key: c["effort"],
             "position_error_m": c["position_error_m"],
             "attitude_error_rad": c["attitude_error_rad"],
             "r2_m": c["r2_m"],
@@ -130,7 +154,7 @@ def run_one(scenario, policy: str, run: int, seed: int, trajectory_period_s: flo
             "contact_lateral_m": (c["contact"] or {}).get("lateral_m"),
             "contact_attitude_rad": (c["contact"] or {}).get("attitude_rad"),
             "contact_closing_m_s": (c["contact"] or {}).get("closing_m_s"),
-            "target_impulse_ns": res["target_impulse_ns"].get(scenario.vehicles[cid].target, 0.0),
+            kind.target_effort_key: res["target_effort"].get(scenario.vehicles[cid].target, 0.0),
             **_mode_columns(c["modes"]),
             **_path_columns(c["series"], c["modes"], c["docking_time_s"]),
             **_decision_columns(c.get("decisions") or [], scenario.mdp),

@@ -27,7 +27,23 @@ METRICS: dict[str, tuple[str, str, float, int]] = {
     "docking_time_s": ("docking time", "s", 1.0, 2),
     "total_impulse_ns": ("total impulse", "N s", 1.0, 4),
 }
-"""Table II metrics: field -> (label, unit shown, scale to that unit, decimals)."""
+"""Table II metrics of the cube: field -> (label, unit shown, scale to that unit, decimals)."""
+
+
+def metrics_for(scenario) -> dict[str, tuple[str, str, float, int]]:
+    """The Table II metrics of a campaign of ``scenario``: :data:`METRICS` with its chasers' kind's effort
+    (a cube's total impulse, a wheeled module's wheel travel, ...) in place of the impulse."""
+    kind = scenario.kind(scenario.chasers[0])
+    out = {}
+    for m, spec in METRICS.items():
+        if m == "total_impulse_ns":
+            out[kind.effort_key] = (
+                spec if kind.effort_key == m else (kind.effort_label, kind.effort_unit, 1.0, 2)
+            )
+        else:
+            out[m] = spec
+    return out
+
 
 PAPER_TABLE_II: dict[str, dict[str, float]] = {
     "fixed": {
@@ -133,14 +149,24 @@ def phase_durations(row: dict) -> dict[str, float | None]:
     return out
 
 
-def summarize(rows: list[dict], policies: tuple[str, ...], runs: int, wall_s: float | None = None) -> dict:
-    """The ``swarm montecarlo --json`` record (DESIGN.md section 8), from the typed rows of ``runs.csv``.
+def summarize(
+    rows: list[dict],
+    policies: tuple[str, ...],
+    runs: int,
+    wall_s: float | None = None,
+    metrics: dict | None = None,
+) -> dict:
+    """The ``swarm montecarlo --json`` record (DESIGN.md section 8), from the typed rows of ``runs.csv``;
+    ``metrics`` the Table II metrics (:func:`metrics_for` the campaign's scenario; the cube's by default),
+    recorded under ``"metrics"``.
 
     ``paired`` compares the second policy with the first (``mdp - fixed`` for ``--policy fixed --policy
     mdp``) over the runs both finished and docked.
     """
+    metrics = METRICS if metrics is None else metrics
     rows = sorted(rows, key=lambda r: (r["run"], r["policy"], r["chaser"]))
-    out: dict = {"runs": runs, "wall_s": wall_s, "confidence": CONFIDENCE, "policies": {}}
+    out: dict = {"runs": runs, "wall_s": wall_s, "confidence": CONFIDENCE, "policies": {},
+                 "metrics": {m: list(v) for m, v in metrics.items()}}  # fmt: skip
     for pol in policies:
         mine = [r for r in rows if r["policy"] == pol]
         docked = [r for r in mine if r["docked"]]
@@ -153,7 +179,7 @@ def summarize(rows: list[dict], policies: tuple[str, ...], runs: int, wall_s: fl
             "collisions": sum(1 for r in mine if r["collided"]),
             "keepout_violations": sum(1 for r in mine if r["keepout_violated"]),
         }
-        for m in METRICS:
+        for m in metrics:
             rec[m] = describe(r[m] for r in docked)
         rec["r2_m"] = describe(r["r2_m"] for r in mine)
         rec["range_align_m"] = describe(r["range_align_m"] for r in mine)
@@ -168,7 +194,7 @@ def summarize(rows: list[dict], policies: tuple[str, ...], runs: int, wall_s: fl
         pairs = complete_pairs(rows, (base, other))
         out["paired_policies"] = [base, other]
         out["paired_runs"] = len(pairs)
-        out["paired"] = {m: paired(rows, base, other, m) for m in METRICS}
+        out["paired"] = {m: paired(rows, base, other, m) for m in metrics}
         out["paired_phases_s"] = _paired_phases(rows, base, other)
     return out
 

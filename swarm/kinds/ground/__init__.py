@@ -106,6 +106,8 @@ class GroundKind(VehicleKind):
     planar = True
     effort_key = "wheel_travel_rad"
     effort_unit = "rad"
+    effort_label = "wheel travel"
+    target_effort_key = "target_wheel_travel_rad"
 
     def validate(self) -> None:
         g = self.sc.guidance
