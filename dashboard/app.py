@@ -98,7 +98,8 @@ def _frame_the_scene(server: viser.ViserServer, sc: Scenario) -> None:
     )  # fmt: skip
     centre = vehicles.mean(axis=0) if len(vehicles) else pts.mean(axis=0)
     direction = np.array([-0.55, -1.0, 0.75])
-    eye = centre + 1.6 * max(extent, 1.0) * direction / np.linalg.norm(direction)
+    on_surface = kinds.draw_surface(server.scene, sc)  # a table under wheeled modules: frame it closer
+    eye = centre + (1.1 if on_surface else 1.6) * max(extent, 1.0) * direction / np.linalg.norm(direction)
     server.initial_camera.position = tuple(eye)
     server.initial_camera.look_at = tuple(centre)
 

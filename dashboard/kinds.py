@@ -70,6 +70,22 @@ def draw_ground(scene: viser.SceneApi, prefix: str, kind, color) -> object:
     return body
 
 
+def draw_surface(scene: viser.SceneApi, sc) -> bool:
+    """The surface planar vehicles stand on (a table): a slab under their bodies over the anchors' and
+    vehicles' footprint, 10 cm beyond it. Drawn when some vehicle's kind is planar; True if drawn."""
+    planar = [v for v in sc.vehicles if sc.kind(v).planar]
+    if not planar:
+        return False
+    pts = np.vstack([np.asarray(sc.anchors_m, dtype=float).reshape(-1, 3),
+                     np.array([sc.vehicles[v].position_m for v in sc.vehicles], dtype=float)])  # fmt: skip
+    lo, hi = pts[:, :2].min(axis=0) - 0.1, pts[:, :2].max(axis=0) + 0.1
+    top = min(sc.vehicles[v].position_m[2] - sc.kind(v).p.body.half_size_m for v in planar)
+    thick = 0.02
+    scene.add_box("/surface", color=(196, 164, 132), dimensions=(*(hi - lo), thick),
+                  position=(*(0.5 * (lo + hi)), top - thick / 2), opacity=0.9)  # fmt: skip
+    return True
+
+
 DRAWERS: dict[str, Drawer] = {"cubesat": draw_cubesat, "ground": draw_ground}
 """Drawer of each kind that has one (the others: :func:`draw_box`)."""
 

@@ -160,7 +160,7 @@ def mode_level(mode: str) -> int:
 
 
 def covariance_ellipsoid(
-    cov_pos: np.ndarray, n_sigma: float, min_radius_m: float = 1e-4
+    cov_pos: np.ndarray, n_sigma: float, min_radius_m: float = 1e-3, min_ratio: float = 0.05
 ) -> tuple[np.ndarray, np.ndarray]:
     """The ``n_sigma`` ellipsoid of a position covariance: ``(radii (3,) [m], wxyz (4,))`` for a unit sphere
     scaled by ``radii`` along its local axes, then rotated by ``wxyz``.
@@ -168,7 +168,9 @@ def covariance_ellipsoid(
     ``cov_pos`` (3, 3) [m^2] in the nav frame (the ``d_p`` block of ``Estimate.cov``). With the eigen-
     decomposition ``P = V diag(lambda) V^T`` (V a rotation, det +1), the surface ``x^T P^-1 x = n^2`` is
     the unit sphere scaled by ``n sqrt(lambda_i)`` along ``V``'s columns. Radii are floored at
-    ``min_radius_m`` so a collapsed axis still draws.
+    ``min_radius_m`` and at ``min_ratio`` times the largest, so a collapsed axis draws as a thin disc (a
+    planar vehicle's filter knows its height to ~0.03 mm against a centimetre in the plane) and never as a
+    near-singular scale, whose normals the renderer would have to invert.
     """
     p = np.asarray(cov_pos, dtype=np.float64).reshape(3, 3)
     if not np.isfinite(p).all():
@@ -178,7 +180,8 @@ def covariance_ellipsoid(
     lam, v = np.linalg.eigh(0.5 * (p + p.T))
     if np.linalg.det(v) < 0.0:
         v[:, 2] = -v[:, 2]
-    radii = np.maximum(n_sigma * np.sqrt(np.clip(lam, 0.0, None)), min_radius_m)
+    radii = n_sigma * np.sqrt(np.clip(lam, 0.0, None))
+    radii = np.maximum(radii, max(min_radius_m, min_ratio * float(radii.max())))
     return radii, wxyz_from_xyzw(matrix_to_quat(v))
 
 

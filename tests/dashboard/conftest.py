@@ -87,18 +87,23 @@ class LaunchedSwarm:
 
 
 def launch_swarm(
-    procs: Procs, workdir: Path, pairs: int = 2, secure: bool = False, timeout_s: float | None = None
+    procs: Procs,
+    workdir: Path,
+    pairs: int = 2,
+    secure: bool = False,
+    timeout_s: float | None = None,
+    scenario: str = "docking",
 ) -> LaunchedSwarm:
-    """``swarm launch docking --agents PAIRS`` (lockstep) with its dashboard on a free port (module
-    docstring). The chasers approach at a tenth of the scenario's speed so that the run lasts longer than
-    the browser tests (a lockstep docking otherwise ends within ~30 s of wall time here), and the run may
-    last 1000 simulated seconds. ``secure``: ``--secure`` (mutual TLS and Zenoh's ACL, certificates made by
-    the launcher; its router listens on a free TLS port); ``timeout_s``: the launcher's ``--timeout``."""
+    """``swarm launch SCENARIO --agents PAIRS`` (lockstep) with its dashboard on a free port (module
+    docstring). The chasers approach at a tenth of the docking scenario's speed so that the run lasts longer
+    than the browser tests (a lockstep docking otherwise ends within ~30 s of wall time here), and the run
+    may last 1000 simulated seconds. ``secure``: ``--secure`` (mutual TLS and Zenoh's ACL, certificates made
+    by the launcher; its router listens on a free TLS port); ``timeout_s``: the launcher's ``--timeout``."""
     namespace = new_namespace("dash")
     listen = [] if secure else ["--listen", loopback(free_port())]
     extra = (["--secure"] if secure else []) + ([] if timeout_s is None else ["--timeout", str(timeout_s)])
     proc = procs.start(
-        [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--agents", str(pairs),
+        [sys.executable, "-m", "swarm.cli.main", "launch", scenario, "--agents", str(pairs),
          "--clock", "lockstep", "--dashboard-port", "0", "--namespace", namespace, *listen, *extra,
          "--set", "guidance.approach_speed_m_s=0.002", "--set", "sim.max_duration_s=1000"]
     )  # fmt: skip
@@ -109,7 +114,7 @@ def launch_swarm(
     endpoint = proc.wait_for_line(r"^swarm listening on (\S+) ", 60.0).group(1)
     url = proc.wait_for_line(r"^dashboard on (http://\S+)$", 120.0).group(1)
     proc.wait_for_line(r"^swarm up:", 120.0)
-    sc = load_scenario("docking").with_pairs(pairs)
+    sc = load_scenario(scenario).with_pairs(pairs)
     return LaunchedSwarm(url, endpoint, namespace, tuple(sc.vehicles), proc, config)
 
 

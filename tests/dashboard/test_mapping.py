@@ -117,7 +117,7 @@ def test_ellipsoid_reproduces_the_covariance() -> None:
     for _ in range(20):
         a = rng.normal(size=(3, 3)) * 0.02
         cov = a @ a.T + 1e-6 * np.eye(3)
-        radii, wxyz = mapping.covariance_ellipsoid(cov, n_sigma=3.0)
+        radii, wxyz = mapping.covariance_ellipsoid(cov, n_sigma=3.0, min_radius_m=0.0, min_ratio=0.0)
         r = Rotation.from_quat(wxyz, scalar_first=True).as_matrix()
         np.testing.assert_allclose(r @ np.diag(radii**2) @ r.T, 9.0 * cov, atol=1e-12)
 
@@ -129,7 +129,16 @@ def test_ellipsoid_of_a_diagonal_covariance_has_the_sigmas_as_radii() -> None:
 
 def test_ellipsoid_of_a_collapsed_axis_keeps_a_drawable_radius() -> None:
     radii, _ = mapping.covariance_ellipsoid(np.diag([1e-4, 1e-4, 0.0]), n_sigma=3.0, min_radius_m=1e-4)
-    assert radii.min() == 1e-4
+    assert radii.min() == pytest.approx(0.05 * 0.03)  # 5 % of the largest (3 x 1 cm), the default ratio
+
+
+def test_a_planar_vehicles_ellipsoid_is_a_disc_not_a_degenerate_scale() -> None:
+    """Height known to 0.03 mm against 1.2 cm in the plane (the ground filter's constraint): the drawn
+    radius is floored at 5 % of the largest and at 1 mm, a thin disc rather than a near-singular scale."""
+    radii, _ = mapping.covariance_ellipsoid(np.diag([1.2e-2**2, 1.2e-2**2, 3e-5**2]), n_sigma=3.0)
+    assert np.sort(radii) == pytest.approx([0.05 * 0.036, 0.036, 0.036])
+    radii, _ = mapping.covariance_ellipsoid(np.diag([1e-8, 1e-8, 0.0]), n_sigma=3.0)
+    assert np.all(radii == 1e-3)
 
 
 def test_ellipsoid_refuses_a_non_finite_covariance() -> None:

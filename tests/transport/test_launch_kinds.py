@@ -1,6 +1,7 @@
 """``swarm launch S --seed N`` equals ``swarm sim S --seed N`` bit for bit for every input the one tick has
-(docs/architecture.md): mode-triggered faults (``docking-faults``), dispersions (the world and the agents
-draw them from the seed themselves) and another vehicle kind (``ground-docking``). Before the step was one
+(docs/architecture.md): mode-triggered faults (``docking-faults``) and dispersions (the world and the agents
+draw them from the seed themselves) in one launched run, and another vehicle kind (``ground-docking``, with
+wheel slip). ``tests/transport/test_launch.py`` has the plain ``docking``. Before the step was one
 piece of code, the processes ignored mode-triggered fault windows and built an undispersed world (issue 12:
 launch 112.16 s / sim 112.26 s on ``docking-faults --seed 3``; 112.57 s / 111.65 s dispersed).
 
@@ -26,8 +27,7 @@ DISPERSED = ["dispersions.position_sigma_m=0.05", "dispersions.mass_sigma_frac=0
              "dispersions.inertia_sigma_frac=0.03", "estimator.accel_psd_m2_s3=1e-8"]  # fmt: skip
 CASES = {
     # case: (scenario, seed, policy, --set overrides)
-    "docking-faults": ("docking-faults", 3, "mdp", []),
-    "docking dispersed": ("docking", 3, "mdp", DISPERSED),
+    "docking-faults dispersed": ("docking-faults", 3, "mdp", DISPERSED),
     "ground-docking": ("ground-docking", 1, "fixed",
                        ["vehicles.chaser.position_m=[0.4, 0.3, 0.05]",
                         "vehicles.chaser.euler_deg=[0.0, 0.0, 90.0]",
@@ -69,5 +69,7 @@ def test_a_lockstep_launch_equals_the_in_process_run(case, tmp_path):
         assert c[field] == w[field], (field, c[field], w[field])
     if policy == "mdp":
         assert c["decisions"] == w["decisions"]
+    if "faults" in case:  # the mode-triggered windows opened in the launched world too
+        assert {e["fault"] for e in w["faults"]["events"]} == {"uwb_dropout", "camera_loss"}
     assert got["target_effort"] == want["target_effort"]
     assert c["kind"] == w["kind"] == load_scenario(scenario).vehicles["chaser"].kind
