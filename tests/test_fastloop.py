@@ -39,6 +39,14 @@ CASES = {
         "ground-docking",
         {"vehicles.chaser.position_m": [0.4, 0.3, 0.05], "vehicles.chaser.euler_deg": [0.0, 0.0, 90.0]},
     ),
+    "ground pnp": (  # the pixel camera: frames built and PnP solved in Python, between compiled runs
+        "ground-docking",
+        {
+            "camera.model": "pnp",
+            "vehicles.chaser.position_m": [0.9, 0.4, 0.05],
+            "vehicles.chaser.euler_deg": [0.0, 0.0, 20.0],
+        },
+    ),
     "ground dispersed, faults": (
         "ground-docking",
         {
@@ -52,11 +60,11 @@ CASES = {
 }
 
 
-# each kind plain and with every input of the step on, both policies among them (a per-tick docking costs
-# ~10 s of Python here: four cases, not every combination)
+# each kind plain and with every input of the step on, both policies and every camera model among them (a
+# per-tick docking costs ~10 s of Python here: five cases, not every combination)
 @pytest.mark.parametrize(("case", "policy", "seed"), [
     ("cubesat", "fixed", 4), ("cubesat dispersed, faults", "mdp", 6),
-    ("ground", "mdp", 5), ("ground dispersed, faults", "fixed", 6),
+    ("ground", "mdp", 5), ("ground pnp", "mdp", 2), ("ground dispersed, faults", "fixed", 6),
 ])  # fmt: skip
 def test_compiled_inner_loop_gives_the_per_tick_run_bit_for_bit(case, policy, seed):
     import warnings
@@ -83,7 +91,9 @@ def test_compiled_inner_loop_gives_the_per_tick_run_bit_for_bit(case, policy, se
     ):
         assert a[key] == b[key], key
     assert a["modes"] == b["modes"]
+    assert a.get("decisions") == b.get("decisions")  # every Algorithm 1 pass, staged or not
     assert a["estimator"] == b["estimator"]
+    assert a["estimator"]["accepted_vision"] > 0
     for key in ("p_true_nav", "p_est_nav", "q_est_nav_body", "cov_pos"):
         assert np.array_equal(np.asarray(a["series"][key]), np.asarray(b["series"][key])), key
     assert fast["target_effort"] == slow["target_effort"]

@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from swarm.core._rot_nb import _LOG_TAYLOR_THRESHOLD as _QLOG_TAYLOR
 from swarm.core._rot_nb import qconj, qexp, qexp3, qlog, qmat, qmat9, qmul, qnormalize, skew3
 
 # Measurement types (columns of the counters).
@@ -279,6 +280,38 @@ def _reset_attitude3(X, P, d0, d1, d2):
             tmp[i] = P[rrow, 6] * G[i, 0] + P[rrow, 7] * G[i, 1] + P[rrow, 8] * G[i, 2]
         for i in range(3):
             P[rrow, 6 + i] = tmp[i]
+
+
+@njit(cache=True)
+def _reset_attitude3_noalloc(X, P, d0, d1, d2):
+    """:func:`_reset_attitude3` on scalars, operation for operation (bit-identical results) but without
+    its temporary arrays (``qexp``, ``qmul``, ``qnormalize``, ``G``): the reset of the fast attitude
+    update. ``G = I - 0.5 [d_theta x]`` has ones on its diagonal, so ``G[i, i] * x`` is written ``x``."""
+    if d0 == 0.0 and d1 == 0.0 and d2 == 0.0:
+        return
+    bx, by, bz, bw = qexp3(d0, d1, d2)
+    ax, ay, az, aw = X[6], X[7], X[8], X[9]
+    # qmul(X[6:10], qexp(dth)), then qnormalize (a division by the norm, as there)
+    x = aw * bx + bw * ax + (ay * bz - az * by)
+    y = aw * by + bw * ay + (az * bx - ax * bz)
+    z = aw * bz + bw * az + (ax * by - ay * bx)
+    w = aw * bw - (ax * bx + ay * by + az * bz)
+    n = np.sqrt(x * x + y * y + z * z + w * w)
+    X[6], X[7], X[8], X[9] = x / n, y / n, z / n, w / n
+    # np.eye(3) - 0.5 * skew3(dth), entry by entry
+    g01, g02 = 0.0 - 0.5 * (-d2), 0.0 - 0.5 * d1
+    g10, g12 = 0.0 - 0.5 * d2, 0.0 - 0.5 * (-d0)
+    g20, g21 = 0.0 - 0.5 * (-d1), 0.0 - 0.5 * d0
+    for c in range(9):  # rows 6..8 <- G rows
+        p6, p7, p8 = P[6, c], P[7, c], P[8, c]
+        P[6, c] = p6 + g01 * p7 + g02 * p8
+        P[7, c] = g10 * p6 + p7 + g12 * p8
+        P[8, c] = g20 * p6 + g21 * p7 + p8
+    for r in range(9):  # columns 6..8 <- columns G^T
+        p6, p7, p8 = P[r, 6], P[r, 7], P[r, 8]
+        P[r, 6] = p6 + p7 * g01 + p8 * g02
+        P[r, 7] = p6 * g10 + p7 + p8 * g12
+        P[r, 8] = p6 * g20 + p7 * g21 + p8
 
 
 @njit(cache=True)
@@ -611,8 +644,10 @@ def update_pose_one(
 
 
 @njit(cache=True)
-def update_attitude_one(X, P, ST_I, ST_F, PRM, q_meas, cov_body, gate):
-    """AHRS attitude: residual ``log(q_ref^-1 (x) q_meas)`` (body frame), ``H = [0 0 I]``."""
+def _update_attitude_generic(X, P, ST_I, ST_F, PRM, q_meas, cov_body, gate):
+    """:func:`update_attitude_one` through the generic :func:`_update` (dense ``H``, ``np.linalg.solve``,
+    dense Joseph form): the reference the fast kernel is tested against, and its fallback for inputs
+    large enough to overflow."""
     if not (_all_finite(q_meas) and _all_finite(cov_body)):
         ST_I[COUNT_REFUSED, TYPE_ATTITUDE] += 1
         return ST_REFUSED_NONFINITE
@@ -623,6 +658,271 @@ def update_attitude_one(X, P, ST_I, ST_F, PRM, q_meas, cov_body, gate):
     nu, H = attitude_residual(X, q_meas)
     R = 0.5 * (cov_body + cov_body.T)
     return _update(X, P, ST_I, ST_F, PRM, TYPE_ATTITUDE, H, nu, R, gate, True)
+
+
+_FAST_BOUND = 1e100
+"""Magnitude (of any ``P`` entry, gain or noise entry) above which :func:`update_attitude_one` hands the
+update to the generic path: below it no product of the closed-form Joseph update can overflow, so its
+result is finite whenever its inputs are and it may be written in place."""
+
+
+@njit(cache=True)
+def _commit_gated(ST_I, ST_F, kind, status, d2):
+    """:func:`_commit` of an update that leaves the state alone (rejected by the gate, or refused)."""
+    ST_F[STF_D2 + kind] = d2
+    if status == ST_REJECTED:
+        ST_I[COUNT_REJECTED, kind] += 1
+    else:
+        ST_I[COUNT_REFUSED, kind] += 1
+    return status
+
+
+@njit(cache=True)
+def _attitude_residual3(X, q_meas):
+    """The residual of :func:`attitude_residual` on scalars, operation for operation (bit-identical):
+    ``qlog(qmul(qconj(q_ref), qnormalize(q_meas)))`` without its temporary arrays."""
+    qx, qy, qz, qw = q_meas[0], q_meas[1], q_meas[2], q_meas[3]
+    n = np.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
+    qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
+    px, py, pz, pw = -X[6], -X[7], -X[8], X[9]
+    x = pw * qx + qw * px + (py * qz - pz * qy)
+    y = pw * qy + qw * py + (pz * qx - px * qz)
+    z = pw * qz + qw * pz + (px * qy - py * qx)
+    w = pw * qw - (px * qx + py * qy + pz * qz)
+    if w < 0.0:  # qlog: the w >= 0 hemisphere, Taylor series of atan(r) / r below its threshold
+        x, y, z, w = -x, -y, -z, -w
+    n2 = x * x + y * y + z * z
+    if n2 < (_QLOG_TAYLOR * _QLOG_TAYLOR) * (w * w):
+        r2 = n2 / (w * w)
+        k = (2.0 / w) * (1.0 - r2 / 3.0 + r2 * r2 / 5.0)
+    else:
+        nn = np.sqrt(n2)
+        k = 2.0 * np.arctan2(nn, w) / nn
+    return k * x, k * y, k * z
+
+
+@njit(cache=True)
+def _inv3(a):
+    """Inverse of the 3x3 matrix ``a`` (a row-major 9-tuple, returned likewise) by its adjugate over its
+    determinant (Cramer's rule), after scaling by ``1 / (|a00| + |a11| + |a22|)`` so that the
+    determinant neither under- nor overflows whatever the units. A singular or non-finite ``a`` gives
+    non-finite (NaN) entries."""
+    s = abs(a[0]) + abs(a[4]) + abs(a[8])
+    if not (s > 0.0 and s < np.inf):
+        s = 1.0
+    t = 1.0 / s
+    b00, b01, b02 = a[0] * t, a[1] * t, a[2] * t
+    b10, b11, b12 = a[3] * t, a[4] * t, a[5] * t
+    b20, b21, b22 = a[6] * t, a[7] * t, a[8] * t
+    c00 = b11 * b22 - b12 * b21
+    c01 = b12 * b20 - b10 * b22
+    c02 = b10 * b21 - b11 * b20
+    det = b00 * c00 + b01 * c01 + b02 * c02
+    if det == 0.0:  # (numba raises ZeroDivisionError on a float division by zero)
+        nan = np.nan
+        return (nan, nan, nan, nan, nan, nan, nan, nan, nan)
+    f = t / det
+    return (
+        c00 * f, (b02 * b21 - b01 * b22) * f, (b01 * b12 - b02 * b11) * f,
+        c01 * f, (b00 * b22 - b02 * b20) * f, (b02 * b10 - b00 * b12) * f,
+        c02 * f, (b01 * b20 - b00 * b21) * f, (b00 * b11 - b01 * b10) * f,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _mm3(a, b):
+    """``a @ b`` for 3x3 matrices given as row-major 9-tuples."""
+    return (
+        a[0] * b[0] + a[1] * b[3] + a[2] * b[6],
+        a[0] * b[1] + a[1] * b[4] + a[2] * b[7],
+        a[0] * b[2] + a[1] * b[5] + a[2] * b[8],
+        a[3] * b[0] + a[4] * b[3] + a[5] * b[6],
+        a[3] * b[1] + a[4] * b[4] + a[5] * b[7],
+        a[3] * b[2] + a[4] * b[5] + a[5] * b[8],
+        a[6] * b[0] + a[7] * b[3] + a[8] * b[6],
+        a[6] * b[1] + a[7] * b[4] + a[8] * b[7],
+        a[6] * b[2] + a[7] * b[5] + a[8] * b[8],
+    )
+
+
+@njit(cache=True)
+def _mmt3(a, b):
+    """``a @ b.T`` for 3x3 matrices given as row-major 9-tuples."""
+    return (
+        a[0] * b[0] + a[1] * b[1] + a[2] * b[2],
+        a[0] * b[3] + a[1] * b[4] + a[2] * b[5],
+        a[0] * b[6] + a[1] * b[7] + a[2] * b[8],
+        a[3] * b[0] + a[4] * b[1] + a[5] * b[2],
+        a[3] * b[3] + a[4] * b[4] + a[5] * b[5],
+        a[3] * b[6] + a[4] * b[7] + a[5] * b[8],
+        a[6] * b[0] + a[7] * b[1] + a[8] * b[2],
+        a[6] * b[3] + a[7] * b[4] + a[8] * b[5],
+        a[6] * b[6] + a[7] * b[7] + a[8] * b[8],
+    )
+
+
+@njit(cache=True)
+def update_attitude_one(X, P, ST_I, ST_F, PRM, q_meas, cov_body, gate):
+    """AHRS attitude: residual ``log(q_ref^-1 (x) q_meas)`` (body frame), ``H = [0 0 I]``.
+
+    The update of :func:`_update_attitude_generic` (same refusals, gate, underweighting, Joseph form,
+    multiplicative reset, status and book-keeping) written out for this ``H``, in place and without
+    allocation. ``P H^T = P[:, 6:9]`` and ``H P H^T = P_thth``: ``S = P_thth + R`` and the underweighted
+    ``S_uw = S + beta P_thth`` are 3x3, inverted in closed form (:func:`_inv3`), ``K = P[:, 6:9] S_uw^-T``
+    (the rows of ``solve(S_uw, (P H^T)^T)``). The Joseph form ``(I - K H) P (I - K H)^T + K R K^T``
+    (Crassidis & Junkins 2011 eq. 5.39) is evaluated as :func:`_sandwich` does, through the structure of
+    ``A = I - K H`` (identity on the translation columns, ``I - K_th`` on the attitude ones): rows
+    ``i < 6`` of ``A P`` are ``P[i] - K[i] P[6:9]``, so only their attitude columns ``b_i`` are kept, and
+    ``P+[i, j] = (A P)[i, j] - b_i . K[j] + (K R)[i] . K[j]`` for ``j < 6``,
+    ``P+[i, 6 + s] = b_i . A_th[s] + (K R)[i] . K_th[s]``, ``P+_thth = A_th P_thth A_th^T + K_th R K_th^T``,
+    the upper triangle evaluated and mirrored; the translation rows of ``K`` live in ST_F's scratch tail.
+    Tandem: the attitude filter alone (``H_t = 0``: the translation filter is not updated and the
+    attitude filter's noise is ``R``).
+
+    Departures from the generic path beyond rounding (~1e-16 relative, the closed-form inverse against
+    LAPACK's LU): a non-finite ``P`` entry the update reads, or a singular ``S``, is refused
+    (``ST_REFUSED_INVALID``) where ``np.linalg.solve`` would raise ``LinAlgError``; and an update whose
+    ``P``, ``R`` or gain has an entry beyond ``_FAST_BOUND`` (where a product could overflow) is handed to
+    the generic path whole.
+    """
+    kind = TYPE_ATTITUDE
+    if not (_all_finite(q_meas) and _all_finite(cov_body)):
+        ST_I[COUNT_REFUSED, kind] += 1
+        return ST_REFUSED_NONFINITE
+    nq = q_meas @ q_meas
+    if nq < 0.5 or nq > 2.0:
+        ST_I[COUNT_REFUSED, kind] += 1
+        return ST_REFUSED_INVALID
+    n0, n1, n2 = _attitude_residual3(X, q_meas)
+    # R = (cov + cov^T) / 2 (exactly symmetric), S = H P H^T + R
+    r00 = 0.5 * (cov_body[0, 0] + cov_body[0, 0])
+    r01 = 0.5 * (cov_body[0, 1] + cov_body[1, 0])
+    r02 = 0.5 * (cov_body[0, 2] + cov_body[2, 0])
+    r11 = 0.5 * (cov_body[1, 1] + cov_body[1, 1])
+    r12 = 0.5 * (cov_body[1, 2] + cov_body[2, 1])
+    r22 = 0.5 * (cov_body[2, 2] + cov_body[2, 2])
+    rr = (r00, r01, r02, r01, r11, r12, r02, r12, r22)
+    a = (P[6, 6], P[6, 7], P[6, 8], P[7, 6], P[7, 7], P[7, 8], P[8, 6], P[8, 7], P[8, 8])
+    S = (
+        a[0] + r00, a[1] + r01, a[2] + r02,
+        a[3] + r01, a[4] + r11, a[5] + r12,
+        a[6] + r02, a[7] + r12, a[8] + r22,
+    )  # fmt: skip
+    v = _inv3(S)
+    d2 = (
+        n0 * (v[0] * n0 + v[1] * n1 + v[2] * n2)
+        + n1 * (v[3] * n0 + v[4] * n1 + v[5] * n2)
+        + n2 * (v[6] * n0 + v[7] * n1 + v[8] * n2)
+    )
+    if not np.isfinite(d2) or d2 < 0.0:
+        return _commit_gated(ST_I, ST_F, kind, ST_REFUSED_INVALID, d2)
+    if d2 > gate:
+        return _commit_gated(ST_I, ST_F, kind, ST_REJECTED, d2)
+    w = v  # inverse of the S the gain uses
+    if ST_F[STF_UW_LEFT] > 0.0 and PRM[PRM_UW_BETA] > 0.0:
+        if a[0] + a[4] + a[8] > PRM[PRM_UW_RATIO] * (r00 + r11 + r22):
+            beta = PRM[PRM_UW_BETA]
+            w = _inv3(
+                (
+                    S[0] + beta * a[0], S[1] + beta * a[1], S[2] + beta * a[2],
+                    S[3] + beta * a[3], S[4] + beta * a[4], S[5] + beta * a[5],
+                    S[6] + beta * a[6], S[7] + beta * a[7], S[8] + beta * a[8],
+                )
+            )  # fmt: skip
+    ka = _mmt3(a, w)  # K_th = P_thth S_uw^-T
+    tandem = PRM[PRM_TANDEM] != 0.0
+    # every entry the update reads or forms must be finite (x * 0.0 is NaN for inf and NaN) and below
+    # _FAST_BOUND; the translation rows of K go to ST_F[STF_WORK + 3 i + m] on the way
+    fin = 0.0
+    big = 0.0
+    for x in ka:
+        fin += x * 0.0
+        big = max(big, abs(x))
+    for x in rr:
+        fin += x * 0.0
+        big = max(big, abs(x))
+    if tandem:
+        for x in a:
+            fin += x * 0.0
+            big = max(big, abs(x))
+    else:
+        for i in range(9):
+            for j in range(9):
+                x = P[i, j]
+                fin += x * 0.0
+                big = max(big, abs(x))
+        for i in range(6):
+            c0, c1, c2 = P[i, 6], P[i, 7], P[i, 8]
+            k0 = c0 * w[0] + c1 * w[1] + c2 * w[2]
+            k1 = c0 * w[3] + c1 * w[4] + c2 * w[5]
+            k2 = c0 * w[6] + c1 * w[7] + c2 * w[8]
+            ST_F[STF_WORK + 3 * i] = k0
+            ST_F[STF_WORK + 3 * i + 1] = k1
+            ST_F[STF_WORK + 3 * i + 2] = k2
+            fin += (k0 + k1 + k2) * 0.0
+            big = max(big, max(abs(k0), max(abs(k1), abs(k2))))
+    if fin != 0.0:
+        return _commit_gated(ST_I, ST_F, kind, ST_REFUSED_INVALID, d2)
+    if big > _FAST_BOUND:
+        return _update_attitude_generic(X, P, ST_I, ST_F, PRM, q_meas, cov_body, gate)
+    # A_th = I - K_th
+    e = (
+        1.0 - ka[0], 0.0 - ka[1], 0.0 - ka[2],
+        0.0 - ka[3], 1.0 - ka[4], 0.0 - ka[5],
+        0.0 - ka[6], 0.0 - ka[7], 1.0 - ka[8],
+    )  # fmt: skip
+    if not tandem:
+        # translation rows, in place: row i reads P[i, j >= i], P[6:9, j >= i] and the attitude block
+        # (kept in `a`), none of which an earlier row has written
+        for i in range(6):
+            k0, k1, k2 = ST_F[STF_WORK + 3 * i], ST_F[STF_WORK + 3 * i + 1], ST_F[STF_WORK + 3 * i + 2]
+            b0 = P[i, 6] - k0 * a[0] - k1 * a[3] - k2 * a[6]  # (A P)[i, 6:9]
+            b1 = P[i, 7] - k0 * a[1] - k1 * a[4] - k2 * a[7]
+            b2 = P[i, 8] - k0 * a[2] - k1 * a[5] - k2 * a[8]
+            q0 = k0 * r00 + k1 * r01 + k2 * r02  # (K R)[i]
+            q1 = k0 * r01 + k1 * r11 + k2 * r12
+            q2 = k0 * r02 + k1 * r12 + k2 * r22
+            for j in range(i, 6):
+                l0, l1, l2 = ST_F[STF_WORK + 3 * j], ST_F[STF_WORK + 3 * j + 1], ST_F[STF_WORK + 3 * j + 2]
+                fp = P[i, j] - k0 * P[6, j] - k1 * P[7, j] - k2 * P[8, j]  # (A P)[i, j]
+                pn = (fp - b0 * l0 - b1 * l1 - b2 * l2) + (q0 * l0 + q1 * l1 + q2 * l2)
+                P[i, j] = pn
+                P[j, i] = pn
+            pn = (b0 * e[0] + b1 * e[1] + b2 * e[2]) + (q0 * ka[0] + q1 * ka[1] + q2 * ka[2])
+            P[i, 6] = pn
+            P[6, i] = pn
+            pn = (b0 * e[3] + b1 * e[4] + b2 * e[5]) + (q0 * ka[3] + q1 * ka[4] + q2 * ka[5])
+            P[i, 7] = pn
+            P[7, i] = pn
+            pn = (b0 * e[6] + b1 * e[7] + b2 * e[8]) + (q0 * ka[6] + q1 * ka[7] + q2 * ka[8])
+            P[i, 8] = pn
+            P[8, i] = pn
+            X[i] += k0 * n0 + k1 * n1 + k2 * n2
+    # attitude block: A_th P_thth A_th^T + K_th R K_th^T, upper triangle mirrored
+    ea = _mm3(e, a)
+    kr = _mm3(ka, rr)
+    P[6, 6] = (ea[0] * e[0] + ea[1] * e[1] + ea[2] * e[2]) + (kr[0] * ka[0] + kr[1] * ka[1] + kr[2] * ka[2])
+    P[6, 7] = (ea[0] * e[3] + ea[1] * e[4] + ea[2] * e[5]) + (kr[0] * ka[3] + kr[1] * ka[4] + kr[2] * ka[5])
+    P[6, 8] = (ea[0] * e[6] + ea[1] * e[7] + ea[2] * e[8]) + (kr[0] * ka[6] + kr[1] * ka[7] + kr[2] * ka[8])
+    P[7, 7] = (ea[3] * e[3] + ea[4] * e[4] + ea[5] * e[5]) + (kr[3] * ka[3] + kr[4] * ka[4] + kr[5] * ka[5])
+    P[7, 8] = (ea[3] * e[6] + ea[4] * e[7] + ea[5] * e[8]) + (kr[3] * ka[6] + kr[4] * ka[7] + kr[5] * ka[8])
+    P[8, 8] = (ea[6] * e[6] + ea[7] * e[7] + ea[8] * e[8]) + (kr[6] * ka[6] + kr[7] * ka[7] + kr[8] * ka[8])
+    P[7, 6] = P[6, 7]
+    P[8, 6] = P[6, 8]
+    P[8, 7] = P[7, 8]
+    _reset_attitude3_noalloc(
+        X,
+        P,
+        ka[0] * n0 + ka[1] * n1 + ka[2] * n2,
+        ka[3] * n0 + ka[4] * n1 + ka[5] * n2,
+        ka[6] * n0 + ka[7] * n1 + ka[8] * n2,
+    )
+    ST_F[STF_D2 + kind] = d2
+    ST_I[COUNT_ACCEPTED, kind] += 1
+    ST_F[STF_SINCE] = 0.0
+    if ST_F[STF_UW_LEFT] > 0.0:
+        ST_F[STF_UW_LEFT] -= 1.0
+    return ST_ACCEPTED
 
 
 # ---- batch loops: the same per-filter code over a leading axis ---------------------------------------

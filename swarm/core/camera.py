@@ -15,6 +15,13 @@ Two measurement models (paper sec. III and IV-D):
   by :func:`solve_pnp` on the agent side with the covariance of ``(dt_cam, dphi_cam)``, where
   ``t_meas = t + dt_cam`` and ``R(q_cam_target_meas) = exp([dphi_cam x]) R(q_cam_target)`` (a
   camera-frame, left perturbation): consumed by ``PoseEstimator.update_pose``.
+* ``"pose"``: a camera that solves PnP on board (the OpenMV's marker pose, paper sec. VI-A: "a pose at
+  20 Hz") and reports the relative pose with its covariance: the true pose perturbed by a draw from the
+  first-order covariance of PnP under white pixel noise, ``sigma_px^2 (J^T J)^-1`` at the true pose
+  (:func:`pose_frame`; the covariance :func:`solve_pnp` reports, the Cramér-Rao bound of the fit). It
+  keeps the pixel model's geometry (range, field of view, the pattern's conditioning) without solving PnP
+  per simulated frame, and it is the model the compiled closed loop runs without Python; ``"pnp"`` keeps
+  what a first-order model misses (the planar ambiguity's flips, outliers of the solver).
 
 Markers. Six LEDs per face of the target cube (paper sec. IV-D: three for PnP, three more for
 observability up close): a five-point X and one off-centre LED on a short standoff post, like the
@@ -38,6 +45,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from swarm.core._noise_nb import normals
 from swarm.core._rot_nb import qconj, qexp, qlog, qmat, qmul, qnormalize
 from swarm.errors import ConfigError
 
@@ -55,6 +63,7 @@ __all__ = [
     "feature_vectors",
     "pinhole",
     "pixel_jacobian",
+    "pose_frame",
     "project_markers",
     "relative_pose",
     "solve_pnp",
@@ -91,6 +100,7 @@ symmetry of the square maps the pattern onto itself, so the markers can be told 
 class CameraModel(enum.StrEnum):
     FEATURES = "features"  # paper: marker positions in the camera frame, 1 mm noise
     PNP = "pnp"  # pixels -> solvePnP -> relative pose with covariance
+    POSE = "pose"  # the relative pose and covariance of an on-board PnP (first-order noise model)
 
 
 def _finite_tuple(section: str, name: str, value, n: int) -> None:
@@ -222,7 +232,8 @@ class CameraParams:
     """Camera-to-body rotation, scalar-last; the default turns the optical axis (+z) to body -z. Must equal
     ``EstimatorParams.q_body_cam``."""
     model: CameraModel = CameraModel.FEATURES
-    """``features`` (paper: marker positions in the camera frame) or ``pnp`` (pixels -> solvePnP)."""
+    """``features`` (paper: marker positions in the camera frame), ``pnp`` (pixels -> solvePnP) or ``pose``
+    (an on-board PnP's pose and covariance, module docstring)."""
     feature_sigma_m: float = 0.001
     """Feature-vector noise per axis in the camera frame [m] (paper sec. III: 1 mm)."""
     pnp_refine_iterations: int = 1
@@ -614,3 +625,56 @@ def solve_pnp(pixels: ArrayLike, markers_target: ArrayLike, params: CameraParams
         q = -q
     rms = math.sqrt(float(r @ r) / len(obj))
     return PnpResult(t, q, cov, rms)
+
+
+# ---- the "pose" model: an on-board PnP's output, compiled ------------------------------------------------
+POSE_N = 43
+"""Length of a ``"pose"`` frame: ``t_cam_m`` (3) [m], ``q_cam_target`` (4), ``cov_cam`` (6 x 6, row-major)."""
+
+
+@numba.njit(cache=True)
+def pose_frame(markers, centre_t, normal_t, p_t, q_t, p_c, q_c, cam, sigma_px, key, counter, out):
+    """One frame of the ``"pose"`` model (module docstring): when the face with ``markers`` (N, 3) [m,
+    target frame], centre ``centre_t`` and outward normal ``normal_t`` is :func:`visible` to the camera at
+    ``(p_c, q_c)`` (``cam`` its visibility vector), writes ``out`` (:data:`POSE_N`,) and returns True.
+
+    With ``J`` the pixel Jacobian (:func:`pixel_jacobian`) at the true pose ``(t, q)`` of the target in the
+    camera frame, ``cov = sigma_px^2 (J^T J)^-1`` and ``(dt, dphi) = chol(cov) z`` for the standard normals
+    ``z`` of ``(key, counter)`` (:func:`swarm.core._noise_nb.normals`): ``t_meas = t + dt``,
+    ``R(q_meas) = exp([dphi x]) R(q)`` (``q_meas`` with ``w >= 0``), reported with ``cov``."""
+    if not _visible_kernel(markers, centre_t, normal_t, p_t, q_t, p_c, q_c, cam):
+        return False
+    R_c = qmat(q_c)
+    t = np.empty(3)
+    for i in range(3):
+        t[i] = R_c[0, i] * (p_t[0] - p_c[0]) + R_c[1, i] * (p_t[1] - p_c[1]) + R_c[2, i] * (p_t[2] - p_c[2])
+    q = qmul(qconj(q_c), q_t)
+    n = markers.shape[0]
+    r = np.empty(2 * n)
+    J = np.zeros((2 * n, 6))
+    if not _residual_jacobian_kernel(markers, np.zeros((n, 2)), t, q, cam[0], cam[1], cam[2], cam[3], r, J):
+        return False
+    info = np.zeros((6, 6))
+    for a in range(6):
+        for b in range(a, 6):
+            s = 0.0
+            for k in range(2 * n):
+                s += J[k, a] * J[k, b]
+            info[a, b] = s
+            info[b, a] = s
+    cov = np.linalg.inv(info) * (sigma_px * sigma_px)
+    cov = 0.5 * (cov + cov.T)
+    L = np.linalg.cholesky(cov)
+    z = np.empty(6)
+    normals(key, counter, z)
+    d = L @ z
+    for i in range(3):
+        out[i] = t[i] + d[i]
+    qm = qnormalize(qmul(qexp(d[3:6]), q))
+    sign = -1.0 if qm[3] < 0.0 else 1.0
+    for i in range(4):
+        out[3 + i] = sign * qm[i]
+    for a in range(6):
+        for b in range(6):
+            out[7 + 6 * a + b] = cov[a, b]
+    return True

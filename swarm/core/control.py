@@ -20,6 +20,7 @@ axes; :class:`TranslationController` holds one integrator per vehicle of a batch
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numba
@@ -267,6 +268,7 @@ def _readonly(*arrays: FloatArray) -> None:
         a.setflags(write=False)
 
 
+@functools.lru_cache(maxsize=64)  # a pure function of frozen parameters; its arrays are read-only
 def design_translation_lqr(mass_kg: float, params: TranslationLqrParams) -> LqrDesign:
     """Per-axis LQR for the translation of a module of mass ``mass_kg`` [kg] (module docstring).
 

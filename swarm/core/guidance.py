@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 from scipy.stats import chi2
 
+from swarm.core import _guidance_nb as nb
 from swarm.core import rotations as rot
 from swarm.core._rot_nb import qconj, qlog, qmul, qnormalize, qrotate
 from swarm.errors import ConfigError
@@ -307,209 +308,165 @@ def in_corridor(p: GuidanceParams, p_c, p_t, n_nav) -> bool:
     return bool(r > 0 and rel @ n_nav >= r * p.corridor_cos)
 
 
+MODES = tuple(Mode)
+"""The modes in the order of their codes in compiled code (:mod:`swarm.core._guidance_nb`, ``M_*``)."""
+
+
+def guidance_row(p: GuidanceParams) -> np.ndarray:
+    """The parameters of :class:`GuidanceParams` as the compiled guidance reads them (``GP_*``)."""
+    row = np.zeros(nb.GP_N)
+    row[: nb.GP_NORMAL] = (
+        p.half_size_m, p.align_distance_m, p.keepout_radius_m, p.keepout_margin_m, p.corridor_cos,
+        p.approach_speed_m_s, p.align_speed_m_s, p.dock_speed_m_s, p.abort_speed_m_s, p.max_lead_m,
+        p.stop_decel_m_s2, p.align_tolerance_m, p.align_attitude_tolerance_rad, p.align_speed_tolerance_m_s,
+        p.dock_overshoot_m, p.contact_distance_m, p.hold_sigma_pos_m, p.resume_sigma_pos_m,
+        p.hold_rejection_fraction, p.hold_nis_mean, p.abort_after_hold_s, p.abort_retreat_m, p.retry_after_s,
+        p.arc_lookahead_rad, p.max_retries, p.stall_timeout_s, float(p.dock_requires_vision),
+    )  # fmt: skip
+    row[nb.GP_NORMAL : nb.GP_NORMAL + 3] = p.face_normal_target
+    row[nb.GP_QTC : nb.GP_QTC + 4] = p.q_target_chaser_docked
+    return row
+
+
+def reason_text(p: GuidanceParams, code: int, r: float, x: float) -> str:
+    """The words of a mode switch's reason ``code`` (``RS_*``), at range ``r`` [m], quoting ``x``."""
+    if code == nb.RS_CONVERGED:
+        return f"initial estimate converged (sigma_pos={x:.3f} m)"
+    if code == nb.RS_HEALTHY:
+        return f"estimate healthy again (sigma_pos={x:.3f} m)"
+    if code == nb.RS_HOLD_LONG:
+        return f"HOLD longer than {p.abort_after_hold_s:.0f} s"
+    if code == nb.RS_SIGMA:
+        return f"estimate not trustworthy: sigma_pos={x:.3f} m > {p.hold_sigma_pos_m} m"
+    if code == nb.RS_REJECTED:
+        return f"estimate not trustworthy: {x:.0%} of recent ranges rejected"
+    if code == nb.RS_NIS:
+        return f"estimate not trustworthy: mean NIS of recent ranges {x:.1f} > {p.hold_nis_mean}"
+    if code == nb.RS_DOCK_UNHEALTHY:
+        return "estimate not trustworthy inside the keep-out sphere"
+    if code == nb.RS_R2:
+        return f"r={r:.3f} m <= r2={x:.3f} m"
+    if code == nb.RS_SKIP_ALIGN:
+        return f"ALIGN skipped: already in the docking corridor with vision (sigma_pos={x * 1000:.1f} mm)"
+    if code == nb.RS_R1:
+        return f"r={r:.3f} m <= r1={x:.3f} m"
+    if code == nb.RS_STALL:
+        return f"held at the keep-out boundary {p.stall_timeout_s:.0f} s above r1={x:.3f} m"
+    if code == nb.RS_AT_ALIGN:
+        return "at the alignment point"
+    if code == nb.RS_NO_VISION:
+        return f"no vision at the alignment point for {p.abort_after_hold_s:.0f} s"
+    if code == nb.RS_GAP:
+        return f"estimated port gap {x * 1000:.1f} mm"
+    if code == nb.RS_RETRY:
+        return f"retry {int(x)} after abort"
+    raise ValueError(f"unknown reason code {code!r}")
+
+
 class ChaserGuidance:
     """Mode logic and reference generation of the chaser (module docstring).
 
     ``switcher`` is a :class:`swarm.core.mdp.FixedSwitcher` or :class:`swarm.core.mdp.MdpSwitcher`: it is
-    asked at every evaluation inside ``r_t`` (``evaluate``) and supplies ``r1_m`` and ``r2_m``.
+    asked at every evaluation inside ``r_t`` and supplies ``r1_m`` and ``r2_m``.
+
+    The state is the array :attr:`G` and one evaluation is the compiled
+    :func:`swarm.core._guidance_nb.chaser_step`, which the compiled closed loop calls directly; a mode
+    switch it makes waits in :attr:`EV` until :meth:`drain_events` puts it into words and :attr:`history`.
     """
 
     def __init__(self, params: GuidanceParams, switcher, q_mission_nav_body, p_start_nav) -> None:
         self.p = params
         self.switcher = switcher
-        self.q_mission = rot.quat_normalize(np.asarray(q_mission_nav_body, dtype=float))
-        self.mode = Mode.HOLD
-        self.resume_mode = Mode.APPROACH
-        self.started = False
-        self.p_ref = np.asarray(p_start_nav, dtype=float).copy()
-        self.mode_since_s = 0.0
-        self.stall_since_s: float | None = None
-        self.retries = 0
+        self.GP = guidance_row(params)
+        self.G = np.zeros(nb.G_N)
+        self.G[nb.G_MODE] = nb.M_HOLD
+        self.G[nb.G_RESUME] = nb.M_APPROACH
+        self.G[nb.G_PREF : nb.G_PREF + 3] = np.asarray(p_start_nav, dtype=float)
+        self.G[nb.G_STALL] = np.nan
+        self.G[nb.G_QMIS : nb.G_QMIS + 4] = rot.quat_normalize(np.asarray(q_mission_nav_body, dtype=float))
+        self.EV = np.zeros((nb.EV_MAX, nb.EV_N))
+        self.EV_n = np.zeros(1, dtype=np.int64)
+        self.REF = np.zeros(nb.REF_N)
         self.history: list[dict] = []
 
-    # ---- helpers --------------------------------------------------------------------------------
-    def _switch(self, t_s: float, new: Mode, r: float, reason: str, out: list[dict]) -> None:
-        ev = {"t_s": t_s, "from": self.mode.value, "to": new.value, "range_m": r, "reason": reason}
-        self.history.append(ev)
-        out.append(ev)
-        self.mode = new
-        self.mode_since_s = t_s
-        self.stall_since_s = None
+    # ---- the state, by name ---------------------------------------------------------------------------
+    @property
+    def mode(self) -> Mode:
+        return MODES[int(self.G[nb.G_MODE])]
 
-    def _carrot(
-        self, nav: NavInput, goal: np.ndarray, speed: float, dt: float, decel: float = 0.0
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Move the reference toward ``goal`` at ``speed``; wait while it leads the vehicle too far.
-        Returns the reference velocity and acceleration.
+    @property
+    def resume_mode(self) -> Mode:
+        """The mode a HOLD resumes."""
+        return MODES[int(self.G[nb.G_RESUME])]
 
-        With ``decel > 0`` the reference brakes into the goal: its speed is ``min(speed, sqrt(2 decel
-        d))`` at distance ``d`` (the constant-deceleration stopping profile, ``v^2 = 2 a d``), and while that
-        bound is the active one the braking ``-decel`` along the path is the feed-forward acceleration."""
-        zero = np.zeros(3)
-        delta = goal - self.p_ref
-        dist = float(_norm(delta))
-        lead = float(_norm(self.p_ref - nav.p_nav))
-        if dist < 1e-9 or lead > self.p.max_lead_m:
-            return zero, zero
-        braking = decel > 0.0 and 2.0 * decel * dist < speed * speed
-        if braking:
-            speed = math.sqrt(2.0 * decel * dist)
-        step = min(dist, speed * dt)
-        u = delta / dist
-        v = u * (step / dt)
-        self.p_ref = self.p_ref + v * dt
-        return v, (-decel * u if braking and step < dist else zero)
+    @property
+    def started(self) -> bool:
+        """The initial estimate has converged once (the chaser began to move)."""
+        return bool(self.G[nb.G_STARTED])
 
-    def _arc_goal(self, p_t: np.ndarray, n_nav: np.ndarray, goal: np.ndarray, speed: float, dt: float):
-        """Next goal on the way to ``goal`` that keeps outside the keep-out sphere: straight when the
-        segment clears the sphere, else along the great circle through the reference toward the normal."""
-        clear = self.p.keepout_radius_m + self.p.keepout_margin_m
-        a, b = self.p_ref - p_t, goal - p_t
-        seg = b - a
-        s = np.clip(-(a @ seg) / max(seg @ seg, 1e-12), 0.0, 1.0)
-        if _norm(a + s * seg) >= clear:
-            return goal
-        radius = max(_norm(a), clear)
-        u = a / _norm(a)
-        axis = np.cross(u, n_nav)
-        if _norm(axis) < 1e-9:  # exactly opposite the face: any perpendicular axis will do
-            axis = np.cross(u, np.eye(3)[np.argmin(np.abs(u))])
-        axis /= _norm(axis)
-        ang = min(np.arccos(np.clip(u @ n_nav, -1.0, 1.0)), self.p.arc_lookahead_rad)
-        return p_t + radius * rot.quat_rotate(rot.rotvec_exp(axis * ang), u)
+    @property
+    def p_ref(self) -> np.ndarray:
+        """The reference position (the carrot) [m], frame nav."""
+        return self.G[nb.G_PREF : nb.G_PREF + 3].copy()
+
+    @property
+    def mode_since_s(self) -> float:
+        return float(self.G[nb.G_SINCE])
+
+    @property
+    def stall_since_s(self) -> float | None:
+        v = float(self.G[nb.G_STALL])
+        return None if math.isnan(v) else v
+
+    @property
+    def retries(self) -> int:
+        return int(self.G[nb.G_RETRIES])
+
+    @property
+    def q_mission(self) -> np.ndarray:
+        return self.G[nb.G_QMIS : nb.G_QMIS + 4].copy()
+
+    # ---- events ------------------------------------------------------------------------------------
+    def drain_events(self) -> list[dict]:
+        """The switches made since the last call, as event records (``t_s``, ``from``, ``to``,
+        ``range_m``, ``reason``), also appended to :attr:`history`."""
+        out = []
+        for i in range(int(self.EV_n[0])):
+            row = self.EV[i]
+            r = float(row[nb.E_R])
+            out.append({
+                "t_s": float(row[nb.E_T]), "from": MODES[int(row[nb.E_FROM])].value,
+                "to": MODES[int(row[nb.E_TO])].value, "range_m": r,
+                "reason": reason_text(self.p, int(row[nb.E_REASON]), r, float(row[nb.E_X])),
+            })  # fmt: skip
+        self.EV_n[0] = 0
+        self.history.extend(out)
+        return out
 
     # ---- one evaluation -------------------------------------------------------------------------
     def step(self, nav: NavInput, dt: float) -> Reference:
-        p = self.p
-        events: list[dict] = []
-        t = nav.t_s
-        p_t = np.asarray(nav.p_target_nav, dtype=float)
-        n_nav, p_docked, q_dock = docking_geometry(p, p_t, nav.q_nav_target)
-        r = float(_norm(nav.p_nav - p_t))
-        qe = rot.quat_mul(rot.quat_conj(q_dock), nav.q_nav_body)
-        qe_norm = float(_norm(qe[:3]))
-        nis = nav.mahalanobis_d * nav.mahalanobis_d  # mean NIS of the health window
-        unhealthy = (
-            nav.sigma_pos_max_m > p.hold_sigma_pos_m
-            or nav.rejection_fraction > p.hold_rejection_fraction
-            or nis > p.hold_nis_mean
-        )
-        healthy = (
-            nav.sigma_pos_max_m < p.resume_sigma_pos_m
-            and nav.rejection_fraction <= p.hold_rejection_fraction
-            and nis <= p.hold_nis_mean
-        )
-        decision = None
-
-        # --- health supervision (HOLD / ABORT) ---
-        if self.mode is Mode.HOLD:
-            if healthy:
-                reason = "initial estimate converged" if not self.started else "estimate healthy again"
-                reason += f" (sigma_pos={nav.sigma_pos_max_m:.3f} m)"
-                self.started = True
-                self.p_ref = nav.p_nav.copy()
-                self._switch(t, self.resume_mode, r, reason, events)
-            elif self.started and t - self.mode_since_s > p.abort_after_hold_s:
-                self._switch(t, Mode.ABORT, r, f"HOLD longer than {p.abort_after_hold_s:.0f} s", events)
-        elif self.mode in (Mode.APPROACH, Mode.REORIENT, Mode.ALIGN) and unhealthy:
-            self.resume_mode = self.mode
-            if nav.sigma_pos_max_m > p.hold_sigma_pos_m:
-                why = f"sigma_pos={nav.sigma_pos_max_m:.3f} m > {p.hold_sigma_pos_m} m"
-            elif nav.rejection_fraction > p.hold_rejection_fraction:
-                why = f"{nav.rejection_fraction:.0%} of recent ranges rejected"
-            else:
-                why = f"mean NIS of recent ranges {nis:.1f} > {p.hold_nis_mean}"
-            self.p_ref = nav.p_nav.copy()
-            self._switch(t, Mode.HOLD, r, "estimate not trustworthy: " + why, events)
-        elif self.mode is Mode.DOCK and unhealthy:
-            self._switch(t, Mode.ABORT, r, "estimate not trustworthy inside the keep-out sphere", events)
-
-        # --- switching radii (Algorithm 1 or fixed) ---
-        if self.mode in (Mode.APPROACH, Mode.REORIENT):
-            decision = self.switcher.evaluate(t, r, nav.mahalanobis_d, qe_norm, nav.sigma_pos_max_m)
-        r1, r2 = self.switcher.r1_m, self.switcher.r2_m
-        corridor = in_corridor(p, nav.p_nav, p_t, n_nav)
-
-        if self.mode is Mode.APPROACH and r <= r2:
-            self._switch(t, Mode.REORIENT, r, f"r={r:.3f} m <= r2={r2:.3f} m", events)
-        if self.mode is Mode.REORIENT:
-            if corridor and nav.vision and r <= p.align_distance_m + p.align_tolerance_m:
-                self._switch(
-                    t, Mode.DOCK, r,
-                    f"ALIGN skipped: already in the docking corridor with vision (sigma_pos="
-                    f"{nav.sigma_pos_max_m * 1000:.1f} mm)", events,
-                )  # fmt: skip
-            elif r <= r1:
-                self._switch(t, Mode.ALIGN, r, f"r={r:.3f} m <= r1={r1:.3f} m", events)
-            elif self.stall_since_s is not None and t - self.stall_since_s > p.stall_timeout_s:
-                self._switch(
-                    t, Mode.ALIGN, r,
-                    f"held at the keep-out boundary {p.stall_timeout_s:.0f} s above r1={r1:.3f} m", events,
-                )  # fmt: skip
-        if self.mode is Mode.ALIGN:
-            p_align = p_t + p.align_distance_m * n_nav
-            att_err = 2.0 * np.arcsin(min(qe_norm, 1.0))
-            if (
-                _norm(nav.p_nav - p_align) <= p.align_tolerance_m
-                and att_err <= p.align_attitude_tolerance_rad
-                and _norm(nav.v_nav) <= p.align_speed_tolerance_m_s
-            ):
-                if nav.vision or not p.dock_requires_vision:
-                    self._switch(t, Mode.DOCK, r, "at the alignment point", events)
-                elif self.stall_since_s is None:
-                    self.stall_since_s = t  # at the point without vision: wait for it
-            if (
-                self.mode is Mode.ALIGN
-                and self.stall_since_s is not None
-                and t - self.stall_since_s > p.abort_after_hold_s
-            ):
-                why = f"no vision at the alignment point for {p.abort_after_hold_s:.0f} s"
-                self._switch(t, Mode.ABORT, r, why, events)
-        if self.mode is Mode.DOCK:
-            c = contact_state(p, nav.p_nav, nav.v_nav, nav.q_nav_body, p_t, nav.q_nav_target)
-            if c["gap_m"] <= p.contact_distance_m:
-                self._switch(t, Mode.DOCKED, r, f"estimated port gap {c['gap_m'] * 1000:.1f} mm", events)
-        if self.mode is Mode.ABORT and self.retries < p.max_retries and healthy:
-            retreat = _norm(self.p_ref - p_t) >= p.keepout_radius_m + p.abort_retreat_m - 1e-3
-            if retreat and t - self.mode_since_s > p.retry_after_s:
-                self.retries += 1
-                self.p_ref = nav.p_nav.copy()
-                self._switch(t, Mode.APPROACH, r, f"retry {self.retries} after abort", events)
-
-        # --- reference for the mode ---
-        v_ref = np.zeros(3)
-        a_ref = np.zeros(3)
-        q_ref = q_dock
-        clear = p.keepout_radius_m + p.keepout_margin_m
-        if self.mode in (Mode.APPROACH, Mode.REORIENT):
-            u = (self.p_ref - p_t) / max(_norm(self.p_ref - p_t), 1e-9)
-            stop = clear
-            goal = p_t + u * stop
-            v_ref, a_ref = self._carrot(nav, goal, p.approach_speed_m_s, dt, p.stop_decel_m_s2)
-            if self.mode is Mode.APPROACH:
-                q_ref = self.q_mission
-            if self.mode is Mode.REORIENT and _norm(self.p_ref - goal) < 1e-6:
-                self.stall_since_s = t if self.stall_since_s is None else self.stall_since_s
-        elif self.mode is Mode.ALIGN:
-            p_align = p_t + p.align_distance_m * n_nav
-            v_ref, a_ref = self._carrot(
-                nav, self._arc_goal(p_t, n_nav, p_align, p.align_speed_m_s, dt), p.align_speed_m_s, dt
-            )
-        elif self.mode is Mode.DOCK:
-            v_ref, a_ref = self._carrot(nav, p_docked - p.dock_overshoot_m * n_nav, p.dock_speed_m_s, dt)
-        elif self.mode is Mode.ABORT:
-            u = (nav.p_nav - p_t) / max(r, 1e-9)
-            goal = p_t + u * (p.keepout_radius_m + p.abort_retreat_m)
-            v_ref, a_ref = self._carrot(nav, goal, p.abort_speed_m_s, dt)
-            q_ref = nav.q_nav_body
-        elif self.mode is Mode.HOLD and (not self.started or self.resume_mode is Mode.APPROACH):
-            q_ref = self.q_mission  # holding before the start or during APPROACH: the mission attitude
-        elif self.mode is Mode.DOCKED:
-            self.p_ref = nav.p_nav.copy()
-        return Reference(
-            mode=self.mode, p_nav=self.p_ref.copy(), v_nav=v_ref, a_nav=a_ref, q_nav_body=q_ref,
-            range_m=r, events=events, decision=decision,
+        f64 = np.float64
+        sw = self.switcher
+        before = int(sw.staged_n[0])
+        nb.chaser_step(
+            self.G, self.GP, sw.SW, np.asarray(nav.p_nav, f64), np.asarray(nav.v_nav, f64),
+            np.asarray(nav.q_nav_body, f64), float(nav.sigma_pos_max_m), float(nav.mahalanobis_d),
+            float(nav.rejection_fraction), bool(nav.vision), np.asarray(nav.p_target_nav, f64),
+            np.asarray(nav.q_nav_target, f64), float(nav.t_s), float(dt), self.REF, self.EV, self.EV_n,
+            sw.staged, sw.staged_n,
         )  # fmt: skip
+        decision = sw.drain() if int(sw.staged_n[0]) > before else None
+        return reference_of(self.REF, self.drain_events(), decision)
+
+
+def reference_of(REF: np.ndarray, events: list[dict], decision=None) -> Reference:
+    """The :class:`Reference` of a compiled reference row (``R_*``)."""
+    return Reference(
+        mode=MODES[int(REF[nb.R_MODE])], p_nav=REF[nb.R_P : nb.R_P + 3].copy(),
+        v_nav=REF[nb.R_V : nb.R_V + 3].copy(), a_nav=REF[nb.R_A : nb.R_A + 3].copy(),
+        q_nav_body=REF[nb.R_Q : nb.R_Q + 4].copy(), range_m=float(REF[nb.R_RANGE]), events=events,
+        decision=decision,
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -594,12 +551,31 @@ class StationKeeping:
 
     def __init__(self, p_nav, q_nav_body, params: StationParams | None = None) -> None:
         self.params = params or StationParams()
-        self.p_ref = np.asarray(p_nav, dtype=float).copy()
-        self.q_ref = rot.quat_normalize(np.asarray(q_nav_body, dtype=float))
+        self.SP = station_row(self.params)
+        self.ST = np.zeros(nb.ST_N)
+        self.ST[nb.ST_PREF : nb.ST_PREF + 3] = np.asarray(p_nav, dtype=float)
+        self.ST[nb.ST_QREF : nb.ST_QREF + 4] = rot.quat_normalize(np.asarray(q_nav_body, dtype=float))
+        self.REF = np.zeros(nb.REF_N)
         self.mode = Mode.STATION
         self.history: list[dict] = []
-        self.translate = False
-        self.rotate = False
+
+    @property
+    def p_ref(self) -> np.ndarray:
+        return self.ST[nb.ST_PREF : nb.ST_PREF + 3].copy()
+
+    @property
+    def q_ref(self) -> np.ndarray:
+        return self.ST[nb.ST_QREF : nb.ST_QREF + 4].copy()
+
+    @property
+    def translate(self) -> bool:
+        """Translation control acts this step."""
+        return bool(self.ST[nb.ST_TRANSLATE])
+
+    @property
+    def rotate(self) -> bool:
+        """Attitude control acts this step."""
+        return bool(self.ST[nb.ST_ROTATE])
 
     def offset_significant(self, offset_m: float, sigma_pos_max_m: float) -> bool:
         """Whether an estimated offset ``offset_m`` [m] from the station rejects "at the station" given the
@@ -607,19 +583,18 @@ class StationKeeping:
         return offset_m > self.params.significance_sigmas * sigma_pos_max_m
 
     def step(self, nav: NavInput, dt: float) -> Reference:
-        p = self.params
-        r = float(_norm(nav.p_nav - self.p_ref))
-        att = float(_norm(rot.attitude_error(self.q_ref, nav.q_nav_body)))
-        if nav.sigma_pos_max_m > p.converged_sigma_m:
-            self.translate = self.rotate = False
-        else:
-            speed = float(_norm(nav.v_nav))
-            if self.translate:
-                self.translate = not (r < p.settle_m and speed < p.settle_speed_m_s)
-            else:
-                self.translate = r > p.deadband_m and self.offset_significant(r, nav.sigma_pos_max_m)
-            if self.rotate:
-                self.rotate = bool(att > np.radians(p.settle_deg))
-            else:
-                self.rotate = bool(att > np.radians(p.deadband_deg))
-        return Reference(Mode.STATION, self.p_ref.copy(), np.zeros(3), np.zeros(3), self.q_ref, r)
+        """One evaluation (the compiled :func:`swarm.core._guidance_nb.station_step`)."""
+        f64 = np.float64
+        nb.station_step(
+            self.ST, self.SP, np.asarray(nav.p_nav, f64), np.asarray(nav.v_nav, f64),
+            np.asarray(nav.q_nav_body, f64), float(nav.sigma_pos_max_m), self.REF,
+        )  # fmt: skip
+        return reference_of(self.REF, [])
+
+
+def station_row(p: StationParams) -> np.ndarray:
+    """The parameters of :class:`StationParams` as the compiled station keeping reads them (``SP_*``)."""
+    return np.array([
+        p.deadband_m, p.settle_m, p.settle_speed_m_s, np.radians(p.deadband_deg), np.radians(p.settle_deg),
+        p.converged_sigma_m, p.significance_sigmas,
+    ], dtype=np.float64)  # fmt: skip

@@ -54,29 +54,10 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
+from numba import njit
 
+from swarm.core.decision_keys import DECISION_KEYS as DECISION_KEYS  # re-exported: the keys of its records
 from swarm.errors import ConfigError
-
-DECISION_KEYS: tuple[str, ...] = (
-    "t_s",
-    "r_m",
-    "d",
-    "qe_vec_norm",
-    "sigma_pos_max_m",
-    "sigma_uwb_m",
-    "r_t_m",
-    "r_d_m",
-    "A11",
-    "A22",
-    "A23",
-    "A32",
-    "A33",
-    "pi1",
-    "pi2",
-    "r1_m",
-    "r2_m",
-)
-"""Keys of one ``"decisions"`` record, DESIGN.md section 8, in that order."""
 
 _ROW_SUM_TOL = 1e-9  # row sums / entries of a transition matrix may be off by rounding, not more
 
@@ -394,6 +375,77 @@ class Decision:
         return {k: getattr(self, k) for k in keys}  # the fields are plain values: no deep copy needed
 
 
+# ------------------------------------------------------------------------------- Algorithm 1, compiled
+
+# switcher state SW (float64): the policy, the current radii and Algorithm 1's parameters
+SW_POLICY, SW_R1, SW_R2, SW_RT, SW_A11_THR, SW_PI2_THR, SW_SIGMA_UWB, SW_RD = range(8)
+SW_N = 8
+POLICY_FIXED = 0.0
+POLICY_MDP = 1.0
+
+# one pass, a row of D_N floats (None as NaN)
+(D_T, D_R, D_D, D_QE, D_SIGMA, D_A11, D_A22, D_A23, D_A32, D_A33, D_PI1, D_PI2, D_R1, D_R2, D_BRANCH,
+ D_SWITCHED) = range(16)  # fmt: skip
+D_N = 16
+BRANCH_A11 = 0.0
+BRANCH_A22 = 1.0
+SWITCHED_NONE, SWITCHED_R2, SWITCHED_R1 = 0.0, 1.0, 2.0
+
+
+@njit(cache=True)
+def mdp_pass(SW, t_s, r, d, qe_vec_norm, sigma_pos_max_m, row):
+    """One pass of Algorithm 1's loop body on the switcher state ``SW`` (module docstring), recorded in
+    ``row`` (:data:`D_N`,); returns False (nothing recorded, nothing changed) for the fixed policy or when
+    the ``while`` condition ``r <= r_t and r > r1`` is false. The arithmetic of
+    :func:`approach_probability`, :func:`reorient_align_probabilities` and :func:`stationary_2state`."""
+    if SW[SW_POLICY] != POLICY_MDP:
+        return False
+    if not (r <= SW[SW_RT] and r > SW[SW_R1]):
+        return False
+    for i in range(D_N):
+        row[i] = np.nan
+    row[D_T] = t_s
+    row[D_R] = r
+    row[D_D] = d
+    row[D_QE] = qe_vec_norm
+    row[D_SIGMA] = sigma_pos_max_m
+    row[D_SWITCHED] = SWITCHED_NONE
+    r2 = SW[SW_R2]
+    if r > r2:
+        row[D_BRANCH] = BRANCH_A11
+        if qe_vec_norm == 0.0:
+            a11 = 1.0
+        else:
+            a11 = (r / SW[SW_RT]) * (1.0 / (1.0 + d)) * (1.0 / qe_vec_norm)
+            a11 = min(max(a11, 0.0), 1.0)
+        row[D_A11] = a11
+        if a11 <= SW[SW_A11_THR]:
+            SW[SW_R2] = r
+            row[D_SWITCHED] = SWITCHED_R2
+    else:
+        row[D_BRANCH] = BRANCH_A22
+        a22 = min(max((r / r2) * (1.0 / (1.0 + d)), 0.0), 1.0)
+        span = r2 - SW[SW_RD]
+        frac = (r2 - r) / span if span > 0.0 else 1.0
+        a32 = min(max((sigma_pos_max_m / SW[SW_SIGMA_UWB]) * frac, 0.0), 1.0)
+        a23 = 1.0 - a22
+        row[D_A22] = a22
+        row[D_A23] = a23
+        row[D_A32] = a32
+        row[D_A33] = 1.0 - a32
+        s = a23 + a32  # stationary_2state(a23, a32): (pi1, pi2) = (a32, a23) / (a23 + a32)
+        if s != 0.0:
+            pi2 = a23 / s
+            row[D_PI1] = a32 / s
+            row[D_PI2] = pi2
+            if pi2 <= SW[SW_PI2_THR]:
+                SW[SW_R1] = r
+                row[D_SWITCHED] = SWITCHED_R1
+    row[D_R1] = SW[SW_R1]
+    row[D_R2] = SW[SW_R2]
+    return True
+
+
 # ---------------------------------------------------------------------------------------------- switchers
 
 
@@ -424,34 +476,91 @@ def _check_inputs(**kwargs: float) -> None:
             raise ValueError(f"{name} must be non-negative, got {v!r}")
 
 
+DECISION_STAGING = 64
+"""Rows of a switcher's staging buffer :attr:`MdpSwitcher.staged`: compiled code appends passes there and
+the switcher turns them into :class:`Decision` records when asked (a runner drains a full buffer)."""
+
+
+def _opt(x: float) -> float | None:
+    return None if math.isnan(x) else float(x)
+
+
 class MdpSwitcher:
-    """Paper Algorithm 1: picks ``r2`` and ``r1`` from transition probabilities, one pass per call."""
+    """Paper Algorithm 1: picks ``r2`` and ``r1`` from transition probabilities, one pass per call.
+
+    Its state is the array :attr:`SW` (layout ``SW_*``) that the compiled guidance updates
+    (:func:`mdp_pass`); the passes made in compiled code wait in :attr:`staged` (``staged_n[0]`` rows) until
+    :attr:`decisions` turns them into records."""
 
     def __init__(self, params: MdpParams | None = None) -> None:
-        self.params = MdpParams() if params is None else params
-        self._r1 = float(self.params.r1_init_m)
-        self._r2 = float(self.params.r2_init_m)
+        self.params = p = MdpParams() if params is None else params
+        self.SW = np.array(
+            [POLICY_MDP, p.r1_init_m, p.r2_init_m, p.r_t_m, p.a11_threshold, p.pi2_threshold, p.sigma_uwb_m,
+             p.r_d_m], dtype=np.float64,
+        )  # fmt: skip
+        self.staged = np.zeros((DECISION_STAGING, D_N))
+        self.staged_n = np.zeros(1, dtype=np.int64)
         self._decisions: list[Decision] = []
 
     @property
     def r1_m(self) -> float:
         """Current REORIENT -> ALIGN radius [m]."""
-        return self._r1
+        return float(self.SW[SW_R1])
 
     @property
     def r2_m(self) -> float:
         """Current APPROACH -> REORIENT radius [m]."""
-        return self._r2
+        return float(self.SW[SW_R2])
 
     @property
     def decisions(self) -> list[Decision]:
         """Every pass so far, oldest first (a copy)."""
+        self.drain()
         return list(self._decisions)
+
+    def drain(self) -> Decision | None:
+        """Turn the staged passes into records; returns the last one (None when none was staged)."""
+        n = int(self.staged_n[0])
+        last = None
+        for i in range(n):
+            last = self.record(self.staged[i])
+            self._decisions.append(last)
+        self.staged_n[0] = 0
+        return last
+
+    def record(self, row: np.ndarray) -> Decision:
+        """The :class:`Decision` of one pass's row (layout ``D_*``), with its reason in words."""
+        p = self.params
+        r = float(row[D_R])
+        switched = {SWITCHED_R2: "r2", SWITCHED_R1: "r1"}.get(float(row[D_SWITCHED]))
+        a11, pi2 = _opt(row[D_A11]), _opt(row[D_PI2])
+        if row[D_BRANCH] == BRANCH_A11:
+            branch = "A11"
+            if switched == "r2":
+                reason = f"A11={a11:.4g} <= {p.a11_threshold:g}: reorient at r={r:.4g} m"
+            else:
+                reason = f"A11={a11:.4g} > {p.a11_threshold:g}: keep approaching"
+        else:
+            branch = "A22"
+            if pi2 is None:
+                reason = "A23 + A32 = 0: no unique stationary distribution, keep reorienting"
+            elif switched == "r1":
+                reason = f"pi2={pi2:.4g} <= {p.pi2_threshold:g}: align at r={r:.4g} m"
+            else:
+                reason = f"pi2={pi2:.4g} > {p.pi2_threshold:g}: keep reorienting"
+        return Decision(
+            t_s=float(row[D_T]), r_m=r, d=float(row[D_D]), qe_vec_norm=float(row[D_QE]),
+            sigma_pos_max_m=float(row[D_SIGMA]), sigma_uwb_m=float(p.sigma_uwb_m), r_t_m=float(p.r_t_m),
+            r_d_m=float(p.r_d_m), A11=a11, A22=_opt(row[D_A22]), A23=_opt(row[D_A23]), A32=_opt(row[D_A32]),
+            A33=_opt(row[D_A33]), pi1=_opt(row[D_PI1]), pi2=pi2, r1_m=float(row[D_R1]), r2_m=float(row[D_R2]),
+            branch=branch, switched=switched, reason=reason,
+        )  # fmt: skip
 
     def evaluate(
         self, t_s: float, r_m: float, d: float, qe_vec_norm: float, sigma_pos_max_m: float
     ) -> Decision | None:
-        """One pass of Algorithm 1's loop body, or ``None`` when its ``while`` condition is false.
+        """One pass of Algorithm 1's loop body, or ``None`` when its ``while`` condition is false
+        (:func:`mdp_pass`, the compiled pass the guidance makes).
 
         Args:
             t_s: time of the decision [s], only recorded.
@@ -467,59 +576,12 @@ class MdpSwitcher:
             ValueError: an input is not finite, or (except ``t_s``) negative.
         """
         _check_inputs(t_s=t_s, r_m=r_m, d=d, qe_vec_norm=qe_vec_norm, sigma_pos_max_m=sigma_pos_max_m)
-        p = self.params
-        r = float(r_m)
-        if not (r <= p.r_t_m and r > self._r1):
+        self.drain()
+        row = np.empty(D_N)
+        if not mdp_pass(self.SW, float(t_s), float(r_m), float(d), float(qe_vec_norm), float(sigma_pos_max_m),
+                        row):  # fmt: skip
             return None
-        a11 = a22 = a23 = a32 = a33 = pi1 = pi2 = None
-        switched: str | None = None
-        if r > self._r2:
-            branch = "A11"
-            a11 = approach_probability(r, float(d), float(qe_vec_norm), p.r_t_m)
-            if a11 <= p.a11_threshold:
-                self._r2 = r
-                switched = "r2"
-                reason = f"A11={a11:.4g} <= {p.a11_threshold:g}: reorient at r={r:.4g} m"
-            else:
-                reason = f"A11={a11:.4g} > {p.a11_threshold:g}: keep approaching"
-        else:
-            branch = "A22"
-            a22, a23, a32, a33 = reorient_align_probabilities(
-                r, self._r2, float(d), float(sigma_pos_max_m), p.sigma_uwb_m, p.r_d_m
-            )
-            pi = stationary_2state(a23, a32)
-            if pi is None:
-                reason = "A23 + A32 = 0: no unique stationary distribution, keep reorienting"
-            else:
-                pi1, pi2 = pi
-                if pi2 <= p.pi2_threshold:
-                    self._r1 = r
-                    switched = "r1"
-                    reason = f"pi2={pi2:.4g} <= {p.pi2_threshold:g}: align at r={r:.4g} m"
-                else:
-                    reason = f"pi2={pi2:.4g} > {p.pi2_threshold:g}: keep reorienting"
-        dec = Decision(
-            t_s=float(t_s),
-            r_m=r,
-            d=float(d),
-            qe_vec_norm=float(qe_vec_norm),
-            sigma_pos_max_m=float(sigma_pos_max_m),
-            sigma_uwb_m=float(p.sigma_uwb_m),
-            r_t_m=float(p.r_t_m),
-            r_d_m=float(p.r_d_m),
-            A11=a11,
-            A22=a22,
-            A23=a23,
-            A32=a32,
-            A33=a33,
-            pi1=pi1,
-            pi2=pi2,
-            r1_m=self._r1,
-            r2_m=self._r2,
-            branch=branch,
-            switched=switched,
-            reason=reason,
-        )
+        dec = self.record(row)
         self._decisions.append(dec)
         return dec
 
@@ -528,7 +590,10 @@ class FixedSwitcher:
     """Constant radii (paper section V-C); same interface as :class:`MdpSwitcher`, never decides."""
 
     def __init__(self, params: FixedParams | None = None) -> None:
-        self.params = FixedParams() if params is None else params
+        self.params = p = FixedParams() if params is None else params
+        self.SW = np.array([POLICY_FIXED, p.r1_m, p.r2_m, 0.0, 0.0, 0.0, 1.0, 0.0], dtype=np.float64)
+        self.staged = np.zeros((1, D_N))
+        self.staged_n = np.zeros(1, dtype=np.int64)
 
     @property
     def r1_m(self) -> float:
@@ -544,6 +609,10 @@ class FixedSwitcher:
     def decisions(self) -> list[Decision]:
         """Always empty: the fixed policy makes no decisions."""
         return []
+
+    def drain(self) -> None:
+        """Nothing is ever staged."""
+        return None
 
     def evaluate(
         self, t_s: float, r_m: float, d: float, qe_vec_norm: float, sigma_pos_max_m: float

@@ -39,9 +39,10 @@ positively for every valid parameter set; :func:`spans_positively` checks any ``
 corner nozzle breaks it; losing a centre nozzle does not (the canted corners also push along ``-n``),
 the centre nozzles are there for efficient translation along the face axis.
 
-Allocation: :func:`allocate` solves ``min |B f - w|`` for ``f >= 0`` with ``scipy.optimize.nnls``
-(Lawson & Hanson 1974, *Solving Least Squares Problems*, ch. 23) and then scales the whole thrust vector
-down uniformly if any nozzle exceeds its limit.
+Allocation: :func:`allocate` solves ``min |B f - w|`` for ``f >= 0`` with :func:`nnls_nb`, a compiled
+(numba) implementation of algorithm NNLS of Lawson & Hanson 1974, *Solving Least Squares Problems*, ch. 23,
+and then scales the whole thrust vector down uniformly if any nozzle exceeds its limit.
+:func:`allocate_nb` does the same inside ``numba.njit`` code (a closed loop compiled as a whole).
 """
 
 from __future__ import annotations
@@ -49,9 +50,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linprog, nnls
+from scipy.optimize import linprog
 
 from swarm.errors import ConfigError
 
@@ -60,7 +62,10 @@ __all__ = [
     "Allocation",
     "ThrusterParams",
     "allocate",
+    "allocate_nb",
     "allocation_matrix",
+    "nnls_nb",
+    "nnls_workspace",
     "nozzle_geometry",
     "spans_positively",
     "total_impulse",
@@ -201,33 +206,347 @@ def spans_positively(B: ArrayLike, tol: float = 1e-9) -> bool:
     return bool(res.status == 0 and -res.fun > tol)
 
 
+# ------------------------------------------------------------------------------ compiled NNLS (numba)
+
+_EPS = float(np.finfo(np.float64).eps)
+_TOL_FACTOR = 10.0
+"""The tolerances of :func:`nnls_nb` are ``_TOL_FACTOR * max(m, n) * eps`` times the problem's scale."""
+
+
+@numba.njit(cache=True)
+def nnls_workspace(m: int, n: int) -> tuple[FloatArray, NDArray[np.int64]]:
+    """Scratch arrays ``(work, iwork)`` for :func:`nnls_nb` on an ``(m, n)`` problem (allocated here, once;
+    reuse them for every call). With ``k = min(m, n)``: ``work`` float64 ``(m k + 2 k + 2 m + n,)``,
+    ``iwork`` int64 ``(1 + n + k,)``. Compiled; also callable from Python."""
+    k = min(m, n)
+    return np.empty(m * k + 2 * k + 2 * m + n), np.empty(1 + n + k, dtype=np.int64)
+
+
+@numba.njit(cache=True)
+def _apply_reflector(qr, m, q, tau, y, off):
+    """``y[off + q : off + m] <- H_q y[...]``: the Householder reflector ``H_q = I - tau u u^T`` stored in
+    column ``q`` of ``qr`` (``u = [1, qr[q m + q + 1 : q m + m]]``, acting on rows ``q..m-1``)."""
+    if tau == 0.0:
+        return
+    base = q * m
+    s = y[off + q]
+    for i in range(q + 1, m):
+        s += qr[base + i] * y[off + i]
+    s *= tau
+    y[off + q] -= s
+    for i in range(q + 1, m):
+        y[off + i] -= s * qr[base + i]
+
+
+@numba.njit(cache=True)
+def _load_column(A, j, work, p, m, o_tau):
+    """Column ``j`` of ``A`` into column ``p`` of the QR storage (``work[:m k]``) with the reflectors
+    ``H_0..H_{p-1}`` applied (their ``tau`` at ``work[o_tau:]``); returns ``(|A[:, j]|, |rows p..m-1|)``:
+    the column's norm and the norm of its part orthogonal to the first ``p`` passive columns."""
+    base = p * m
+    cn2 = 0.0
+    for i in range(m):
+        a = A[i, j]
+        work[base + i] = a
+        cn2 += a * a
+    for q in range(p):
+        _apply_reflector(work, m, q, work[o_tau + q], work, base)
+    pn2 = 0.0
+    for i in range(p, m):
+        pn2 += work[base + i] * work[base + i]
+    return math.sqrt(cn2), math.sqrt(pn2)
+
+
+@numba.njit(cache=True)
+def _make_reflector(qr, p, m, perp):
+    """Householder reflector zeroing rows ``p+1..m-1`` of column ``p`` of ``qr`` (LAPACK ``dlarfg``
+    convention, ``perp > 0`` the norm of rows ``p..m-1``): stores ``R[p, p] = beta = -sign(alpha) perp``
+    and ``u[1:]`` in place, returns ``tau`` (in [1, 2])."""
+    base = p * m
+    alpha = qr[base + p]
+    if perp == 0.0:
+        return 0.0  # a zero column: never passive (the independence test rejects it)
+    beta = -perp if alpha >= 0.0 else perp
+    scale = 1.0 / (alpha - beta)
+    for i in range(p + 1, m):
+        qr[base + i] *= scale
+    qr[base + p] = beta
+    return (beta - alpha) / beta
+
+
+@numba.njit(cache=True)
+def nnls_nb(A, b, x, work, iwork, maxiter=-1):
+    """``x = argmin |A x - b|_2`` subject to ``x >= 0``; returns ``|A x - b|_2``. Compiled (numba).
+
+    Algorithm NNLS of Lawson & Hanson, *Solving Least Squares Problems*, Prentice-Hall 1974 (SIAM 1995),
+    ch. 23 (the active-set method ``scipy.optimize.nnls`` also implements). Variables are either zero
+    (set Z) or passive (set P, free).
+
+    * Outer loop: the dual vector ``w = A^T (b - A x)`` (minus the gradient of ``|A x - b|^2 / 2``); if no
+      ``w_j`` with ``j`` in Z exceeds ``tol_w``, ``x`` satisfies the KKT conditions and is returned.
+      Otherwise the ``j`` with the largest ``w_j`` moves to P (ties within ``tol_w``: the lowest ``j``;
+      the cube's symmetry makes exact ties, which round-off would otherwise break either way), provided
+      its column is independent of the passive ones (its part orthogonal to them exceeds
+      ``tol |A[:, j]|``) and its value in the least-squares solution on P + {j} is positive (L&H's guard
+      against round-off); else it is skipped for this outer iteration and the next ``w_j`` is tried.
+    * Inner loop: ``z`` = the unconstrained least-squares solution on the columns of P (zero on Z). If
+      ``z > 0`` on P, ``x = z``, back to the outer loop. Otherwise step from ``x`` towards ``z`` as far as
+      feasibility allows (``alpha = min x_j / (x_j - z_j)`` over ``z_j <= 0``), move the variable that
+      hit zero (and any other that is ``<= 0``) back to Z, and solve again.
+
+    The passive least-squares problems are solved by Householder QR of the passive columns (``R`` and the
+    reflectors stored column by column in ``work``, with ``Q^T b``): a column entering P is appended in
+    ``O(m p)``; after a column leaves, the ``p <= min(m, n)`` passive columns are refactored from scratch
+    (``O(m p^2)``, simpler than L&H's Givens down-dates and as cheap at these sizes).
+
+    Tolerances, with ``tol = 10 max(m, n) eps`` (``eps`` = 2.2e-16), scale-invariant in ``A`` and ``b``:
+    the dual test is ``w_j > tol_w = tol |A| (|b| + |A| |x|_1)`` with ``|A|`` the largest column norm (a
+    bound on the round-off in ``A^T (b - A x)``; L&H and scipy test ``w_j > 0`` and rely on the two
+    guards alone), the independence test ``> tol |A[:, j]|`` (L&H: 100 ulp of the column's part in the
+    span of P). ``b = 0`` or ``A = 0`` give ``x = 0`` at once.
+
+    Iteration cap: each passive least-squares solve counts as one iteration, at most ``maxiter``
+    (``< 0``: ``3 n``, scipy's default; the cube needs 6-10). On reaching it the current iterate is
+    returned, with its residual: feasible (``x >= 0``) and no worse than the earlier iterates (the
+    residual never increases), but not necessarily optimal; ``iwork[0]`` is then 1 (0 after
+    convergence). scipy raises ``RuntimeError`` instead.
+
+    Args:
+        A: ``(m, n)`` float64, C-contiguous, finite (not checked here).
+        b: ``(m,)`` float64, finite.
+        x: ``(n,)`` float64, overwritten with the solution.
+        work, iwork: scratch from :func:`nnls_workspace` (or longer); ``iwork[0]`` is the status on return.
+        maxiter: the iteration cap, ``< 0`` for ``3 n``.
+
+    Nothing is allocated. The solution is a basic one: at most ``min(m, n)`` positive entries, on
+    linearly independent columns. Cost on the cube's ``B`` (6, 10), random wrenches (AMD EPYC, ``timeit``
+    best of 15, mean over 1000 wrenches, 6.3 iterations on average): 1.6 us per call from compiled code,
+    2.4 us from Python; ``scipy.optimize.nnls`` 12.8 us.
+    """
+    m, n = A.shape
+    k = min(m, n)
+    if b.shape[0] != m or x.shape[0] != n:
+        raise ValueError("nnls_nb: b must have shape (m,) and x shape (n,) for A of shape (m, n)")
+    if work.shape[0] < m * k + 2 * k + 2 * m + n or iwork.shape[0] < 1 + n + k:
+        raise ValueError("nnls_nb: work or iwork too short (use nnls_workspace(m, n))")
+    if maxiter < 0:
+        maxiter = 3 * n
+    # work: qr (m, k) column-major | tau (k) | z (k) | qtb (m) | r (m) | w (n)
+    # iwork: status | in_p (n): 1 if passive | P (k): the passive indices, in QR order
+    o_tau = m * k
+    o_z = o_tau + k
+    o_qtb = o_z + k
+    o_r = o_qtb + m
+    o_w = o_r + m
+    o_p = 1 + n
+    tol = _TOL_FACTOR * max(m, n) * _EPS
+    a2 = 0.0
+    for j in range(n):
+        s = 0.0
+        for i in range(m):
+            s += A[i, j] * A[i, j]
+        a2 = max(a2, s)
+    anorm = math.sqrt(a2)
+    bnorm = 0.0
+    for i in range(m):
+        bnorm += b[i] * b[i]
+        work[o_qtb + i] = b[i]
+    bnorm = math.sqrt(bnorm)
+    for j in range(n):
+        x[j] = 0.0
+        iwork[1 + j] = 0
+    p = 0
+    iterations = 0
+    status = 0
+    while p < k:
+        # ---- outer loop: dual vector on Z, residual of the current (feasible) x
+        for i in range(m):
+            work[o_r + i] = b[i]
+        xnorm1 = 0.0
+        for q in range(p):  # x is zero off P
+            j = iwork[o_p + q]
+            xj = x[j]
+            xnorm1 += xj
+            for i in range(m):
+                work[o_r + i] -= A[i, j] * xj
+        tol_w = tol * anorm * (bnorm + anorm * xnorm1)
+        for j in range(n):
+            s = 0.0
+            if iwork[1 + j] == 0:
+                for i in range(m):
+                    s += A[i, j] * work[o_r + i]
+            work[o_w + j] = s
+        entered = False
+        while True:
+            jmax = -1
+            wmax = tol_w
+            for j in range(n):
+                if iwork[1 + j] == 0 and work[o_w + j] > wmax:
+                    wmax = work[o_w + j]
+                    jmax = j
+            if jmax < 0:
+                break
+            for j in range(jmax):  # ties (to round-off): the lowest index
+                if iwork[1 + j] == 0 and work[o_w + j] > tol_w and work[o_w + j] >= wmax - tol_w:
+                    jmax = j
+                    break
+            cnorm, perp = _load_column(A, jmax, work, p, m, o_tau)
+            if perp > tol * cnorm:
+                # trial reflector for the new column; R[p, p] = beta. ztest = new variable's value in
+                # the least-squares solution on P + {jmax} (the last unknown of the triangular system).
+                t = _make_reflector(work, p, m, perp)
+                base = p * m
+                s = work[o_qtb + p]
+                for i in range(p + 1, m):
+                    s += work[base + i] * work[o_qtb + i]
+                s *= t
+                ztest = (work[o_qtb + p] - s) / work[base + p]
+                if ztest > 0.0:
+                    work[o_tau + p] = t
+                    _apply_reflector(work, m, p, t, work, o_qtb)
+                    iwork[o_p + p] = jmax
+                    iwork[1 + jmax] = 1
+                    p += 1
+                    entered = True
+                    break
+            work[o_w + jmax] = 0.0  # rejected until the next outer iteration
+        if not entered:
+            break  # KKT conditions hold
+        # ---- inner loop: least squares on P, step back to stay feasible
+        while True:
+            iterations += 1
+            if iterations > maxiter:
+                status = 1
+                break
+            for q in range(p - 1, -1, -1):  # back substitution R z = (Q^T b)[:p]
+                s = work[o_qtb + q]
+                for c in range(q + 1, p):
+                    s -= work[c * m + q] * work[o_z + c]
+                work[o_z + q] = s / work[q * m + q]
+            alpha = 2.0
+            qmin = -1
+            for q in range(p):
+                zq = work[o_z + q]
+                if zq <= 0.0:
+                    xq = x[iwork[o_p + q]]
+                    t = xq / (xq - zq)
+                    if t < alpha:
+                        alpha = t
+                        qmin = q
+            if qmin < 0:
+                for q in range(p):
+                    x[iwork[o_p + q]] = work[o_z + q]
+                break
+            for q in range(p):
+                j = iwork[o_p + q]
+                x[j] += alpha * (work[o_z + q] - x[j])
+            x[iwork[o_p + qmin]] = 0.0
+            kept = 0
+            for q in range(p):
+                j = iwork[o_p + q]
+                if x[j] > 0.0:
+                    iwork[o_p + kept] = j
+                    kept += 1
+                else:
+                    x[j] = 0.0
+                    iwork[1 + j] = 0
+            p = kept
+            for i in range(m):
+                work[o_qtb + i] = b[i]
+            for q in range(p):  # refactor the remaining passive columns
+                _, perp = _load_column(A, iwork[o_p + q], work, q, m, o_tau)
+                work[o_tau + q] = _make_reflector(work, q, m, perp)
+                _apply_reflector(work, m, q, work[o_tau + q], work, o_qtb)
+        if status != 0:
+            break
+    iwork[0] = status
+    r2 = 0.0
+    for i in range(m):
+        s = b[i]
+        for j in range(n):
+            s -= A[i, j] * x[j]
+        r2 += s * s
+    return math.sqrt(r2)
+
+
+@numba.njit(cache=True)
+def allocate_nb(wrench, B, max_thrust_n, f_out, wrench_out):
+    """:func:`allocate` for compiled code: thrusts into ``f_out`` (n,), ``B @ f_out`` into ``wrench_out``
+    (6,); returns ``saturated``.
+
+    ``wrench`` (6,) ``[F_body (N), tau_body (N m)]``, ``B`` (6, n) from :func:`allocation_matrix`, both
+    float64, C-contiguous and finite (not checked here), ``max_thrust_n`` > 0 (``inf``: no saturation).
+    :func:`nnls_nb`, then if ``max(f) > max_thrust_n`` all thrusts scaled by ``max_thrust_n / max(f)``.
+    Allocates only the two small scratch arrays of :func:`nnls_workspace`.
+    """
+    m, n = B.shape
+    if m != 6 or wrench.shape[0] != 6 or wrench_out.shape[0] != 6 or f_out.shape[0] != n:
+        raise ValueError("allocate_nb: wrench and wrench_out must have shape (6,), B (6, n), f_out (n,)")
+    work, iwork = nnls_workspace(m, n)
+    nnls_nb(B, wrench, f_out, work, iwork)
+    peak = 0.0
+    for j in range(n):
+        peak = max(peak, f_out[j])
+    saturated = peak > max_thrust_n
+    if saturated:
+        scale = max_thrust_n / peak
+        for j in range(n):
+            f_out[j] *= scale
+    for i in range(m):
+        s = 0.0
+        for j in range(n):
+            s += B[i, j] * f_out[j]
+        wrench_out[i] = s
+    return saturated
+
+
+@numba.njit(cache=True)
+def _nnls_checked(A, b, x):
+    """:func:`nnls_nb` with its own scratch, one compiled call for :func:`allocate`; ``nan`` (and ``x``
+    untouched) when ``A`` is not finite."""
+    m, n = A.shape
+    for i in range(m):
+        for j in range(n):
+            if not math.isfinite(A[i, j]):
+                return math.nan
+    work, iwork = nnls_workspace(m, n)
+    return nnls_nb(A, b, x, work, iwork)
+
+
 def allocate(wrench_body: ArrayLike, B: ArrayLike, max_thrust_n: float) -> Allocation:
     """Non-negative nozzle thrusts (10,) [N] producing the wanted body wrench, within the limit.
 
     ``wrench_body`` (6,) is ``[F_body (N), tau_body (N m)]`` about the centre of mass, ``B`` (6, 10) from
     :func:`allocation_matrix`, ``max_thrust_n`` the per-nozzle limit [N] (``inf`` disables saturation).
 
-    1. ``f = argmin |B f - w|`` subject to ``f >= 0``: ``scipy.optimize.nnls`` (Lawson & Hanson 1974,
-       active-set NNLS). For a positively spanning ``B`` the fit is exact. The solution is a basic one
-       (at most 6 nozzles on), neither minimum-impulse nor minimum-peak.
+    1. ``f = argmin |B f - w|`` subject to ``f >= 0``: :func:`nnls_nb` (Lawson & Hanson 1974, active-set
+       NNLS, compiled; it gives the same thrusts as ``scipy.optimize.nnls``, which this used before, to
+       round-off). For a positively spanning ``B`` the fit is exact. The solution is a basic one (at
+       most 6 nozzles on), neither minimum-impulse nor minimum-peak.
     2. If ``max(f) > max_thrust_n``, ``f <- f * max_thrust_n / max(f)``. One common factor keeps the
        achieved wrench parallel to the request (same direction of force and torque together, shorter),
        which keeps the attitude and translation loops from being steered off their axes by saturation.
 
-    Cost (scipy 1.17, AMD EPYC, ``timeit`` best of 7 on the default ``B``): the NNLS 6-12 us, a whole
-    call 13-23 us depending on load, i.e. under 0.25 % of one core per vehicle at 100 Hz.
+    :func:`allocate_nb` is the same for compiled callers (without the checks and the dataclass).
+
+    Cost (AMD EPYC, ``timeit`` on the default ``B``, random wrenches): the NNLS 1.6 us (scipy's was
+    13 us), a whole call 9-13 us depending on load, almost all of it the Python-side checks, array
+    handling and the dataclass; :func:`allocate_nb` from compiled code 1.7 us.
     """
     w = np.asarray(wrench_body, dtype=np.float64)
     if w.shape != (6,):
         raise ValueError(f"wrench_body must have shape (6,), got {w.shape}")
     if not np.isfinite(w).all():
         raise ValueError(f"wrench_body must be finite, got {w!r}")
-    B = np.asarray(B, dtype=np.float64)
+    B = np.ascontiguousarray(B, dtype=np.float64)
     if B.ndim != 2 or B.shape[0] != 6:
         raise ValueError(f"B must have shape (6, n), got {B.shape}")
     if not (max_thrust_n > 0):
         raise ValueError(f"max_thrust_n must be positive, got {max_thrust_n!r}")
-    f, residual = nnls(B, w)
+    f = np.empty(B.shape[1])
+    residual = _nnls_checked(B, np.ascontiguousarray(w), f)
+    if math.isnan(residual):
+        raise ValueError("B must be finite")
     peak = float(f.max()) if f.size else 0.0
     saturated = peak > max_thrust_n
     if saturated:

@@ -9,10 +9,17 @@ compiled world loop:
 * ``x`` (13,): the truth row ``[p_nav, v_nav, q_nav_body (x, y, z, w), w_body]``, the same for every kind;
 * ``s`` (``S_N``,): the kind's actuator state (a cubesat's held body wrench, a rover's wheel speeds);
 * ``u`` (``U_N``,): the held actuator command (nozzle thrusts [N], wheel speeds [rad/s]);
-* ``kp`` (``KP_N``,): the kind's truth parameters of that vehicle, dispersions applied.
+* ``kp`` (``KP_N``,): the kind's truth parameters of that vehicle, dispersions applied;
+* ``cp`` (``CP_N``,): its controller's parameters (nominal: the controller does not know the dispersions),
+  ``cs`` (``CS_N``,) the controller's state (integrals);
+* ``act`` (:data:`ACT_N`,): what a control step achieved, ``[known force (3) N, net force (3) N, net torque
+  (3) N m]`` in the body frame, NaN where the kind has no such quantity.
 
-The compiled ``swarm.kinds._dispatch.truth_step(code, x, s, u, kp, dt)`` advances one vehicle of any
-kind by one tick; each kind's own step has that signature.
+The compiled dispatch (:mod:`swarm.kinds._dispatch`) reaches every kind's steps by its ``code``:
+``truth_step(code, x, s, u, kp, dt)`` advances one vehicle by one tick, ``hold_step(code, u_cmd, s,
+u_held, kp)`` holds a new command, ``control_step(code, cs, cp, p, v, q, w, ref, translate, rotate, u,
+act)`` is one control step toward a guidance reference, ``idle_step`` and ``docked_step`` the commands
+with all actuators off and once docked.
 """
 
 from __future__ import annotations
@@ -68,6 +75,10 @@ class Mounts:
         return quat_rotate(np.asarray(self.q_body_cam, dtype=float), np.array([0.0, 0.0, 1.0]))
 
 
+ACT_FORCE_KNOWN, ACT_FORCE, ACT_TORQUE = 0, 3, 6
+ACT_N = 9
+
+
 @dataclass
 class Actuation:
     """What a kind's controller decided at one control tick."""
@@ -97,47 +108,16 @@ class VehicleDispersion:
     """The kind's own draws (nozzle misalignment, wheel slip), named by the kind."""
 
 
-class TruthActuator(ABC):
+class TruthActuator:
     """The truth side of one vehicle's actuators: its compiled parameters and how a command is held."""
 
+    code: int
+    """The kind's code (:attr:`VehicleKind.code`)."""
     kp: np.ndarray
-    """(KP_N,) truth parameters for the kind's compiled step (dispersions applied)."""
+    """(KP_N,) truth parameters for the kind's compiled steps (dispersions applied)."""
     s0: np.ndarray
     """(S_N,) actuator state at tick 0."""
-
-    @abstractmethod
-    def hold(self, u: np.ndarray, s: np.ndarray, u_held: np.ndarray) -> bool:
-        """Hold command ``u`` from now on: write what the compiled step reads into the vehicle's rows
-        ``s`` and ``u_held`` (padded, in place). A command outside the actuators' range is brought into it
-        (a nozzle cannot pull, a wheel cannot exceed its speed); a non-finite entry counts as zero.
-        Returns False when nothing changed (then nothing was written)."""
-
-
-class Controller(ABC):
-    """A kind's controller and allocation: from the estimate and the guidance's reference to actuators."""
-
-    rate_hz: float
-
-    @abstractmethod
-    def step(self, p_nav, v_nav, q_nav_body, w_body, ref, translate: bool, rotate: bool) -> Actuation:
-        """One control step on the estimate (``p_nav`` [m], ``v_nav`` [m/s], ``q_nav_body``, ``w_body`` the
-        latest gyro rate [rad/s]) towards ``ref`` (:class:`swarm.core.guidance.Reference`). ``translate`` /
-        ``rotate`` False: no translation / attitude control this step (a station keeper in its dead
-        band)."""
-
-    @abstractmethod
-    def reset(self) -> None:
-        """Forget the integral state (the reference jumped: a new guidance mode)."""
-
-    @abstractmethod
-    def idle(self) -> Actuation:
-        """All actuators off."""
-
-    def docked(self, speed_m_s: float) -> Actuation:
-        """The command once the guidance believes the port is in contact (DOCKED): by default all off (a
-        free flyer drifts the last millimetres into the port); a vehicle held by friction keeps pushing
-        its port forward at ``speed_m_s`` until the contact stops it."""
-        return self.idle()
+    U_N: int
 
 
 class VehicleKind(ABC):
@@ -152,6 +132,8 @@ class VehicleKind(ABC):
     S_N: ClassVar[int]
     U_N: ClassVar[int]
     KP_N: ClassVar[int]
+    CP_N: ClassVar[int]
+    CS_N: ClassVar[int]
     planar: ClassVar[bool] = False
     """Moves in the nav x-y plane only (x, y, yaw): the filter then fuses a height and vertical-velocity
     constraint, and the initial dispersions act in the plane."""
@@ -222,5 +204,5 @@ class VehicleKind(ABC):
         return None
 
     @abstractmethod
-    def controller(self) -> Controller:
-        """A fresh controller for one vehicle."""
+    def control_row(self) -> np.ndarray:
+        """The controller's parameters (``CP_N``,) as the kind's compiled control step reads them."""

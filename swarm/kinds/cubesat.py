@@ -7,9 +7,11 @@ allocated to non-negative nozzle thrusts (:func:`swarm.core.thrusters.allocate`)
 input is the achieved thrust force, ``a_nav = R(q) f_body / m``. Effort: the total impulse
 ``sum_nozzles |f| dt`` [N s] (the paper's Table II).
 
-Arrays of the compiled truth step (:mod:`swarm.kinds.base`): ``s = [F_body (3) N, tau_body (3) N m,
-sum of thrusts N]`` (the held wrench, computed once per command), ``u`` the ten thrusts [N], ``kp = [mass
-kg, Ixx, Iyy, Izz kg m^2, largest RK4 sub-step s]``.
+Arrays of the compiled steps (:mod:`swarm.kinds.base`): ``s = [F_body (3) N, tau_body (3) N m, sum of
+thrusts N]`` (the held wrench, computed once per command by :func:`cubesat_hold`), ``u`` the ten thrusts
+[N], ``kp = [mass kg, Ixx, Iyy, Izz kg m^2, largest RK4 sub-step s, thrust limit N, the true wrench per
+newton of each nozzle B (6 x 10, row-major)]``; the controller's ``cp`` (``CP_*``) and its state ``cs``,
+the translation integral (3,) [m s].
 """
 
 from __future__ import annotations
@@ -20,20 +22,28 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from swarm.core import _guidance_nb as gnb
 from swarm.core import rotations as rot
+from swarm.core._rot_nb import qconj, qrotate
 from swarm.core.control import (
     AttitudeControlParams,
-    TranslationController,
     TranslationLqrParams,
-    attitude_torque,
+    _attitude_torque1,
+    _lqr_step1,
+    design_translation_lqr,
 )
 from swarm.core.dynamics import RigidBodyParams, propagate
-from swarm.core.thrusters import N_NOZZLES, ThrusterParams, allocate, allocation_matrix, nozzle_geometry
+from swarm.core.thrusters import N_NOZZLES, ThrusterParams, allocate_nb, allocation_matrix, nozzle_geometry
 from swarm.errors import ConfigError
-from swarm.kinds.base import Actuation, Controller, Mounts, TruthActuator, VehicleDispersion, VehicleKind
+from swarm.kinds.base import ACT_N, Mounts, TruthActuator, VehicleDispersion, VehicleKind
 
-KP_MASS, KP_IXX, KP_IZZ, KP_HMAX = 0, 1, 3, 4
+KP_MASS, KP_IXX, KP_IZZ, KP_HMAX, KP_UMAX, KP_B = 0, 1, 3, 4, 5, 6
+KP_N = KP_B + 6 * N_NOZZLES
 S_FORCE, S_TORQUE, S_THRUST_SUM = 0, 3, 6
+(CP_MASS, CP_KP, CP_KV, CP_KI, CP_DT, CP_ILIM, CP_FMAX, CP_INERTIA, CP_ATT_KP, CP_ATT_KD, CP_TMAX, CP_UMAX,
+ CP_B) = (0, 1, 2, 3, 4, 5, 6, 7, 10, 11, 12, 13, 14)  # fmt: skip
+CP_N = CP_B + 6 * N_NOZZLES
+CS_N = 3
 
 
 @dataclass(frozen=True)
@@ -80,68 +90,117 @@ def cubesat_truth_step(x, s, u, kp, dt):
     return s[S_THRUST_SUM] * dt
 
 
+@numba.njit(cache=True)
+def cubesat_hold(u_cmd, s, u_held, kp):
+    """Hold the nozzle thrusts ``u_cmd`` (10,) [N]: each clipped to ``[0, limit]`` (a nozzle cannot pull), a
+    non-finite one off; ``s`` gets the true wrench ``B f`` and the sum of thrusts. Returns False when all
+    were off and stay off (nothing written)."""
+    any_on = False
+    for i in range(N_NOZZLES):
+        if u_cmd[i] != 0.0:
+            any_on = True
+    if s[S_THRUST_SUM] == 0.0 and not any_on:
+        return False
+    umax = kp[KP_UMAX]
+    total = 0.0
+    for i in range(N_NOZZLES):
+        f = u_cmd[i]
+        f = 0.0 if math.isnan(f) else min(max(f, 0.0), umax)
+        u_held[i] = f
+        total += f
+    for r in range(6):
+        acc = 0.0
+        for i in range(N_NOZZLES):
+            acc += kp[KP_B + r * N_NOZZLES + i] * u_held[i]
+        s[S_FORCE + r] = acc
+    s[S_THRUST_SUM] = total
+    return True
+
+
 class CubesatTruth(TruthActuator):
     """One cube's true nozzles: their (possibly misaligned) directions and the thrust limit."""
 
     def __init__(self, p: CubesatParams, disp: VehicleDispersion) -> None:
         d = p.dynamics
-        self.kp = np.array([d.mass_kg, *d.inertia_diag_kgm2, d.integration_step_s])
+        self.kp = np.zeros(KP_N)
+        self.kp[: KP_HMAX + 1] = [d.mass_kg, *d.inertia_diag_kgm2, d.integration_step_s]
         self.kp[KP_MASS] *= disp.mass_factor
         self.kp[KP_IXX : KP_IZZ + 1] *= disp.inertia_factor
+        self.kp[KP_UMAX] = p.thrusters.max_thrust_n
         self.s0 = np.zeros(CubesatKind.S_N)
-        self.max_thrust = p.thrusters.max_thrust_n
         rotvec = disp.kind.get("thruster_rotvec_rad")
         if rotvec is None:
-            self.B = allocation_matrix(p.thrusters)
+            B = allocation_matrix(p.thrusters)
         else:
             r, dirs = nozzle_geometry(p.thrusters)
             d_true = rot.quat_rotate(rot.rotvec_exp(rotvec), dirs)
-            self.B = np.vstack([d_true.T, np.cross(r, d_true).T])
+            B = np.vstack([d_true.T, np.cross(r, d_true).T])
+        self.kp[KP_B:] = B.ravel()
 
-    def hold(self, u, s, u_held) -> bool:
-        f = np.asarray(u, dtype=float)
-        if f.shape != (N_NOZZLES,):
-            raise ValueError(f"a cubesat command is {N_NOZZLES} nozzle thrusts, got shape {f.shape}")
-        if s[S_THRUST_SUM] == 0.0 and not f.any():
-            return False  # still all off: nothing to recompute
-        f = np.clip(f, 0.0, self.max_thrust)
-        f = np.where(np.isfinite(f), f, 0.0)
-        u_held[:N_NOZZLES] = f
-        s[S_FORCE : S_TORQUE + 3] = self.B @ f
-        s[S_THRUST_SUM] = float(np.sum(f))
-        return True
+    @property
+    def B(self) -> np.ndarray:
+        """The true wrench per newton of each nozzle (6, 10)."""
+        return self.kp[KP_B:].reshape(6, N_NOZZLES)
 
 
-class CubesatController(Controller):
-    """Translation LQR + quaternion-feedback attitude law + nozzle allocation (paper sec. IV-B)."""
+def cubesat_control_row(p: CubesatParams) -> np.ndarray:
+    """The controller's parameters (CP_N,): the LQR's (nominal mass, gains, period, integral limit or -1,
+    force bound), the attitude law's (nominal inertia, gains, torque bound), the thrust limit and the
+    nominal allocation matrix (the controller does not know the dispersions)."""
+    tc, ac = p.translation_control, p.attitude_control
+    k_p, k_v, k_i = design_translation_lqr(p.dynamics.mass_kg, tc).K_axis[0]
+    cp = np.zeros(CP_N)
+    cp[:CP_B] = [
+        p.dynamics.mass_kg, k_p, k_v, k_i, tc.dt_s, tc.integral_limit_m_s if tc.integral_enabled else -1.0,
+        tc.max_force_n, *p.dynamics.inertia_diag_kgm2, ac.kp_nm, ac.kd_nms, ac.max_torque_nm,
+        p.thrusters.max_thrust_n,
+    ]  # fmt: skip
+    cp[CP_B:] = allocation_matrix(p.thrusters).ravel()
+    return cp
 
-    def __init__(self, p: CubesatParams) -> None:
-        self.p = p
-        self.rate_hz = p.translation_control.rate_hz
-        self.translation = TranslationController(p.dynamics.mass_kg, p.translation_control)
-        self.inertia = np.asarray(p.dynamics.inertia_diag_kgm2, dtype=float)
-        self.B = allocation_matrix(p.thrusters)
-        self.max_thrust = p.thrusters.max_thrust_n
 
-    def step(self, p_nav, v_nav, q_nav_body, w_body, ref, translate: bool, rotate: bool) -> Actuation:
-        F_nav = self.translation.step(p_nav, v_nav, ref.p_nav, ref.v_nav, ref.a_nav)
-        tau = attitude_torque(q_nav_body, w_body, ref.q_nav_body, None, self.inertia, self.p.attitude_control)
-        if not translate:  # a station keeper inside its dead band: hold still on this axis set
-            F_nav = np.zeros(3)
-            self.translation.reset()
-        if not rotate:
-            tau = np.zeros(3)
-        F_body = rot.quat_rotate(rot.quat_conj(q_nav_body), F_nav)
-        alloc = allocate(np.concatenate([F_body, tau]), self.B, self.max_thrust)
-        w = alloc.wrench_achieved
-        return Actuation(alloc.thrusts_n, w[:3], w[:3], w[3:], bool(alloc.saturated))
+_ZERO3 = np.zeros(3)
 
-    def reset(self) -> None:
-        self.translation.reset()
 
-    def idle(self) -> Actuation:
-        z = np.zeros(3)
-        return Actuation(np.zeros(self.B.shape[1]), z, z.copy(), z.copy(), False)
+@numba.njit(cache=True)
+def cubesat_control(cs, cp, p, v, q, w, ref, translate, rotate, u, act):
+    """One control step (module docstring): the LQR force ``F_nav`` and the quaternion-feedback torque
+    toward the reference row ``ref`` (:mod:`swarm.core._guidance_nb`, ``R_*``), ``translate`` / ``rotate``
+    False: none (and the integral ``cs`` reset); the body wrench allocated to the nozzles (``u``). Writes
+    ``act`` = [known force = achieved force (3), achieved force (3), achieved torque (3)] and returns
+    whether the thrust limit scaled the command down."""
+    F = _lqr_step1(p, v, ref[gnb.R_P : gnb.R_P + 3], ref[gnb.R_V : gnb.R_V + 3],
+                   ref[gnb.R_A : gnb.R_A + 3], cs, cp[CP_MASS], cp[CP_KP], cp[CP_KV], cp[CP_KI], cp[CP_DT],
+                   cp[CP_ILIM], cp[CP_FMAX])  # fmt: skip
+    tau = _attitude_torque1(q, w, ref[gnb.R_Q : gnb.R_Q + 4], _ZERO3, cp[CP_INERTIA : CP_INERTIA + 3],
+                            cp[CP_ATT_KP], cp[CP_ATT_KD], cp[CP_TMAX])  # fmt: skip
+    if not translate:  # a station keeper inside its dead band: hold still on this axis set
+        for i in range(3):
+            F[i] = 0.0
+            cs[i] = 0.0
+    if not rotate:
+        for i in range(3):
+            tau[i] = 0.0
+    f_body = qrotate(qconj(q), F)
+    wrench = np.empty(6)
+    wrench[0:3] = f_body
+    wrench[3:6] = tau
+    achieved = np.empty(6)
+    B = cp[CP_B:].reshape((6, N_NOZZLES))
+    saturated = allocate_nb(wrench, B, cp[CP_UMAX], u[:N_NOZZLES], achieved)
+    act[0:3] = achieved[0:3]
+    act[3:6] = achieved[0:3]
+    act[6:9] = achieved[3:6]
+    return saturated
+
+
+@numba.njit(cache=True)
+def cubesat_idle(cp, u, act):
+    """All nozzles off."""
+    for i in range(N_NOZZLES):
+        u[i] = 0.0
+    for i in range(ACT_N):
+        act[i] = 0.0
 
 
 class CubesatKind(VehicleKind):
@@ -152,7 +211,9 @@ class CubesatKind(VehicleKind):
     Params = CubesatParams
     S_N = 7
     U_N = N_NOZZLES
-    KP_N = 5
+    KP_N = KP_N
+    CP_N = CP_N
+    CS_N = CS_N
     planar = False
     effort_key = "total_impulse_ns"
     effort_unit = "N s"
@@ -213,5 +274,8 @@ class CubesatKind(VehicleKind):
         rms = 0.0 if rv is None else float(np.sqrt(np.mean(np.sum(rv**2, axis=1))))
         return {"disp_thruster_rms_rad": rms}
 
-    def controller(self) -> CubesatController:
-        return CubesatController(self.p)
+    def control_row(self) -> np.ndarray:
+        return cubesat_control_row(self.p)
+
+
+CubesatTruth.code, CubesatTruth.U_N = CubesatKind.code, CubesatKind.U_N

@@ -11,8 +11,9 @@ for tick ``k``
 3. the referee judges contact and the keep-out sphere on the truth (:class:`swarm.step.referee.Referee`),
    then the world steps to tick ``k + 1``.
 
-Ticks that need no Python (no control, no camera frame, no time-series sample) run compiled, many at a
-time (:func:`swarm.step.tick.run_ticks`): the same compiled steps in the same order.
+Ticks that need no Python (everything but a camera frame that may see the target, a guidance mode switch
+and a contact) run compiled, many at a time (:func:`swarm.step.tick.run_ticks`): the same compiled steps
+in the same order.
 """
 
 from __future__ import annotations
@@ -22,16 +23,31 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from swarm.step.agent import AgentInputs, VehicleAgent
+from swarm.core.camera import POSE_N
+from swarm.core.guidance import MODES
+from swarm.core.mdp import D_N, DECISION_STAGING
+from swarm.step.agent import ROLE_CHASER, AgentInputs, VehicleAgent
 from swarm.step.initial import initial_estimate
 from swarm.step.outcome import chaser_summary, run_summary
 from swarm.step.radio import UwbNetwork
 from swarm.step.referee import Referee
 from swarm.step.tick import (
     CONTACT,
-    SENSORS_DONE,
+    EVENT,
+    S_COV,
+    S_MODE,
+    S_PEST,
+    S_PTRUE,
+    S_QEST,
+    S_QTRUE,
+    S_REL,
+    S_T,
+    SERIES_N,
+    STAGING_FULL,
     agent_arrays,
+    camera_possible,
     radio_arrays,
+    record_series,
     referee_arrays,
     run_ticks,
     world_arrays,
@@ -40,6 +56,9 @@ from swarm.step.world import World
 
 NO_VISION = object()
 """Marker for 'this tick's samples are in the world's arrays and no camera sees anything'."""
+
+SEGMENT_TICKS = 4096
+"""Longest run of compiled ticks per call (the noise drawn ahead of it is sized by it)."""
 
 
 def _has_vision(frames) -> bool:
@@ -59,11 +78,18 @@ class ChaserOutcome:
     keepout_violated: bool = False
     modes: list[dict] = field(default_factory=list)
     events: list[dict] = field(default_factory=list)
-    series: dict[str, list] = field(default_factory=dict)
 
 
 SERIES_KEYS = ("t_s", "p_true_nav", "p_est_nav", "q_true_nav_body", "q_est_nav_body", "cov_pos", "mode",
                "relative_nav")  # fmt: skip
+
+
+def _pad(rows: list[np.ndarray]) -> np.ndarray:
+    """Rows of different lengths (each kind's own) stacked, zero-padded to the longest."""
+    out = np.zeros((len(rows), max(max(len(r) for r in rows), 1)))
+    for i, r in enumerate(rows):
+        out[i, : len(r)] = r
+    return out
 
 
 class DockingSim:
@@ -91,16 +117,16 @@ class DockingSim:
             p0, v0, q0, cov0 = initial_estimate(sc, i, self.world.x[vid], self.seed)
             self.agents[vid] = VehicleAgent(sc, vid, p0, v0, q0, cov0, self.policy)
         self.referee = Referee(sc)
-        self.outcomes = {c: ChaserOutcome(series={k: [] for k in SERIES_KEYS}) for c in sc.chasers}
+        self.outcomes = {c: ChaserOutcome() for c in sc.chasers}
         self.done: set[str] = set()
-        self.control_periods = sorted({a.control_every for a in self.agents.values()})
         self._bind_storage()
 
     # ---- set-up ------------------------------------------------------------------------------------
     def _bind_storage(self) -> None:
-        """Stack every agent's filter and health arrays (views stay with the agents) so the compiled
-        loop sees all vehicles at once."""
+        """Stack every agent's filter, health and control arrays (views stay with the agents and their
+        guidance, switcher and controller objects) so the compiled loop sees all vehicles at once."""
         agents = list(self.agents.values())
+        n = len(agents)
         self.AX = np.ascontiguousarray(np.concatenate([a.est.X for a in agents]))
         self.AP = np.ascontiguousarray(np.concatenate([a.est.P for a in agents]))
         self.AC = np.ascontiguousarray(np.concatenate([a.est.counts for a in agents]))
@@ -113,33 +139,95 @@ class DockingSim:
         self.Wb = np.stack([a.w_body for a in agents])
         self.plane = np.stack([a.plane for a in agents])
         self.mass = np.array([a.mass_kg for a in agents])
+        # control: roles, periods, targets and every agent's guidance / switcher / controller arrays
+        ids = list(self.agents)
+        self.role = np.array([a.role_code for a in agents], dtype=np.int64)
+        self.every = np.array([a.control_every for a in agents], dtype=np.int64)
+        self.vdone = np.zeros(n, dtype=np.bool_)
+        self.tidx = np.array([ids.index(a.target_id) if a.target_id else -1 for a in agents], dtype=np.int64)
+        self.TGT = np.stack([a.TGT for a in agents])
+        self.G = np.stack([a.G for a in agents])
+        self.GP = np.stack([a.GP for a in agents])
+        self.SW = np.stack([a.SW for a in agents])
+        self.DEC = np.zeros((n, DECISION_STAGING, D_N))
+        self.DEC_n = np.zeros(n, dtype=np.int64)
+        self.EV = np.zeros((n, max(a.EV.shape[0] for a in agents), agents[0].EV.shape[1]))
+        self.EV_n = np.zeros(n, dtype=np.int64)
+        self.ST = np.stack([a.ST for a in agents])
+        self.SP = np.stack([a.SP for a in agents])
+        self.CS = _pad([a.CS for a in agents])
+        self.CP = _pad([a.CP for a in agents])
+        self.REF = np.stack([a.REF for a in agents])
+        self.UC = _pad([a.U for a in agents])
+        self.ACT = np.stack([a.ACT for a in agents])
+        self.SAT = np.zeros(n, dtype=np.bool_)
+        self.ctl = np.zeros(n, dtype=np.bool_)
         for b, a in enumerate(agents):
             a.est.X, a.est.P = self.AX[b : b + 1], self.AP[b : b + 1]
             a.est.counts, a.est.book = self.AC[b : b + 1], self.AB[b : b + 1]
             a.est._prm = self.PRMS[b]
             a.h_ok, a.h_d2, a.h_meta = self.Hok[b], self.Hd2[b], self.Hmeta[b]
             a.f_body, a.w_body, a.plane = self.Fb[b], self.Wb[b], self.plane[b]
-        self.t_agent = np.zeros(len(agents))
-        self.last_vision = np.zeros(len(agents))
-        self.dock_flag = np.zeros(len(agents), dtype=np.bool_)
+            a.TGT, a.G, a.GP, a.SW = self.TGT[b], self.G[b], self.GP[b], self.SW[b]
+            a.ST, a.SP, a.REF, a.ACT = self.ST[b], self.SP[b], self.REF[b], self.ACT[b]
+            a.CS = a.controller.cs = self.CS[b, : len(a.CS)]
+            a.CP = a.controller.cp = self.CP[b, : len(a.CP)]
+            a.U = self.UC[b, : len(a.U)]
+            a.DEC, a.DEC_n = self.DEC[b], self.DEC_n[b : b + 1]
+            a.EV, a.EV_n = self.EV[b], self.EV_n[b : b + 1]
+            if a.role_code == ROLE_CHASER:
+                a.guidance.G, a.guidance.GP, a.guidance.REF = a.G, a.GP, a.REF
+                a.guidance.EV, a.guidance.EV_n = a.EV, a.EV_n
+                a.switcher.SW, a.switcher.staged, a.switcher.staged_n = a.SW, a.DEC, a.DEC_n
+            else:
+                a.guidance.ST, a.guidance.SP, a.guidance.REF = a.ST, a.SP, a.REF
+        self.t_agent = np.zeros(n)
+        self.last_vision = np.zeros(n)
+        # the camera mounts the filters use (a "pose" frame is fused in the compiled loop)
+        self.MP = np.stack([a.est._cam_pos for a in agents])
+        self.MR = np.ascontiguousarray(np.stack([a.est._R_bc for a in agents]))
+        self.MQ = np.stack([a.est._q_bc for a in agents])
+        n_pairs = len(self.referee.chasers)
+        self._pose_only = self.world.pose_camera_only
+        self._V = (
+            np.array([self._pose_only]),
+            np.zeros((n_pairs, POSE_N)),
+            np.zeros(n_pairs, dtype=np.bool_),
+        )
         sc, first = self.sc, agents[0]
+        self._vision_every = sc.every(sc.camera.rate_hz)
+        self._series_every = sc.sim.series_every if self.record_series else 0
         self._cfg = (
             sc.dt_s, self.network.every, self.world.ahrs_every, sc.ahrs.enabled, first._ahrs_cov,
             first._gate_1d, first._gate_3d, first._sigma_range, sc.agent.vision_recent_s,
-            sc.agent.uwb_with_vision,
+            sc.agent.uwb_with_vision, sc.agent.latch_target_with_vision, float(sc.guidance.dock_speed_m_s),
+            self._series_every, self._vision_every, sc.agent.vision_target_cov, first._gate_6d,
         )  # fmt: skip
-        self._camera = True
-        self._cam_axis_body = {c: sc.kind(c).mounts.camera_axis_body for c in sc.chasers}
+        # camera_possible: the target within the camera's range plus a body's diagonal and 5 cm, within
+        # its field-of-view cone plus 5 deg (margins for the motion within a control period)
+        cam = sc.camera
+        axes = [sc.kind(c).mounts.camera_axis_body for c in self.referee.chasers]
+        self._cam = (
+            np.ones(1, dtype=np.bool_), np.array(axes, dtype=float).reshape(-1, 3),
+            float(cam.max_range_m + 4.0 * sc.guidance.half_size_m + 0.05),
+            float(np.cos(np.radians(min(cam.fov_half_angle_deg + 5.0, 180.0)))),
+        )  # fmt: skip
+        max_k = round(sc.sim.max_duration_s / sc.dt_s)
+        rows = max_k // self._series_every + 2 if self._series_every else 0
+        self.SER = np.zeros((len(self.referee.chasers), rows, SERIES_N))
+        self.SER_n = np.zeros(len(self.referee.chasers), dtype=np.int64)
 
-    def _is_control(self, k: int) -> bool:
-        return any(k % e == 0 for e in self.control_periods)
+    @property
+    def _camera(self) -> bool:
+        return bool(self._cam[0][0])
+
+    def _update_camera(self) -> None:
+        self._cam[0][0] = camera_possible(self.world.X, self.referee.pairs, *self._cam[1:])
 
     # ---- the run -----------------------------------------------------------------------------------
     def run(self) -> dict:
         sc = self.sc
         dt = sc.dt_s
-        vision_every = sc.every(sc.camera.rate_hz)
-        series_every = sc.sim.series_every if self.record_series else 0
         max_k = round(sc.sim.max_duration_s / dt)
         watched = {sc.vehicles[c].target for c in sc.chasers}
         frames = None  # tick k's sensor frames; NO_VISION: they are in the world's arrays, no camera frame
@@ -147,47 +235,21 @@ class DockingSim:
         k = 0
         while k <= max_k:
             t = k * dt
-            python_tick = (
-                not self.fast
-                or frames is None
-                or self._is_control(k)
-                or (series_every and k % series_every == 0)
-                or (frames is not NO_VISION and _has_vision(frames))
-            )
-            if not python_tick:
-                # compiled ticks up to the next one that needs Python (control, series, camera)
-                camera = self._camera  # decided at the last Python tick, margins cover one control period
-                k_end = k + 1
-                while k_end <= max_k and not (
-                    self._is_control(k_end)
-                    or (series_every and k_end % series_every == 0)
-                    or (camera and k_end % vision_every == 0)
-                ):
-                    k_end += 1
-                k_stop, code = self._fast(k, min(k_end, max_k + 1))
-                if code == CONTACT:  # tick k_stop's sensors are in; finish it here
-                    k = k_stop
-                    self._check_truth(k, k * dt)
-                    if len(self.done) == len(self.outcomes):
-                        break
-                    frames = self.world.step()
-                    k += 1
-                else:
-                    k = k_stop
-                    camera_tick = k % vision_every == 0 and self._camera
-                    frames = self.world.frames() if camera_tick else NO_VISION
+            if self.fast and frames is not None and (frames is NO_VISION or not _has_vision(frames)):
+                k_end = min(k + SEGMENT_TICKS, max_k + 1)
+                if (
+                    self._camera and not self._pose_only
+                ):  # no further than the next camera tick (it stops there)
+                    k_end = min(k_end, (k // self._vision_every + 1) * self._vision_every)
+                k, frames = self._fast(k, k_end)
+                if frames is None:  # the run is over
+                    break
                 continue
+            # one tick in Python: tick 0, a camera frame that sees the target, or the per-tick path
             snap = {vid: self.agents[vid].estimate() for vid in watched}  # estimates of tick k - 1
             targets = {cid: snap[sc.vehicles[cid].target] for cid in sc.chasers}
             commands = {}
-            if frames is NO_VISION or (self.fast and frames is not None and not _has_vision(frames)):
-                for cid, est in targets.items():
-                    self.agents[cid].set_target_estimate(est)
-                self._fast(k, k + 1, sensors_only=True)  # the same sensor steps, compiled
-                for vid, agent in self.agents.items():
-                    if k % agent.control_every == 0 and vid not in self.done:
-                        commands[vid] = agent.control(t, agent.control_dt)
-            elif frames is not None:
+            if frames is not None:
                 ranges = self.network.step(k, t, self.world.X, *self.world.radio_env(t))
                 for vid, agent in self.agents.items():
                     fr = frames[vid]
@@ -206,15 +268,10 @@ class DockingSim:
                     self.agents[cid].set_target_estimate(est)
                 for vid, agent in self.agents.items():
                     commands[vid] = agent.control(t, agent.control_dt)
-            for vid, cmd in commands.items():
-                if vid in self.outcomes:
-                    self._log_events(vid, cmd.events)
-            self.world.take_commands(k, {v: (c.u, self.agents[v].mode.value) for v, c in commands.items()})
-            self._check_truth(k, t)
-            if len(self.done) == len(self.outcomes):
+            if self._finish_tick(k, commands, series=True):
                 break
-            self._camera = self._camera_possible()
-            build = not self.fast or ((k + 1) % vision_every == 0 and self._camera)
+            self._update_camera()
+            build = not self.fast or ((k + 1) % self._vision_every == 0 and self._camera)
             frames = self.world.step(build_frames=build)
             if frames is None:
                 frames = NO_VISION
@@ -222,49 +279,71 @@ class DockingSim:
         wall = time.perf_counter() - wall0
         return self._summary(min(k, max_k) * dt, wall)
 
-    def _camera_possible(self) -> bool:
-        """Whether any chaser could see its target before the next control tick (then camera ticks need
-        Python): a necessary condition on the truth, with margins for the motion within a control
-        period: the target within the camera's range (plus a body's diagonal and 5 cm) and within its
-        field-of-view cone (plus 5 deg)."""
-        from swarm.core import rotations as rot
+    def _finish_tick(self, k: int, commands: dict, series: bool) -> bool:
+        """The rest of tick ``k`` after the agents' steps: the chasers' mode switches logged, the commands
+        held (and the modes handed to the fault schedule), the series sample (``series``) and the referee.
+        Returns True when every chaser is done."""
+        for vid, cmd in commands.items():
+            if vid in self.outcomes:
+                self._log_events(vid, cmd.events)
+        self.world.take_commands(k, {v: (c.u, self.agents[v].mode.value) for v, c in commands.items()})
+        if series:
+            self._record_series(k)
+        self._judge(k, k * self.sc.dt_s)
+        return len(self.done) == len(self.outcomes)
 
-        cam = self.sc.camera
-        reach = cam.max_range_m + 4.0 * self.sc.guidance.half_size_m + 0.05
-        cos_fov = np.cos(np.radians(min(cam.fov_half_angle_deg + 5.0, 180.0)))
-        X = self.world.X
-        for c, (ic, it) in enumerate(self.referee.pairs):
-            d = X[it, 0:3] - X[ic, 0:3]
-            dist2 = d.dot(d)
-            if dist2 > reach * reach:
-                continue
-            axis_nav = rot.quat_rotate(X[ic, 6:10], self._cam_axis_body[self.referee.chasers[c]])
-            if axis_nav.dot(d) >= cos_fov * np.sqrt(dist2):
-                return True
-        return False
-
-    def _fast(self, k0: int, k1: int, sensors_only: bool = False) -> tuple[int, int]:
-        """Run ticks ``k0 .. k1 - 1`` compiled (:func:`swarm.step.tick.run_ticks`)."""
+    def _fast(self, k0: int, k1: int):
+        """Ticks from ``k0`` compiled (:func:`swarm.step.tick.run_ticks`) until ``k1`` or until one needs
+        Python; finishes a tick the loop left half done. Returns the next tick and its frames (NO_VISION:
+        none built; None: the run is over)."""
         w, net, ref = self.world, self.network, self.referee
         w.reserve_noise(k1 - k0)
         net.reserve_noise((k1 - k0) // net.every + 1)
-        for b, a in enumerate(self.agents.values()):
+        agents = list(self.agents.values())
+        for b, a in enumerate(agents):
             self.last_vision[b] = a._last_vision_s
-            self.dock_flag[b] = a.docking_on_vision
+            self.t_agent[b] = a.t_s
         ref.set_modes({c: self.agents[c].mode for c in ref.chasers})
         ko_before = ref.ko_flag.copy()
-        k_stop, code = run_ticks(
+        k, code = run_ticks(
             k0, k1, self._cfg, world_arrays(w), radio_arrays(net), agent_arrays(self), referee_arrays(ref),
-            sensors_only,
+            self._cam, self._V, w.pose_cam, self.SER, self.SER_n,
         )  # fmt: skip
-        for b, a in enumerate(self.agents.values()):
+        for b, a in enumerate(agents):
             a.t_s = float(self.t_agent[b])
-        if code != SENSORS_DONE:
-            w.k = k_stop  # the world's state is that of tick k_stop
+            a._last_vision_s = float(self.last_vision[b])
         for c, cid in enumerate(ref.chasers):
             if ref.ko_flag[c] and not ko_before[c]:
                 self._keepout(cid, float(ref.ko_t[c]), float(ref.ko_r[c]))
-        return k_stop, code
+        dt = self.sc.dt_s
+        if code == STAGING_FULL:
+            w.k = k
+            for a in agents:
+                if a.switcher is not None:
+                    a.switcher.drain()
+            return k, NO_VISION
+        if code == EVENT:  # tick k's agents are done; the commands, the series and the referee are not
+            w.k = k
+            commands = {
+                vid: a.command_of(k * dt, bool(self.SAT[b]))
+                for b, (vid, a) in enumerate(self.agents.items())
+                if self.ctl[b]
+            }
+            if self._finish_tick(k, commands, series=True):
+                return k, None
+        elif code == CONTACT:  # only the referee's verdict and the world step are left
+            w.k = k
+            self._judge(k, k * dt)
+            if len(self.done) == len(self.outcomes):
+                return k, None
+        else:  # REACHED_END, CAMERA: the world's state is that of tick k
+            w.k = k
+            if k % self._vision_every == 0 and self._camera and not self._pose_only:
+                return k, w.frames()
+            return k, NO_VISION  # (pose cameras: the loop built tick k's frames)
+        build = (k + 1) % self._vision_every == 0 and self._camera
+        frames = w.step(build_frames=build)
+        return k + 1, (NO_VISION if frames is None else frames)
 
     def _keepout(self, cid: str, t: float, range_m: float) -> None:
         out = self.outcomes[cid]
@@ -282,22 +361,25 @@ class DockingSim:
                 {"mode": ev["to"], "t_s": ev["t_s"], "range_m": ev["range_m"], "reason": ev["reason"]}
             )
 
-    def _check_truth(self, k: int, t: float) -> None:
-        sc = self.sc
-        if self.record_series and k % sc.sim.series_every == 0:
-            for cid, out in self.outcomes.items():
-                if cid in self.done:
-                    continue
-                agent, x = self.agents[cid], self.world.x[cid]
-                s = out.series
-                s["t_s"].append(t)
-                s["p_true_nav"].append(x[0:3].tolist())
-                s["p_est_nav"].append(agent.est.p_nav[0].tolist())
-                s["q_true_nav_body"].append(x[6:10].tolist())
-                s["q_est_nav_body"].append(agent.est.q_nav_body[0].tolist())
-                s["cov_pos"].append(agent.est.P[0, :3, :3].tolist())
-                s["mode"].append(agent.mode.value)
-                s["relative_nav"].append(bool(agent.relative_nav))
+    def _record_series(self, k: int) -> None:
+        """The time-series sample of tick ``k`` of every chaser not done (compiled
+        :func:`swarm.step.tick.record_series`, as the compiled loop records it)."""
+        if not (self._series_every and k % self._series_every == 0):
+            return
+        t = k * self.sc.dt_s
+        for c, cid in enumerate(self.referee.chasers):
+            if cid in self.done:
+                continue
+            agent = self.agents[cid]
+            mode = float(MODES.index(agent.mode))
+            i = int(self.referee.pairs[c, 0])
+            row = self.SER[c, self.SER_n[c]]
+            record_series(
+                row, t, self.world.X[i], agent.est.X[0], agent.est.P[0], mode, bool(agent.relative_nav)
+            )
+            self.SER_n[c] += 1
+
+    def _judge(self, k: int, t: float) -> None:
         keepouts, contacts = self.referee.judge(
             self.world.X, t, {c: self.agents[c].mode for c in self.referee.chasers}
         )
@@ -310,9 +392,25 @@ class DockingSim:
             out.docking_time_s = t
             out.position_error_m = ct.position_error_m
             out.attitude_error_rad = ct.attitude_error_rad
-            self.world.attach(cid, sc.vehicles[cid].target)
+            self.world.attach(cid, self.sc.vehicles[cid].target)
             self.done.add(cid)
+            self.vdone[list(self.agents).index(cid)] = True
             self._log_events(cid, [ct.event(self.agents[cid].mode.value)])
+
+    def series(self, chaser: str) -> dict[str, list]:
+        """The chaser's time series (:data:`SERIES_KEYS`), one sample every ``sim.series_every`` ticks."""
+        c = self.referee.chasers.index(chaser)
+        rows = self.SER[c, : self.SER_n[c]]
+        return {
+            "t_s": rows[:, S_T].tolist(),
+            "p_true_nav": rows[:, S_PTRUE : S_PTRUE + 3].tolist(),
+            "p_est_nav": rows[:, S_PEST : S_PEST + 3].tolist(),
+            "q_true_nav_body": rows[:, S_QTRUE : S_QTRUE + 4].tolist(),
+            "q_est_nav_body": rows[:, S_QEST : S_QEST + 4].tolist(),
+            "cov_pos": rows[:, S_COV : S_COV + 9].reshape(-1, 3, 3).tolist(),
+            "mode": [MODES[int(m)].value for m in rows[:, S_MODE]],
+            "relative_nav": [bool(r) for r in rows[:, S_REL]],
+        }
 
     def _summary(self, t_end: float, wall: float) -> dict:
         sc = self.sc
@@ -337,7 +435,7 @@ class DockingSim:
             if self.policy == "mdp":
                 d["decisions"] = [dec.as_dict() for dec in sw.decisions]
             if self.record_series:
-                d["series"] = out.series
+                d["series"] = self.series(cid)
             if sc.faults.enabled:
                 f = self.world.faults
                 d["faults"] = {

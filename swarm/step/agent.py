@@ -22,12 +22,15 @@ import numpy as np
 from numba import njit
 
 from swarm.core import _ekf_nb as nb
+from swarm.core import _guidance_nb as gnb
 from swarm.core import rotations as rot
 from swarm.core._rot_nb import qrotate
-from swarm.core.camera import solve_pnp
+from swarm.core.camera import POSE_N, solve_pnp
 from swarm.core.estimator import PoseEstimator, UpdateStatus, chi2_gate
-from swarm.core.guidance import ChaserGuidance, Mode, NavInput, Reference, StationKeeping
-from swarm.core.mdp import make_switcher
+from swarm.core.guidance import ChaserGuidance, Mode, Reference, StationKeeping, reference_of
+from swarm.core.mdp import D_N, SW_N, make_switcher
+from swarm.kinds._dispatch import Controller, control_step, docked_step, idle_step
+from swarm.kinds.base import ACT_N
 
 
 @dataclass
@@ -101,7 +104,7 @@ class VehicleAgent:
         self.control_dt = self.control_every * sc.dt_s
         est_params = sc.estimator_for(vehicle_id)
         self.est = PoseEstimator.create(est_params, p0_nav, v0_nav, q0_nav_body, cov0)
-        self.controller = self.kind.controller()
+        self.controller = Controller(self.kind)
         self.camera = sc.camera_for(vehicle_id)
         self.anchors = np.asarray(sc.anchors_m, dtype=float)
         self.markers_target = sc.markers.markers(sc.guidance.docking_face)
@@ -113,7 +116,8 @@ class VehicleAgent:
             self.switcher = None
             q_nom = rot.euler_to_quat(np.radians(spec.euler_deg), sc.euler_seq)
             self.guidance = StationKeeping(spec.position_m, q_nom, sc.station)
-        self.target: TargetEstimate | None = None
+        self.TGT = np.zeros(TG_N)
+        """The target's estimate as the chaser uses it (``TG_*``; ``TG_HAS`` 0: none yet)."""
         self.w_body = np.zeros(3)  # latest gyro rate, for the rate damping of an attitude law
         self.f_body = np.zeros(3)  # the filter's known input: it predicts with R(q) f_body / m
         self.plane = np.zeros(3)  # [z0, sigma_z, sigma_vz] of a planar kind's constraint; sigma 0: none
@@ -123,6 +127,7 @@ class VehicleAgent:
         window = max(1, round(sc.agent.health_window_s * sc.uwb.rate_hz))
         self._gate_1d = chi2_gate(1, sc.estimator.gate_probability)
         self._gate_3d = chi2_gate(3, sc.estimator.gate_probability)
+        self._gate_6d = chi2_gate(6, sc.estimator.gate_probability)
         self._ahrs_cov = np.radians(sc.ahrs.sigma_deg) ** 2 * np.eye(3)
         self._sigma_range = float(sc.estimator.sigma_range_m)
         # health windows of the recent ranges (a ring: [count, next]); see ``agent_uwb``
@@ -133,6 +138,23 @@ class VehicleAgent:
         self.mode = self.guidance.mode
         self.last_command: Command | None = None
         self.t_s = 0.0
+        # the compiled control step's arrays (agent_control); a role's unused ones are placeholders
+        self.role_code = ROLE_CHASER if self.role == "chaser" else ROLE_TARGET
+        g = self.guidance
+        if isinstance(g, ChaserGuidance):
+            self.G, self.GP, self.EV, self.EV_n = g.G, g.GP, g.EV, g.EV_n
+            self.SW, self.DEC, self.DEC_n = self.switcher.SW, self.switcher.staged, self.switcher.staged_n
+            self.ST, self.SP = np.zeros(gnb.ST_N), np.zeros(gnb.SP_N)
+        else:
+            self.G, self.GP = np.zeros(gnb.G_N), np.zeros(gnb.GP_N)
+            self.EV, self.EV_n = np.zeros((1, gnb.EV_N)), np.zeros(1, dtype=np.int64)
+            self.SW, self.DEC, self.DEC_n = np.zeros(SW_N), np.zeros((1, D_N)), np.zeros(1, dtype=np.int64)
+            self.ST, self.SP = g.ST, g.SP
+        self.CS, self.CP = self.controller.cs, self.controller.cp
+        self.REF = np.zeros(gnb.REF_N)
+        self.U = np.zeros(max(self.kind.U_N, 1))
+        self.ACT = np.zeros(ACT_N)
+        self.dock_speed = float(sc.guidance.dock_speed_m_s)
 
     # ---- the one step ---------------------------------------------------------------------------
     def tick(self, inp: AgentInputs) -> Command | None:
@@ -180,7 +202,8 @@ class VehicleAgent:
 
     def on_vision(self, t_s: float, kind: str, data: np.ndarray) -> int:
         """Vision of the target's docking-face markers: ``kind`` "features" (6, 3) marker positions in the
-        camera frame [m] (the paper's model) or "pixels" (6, 2) for PnP on board."""
+        camera frame [m] (the paper's model), "pixels" (6, 2) for PnP on board, or "pose" (43,) an on-board
+        PnP's relative pose and covariance (:func:`agent_pose`)."""
         if self.target is None:
             return int(UpdateStatus.SKIPPED)
         tgt = self.target
@@ -188,6 +211,15 @@ class VehicleAgent:
         if kind == "features":
             markers_nav = tgt.p_nav + rot.quat_rotate(tgt.q_nav_body, self.markers_target)
             status = int(self.est.update_features(markers_nav, data, target_cov_nav=cov_t)[0])
+        elif kind == "pose":
+            frame = np.ascontiguousarray(data, dtype=np.float64).reshape(-1)
+            if frame.shape != (POSE_N,):
+                return int(UpdateStatus.REFUSED_INVALID)
+            e = self.est
+            status = agent_pose(
+                e.X[0], e.P[0], e.counts[0], e.book[0], e._prm, self.TGT, frame,
+                self.sc.agent.vision_target_cov, e._cam_pos, e._R_bc, e._q_bc, self._gate_6d,
+            )  # fmt: skip
         elif kind == "pixels":
             pnp = solve_pnp(np.asarray(data, dtype=float), self.markers_target, self.camera)
             if pnp is None:
@@ -219,12 +251,28 @@ class VehicleAgent:
             self.t_s, self._last_vision_s, self.sc.agent.vision_recent_s, self.docking_on_vision
         )
 
+    @property
+    def target(self) -> TargetEstimate | None:
+        """The target's estimate this chaser uses (None before the first)."""
+        T = self.TGT
+        if T[TG_HAS] == 0.0:
+            return None
+        return TargetEstimate(
+            float(T[TG_T]), T[TG_P : TG_P + 3].copy(), T[TG_Q : TG_Q + 4].copy(),
+            T[TG_COV : TG_COV + 9].reshape(3, 3).copy(),
+        )  # fmt: skip
+
     def set_target_estimate(self, est: TargetEstimate) -> None:
         """The target's latest published estimate; held fixed while vision is available when
         ``agent.latch_target_with_vision`` (see :class:`swarm.scenario.AgentParams`)."""
-        if self.sc.agent.latch_target_with_vision and self.relative_nav and self.target is not None:
+        if self.sc.agent.latch_target_with_vision and self.relative_nav and self.TGT[TG_HAS] != 0.0:
             return
-        self.target = est
+        T = self.TGT
+        T[TG_HAS] = 1.0
+        T[TG_T] = est.t_s
+        T[TG_P : TG_P + 3] = est.p_nav
+        T[TG_Q : TG_Q + 4] = est.q_nav_body
+        T[TG_COV : TG_COV + 9] = np.asarray(est.cov_pos, dtype=float).ravel()
 
     # ---- outputs ------------------------------------------------------------------------------------
     def estimate(self) -> TargetEstimate:
@@ -247,45 +295,86 @@ class VehicleAgent:
         return window_stats(self.h_ok, self.h_d2, self.h_meta)[1]
 
     def control(self, t_s: float, dt_s: float) -> Command:
-        """Guidance, switcher and the kind's controller on the current estimate; returns the command."""
+        """Guidance, switcher and the kind's controller on the current estimate (the compiled
+        :func:`agent_control`); returns the command."""
         est = self.est
-        p, v, q = est.p_nav[0].copy(), est.v_nav[0].copy(), est.q_nav_body[0].copy()
-        tgt = self.target
-        nav = NavInput(
-            t_s=t_s,
-            p_nav=p,
-            v_nav=v,
-            q_nav_body=q,
-            sigma_pos_max_m=self.sigma_pos_max_m,
-            # the target's station keeping reads neither: spare it the two window means
-            mahalanobis_d=self.mahalanobis_d if self.role == "chaser" else 0.0,
-            rejection_fraction=self.rejection_fraction if self.role == "chaser" else 0.0,
-            vision=self.vision_recent,
-            p_target_nav=tgt.p_nav if tgt is not None else p,
-            q_nav_target=tgt.q_nav_body if tgt is not None else q,
-        )
-        if self.role == "chaser" and tgt is None:  # nothing to fly to yet: hold still
-            ref = Reference(Mode.HOLD, p, np.zeros(3), np.zeros(3), q, 0.0)
-        else:
-            ref = self.guidance.step(nav, dt_s)
-        if ref.events:
-            self.controller.reset()
+        sw = self.switcher
+        staged = int(self.DEC_n[0])
+        saturated = agent_control(
+            self.role_code, self.kind.code, float(t_s), float(dt_s), est.X[0], est.P[0], self.h_ok,
+            self.h_d2, self.h_meta, float(self._last_vision_s), float(self.sc.agent.vision_recent_s),
+            self.w_body, self.f_body, self.TGT, self.G, self.GP, self.SW, self.DEC, self.DEC_n, self.EV,
+            self.EV_n, self.ST, self.SP, self.CS, self.CP, self.REF, self.U, self.ACT, self.dock_speed,
+        )  # fmt: skip
+        return self.command_of(t_s, saturated, sw is not None and int(self.DEC_n[0]) > staged)
+
+    def command_of(self, t_s: float, saturated: bool, decided: bool = False) -> Command:
+        """The :class:`Command` of the compiled step's outputs (``REF``, ``U``, ``ACT``): its mode switches
+        and Algorithm 1 pass (``decided``) put into records."""
+        events = self.guidance.drain_events() if self.role_code == ROLE_CHASER else []
+        decision = self.switcher.drain() if decided else None
+        ref = reference_of(self.REF, events, decision)
         self.mode = ref.mode
-        station = self.guidance if isinstance(self.guidance, StationKeeping) else None
-        idle = station is not None and not (station.translate or station.rotate)
-        if ref.mode is Mode.DOCKED:  # the kind's last act: drift in (a cube) or drive in (a rover)
-            act = self.controller.docked(self.sc.guidance.dock_speed_m_s)
-        elif idle:  # a target inside its dead band: actuators off
-            self.controller.reset()
-            act = self.controller.idle()
-        else:
-            translate = station is None or station.translate
-            rotate = station is None or station.rotate
-            act = self.controller.step(p, v, q, self.w_body, ref, translate, rotate)
-        self.f_body[:] = act.f_body_known_n
-        cmd = Command(t_s, act.u, act.force_body_n, act.torque_body_nm, act.saturated, ref, list(ref.events))
+        act = self.controller._actuation(self.U, self.ACT, saturated)
+        cmd = Command(
+            float(t_s), act.u, act.force_body_n, act.torque_body_nm, act.saturated, ref, list(events)
+        )
         self.last_command = cmd
         return cmd
+
+
+ROLE_CHASER = 0
+ROLE_TARGET = 1
+
+# the target's estimate as a chaser holds it (VehicleAgent.TGT)
+TG_HAS, TG_T, TG_P, TG_Q, TG_COV = 0, 1, 2, 5, 9
+TG_N = 18
+
+
+@njit(cache=True)
+def agent_control(role, code, t, dt, X, P, h_ok, h_d2, h_meta, last_vision, recent_s, w_body, f_body, TGT, G,
+                  GP, SW, DEC, DEC_n, EV, EV_n, ST, SP, CS, CP, REF, U, ACT, dock_speed):  # fmt: skip
+    """One control step of one agent at ``t`` [s] for a control period ``dt`` [s] (module docstring): the
+    navigation input from the filter (``X``, ``P``), the health window and the last accepted vision; the
+    chaser's guidance and Algorithm 1 (:func:`swarm.core._guidance_nb.chaser_step`, toward the target
+    estimate ``TGT``; HOLD where it is without one) or the target's station keeping
+    (:func:`~swarm.core._guidance_nb.station_step`); then its kind's controller
+    (:func:`swarm.kinds._dispatch.control_step`; all off for a station keeper in its dead band, the kind's
+    docked command once DOCKED), whose integral restarts on a mode switch. Writes the reference ``REF``,
+    the command ``U``, ``ACT`` and the filter's known force ``f_body``; returns whether an actuator limit
+    scaled the command down."""
+    p = X[0:3].copy()
+    v = X[3:6].copy()
+    q = X[6:10].copy()
+    lam = nb.max_eig_sym3(P[0, 0], P[0, 1], P[0, 2], P[1, 1], P[1, 2], P[2, 2])
+    sigma = np.sqrt(max(lam, 0.0))
+    ev0 = EV_n[0]
+    if role == ROLE_CHASER:
+        if TGT[TG_HAS] == 0.0:  # nothing to fly to yet: hold still
+            gnb.hold_reference(p, q, REF)
+        else:
+            d, rej = window_stats(h_ok, h_d2, h_meta)
+            vision = t - last_vision <= recent_s
+            gnb.chaser_step(G, GP, SW, p, v, q, sigma, d, rej, vision, TGT[TG_P : TG_P + 3],
+                            TGT[TG_Q : TG_Q + 4], t, dt, REF, EV, EV_n, DEC, DEC_n)  # fmt: skip
+    else:
+        gnb.station_step(ST, SP, p, v, q, sigma, REF)
+    if EV_n[0] > ev0:
+        CS[:] = 0.0
+    mode = int(REF[gnb.R_MODE])
+    translate = REF[gnb.R_TRANSLATE] != 0.0
+    rotate = REF[gnb.R_ROTATE] != 0.0
+    saturated = False
+    if mode == gnb.M_DOCKED:  # the kind's last act: drift in (a cube) or drive in (a rover)
+        docked_step(code, CP, dock_speed, U, ACT)
+    elif role == ROLE_TARGET and not (translate or rotate):  # inside its dead band: actuators off
+        CS[:] = 0.0
+        idle_step(code, CP, U, ACT)
+    else:
+        saturated = control_step(code, CS, CP, p, v, q, w_body, REF, translate, rotate, U, ACT)
+    for i in range(3):
+        f_body[i] = ACT[i]
+    return saturated
 
 
 _NO_Q = np.zeros(4)
@@ -351,3 +440,24 @@ def window_stats(h_ok, h_d2, h_meta):
         s_d2 += h_d2[i]
         n_ok += 1 if h_ok[i] else 0
     return np.sqrt(s_d2 / count), 1.0 - n_ok / count
+
+
+@njit(cache=True)
+def agent_pose(X, P, ST_I, ST_F, PRM, TGT, frame, use_target_cov, cam_pos, R_bc, q_bc, gate6):
+    """A ``"pose"`` camera frame (:func:`swarm.core.camera.pose_frame`: the target's pose in the camera frame
+    and its covariance) fused against the target estimate ``TGT`` (its position covariance counted when
+    ``use_target_cov``; :func:`swarm.core._ekf_nb.update_pose_one`). Returns the update status."""
+    cov_t = np.zeros((3, 3))
+    if use_target_cov:
+        for i in range(3):
+            for j in range(3):
+                cov_t[i, j] = TGT[TG_COV + 3 * i + j]
+    cov = np.empty((6, 6))
+    for i in range(6):
+        for j in range(6):
+            cov[i, j] = frame[7 + 6 * i + j]
+    p_t, q_t = TGT[TG_P : TG_P + 3].copy(), TGT[TG_Q : TG_Q + 4].copy()
+    t_cam, q_cam = frame[0:3].copy(), frame[3:7].copy()
+    return nb.update_pose_one(
+        X, P, ST_I, ST_F, PRM, p_t, q_t, t_cam, q_cam, cov, cov_t, cam_pos, R_bc, q_bc, gate6
+    )

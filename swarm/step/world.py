@@ -23,11 +23,20 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from swarm.core._rot_nb import qconj, qexp, qlog, qmul, qnormalize
-from swarm.core.camera import camera_pose_nav, feature_vectors, project_markers, visible
+from swarm.core._noise_nb import noise_key
+from swarm.core._rot_nb import qconj, qexp, qlog, qmul, qnormalize, qrotate
+from swarm.core.camera import (
+    POSE_N,
+    CameraModel,
+    camera_pose_nav,
+    feature_vectors,
+    pose_frame,
+    project_markers,
+    visible,
+)
 from swarm.core.faults import FaultSchedule
 from swarm.core.sensors import _gyro_kernel, gyro_init_bias
-from swarm.kinds._dispatch import truth_step
+from swarm.kinds._dispatch import hold, truth_step
 from swarm.kinds.dispersions import Dispersion, draw_dispersion
 from swarm.step.radio import radio_env
 from swarm.step.streams import STREAMS, stream  # noqa: F401 (re-exported)
@@ -144,9 +153,41 @@ class World:
         self.faults = FaultSchedule(sc.faults, self.dt, sc.chasers, sc.uwb.dropout_windows_s)
         self.drop_w = np.zeros((0, 2))
         self.nlos_w = np.zeros((0, 3))
+        self.cam_lost = np.zeros(1, dtype=np.int64)
+        self.pose_cam = self._pose_camera()
         self._refresh_windows()
-        self.camera_frames_lost = 0
+
+    def _pose_camera(self) -> tuple:
+        """The arrays of :func:`pose_camera` (the ``"pose"`` camera model, compiled): per chaser (in the
+        referee's order) its row and its target's, its camera mount and its noise key; the docking face's
+        markers, centre and normal; the camera's visibility vector and pixel noise; the camera-loss windows
+        ``(chaser, start, end)`` (refreshed with the fault schedule) and the count of frames they dropped."""
+        sc = self.sc
+        chasers = list(sc.chasers)
+        face = sc.guidance.docking_face
+        normal = np.zeros(3)
+        normal["xyz".index(face[1])] = 1.0 if face[0] == "+" else -1.0
+        cams = [self.cameras[c] for c in chasers]
+        return (
+            np.array([[self.index[c], self.index[sc.vehicles[c].target]] for c in chasers],
+                     dtype=np.int64).reshape(-1, 2),
+            np.array([c.pos_body for c in cams]).reshape(-1, 3),
+            np.array([c.q_body_cam_arr for c in cams]).reshape(-1, 4),
+            np.array([noise_key(self.seed, self.index[c], STREAM_CAMERA) for c in chasers], dtype=np.uint64),
+            np.ascontiguousarray(sc.markers.markers(face)), sc.markers.half_size_m * normal, normal,
+            np.array(sc.camera.visibility_vector), float(sc.camera.pixel_sigma_px), np.zeros((0, 3)),
+            self.cam_lost,
+        )  # fmt: skip
+
+    @property
+    def camera_frames_lost(self) -> int:
         """Camera frames with the target in view dropped by a camera-loss window (a fault's footprint)."""
+        return int(self.cam_lost[0])
+
+    @property
+    def pose_camera_only(self) -> bool:
+        """Every chaser's camera is the ``"pose"`` model: the compiled loop builds the camera frames."""
+        return all(self.cameras[c].model == CameraModel.POSE for c in self.sc.chasers)
 
     @property
     def effort_by_vehicle(self) -> dict[str, float]:
@@ -171,6 +212,10 @@ class World:
         """The radio windows as the arrays :func:`swarm.step.radio.radio_env` reads."""
         self.drop_w = np.array(self.faults.uwb_dropout, dtype=float).reshape(-1, 2)
         self.nlos_w = np.array(self.faults.nlos, dtype=float).reshape(-1, 3)
+        chasers = list(self.sc.chasers)
+        cam_w = [[c, w[0], w[1]] for c, cid in enumerate(chasers) for w in self.faults.camera.get(cid, ())]
+        pc = self.pose_cam
+        self.pose_cam = (*pc[:9], np.array(cam_w, dtype=float).reshape(-1, 3), pc[10])
 
     def radio_env(self, t_s: float) -> tuple[bool, float]:
         """The radio environment at ``t_s``: every reply lost (a dropout window), and the NLOS outlier
@@ -248,7 +293,7 @@ class World:
         snap.update(
             k=self.k, gi=int(self.gi[0]), ai=int(self.ai[0]), blocks=dict(self._blocks),
             rng={key: g.bit_generator.state for key, g in self.rng.items()},
-            faults=self.faults.state(), camera_frames_lost=self.camera_frames_lost,
+            faults=self.faults.state(), camera_frames_lost=int(self.cam_lost[0]),
         )  # fmt: skip
         return snap
 
@@ -282,17 +327,17 @@ class World:
                 raise ValueError(f"snapshot: random stream {key} does not end where it did")
         self.faults.restore(snap["faults"])
         self._refresh_windows()
-        self.camera_frames_lost = int(snap["camera_frames_lost"])
+        self.cam_lost[0] = int(snap["camera_frames_lost"])
 
     # ---- the step ------------------------------------------------------------------------------------
     def set_command(self, vehicle_id: str, u) -> None:
         """Actuator command ``u`` to hold from now on, in the vehicle kind's units; brought into the
-        actuators' range by the kind (:meth:`swarm.kinds.base.TruthActuator.hold`). Ignored once the
+        actuators' range by the kind (:func:`swarm.kinds._dispatch.hold`). Ignored once the
         vehicle is docked (:meth:`attach`)."""
         i = self.index[vehicle_id]
         if self.attached_arr[i]:
             return
-        self.truth_act[i].hold(u, self.S[i], self.U[i])
+        hold(self.truth_act[i], u, self.S[i], self.U[i])
 
     def command_size(self, vehicle_id: str) -> int:
         """Length of ``vehicle_id``'s actuator command (its kind's ``U_N``)."""
@@ -330,6 +375,12 @@ class World:
 
     def _vision(self, chaser: str, target: str, frame: SensorFrame) -> None:
         cam = self.cameras[chaser]
+        if cam.model == CameraModel.POSE:
+            out = np.empty(POSE_N)
+            c = self.sc.chasers.index(chaser)
+            if pose_camera(c, self.k, self.dt, self.X, *self.pose_cam, out):
+                frame.vision_kind, frame.vision = "pose", out
+            return
         xc, xt = self.x[chaser], self.x[target]
         p_cam, q_cam = camera_pose_nav(xc[0:3], xc[6:10], cam)
         if not visible(p_cam, q_cam, xt[0:3], xt[6:10], self.sc.guidance.docking_face, cam, self.sc.markers):
@@ -344,7 +395,7 @@ class World:
         if any(w[0] <= frame.t_s < w[1] for w in self.faults.camera.get(chaser, ())):
             # camera lost (a fault): the frame was drawn, so the camera stream stays aligned, and dropped
             frame.vision_kind = frame.vision = None
-            self.camera_frames_lost += 1
+            self.cam_lost[0] += 1
 
     def attach(self, chaser: str, target: str) -> None:
         """Docked: the chaser rides with the target from now on (no further propagation)."""
@@ -389,3 +440,32 @@ def world_tick(X, S, U, KP, codes, effort, attached, bias, gyro_noise, gi, ahrs_
     gi[0] += 1
     if do_ahrs:
         ai[0] += 1
+
+
+STREAM_CAMERA = 3
+"""The ``"pose"`` camera's noise stream number (:func:`swarm.core._noise_nb.noise_key`)."""
+
+
+@numba.njit(cache=True)
+def pose_camera(c, k, dt, X, pairs, cam_pos, q_bc, keys, markers, centre, normal, vis, sigma_px, cam_w, lost,
+                out):  # fmt: skip
+    """The ``"pose"`` camera frame of chaser ``c`` (row ``pairs[c]``, :meth:`World._pose_camera`) at tick
+    ``k`` (period ``dt`` [s]) on the truth ``X`` (:func:`swarm.core.camera.pose_frame`): True with ``out``
+    written when it sees its target's docking face; a frame inside one of its camera-loss windows is
+    dropped (and counted in ``lost``)."""
+    ic, it = pairs[c, 0], pairs[c, 1]
+    x = X[ic]
+    r = qrotate(x[6:10], cam_pos[c])
+    p_cam = np.empty(3)
+    for i in range(3):
+        p_cam[i] = x[i] + r[i]
+    q_cam = qmul(x[6:10], q_bc[c])
+    if not pose_frame(markers, centre, normal, X[it, 0:3], X[it, 6:10], p_cam, q_cam, vis, sigma_px, keys[c],
+                      k, out):  # fmt: skip
+        return False
+    t = k * dt
+    for w in range(cam_w.shape[0]):
+        if cam_w[w, 0] == c and cam_w[w, 1] <= t < cam_w[w, 2]:
+            lost[0] += 1
+            return False
+    return True

@@ -35,7 +35,7 @@ from typing import Any, TypeVar
 import msgpack
 import numpy as np
 
-from swarm.core.mdp import DECISION_KEYS
+from swarm.core.decision_keys import DECISION_KEYS
 from swarm.errors import ConfigError, MessageError
 from swarm.transport.keys import ID_PATTERN
 
@@ -98,7 +98,10 @@ MODES: tuple[str, ...] = ("HOLD", "APPROACH", "REORIENT", "ALIGN", "DOCK", "DOCK
 """Guidance modes (paper section V; ``STATION`` is the station-keeping target)."""
 FACES: tuple[str, ...] = ("+x", "-x", "+y", "-y", "+z", "-z")
 """Faces of the target cube, named by the outward normal in the target body frame."""
-VISION_KINDS: tuple[str, ...] = ("features", "pixels")
+VISION_KINDS: tuple[str, ...] = ("features", "pixels", "pose")
+POSE_LEN = 43
+"""Length of a ``"pose"`` row: ``t_cam_m`` (3), ``q_cam_target`` (4), ``cov_cam`` (6 x 6)
+(``swarm.core.camera.POSE_N``)."""
 CLOCK_STATES: tuple[str, ...] = ("running", "paused", "stopped")
 RUN_COMMANDS: tuple[str, ...] = ("pause", "resume", "reset", "new_seed")
 EVENT_KINDS: tuple[str, ...] = (
@@ -455,15 +458,20 @@ class Vision(Message):
     """Face of the target the markers belong to, one of :data:`FACES`."""
     kind: str
     """``"features"``: marker positions in the camera frame [m] (the paper's feature model);
-    ``"pixels"``: marker image coordinates [px] (the agent runs PnP)."""
+    ``"pixels"``: marker image coordinates [px] (the agent runs PnP); ``"pose"``: the target's pose in the
+    camera frame from a camera that runs PnP itself, with its covariance."""
     data: np.ndarray
     """(N, 3) [m] in the OpenCV camera frame (+z optical axis, +x right, +y down) for ``features``;
     (N, 2) [px] image coordinates (u right, v down, as ``cv2.projectPoints`` gives them) for ``pixels``.
-    Row i is marker ``marker_ids[i]``; 0 <= N <= :data:`MAX_ITEMS`. N = 0 is a frame in which no marker
-    was detected: a camera reports every frame, so a lockstep agent knows the frame of its camera tick is
-    complete (``docs/protocol.md``, "Clocks and lockstep")."""
+    Row i is marker ``marker_ids[i]``; 0 <= N <= :data:`MAX_ITEMS`. For ``pose``, (N, 43) with N <= 1:
+    the target origin in the camera frame ``t_cam_m`` (3) [m], the attitude ``q_cam_target`` (4,
+    scalar-last) and the covariance (6 x 6, row-major) of ``(dt_cam [m], dphi_cam [rad])``
+    (``swarm.core.camera``). N = 0 is a frame in which no marker was detected: a camera reports every
+    frame, so a lockstep agent knows the frame of its camera tick is complete (``docs/protocol.md``,
+    "Clocks and lockstep")."""
     marker_ids: tuple[int, ...]
-    """Index of each row's marker in the face's pattern (>= 0, distinct), N entries."""
+    """Index of each row's marker in the face's pattern (>= 0, distinct), N entries; for ``pose``, the
+    markers the pose was computed from (empty when N = 0)."""
 
     @property
     def seen(self) -> bool:
@@ -472,9 +480,25 @@ class Vision(Message):
 
     def __post_init__(self) -> None:
         kind = _str(self.kind, "kind", choices=VISION_KINDS)
-        data = _array(self.data, "data", (None, 3 if kind == "features" else 2))
+        width = {"features": 3, "pixels": 2, "pose": POSE_LEN}[kind]
+        data = _array(self.data, "data", (None, width))
         ids = _ids(self.marker_ids, "marker_ids", min_len=0)
-        if len(ids) != data.shape[0]:
+        if kind == "pose":
+            if data.shape[0] > 1:
+                raise MessageError(f"data: a pose frame holds at most one pose, got {data.shape[0]} rows")
+            if (len(ids) > 0) != (data.shape[0] == 1):
+                raise MessageError(f"marker_ids: {len(ids)} ids for {data.shape[0]} poses")
+            if data.shape[0] == 1:
+                cov = data[0, 7:].reshape(6, 6)
+                what = "data: a pose's covariance (columns 7-42)"
+                if not np.array_equal(cov, cov.T) or not (np.diag(cov) > 0.0).all():
+                    diag = np.diag(cov).tolist()
+                    raise MessageError(f"{what} must be symmetric with a positive diagonal, got {diag}")
+                try:
+                    np.linalg.cholesky(cov)
+                except np.linalg.LinAlgError:
+                    raise MessageError(f"{what} is not positive definite") from None
+        elif len(ids) != data.shape[0]:
             raise MessageError(f"marker_ids: {len(ids)} ids for {data.shape[0]} rows of data")
         _set(
             self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
@@ -544,9 +568,10 @@ class Guidance(Message):
     r_t_m: float | None = None
     """Radius below which Algorithm 1 runs [m] (>= 0); ``None`` for a vehicle without a switcher."""
     decision: dict[str, float | None] | None = None
-    """Latest Algorithm 1 pass: exactly the 17 DESIGN.md section 8 keys (``swarm.core.mdp.DECISION_KEYS``),
-    numbers >= 0, ``A11 A22 A23 A32 A33 pi1 pi2`` probabilities in [0, 1] or ``None`` where the branch did
-    not compute them; other keys are dropped. ``None`` when no pass happened yet (or the fixed policy)."""
+    """Latest Algorithm 1 pass: exactly the 17 DESIGN.md section 8 keys
+    (``swarm.core.decision_keys.DECISION_KEYS``), numbers >= 0, ``A11 A22 A23 A32 A33 pi1 pi2``
+    probabilities in [0, 1] or ``None`` where the branch did not compute them; other keys are dropped.
+    ``None`` when no pass happened yet (or the fixed policy)."""
     reason: str = ""
     """Human-readable account of the latest mode decision (at most 1024 characters)."""
 

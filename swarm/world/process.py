@@ -336,6 +336,8 @@ class WorldProcess:
                 target = self.sc.vehicles[vid].target
                 if fr.vision is None:
                     data, kind, ids = np.zeros((0, 3)), "features", ()
+                elif fr.vision_kind == "pose":  # one pose, from every marker of the face
+                    data, kind, ids = fr.vision.reshape(1, -1), "pose", tuple(range(len(w.markers_target)))
                 else:
                     data, kind, ids = fr.vision, fr.vision_kind, tuple(range(len(fr.vision)))
                 out.append(("vision", vid, encode(Vision(k, t, target, face, kind, data, ids))))

@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from swarm.core import rotations as rot
 from swarm.core.thrusters import allocation_matrix, nozzle_geometry
 from swarm.errors import ConfigError
-from swarm.kinds.cubesat import KP_IXX, KP_IZZ, KP_MASS
+from swarm.kinds.cubesat import KP_B, KP_HMAX, KP_IXX, KP_IZZ, KP_MASS
 from swarm.kinds.dispersions import DispersionParams, draw_dispersion
 from swarm.scenario import Scenario, load_scenario
 from swarm.sim.docking import DockingSim
@@ -40,8 +40,11 @@ def test_off_dispersions_leave_the_world_exactly_nominal():
         x[0:3], x[6:10] = sc.vehicles[vid].position_m, sc.q0(vid)
         assert np.array_equal(sim.world.X[i], x)
         d = sc.kind(vid).p.dynamics
-        assert np.array_equal(sim.world.KP[i], [d.mass_kg, *d.inertia_diag_kgm2, d.integration_step_s])
-        assert np.array_equal(sim.world.truth_act[i].B, allocation_matrix(sc.kind(vid).p.thrusters))
+        kp = sim.world.KP[i]
+        assert np.array_equal(kp[: KP_HMAX + 1], [d.mass_kg, *d.inertia_diag_kgm2, d.integration_step_s])
+        B = allocation_matrix(sc.kind(vid).p.thrusters)
+        assert np.array_equal(sim.world.truth_act[i].B, B)
+        assert np.array_equal(kp[KP_B:].reshape(6, -1), B)  # the compiled hold's copy of the nozzles
 
 
 def test_dispersions_change_the_truth_and_the_initial_estimate_follows_it():

@@ -153,7 +153,15 @@ counts = st.dictionaries(st.from_regex(r"[a-z_]{1,20}", fullmatch=True), ticks, 
 @st.composite
 def visions(draw):
     kind = draw(st.sampled_from(msgs.VISION_KINDS))
-    data, marker_ids = draw(marked(3 if kind == "features" else 2))
+    if kind == "pose":  # at most one pose: position, unit quaternion, a positive definite covariance
+        data, marker_ids = np.zeros((0, msgs.POSE_LEN)), ()
+        if draw(st.booleans()):
+            sd = draw(arrays(np.float64, 6, elements=st.floats(1e-4, 1.0)))
+            row = np.concatenate([draw(vec(3)), draw(quats), np.diag(sd**2).ravel()])
+            data = row.reshape(1, -1)
+            marker_ids = tuple(draw(st.lists(st.integers(0, 2**31 - 1), min_size=1, max_size=4, unique=True)))
+    else:
+        data, marker_ids = draw(marked(3 if kind == "features" else 2))
     face = draw(st.sampled_from(msgs.FACES))
     return Vision(draw(ticks), draw(times), draw(ids), face, kind, data, marker_ids)
 
@@ -332,7 +340,7 @@ CASES = [
     (Uwb, "range_m", -0.1, "range_m: must be >= 0"),
     (Uwb, "range_m", INF, "range_m: not finite"),
     (Uwb, "range_m", "far", "range_m: expected a number or nil"),
-    (Vision, "kind", "depth", "kind: expected one of ('features', 'pixels')"),
+    (Vision, "kind", "depth", "kind: expected one of ('features', 'pixels', 'pose')"),
     (Vision, "face", "+w", "face: expected one of"),
     (Vision, "target_id", "a/b", "target_id: must match"),
     (Vision, "target_id", 7, "target_id: expected a string"),
@@ -736,3 +744,31 @@ def test_truth_carries_the_effort_and_refuses_a_negative_one():
     assert decode(encode(t), Truth).effort == 0.25
     with pytest.raises(MessageError, match="effort: must be >= 0"):
         Truth(1, 0.01, np.zeros(3), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), effort=-1.0)
+
+
+def _pose_row(cov=None) -> list[float]:
+    cov = np.diag([1e-6, 1e-6, 4e-6, 1e-4, 1e-4, 1e-4]) if cov is None else np.asarray(cov)
+    return [0.01, -0.02, 0.3, *Q, *cov.ravel()]
+
+
+@pytest.mark.parametrize(("data", "ids", "expected"), [
+    ([_pose_row(), _pose_row()], (0, 1), "data: a pose frame holds at most one pose, got 2 rows"),
+    ([_pose_row()], (), "marker_ids: 0 ids for 1 poses"),
+    ([], (3,), "marker_ids: 1 ids for 0 poses"),
+    ([_pose_row()[:42]], (0,), "data: expected shape (N, 43), got (1, 42)"),
+    ([_pose_row(np.diag([1e-6, 1e-6, -4e-6, 1e-4, 1e-4, 1e-4]))], (0,), "data: a pose's covariance"),
+    ([_pose_row(np.eye(6) + np.triu(np.ones((6, 6)), 1) * 0.1)], (0,), "data: a pose's covariance"),
+    ([_pose_row(np.ones((6, 6)))], (0,), "data: a pose's covariance (columns 7-42) is not positive definite"),
+])  # fmt: skip
+def test_a_bad_pose_frame_is_refused_on_the_wire_and_in_python(data, ids, expected):
+    """A pose frame feeds the filter a measurement and its covariance: one pose at most, its markers named,
+    and a covariance the filter can invert (symmetric, positive definite), or the frame is dropped."""
+    arr = np.asarray(data, dtype=float).reshape(len(data), len(data[0]) if data else msgs.POSE_LEN)
+    with pytest.raises(MessageError) as exc:
+        Vision(3, 0.05, "target", "+x", "pose", arr, ids)
+    assert str(exc.value).startswith(expected), str(exc.value)
+    good = wire(Vision(3, 0.05, "target", "+x", "pose", np.asarray([_pose_row()]), (0, 1)))
+    good["data"], good["marker_ids"] = [list(map(float, r)) for r in data], list(ids)
+    with pytest.raises(MessageError) as exc:
+        decode(pack(good), Vision)
+    assert str(exc.value).startswith(expected), str(exc.value)

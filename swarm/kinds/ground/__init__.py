@@ -13,13 +13,31 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
+from swarm.core import _guidance_nb as gnb
 from swarm.core import rotations as rot
 from swarm.errors import ConfigError
-from swarm.kinds.base import Actuation, Controller, Mounts, TruthActuator, VehicleDispersion, VehicleKind
-from swarm.kinds.ground.control import GroundController
-from swarm.kinds.ground.dynamics import KP_N, S_N, U_N, ground_truth_row, mecanum_inverse
+from swarm.kinds.base import (
+    ACT_FORCE,
+    ACT_FORCE_KNOWN,
+    ACT_TORQUE,
+    Mounts,
+    TruthActuator,
+    VehicleDispersion,
+    VehicleKind,
+)
+from swarm.kinds.ground.control import (
+    CP_HALF_LENGTH,
+    CP_HALF_WIDTH,
+    CP_RADIUS,
+    design_ground_lqr,
+    ground_control_row,
+    ground_control_step,
+)
+from swarm.kinds.ground.control import CP_N as CP_CONTROL_N
+from swarm.kinds.ground.dynamics import KP_MAX_SPEED, KP_N, S_N, U_N, _inverse4, ground_truth_row
 from swarm.kinds.ground.params import (
     GroundBodyParams,
     GroundControlParams,
@@ -53,45 +71,68 @@ class GroundTruth(TruthActuator):
     def __init__(self, p: GroundParams, disp: VehicleDispersion) -> None:
         self.kp = ground_truth_row(p.wheels, disp.kind.get("wheel_traction", np.ones(4)))
         self.s0 = np.zeros(S_N)
-        self.limit = p.wheels.max_speed_rad_s
-
-    def hold(self, u, s, u_held) -> bool:
-        w = np.asarray(u, dtype=float)
-        if w.shape != (U_N,):
-            raise ValueError(f"a ground command is {U_N} wheel speeds, got shape {w.shape}")
-        w = np.clip(np.where(np.isfinite(w), w, 0.0), -self.limit, self.limit)
-        if np.array_equal(w, u_held[:U_N]):
-            return False
-        u_held[:U_N] = w
-        return True
 
 
-class GroundControl(Controller):
-    """:class:`GroundController` behind the kind interface; the known force is ``m`` times its known
-    acceleration."""
+@numba.njit(cache=True)
+def ground_hold(u_cmd, s, u_held, kp):
+    """Hold the wheel-speed commands ``u_cmd`` (4,) [rad/s], each clipped to the motors' speed, a non-finite
+    one zero. Returns False when they equal the held ones (nothing written)."""
+    limit = kp[KP_MAX_SPEED]
+    same = True
+    w = np.empty(U_N)
+    for i in range(U_N):
+        c = u_cmd[i]
+        w[i] = 0.0 if not np.isfinite(c) else min(max(c, -limit), limit)
+        same = same and w[i] == u_held[i]
+    if same:
+        return False
+    for i in range(U_N):
+        u_held[i] = w[i]
+    return True
 
-    def __init__(self, p: GroundParams) -> None:
-        self.c = GroundController(p.control, p.wheels, p.body)
-        self.rate_hz = p.control.rate_hz
-        self.mass = p.body.mass_kg
 
-    def step(self, p_nav, v_nav, q_nav_body, w_body, ref, translate: bool, rotate: bool) -> Actuation:
-        cmd = self.c.step(p_nav, v_nav, q_nav_body, ref.p_nav, ref.v_nav, ref.a_nav, ref.q_nav_body,
-                          translate=translate, rotate=rotate)  # fmt: skip
-        return Actuation(cmd.wheel_rad_s, self.mass * cmd.accel_body_known, saturated=cmd.saturated)
+CP_MASS = CP_CONTROL_N
+CP_N = CP_CONTROL_N + 1
+CS_N = 2
 
-    def reset(self) -> None:
-        self.c.reset()
 
-    def idle(self) -> Actuation:
-        return Actuation(self.c.zero_command(), np.zeros(3))
+@numba.njit(cache=True)
+def ground_control(cs, cp, p, v, q, w, ref, translate, rotate, u, act):
+    """One control step (:func:`swarm.kinds.ground.control.ground_control_step`) toward the reference row
+    ``ref`` (``R_*``); the known force is the mass times the known acceleration, and the kind has no net
+    force or torque to report (NaN)."""
+    twist, accel = np.empty(3), np.empty(3)
+    sat = ground_control_step(cs, cp, p, v, q, ref[gnb.R_P : gnb.R_P + 3], ref[gnb.R_V : gnb.R_V + 3],
+                              ref[gnb.R_A : gnb.R_A + 3], ref[gnb.R_Q : gnb.R_Q + 4], translate, rotate, u,
+                              twist, accel)  # fmt: skip
+    for i in range(3):
+        act[ACT_FORCE_KNOWN + i] = cp[CP_MASS] * accel[i]
+        act[ACT_FORCE + i] = np.nan
+        act[ACT_TORQUE + i] = np.nan
+    return sat
 
-    def docked(self, speed_m_s: float) -> Actuation:
-        """Creep forward (the port is the front face) at ``speed_m_s``: wheels stop on friction, so the last
-        millimetres to the contact the estimate cannot resolve are driven, as a rover drives into its dock."""
-        w = self.c.wheels
-        wheels = mecanum_inverse(np.array([speed_m_s, 0.0, 0.0]), w.radius_m, w.half_length_m, w.half_width_m)
-        return Actuation(wheels, np.zeros(3))
+
+@numba.njit(cache=True)
+def ground_idle(cp, u, act):
+    """Wheels stopped."""
+    for i in range(U_N):
+        u[i] = 0.0
+    for i in range(3):
+        act[ACT_FORCE_KNOWN + i] = 0.0
+        act[ACT_FORCE + i] = np.nan
+        act[ACT_TORQUE + i] = np.nan
+
+
+@numba.njit(cache=True)
+def ground_docked(cp, speed_m_s, u, act):
+    """Creep forward (the port is the front face) at ``speed_m_s``: wheels stop on friction, so the last
+    millimetres to the contact the estimate cannot resolve are driven, as a rover drives into its dock."""
+    r, hl, hw = cp[CP_RADIUS], cp[CP_HALF_LENGTH], cp[CP_HALF_WIDTH]
+    u[0], u[1], u[2], u[3] = _inverse4(speed_m_s, 0.0, 0.0, r, hl, hw)
+    for i in range(3):
+        act[ACT_FORCE_KNOWN + i] = 0.0
+        act[ACT_FORCE + i] = np.nan
+        act[ACT_TORQUE + i] = np.nan
 
 
 class GroundKind(VehicleKind):
@@ -103,6 +144,8 @@ class GroundKind(VehicleKind):
     S_N = S_N
     U_N = U_N
     KP_N = KP_N
+    CP_N = CP_N
+    CS_N = CS_N
     planar = True
     effort_key = "wheel_travel_rad"
     effort_unit = "rad"
@@ -179,5 +222,10 @@ class GroundKind(VehicleKind):
         b = self.p.body
         return b.height_sigma_m, b.vertical_speed_sigma_m_s
 
-    def controller(self) -> GroundControl:
-        return GroundControl(self.p)
+    def control_row(self) -> np.ndarray:
+        p = self.p
+        return np.append(ground_control_row(p.control, p.wheels, design_ground_lqr(p.control, p.wheels)),
+                         p.body.mass_kg)  # fmt: skip
+
+
+GroundTruth.code, GroundTruth.U_N = GroundKind.code, GroundKind.U_N

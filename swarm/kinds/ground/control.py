@@ -15,15 +15,17 @@ proportional law on the wrapped yaw error; the vehicle is planar, so only x, y a
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from swarm.core.control import dlqr
 from swarm.errors import ConfigError
-from swarm.kinds.ground.dynamics import mecanum_inverse
+from swarm.kinds.ground.dynamics import _inverse4
 from swarm.kinds.ground.params import GroundBodyParams, GroundControlParams, WheelParams
 
 __all__ = ["GroundCommand", "GroundController", "GroundLqrDesign", "design_ground_lqr", "yaw_of"]
@@ -64,6 +66,7 @@ class GroundLqrDesign:
     """Eigenvalues of ``A_d - B_d K_axis`` (3,) or, integral disabled, (2,) complex."""
 
 
+@functools.lru_cache(maxsize=64)  # a pure function of frozen parameters; its arrays are read-only
 def design_ground_lqr(control: GroundControlParams, wheels: WheelParams) -> GroundLqrDesign:
     """Per-axis LQR of the lagged velocity plant (module docstring) at ``T = control.dt_s``.
 
@@ -187,6 +190,11 @@ class GroundController:
         """The wheel-speed command (4,) [rad/s] that stops the wheels."""
         return np.zeros(4)
 
+    @property
+    def row(self) -> FloatArray:
+        """The parameters as the compiled step reads them (:func:`ground_control_row`)."""
+        return ground_control_row(self.control, self.wheels, self.design)
+
     def step(
         self,
         p_nav: ArrayLike,
@@ -199,7 +207,8 @@ class GroundController:
         translate: bool = True,
         rotate: bool = True,
     ) -> GroundCommand:
-        """The command of one control period; advances the integral.
+        """The command of one control period; advances the integral (the compiled
+        :func:`ground_control_step`, which the closed loop calls directly).
 
         Args:
             p_nav, v_nav: estimated position [m] and velocity [m/s] (3,), frame nav; z is ignored.
@@ -217,47 +226,102 @@ class GroundController:
         v_ref = _vec(v_ref_nav, 3, "v_ref_nav")
         a_ref = np.zeros(3) if a_ref_nav is None else _vec(a_ref_nav, 3, "a_ref_nav")
         q_ref = _vec(q_ref_nav_body, 4, "q_ref_nav_body")
-        c = self.control
-        tau = self.wheels.motor_time_constant_s
-
-        psi = yaw_of(q)
-        if translate:
-            k_p, k_v, k_i = self.design.K_axis[0]
-            e_p = p[:2] - p_ref[:2]
-            e_v = v[:2] - v_ref[:2]
-            v_cmd_nav = v_ref[:2] + tau * a_ref[:2] - (k_p * e_p + k_v * e_v + k_i * self.integral_m_s)
-            if c.integral_enabled:
-                lim = c.integral_limit_m_s
-                self.integral_m_s[:] = np.clip(self.integral_m_s + e_p * c.dt_s, -lim, lim)
-        else:
-            v_cmd_nav = np.zeros(2)
-            self.reset()
-        wz = 0.0
-        if rotate:
-            err = _wrap(yaw_of(q_ref) - psi)
-            wz = min(max(c.yaw_gain_1_s * err, -c.max_yaw_rate_rad_s), c.max_yaw_rate_rad_s)
-
-        cs, sn = math.cos(psi), math.sin(psi)
-        vx = cs * v_cmd_nav[0] + sn * v_cmd_nav[1]  # R(psi)^T v_cmd_nav
-        vy = -sn * v_cmd_nav[0] + cs * v_cmd_nav[1]
-        speed = math.hypot(vx, vy)
-        if speed > c.max_speed_m_s:
-            vx, vy = vx * (c.max_speed_m_s / speed), vy * (c.max_speed_m_s / speed)
-        twist = np.array([vx, vy, wz])
-        w = self.wheels
-        wheel = mecanum_inverse(twist, w.radius_m, w.half_length_m, w.half_width_m)
-        peak = float(np.max(np.abs(wheel)))
-        saturated = peak > w.max_speed_rad_s
-        if saturated:
-            scale = w.max_speed_rad_s / peak
-            wheel *= scale
-            twist *= scale
-
-        v0x = cs * v[0] + sn * v[1]  # estimated body velocity
-        v0y = -sn * v[0] + cs * v[1]
-        g = self._accel_gain
-        accel = np.array([(twist[0] - v0x) * g, (twist[1] - v0y) * g, 0.0])
+        wheel, twist, accel = np.empty(4), np.empty(3), np.empty(3)
+        saturated = ground_control_step(
+            self.integral_m_s, self._row, p, v, q, p_ref, v_ref, a_ref, q_ref, bool(translate), bool(rotate),
+            wheel, twist, accel,
+        )  # fmt: skip
         return GroundCommand(wheel_rad_s=wheel, twist_body=twist, accel_body_known=accel, saturated=saturated)
+
+    @property
+    def _row(self) -> FloatArray:
+        row = self.__dict__.get("_row_cache")
+        if row is None:
+            row = self.__dict__["_row_cache"] = self.row
+        return row
+
+
+# ---- the compiled step: parameter row (CP_*) and kernel ---------------------------------------------------
+(CP_TAU, CP_DT, CP_KP, CP_KV, CP_KI, CP_ILIM, CP_YAW_GAIN, CP_MAX_YAW_RATE, CP_MAX_SPEED, CP_RADIUS,
+ CP_HALF_LENGTH, CP_HALF_WIDTH, CP_MAX_WHEEL, CP_ACCEL_GAIN) = range(14)  # fmt: skip
+CP_N = 14
+
+
+def ground_control_row(
+    control: GroundControlParams, wheels: WheelParams, design: GroundLqrDesign
+) -> FloatArray:
+    """The controller's parameters (CP_N,) for :func:`ground_control_step`: lag, period, the per-axis gains,
+    the integral's limit (-1: no integral action), the yaw law, the speed limits, the wheel geometry and the
+    known-acceleration gain ``(1 - exp(-T/tau)) / T``."""
+    k_p, k_v, k_i = design.K_axis[0]
+    tau, T = wheels.motor_time_constant_s, control.dt_s
+    return np.array([
+        tau, T, k_p, k_v, k_i, control.integral_limit_m_s if control.integral_enabled else -1.0,
+        control.yaw_gain_1_s, control.max_yaw_rate_rad_s, control.max_speed_m_s, wheels.radius_m,
+        wheels.half_length_m, wheels.half_width_m, wheels.max_speed_rad_s, -math.expm1(-T / tau) / T,
+    ], dtype=np.float64)  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _yaw(x, y, z, w):
+    return math.atan2(2.0 * (x * y + z * w), 1.0 - 2.0 * (y * y + z * z))
+
+
+@numba.njit(cache=True)
+def _wrap_nb(angle):
+    """``angle`` [rad] wrapped to (-pi, pi] (:func:`_wrap`)."""
+    two_pi = 2.0 * math.pi
+    a = angle - two_pi * np.rint(angle / two_pi)
+    return math.pi if a <= -math.pi else a
+
+
+@numba.njit(cache=True)
+def ground_control_step(z, cp, p, v, q, p_ref, v_ref, a_ref, q_ref, translate, rotate, wheel, twist, accel):
+    """One step of :class:`GroundController` (its docstring is the law) on the integral ``z`` (2,) and the
+    parameters ``cp`` (:func:`ground_control_row`); writes the wheel commands (4,), the commanded body
+    twist (3,) and the known body acceleration (3,); returns whether a wheel saturated."""
+    qx, qy, qz, qw = q[0], q[1], q[2], q[3]
+    psi = _yaw(qx, qy, qz, qw)
+    c0 = 0.0
+    c1 = 0.0
+    if translate:
+        tau = cp[CP_TAU]
+        k_p, k_v, k_i = cp[CP_KP], cp[CP_KV], cp[CP_KI]
+        e0, e1 = p[0] - p_ref[0], p[1] - p_ref[1]
+        c0 = v_ref[0] + tau * a_ref[0] - (k_p * e0 + k_v * (v[0] - v_ref[0]) + k_i * z[0])
+        c1 = v_ref[1] + tau * a_ref[1] - (k_p * e1 + k_v * (v[1] - v_ref[1]) + k_i * z[1])
+        lim = cp[CP_ILIM]
+        if lim >= 0.0:
+            z[0] = min(max(z[0] + e0 * cp[CP_DT], -lim), lim)
+            z[1] = min(max(z[1] + e1 * cp[CP_DT], -lim), lim)
+    else:
+        z[0] = 0.0
+        z[1] = 0.0
+    wz = 0.0
+    if rotate:
+        err = _wrap_nb(_yaw(q_ref[0], q_ref[1], q_ref[2], q_ref[3]) - psi)
+        wz = min(max(cp[CP_YAW_GAIN] * err, -cp[CP_MAX_YAW_RATE]), cp[CP_MAX_YAW_RATE])
+    cs, sn = math.cos(psi), math.sin(psi)
+    vx = cs * c0 + sn * c1  # R(psi)^T v_cmd_nav
+    vy = -sn * c0 + cs * c1
+    speed = math.hypot(vx, vy)
+    vmax = cp[CP_MAX_SPEED]
+    if speed > vmax:
+        vx, vy = vx * (vmax / speed), vy * (vmax / speed)
+    u1, u2, u3, u4 = _inverse4(vx, vy, wz, cp[CP_RADIUS], cp[CP_HALF_LENGTH], cp[CP_HALF_WIDTH])
+    peak = max(max(abs(u1), abs(u2)), max(abs(u3), abs(u4)))
+    saturated = peak > cp[CP_MAX_WHEEL]
+    if saturated:
+        k = cp[CP_MAX_WHEEL] / peak
+        u1, u2, u3, u4 = u1 * k, u2 * k, u3 * k, u4 * k
+        vx, vy, wz = vx * k, vy * k, wz * k
+    wheel[0], wheel[1], wheel[2], wheel[3] = u1, u2, u3, u4
+    twist[0], twist[1], twist[2] = vx, vy, wz
+    v0x = cs * v[0] + sn * v[1]  # estimated body velocity
+    v0y = -sn * v[0] + cs * v[1]
+    g = cp[CP_ACCEL_GAIN]
+    accel[0], accel[1], accel[2] = (vx - v0x) * g, (vy - v0y) * g, 0.0
+    return saturated
 
 
 def _vec(a: ArrayLike, n: int, name: str) -> FloatArray:
