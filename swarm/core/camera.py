@@ -678,3 +678,22 @@ def pose_frame(markers, centre_t, normal_t, p_t, q_t, p_c, q_c, cam, sigma_px, k
         for b in range(6):
             out[7 + 6 * a + b] = cov[a, b]
     return True
+
+
+@numba.njit(cache=True)
+def features_frame(markers, centre_t, normal_t, p_t, q_t, p_c, q_c, cam, sigma_m, key, counter, out):
+    """One frame of the ``"features"`` model (the paper's, :func:`feature_vectors`), compiled: when the
+    face with ``markers`` (N, 3) [m, target frame] is :func:`visible` to the camera at ``(p_c, q_c)``,
+    writes the marker positions in the camera frame plus ``sigma_m`` times the standard normals of ``(key,
+    counter)`` (:func:`swarm.core._noise_nb.normals`, 3 N of them, marker by marker) into ``out`` (3 N,)
+    and returns True."""
+    if not _visible_kernel(markers, centre_t, normal_t, p_t, q_t, p_c, q_c, cam):
+        return False
+    f = _markers_in_camera(markers, p_t, q_t, p_c, q_c)
+    n = markers.shape[0]
+    z = np.empty(3 * n)
+    normals(key, counter, z)
+    for j in range(n):
+        for i in range(3):
+            out[3 * j + i] = f[j, i] + sigma_m * z[3 * j + i]
+    return True

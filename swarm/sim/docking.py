@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from swarm.core.camera import POSE_N
 from swarm.core.guidance import MODES
 from swarm.core.mdp import D_N, DECISION_STAGING
 from swarm.step.agent import ROLE_CHASER, AgentInputs, VehicleAgent
@@ -183,15 +182,15 @@ class DockingSim:
                 a.guidance.ST, a.guidance.SP, a.guidance.REF = a.ST, a.SP, a.REF
         self.t_agent = np.zeros(n)
         self.last_vision = np.zeros(n)
-        # the camera mounts the filters use (a "pose" frame is fused in the compiled loop)
+        # the camera mounts the filters use (a compiled camera model's frame is fused in the compiled loop)
         self.MP = np.stack([a.est._cam_pos for a in agents])
         self.MR = np.ascontiguousarray(np.stack([a.est._R_bc for a in agents]))
         self.MQ = np.stack([a.est._q_bc for a in agents])
         n_pairs = len(self.referee.chasers)
-        self._pose_only = self.world.pose_camera_only
+        self._compiled_cams = self.world.compiled_cameras
         self._V = (
-            np.array([self._pose_only]),
-            np.zeros((n_pairs, POSE_N)),
+            np.array([self._compiled_cams]),
+            np.zeros((n_pairs, self.world.frame_width)),
             np.zeros(n_pairs, dtype=np.bool_),
         )
         sc, first = self.sc, agents[0]
@@ -202,6 +201,7 @@ class DockingSim:
             first._gate_1d, first._gate_3d, first._sigma_range, sc.agent.vision_recent_s,
             sc.agent.uwb_with_vision, sc.agent.latch_target_with_vision, float(sc.guidance.dock_speed_m_s),
             self._series_every, self._vision_every, sc.agent.vision_target_cov, first._gate_6d,
+            np.array([a._gate_features for a in agents]), np.array([a._sigma_feature for a in agents]),
         )  # fmt: skip
         # camera_possible: the target within the camera's range plus a body's diagonal and 5 cm, within
         # its field-of-view cone plus 5 deg (margins for the motion within a control period)
@@ -238,7 +238,7 @@ class DockingSim:
             if self.fast and frames is not None and (frames is NO_VISION or not _has_vision(frames)):
                 k_end = min(k + SEGMENT_TICKS, max_k + 1)
                 if (
-                    self._camera and not self._pose_only
+                    self._camera and not self._compiled_cams
                 ):  # no further than the next camera tick (it stops there)
                     k_end = min(k_end, (k // self._vision_every + 1) * self._vision_every)
                 k, frames = self._fast(k, k_end)
@@ -307,7 +307,7 @@ class DockingSim:
         ko_before = ref.ko_flag.copy()
         k, code = run_ticks(
             k0, k1, self._cfg, world_arrays(w), radio_arrays(net), agent_arrays(self), referee_arrays(ref),
-            self._cam, self._V, w.pose_cam, self.SER, self.SER_n,
+            self._cam, self._V, w.cam_arrays, self.SER, self.SER_n,
         )  # fmt: skip
         for b, a in enumerate(agents):
             a.t_s = float(self.t_agent[b])
@@ -338,9 +338,9 @@ class DockingSim:
                 return k, None
         else:  # REACHED_END, CAMERA: the world's state is that of tick k
             w.k = k
-            if k % self._vision_every == 0 and self._camera and not self._pose_only:
+            if k % self._vision_every == 0 and self._camera and not self._compiled_cams:
                 return k, w.frames()
-            return k, NO_VISION  # (pose cameras: the loop built tick k's frames)
+            return k, NO_VISION  # (compiled cameras: the loop built tick k's frames)
         build = (k + 1) % self._vision_every == 0 and self._camera
         frames = w.step(build_frames=build)
         return k + 1, (NO_VISION if frames is None else frames)

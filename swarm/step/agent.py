@@ -107,7 +107,7 @@ class VehicleAgent:
         self.controller = Controller(self.kind)
         self.camera = sc.camera_for(vehicle_id)
         self.anchors = np.asarray(sc.anchors_m, dtype=float)
-        self.markers_target = sc.markers.markers(sc.guidance.docking_face)
+        self.markers_target = np.ascontiguousarray(sc.markers.markers(sc.guidance.docking_face), dtype=float)
         if self.role == "chaser":
             self.switcher = make_switcher(policy, sc.mdp, sc.fixed)
             q_mission = rot.euler_to_quat(np.radians(spec.euler_deg), sc.euler_seq)
@@ -128,6 +128,8 @@ class VehicleAgent:
         self._gate_1d = chi2_gate(1, sc.estimator.gate_probability)
         self._gate_3d = chi2_gate(3, sc.estimator.gate_probability)
         self._gate_6d = chi2_gate(6, sc.estimator.gate_probability)
+        self._gate_features = chi2_gate(3 * len(self.markers_target), est_params.gate_probability)
+        self._sigma_feature = float(est_params.sigma_feature_m)
         self._ahrs_cov = np.radians(sc.ahrs.sigma_deg) ** 2 * np.eye(3)
         self._sigma_range = float(sc.estimator.sigma_range_m)
         # health windows of the recent ranges (a ring: [count, next]); see ``agent_uwb``
@@ -209,8 +211,15 @@ class VehicleAgent:
         tgt = self.target
         cov_t = tgt.cov_pos if self.sc.agent.vision_target_cov else np.zeros((3, 3))
         if kind == "features":
-            markers_nav = tgt.p_nav + rot.quat_rotate(tgt.q_nav_body, self.markers_target)
-            status = int(self.est.update_features(markers_nav, data, target_cov_nav=cov_t)[0])
+            f = np.ascontiguousarray(data, dtype=np.float64)
+            if f.shape != self.markers_target.shape:
+                return int(UpdateStatus.REFUSED_INVALID)
+            e = self.est
+            status = agent_features(
+                e.X[0], e.P[0], e.counts[0], e.book[0], e._prm, self.TGT, f.reshape(-1),
+                self.markers_target, self.sc.agent.vision_target_cov, self._sigma_feature, e._cam_pos,
+                e._R_bc, self._gate_features,
+            )  # fmt: skip
         elif kind == "pose":
             frame = np.ascontiguousarray(data, dtype=np.float64).reshape(-1)
             if frame.shape != (POSE_N,):
@@ -440,6 +449,29 @@ def window_stats(h_ok, h_d2, h_meta):
         s_d2 += h_d2[i]
         n_ok += 1 if h_ok[i] else 0
     return np.sqrt(s_d2 / count), 1.0 - n_ok / count
+
+
+@njit(cache=True)
+def agent_features(X, P, ST_I, ST_F, PRM, TGT, frame, markers_t, use_target_cov, sigma, cam_pos, R_bc, gate):
+    """A ``"features"`` camera frame (the paper's model: ``frame`` (3 N,) the N markers' positions in the
+    camera frame, marker by marker) fused against the markers placed by the target estimate ``TGT``
+    (``p_t + R(q_t) m``; its position covariance counted when ``use_target_cov``;
+    :func:`swarm.core._ekf_nb.update_features_one`). Returns the update status."""
+    cov_t = np.zeros((3, 3))
+    if use_target_cov:
+        for i in range(3):
+            for j in range(3):
+                cov_t[i, j] = TGT[TG_COV + 3 * i + j]
+    n = markers_t.shape[0]
+    mk = np.empty((n, 3))
+    f = np.empty((n, 3))
+    q_t = TGT[TG_Q : TG_Q + 4].copy()
+    for m in range(n):
+        r = qrotate(q_t, markers_t[m])
+        for i in range(3):
+            mk[m, i] = TGT[TG_P + i] + r[i]
+            f[m, i] = frame[3 * m + i]
+    return nb.update_features_one(X, P, ST_I, ST_F, PRM, mk, f, sigma, cov_t, cam_pos, R_bc, gate)
 
 
 @njit(cache=True)

@@ -36,6 +36,7 @@ from swarm.step.agent import (
     TG_Q,
     TG_T,
     agent_control,
+    agent_features,
     agent_imu,
     agent_pose,
     agent_uwb,
@@ -43,7 +44,7 @@ from swarm.step.agent import (
 )
 from swarm.step.radio import radio_env, uwb_tick
 from swarm.step.referee import NO_CONTACT, referee_tick
-from swarm.step.world import pose_camera, world_tick
+from swarm.step.world import CAM_FEATURES, CAM_POSE, camera_frame, world_tick
 
 REACHED_END = 0
 """Ticks ``k0 .. k1 - 1`` are done; the world is at tick ``k1``."""
@@ -170,16 +171,17 @@ def _world(W, do_ahrs, t):
 def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
     """Ticks ``k0 .. k1 - 1`` (module docstring). ``cfg`` = ``(dt, uwb_every, ahrs_every, ahrs_enabled,
     ahrs_cov, gate1, gate3, sigma_range, vision_recent_s, uwb_with_vision, latch_target, dock_speed,
-    series_every, vision_every, vision_target_cov, gate6)``; ``W``, ``R``, ``A``, ``F`` the world's, radio's,
-    agents' and referee's arrays; ``C`` = ``(camera flag (1,), each pair's camera axis (P, 3), reach,
-    cos_fov)`` (:func:`camera_possible`); ``V`` = ``(every camera is the "pose" model, frames (P, 43), frame
-    present (P,))`` and ``PC`` the world's ``pose_cam`` arrays (:func:`swarm.step.world.pose_camera`): with
-    pose cameras only, the camera frames are built and fused here, else the loop stops at a camera tick
-    (CAMERA). ``SER`` (P, cap, SERIES_N) the chasers' time series, ``SER_n`` (P,) rows used. Returns
-    ``(k, code)``: ``(k1, REACHED_END)`` or the tick and reason of an earlier stop (the codes' docstrings
-    say what of tick ``k`` is done)."""
+    series_every, vision_every, vision_target_cov, gate6, gate_features (n,), sigma_feature (n,))``; ``W``,
+    ``R``, ``A``, ``F`` the world's, radio's, agents' and referee's arrays; ``C`` = ``(camera flag (1,),
+    each pair's camera axis (P, 3), reach, cos_fov)`` (:func:`camera_possible`); ``V`` = ``(every camera
+    model is compiled, frames (P, W), frame present (P,))`` and ``PC`` the world's ``cam_arrays``
+    (:func:`swarm.step.world.camera_frame`): with compiled camera models only ("features", "pose"), the
+    camera frames are built and fused here, else the loop stops at a camera tick (CAMERA). ``SER`` (P, cap,
+    SERIES_N) the chasers' time series, ``SER_n`` (P,) rows used. Returns ``(k, code)``: ``(k1,
+    REACHED_END)`` or the tick and reason of an earlier stop (the codes' docstrings say what of tick ``k``
+    is done)."""
     (dt, uwb_every, ahrs_every, ahrs_enabled, ahrs_cov, gate1, gate3, sigma_r, recent_s, uwb_with_vision,
-     latch, dock_speed, series_every, vision_every, target_cov, gate6) = cfg  # fmt: skip
+     latch, dock_speed, series_every, vision_every, target_cov, gate6, gate_f, sigma_f) = cfg  # fmt: skip
     X, S, U, KP, codes, attached = W[0], W[1], W[2], W[3], W[4], W[6]
     drop_w, nlos_w = W[17], W[18]
     gyro_out, ahrs_out = W[13], W[14]
@@ -191,7 +193,8 @@ def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
     (pairs, done, docking, n_target, q_tc, half, keepout_r, corridor_cos, contact_d, ko_flag, ko_t, ko_r,
      closest) = F  # fmt: skip
     cam, cam_axis, reach, cos_fov = C
-    pose_only, VF, VF_ok = V
+    compiled_cams, VF, VF_ok = V
+    cam_model, markers_t = PC[11], PC[4]
     n = AX.shape[0]
     n_pairs = pairs.shape[0]
     for j in range(k0, k1):
@@ -236,8 +239,14 @@ def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
                 VF_ok[c] = False
                 v = pairs[c, 0]
                 if TGT[v, TG_HAS] != 0.0:
-                    status = agent_pose(AX[v], AP[v], AC[v], AB[v], PRMS[v], TGT[v], VF[c], target_cov, MP[v],
-                                        MR[v], MQ[v], gate6)  # fmt: skip
+                    if cam_model[c] == CAM_POSE:
+                        status = agent_pose(AX[v], AP[v], AC[v], AB[v], PRMS[v], TGT[v], VF[c], target_cov,
+                                            MP[v], MR[v], MQ[v], gate6)  # fmt: skip
+                    elif cam_model[c] == CAM_FEATURES:
+                        status = agent_features(AX[v], AP[v], AC[v], AB[v], PRMS[v], TGT[v], VF[c], markers_t,
+                                                target_cov, sigma_f[v], MP[v], MR[v], gate_f[v])  # fmt: skip
+                    else:
+                        status = -1
                     if status == ST_ACCEPTED:
                         last_vision[v] = t
         if any_ctl:
@@ -271,8 +280,8 @@ def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
             return j, CONTACT
         _world(W, ahrs_enabled and (j + 1) % ahrs_every == 0, t)
         if cam[0] and (j + 1) % vision_every == 0:
-            if not pose_only[0]:
+            if not compiled_cams[0]:
                 return j + 1, CAMERA
             for c in range(n_pairs):
-                VF_ok[c] = pose_camera(c, j + 1, dt, X, *PC, VF[c])
+                VF_ok[c] = camera_frame(c, j + 1, dt, X, *PC, VF[c])
     return k1, REACHED_END

@@ -29,7 +29,7 @@ from swarm.core.camera import (
     POSE_N,
     CameraModel,
     camera_pose_nav,
-    feature_vectors,
+    features_frame,
     pose_frame,
     project_markers,
     visible,
@@ -154,14 +154,15 @@ class World:
         self.drop_w = np.zeros((0, 2))
         self.nlos_w = np.zeros((0, 3))
         self.cam_lost = np.zeros(1, dtype=np.int64)
-        self.pose_cam = self._pose_camera()
+        self.cam_arrays = self._camera_arrays()
         self._refresh_windows()
 
-    def _pose_camera(self) -> tuple:
-        """The arrays of :func:`pose_camera` (the ``"pose"`` camera model, compiled): per chaser (in the
-        referee's order) its row and its target's, its camera mount and its noise key; the docking face's
-        markers, centre and normal; the camera's visibility vector and pixel noise; the camera-loss windows
-        ``(chaser, start, end)`` (refreshed with the fault schedule) and the count of frames they dropped."""
+    def _camera_arrays(self) -> tuple:
+        """The arrays of :func:`camera_frame` (the compiled camera models, ``"features"`` and ``"pose"``):
+        per chaser (in the referee's order) its row and its target's, its camera mount and its noise key;
+        the docking face's markers, centre and normal; the camera's visibility vector and pixel noise; the
+        camera-loss windows ``(chaser, start, end)`` (refreshed with the fault schedule) and the count of
+        frames they dropped; per chaser its camera model's code (:data:`CAMERA_CODES`) and feature noise."""
         sc = self.sc
         chasers = list(sc.chasers)
         face = sc.guidance.docking_face
@@ -176,8 +177,14 @@ class World:
             np.array([noise_key(self.seed, self.index[c], STREAM_CAMERA) for c in chasers], dtype=np.uint64),
             np.ascontiguousarray(sc.markers.markers(face)), sc.markers.half_size_m * normal, normal,
             np.array(sc.camera.visibility_vector), float(sc.camera.pixel_sigma_px), np.zeros((0, 3)),
-            self.cam_lost,
+            self.cam_lost, np.array([CAMERA_CODES[str(c.model)] for c in cams], dtype=np.int64),
+            np.array([c.feature_sigma_m for c in cams], dtype=float),
         )  # fmt: skip
+
+    @property
+    def frame_width(self) -> int:
+        """Length of one compiled camera frame row: a pose (:data:`POSE_N`) or 3 per marker."""
+        return max(POSE_N, 3 * self.cam_arrays[4].shape[0])
 
     @property
     def camera_frames_lost(self) -> int:
@@ -185,9 +192,10 @@ class World:
         return int(self.cam_lost[0])
 
     @property
-    def pose_camera_only(self) -> bool:
-        """Every chaser's camera is the ``"pose"`` model: the compiled loop builds the camera frames."""
-        return all(self.cameras[c].model == CameraModel.POSE for c in self.sc.chasers)
+    def compiled_cameras(self) -> bool:
+        """Every chaser's camera model is compiled (``"features"`` or ``"pose"``): the compiled loop builds
+        and fuses the camera frames (``"pnp"`` solves PnP in Python)."""
+        return all(self.cameras[c].model != CameraModel.PNP for c in self.sc.chasers)
 
     @property
     def effort_by_vehicle(self) -> dict[str, float]:
@@ -214,8 +222,8 @@ class World:
         self.nlos_w = np.array(self.faults.nlos, dtype=float).reshape(-1, 3)
         chasers = list(self.sc.chasers)
         cam_w = [[c, w[0], w[1]] for c, cid in enumerate(chasers) for w in self.faults.camera.get(cid, ())]
-        pc = self.pose_cam
-        self.pose_cam = (*pc[:9], np.array(cam_w, dtype=float).reshape(-1, 3), pc[10])
+        pc = self.cam_arrays
+        self.cam_arrays = (*pc[:9], np.array(cam_w, dtype=float).reshape(-1, 3), *pc[10:])
 
     def radio_env(self, t_s: float) -> tuple[bool, float]:
         """The radio environment at ``t_s``: every reply lost (a dropout window), and the NLOS outlier
@@ -375,23 +383,21 @@ class World:
 
     def _vision(self, chaser: str, target: str, frame: SensorFrame) -> None:
         cam = self.cameras[chaser]
-        if cam.model == CameraModel.POSE:
-            out = np.empty(POSE_N)
+        if cam.model != CameraModel.PNP:  # compiled: the loop's own frames
+            out = np.empty(self.frame_width)
             c = self.sc.chasers.index(chaser)
-            if pose_camera(c, self.k, self.dt, self.X, *self.pose_cam, out):
-                frame.vision_kind, frame.vision = "pose", out
+            if camera_frame(c, self.k, self.dt, self.X, *self.cam_arrays, out):
+                frame.vision_kind = str(cam.model)
+                n = self.cam_arrays[4].shape[0]
+                frame.vision = out[:POSE_N] if cam.model == CameraModel.POSE else out[: 3 * n].reshape(n, 3)
             return
         xc, xt = self.x[chaser], self.x[target]
         p_cam, q_cam = camera_pose_nav(xc[0:3], xc[6:10], cam)
         if not visible(p_cam, q_cam, xt[0:3], xt[6:10], self.sc.guidance.docking_face, cam, self.sc.markers):
             return
         rng = self.rng[chaser, "camera"]
-        if cam.model == "pnp":
-            frame.vision_kind = "pixels"
-            frame.vision = project_markers(self.markers_target, xt[0:3], xt[6:10], p_cam, q_cam, cam, rng)
-        else:
-            frame.vision_kind = "features"
-            frame.vision = feature_vectors(self.markers_target, xt[0:3], xt[6:10], p_cam, q_cam, cam, rng)
+        frame.vision_kind = "pixels"
+        frame.vision = project_markers(self.markers_target, xt[0:3], xt[6:10], p_cam, q_cam, cam, rng)
         if any(w[0] <= frame.t_s < w[1] for w in self.faults.camera.get(chaser, ())):
             # camera lost (a fault): the frame was drawn, so the camera stream stays aligned, and dropped
             frame.vision_kind = frame.vision = None
@@ -443,16 +449,22 @@ def world_tick(X, S, U, KP, codes, effort, attached, bias, gyro_noise, gi, ahrs_
 
 
 STREAM_CAMERA = 3
-"""The ``"pose"`` camera's noise stream number (:func:`swarm.core._noise_nb.noise_key`)."""
+"""The compiled camera models' noise stream number (:func:`swarm.core._noise_nb.noise_key`)."""
+
+CAM_FEATURES, CAM_POSE, CAM_PNP = 0, 1, 2
+CAMERA_CODES = {"features": CAM_FEATURES, "pose": CAM_POSE, "pnp": CAM_PNP}
+"""Each camera model's code in :func:`camera_frame` (``"pnp"`` is not compiled)."""
 
 
 @numba.njit(cache=True)
-def pose_camera(c, k, dt, X, pairs, cam_pos, q_bc, keys, markers, centre, normal, vis, sigma_px, cam_w, lost,
-                out):  # fmt: skip
-    """The ``"pose"`` camera frame of chaser ``c`` (row ``pairs[c]``, :meth:`World._pose_camera`) at tick
-    ``k`` (period ``dt`` [s]) on the truth ``X`` (:func:`swarm.core.camera.pose_frame`): True with ``out``
-    written when it sees its target's docking face; a frame inside one of its camera-loss windows is
-    dropped (and counted in ``lost``)."""
+def camera_frame(c, k, dt, X, pairs, cam_pos, q_bc, keys, markers, centre, normal, vis, sigma_px, cam_w, lost,
+                 model, sigma_f, out):  # fmt: skip
+    """The camera frame of chaser ``c`` (row ``pairs[c]``, :meth:`World._camera_arrays`) at tick ``k``
+    (period ``dt`` [s]) on the truth ``X``, in its camera model ``model[c]``: ``"pose"``
+    (:func:`swarm.core.camera.pose_frame`, ``out[:POSE_N]``) or ``"features"``
+    (:func:`swarm.core.camera.features_frame`, ``out[:3 N]``). True with ``out`` written when it sees its
+    target's docking face; a frame inside one of its camera-loss windows is drawn, then dropped (and
+    counted in ``lost``), so the noise of later frames does not depend on the fault."""
     ic, it = pairs[c, 0], pairs[c, 1]
     x = X[ic]
     r = qrotate(x[6:10], cam_pos[c])
@@ -460,8 +472,15 @@ def pose_camera(c, k, dt, X, pairs, cam_pos, q_bc, keys, markers, centre, normal
     for i in range(3):
         p_cam[i] = x[i] + r[i]
     q_cam = qmul(x[6:10], q_bc[c])
-    if not pose_frame(markers, centre, normal, X[it, 0:3], X[it, 6:10], p_cam, q_cam, vis, sigma_px, keys[c],
-                      k, out):  # fmt: skip
+    if model[c] == CAM_POSE:
+        seen = pose_frame(markers, centre, normal, X[it, 0:3], X[it, 6:10], p_cam, q_cam, vis, sigma_px,
+                          keys[c], k, out)  # fmt: skip
+    elif model[c] == CAM_FEATURES:
+        seen = features_frame(markers, centre, normal, X[it, 0:3], X[it, 6:10], p_cam, q_cam, vis, sigma_f[c],
+                              keys[c], k, out)  # fmt: skip
+    else:
+        seen = False
+    if not seen:
         return False
     t = k * dt
     for w in range(cam_w.shape[0]):

@@ -30,6 +30,7 @@ from swarm.core.camera import (
     face_normal,
     facing_face,
     feature_vectors,
+    features_frame,
     pinhole,
     pixel_jacobian,
     project_markers,
@@ -173,6 +174,35 @@ def test_feature_vector_noise_is_white_with_feature_sigma():
     assert np.all(np.abs(err.reshape(-1, 3).mean(axis=0)) < 5 * 0.001 / math.sqrt(err.size / 3))
     corr = np.corrcoef(err.reshape(-1, 3).T)
     assert np.all(np.abs(corr - np.eye(3)) < 0.02)  # independent axes; standard error 0.004
+
+
+def _features_frame(m, p_t, q_t, p_cam, q_cam, sigma, counter, face="+z"):
+    n = face_normal(face)
+    out = np.full(3 * len(m), np.nan)
+    seen = features_frame(np.ascontiguousarray(m), MARKERS.half_size_m * n, n, np.asarray(p_t, float),
+                          np.asarray(q_t, float), np.asarray(p_cam, float), np.asarray(q_cam, float),
+                          CAM.visibility_vector, sigma, np.uint64(77), counter, out)  # fmt: skip
+    return seen, out.reshape(-1, 3)
+
+
+def test_the_compiled_features_frame_is_the_paper_model_with_counter_noise():
+    """The compiled frame (the loop's and the world process's) is :func:`feature_vectors`: the same
+    visibility, the same vectors without noise, white noise of ``feature_sigma`` per axis with it."""
+    p_cam, q_cam, p_t, q_t = _scene()
+    m = MARKERS.markers("+z")
+    seen, clean = _features_frame(m, p_t, q_t, p_cam, q_cam, 0.0, 0)
+    assert seen and visible(p_cam, q_cam, p_t, q_t, "+z", CAM, MARKERS)
+    np.testing.assert_allclose(clean, feature_vectors(m, p_t, q_t, p_cam, q_cam, CAM, None), atol=1e-15)
+    err = np.array([_features_frame(m, p_t, q_t, p_cam, q_cam, 0.001, k)[1] - clean for k in range(3000)])
+    # as for feature_vectors above: std standard error 0.5 %, 2.5 % is 5x
+    np.testing.assert_allclose(err.reshape(-1, 3).std(axis=0), 0.001, rtol=0.025)
+    corr = np.corrcoef(err.reshape(-1, 6 * 3).T)  # every marker and axis independent of the others
+    assert np.all(np.abs(corr - np.eye(18)) < 0.08)  # standard error 0.018: 4.4 of them
+    again = _features_frame(m, p_t, q_t, p_cam, q_cam, 0.001, 1234)[1]
+    np.testing.assert_array_equal(again, _features_frame(m, p_t, q_t, p_cam, q_cam, 0.001, 1234)[1])
+    # the face turned away: no frame, nothing written
+    seen, out = _features_frame(m, p_t, q_t, p_cam, q_cam, 0.001, 0, face="-z")
+    assert not seen and np.isnan(out).all()
 
 
 # ---- PnP ------------------------------------------------------------------------------------------------
