@@ -106,6 +106,11 @@ class AgentProcess:
             vehicle_id, self.chaser, self.target_id, sc.every(sc.uwb.rate_hz), self.vision_every,
             start=None if rejoin else 0, wait_for_target=clock.lockstep,
         )  # fmt: skip
+        if rejoin:
+            # who is alive is not known yet: wait for nobody until the liveliness history says (a mothership
+            # or target lost before this process subscribed would otherwise be waited for forever)
+            self.assembler.set_uwb_live(False)
+            self.assembler.set_target_live(False)
         self.agent: VehicleAgent | None = None
         if not rejoin:
             # the dispersed truth this run starts from, as the world builds it: the same initial estimate
@@ -368,7 +373,7 @@ class AgentProcess:
         if self.chaser:
             subscribe_decoded(self.session, k.vision(self.id), Vision, self._on_sensor, self.drops)
             subscribe_decoded(self.session, k.estimate(self.target_id), Estimate, self._on_target, self.drops)
-        watch_liveliness(self.session, k, self._on_alive, history=False)
+        watch_liveliness(self.session, k, self._on_alive, history=self.rejoin)
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
         subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.drops)
         self._token = declare_liveliness(self.session, k, "agent", self.id)

@@ -1,4 +1,5 @@
-"""Suite-wide options: ``--runslow`` enables the long statistical runs marked ``slow``."""
+"""Suite-wide options: ``--runslow`` enables the tests marked ``slow`` (long statistical runs, and launches
+whose claim the default suite already checks in another launch)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     if config.getoption("--runslow"):
         return
-    skip = pytest.mark.skip(reason="statistical long run: use --runslow (a small version runs by default)")
+    skip = pytest.mark.skip(reason="long run: use --runslow (a smaller version or a sibling runs by default)")
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)

@@ -428,11 +428,18 @@ class WorldProcess:
                 break
         commands, missing = self.barrier.wait(k, 0)
         if missing:
+            # a live agent that sends no command is not flying its vehicle: its actuators go idle (nozzles
+            # closed, wheels stopped) until its next command, as for a lost one; holding its last command
+            # would keep a thrust on for as long as the agent is stuck (PX4's offboard-loss failsafe)
             self.missing_ticks += 1
             _LOG.warning(
-                "tick %d: no command from %s after %.1f s; holding theirs", k, missing, self.step_timeout_s
-            )
+                "tick %d: no command from %s after %.1f s; their actuators idle until one comes",
+                k, missing, self.step_timeout_s,
+            )  # fmt: skip
             self._world_event("agent_missing", k * self.sc.dt_s, {"tick": k, "agents": missing})
+            for vid in missing:
+                if vid in self.world.index:
+                    self.world.set_command(vid, np.zeros(self.world.command_size(vid)))
         self._apply(k, commands)
         return True
 

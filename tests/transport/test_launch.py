@@ -33,9 +33,11 @@ SEED = 1
 RUN_S = 180.0  # wall-time ceiling of one launched docking (measured ~25 s on this 2-core VM)
 
 
-def _launch(procs: Procs, ns: str, *extra: str, json_path=None):
-    args = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--seed", str(SEED),
+def _launch(procs: Procs, ns: str, *extra: str, json_path=None, headless: bool = True):
+    args = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--seed", str(SEED),
             "--namespace", ns, "--listen", loopback(free_port()), *extra]  # fmt: skip
+    if headless:
+        args.append("--headless")
     if json_path is not None:
         args += ["--json", str(json_path)]
     proc = procs.start(args)
@@ -73,46 +75,32 @@ def sim_result():
     return run_docking(load_scenario("docking"), seed=SEED, record_series=False)
 
 
-def test_lockstep_launch_docks_and_equals_the_in_process_simulation(tmp_path, sim_result):
-    """Same seed, lockstep: identical docking time, impulse, errors, modes and Algorithm 1 decisions. Bit
-    for bit, not to 1e-9: both runners call the same kernels in the same order on the same float64
-    values, and the codec carries arrays as raw little-endian float64."""
-
-    from swarm.transport.keys import Keys
+def test_lockstep_launch_equals_the_in_process_run_even_under_garbage_on_every_key(tmp_path, sim_result):
+    """Lockstep, same seed as ``swarm sim``: the launched run is the in-process one bit for bit (docking
+    time, impulse, errors, modes, Algorithm 1 decisions; not to 1e-9: both runners call the same kernels in
+    the same order on the same float64 values, and the codec carries arrays as raw little-endian float64),
+    even while bytes, wrong types, NaN, wrong shapes and an unknown schema version arrive on every key of
+    the swarm: no process crashes, and the drops are logged per key. An outside client on the printed
+    endpoint sees every mode transition on ``event`` and every mode flown on ``guidance``. (One launch
+    serves both claims: launches are the suite's costly tests.)"""
+    from swarm.errors import MessageError
+    from swarm.transport.keys import AGENT_KINDS, Keys
     from swarm.transport.messages import Event, Guidance, decode
 
-    ns = _ns()
     seen_modes: list[str] = []
     seen_events: list[str] = []
-    with Procs() as procs:
-        out = tmp_path / "launch.json"
-        proc, endpoint = _launch(procs, ns, "--until-docked", json_path=out)
-        keys = Keys(ns)
-        # an outside client on the printed endpoint sees every mode on guidance and event
-        with _client(endpoint) as session:
-            session.declare_subscriber(
-                keys.guidance("chaser"), lambda s: seen_modes.append(decode(s.payload, Guidance).mode)
-            )
-            session.declare_subscriber(
-                keys.event("chaser"),
-                lambda s: seen_events.append(decode(s.payload, Event).data.get("to", "")),
-            )
-            assert proc.wait(RUN_S) == 0, proc.output()
-    got = json.loads(out.read_text())["chasers"]["chaser"]
-    want = sim_result["chasers"]["chaser"]
-    _assert_same_run(got, want)
-    transitions = [m["mode"] for m in want["modes"]]
-    assert [
-        e for e in seen_events if e
-    ] == transitions  # every transition on event, in order (CONTACT from the world)
-    assert set(transitions[:-1]) <= set(seen_modes)  # every mode flown appears on guidance
-    assert "Traceback" not in proc.output()
 
+    def on_guidance(sample) -> None:
+        try:
+            seen_modes.append(decode(sample.payload, Guidance).mode)
+        except MessageError:
+            pass  # this test's own garbage
 
-def test_garbage_on_every_key_changes_nothing_but_the_drop_counters(tmp_path, sim_result):
-    """Bytes, wrong types, NaN, wrong shapes and an unknown schema version on every key of the swarm while
-    it runs: no process crashes, the run is still the in-process one, and the drops are logged per key."""
-    from swarm.transport.keys import AGENT_KINDS, Keys
+    def on_event(sample) -> None:
+        try:
+            seen_events.append(decode(sample.payload, Event).data.get("to", ""))
+        except MessageError:
+            pass
 
     ns = _ns()
     keys = Keys(ns)
@@ -130,9 +118,11 @@ def test_garbage_on_every_key_changes_nothing_but_the_drop_counters(tmp_path, si
     with Procs() as procs:
         out = tmp_path / "launch.json"
         proc, endpoint = _launch(procs, ns, "--until-docked", json_path=out)
-        proc.wait_for_line(r"^swarm up:", 120.0)
         sent = 0
         with _client(endpoint) as session:
+            session.declare_subscriber(keys.guidance("chaser"), on_guidance)
+            session.declare_subscriber(keys.event("chaser"), on_event)
+            proc.wait_for_line(r"^swarm up:", 120.0)
             deadline = time.monotonic() + 5.0
             while time.monotonic() < deadline:
                 for key in targets:
@@ -143,8 +133,10 @@ def test_garbage_on_every_key_changes_nothing_but_the_drop_counters(tmp_path, si
             assert proc.wait(RUN_S) == 0, proc.output()
     got = json.loads(out.read_text())["chasers"]["chaser"]
     want = sim_result["chasers"]["chaser"]
-    for field in ("docking_time_s", "total_impulse_ns", "position_error_m", "modes"):
-        assert got[field] == want[field], field
+    _assert_same_run(got, want)
+    transitions = [m["mode"] for m in want["modes"]]
+    assert [e for e in seen_events if e] == transitions  # every transition, in order (CONTACT from the world)
+    assert set(transitions[:-1]) <= set(seen_modes)  # every mode flown appears on guidance
     text = proc.output()
     assert "Traceback" not in text
     for key in (keys.imu("chaser"), keys.uwb("target"), keys.command("chaser"), keys.truth("target")):
@@ -152,19 +144,53 @@ def test_garbage_on_every_key_changes_nothing_but_the_drop_counters(tmp_path, si
     assert sent > 1000
 
 
-def test_a_killed_agent_is_seen_lost_within_a_second_and_restarted(tmp_path):
+def test_killed_dashboard_agent_and_mothership_are_restarted_and_the_run_goes_on(tmp_path):
+    """Every process of the swarm but the world is SIGKILLed in turn during one lockstep run (one launch
+    serves the three, DESIGN.md section 9: launches are the costly tests):
+
+    - the dashboard: the launcher says so, starts it again on the same port and the page serves again;
+    - the chaser's agent: seen lost within a second (its liveliness token), restarted, re-initialised from
+      its sensors, and it rejoins the run;
+    - the mothership: the agents stop waiting for ranges (lockstep would deadlock otherwise) and fly on
+      without them; the restarted one joins at the slot after the first truth it sees.
+
+    The run still ends docked or in a safe hold, without a keep-out violation, and nothing crashes."""
     ns = _ns()
+    port = free_port()
     with Procs() as procs:
         out = tmp_path / "launch.json"
-        proc, _ = _launch(procs, ns, "--until-docked", "--max-restarts", "2", json_path=out)
+        proc, _ = _launch(procs, ns, "--until-docked", "--dashboard-port", str(port), "--max-restarts", "2",
+                          json_path=out, headless=False)  # fmt: skip
+        proc.wait_for_line(r"^dashboard on http://\S+", 120.0)
         proc.wait_for_line(r"^swarm up:", 120.0)
-        wait_until(lambda: any("--id chaser" in c for c in _children(ns)), 10.0, "the chaser's process")
-        time.sleep(2.0)  # well into the run
-        victim = next(c for c in _children(ns) if "--id chaser" in c)
-        killed_at = time.time()
-        os.kill(int(victim.split()[0]), signal.SIGKILL)
+
+        def kill(marker: str) -> float:
+            wait_until(lambda: any(marker in c for c in _children(ns)), 30.0, f"a process with {marker!r}")
+            victim = next(c for c in _children(ns) if marker in c)
+            killed_at = time.time()
+            os.kill(int(victim.split()[0]), signal.SIGKILL)
+            return killed_at
+
+        def logged(pattern: str, what: str) -> None:
+            wait_until(lambda: re.search(pattern, proc.output(), re.M), 60.0, what, poll_s=0.05)
+
+        kill(" dashboard ")
+        wait_until(lambda: len(re.findall(r"^dashboard on http://", proc.output(), re.M)) >= 2, 60.0,
+                   "the restarted dashboard's URL", poll_s=0.05)  # fmt: skip
+        page = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10).read()
+        agent_killed_at = kill("--id chaser")
+        logged(r"agent/chaser restarted \(pid \d+\), rejoining the run", "the chaser's restart")
+        kill("-m mothership")
+        logged(r"mothership restarted \(pid \d+\), rejoining the run", "the mothership's restart")
         rc = proc.wait(RUN_S)
     text = proc.output()
+    assert "Traceback" not in text
+    # the dashboard
+    lost = r"WARNING swarm.launch: dashboard lost \(exited with status -9\); restart 1/\d"
+    assert re.search(lost, text), text
+    assert re.search(r"dashboard restarted \(pid \d+\), serving the page again", text), text
+    assert b"<html" in page.lower()
+    # the agent
     lost = re.search(
         r"^(\S+ \S+) WARNING swarm.launch: agent/chaser lost \(liveliness token gone\); restart 1/2",
         text,
@@ -172,70 +198,20 @@ def test_a_killed_agent_is_seen_lost_within_a_second_and_restarted(tmp_path):
     )
     assert lost is not None, text
     seen_at = datetime.strptime(lost.group(1), "%Y-%m-%d %H:%M:%S,%f").timestamp()
-    assert seen_at - killed_at < 1.0, (seen_at - killed_at, text)
-    assert re.search(r"agent/chaser restarted \(pid \d+\), rejoining the run", text), text
+    assert seen_at - agent_killed_at < 1.0, (seen_at - agent_killed_at, text)
     assert "re-initialised from its sensors" in text
-    assert "Traceback" not in text
-    res = json.loads(out.read_text())["chasers"]["chaser"]
-    assert res["docked"] or res["final_mode"] in ("HOLD", "ABORT"), (rc, res)
-    assert not res["keepout_violated"]
-
-
-def test_a_killed_dashboard_is_restarted_and_the_run_goes_on(tmp_path):
-    """The dashboard is a process of the swarm too: SIGKILLed mid-run, the launcher says so, starts it again
-    on the same port (the page serves again) and the run docks as if nothing had happened."""
-    ns = _ns()
-    port = free_port()
-    with Procs() as procs:
-        out = tmp_path / "launch.json"
-        args = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--seed", str(SEED),
-                "--namespace", ns, "--listen", loopback(free_port()), "--dashboard-port", str(port),
-                "--until-docked", "--clock", "scaled:4", "--json", str(out)]  # fmt: skip
-        # scaled:4 (~30 s of docking) leaves the restart time to happen during the run
-        proc = procs.start(args)
-        proc.wait_for_line(r"^dashboard on http://\S+", 120.0)
-        proc.wait_for_line(r"^swarm up:", 120.0)
-        victim = next(c for c in _children(ns) if " dashboard " in c)
-        os.kill(int(victim.split()[0]), signal.SIGKILL)
-        wait_until(lambda: len(re.findall(r"^dashboard on http://", proc.output(), re.M)) >= 2, 60.0,
-                   "the restarted dashboard's URL")  # fmt: skip
-        page = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10).read()
-        rc = proc.wait(RUN_S)
-    text = proc.output()
-    lost = r"WARNING swarm.launch: dashboard lost \(exited with status -9\); restart 1/\d"
-    assert re.search(lost, text), text
-    assert re.search(r"dashboard restarted \(pid \d+\), serving the page again", text), text
-    assert "Traceback" not in text
-    assert b"<html" in page.lower()
-    res = json.loads(out.read_text())["chasers"]["chaser"]
-    assert res["docked"] or res["final_mode"] in ("HOLD", "ABORT"), (rc, res)
-    assert not res["keepout_violated"]
-
-
-def test_a_killed_mothership_is_restarted_and_the_agents_fly_on_without_ranges_meanwhile(tmp_path):
-    """The mothership's loss stops the agents' wait for ranges (lockstep would deadlock otherwise); the
-    restarted one joins at the slot after the first truth it sees; the run still ends docked or in a safe
-    hold, and no other process crashes."""
-    ns = _ns()
-    with Procs() as procs:
-        out = tmp_path / "launch.json"
-        proc, _ = _launch(procs, ns, "--until-docked", json_path=out)
-        proc.wait_for_line(r"^swarm up:", 120.0)
-        time.sleep(2.0)
-        victim = next(c for c in _children(ns) if "-m mothership" in c)
-        os.kill(int(victim.split()[0]), signal.SIGKILL)
-        proc.wait(RUN_S)
-    text = proc.output()
-    assert re.search(r"WARNING swarm.launch: mothership lost \(liveliness token gone\); restart 1/3", text), (
+    # the mothership
+    assert re.search(r"WARNING swarm.launch: mothership lost \(liveliness token gone\); restart 1/2", text), (
         text
     )
     assert "mothership lost; flying without ranges" in text
-    assert re.search(r"mothership restarted \(pid \d+\), rejoining the run", text), text
     assert "mothership rejoins the run: ranges from tick" in text
-    assert "Traceback" not in text
-    res = json.loads(out.read_text())["chasers"]["chaser"]
-    assert res["docked"] or res["final_mode"] in ("HOLD", "ABORT"), res
-    assert not res["keepout_violated"]
+    res = json.loads(out.read_text())
+    assert res["restarts"] == {"mothership": 1, "agent/chaser": 1, "agent/target": 0, "world": 0,
+                               "dashboard": 1}, res["restarts"]  # fmt: skip
+    c = res["chasers"]["chaser"]
+    assert c["docked"] or c["final_mode"] in ("HOLD", "ABORT"), (rc, c)
+    assert not c["keepout_violated"]
 
 
 def _stamp(text: str, pattern: str) -> tuple[float, re.Match[str]]:
@@ -273,10 +249,13 @@ def _assert_world_restarted(text: str, killed_at: float) -> dict[str, float]:
             "resumed_s": resumed - killed_at}  # fmt: skip
 
 
+@pytest.mark.slow
 def test_a_killed_world_resumes_from_its_checkpoint_and_the_run_equals_the_simulation(tmp_path, sim_result):
     """SIGKILL of the world mid-run (lockstep): the launcher restarts it with --resume; it continues from
     its checkpoint of the last tick it published, the agents drop the samples they had and send the
-    command it lacked, and the run is the in-process simulation's, bit for bit."""
+    command it lacked, and the run is the in-process simulation's, bit for bit. (``--runslow`` only: the
+    default suite has the same claim in the secure world restart of ``test_security.py`` and the restart
+    log in the free-running one above; launches are the suite's costly tests.)"""
     ns = _ns()
     with Procs() as procs:
         out = tmp_path / "launch.json"
@@ -297,23 +276,41 @@ def test_a_killed_world_resumes_from_its_checkpoint_and_the_run_equals_the_simul
     assert re.search(r"  restarts: world 1$", text, re.M), text
 
 
-def test_a_killed_world_in_a_scaled_run_resumes_where_it_was_and_the_run_ends_safely(tmp_path):
-    """A free-running clock (scaled:4): the restarted world resumes at the simulated time of its checkpoint
-    (the vehicles did not move meanwhile); the agents saw a gap of wall time and no samples, and fly on
-    from the samples that follow. The run ends docked or in a safe hold, without a keep-out violation."""
+def test_a_free_running_swarm_takes_delayed_samples_and_a_killed_world_and_ends_safely(tmp_path):
+    """A free-running clock (scaled:2; at scaled:4 a loaded 2-core CI machine could not keep up with the
+    five processes, the agents' commands came late, and the run showed that overload rather than what is
+    tested here). One launch serves two claims, in turn:
+
+    - ``sensor_delay``: for 5 s the chaser's imu and vision samples leave the world up to 30 ms late, so
+      they arrive late and out of order; the agent processes ticks in order, taking late ones partially
+      (counted);
+    - then the world SIGKILLed: the restarted world resumes at the simulated time of its checkpoint (the
+      vehicles did not move meanwhile); the agents saw a gap of wall time and no samples, and fly on from
+      the samples that follow.
+
+    The run ends docked or in a safe hold, without a keep-out violation and with no crash."""
     ns = _ns()
     with Procs() as procs:
         out = tmp_path / "launch.json"
-        proc, _ = _launch(procs, ns, "--until-docked", "--clock", "scaled:4", json_path=out)
+        proc, endpoint = _launch(procs, ns, "--until-docked", "--clock", "scaled:2", json_path=out)
         proc.wait_for_line(r"^swarm up:", 120.0)
-        killed_at, _ = _kill_world(ns, 4.0)
+        cmd = [sys.executable, "-m", "swarm.cli.main", "fault", "sensor_delay", "--vehicle", "chaser",
+               "--for", "5", "--delay", "0.03", "--namespace", ns,
+               "--mode", "client", "--connect", endpoint]  # fmt: skip
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+        assert r.returncode == 0, r.stderr
+        wait_until(lambda: "fault applied: sensor_delay on ['chaser']" in proc.output(), 30.0,
+                   "the world to apply the delay", poll_s=0.05)  # fmt: skip
+        killed_at, _ = _kill_world(ns, 3.0)  # 6 simulated s later: after the 5 s window
         proc.wait(RUN_S)
     text = proc.output()
     delays = _assert_world_restarted(text, killed_at)
     res = json.loads(out.read_text())
     assert res["restarts"]["world"] == 1
     c = res["chasers"]["chaser"]
-    print(f"world restart (scaled:4): {delays}; docked {c['docked']}, final mode {c['final_mode']}")
+    print(f"world restart (scaled:2): {delays}; docked {c['docked']}, final mode {c['final_mode']}; "
+          f"tick assembly {c['tick_assembly']}")  # fmt: skip
+    assert c["tick_assembly"]["incomplete"] + c["tick_assembly"]["stale"] > 0  # late samples were seen
     assert c["docked"] or c["final_mode"] in ("HOLD", "ABORT"), c
     assert not c["keepout_violated"]
 
@@ -376,30 +373,6 @@ def test_faults_injected_at_run_time_reach_the_world_and_the_radios(tmp_path, si
     assert (
         res["estimator"]["accepted_ranges"] < sim_result["chasers"]["chaser"]["estimator"]["accepted_ranges"]
     )
-    assert res["docked"] or res["final_mode"] in ("HOLD", "ABORT"), res
-    assert not res["keepout_violated"]
-
-
-def test_delayed_and_reordered_sensor_samples_in_a_free_running_swarm(tmp_path):
-    """``sensor_delay`` (scaled clock): for 5 s the chaser's imu and vision samples leave the world up to
-    30 ms late, so they arrive late and out of order; the agent processes ticks in order, taking late ones
-    partially (counted), and the run still ends docked or in a safe hold with no crash."""
-    ns = _ns()
-    with Procs() as procs:
-        out = tmp_path / "launch.json"
-        proc, endpoint = _launch(procs, ns, "--until-docked", "--clock", "scaled:4", json_path=out)
-        proc.wait_for_line(r"^swarm up:", 120.0)
-        cmd = [sys.executable, "-m", "swarm.cli.main", "fault", "sensor_delay", "--vehicle", "chaser",
-               "--for", "5", "--delay", "0.03", "--namespace", ns,
-               "--mode", "client", "--connect", endpoint]  # fmt: skip
-        r = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
-        assert r.returncode == 0, r.stderr
-        proc.wait(RUN_S)
-    text = proc.output()
-    assert "fault applied: sensor_delay on ['chaser']" in text
-    assert "Traceback" not in text
-    res = json.loads(out.read_text())["chasers"]["chaser"]
-    assert res["tick_assembly"]["incomplete"] + res["tick_assembly"]["stale"] > 0  # late samples were seen
     assert res["docked"] or res["final_mode"] in ("HOLD", "ABORT"), res
     assert not res["keepout_violated"]
 
