@@ -334,10 +334,10 @@ def test_cli_runs_a_campaign_and_writes_json(tmp_path, capsys):
 # ---- the committed campaign is reproducible --------------------------------------------------------------
 
 
-@pytest.mark.slow
 def test_committed_campaign_first_runs_reproduce_exactly(tmp_path):
     """The first 10 paired runs of docs/results/docking-500-seed0, re-run from its scenario.toml and root
-    seed, give the committed rows bit for bit (fails when the simulator changes: re-run the results then)."""
+    seed, give the committed rows bit for bit (fails when the simulator changes: re-run the results then).
+    In the default suite since the control tick is compiled (20 dockings in ~1 s)."""
     from pathlib import Path
 
     committed = Path(__file__).resolve().parents[2] / "docs" / "results" / "docking-500-seed0"
