@@ -117,7 +117,9 @@ def run_one(scenario, policy: str, run: int, seed: int, trajectory_period_s: flo
     from swarm.kinds.dispersions import dispersion_columns
     from swarm.sim.docking import DockingSim
 
-    sim = DockingSim(scenario, policy, seed, record_series=True)
+    # the rows and the trajectory need the truth's path only; the faults' NEES samples need the rest
+    keys = None if scenario.faults.enabled else ("t_s", "p_true_nav")
+    sim = DockingSim(scenario, policy, seed, record_series=True, series_keys=keys)
     start = {}
     for cid in scenario.chasers:
         x, est = sim.world.x[cid], sim.agents[cid].est

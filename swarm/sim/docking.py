@@ -101,12 +101,16 @@ class DockingSim:
         seed: int = 0,
         record_series: bool = True,
         fast: bool = True,
+        series_keys: tuple[str, ...] | None = None,
     ):
         sc = scenario
         self.sc = sc
         self.policy = policy or sc.policy
         self.seed = int(seed)
         self.record_series = record_series
+        # the series keys the summary carries (None: all of them); the compiled loop records every column
+        # either way, this only saves turning the others into lists (a campaign needs two of eight)
+        self.series_keys = series_keys
         self.fast = fast  # False: every tick through the per-object Python path (the reference)
         self.world = World(sc, self.seed)  # draws and applies the run's dispersions, owns its faults
         self.dispersion = self.world.dispersion
@@ -397,20 +401,25 @@ class DockingSim:
             self.vdone[list(self.agents).index(cid)] = True
             self._log_events(cid, [ct.event(self.agents[cid].mode.value)])
 
-    def series(self, chaser: str) -> dict[str, list]:
-        """The chaser's time series (:data:`SERIES_KEYS`), one sample every ``sim.series_every`` ticks."""
+    def series(self, chaser: str, keys: tuple[str, ...] | None = None) -> dict[str, list]:
+        """The chaser's time series (:data:`SERIES_KEYS`, or only ``keys``), one sample every
+        ``sim.series_every`` ticks."""
         c = self.referee.chasers.index(chaser)
         rows = self.SER[c, : self.SER_n[c]]
-        return {
-            "t_s": rows[:, S_T].tolist(),
-            "p_true_nav": rows[:, S_PTRUE : S_PTRUE + 3].tolist(),
-            "p_est_nav": rows[:, S_PEST : S_PEST + 3].tolist(),
-            "q_true_nav_body": rows[:, S_QTRUE : S_QTRUE + 4].tolist(),
-            "q_est_nav_body": rows[:, S_QEST : S_QEST + 4].tolist(),
-            "cov_pos": rows[:, S_COV : S_COV + 9].reshape(-1, 3, 3).tolist(),
-            "mode": [MODES[int(m)].value for m in rows[:, S_MODE]],
-            "relative_nav": [bool(r) for r in rows[:, S_REL]],
+        columns = {
+            "t_s": lambda: rows[:, S_T].tolist(),
+            "p_true_nav": lambda: rows[:, S_PTRUE : S_PTRUE + 3].tolist(),
+            "p_est_nav": lambda: rows[:, S_PEST : S_PEST + 3].tolist(),
+            "q_true_nav_body": lambda: rows[:, S_QTRUE : S_QTRUE + 4].tolist(),
+            "q_est_nav_body": lambda: rows[:, S_QEST : S_QEST + 4].tolist(),
+            "cov_pos": lambda: rows[:, S_COV : S_COV + 9].reshape(-1, 3, 3).tolist(),
+            "mode": lambda: [MODES[int(m)].value for m in rows[:, S_MODE]],
+            "relative_nav": lambda: [bool(r) for r in rows[:, S_REL]],
         }
+        unknown = set(keys or ()) - set(columns)
+        if unknown:
+            raise ValueError(f"series keys: unknown {sorted(unknown)}, known {list(columns)}")
+        return {k: make() for k, make in columns.items() if keys is None or k in keys}
 
     def _summary(self, t_end: float, wall: float) -> dict:
         sc = self.sc
@@ -435,7 +444,7 @@ class DockingSim:
             if self.policy == "mdp":
                 d["decisions"] = [dec.as_dict() for dec in sw.decisions]
             if self.record_series:
-                d["series"] = self.series(cid)
+                d["series"] = self.series(cid, self.series_keys)
             if sc.faults.enabled:
                 f = self.world.faults
                 d["faults"] = {
