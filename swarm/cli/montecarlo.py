@@ -1,10 +1,10 @@
 """``swarm montecarlo SCENARIO``: paired Monte Carlo campaign of several policies (paper Table II, Figs. 5-6).
 
-Runs ``--runs`` paired runs of each ``--policy`` on ``--workers`` processes, saves them run by run in
-``--out DIR`` (Ctrl-C keeps the finished runs, ``--resume DIR`` continues), then writes ``DIR/report.md``
-with the statistics and figures; ``--json FILE`` gets the DESIGN.md section 8 record. The library entry
-point, which also takes any ``concurrent.futures`` executor (a dask cluster, say), is
-:func:`swarm.montecarlo.campaign.run_campaign`.
+Runs ``--runs`` paired runs of each ``--policy`` on ``--workers`` processes, or on an existing
+dask.distributed cluster with ``--dask tcp://HOST:8786``, saves them run by run in ``--out DIR`` (Ctrl-C
+keeps the finished runs, ``--resume DIR`` continues), then writes ``DIR/report.md`` with the statistics and
+figures; ``--json FILE`` gets the DESIGN.md section 8 record. The library entry point, which takes any
+``concurrent.futures`` executor, is :func:`swarm.montecarlo.campaign.run_campaign`.
 """
 
 from __future__ import annotations
@@ -47,6 +47,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="fixed or mdp; repeat to compare (default: both); the first is the baseline",
     )
     p.add_argument("--workers", type=_int("--workers"), default=None, help="processes (default: the cores)")
+    p.add_argument(
+        "--dask",
+        default=None,
+        metavar="ADDRESS",
+        help="run on the dask.distributed scheduler at ADDRESS (tcp://HOST:PORT; extra 'dask'), not locally",
+    )
     p.add_argument("--seed", type=seed, default=None, help="root seed (default 0)")
     p.add_argument(
         "--out", type=Path, default=None, metavar="DIR", help="campaign directory (default mc-SCENARIO-seedS)"
@@ -81,9 +87,19 @@ def run(args: argparse.Namespace) -> int:
         policies = tuple(args.policies) if args.policies else ("fixed", "mdp")
         out = args.out if args.out is not None else Path(f"mc-{sc.name}-seed{seed}")
     spec = CampaignSpec(sc, policies, runs, seed)
-    outcome = run_campaign(
-        spec, out, workers=args.workers, resume=args.resume is not None, progress=not args.no_progress
-    )
+    if args.dask is not None:
+        if args.workers is not None:
+            raise ConfigError("--workers and --dask: choose one (the cluster has its own workers)")
+        from swarm.montecarlo.cluster import dask_executor
+
+        with dask_executor(args.dask) as executor:
+            outcome = run_campaign(
+                spec, out, executor=executor, resume=args.resume is not None, progress=not args.no_progress
+            )
+    else:
+        outcome = run_campaign(
+            spec, out, workers=args.workers, resume=args.resume is not None, progress=not args.no_progress
+        )
     for failure in outcome.failures:
         log.error("%s", failure)
     if outcome.interrupted:
