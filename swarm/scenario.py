@@ -51,6 +51,14 @@ class VehicleSpec:
     kind: str = "cubesat"
     """The vehicle's kind (:data:`swarm.kinds.KINDS`: ``cubesat``, ``ground``); its tables are
     ``[kinds.<kind>]``."""
+    uwb_address: int | None = None
+    """The UWB tag's address, which picks its TDMA slot (``uwb.tdma``): ``address % frame``; default the
+    vehicle's index in ``[vehicles]``. Two tags whose addresses share a slot collide."""
+
+    def __post_init__(self) -> None:
+        a = self.uwb_address
+        if a is not None and (isinstance(a, bool) or not isinstance(a, int) or not 0 <= a < 2**16):
+            raise ConfigError(f"uwb_address must be an integer in 0..65535, got {a!r}")
 
 
 @dataclass(frozen=True)

@@ -188,9 +188,26 @@ class UwbParams:
     """Probability that an exchange's reply is lost (no measurement)."""
     dropout_windows_s: tuple[tuple[float, float], ...] = ()
     """Intervals ``(start, end)`` [s], start inclusive, end exclusive, in which every reply is lost."""
+    tdma: bool = False
+    """Many tags on one channel, as the Loco Positioning TWR-TDMA shares it: time is cut into slots of
+    ``tdma_slot_s``, a frame is ``tdma_frame_slots`` slots, each tag ranges once per frame (with its next
+    anchor) in the slot ``address % frame`` (``[vehicles.X] uwb_address``, default its index), and tags
+    with the same slot collide (both exchanges lost, counted). Each tag reports at most one range per UWB
+    tick (``rate_hz``), so its rate is ``min(rate_hz, 1 / (frame * slot))``: ~238/N Hz for N tags once
+    that is below ``rate_hz``. Off: every tag ranges at ``rate_hz`` (a single pair, today's default)."""
+    tdma_slot_s: float = 0.0042
+    """Length of one TDMA slot [s] (Loco Positioning TWR-TDMA: ~4.2 ms per exchange)."""
+    tdma_frame_slots: int = 0
+    """Slots per TDMA frame, a power of two; 0: the smallest power of two >= the number of tags."""
 
     def __post_init__(self) -> None:
         _check_positive("uwb", "rate_hz", self.rate_hz)
+        if not isinstance(self.tdma, bool):
+            raise ConfigError(f"uwb.tdma must be true or false, got {self.tdma!r}")
+        _check_positive("uwb", "tdma_slot_s", self.tdma_slot_s)
+        f = self.tdma_frame_slots
+        if isinstance(f, bool) or not isinstance(f, int) or f < 0 or (f and f & (f - 1)):
+            raise ConfigError(f"uwb.tdma_frame_slots must be 0 or a power of two (1, 2, 4, ...), got {f!r}")
         _check_positive("uwb", "sigma_m", self.sigma_m)
         for name in ("nlos_min_m", "nlos_max_m"):
             _check_nonneg("uwb", name, getattr(self, name))

@@ -64,6 +64,14 @@ class UwbNetwork:
         self.outlier = np.zeros(n, dtype=np.bool_)
         self.env_lost = np.zeros(n, dtype=np.bool_)
         self.env_p = np.zeros(n)
+        # TDMA (uwb.tdma): each tag's slot (-1: off) and (slot length, frame length, UWB tick period);
+        # per tag, whether this tick had no slot of it, whether it collided, and the collisions so far
+        slots, frame = tdma_slots(scenario)
+        self.tdma_slot = slots
+        self.tdma_prm = np.array([scenario.uwb.tdma_slot_s, float(frame), self.every * scenario.dt_s])
+        self.idle = np.zeros(n, dtype=np.bool_)
+        self.collided = np.zeros(n, dtype=np.bool_)
+        self.collisions = np.zeros(n, dtype=np.int64)
 
     def reserve_noise(self, exchanges: int) -> None:
         """Pre-draw the normals of the next ``exchanges`` exchanges of every radio (four each)."""
@@ -92,6 +100,7 @@ class UwbNetwork:
         uwb_tick(
             t_s, X, self.lever, self.anchors, self.drift, self.prm, self.next_anchor, self.noise, self.ui,
             self.env_lost, self.env_p, self.lost, self.anchor_id, self.range_m, self.outlier,
+            self.tdma_slot, self.tdma_prm, self.idle, self.collided, self.collisions,
         )  # fmt: skip
         return {
             vid: UwbSample(t_s, int(self.anchor_id[i]), float(self.range_m[i]), bool(self.outlier[i]))
@@ -100,13 +109,60 @@ class UwbNetwork:
         }
 
 
+def tdma_slots(scenario) -> tuple[np.ndarray, int]:
+    """``(slot of each vehicle's tag (n,), frame length in slots)`` of the scenario's TDMA channel
+    (:class:`swarm.core.sensors.UwbParams`): slots ``address % frame``, the frame ``uwb.tdma_frame_slots``
+    or the smallest power of two >= the number of tags; slots all -1 (and frame 1) when TDMA is off."""
+    ids = list(scenario.vehicles)
+    n = len(ids)
+    if not scenario.uwb.tdma:
+        return np.full(n, -1, dtype=np.int64), 1
+    frame = scenario.uwb.tdma_frame_slots or 1 << max(0, (n - 1).bit_length())
+    addresses = [scenario.vehicles[v].uwb_address for v in ids]
+    slots = np.array([(i if a is None else a) % frame for i, a in enumerate(addresses)], dtype=np.int64)
+    return slots, frame
+
+
+@numba.njit(cache=True)
+def tdma_has_slot(t_s, slot, tdma_prm):
+    """Whether the tag of TDMA ``slot`` had its slot in the UWB tick period ``(t_s - period, t_s]``:
+    its slots start at ``(m * frame + slot) * slot_s``, ``m = 0, 1, ...`` (``tdma_prm`` = ``(slot_s, frame,
+    period)``). At most one counts per period: the tick carries one range per tag."""
+    slot_s, frame, period = tdma_prm[0], tdma_prm[1], tdma_prm[2]
+    eps = 1e-9 * slot_s  # t_s is k * dt: a slot start on a tick boundary belongs to the period it ends
+    m = np.floor((t_s + eps) / (frame * slot_s) - slot / frame)
+    if m < 0:
+        return False
+    start = (m * frame + slot) * slot_s
+    return start > t_s - period + eps
+
+
 @numba.njit(cache=True)
 def uwb_tick(t_s, X, lever, anchors, drift, prm, next_anchor, noise, ui, env_lost, env_p, lost, anchor_id,
-             range_m, outlier):  # fmt: skip
+             range_m, outlier, tdma_slot, tdma_prm, idle, collided, collisions):  # fmt: skip
     """One exchange of every radio at ``t_s`` from the truth ``X`` (n, 13) in the radio environment
     ``env_lost``/``env_p`` (n,): the tag is ``p + R(q) P1`` (paper Fig. 2, ``lever`` (n, 3) per vehicle),
-    the anchor the next in round robin (which advances even when the reply is lost)."""
-    for v in range(X.shape[0]):
+    the anchor the next in round robin (which advances even when the reply is lost). With TDMA on
+    (``tdma_slot[v] >= 0``, :func:`tdma_slots`), a tag whose slot did not come in this tick's period has
+    no exchange (``idle``, ``lost``, its anchor kept), and tags that share a slot collide: both exchanges
+    lost (``collided``, ``collisions`` counted), their anchors advanced. The exchange is evaluated on the
+    truth at ``t_s``, at most one UWB period after its slot (a vehicle at 2 cm/s moves 0.4 mm in 20 ms)."""
+    n = X.shape[0]
+    for v in range(n):
+        idle[v] = tdma_slot[v] >= 0 and not tdma_has_slot(t_s, tdma_slot[v], tdma_prm)
+        collided[v] = False
+    for v in range(n):
+        if tdma_slot[v] < 0 or idle[v]:
+            continue
+        for u in range(n):
+            if u != v and not idle[u] and tdma_slot[u] == tdma_slot[v]:
+                collided[v] = True
+                collisions[v] += 1
+                break
+    for v in range(n):
+        if idle[v]:
+            lost[v], outlier[v] = True, False
+            continue
         tag = X[v, 0:3] + qrotate(X[v, 6:10], lever[v])
         i = next_anchor[v]
         next_anchor[v] = (i + 1) % anchors.shape[0]
@@ -114,6 +170,8 @@ def uwb_tick(t_s, X, lever, anchors, drift, prm, next_anchor, noise, ui, env_los
         lost[v], range_m[v], outlier[v] = uwb_exchange(
             t_s, tag, anchors[i], noise[v, ui[0]], drift[i], prm, env_lost[v], env_p[v]
         )
+        if collided[v]:
+            lost[v], outlier[v] = True, False
     ui[0] += 1
 
 

@@ -78,7 +78,8 @@ def radio_arrays(net) -> tuple:
     """The arrays of :func:`swarm.step.radio.uwb_tick` (without ``t_s`` and ``X``) of a
     :class:`swarm.step.radio.UwbNetwork`."""
     return (net.lever, net.anchors, net.drift, net.prm, net.next_anchor, net.noise, net.ui, net.env_lost,
-            net.env_p, net.lost, net.anchor_id, net.range_m, net.outlier)  # fmt: skip
+            net.env_p, net.lost, net.anchor_id, net.range_m, net.outlier, net.tdma_slot, net.tdma_prm,
+            net.idle, net.collided, net.collisions)  # fmt: skip
 
 
 def agent_arrays(a) -> tuple:
@@ -186,7 +187,7 @@ def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
     drop_w, nlos_w = W[17], W[18]
     gyro_out, ahrs_out = W[13], W[14]
     (lever, anchors, drift, uprm, next_anchor, unoise, ui, env_lost, env_p, lost, anchor_id, range_m,
-     outlier) = R  # fmt: skip
+     outlier, tdma_slot, tdma_prm, idle, collided, collisions) = R  # fmt: skip
     (AX, AP, AC, AB, PRMS, f_body, w_body, mass, plane, Hok, Hd2, Hmeta, last_vision, MP, t_agent,
      role, every, vdone, tidx, TGT, G, GP, SW, DEC, DEC_n, EV, EV_n, ST, SP, CS, CP, REF, UC, ACT, SAT,
      ctl, MR, MQ) = A  # fmt: skip
@@ -223,7 +224,8 @@ def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
             env_lost[:] = lost_all
             env_p[:] = p_all
             uwb_tick(t, X, lever, anchors, drift, uprm, next_anchor, unoise, ui, env_lost, env_p, lost,
-                     anchor_id, range_m, outlier)  # fmt: skip
+                     anchor_id, range_m, outlier, tdma_slot, tdma_prm, idle, collided,
+                     collisions)  # fmt: skip
         has_ahrs = ahrs_enabled and j % ahrs_every == 0
         for v in range(n):
             agent_imu(AX[v], AP[v], AC[v], AB[v], PRMS[v], gyro_out[v], dt, f_body[v], mass[v], w_body[v],

@@ -587,6 +587,9 @@ class WorldProcess:
                 self.end_reason = "all_contact"
                 break
             if tick >= max_k:
+                # tick max_k's commands act over its step, as in the in-process run (whose loop, compiled or
+                # not, steps every tick it processes): the effort of a run that ends here is the same
+                self.world.step()
                 self.end_reason = "max_duration"
                 break
             frames = self.world.step()
