@@ -54,6 +54,10 @@ BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
         _bench("checkpoint", presets=True),
         "the world's checkpoint per tick (1/4/16 pairs), in memory and on disk",
     ),
+    "swarm": (
+        _bench("swarm", presets=True),
+        "the swarm at scale: CPU per vehicle per tick, late ticks, real-time factor, latency (--vehicles)",
+    ),
 }
 """Bench name -> (runner taking ``quick``, one-line help)."""
 
@@ -71,6 +75,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     for name, (_, help_text) in BENCHES.items():
         bp = benches.add_parser(name, help=help_text, description=help_text)
         _add_flags(bp, argparse.SUPPRESS)
+        if name == "swarm":
+            bp.add_argument("--vehicles", default=None, metavar="N,N,...",
+                            help="vehicle counts, even; default 2,8,32 (2,8 with --quick)")  # fmt: skip
+            bp.add_argument("--clock", default=None, metavar="CLOCK[,CLOCK]",
+                            help="realtime, lockstep or both (default both)")  # fmt: skip
+            bp.add_argument("--span", type=float, default=None, metavar="S",
+                            help="simulated seconds per case (default 20, 5 with --quick)")  # fmt: skip
 
 
 def _add_flags(p: argparse.ArgumentParser, default) -> None:
@@ -83,7 +94,10 @@ def run(args: argparse.Namespace) -> int:
     records = {}
     for name in names:
         log.info("bench %s%s", name, " (quick)" if args.quick else "")
-        record, report = BENCHES[name][0](args.quick)
+        if name == "swarm" and args.bench == "swarm":  # its own flags override the preset
+            record, report = _swarm(args)
+        else:
+            record, report = BENCHES[name][0](args.quick)
         print(report)
         records[name] = record
     if args.json is not None:
@@ -94,6 +108,22 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc.strerror}") from exc
         log.info("wrote %s", args.json)
     return 0
+
+
+def _swarm(args: argparse.Namespace) -> tuple[dict, str]:
+    from swarm.bench import swarm as bench
+
+    preset = dict(bench.QUICK if args.quick else bench.FULL)
+    if getattr(args, "vehicles", None) is not None:
+        preset["vehicles"] = bench.parse_vehicles(args.vehicles)
+    if getattr(args, "clock", None) is not None:
+        preset["clocks"] = bench.parse_clocks(args.clock)
+    if getattr(args, "span", None) is not None:
+        if not (math.isfinite(args.span) and 1.0 <= args.span <= 3600.0):
+            raise ConfigError(f"--span must be a number of seconds in 1..3600, got {args.span}")
+        preset["span_s"] = args.span
+    record = bench.run(preset)
+    return record, bench.format_report(record)
 
 
 def _finite_or_null(x):

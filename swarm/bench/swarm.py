@@ -1,0 +1,188 @@
+"""``swarm bench swarm``: how many vehicles the swarm runs on this machine (issue 13).
+
+For each case (number of vehicles, clock), ``swarm launch docking --agents V/2`` (one process per vehicle)
+runs for a fixed simulated span while a probe client, on the launcher's router, stamps the arrival of every
+vehicle's ``imu(k)``, ``estimate(k)`` and ``command(k)`` on one clock (it decodes only the tick number):
+
+- **CPU per vehicle per tick**: the agents' own CPU time (each agent process reports it at the end of the
+  run, ``cpu_s`` in the launch summary) over vehicles x ticks; the world's per tick beside it;
+- **late ticks** (free-running clocks): the share of ``command(k)`` that arrive more than one tick period
+  (``dt / factor`` of wall time) after ``imu(k)``, i.e. after the world has stepped past the tick they
+  were meant for (the world then holds the previous command); in lockstep no tick is late by construction;
+- **real-time factor**: simulated over wall time of the run (``run_end``);
+- **sensor-to-estimate latency** p50/p99: ``estimate(k)`` minus ``imu(k)`` arrival, per vehicle: the agent's
+  receive, filter and publish time plus one router hop each way.
+
+The probe's own callbacks (two per vehicle per tick) run on the same two cores: at 32 vehicles that is
+~6400 small callbacks a second, a few per cent of a core; the numbers include that disturbance.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import msgpack
+import numpy as np
+
+from swarm.errors import ConfigError
+from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session
+
+QUICK = {"vehicles": (2, 8), "clocks": ("lockstep", "realtime"), "span_s": 5.0}
+FULL = {"vehicles": (2, 8, 32), "clocks": ("lockstep", "realtime"), "span_s": 20.0}
+DT_S = 0.01  # the docking scenario's tick
+
+
+def parse_vehicles(text: str) -> tuple[int, ...]:
+    """``--vehicles 2,8,32``: even counts (a chaser and its target per pair), 2..128."""
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise ConfigError(f"--vehicles must be even integers separated by commas, got {text!r}") from None
+    bad = [v for v in values if v < 2 or v > 128 or v % 2]
+    if not values or bad:
+        raise ConfigError(f"--vehicles must be even integers in 2..128 (pairs), got {text!r}")
+    return values
+
+
+def parse_clocks(text: str) -> tuple[str, ...]:
+    """``--clock realtime,lockstep``."""
+    values = tuple(text.split(","))
+    bad = [c for c in values if c not in ("realtime", "lockstep")]
+    if bad:
+        raise ConfigError(f"--clock must be realtime, lockstep or both (comma-separated), got {text!r}")
+    return values
+
+
+class _Probe:
+    """Arrival stamps of every vehicle's imu, estimate and command ticks (the tick number decoded only)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.imu: dict[tuple[str, int], float] = {}
+        self.latency: list[float] = []
+        self.command_delay: list[float] = []
+
+    def _tick(self, sample) -> tuple[str, int] | None:
+        try:
+            vid = str(sample.key_expr).split("/")[-2]
+            return vid, int(msgpack.unpackb(bytes(sample.payload))["tick"])
+        except Exception:  # a payload of someone else's making: not ours to measure
+            return None
+
+    def on_imu(self, sample) -> None:
+        now = time.perf_counter()
+        key = self._tick(sample)
+        if key is not None:
+            with self.lock:
+                self.imu[key] = now
+
+    def on_later(self, into: str):
+        def handler(sample) -> None:
+            now = time.perf_counter()
+            key = self._tick(sample)
+            if key is None:
+                return
+            with self.lock:
+                t0 = self.imu.get(key)
+                if t0 is not None:
+                    getattr(self, into).append(now - t0)
+
+        return handler
+
+
+def _case(vehicles: int, clock: str, span_s: float, factor: float = 1.0) -> dict:
+    pairs = vehicles // 2
+    ns = f"benchswarm{os.getpid()}v{vehicles}{clock}"
+    endpoint = free_loopback_endpoint()
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run.json"
+        cmd = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--until-docked",
+               "--agents", str(pairs), "--clock", clock, "--set", f"sim.max_duration_s={span_s}",
+               "--json", str(out), "--namespace", ns, "--listen", endpoint]  # fmt: skip
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        probe = _Probe()
+        up = threading.Event()
+
+        def drain() -> None:  # the launcher's stdout: wait for "swarm up", then keep the pipe empty
+            for line in proc.stdout:
+                if line.startswith("swarm listening on"):
+                    up.set()
+            up.set()
+
+        threading.Thread(target=drain, daemon=True).start()
+        try:
+            up.wait(300)
+            session = open_session(ZenohArgs(mode="client", connect=(endpoint,)))
+            try:
+                wild = f"{ns}/agent/*"
+                session.declare_subscriber(f"{wild}/imu", probe.on_imu)
+                session.declare_subscriber(f"{wild}/estimate", probe.on_later("latency"))
+                session.declare_subscriber(f"{wild}/command", probe.on_later("command_delay"))
+                rc = proc.wait(timeout=1800)
+            finally:
+                session.close()
+        finally:
+            if proc.poll() is None:
+                proc.send_signal(2)
+                proc.wait(60)
+        if not out.exists():
+            raise RuntimeError(f"swarm launch --agents {pairs} --clock {clock} failed ({rc})")
+        res = json.loads(out.read_text())
+    ticks = max(1, round(res["sim_time_s"] / DT_S))
+    cpu = res.get("cpu_s") or {}
+    agents = [v for k, v in cpu.items() if k != "world" and v is not None]
+    lat = np.asarray(probe.latency) * 1e6
+    delay = np.asarray(probe.command_delay)
+    period = DT_S / factor
+    late = float(np.mean(delay > period)) if clock != "lockstep" and delay.size else None
+    return {
+        "vehicles": vehicles,
+        "per_process": 1,
+        "clock": clock,
+        "cpu_us_per_vehicle_tick": 1e6 * float(np.sum(agents)) / (len(agents) * ticks) if agents else None,
+        "world_cpu_us_per_tick": 1e6 * cpu["world"] / ticks if cpu.get("world") is not None else None,
+        "late_tick_share": late,
+        "realtime_factor": res.get("realtime_factor"),
+        "latency_p50_us": float(np.percentile(lat, 50)) if lat.size else None,
+        "latency_p99_us": float(np.percentile(lat, 99)) if lat.size else None,
+        "samples": int(lat.size),
+        "ticks": ticks,
+    }
+
+
+def run(preset: dict) -> dict:
+    cases = [_case(v, c, preset["span_s"]) for c in preset["clocks"] for v in preset["vehicles"]]
+    return {
+        "cases": cases,
+        "span_s": preset["span_s"],
+        "cores": os.cpu_count(),
+        "load_1min": os.getloadavg()[0],
+    }
+
+
+def _fmt(x, spec: str) -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def format_report(r: dict) -> str:
+    lines = [
+        f"swarm launch docking, one process per vehicle, {r['span_s']:.0f} s simulated per case "
+        f"({r['cores']} cores, 1-min load {r['load_1min']:.2f} at the end)",
+        "vehicles  clock      CPU us/vehicle/tick  world us/tick  late ticks  real-time  latency p50/p99 us",
+    ]
+    for c in r["cases"]:
+        late = "-" if c["late_tick_share"] is None else f"{100 * c['late_tick_share']:.1f} %"
+        lines.append(
+            f"{c['vehicles']:>8}  {c['clock']:<9}  {_fmt(c['cpu_us_per_vehicle_tick'], '19.0f')}  "
+            f"{_fmt(c['world_cpu_us_per_tick'], '13.0f')}  {late:>10}  "
+            f"{_fmt(c['realtime_factor'], '8.2f')}x  "
+            f"{_fmt(c['latency_p50_us'], '.0f')}/{_fmt(c['latency_p99_us'], '.0f')}"
+        )
+    return "\n".join(lines)
