@@ -15,7 +15,13 @@ DESCRIPTION = (
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from swarm.transport.process import add_process_arguments
 
-    p.add_argument("--id", required=True, help="the vehicle this agent flies (a vehicle id of the scenario)")
+    p.add_argument(
+        "--id",
+        required=True,
+        help="the vehicle this agent flies (a vehicle id of the scenario); several, comma-separated, make "
+        "this process an agent host: their agents on one Zenoh session, each on its own thread, keys and "
+        "liveliness per vehicle",
+    )
     p.add_argument(
         "--rejoin",
         action="store_true",
@@ -30,16 +36,48 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     from swarm.transport.process import keys_from, scenario_from, zenoh_args
     from swarm.transport.session import open_session
 
-    check_id(args.id, "--id")
+    ids = args.id.split(",")
+    for vid in ids:
+        check_id(vid, "--id")
+    if len(set(ids)) != len(ids):
+        from swarm.errors import ConfigError
+
+        raise ConfigError(f"--id names a vehicle twice: {args.id!r}")
     sc = scenario_from(args)
     policy = args.policy or sc.policy
     stop = stop if stop is not None else threading.Event()
     with open_session(zenoh_args(args)) as session:
-        proc = AgentProcess(
-            sc, args.id, args.seed, policy, session, keys_from(args), args.clock, stop, rejoin=args.rejoin
-        )
-        proc.run()
+        keys, hosted = keys_from(args), len(ids)
+        procs = [AgentProcess(sc, vid, args.seed, policy, session, keys, args.clock, stop, rejoin=args.rejoin,
+                              hosted=hosted) for vid in ids]  # fmt: skip
+        if len(procs) == 1:
+            procs[0].run()
+            return 0
+        return _host(procs, stop)
     return 0
+
+
+def _host(procs: list, stop: threading.Event) -> int:
+    """Run several agents in this process, each on its own thread; the first that fails stops the others
+    and the host exits 1 (its supervisor restarts all of its vehicles, which rejoin the run)."""
+    import logging
+
+    failed: list[BaseException] = []
+
+    def run_one(proc) -> None:
+        try:
+            proc.run()
+        except BaseException as exc:  # reported, then the whole host stops
+            logging.getLogger("agents").exception("%s: agent failed: %s", proc.id, exc)
+            failed.append(exc)
+            stop.set()
+
+    threads = [threading.Thread(target=run_one, args=(p,), name=f"agent-{p.id}", daemon=True) for p in procs]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return 1 if failed else 0
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -86,8 +86,10 @@ class AgentProcess:
         stop: threading.Event,
         *,
         rejoin: bool = False,
+        hosted: int = 1,
     ) -> None:
         sc = scenario
+        self.hosted = hosted  # vehicles in this process (an agent host): its CPU time is shared by them
         if vehicle_id not in sc.vehicles:
             raise ConfigError(
                 f"--id must be a vehicle of the scenario, one of {sorted(sc.vehicles)}, got {vehicle_id!r}"
@@ -183,6 +185,20 @@ class AgentProcess:
                 self.assembler.set_target_live(alive)
 
     # ------------------------------------------------------------------------------ publishing
+
+    def _await_world_subscriber(self, timeout_s: float = 5.0) -> None:
+        """A rejoining agent declares its liveliness token (which makes a lockstep world hand it the current
+        tick) only once its command publisher knows the world's subscriber: Zenoh drops a publication
+        that no known subscriber matches, and a session a few milliseconds old may not know the router's
+        subscribers yet (a command lost there cost the run a 5 s step timeout)."""
+        deadline = time.monotonic() + timeout_s
+        while not self.pub_command.matching_status.matching:
+            if self.stop.is_set() or time.monotonic() > deadline:
+                _LOG.warning(
+                    "%s: no subscriber of its commands after %.0f s; joining anyway", self.id, timeout_s
+                )
+                return
+            time.sleep(0.005)
 
     def _declare(self) -> None:
         k = self.keys
@@ -376,6 +392,8 @@ class AgentProcess:
         watch_liveliness(self.session, k, self._on_alive, history=self.rejoin)
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
         subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.drops)
+        if self.rejoin:
+            self._await_world_subscriber()
         self._token = declare_liveliness(self.session, k, "agent", self.id)
         print_ready("agent", self.id)
         if self.clock.lockstep:
@@ -391,7 +409,7 @@ class AgentProcess:
                 "final_mode": a.mode.value, "counts": self._counts(), "ticks": self.ticks,
                 "r1_m": None if sw is None else sw.r1_m, "r2_m": None if sw is None else sw.r2_m,
                 "dropped": self.drops.total, "assembler": self.assembler.counts(), "resent": self.resent,
-                "cpu_s": time.process_time() - (self._cpu0 or time.process_time()),
+                "cpu_s": (time.process_time() - (self._cpu0 or time.process_time())) / self.hosted,
             }  # fmt: skip
             self.pub_event.put(encode(Event(a.t_s, "summary", data)))
             _LOG.info("%s: run ended in mode %s", self.id, a.mode.value)

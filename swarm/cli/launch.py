@@ -75,8 +75,34 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="restarts of one process (an agent, the mothership or the world) before giving up on it "
         "(default 3); a world restarts from its checkpoint of the last tick and the run goes on",
     )  # fmt: skip
+    g.add_argument(
+        "--vehicles-per-process", type=count("--vehicles-per-process"), default=1, metavar="N",
+        help="agent hosts: N vehicles' agents in one process (one Zenoh session), as ROS 2 component "
+        "containers host nodes; keys and liveliness stay per vehicle, a lost host restarts its vehicles "
+        "(default 1: one process per vehicle)",
+    )  # fmt: skip
     add_world_timeouts(g)
     p.set_defaults(func=run)
+
+
+def _hosts(args: argparse.Namespace, sc) -> dict[str, list[str]]:
+    """The agent processes to start, ``{child name: [vehicle ids]}``: ``agent/<id>`` with one vehicle each
+    (the default), or ``agents/<i>`` hosting ``--vehicles-per-process`` vehicles in scenario order."""
+    n = getattr(args, "vehicles_per_process", 1)
+    if n < 1 or n > 64:
+        raise ConfigError(f"--vehicles-per-process must be an integer in 1..64, got {n}")
+    ids = list(sc.vehicles)
+    if n == 1:
+        return {f"agent/{v}": [v] for v in ids}
+    if getattr(args, "secure", False):
+        raise ConfigError("--vehicles-per-process > 1 and --secure: an agent host would need every hosted "
+                          "vehicle's identity; run secure swarms with one process per vehicle")  # fmt: skip
+    return {f"agents/{i // n}": ids[i : i + n] for i in range(0, len(ids), n)}
+
+
+def _child_of(args: argparse.Namespace, sc) -> dict[str, str]:
+    """Vehicle id -> the name of the child process that hosts its agent."""
+    return {v: name for name, vids in _hosts(args, sc).items() for v in vids}
 
 
 def _client_endpoint(listen: str) -> str:
@@ -236,6 +262,7 @@ def run(args: argparse.Namespace) -> int:
     )
 
     sc = scenario_from(args)
+    _hosts(args, sc)  # the agent processes' layout, checked before anything starts
     keys = Keys(args.namespace)
     policy = args.policy or sc.policy
     listen = list(args.listen) if args.listen else [free_loopback_endpoint()]
@@ -319,7 +346,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"swarm up: {n_proc} processes, seed {seed}, clock {args.clock}", flush=True)
                 outcome = _supervise(args, sc, sup, alive_changes, log, stop, wall0, announce)
                 if outcome == "ended":
-                    _wait_summaries(sc, log, sup)
+                    _wait_summaries(sc, log, sup, child_of=_child_of(args, sc))
                     result = summarize(sc, policy, seed, log, time.monotonic() - wall0)
                     result["restarts"] = {c.name: c.restarts for c in sup.children.values()}
                     result["world_resumed_at"] = [d.get("tick") for d in log.resumed]
@@ -379,10 +406,10 @@ def _start_run(args, sc, seed, endpoint, sup, Child):
 
     mothership = ["mothership", *common, *_config_args(args, "mothership")]
     sup.start(Child("mothership", mothership, restartable=True, rejoin_args=["--rejoin"]))
-    for vid in sc.vehicles:
-        agent = ["agents", "--id", vid, "--clock", str(args.clock), *common,
-                 *_config_args(args, agent_name(vid))]  # fmt: skip
-        sup.start(Child(f"agent/{vid}", agent, restartable=True, rejoin_args=["--rejoin"]))
+    for name, vids in _hosts(args, sc).items():
+        agent = ["agents", "--id", ",".join(vids), "--clock", str(args.clock), *common,
+                 *_config_args(args, agent_name(vids[0]))]  # fmt: skip
+        sup.start(Child(name, agent, restartable=True, rejoin_args=["--rejoin"]))
     world = ["swarm.world", "--clock", str(args.clock), "--step-timeout", str(args.step_timeout),
              "--start-timeout", str(args.start_timeout),
              "--checkpoint-dir", str(args.checkpoint_dir)]  # fmt: skip
@@ -405,6 +432,7 @@ def _start_run(args, sc, seed, endpoint, sup, Child):
 
 
 def _name(role: str, pid: str) -> str:
+    """The liveliness name of a process (``agent/<id>`` per vehicle, even in an agent host)."""
     return f"agent/{pid}" if role == "agent" else role
 
 
@@ -434,6 +462,7 @@ def _supervise(
 ) -> str:
     """Until the run ends (``"ended"``), a stop (``"stopped"``), the timeout or a fatal loss
     (``"failed"``)."""
+    child_of = _child_of(args, sc)
     while not stop.is_set():
         if log.ended.is_set():
             return "ended"
@@ -445,7 +474,7 @@ def _supervise(
         except queue.Empty:
             role = None
         if role is not None and not alive and role in ("agent", "world", "mothership"):
-            name = _name(role, pid)
+            name = child_of.get(pid, _name(role, pid)) if role == "agent" else _name(role, pid)
             if name in sup.children:
                 if role == "world" and log.ended.is_set():
                     continue  # the run is over: nothing to resume
@@ -488,14 +517,12 @@ def _supervise(
     return "stopped"
 
 
-def _wait_summaries(sc, log: RunLog, sup, timeout_s: float = 3.0) -> None:
+def _wait_summaries(sc, log: RunLog, sup, timeout_s: float = 3.0, *, child_of: dict[str, str]) -> None:
     """After ``run_end``, until every live agent's ``summary`` event arrived (or ``timeout_s``)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         with log.lock:
-            missing = [
-                v for v in sc.vehicles if v not in log.summaries and sup.children[f"agent/{v}"].running
-            ]
+            missing = [v for v in sc.vehicles if v not in log.summaries and sup.children[child_of[v]].running]
         if not missing:
             return
         time.sleep(0.01)

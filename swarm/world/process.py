@@ -108,6 +108,8 @@ class WorldProcess:
         self._alive: set[str] = set()
         self._mothership = False
         self._lost: list[str] = []  # agents seen lost since the main loop last looked
+        self._returned: list[str] = []  # awaited agents whose token is back, not yet handed their tick
+        self._joining: list[str] = []  # agents handed a tick, in the lockstep from the next one
         self._awaited: set[str] = set()  # lost agents not back yet: a lockstep world waits for them
         self._latest: dict[str, Command] = {}  # realtime: newest command per agent
         self._controls: queue.Queue[RunControl] = queue.Queue()
@@ -239,6 +241,8 @@ class WorldProcess:
                 return
             if alive:
                 self._alive.add(pid)
+                if pid in self._awaited:
+                    self._returned.append(pid)  # the main loop hands it the current tick (_await_lost)
                 self._awaited.discard(pid)
                 return
             self._alive.discard(pid)
@@ -449,8 +453,13 @@ class WorldProcess:
         ``start_timeout_s``, then the run goes on without it, logged). Its vehicle's nozzles are closed."""
         if not self.clock.lockstep:
             return
+        with self._lock:  # the agents handed the previous tick: the world waits for their commands now
+            joining, self._joining = self._joining, []
+            if joining:
+                self.barrier.set_live(self.barrier.live | set(joining))
         deadline = time.monotonic() + self.start_timeout_s
         while not self.stop.is_set():
+            self._hand_tick_to_returned()
             with self._lock:
                 awaited = sorted(self._awaited)
             if not awaited:
@@ -463,6 +472,22 @@ class WorldProcess:
                     self._awaited.clear()
                 return
             time.sleep(0.005)
+
+    def _hand_tick_to_returned(self) -> None:
+        """Lockstep: an agent whose token came back (restarted, subscribed) gets the current tick's samples
+        of its vehicle again (a rejoining agent starts at the tick after the first imu it sees) and the
+        world waits for its commands from the next tick on (:meth:`_await_lost`). Without this, a swarm
+        whose every agent was lost at once (an agent host with all the vehicles) had nobody pacing the
+        world when they came back: it stepped on at full speed, and the agents never caught up."""
+        with self._lock:
+            returned, self._returned = self._returned, []
+            self._joining.extend(returned)
+        for vid in returned:
+            samples = [(kind, payload) for kind, v, payload in self._sensors if v == vid and kind != "truth"]
+            for kind, payload in samples:
+                self._pub(kind, vid).put(payload)
+            _LOG.info("agent %s back: in the lockstep from the next tick (%d samples of this one sent again)",
+                      vid, len(samples))  # fmt: skip
 
     def _handle_controls(self) -> bool:
         """Apply pending run controls; True if any arrived."""

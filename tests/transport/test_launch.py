@@ -214,6 +214,36 @@ def test_killed_dashboard_agent_and_mothership_are_restarted_and_the_run_goes_on
     assert not c["keepout_violated"]
 
 
+def test_a_killed_agent_host_restarts_its_vehicles_and_the_run_goes_on(tmp_path):
+    """``--vehicles-per-process 2``: both vehicles' agents in one host process (one Zenoh session), their
+    keys and liveliness tokens per vehicle. SIGKILLed mid-run (lockstep), the host is seen lost through its
+    vehicles' tokens, restarted once with ``--rejoin`` for both, each vehicle re-initialised from its
+    sensors; the run ends docked or in a safe hold, without a keep-out violation."""
+    ns = _ns()
+    with Procs() as procs:
+        out = tmp_path / "launch.json"
+        proc, _ = _launch(procs, ns, "--until-docked", "--vehicles-per-process", "2", json_path=out)
+        proc.wait_for_line(r"^swarm up:", 120.0)
+        hosts = [c for c in _children(ns) if "-m agents" in c or " agents " in c]
+        assert len(hosts) == 1 and "--id chaser,target" in hosts[0], hosts
+        time.sleep(2.0)
+        os.kill(int(hosts[0].split()[0]), signal.SIGKILL)
+        rc = proc.wait(RUN_S)
+    text = proc.output()
+    assert "Traceback" not in text
+    why = r"(liveliness token gone|exited with status -9)"
+    assert re.search(rf"WARNING swarm.launch: agents/0 lost \({why}\); restart 1/3", text), text
+    assert "restart 2/" not in text  # one loss, one restart, whichever vehicle's token went first
+    assert re.search(r"agents/0 restarted \(pid \d+\), rejoining the run", text), text
+    for vid in ("chaser", "target"):
+        assert f"{vid} re-initialised from its sensors" in text, vid
+    res = json.loads(out.read_text())
+    assert res["restarts"] == {"mothership": 0, "agents/0": 1, "world": 0}, res["restarts"]
+    c = res["chasers"]["chaser"]
+    assert c["docked"] or c["final_mode"] in ("HOLD", "ABORT"), (rc, c)
+    assert not c["keepout_violated"]
+
+
 def _stamp(text: str, pattern: str) -> tuple[float, re.Match[str]]:
     """The wall time of the first log line matching ``pattern`` (after its ``date time`` prefix)."""
     m = re.search(rf"^(\S+ \S+) {pattern}", text, re.M)
@@ -388,11 +418,19 @@ def test_sigint_to_the_launcher_leaves_no_child_behind():
         wait_until(lambda: not _children(ns), 5.0, f"every process of {ns} to be gone: {_children(ns)}")
 
 
+VPP = "--vehicles-per-process"
+BAD_FLAGS = [
+    (["--clock", "fast"], "--clock must be lockstep, realtime or scaled:N"),
+    (["--agents", "0"], "--agents must be an integer in 1..64, got '0'"),
+    (["--timeout", "-1"], "--timeout must be a finite number > 0"),
+    (["--set", "uwb.sigma_m=-1"], "uwb.sigma_m"),
+    ([VPP, "0"], f"{VPP} must be an integer in 1..64, got 0"),
+    ([VPP, "2", "--secure"], f"{VPP} > 1 and --secure: an agent host would need every hosted vehicle's"),
+]
+
+
 def test_bad_launch_flags_give_one_clear_error():
-    for flags, expect in ((["--clock", "fast"], "--clock must be lockstep, realtime or scaled:N"),
-                          (["--agents", "0"], "--agents must be an integer in 1..64, got '0'"),
-                          (["--timeout", "-1"], "--timeout must be a finite number > 0"),
-                          (["--set", "uwb.sigma_m=-1"], "uwb.sigma_m")):  # fmt: skip
+    for flags, expect in BAD_FLAGS:
         cmd = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", *flags]
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
         assert r.returncode == 2, (flags, r.stderr)

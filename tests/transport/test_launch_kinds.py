@@ -26,15 +26,17 @@ RUN_S = 240.0  # wall-time ceiling of one launched run (a docking ~25 s, a groun
 DISPERSED = ["dispersions.position_sigma_m=0.05", "dispersions.mass_sigma_frac=0.03",
              "dispersions.inertia_sigma_frac=0.03", "estimator.accel_psd_m2_s3=1e-8"]  # fmt: skip
 CASES = {
-    # case: (scenario, seed, policy, --set overrides, pairs (--agents))
-    "docking-faults dispersed": ("docking-faults", 3, "mdp", DISPERSED, 1),
+    # case: (scenario, seed, policy, --set overrides, pairs (--agents), --vehicles-per-process)
+    "docking-faults dispersed": ("docking-faults", 3, "mdp", DISPERSED, 1, 1),
     "ground-docking": ("ground-docking", 1, "fixed",
                        ["vehicles.chaser.position_m=[0.4, 0.3, 0.05]",
                         "vehicles.chaser.euler_deg=[0.0, 0.0, 90.0]",
-                        "kinds.ground.dispersions.wheel_slip_sigma_frac=0.05"], 1),
-    # issue 13: four pairs sharing one UWB channel (TDMA, 8 tags: 29.8 ranges/s each instead of 50), the
-    # first 30 s of the run (the whole docking takes ~80 s of wall time with ten processes on two cores)
-    "docking 4 pairs TDMA": ("docking", 2, "fixed", ["uwb.tdma=true", "sim.max_duration_s=30.0"], 4),
+                        "kinds.ground.dispersions.wheel_slip_sigma_frac=0.05"], 1, 1),
+    # issue 13: four pairs sharing one UWB channel (TDMA, 8 tags: 29.8 ranges/s each instead of 50), their
+    # agents in two agent hosts of four vehicles each (--vehicles-per-process 4), the first 30 s of the run
+    # (the whole docking takes ~80 s of wall time with ten processes on two cores)
+    "docking 4 pairs TDMA, agent hosts": ("docking", 2, "fixed", ["uwb.tdma=true", "sim.max_duration_s=30.0"],
+                                          4, 4),
 }  # fmt: skip
 FIELDS = ("docked", "docking_time_s", "effort", "position_error_m", "attitude_error_rad", "r1_m", "r2_m",
           "keepout_violated", "closest_approach_m", "final_mode", "modes", "estimator")  # fmt: skip
@@ -51,13 +53,14 @@ def _sim(scenario: str, seed: int, policy: str, overrides: list[str], pairs: int
 
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_a_lockstep_launch_equals_the_in_process_run(case, tmp_path):
-    scenario, seed, policy, overrides, pairs = CASES[case]
+    scenario, seed, policy, overrides, pairs, per_process = CASES[case]
     want = _sim(scenario, seed, policy, overrides, pairs)
     ns = f"test-{uuid.uuid4().hex[:8]}"
     out = tmp_path / "launch.json"
     args = [sys.executable, "-m", "swarm.cli.main", "launch", scenario, "--headless", "--seed", str(seed),
             "--policy", policy, "--namespace", ns, "--listen", loopback(free_port()), "--until-docked",
-            "--json", str(out), "--agents", str(pairs)]  # fmt: skip
+            "--json", str(out), "--agents", str(pairs),
+            "--vehicles-per-process", str(per_process)]  # fmt: skip
     for o in overrides:
         args += ["--set", o]
     with Procs() as procs:
@@ -78,3 +81,5 @@ def test_a_lockstep_launch_equals_the_in_process_run(case, tmp_path):
             assert {e["fault"] for e in w["faults"]["events"]} == {"uwb_dropout", "camera_loss"}
         assert c["kind"] == w["kind"] == load_scenario(scenario).vehicles["chaser"].kind
     assert got["target_effort"] == want["target_effort"]
+    hosts = sorted(name for name in got["restarts"] if name.startswith("agent"))
+    assert len(hosts) == 2 * pairs // per_process, hosts  # the processes the agents ran in
