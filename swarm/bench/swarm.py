@@ -34,8 +34,8 @@ import numpy as np
 from swarm.errors import ConfigError
 from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session
 
-QUICK = {"vehicles": (2, 8), "clocks": ("lockstep", "realtime"), "span_s": 5.0}
-FULL = {"vehicles": (2, 8, 32), "clocks": ("lockstep", "realtime"), "span_s": 20.0}
+QUICK = {"vehicles": (2, 8), "clocks": ("lockstep", "realtime"), "span_s": 5.0, "per_process": (1,)}
+FULL = {"vehicles": (2, 8, 32), "clocks": ("lockstep", "realtime"), "span_s": 20.0, "per_process": (1,)}
 DT_S = 0.01  # the docking scenario's tick
 
 
@@ -48,6 +48,17 @@ def parse_vehicles(text: str) -> tuple[int, ...]:
     bad = [v for v in values if v < 2 or v > 128 or v % 2]
     if not values or bad:
         raise ConfigError(f"--vehicles must be even integers in 2..128 (pairs), got {text!r}")
+    return values
+
+
+def parse_per_process(text: str) -> tuple[int, ...]:
+    """``--vehicles-per-process 1,8``: agent hosts of that many vehicles (1: one process per vehicle)."""
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if not values or any(v < 1 or v > 64 for v in values):
+        raise ConfigError(f"--vehicles-per-process must be integers in 1..64, comma-separated, got {text!r}")
     return values
 
 
@@ -97,15 +108,16 @@ class _Probe:
         return handler
 
 
-def _case(vehicles: int, clock: str, span_s: float, factor: float = 1.0) -> dict:
+def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, factor: float = 1.0) -> dict:
     pairs = vehicles // 2
-    ns = f"benchswarm{os.getpid()}v{vehicles}{clock}"
+    ns = f"benchswarm{os.getpid()}v{vehicles}p{per_process}{clock}"
     endpoint = free_loopback_endpoint()
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run.json"
         cmd = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--until-docked",
                "--agents", str(pairs), "--clock", clock, "--set", f"sim.max_duration_s={span_s}",
-               "--json", str(out), "--namespace", ns, "--listen", endpoint]  # fmt: skip
+               "--json", str(out), "--namespace", ns, "--listen", endpoint,
+               "--vehicles-per-process", str(per_process)]  # fmt: skip
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         probe = _Probe()
         up = threading.Event()
@@ -144,7 +156,7 @@ def _case(vehicles: int, clock: str, span_s: float, factor: float = 1.0) -> dict
     late = float(np.mean(delay > period)) if clock != "lockstep" and delay.size else None
     return {
         "vehicles": vehicles,
-        "per_process": 1,
+        "per_process": per_process,
         "clock": clock,
         "cpu_us_per_vehicle_tick": 1e6 * float(np.sum(agents)) / (len(agents) * ticks) if agents else None,
         "world_cpu_us_per_tick": 1e6 * cpu["world"] / ticks if cpu.get("world") is not None else None,
@@ -158,7 +170,8 @@ def _case(vehicles: int, clock: str, span_s: float, factor: float = 1.0) -> dict
 
 
 def run(preset: dict) -> dict:
-    cases = [_case(v, c, preset["span_s"]) for c in preset["clocks"] for v in preset["vehicles"]]
+    cases = [_case(v, c, preset["span_s"], n) for c in preset["clocks"] for n in preset["per_process"]
+             for v in preset["vehicles"] if n <= v]  # fmt: skip
     return {
         "cases": cases,
         "span_s": preset["span_s"],
@@ -173,14 +186,16 @@ def _fmt(x, spec: str) -> str:
 
 def format_report(r: dict) -> str:
     lines = [
-        f"swarm launch docking, one process per vehicle, {r['span_s']:.0f} s simulated per case "
+        f"swarm launch docking, {r['span_s']:.0f} s simulated per case "
         f"({r['cores']} cores, 1-min load {r['load_1min']:.2f} at the end)",
-        "vehicles  clock      CPU us/vehicle/tick  world us/tick  late ticks  real-time  latency p50/p99 us",
+        "vehicles  per proc  clock      CPU us/vehicle/tick  world us/tick  late ticks  real-time  "
+        "latency p50/p99 us",
     ]
     for c in r["cases"]:
         late = "-" if c["late_tick_share"] is None else f"{100 * c['late_tick_share']:.1f} %"
         lines.append(
-            f"{c['vehicles']:>8}  {c['clock']:<9}  {_fmt(c['cpu_us_per_vehicle_tick'], '19.0f')}  "
+            f"{c['vehicles']:>8}  {c['per_process']:>8}  {c['clock']:<9}  "
+            f"{_fmt(c['cpu_us_per_vehicle_tick'], '19.0f')}  "
             f"{_fmt(c['world_cpu_us_per_tick'], '13.0f')}  {late:>10}  "
             f"{_fmt(c['realtime_factor'], '8.2f')}x  "
             f"{_fmt(c['latency_p50_us'], '.0f')}/{_fmt(c['latency_p99_us'], '.0f')}"

@@ -80,6 +80,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                             help="vehicle counts, even; default 2,8,32 (2,8 with --quick)")  # fmt: skip
             bp.add_argument("--clock", default=None, metavar="CLOCK[,CLOCK]",
                             help="realtime, lockstep or both (default both)")  # fmt: skip
+            bp.add_argument("--vehicles-per-process", dest="per_process", default=None, metavar="N[,N]",
+                            help="agent hosts of N vehicles (default 1: a process per vehicle)")  # fmt: skip
             bp.add_argument("--span", type=float, default=None, metavar="S",
                             help="simulated seconds per case (default 20, 5 with --quick)")  # fmt: skip
 
@@ -118,6 +120,8 @@ def _swarm(args: argparse.Namespace) -> tuple[dict, str]:
         preset["vehicles"] = bench.parse_vehicles(args.vehicles)
     if getattr(args, "clock", None) is not None:
         preset["clocks"] = bench.parse_clocks(args.clock)
+    if getattr(args, "per_process", None) is not None:
+        preset["per_process"] = bench.parse_per_process(args.per_process)
     if getattr(args, "span", None) is not None:
         if not (math.isfinite(args.span) and 1.0 <= args.span <= 3600.0):
             raise ConfigError(f"--span must be a number of seconds in 1..3600, got {args.span}")
