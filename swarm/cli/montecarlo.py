@@ -53,6 +53,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="ADDRESS",
         help="run on the dask.distributed scheduler at ADDRESS (tcp://HOST:PORT; extra 'dask'), not locally",
     )
+    p.add_argument(
+        "--dask-timeout",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="seconds to wait for the dask scheduler to answer (default 10)",
+    )
     p.add_argument("--seed", type=seed, default=None, help="root seed (default 0)")
     p.add_argument(
         "--out", type=Path, default=None, metavar="DIR", help="campaign directory (default mc-SCENARIO-seedS)"
@@ -92,7 +99,11 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--workers and --dask: choose one (the cluster has its own workers)")
         from swarm.montecarlo.cluster import dask_executor
 
-        with dask_executor(args.dask) as executor:
+        if not (0.1 <= args.dask_timeout <= 600.0):
+            raise ConfigError(
+                f"--dask-timeout must be a number of seconds in 0.1..600, got {args.dask_timeout}"
+            )
+        with dask_executor(args.dask, timeout_s=args.dask_timeout) as executor:
             outcome = run_campaign(
                 spec, out, executor=executor, resume=args.resume is not None, progress=not args.no_progress
             )
