@@ -54,7 +54,6 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
             procs[0].run()
             return 0
         return _host(procs, stop)
-    return 0
 
 
 def _host(procs: list, stop: threading.Event) -> int:

@@ -50,9 +50,6 @@ class OneBlasThread(WorkerPlugin):
 
         self._limit = threadpool_limits(limits=1)  # kept for the worker's lifetime
 
-    def teardown(self, worker) -> None:
-        pass
-
 
 @contextlib.contextmanager
 def dask_executor(address: str, timeout_s: float = 10.0) -> Iterator:

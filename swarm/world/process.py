@@ -442,8 +442,7 @@ class WorldProcess:
             )  # fmt: skip
             self._world_event("agent_missing", k * self.sc.dt_s, {"tick": k, "agents": missing})
             for vid in missing:
-                if vid in self.world.index:
-                    self.world.set_command(vid, np.zeros(self.world.command_size(vid)))
+                self._idle(vid)
         self._apply(k, commands)
         return True
 
@@ -537,8 +536,12 @@ class WorldProcess:
         with self._lock:
             lost, self._lost = self._lost, []
         for vid in lost:
-            self.world.set_command(vid, np.zeros(self.world.command_size(vid)))
+            self._idle(vid)
             self.modes[vid] = "HOLD"
+
+    def _idle(self, vid: str) -> None:
+        """The vehicle's actuators off from now on (nozzles closed, wheels stopped)."""
+        self.world.set_command(vid, np.zeros(self.world.command_size(vid)))
 
     def _warm_up(self) -> None:
         """Run every compiled kernel of a tick once on a scratch world (dynamics, sensors, the camera's
