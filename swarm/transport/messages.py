@@ -30,9 +30,10 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field, fields
-from typing import Any, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
 import msgpack
+import msgspec
 import numpy as np
 
 from swarm.core.decision_keys import DECISION_KEYS
@@ -284,7 +285,10 @@ def _array(value: object, name: str, shape: tuple[int | None, ...], nullable: bo
 def _quat(value: object, name: str, nullable: bool = False) -> Any:
     if value is None and nullable:
         return None
-    q = _array(value, name, (4,))
+    return _unit(_array(value, name, (4,)), name)
+
+
+def _unit(q: np.ndarray, name: str) -> np.ndarray:
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > QUAT_NORM_TOL:
         raise MessageError(
@@ -294,7 +298,10 @@ def _quat(value: object, name: str, nullable: bool = False) -> Any:
 
 
 def _cov(value: object, name: str, n: int) -> np.ndarray:
-    p = _array(value, name, (n, n))
+    return _covariance(_array(value, name, (n, n)), name)
+
+
+def _covariance(p: np.ndarray, name: str) -> np.ndarray:
     asym = float(np.max(np.abs(p - p.T)))
     if asym > COV_SYMMETRY_RTOL * float(np.max(np.abs(p))):
         raise MessageError(f"{name}: not symmetric (max |P - P^T| = {asym:.3g})")
@@ -369,6 +376,27 @@ def _decision(value: object, name: str) -> dict[str, float | None] | None:
             raise MessageError(f"{name}.{k}: a probability must be in [0, 1], got {v}")
         out[k] = v
     return out
+
+
+def _frame(kind: str, data: np.ndarray, ids: tuple[int, ...]) -> None:
+    """The checks of a :class:`Vision` frame across its fields (rows against ids, a pose's covariance)."""
+    if kind == "pose":
+        if data.shape[0] > 1:
+            raise MessageError(f"data: a pose frame holds at most one pose, got {data.shape[0]} rows")
+        if (len(ids) > 0) != (data.shape[0] == 1):
+            raise MessageError(f"marker_ids: {len(ids)} ids for {data.shape[0]} poses")
+        if data.shape[0] == 1:
+            cov = data[0, 7:].reshape(6, 6)
+            what = "data: a pose's covariance (columns 7-42)"
+            if not np.array_equal(cov, cov.T) or not (np.diag(cov) > 0.0).all():
+                diag = np.diag(cov).tolist()
+                raise MessageError(f"{what} must be symmetric with a positive diagonal, got {diag}")
+            try:
+                np.linalg.cholesky(cov)
+            except np.linalg.LinAlgError:
+                raise MessageError(f"{what} is not positive definite") from None
+    elif len(ids) != data.shape[0]:
+        raise MessageError(f"marker_ids: {len(ids)} ids for {data.shape[0]} rows of data")
 
 
 def _set(msg: object, **values: object) -> None:
@@ -483,23 +511,7 @@ class Vision(Message):
         width = {"features": 3, "pixels": 2, "pose": POSE_LEN}[kind]
         data = _array(self.data, "data", (None, width))
         ids = _ids(self.marker_ids, "marker_ids", min_len=0)
-        if kind == "pose":
-            if data.shape[0] > 1:
-                raise MessageError(f"data: a pose frame holds at most one pose, got {data.shape[0]} rows")
-            if (len(ids) > 0) != (data.shape[0] == 1):
-                raise MessageError(f"marker_ids: {len(ids)} ids for {data.shape[0]} poses")
-            if data.shape[0] == 1:
-                cov = data[0, 7:].reshape(6, 6)
-                what = "data: a pose's covariance (columns 7-42)"
-                if not np.array_equal(cov, cov.T) or not (np.diag(cov) > 0.0).all():
-                    diag = np.diag(cov).tolist()
-                    raise MessageError(f"{what} must be symmetric with a positive diagonal, got {diag}")
-                try:
-                    np.linalg.cholesky(cov)
-                except np.linalg.LinAlgError:
-                    raise MessageError(f"{what} is not positive definite") from None
-        elif len(ids) != data.shape[0]:
-            raise MessageError(f"marker_ids: {len(ids)} ids for {data.shape[0]} rows of data")
+        _frame(kind, data, ids)
         _set(
             self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
             target_id=_str(self.target_id, "target_id", pattern=ID_PATTERN),
@@ -856,6 +868,12 @@ def decode(payload: object, expected: type[M]) -> M:
     data = _as_bytes(payload)
     if len(data) > MAX_PAYLOAD_BYTES:
         raise MessageError(f"payload: {len(data)} bytes, more than the {MAX_PAYLOAD_BYTES} allowed")
+    msg = _decode_fast(data, expected)
+    return msg if msg is not None else _decode_reference(data, expected)
+
+
+def _decode_reference(data: bytes | bytearray, expected: type[M]) -> M:
+    """:func:`decode` by the message's own checks: every form the protocol allows, and the error messages."""
     try:
         obj = msgpack.unpackb(data, raw=False, strict_map_key=True)
     except Exception as exc:  # msgpack raises ValueError, ExtraData, FormatError, StackError, UnicodeError...
@@ -879,6 +897,237 @@ def decode(payload: object, expected: type[M]) -> M:
         elif f.default is MISSING and f.default_factory is MISSING:
             raise MessageError(f"{f.name}: missing")
     return expected(**kwargs)
+
+
+# ------------------------------------------------------------------------------------------ fast path
+#
+# The messages of every tick (imu, uwb, vision, estimate, guidance, command, truth, clock) are decoded by
+# msgspec into typed Structs first: types, integer and float ranges, string choices and patterns, the
+# array maps' layout and the counters are checked in C, then the arrays' shapes, finiteness, a quaternion's
+# norm and a covariance by the same helpers as the reference path. Whatever the fast path does not take as
+# it is (a plain nested list, another dtype, any failed check) goes to the reference path, which accepts
+# the other forms the protocol allows and names the field of an error: the fast path only ever accepts a
+# subset, to the same message (tests/transport/test_messages.py checks both on the fuzzed payloads).
+
+
+class _Defer(Exception):
+    """The fast path leaves this payload to the reference path."""
+
+
+_Nat = Annotated[int, msgspec.Meta(ge=0)]
+_Time = Annotated[float, msgspec.Meta(ge=0.0)]
+_NonNeg = Annotated[float, msgspec.Meta(ge=0.0)]
+_Share = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+_Name = Annotated[str, msgspec.Meta(pattern=rf"\A(?:{ID_PATTERN.pattern})\Z", max_length=_MAX_NAME)]
+
+
+class _Array(msgspec.Struct):
+    """The wire map of a float64 array as this codec writes it."""
+
+    dtype: Literal["<f8"]
+    shape: list[int]
+    data: bytes
+
+
+class _Wire(msgspec.Struct):
+    v: int
+    type: str
+
+
+class _ImuWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    dt_s: Annotated[float, msgspec.Meta(gt=0.0)]
+    gyro_body: _Array
+    q_ahrs_nav_body: _Array | None = None
+
+
+class _UwbWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    anchor_id: Annotated[int, msgspec.Meta(ge=0, le=_MAX_ID)]
+    range_m: _NonNeg | None = None
+
+
+class _VisionWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    target_id: _Name
+    face: Literal[FACES]  # type: ignore[valid-type]
+    kind: Literal[VISION_KINDS]  # type: ignore[valid-type]
+    data: _Array
+    marker_ids: list[Any]
+
+
+class _EstimateWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    p_nav: _Array
+    v_nav: _Array
+    q_nav_body: _Array
+    cov: _Array
+    sigma_pos_max_m: _NonNeg
+    mahalanobis_d: _NonNeg
+    rejection_fraction: _Share
+    counts: Annotated[dict[_Name, _Nat], msgspec.Meta(max_length=MAX_ITEMS)]
+
+
+class _GuidanceWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    mode: Literal[MODES]  # type: ignore[valid-type]
+    range_m: _NonNeg | None = None
+    r1_m: _NonNeg | None = None
+    r2_m: _NonNeg | None = None
+    r_t_m: _NonNeg | None = None
+    decision: Any = None
+    reason: Annotated[str, msgspec.Meta(max_length=_MAX_TEXT)] = ""
+
+
+class _CommandWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    actuators: _Array
+    mode: Literal[MODES]  # type: ignore[valid-type]
+    force_body_n: _Array | None = None
+    torque_body_nm: _Array | None = None
+
+
+class _TruthWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    p_nav: _Array
+    v_nav: _Array
+    q_nav_body: _Array
+    w_body: _Array
+    effort: _NonNeg = 0.0
+    uwb_lost: bool = False
+    nlos_probability: _Share = 0.0
+
+
+class _ClockWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    state: Literal[CLOCK_STATES]  # type: ignore[valid-type]
+    seed: _Nat
+
+
+def _fin(x: float | None) -> float | None:
+    if x is not None and not math.isfinite(x):
+        raise _Defer
+    return x
+
+
+def _arr(a: _Array | None, shape: tuple[int | None, ...]) -> Any:
+    if a is None:
+        return None
+    if len(a.shape) != len(shape):
+        raise _Defer
+    n = 1
+    for got, want in zip(a.shape, shape, strict=True):
+        if got != want and (want is not None or not 0 <= got <= MAX_ITEMS):
+            raise _Defer
+        n *= got
+    if len(a.data) != 8 * n:
+        raise _Defer
+    out = np.frombuffer(a.data, "<f8").reshape(a.shape).astype(np.float64)  # a writable copy
+    if not np.isfinite(out).all():
+        raise _Defer
+    return out
+
+
+def _q(a: _Array | None, name: str) -> Any:
+    return None if a is None else _unit(_arr(a, (4,)), name)
+
+
+def _imu(w: _ImuWire) -> dict[str, Any]:
+    return {
+        "tick": w.tick, "t_s": _fin(w.t_s), "dt_s": _fin(w.dt_s), "gyro_body": _arr(w.gyro_body, (3,)),
+        "q_ahrs_nav_body": _q(w.q_ahrs_nav_body, "q_ahrs_nav_body"),
+    }  # fmt: skip
+
+
+def _uwb(w: _UwbWire) -> dict[str, Any]:
+    return {"tick": w.tick, "t_s": _fin(w.t_s), "anchor_id": w.anchor_id, "range_m": _fin(w.range_m)}
+
+
+def _vision(w: _VisionWire) -> dict[str, Any]:
+    data = _arr(w.data, (None, {"features": 3, "pixels": 2, "pose": POSE_LEN}[w.kind]))
+    ids = _ids(w.marker_ids, "marker_ids", min_len=0)
+    _frame(w.kind, data, ids)
+    return {
+        "tick": w.tick, "t_s": _fin(w.t_s), "target_id": w.target_id, "face": w.face, "kind": w.kind,
+        "data": data, "marker_ids": ids,
+    }  # fmt: skip
+
+
+def _estimate(w: _EstimateWire) -> dict[str, Any]:
+    return {
+        "tick": w.tick, "t_s": _fin(w.t_s), "p_nav": _arr(w.p_nav, (3,)), "v_nav": _arr(w.v_nav, (3,)),
+        "q_nav_body": _q(w.q_nav_body, "q_nav_body"), "cov": _covariance(_arr(w.cov, (9, 9)), "cov"),
+        "sigma_pos_max_m": _fin(w.sigma_pos_max_m), "mahalanobis_d": _fin(w.mahalanobis_d),
+        "rejection_fraction": w.rejection_fraction, "counts": w.counts,
+    }  # fmt: skip
+
+
+def _guidance(w: _GuidanceWire) -> dict[str, Any]:
+    return {
+        "tick": w.tick, "t_s": _fin(w.t_s), "mode": w.mode, "range_m": _fin(w.range_m), "r1_m": _fin(w.r1_m),
+        "r2_m": _fin(w.r2_m), "r_t_m": _fin(w.r_t_m), "decision": _decision(w.decision, "decision"),
+        "reason": w.reason,
+    }  # fmt: skip
+
+
+def _command(w: _CommandWire) -> dict[str, Any]:
+    return {
+        "tick": w.tick, "t_s": _fin(w.t_s), "actuators": _arr(w.actuators, (None,)), "mode": w.mode,
+        "force_body_n": _arr(w.force_body_n, (3,)), "torque_body_nm": _arr(w.torque_body_nm, (3,)),
+    }  # fmt: skip
+
+
+def _truth(w: _TruthWire) -> dict[str, Any]:
+    return {
+        "tick": w.tick, "t_s": _fin(w.t_s), "p_nav": _arr(w.p_nav, (3,)), "v_nav": _arr(w.v_nav, (3,)),
+        "q_nav_body": _q(w.q_nav_body, "q_nav_body"), "w_body": _arr(w.w_body, (3,)),
+        "effort": _fin(w.effort), "uwb_lost": w.uwb_lost, "nlos_probability": w.nlos_probability,
+    }  # fmt: skip
+
+
+def _clock(w: _ClockWire) -> dict[str, Any]:
+    return {"tick": w.tick, "t_s": _fin(w.t_s), "state": w.state, "seed": w.seed}
+
+
+_FAST: dict[type[Message], tuple[msgspec.msgpack.Decoder, Callable[[Any], dict[str, Any]]]] = {
+    cls: (msgspec.msgpack.Decoder(wire), convert)
+    for cls, wire, convert in (
+        (Imu, _ImuWire, _imu),
+        (Uwb, _UwbWire, _uwb),
+        (Vision, _VisionWire, _vision),
+        (Estimate, _EstimateWire, _estimate),
+        (Guidance, _GuidanceWire, _guidance),
+        (Command, _CommandWire, _command),
+        (Truth, _TruthWire, _truth),
+        (Clock, _ClockWire, _clock),
+    )
+}
+
+
+def _decode_fast(data: bytes | bytearray, expected: type[M]) -> M | None:
+    """The message in ``data`` if the fast path takes it as it is, else ``None`` (the reference decides)."""
+    fast = _FAST.get(expected)
+    if fast is None:
+        return None
+    decoder, convert = fast
+    try:
+        wire = decoder.decode(data)
+        if wire.v != SCHEMA_VERSION or wire.type != expected.__name__:
+            return None
+        values = convert(wire)
+    except (msgspec.MsgspecError, MessageError, _Defer):
+        return None
+    msg = object.__new__(expected)
+    msg.__dict__.update(values)  # checked above: the frozen dataclass's __post_init__ would check again
+    return msg
 
 
 # --------------------------------------------------------------------------------------- bad messages

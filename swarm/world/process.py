@@ -102,6 +102,7 @@ class WorldProcess:
         self.referee = Referee(sc)
         self.ids = list(sc.vehicles)
         self.chasers = sc.chasers
+        self._truth_every = sc.every(sc.uwb.rate_hz)  # the UWB slot period [ticks]
         self.drops = DropCounter()
         self.barrier = CommandBarrier(self.ids)
         self._lock = threading.Lock()
@@ -322,14 +323,17 @@ class WorldProcess:
         self.pub_world_event.put(encode(Event(t_s, kind, data)))
 
     def _encode_tick(self, k: int, frames) -> list[tuple[str, str, bytes]]:
-        """The samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle, then per
-        vehicle vision(k) (camera ticks, chasers) and imu(k): ``(kind, vehicle, payload)``."""
+        """The samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle (on UWB slot
+        ticks), then per vehicle vision(k) (camera ticks, chasers) and imu(k): ``(kind, vehicle,
+        payload)``."""
         w, t = self.world, k * self.sc.dt_s
         camera_tick = k % w.vision_every == 0
         face = self.sc.guidance.docking_face
         out = []
         lost, p_nlos = w.radio_env(t)
-        for i, vid in enumerate(self.ids):
+        # truth only on UWB slot ticks: the mothership's radios need no other, and a viewer draws at 50 Hz
+        # as well as at 100 (docs/protocol.md, "Rates")
+        for i, vid in enumerate(self.ids if k % self._truth_every == 0 else ()):
             x = w.X[i]
             truth = Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], effort=float(w.effort[i]),
                           uwb_lost=bool(lost), nlos_probability=float(p_nlos))  # fmt: skip

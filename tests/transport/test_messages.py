@@ -772,3 +772,113 @@ def test_a_bad_pose_frame_is_refused_on_the_wire_and_in_python(data, ids, expect
     with pytest.raises(MessageError) as exc:
         decode(pack(good), Vision)
     assert str(exc.value).startswith(expected), str(exc.value)
+
+
+# ------------------------------------------------------------------------- plain msgpack, the fast path
+
+
+def _plain_fields(obj: dict, cls) -> dict:
+    """The fields of a message decoded with plain ``msgpack`` and numpy, as any client would."""
+    out = {}
+    for f in dataclasses.fields(cls):
+        value = obj[f.name]
+        if isinstance(value, dict) and set(value) == {"dtype", "shape", "data"}:
+            value = np.frombuffer(value["data"], value["dtype"]).reshape(value["shape"])
+        out[f.name] = value
+    return out
+
+
+@pytest.mark.parametrize("cls", ALL, ids=lambda c: c.__name__)
+@given(data=st.data())
+def test_every_message_type_decodes_with_plain_msgpack(cls, data):
+    msg = data.draw(STRATEGIES[cls])
+    obj = msgpack.unpackb(encode(msg), raw=False)
+    assert obj["v"] == SCHEMA_VERSION and obj["type"] == cls.__name__
+    plain = _plain_fields(obj, cls)
+    for f in dataclasses.fields(cls):
+        mine, theirs = getattr(msg, f.name), plain[f.name]
+        if isinstance(mine, np.ndarray):
+            assert isinstance(theirs, np.ndarray) and np.array_equal(mine, theirs), f.name
+        elif isinstance(mine, tuple):
+            assert theirs == list(mine), f.name
+        else:
+            assert theirs == mine and type(theirs) is type(mine), f.name
+    assert cls(**plain) == msg  # and the plain decoding builds the same message
+
+
+FAST = [cls for cls in ALL if cls in msgs._FAST]
+
+
+def test_the_fast_path_covers_the_messages_of_every_tick():
+    assert set(FAST) == {Imu, Uwb, Vision, Estimate, Guidance, Command, Truth, Clock}
+
+
+@pytest.mark.parametrize("cls", FAST, ids=lambda c: c.__name__)
+@given(data=st.data())
+def test_the_fast_path_takes_every_message_this_codec_writes(cls, data):
+    msg = data.draw(STRATEGIES[cls])
+    fast = msgs._decode_fast(encode(msg), cls)
+    assert fast is not None and fast == msg
+
+
+# values at the edges of the checks: the fast path must refuse (leave to the reference) what the reference
+# refuses, so every field is replaced by values either side of its limits
+edge_values = st.sampled_from(
+    [None, True, False, 0, -1, 1, 2**63, 2**64 - 1, 0.0, -0.0, -1e-300, 1.0, 1.0 + 1e-9, 1e308, math.nan,
+     math.inf, -math.inf, "", "x", "+x", "APPROACH", "running", "pose", "features", "a" * 65, [], [0, 0],
+     [1, 2, 3], {}, b"\x00"]
+)  # fmt: skip
+
+
+@st.composite
+def arrays_at_edges(draw, shape=None):
+    """An array map, mostly of ``shape`` (the field's own) and our dtype, with values at the checks' edges."""
+    if shape is None or draw(st.integers(0, 4)) == 0:
+        shape = draw(st.sampled_from([[3], [4], [9, 9], [0, 3], [1, 43], [2, 2], [10], [65], [4, 3]]))
+    n = math.prod(shape)
+    edge = st.sampled_from([0.0, 1.0, -1.0, 0.5, math.nan, math.inf, -math.inf, 1e308])
+    a = np.array(draw(st.lists(edge, min_size=n, max_size=n)), "<f8").reshape(shape)
+    if shape == [4] and draw(st.booleans()):
+        a = np.array([0.0, 0.0, 0.0, draw(st.sampled_from([1.0, 1.0005, 1.002, -1.0, math.nan]))])
+    if shape == [9, 9] and draw(st.booleans()):
+        a = np.eye(9) * draw(st.sampled_from([1.0, -1.0, 0.0, math.nan]))
+        a[0, 1] += draw(st.sampled_from([0.0, 1e-12, 1e-3]))
+    data = a.tobytes()
+    if draw(st.integers(0, 4)) == 0:
+        data = data[: draw(st.integers(0, len(data)))]
+    dtype = "<f8" if draw(st.integers(0, 4)) else draw(st.sampled_from([">f8", "<f4", "<i8"]))
+    return {"dtype": dtype, "shape": shape, "data": data}
+
+
+@st.composite
+def mutated(draw):
+    cls = draw(st.sampled_from(FAST))
+    obj = wire(draw(STRATEGIES[cls]))
+    for name in draw(st.lists(st.sampled_from([f.name for f in dataclasses.fields(cls)] + ["v", "type"]),
+                              min_size=1, max_size=3)):  # fmt: skip
+        old = obj.get(name)
+        shape = old["shape"] if isinstance(old, dict) and "shape" in old else None  # an array field's
+        choice = draw(st.integers(0, 3))
+        if choice == 0:
+            obj.pop(name, None)
+        elif choice == 1 or shape is not None:
+            obj[name] = draw(arrays_at_edges(shape))
+        else:
+            obj[name] = draw(edge_values | msgpack_values)
+    return cls, obj
+
+
+@settings(max_examples=1000, suppress_health_check=[HealthCheck.too_slow])
+@given(mutated())
+def test_the_fast_path_never_accepts_what_the_reference_refuses(case):
+    """The fast path (msgspec) only ever takes a payload the reference checks accept, to the same message;
+    everything else is left to the reference, whose error names the field."""
+    cls, obj = case
+    payload = pack(obj)
+    fast = msgs._decode_fast(payload, cls)
+    try:
+        reference = msgs._decode_reference(payload, cls)
+    except MessageError:
+        assert fast is None
+    else:
+        assert fast is None or fast == reference
