@@ -37,6 +37,10 @@ BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
         _bench("estimator", presets=True),
         "estimator step: tandem vs compounded vs FilterPy (paper Table I)",
     ),
+    "codec": (
+        _bench("codec", presets=True),
+        "one message of every tick: build, encode, decode (msgspec fast path vs reference checks)",
+    ),
     "sim": (_bench("sim", presets=False), "one in-process docking: real-time factor and profile"),
     "transport": (
         _bench("transport", presets=True),

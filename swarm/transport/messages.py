@@ -254,6 +254,11 @@ def _array(value: object, name: str, shape: tuple[int | None, ...], nullable: bo
     Accepts an ndarray, nested lists/tuples or the wire map; ``None`` too when ``nullable``."""
     if value is None and nullable:
         return None
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == shape:
+        out = value.copy()  # the common case of an array of the right shape, checked in one step
+        if not np.isfinite(out).all():
+            raise MessageError(f"{name}: not finite")
+        return out
     if isinstance(value, np.ndarray):
         arr = value
         if arr.dtype.kind not in "iuf":

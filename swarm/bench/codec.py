@@ -1,0 +1,85 @@
+"""``swarm bench codec``: what one message of every tick costs to build, encode and decode (issue 13).
+
+For each message type of the hot path (``swarm/transport/messages.py``): building it in Python (its
+constructor's checks), :func:`~swarm.transport.messages.encode`, and decoding its payload by the msgspec
+fast path (what every receiver runs) and by the reference checks alone (what it ran before issue 13, and
+still runs for a payload the fast path leaves to it). Times are medians of repeated blocks, so a burst of
+load on a shared machine moves them less than a mean; the ratio of the two decodes is measured in one run.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+FULL = {"repeat": 7, "number": 2000}
+QUICK = {"repeat": 3, "number": 300}
+
+
+def examples() -> list:
+    """One realistic message of each hot-path type (the docking chaser's sizes)."""
+    from swarm.core.decision_keys import DECISION_KEYS
+    from swarm.transport import messages as m
+
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(9, 9))
+    q = np.array([0.0, 0.0, 0.0, 1.0])
+    counts = {"range_accepted": 5, "range_rejected": 1, "features_accepted": 2}
+    return [
+        m.Imu(5, 0.05, 0.01, np.full(3, 0.01), q),
+        m.Uwb(5, 0.05, 3, 2.5),
+        m.Vision(5, 0.05, "target", "+x", "features", rng.normal(size=(4, 3)), (0, 1, 2, 3)),
+        m.Estimate(5, 0.05, np.ones(3), np.ones(3), q, a @ a.T, 0.1, 1.0, 0.1, counts),
+        m.Guidance(5, 0.05, "APPROACH", 1.0, 0.5, 1.0, 2.0, dict.fromkeys(DECISION_KEYS, 0.5), "x" * 60),
+        m.Command(5, 0.05, np.ones(10), "APPROACH", np.ones(3), np.ones(3)),
+        m.Truth(5, 0.05, np.ones(3), np.ones(3), q, np.ones(3)),
+        m.Clock(5, 0.05, "running", 3),
+    ]
+
+
+def _us(fn, repeat: int, number: int) -> float:
+    blocks = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        blocks.append((time.perf_counter() - t0) / number)
+    return float(np.median(blocks)) * 1e6
+
+
+def run(preset: dict) -> dict:
+    from dataclasses import fields
+
+    from swarm.transport import messages as m
+
+    rows = []
+    for msg in examples():
+        cls, payload = type(msg), m.encode(msg)
+        kwargs = {f.name: getattr(msg, f.name) for f in fields(msg)}
+        assert m._decode_fast(payload, cls) == msg  # the fast path takes it: what is timed is what runs
+        r, n = preset["repeat"], preset["number"]
+        rows.append({
+            "type": cls.__name__,
+            "bytes": len(payload),
+            "build_us": _us(lambda c=cls, k=kwargs: c(**k), r, n),
+            "encode_us": _us(lambda x=msg: m.encode(x), r, n),
+            "decode_us": _us(lambda p=payload, c=cls: m.decode(p, c), r, n),
+            "decode_reference_us": _us(lambda p=payload, c=cls: m._decode_reference(p, c), r, n),
+        })  # fmt: skip
+    return {"bench": "codec", **preset, "messages": rows}
+
+
+def format_report(record: dict) -> str:
+    lines = [
+        "one message of each hot-path type: median of blocks [us]",
+        f"{'type':10s} {'bytes':>6s} {'build':>8s} {'encode':>8s} {'decode':>8s} {'reference':>10s}"
+        f" {'ratio':>6s}",
+    ]
+    for r in record["messages"]:
+        lines.append(
+            f"{r['type']:10s} {r['bytes']:6d} {r['build_us']:8.1f} {r['encode_us']:8.1f} "
+            f"{r['decode_us']:8.1f} {r['decode_reference_us']:10.1f}"
+            f" {r['decode_reference_us'] / r['decode_us']:5.1f}x"
+        )
+    return "\n".join(lines)
