@@ -97,15 +97,21 @@ def _attack(draw, keys: list[tuple[str, str]]) -> tuple[str, bytes]:
     return key, payload
 
 
-@pytest.fixture(scope="module")
-def swarm(tmp_path_factory):
+@pytest.fixture(
+    scope="module",
+    # both vehicles in one agent host (issue 13) by default; one process per vehicle, the launcher's default,
+    # in the --runslow job (test_launch.py's garbage run covers it by default)
+    params=[2, pytest.param(1, marks=pytest.mark.slow)],
+    ids=["agent host", "a process per vehicle"],
+)
+def swarm(request, tmp_path_factory):
     ns = f"fuzz-{free_port()}"
     out = tmp_path_factory.mktemp("fuzz") / "launch.json"
     endpoint = loopback(free_port())
     with Procs() as procs:
         proc = procs.start([sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless",
                             "--until-docked", "--seed", str(SEED), "--namespace", ns, "--listen", endpoint,
-                            "--json", str(out)])  # fmt: skip
+                            "--json", str(out), "--vehicles-per-process", str(request.param)])  # fmt: skip
         proc.wait_for_line(r"^swarm up:", 180.0)
         with open_session(ZenohArgs(mode="client", connect=(endpoint,))) as session:
             yield {"proc": proc, "session": session, "keys": _keys(ns), "out": out, "sent": [0]}
