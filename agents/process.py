@@ -21,7 +21,7 @@ gone (its liveliness token went) the agent says so and waits: no sample, no tick
 
 A restarted agent (``--rejoin``) joins the run in progress: it publishes zero-thrust HOLD commands while it
 re-initialises from its own sensors (the AHRS attitude, and its position by least squares on one range to
-each anchor, :func:`swarm.step.initial.position_from_ranges`), then flies again from that estimate.
+each anchor, :func:`swarm.core.ranging.position_from_ranges`), then flies again from that estimate.
 """
 
 from __future__ import annotations
@@ -34,9 +34,10 @@ import numpy as np
 
 from swarm.core import rotations as rot
 from swarm.core.estimator import MeasKind
+from swarm.core.ranging import position_from_ranges
 from swarm.errors import ConfigError, MessageError
 from swarm.step.agent import AgentInputs, TargetEstimate, VehicleAgent
-from swarm.step.initial import initial_estimate, position_from_ranges
+from swarm.step.initial import initial_estimate
 from swarm.step.world import initial_truth
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import AgentTickAssembler, TickInputs

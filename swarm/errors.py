@@ -13,3 +13,7 @@ class ConfigError(SwarmError, ValueError):
 
 class MessageError(SwarmError, ValueError):
     """A wire message failed validation (type, shape, finiteness, schema version)."""
+
+
+class LogError(SwarmError, ValueError):
+    """A recorded sensor log is invalid; the message names the file and, inside it, the line and column."""

@@ -3,14 +3,13 @@ from its own sensors (a restarted agent, a log).
 
 :func:`initial_estimate` is what the in-process runner and an agent process of the same run both call, on
 the same dispersed truth (:func:`swarm.step.world.initial_truth`) and the vehicle's ``init`` stream, so
-their filters start bit for bit alike. :func:`position_from_ranges` is the range-only fix a vehicle makes
-when it has no such start: least squares on one range to each anchor.
+their filters start bit for bit alike. A vehicle without such a start (a restarted agent, a log) fixes its
+position from ranges alone: :func:`swarm.core.ranging.position_from_ranges`.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from swarm.core import rotations as rot
 from swarm.step.streams import stream
@@ -33,23 +32,3 @@ def initial_estimate(sc, vehicle_index: int, x_true: np.ndarray, seed: int):
     v0 = x_true[3:6] + e[3:6]
     q0 = rot.multiplicative_reset(x_true[6:10], -e[6:9])
     return p0, v0, q0, sig**2
-
-
-def position_from_ranges(anchors_nav: np.ndarray, ranges: dict[int, float], lever_nav: np.ndarray, guess_nav):
-    """Centre-of-mass position [m] (3,), frame nav, and its covariance factor ``(J^T J)^-1`` from one or
-    more ranges to each of at least four anchors: nonlinear least squares (scipy ``least_squares``, soft-L1
-    loss against an NLOS range) on ``|p + lever_nav - a_i| = rho_i``, started from ``guess_nav``.
-
-    ``lever_nav`` is the tag's lever arm rotated into nav (``R(q) P1``). Coplanar anchors (the paper's four
-    satisfy ``2 y + 0.8 z = 0``) leave a mirror solution across their plane: the start decides, and the
-    scenario's start position of the vehicle lies on the side it flies on."""
-    ids = sorted(ranges)
-    A = anchors_nav[ids]
-    rho = np.array([ranges[i] for i in ids])
-
-    def residual(p):
-        return np.linalg.norm(p + lever_nav - A, axis=1) - rho
-
-    sol = least_squares(residual, np.asarray(guess_nav, dtype=float), loss="soft_l1", f_scale=0.05)
-    J = sol.jac
-    return sol.x, np.linalg.pinv(J.T @ J)

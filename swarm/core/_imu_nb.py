@@ -1,0 +1,369 @@
+"""Compiled kernels of the IMU-driven error-state filter (:mod:`swarm.core.imu_filter`).
+
+One filter per call, on its own rows of the batch arrays (``X[i]``, ``P[i]``); the batch functions loop over
+the leading axis running the same code, so a filter gives bit-identical numbers alone or in a batch, as
+the tandem filter's kernels (:mod:`swarm.core._ekf_nb`).
+
+Nominal state ``X`` (16 + M): ``p`` (3) [m] and ``v`` (3) [m/s] in nav, ``q_nav_body`` (4, scalar-last),
+accelerometer bias ``b_a`` (3) [m/s^2], gyro bias ``b_g`` (3) [rad/s], then M per-anchor range biases [m]
+(M = 0 without them). Error state (15 + M): ``(dp, dv, dtheta, db_a, db_g, db_r)``, ``dtheta`` a body-frame
+(local) rotation vector, ``q_true = q (x) exp(dtheta)``.
+
+Equations: Sola 2017, "Quaternion kinematics for the error-state Kalman filter" (arXiv:1711.02508):
+nominal kinematics sec. 5.3.1 and their discrete form sec. 5.4.1; error-state kinematics with the local
+angular error sec. 5.3.3; the discrete error-state Jacobian ``F_x`` and perturbation covariances
+``Q_i`` sec. 5.4.3; update, injection and reset sec. 6.1-6.3.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from swarm.core._rot_nb import qexp3
+
+# X layout
+XP, XV, XQ, XBA, XBG, XRB = 0, 3, 6, 10, 13, 16
+# error-state layout
+EP, EV, ETH, EBA, EBG, ERB = 0, 3, 6, 9, 12, 15
+
+# PRM layout (ImuFilterParams.vector)
+PRM_SIG_A = 0  # accelerometer white noise [m/s^2/sqrt(Hz)]
+PRM_SIG_G = 1  # gyro white noise [rad/s/sqrt(Hz)]
+PRM_SIG_BA = 2  # accelerometer bias random walk [m/s^3/sqrt(Hz)]
+PRM_SIG_BG = 3  # gyro bias random walk [rad/s^2/sqrt(Hz)]
+PRM_SIG_RB = 4  # range bias random walk [m/sqrt(s)]
+PRM_G = 5  # 5:8 gravity in nav [m/s^2]
+PRM_LEVER = 8  # 8:11 UWB tag lever arm, body [m]
+PRM_GATE = 11  # hard gate on the squared Mahalanobis distance of a range
+PRM_HUBER = 12  # Huber threshold on the normalised innovation (0: off)
+N_PRM = 13
+
+# outcome of an update
+ACCEPTED, REJECTED, REFUSED = 0, 1, 2
+
+
+@njit(cache=True)
+def _rotmat(q, R):
+    x, y, z, w = q[0], q[1], q[2], q[3]
+    R[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    R[0, 1] = 2.0 * (x * y - z * w)
+    R[0, 2] = 2.0 * (x * z + y * w)
+    R[1, 0] = 2.0 * (x * y + z * w)
+    R[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    R[1, 2] = 2.0 * (y * z - x * w)
+    R[2, 0] = 2.0 * (x * z - y * w)
+    R[2, 1] = 2.0 * (y * z + x * w)
+    R[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+
+
+@njit(cache=True)
+def _qmul_exp(q, px, py, pz):
+    """``q <- q (x) exp(phi)``, normalised (in place)."""
+    ex, ey, ez, ew = qexp3(px, py, pz)
+    x, y, z, w = q[0], q[1], q[2], q[3]
+    nx = w * ex + x * ew + y * ez - z * ey
+    ny = w * ey - x * ez + y * ew + z * ex
+    nz = w * ez + x * ey - y * ex + z * ew
+    nw = w * ew - x * ex - y * ey - z * ez
+    n = math.sqrt(nx * nx + ny * ny + nz * nz + nw * nw)
+    q[0], q[1], q[2], q[3] = nx / n, ny / n, nz / n, nw / n
+
+
+@njit(cache=True)
+def transition(X, gyro, acc, dt, F):
+    """The discrete error-state Jacobian ``F_x`` (15 x 15 core; Sola 2017 sec. 5.4.3, local angular error)
+    at the nominal state ``X`` before the step, written into ``F``:
+
+    ``dp <- dp + dv dt``; ``dv <- dv - R [a_m - b_a]x dtheta dt - R db_a dt``;
+    ``dtheta <- R{(w_m - b_g) dt}^T dtheta - db_g dt``; the biases are random walks (identity)."""
+    R = np.empty((3, 3))
+    _rotmat(X[XQ : XQ + 4], R)
+    ax, ay, az = acc[0] - X[XBA], acc[1] - X[XBA + 1], acc[2] - X[XBA + 2]
+    wx, wy, wz = (gyro[0] - X[XBG]) * dt, (gyro[1] - X[XBG + 1]) * dt, (gyro[2] - X[XBG + 2]) * dt
+    F[:, :] = 0.0
+    for i in range(15):
+        F[i, i] = 1.0
+    for i in range(3):
+        F[EP + i, EV + i] = dt
+        # -R [a]x: column j of [a]x is a x e_j
+        F[EV + i, ETH + 0] = -(R[i, 1] * az - R[i, 2] * ay) * dt
+        F[EV + i, ETH + 1] = -(R[i, 2] * ax - R[i, 0] * az) * dt
+        F[EV + i, ETH + 2] = -(R[i, 0] * ay - R[i, 1] * ax) * dt
+        for j in range(3):
+            F[EV + i, EBA + j] = -R[i, j] * dt
+        F[ETH + i, EBG + i] = -dt
+    # R{w dt}^T = exp(-[w dt]x): the rotation matrix of exp(-w dt)
+    ex, ey, ez, ew = qexp3(-wx, -wy, -wz)
+    E = np.empty((3, 3))
+    _rotmat(np.array([ex, ey, ez, ew]), E)
+    for i in range(3):
+        for j in range(3):
+            F[ETH + i, ETH + j] = E[i, j]
+
+
+@njit(cache=True)
+def predict_one(X, P, gyro, acc, dt, PRM, F, FP):
+    """Propagate one filter over ``dt`` [s] with the IMU sample held over the interval: gyro rate ``gyro``
+    [rad/s] and specific force ``acc`` [m/s^2], body frame (Sola 2017 sec. 5.4.1 for the nominal state,
+    ``P <- F_x P F_x^T + F_i Q_i F_i^T`` of sec. 5.4.3 for the covariance, with ``Q_i`` from the noise
+    densities: ``V_i = sigma_a^2 dt I``, ``Theta_i = sigma_g^2 dt I``, ``A_i = sigma_ba^2 dt I``,
+    ``Omega_i = sigma_bg^2 dt I``, and ``sigma_rb^2 dt`` per range bias). ``F`` (15 x 15) and ``FP`` (15 x N)
+    are scratch. Returns False (and changes nothing) on a non-finite input."""
+    for k in range(3):
+        if not (np.isfinite(gyro[k]) and np.isfinite(acc[k])):
+            return False
+    if not (np.isfinite(dt) and dt >= 0.0):
+        return False
+    if dt == 0.0:
+        return True
+    n = P.shape[0]
+    transition(X, gyro, acc, dt, F)
+    # nominal state
+    R = np.empty((3, 3))
+    _rotmat(X[XQ : XQ + 4], R)
+    a = np.empty(3)
+    for i in range(3):
+        a[i] = acc[i] - X[XBA + i]
+    for i in range(3):
+        an = R[i, 0] * a[0] + R[i, 1] * a[1] + R[i, 2] * a[2] + PRM[PRM_G + i]
+        X[XP + i] += X[XV + i] * dt + 0.5 * an * dt * dt
+        X[XV + i] += an * dt
+    _qmul_exp(
+        X[XQ : XQ + 4], (gyro[0] - X[XBG]) * dt, (gyro[1] - X[XBG + 1]) * dt, (gyro[2] - X[XBG + 2]) * dt
+    )
+    # covariance: rows 0:15 become F P; then columns 0:15 become (F P) F^T; the bias block only gains Q
+    for i in range(15):
+        for j in range(n):
+            s = 0.0
+            for k in range(15):
+                f = F[i, k]
+                if f != 0.0:
+                    s += f * P[k, j]
+            FP[i, j] = s
+    for i in range(15):
+        for j in range(i, 15):
+            s = 0.0
+            for k in range(15):
+                f = F[j, k]
+                if f != 0.0:
+                    s += FP[i, k] * f
+            P[i, j] = s
+            P[j, i] = s
+        for j in range(15, n):
+            P[i, j] = FP[i, j]
+            P[j, i] = FP[i, j]
+    qa, qg = PRM[PRM_SIG_A] ** 2 * dt, PRM[PRM_SIG_G] ** 2 * dt
+    qba, qbg, qrb = PRM[PRM_SIG_BA] ** 2 * dt, PRM[PRM_SIG_BG] ** 2 * dt, PRM[PRM_SIG_RB] ** 2 * dt
+    for i in range(3):
+        P[EV + i, EV + i] += qa
+        P[ETH + i, ETH + i] += qg
+        P[EBA + i, EBA + i] += qba
+        P[EBG + i, EBG + i] += qbg
+    for i in range(15, n):
+        P[i, i] += qrb
+    return True
+
+
+@njit(cache=True)
+def range_row(X, anchor, bias_index, lever, H):
+    """The predicted range ``|p + R(q) l - a| + b_r`` and its Jacobian row ``H`` (N,) with respect to the
+    error state: ``u^T`` on ``dp``, ``-(u_b x l)`` on ``dtheta`` (``u_b = R^T u``, from
+    ``R (I + [dtheta]x) l``),
+    1 on the anchor's bias (``bias_index`` >= 0, its error-state index)."""
+    R = np.empty((3, 3))
+    _rotmat(X[XQ : XQ + 4], R)
+    d = np.empty(3)
+    for i in range(3):
+        d[i] = X[XP + i] + R[i, 0] * lever[0] + R[i, 1] * lever[1] + R[i, 2] * lever[2] - anchor[i]
+    r = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    H[:] = 0.0
+    if r < 1e-9:
+        return r
+    u = d / r
+    ub = np.empty(3)
+    for j in range(3):
+        ub[j] = R[0, j] * u[0] + R[1, j] * u[1] + R[2, j] * u[2]
+    for i in range(3):
+        H[EP + i] = u[i]
+    H[ETH + 0] = -(ub[1] * lever[2] - ub[2] * lever[1])
+    H[ETH + 1] = -(ub[2] * lever[0] - ub[0] * lever[2])
+    H[ETH + 2] = -(ub[0] * lever[1] - ub[1] * lever[0])
+    h = r
+    if bias_index >= 0:
+        H[bias_index] = 1.0
+        h += X[XRB + bias_index - ERB]
+    return h
+
+
+@njit(cache=True)
+def inject(X, P, dx):
+    """Add the observed error to the nominal state and reset it (Sola 2017 sec. 6.2-6.3): ``q <- q (x)
+    exp(dtheta)`` and ``P <- G P G^T`` with ``G = I - [dtheta / 2]x`` on the attitude block (eq. of sec.
+    6.3.1)."""
+    n = P.shape[0]
+    for i in range(3):
+        X[XP + i] += dx[EP + i]
+        X[XV + i] += dx[EV + i]
+        X[XBA + i] += dx[EBA + i]
+        X[XBG + i] += dx[EBG + i]
+    for i in range(15, n):
+        X[XRB + i - ERB] += dx[i]
+    hx, hy, hz = 0.5 * dx[ETH], 0.5 * dx[ETH + 1], 0.5 * dx[ETH + 2]
+    _qmul_exp(X[XQ : XQ + 4], dx[ETH], dx[ETH + 1], dx[ETH + 2])
+    G = np.array([[1.0, hz, -hy], [-hz, 1.0, hx], [hy, -hx, 1.0]])  # I - [dtheta/2]x
+    rows = np.empty((3, n))
+    for i in range(3):
+        for j in range(n):
+            rows[i, j] = G[i, 0] * P[ETH, j] + G[i, 1] * P[ETH + 1, j] + G[i, 2] * P[ETH + 2, j]
+    for i in range(3):
+        for j in range(n):
+            P[ETH + i, j] = rows[i, j]
+    for i in range(3):
+        for j in range(n):
+            rows[i, j] = G[i, 0] * P[j, ETH] + G[i, 1] * P[j, ETH + 1] + G[i, 2] * P[j, ETH + 2]
+    for i in range(3):
+        for j in range(n):
+            P[j, ETH + i] = rows[i, j]
+
+
+@njit(cache=True)
+def update_range_one(X, P, anchor, bias_index, z, sigma, PRM, H, out):
+    """One UWB range ``z`` [m] (noise ``sigma`` [m]) to ``anchor``: gated on its squared Mahalanobis
+    distance (``PRM_GATE``), then, if the normalised innovation ``e`` exceeds the Huber threshold ``k``,
+    underweighted by inflating its variance by ``|e| / k`` (Huber's M-estimator as an iteratively reweighted
+    Kalman update; an NLOS range that passes the gate pulls with a bounded influence). ``out`` receives
+    ``(outcome, d2, innovation)``; returns the outcome."""
+    out[1] = 0.0
+    out[2] = 0.0
+    if not (np.isfinite(z) and np.isfinite(sigma) and sigma > 0.0 and z >= 0.0):
+        out[0] = REFUSED
+        return REFUSED
+    n = P.shape[0]
+    h = range_row(X, anchor, bias_index, PRM[PRM_LEVER : PRM_LEVER + 3], H)
+    nu = z - h
+    b = np.empty(n)
+    hph = 0.0
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            if H[j] != 0.0:
+                s += P[i, j] * H[j]
+        b[i] = s
+        hph += H[i] * s
+    r = sigma * sigma
+    S = hph + r
+    d2 = nu * nu / S
+    out[1], out[2] = d2, nu
+    if d2 > PRM[PRM_GATE]:
+        out[0] = REJECTED
+        return REJECTED
+    k = PRM[PRM_HUBER]
+    if k > 0.0 and d2 > k * k:
+        r *= math.sqrt(d2) / k
+        S = hph + r
+    dx = np.empty(n)
+    for i in range(n):
+        dx[i] = b[i] * nu / S
+    for i in range(n):
+        bi = b[i] / S
+        for j in range(i, n):
+            v = P[i, j] - bi * b[j]
+            P[i, j] = v
+            P[j, i] = v
+    inject(X, P, dx)
+    out[0] = ACCEPTED
+    return ACCEPTED
+
+
+# ------------------------------------------------------------------------------------------ log replay
+
+EV_DONE, EV_DIVERGED, EV_PAUSE = 0, 1, 2
+
+# ST (int64 state of a replay): cursors and counters
+ST_I_IMU, ST_I_RNG, ST_I_OUT, ST_WIN_FILL, ST_WIN_POS, ST_HELD, ST_DROPPED, ST_IMU_REFUSED = range(8)
+N_ST = 8
+
+
+@njit(cache=True)
+def replay(
+    X, P, PRM, tf, t_stop, imu_t, imu_gyro, imu_acc, rng_t, rng_anchor, rng_z, anchors, bias_of, sigma_of,
+    ST, counts, win_rej, win_d2, nis_limit, reject_share_max, last_range, last_range_t,
+    out_every, out_t, out_X, out_P, nis_t, nis_anchor, nis_d2, nis_outcome,
+):  # fmt: skip
+    """Run the filter over a log from the cursors in ``ST`` until its end (returns ``EV_DONE``), a
+    divergence (``EV_DIVERGED``, the cursors left after the range that declared it, for the caller to
+    re-initialise and call again) or the first sample after ``t_stop`` (``EV_PAUSE``). Samples are
+    processed in time order; an IMU sample is held over the
+    interval that follows it (zero-order hold), so the filter predicts to each range's own time stamp.
+
+    Divergence (the windowed test of :mod:`swarm.core.imu_filter`): over the last ``W = len(win_rej)``
+    ranges, the share rejected by the gate above ``reject_share_max``, or the mean NIS of the accepted
+    ones above ``nis_limit[n_accepted]`` (chi-square quantiles computed by the caller)."""
+    n_imu, n_rng = imu_t.shape[0], rng_t.shape[0]
+    n = P.shape[0]
+    F = np.empty((15, 15))
+    FP = np.empty((15, n))
+    H = np.empty(n)
+    res = np.empty(3)
+    W = win_rej.shape[0]
+    tcur = tf[0]
+    while ST[ST_I_IMU] < n_imu or ST[ST_I_RNG] < n_rng:
+        i, j = ST[ST_I_IMU], ST[ST_I_RNG]
+        take_imu = j >= n_rng or (i < n_imu and imu_t[i] <= rng_t[j])
+        t = imu_t[i] if take_imu else rng_t[j]
+        if t > t_stop:
+            tf[0] = tcur
+            return EV_PAUSE
+        if t < tcur:  # older than the filter: dropped, counted
+            ST[ST_DROPPED] += 1
+            if take_imu:
+                ST[ST_I_IMU] += 1
+            else:
+                ST[ST_I_RNG] += 1
+            continue
+        if ST[ST_HELD] >= 0:
+            h = ST[ST_HELD]
+            if not predict_one(X, P, imu_gyro[h], imu_acc[h], t - tcur, PRM, F, FP):
+                ST[ST_IMU_REFUSED] += 1
+        tcur = t
+        if take_imu:
+            ST[ST_HELD] = i
+            ST[ST_I_IMU] += 1
+            if i % out_every == 0 and ST[ST_I_OUT] < out_t.shape[0]:
+                o = ST[ST_I_OUT]
+                out_t[o] = t
+                out_X[o, :] = X
+                for a in range(9):
+                    for b in range(9):
+                        out_P[o, a, b] = P[a, b]
+                ST[ST_I_OUT] += 1
+            continue
+        ST[ST_I_RNG] += 1
+        a = rng_anchor[j]
+        outcome = update_range_one(X, P, anchors[a], bias_of[a], rng_z[j], sigma_of[a], PRM, H, res)
+        nis_t[j], nis_anchor[j], nis_d2[j], nis_outcome[j] = t, a, res[1], outcome
+        counts[a, outcome] += 1
+        if outcome == REFUSED:
+            continue
+        last_range[a], last_range_t[a] = rng_z[j], t
+        pos = ST[ST_WIN_POS]
+        win_rej[pos] = 1.0 if outcome == REJECTED else 0.0
+        win_d2[pos] = res[1] if outcome == ACCEPTED else 0.0
+        ST[ST_WIN_POS] = (pos + 1) % W
+        if ST[ST_WIN_FILL] < W:
+            ST[ST_WIN_FILL] += 1
+        if ST[ST_WIN_FILL] == W:
+            rej = 0.0
+            d2 = 0.0
+            for k in range(W):
+                rej += win_rej[k]
+                d2 += win_d2[k]
+            n_acc = W - int(rej)
+            if rej / W > reject_share_max or (n_acc > 0 and d2 / n_acc > nis_limit[n_acc]):
+                tf[0] = tcur
+                return EV_DIVERGED
+    tf[0] = tcur
+    return EV_DONE

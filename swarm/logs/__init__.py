@@ -1,0 +1,1 @@
+"""Recorded sensor logs: the CSV format (``docs/logs.md``), a synthetic log maker, calibration and replay."""

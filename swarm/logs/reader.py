@@ -1,0 +1,340 @@
+"""Read a recorded sensor log: a folder of CSV files and a ``log.toml`` (``docs/logs.md`` is the format).
+
+Every error names the file, and where it is in the file the line and the column (``uwb.csv, line 12,
+column 2 (anchor_id): unknown anchor 9; anchors.csv has 0, 1, 2, 3``), as a :class:`~swarm.errors.LogError`.
+A NaN or empty value in a sample (an IMU or range reading, not a time) is what a logger writes for a lost
+reading: that row is skipped and counted in :attr:`Log.skipped`, never fed to a filter.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from swarm.config import load_toml
+from swarm.core.imu_filter import ImuFilterParams
+from swarm.errors import ConfigError, LogError
+
+IMU_COLUMNS = (
+    "t_s",
+    "gyro_x_rad_s",
+    "gyro_y_rad_s",
+    "gyro_z_rad_s",
+    "acc_x_m_s2",
+    "acc_y_m_s2",
+    "acc_z_m_s2",
+)
+UWB_COLUMNS = ("t_s", "anchor_id", "range_m")
+ANCHOR_COLUMNS = ("anchor_id", "x_m", "y_m", "z_m")
+TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "qx", "qy", "qz", "qw")
+QUAT_NORM_TOL = 1e-3
+
+
+@dataclass(frozen=True)
+class UwbLog:
+    """``[uwb]`` of log.toml."""
+
+    sigma_m: float | None = None
+    """Range noise standard deviation [m], every anchor; leave out to calibrate it per anchor from the
+    static segment (``[calibration] until_s``)."""
+    sigma_floor_m: float = 0.02
+    """Smallest per-anchor sigma the calibration may give [m] (a static segment is short and quiet)."""
+
+    def __post_init__(self) -> None:
+        if self.sigma_m is not None and not (math.isfinite(self.sigma_m) and self.sigma_m > 0):
+            raise ConfigError(f"uwb.sigma_m must be a finite number > 0, got {self.sigma_m!r}")
+        if not (math.isfinite(self.sigma_floor_m) and self.sigma_floor_m > 0):
+            raise ConfigError(f"uwb.sigma_floor_m must be a finite number > 0, got {self.sigma_floor_m!r}")
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """``[calibration]`` of log.toml: a static segment at the start of the log."""
+
+    until_s: float = 0.0
+    """The vehicle stands still for ``t < until_s`` [s] (log time); 0: no calibration."""
+    position_m: tuple[float, float, float] | None = None
+    """Where the IMU stands during the segment, nav [m] (a surveyed pad), so that per-anchor range biases are
+    absolute; leave out to take the least-squares fix of the segment's median ranges (then the biases are
+    the fit's residuals: their common part is absorbed)."""
+    range_bias: bool = True
+    """Calibrate a bias per anchor (else only sigma)."""
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.until_s) and self.until_s >= 0):
+            raise ConfigError(f"calibration.until_s must be a finite number >= 0, got {self.until_s!r}")
+
+
+@dataclass(frozen=True)
+class Initial:
+    """``[initial]`` of log.toml: the filter's first state and standard deviations."""
+
+    position_m: tuple[float, float, float] | None = None
+    """First position, nav [m]; leave out to take the calibration position or a fix from the first ranges."""
+    yaw_deg: float = 0.0
+    """First heading [deg] about the gravity axis (a static accelerometer gives roll and pitch, not yaw)."""
+    sigma_position_m: float = 0.3
+    sigma_velocity_m_s: float = 0.1
+    sigma_attitude_deg: float = 5.0
+    sigma_accel_bias_m_s2: float = 0.2
+    sigma_gyro_bias_rad_s: float = 0.01
+    sigma_range_bias_m: float = 0.3
+    """Prior on each range bias [m] (after calibration it is the calibration's uncertainty)."""
+
+    def __post_init__(self) -> None:
+        for name in (
+            "sigma_position_m",
+            "sigma_velocity_m_s",
+            "sigma_attitude_deg",
+            "sigma_accel_bias_m_s2",
+            "sigma_gyro_bias_rad_s",
+            "sigma_range_bias_m",
+        ):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ConfigError(f"initial.{name} must be a finite number > 0, got {v!r}")
+
+
+@dataclass(frozen=True)
+class Recovery:
+    """``[recovery]`` of log.toml: what the replay does after a divergence."""
+
+    enabled: bool = True
+    """Re-initialise the position from ranges when the divergence test fires (else only report it)."""
+    max_range_age_s: float = 1.0
+    """Ranges older than this [s] are not used for the fix."""
+    sigma_velocity_m_s: float = 1.0
+    """Velocity standard deviation after a re-initialisation [m/s] (the velocity is set to zero)."""
+
+
+@dataclass(frozen=True)
+class Faults:
+    """``[faults]`` of log.toml: a forced divergence, to see the recovery (testing, demonstrations)."""
+
+    jump_at_s: float | None = None
+    """At this log time [s] the position estimate jumps by ``jump_m`` while its covariance shrinks to
+    ``jump_sigma_m``: an overconfident, wrong filter."""
+    jump_m: tuple[float, float, float] = (5.0, 0.0, 0.0)
+    jump_sigma_m: float = 0.01
+
+
+@dataclass(frozen=True)
+class LogConfig:
+    """``log.toml``: what the CSV files cannot say (``docs/logs.md``)."""
+
+    name: str = ""
+    estimator: ImuFilterParams = field(default_factory=ImuFilterParams)
+    uwb: UwbLog = UwbLog()
+    calibration: Calibration = Calibration()
+    initial: Initial = Initial()
+    recovery: Recovery = Recovery()
+    faults: Faults = Faults()
+    output_every: int = 10
+    """Write one estimate row every this many IMU samples (10: 100 Hz for a 1 kHz IMU)."""
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.output_every, int) and self.output_every >= 1):
+            raise ConfigError(f"output_every must be an integer >= 1, got {self.output_every!r}")
+
+
+@dataclass
+class Log:
+    """A log in memory: arrays sorted by time, anchors by index (``anchor_ids[index]`` is the file's id)."""
+
+    path: Path
+    config: LogConfig
+    imu_t: np.ndarray
+    gyro: np.ndarray
+    acc: np.ndarray
+    uwb_t: np.ndarray
+    uwb_anchor: np.ndarray
+    """Index into :attr:`anchors_nav` of each range."""
+    uwb_range: np.ndarray
+    anchor_ids: np.ndarray
+    anchors_nav: np.ndarray
+    truth_t: np.ndarray | None = None
+    truth_p: np.ndarray | None = None
+    truth_q: np.ndarray | None = None
+    skipped: dict[str, int] = field(default_factory=dict)
+    """Rows skipped per file (a NaN or empty sample value)."""
+
+
+def _at(name: str, line: int, col: int, column: str) -> str:
+    """Where in a file: ``"uwb.csv, line 12, column 2 (anchor_id)"`` (``col`` counted from 0)."""
+    return f"{name}, line {line}, column {col + 1} ({column})"
+
+
+def _rows(path: Path, columns: tuple[str, ...], optional: bool = False):
+    """The header's positions of ``columns`` and the data rows ``(line number, fields)`` of a CSV file."""
+    name = path.name
+    if not path.is_file():
+        if optional:
+            return None
+        raise LogError(f"{path}: missing (a log folder needs imu.csv, uwb.csv and anchors.csv; docs/logs.md)")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise LogError(f"{name}: not UTF-8 text ({exc})") from None
+    except OSError as exc:
+        raise LogError(f"{name}: cannot read: {exc.strerror or exc}") from None
+    lines = [
+        (i + 1, ln)
+        for i, ln in enumerate(text.splitlines())
+        if ln.strip() and not ln.lstrip().startswith("#")
+    ]
+    if not lines:
+        raise LogError(f"{name}: empty (expected a header line: {', '.join(columns)})")
+    head_no, head = lines[0]
+    header = [h.strip() for h in next(csv.reader([head]))]
+    where = {}
+    for c in columns:
+        if c not in header:
+            raise LogError(
+                f"{name}, line {head_no}: missing column {c!r} (the header has {', '.join(header)})"
+            )
+        where[c] = header.index(c)
+    rows = []
+    for no, ln in lines[1:]:
+        fields = next(csv.reader([ln]))
+        if len(fields) != len(header):
+            raise LogError(f"{name}, line {no}: {len(fields)} fields, the header has {len(header)}")
+        rows.append((no, fields))
+    if not rows:
+        raise LogError(f"{name}: no data rows after the header")
+    return where, rows
+
+
+def _table(
+    path: Path,
+    columns: tuple[str, ...],
+    nan_ok: tuple[str, ...],
+    skipped: dict[str, int],
+    optional: bool = False,
+):
+    """The columns as a float array (rows, len(columns)); a NaN or empty value in a ``nan_ok`` column skips
+    the row (counted), anywhere else it is an error naming line and column."""
+    got = _rows(path, columns, optional)
+    if got is None:
+        return None, None
+    where, rows = got
+    cols = [where[c] for c in columns]
+    out = np.empty((len(rows), len(columns)))
+    lines = np.empty(len(rows), dtype=np.int64)
+    keep = 0
+    for no, fields in rows:
+        row = out[keep]
+        bad = False
+        for k, (c, col) in enumerate(zip(columns, cols, strict=True)):
+            text = fields[col].strip()
+            try:
+                v = float(text) if text else math.nan
+            except ValueError:
+                raise LogError(f"{_at(path.name, no, col, c)}: not a number: {text!r}") from None
+            if not math.isfinite(v):
+                if c in nan_ok and not math.isinf(v):
+                    bad = True
+                else:
+                    raise LogError(f"{_at(path.name, no, col, c)}: {text or 'empty'} is not a finite number")
+            row[k] = v
+        if bad:
+            skipped[path.name] = skipped.get(path.name, 0) + 1
+            continue
+        lines[keep] = no
+        keep += 1
+    return out[:keep], lines[:keep], cols
+
+
+def _monotonic(name: str, t: np.ndarray, lines: np.ndarray, col: int, strict: bool) -> None:
+    d = np.diff(t)
+    bad = np.flatnonzero(d <= 0.0 if strict else d < 0.0)
+    if len(bad):
+        i = int(bad[0]) + 1
+        word = "after" if strict else "at or after"
+        raise LogError(
+            f"{_at(name, lines[i], col, 't_s')}: time {float(t[i])!r} is not {word} the previous "
+            f"sample's {float(t[i - 1])!r} (line {lines[i - 1]}): samples must be in time order"
+        )
+
+
+def read_log(directory: str | os.PathLike[str], overrides: dict[str, object] | None = None) -> Log:
+    """The log in ``directory`` (``docs/logs.md``), its ``log.toml`` with ``overrides`` (dotted keys, as
+    ``--set``) applied. Raises LogError (a bad CSV file) or ConfigError (a bad log.toml)."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise LogError(f"{d}: not a folder (a log is a folder of CSV files, docs/logs.md)")
+    toml = d / "log.toml"
+    if toml.is_file():
+        config = load_toml(LogConfig, toml, overrides)
+    else:
+        from swarm.config import apply_overrides, from_mapping
+
+        config = from_mapping(LogConfig, apply_overrides({}, overrides or {}))
+    skipped: dict[str, int] = {}
+    a, a_lines, a_cols = _table(d / "anchors.csv", ANCHOR_COLUMNS, (), skipped)
+    ids = a[:, 0]
+    for k, v in enumerate(ids):
+        if v != int(v) or v < 0:
+            raise LogError(
+                f"{_at('anchors.csv', a_lines[k], a_cols[0], 'anchor_id')}: not an integer id >= 0: "
+                f"{float(v)!r}"
+            )
+    ids = ids.astype(np.int64)
+    if len(set(ids.tolist())) != len(ids):
+        dup = next(int(v) for v in ids if (ids == v).sum() > 1)
+        raise LogError(f"anchors.csv: anchor {dup} is listed twice")
+    index = {int(v): k for k, v in enumerate(ids)}
+
+    imu, i_lines, i_cols = _table(d / "imu.csv", IMU_COLUMNS, IMU_COLUMNS[1:], skipped)
+    _monotonic("imu.csv", imu[:, 0], i_lines, i_cols[0], strict=True)
+    uwb, u_lines, u_cols = _table(d / "uwb.csv", UWB_COLUMNS, ("range_m",), skipped)
+    _monotonic("uwb.csv", uwb[:, 0], u_lines, u_cols[0], strict=False)
+    anchor_index = np.empty(len(uwb), dtype=np.int64)
+    for k, v in enumerate(uwb[:, 1]):
+        if v != int(v) or int(v) not in index:
+            raise LogError(
+                f"{_at('uwb.csv', u_lines[k], u_cols[1], 'anchor_id')}: unknown anchor {v:g}; "
+                f"anchors.csv has {', '.join(str(i) for i in ids)}"
+            )
+        anchor_index[k] = index[int(v)]
+    neg = np.flatnonzero(uwb[:, 2] < 0.0)
+    if len(neg):
+        k = int(neg[0])
+        raise LogError(
+            f"{_at('uwb.csv', u_lines[k], u_cols[2], 'range_m')}: negative range {float(uwb[k, 2])!r}"
+        )
+
+    log = Log(
+        d,
+        config,
+        imu[:, 0].copy(),
+        imu[:, 1:4].copy(),
+        imu[:, 4:7].copy(),
+        uwb[:, 0].copy(),
+        anchor_index,
+        uwb[:, 2].copy(),
+        ids,
+        a[:, 1:4].copy(),
+        skipped=skipped,
+    )
+    truth, t_lines, t_cols = _table(d / "truth.csv", TRUTH_COLUMNS, (), skipped, optional=True)
+    if truth is not None:
+        _monotonic("truth.csv", truth[:, 0], t_lines, t_cols[0], strict=True)
+        norms = np.linalg.norm(truth[:, 4:8], axis=1)
+        bad = np.flatnonzero(np.abs(norms - 1.0) > QUAT_NORM_TOL)
+        if len(bad):
+            k = int(bad[0])
+            raise LogError(
+                f"{_at('truth.csv', t_lines[k], t_cols[4], 'qx')}: quaternion norm {norms[k]:.6g} is not "
+                f"within {QUAT_NORM_TOL:g} of 1 (qx, qy, qz, qw, scalar-last)"
+            )
+        log.truth_t, log.truth_p, log.truth_q = (
+            truth[:, 0].copy(),
+            truth[:, 1:4].copy(),
+            truth[:, 4:8] / norms[:, None],
+        )
+    return log

@@ -1,0 +1,243 @@
+"""A synthetic flight log with what real UWB + IMU logs have (``swarm synth-log``, the replay tests and
+the bench).
+
+A quadrotor stands on a surveyed pad for ``static_s``, takes off and flies a Lissajous figure in a room of
+anchors, with a coordinated attitude (its thrust axis along the acceleration minus gravity, the heading
+turning slowly). From that trajectory, sampled exactly at each sensor's (jittered) time:
+
+* a 6-axis IMU at ``imu_rate_hz``: rate and specific force in the body frame, with constant biases plus a
+  random walk, white noise, and a dropout (a gap with no sample);
+* two-way ranges at ``range_rate_hz`` in all, to one anchor after another (Loco Positioning TWR), each with
+  a per-anchor bias drawn in ``range_bias_m`` that steps once airborne and then drifts (random walk), white
+  noise, lost exchanges, and one NLOS anchor whose ranges, once airborne, are long by an exponential excess
+  most of the time;
+* the truth at 100 Hz, and a ``log.toml`` with the noise densities and the pad's position (the
+  calibration segment), as a user would write it.
+
+Everything is drawn from ``numpy.random.default_rng(seed)``: the same seed gives the same files.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from swarm.core import rotations as rot
+
+GRAVITY = np.array([0.0, 0.0, -9.81])
+
+
+@dataclass(frozen=True)
+class SyntheticSpec:
+    """What the synthetic log contains (defaults: a Crazyflie-like flight in an 8-anchor room)."""
+
+    duration_s: float = 60.0
+    static_s: float = 5.0
+    takeoff_s: float = 3.0
+    imu_rate_hz: float = 1000.0
+    imu_jitter_s: float = 5e-5
+    imu_gap_at_s: float = 30.0
+    imu_gap_s: float = 0.05
+    accel_noise: float = 0.02  # [m/s^2/sqrt(Hz)]
+    gyro_noise: float = 0.002  # [rad/s/sqrt(Hz)]
+    accel_bias_m_s2: float = 0.1  # |b_a| per axis, drawn in [-x, x]
+    gyro_bias_rad_s: float = 0.005
+    accel_bias_rw: float = 5e-4
+    gyro_bias_rw: float = 5e-6
+    range_rate_hz: float = 80.0
+    range_jitter_s: float = 0.002
+    range_sigma_m: float = 0.05
+    range_bias_m: tuple[float, float] = (0.2, 0.5)
+    range_bias_step_m: float = 0.0  # once airborne, each bias steps by U(-x, x) (a model the filter lacks)
+    range_bias_rw: float = 0.003  # [m/sqrt(s)]
+    range_loss: float = 0.05
+    nlos_anchor: int = 3
+    nlos_probability: float = 0.6  # of each of its ranges while airborne
+    nlos_excess_m: float = 1.0  # mean of the exponential excess
+    pad_m: tuple[float, float, float] = (0.0, 0.0, 0.05)
+    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.03)
+    yaw0_deg: float = 30.0
+
+
+ANCHORS = np.array(
+    [
+        [-4.0, -3.0, 0.2],
+        [4.0, -3.0, 0.2],
+        [4.0, 3.0, 0.2],
+        [-4.0, 3.0, 0.2],
+        [-4.0, -3.0, 2.8],
+        [4.0, -3.0, 2.8],
+        [4.0, 3.0, 2.8],
+        [-4.0, 3.0, 2.8],
+    ]
+)
+"""Eight anchors in the corners of an 8 x 6 x 3 m room, nav frame (z up)."""
+
+
+def _blend(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
+    """0 before t0, 1 after t1, a quintic smoothstep between (C2: continuous acceleration)."""
+    s = np.clip((t - t0) / (t1 - t0), 0.0, 1.0)
+    return s**3 * (10.0 - 15.0 * s + 6.0 * s * s)
+
+
+def _position(spec: SyntheticSpec, t: np.ndarray) -> np.ndarray:
+    pad = np.array(spec.pad_m)
+    t0, t1 = spec.static_s, spec.static_s + spec.takeoff_s
+    lift = _blend(t, t0, t1)
+    fly = _blend(t, t1, t1 + 2.0)
+    tau = np.maximum(t - t1, 0.0)
+    figure = np.stack([2.5 * np.sin(0.25 * tau), 1.8 * np.sin(0.5 * tau), 0.4 * np.sin(0.15 * tau)], axis=-1)
+    up = np.array([0.0, 0.0, 1.5])
+    return pad + lift[:, None] * up + fly[:, None] * figure
+
+
+def _derivatives(spec: SyntheticSpec, t: np.ndarray, h: float = 1e-3):
+    """Position, velocity and acceleration by central differences of the smooth trajectory (error ~h^2)."""
+    p = _position(spec, t)
+    v = (_position(spec, t + h) - _position(spec, t - h)) / (2 * h)
+    a = (_position(spec, t + h) - 2 * p + _position(spec, t - h)) / (h * h)
+    return p, v, a
+
+
+def _attitude(spec: SyntheticSpec, t: np.ndarray) -> np.ndarray:
+    """q_nav_body: body z along (a - g) (a quadrotor's thrust), heading ``yaw0 + 0.4 sin(0.1 t)`` airborne."""
+    _, _, a = _derivatives(spec, t)
+    z = a - GRAVITY
+    z /= np.linalg.norm(z, axis=1, keepdims=True)
+    airborne = _blend(t, spec.static_s, spec.static_s + spec.takeoff_s)
+    yaw = np.radians(spec.yaw0_deg) + 0.4 * np.sin(0.1 * t) * airborne
+    xc = np.stack([np.cos(yaw), np.sin(yaw), np.zeros_like(yaw)], axis=-1)
+    y = np.cross(z, xc)
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    x = np.cross(y, z)
+    R = np.stack([x, y, z], axis=-1)  # columns: body axes in nav
+    return rot.matrix_to_quat(R)
+
+
+def _rates(spec: SyntheticSpec, t: np.ndarray, h: float = 1e-4) -> np.ndarray:
+    """Body angular rate from the attitude: ``2 vec(q^-1 (x) dq/dt)`` by central differences."""
+    qm, qp = _attitude(spec, t - h), _attitude(spec, t + h)
+    dq = rot.quat_mul(rot.quat_conj(qm), qp)
+    dq *= np.sign(dq[:, 3:4])
+    return rot.quat_log(dq) / (2 * h)
+
+
+def truth_at(spec: SyntheticSpec, t: np.ndarray):
+    """True position, velocity, attitude, body rate and specific force (body) at times ``t``."""
+    p, v, a = _derivatives(spec, t)
+    q = _attitude(spec, t)
+    w = _rates(spec, t)
+    f = rot.quat_rotate(rot.quat_conj(q), a - GRAVITY)
+    return p, v, q, w, f
+
+
+def _write(path: Path, header: str, rows: np.ndarray, fmt) -> None:
+    np.savetxt(path, rows, delimiter=",", header=header, comments="", fmt=fmt)
+
+
+def make_log(directory, seed: int = 0, spec: SyntheticSpec | None = None) -> dict:
+    """Write a synthetic log into ``directory`` (created); returns the true biases and the NLOS anchor."""
+    spec = spec or SyntheticSpec()
+    rng = np.random.default_rng(seed)
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    T = spec.duration_s
+
+    # IMU: jittered sample times, a gap, biases with a random walk
+    n = int(T * spec.imu_rate_hz)
+    dt = 1.0 / spec.imu_rate_hz
+    t_imu = np.arange(n) * dt + rng.uniform(-spec.imu_jitter_s, spec.imu_jitter_s, n)
+    t_imu[0] = 0.0
+    keep = ~((t_imu >= spec.imu_gap_at_s) & (t_imu < spec.imu_gap_at_s + spec.imu_gap_s))
+    t_imu = t_imu[keep]
+    _, _, _, w, f = truth_at(spec, t_imu)
+    ba0 = rng.uniform(-spec.accel_bias_m_s2, spec.accel_bias_m_s2, 3)
+    bg0 = rng.uniform(-spec.gyro_bias_rad_s, spec.gyro_bias_rad_s, 3)
+    steps = np.diff(t_imu, prepend=0.0)[:, None]
+    ba = ba0 + np.cumsum(rng.normal(size=(len(t_imu), 3)) * spec.accel_bias_rw * np.sqrt(steps), axis=0)
+    bg = bg0 + np.cumsum(rng.normal(size=(len(t_imu), 3)) * spec.gyro_bias_rw * np.sqrt(steps), axis=0)
+    gyro = w + bg + rng.normal(size=w.shape) * spec.gyro_noise * math.sqrt(spec.imu_rate_hz)
+    acc = f + ba + rng.normal(size=f.shape) * spec.accel_noise * math.sqrt(spec.imu_rate_hz)
+    _write(
+        d / "imu.csv",
+        "t_s,gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,acc_x_m_s2,acc_y_m_s2,acc_z_m_s2",
+        np.column_stack([t_imu, gyro, acc]),
+        "%.6f",
+    )
+
+    # UWB: round robin over the anchors, biases that step once airborne and drift, losses, one NLOS anchor
+    m = len(ANCHORS)
+    k = np.arange(int(T * spec.range_rate_hz))
+    t_rng = np.sort(k / spec.range_rate_hz + rng.uniform(0.0, spec.range_jitter_s, len(k)))
+    anchor = k % m
+    p, _, q, _, _ = truth_at(spec, t_rng)
+    tag = p + rot.quat_rotate(q, np.broadcast_to(np.array(spec.lever_arm_m), p.shape))
+    true_range = np.linalg.norm(tag - ANCHORS[anchor], axis=1)
+    b0 = rng.uniform(*spec.range_bias_m, m)
+    step = rng.uniform(-spec.range_bias_step_m, spec.range_bias_step_m, m)
+    airborne = t_rng >= spec.static_s + spec.takeoff_s
+    walk = np.zeros((len(t_rng), m))
+    walk[1:] = np.cumsum(
+        rng.normal(size=(len(t_rng) - 1, m)) * spec.range_bias_rw * np.sqrt(np.diff(t_rng))[:, None], axis=0
+    )
+    walk -= walk[np.searchsorted(t_rng, spec.static_s + spec.takeoff_s).clip(0, len(t_rng) - 1)]
+    walk[~airborne] = 0.0
+    bias = b0[anchor] + airborne * (step[anchor] + walk[np.arange(len(t_rng)), anchor])
+    z = true_range + bias + rng.normal(size=len(t_rng)) * spec.range_sigma_m
+    nlos = (anchor == spec.nlos_anchor) & airborne & (rng.random(len(t_rng)) < spec.nlos_probability)
+    z[nlos] += rng.exponential(spec.nlos_excess_m, nlos.sum())
+    lost = rng.random(len(t_rng)) < spec.range_loss
+    z[lost] = np.nan  # a lost reply: the logger writes nan, the reader skips and counts the row
+    _write(
+        d / "uwb.csv", "t_s,anchor_id,range_m", np.column_stack([t_rng, anchor, z]), ["%.6f", "%d", "%.6f"]
+    )
+    _write(
+        d / "anchors.csv",
+        "anchor_id,x_m,y_m,z_m",
+        np.column_stack([np.arange(m), ANCHORS]),
+        ["%d"] + ["%.4f"] * 3,
+    )
+
+    t_truth = np.arange(0.0, T, 0.01)
+    pt, _, qt, _, _ = truth_at(spec, t_truth)
+    _write(d / "truth.csv", "t_s,x_m,y_m,z_m,qx,qy,qz,qw", np.column_stack([t_truth, pt, qt]), "%.7f")
+
+    pad = ", ".join(f"{v:g}" for v in spec.pad_m)
+    lever = ", ".join(f"{v:g}" for v in spec.lever_arm_m)
+    (
+        d / "log.toml"
+    ).write_text(f"""# Synthetic flight (swarm synth-log --seed {seed}): {T:g} s, {m} anchors, anchor {spec.nlos_anchor} NLOS.
+name = "synthetic flight, seed {seed}"
+
+[estimator]
+accel_noise = {spec.accel_noise:g}
+gyro_noise = {spec.gyro_noise:g}
+accel_bias_rw = {max(spec.accel_bias_rw, 1e-4):g}
+gyro_bias_rw = {max(spec.gyro_bias_rw, 1e-6):g}
+range_bias = true
+range_bias_rw = {max(spec.range_bias_rw, 1e-3):g}
+gravity_nav = [0.0, 0.0, -9.81]
+lever_arm_m = [{lever}]
+
+[calibration]
+until_s = {spec.static_s:g}
+position_m = [{pad}]
+
+[initial]
+# the pad is surveyed: the first position is known to ~2 cm
+sigma_position_m = 0.02
+yaw_deg = {spec.yaw0_deg:g}
+sigma_range_bias_m = {max(spec.range_bias_step_m, 0.03):g}
+""")  # noqa: E501
+    return {
+        "accel_bias": ba0,
+        "gyro_bias": bg0,
+        "range_bias_static": b0,
+        "range_bias_step": step,
+        "nlos_anchor": spec.nlos_anchor,
+        "range_bias_final": b0 + step + walk[-1],
+        "nlos_t": t_rng[nlos & ~lost],
+    }
