@@ -41,6 +41,10 @@ BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
         _bench("codec", presets=True),
         "one message of every tick: build, encode, decode (msgspec fast path vs reference checks)",
     ),
+    "replay": (
+        _bench("replay", presets=True),
+        "a 60 s UWB + IMU log through the IMU-driven filter; its step against the tandem's",
+    ),
     "sim": (_bench("sim", presets=False), "one in-process docking: real-time factor and profile"),
     "transport": (
         _bench("transport", presets=True),

@@ -22,12 +22,13 @@ import math
 import numpy as np
 from numba import njit
 
-from swarm.core._rot_nb import qexp3
+from swarm.core._rot_nb import qexp3, qmat9
 
 # X layout
 XP, XV, XQ, XBA, XBG, XRB = 0, 3, 6, 10, 13, 16
 # error-state layout
 EP, EV, ETH, EBA, EBG, ERB = 0, 3, 6, 9, 12, 15
+N_CORE = 15
 
 # PRM layout (ImuFilterParams.vector)
 PRM_SIG_A = 0  # accelerometer white noise [m/s^2/sqrt(Hz)]
@@ -105,13 +106,14 @@ def transition(X, gyro, acc, dt, F):
 
 
 @njit(cache=True)
-def predict_one(X, P, gyro, acc, dt, PRM, F, FP):
+def predict_one(X, P, gyro, acc, dt, PRM):
     """Propagate one filter over ``dt`` [s] with the IMU sample held over the interval: gyro rate ``gyro``
     [rad/s] and specific force ``acc`` [m/s^2], body frame (Sola 2017 sec. 5.4.1 for the nominal state,
     ``P <- F_x P F_x^T + F_i Q_i F_i^T`` of sec. 5.4.3 for the covariance, with ``Q_i`` from the noise
     densities: ``V_i = sigma_a^2 dt I``, ``Theta_i = sigma_g^2 dt I``, ``A_i = sigma_ba^2 dt I``,
-    ``Omega_i = sigma_bg^2 dt I``, and ``sigma_rb^2 dt`` per range bias). ``F`` (15 x 15) and ``FP`` (15 x N)
-    are scratch. Returns False (and changes nothing) on a non-finite input."""
+    ``Omega_i = sigma_bg^2 dt I``, and ``sigma_rb^2 dt`` per range bias). ``F_x`` is that of
+    :func:`transition`, applied block by block in place (rows, then columns): only its non-identity blocks
+    cost anything, and nothing is allocated. Returns False (and changes nothing) on a non-finite input."""
     for k in range(3):
         if not (np.isfinite(gyro[k]) and np.isfinite(acc[k])):
             return False
@@ -120,41 +122,61 @@ def predict_one(X, P, gyro, acc, dt, PRM, F, FP):
     if dt == 0.0:
         return True
     n = P.shape[0]
-    transition(X, gyro, acc, dt, F)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = qmat9(X[XQ], X[XQ + 1], X[XQ + 2], X[XQ + 3])
+    ax, ay, az = acc[0] - X[XBA], acc[1] - X[XBA + 1], acc[2] - X[XBA + 2]
+    wx, wy, wz = (gyro[0] - X[XBG]) * dt, (gyro[1] - X[XBG + 1]) * dt, (gyro[2] - X[XBG + 2]) * dt
+    # F_vtheta = -R [a]x dt, F_vba = -R dt, F_thetatheta = R(exp(-w dt))
+    a00, a01, a02 = -(r01 * az - r02 * ay) * dt, -(r02 * ax - r00 * az) * dt, -(r00 * ay - r01 * ax) * dt
+    a10, a11, a12 = -(r11 * az - r12 * ay) * dt, -(r12 * ax - r10 * az) * dt, -(r10 * ay - r11 * ax) * dt
+    a20, a21, a22 = -(r21 * az - r22 * ay) * dt, -(r22 * ax - r20 * az) * dt, -(r20 * ay - r21 * ax) * dt
+    ex, ey, ez, ew = qexp3(-wx, -wy, -wz)
+    e00, e01, e02, e10, e11, e12, e20, e21, e22 = qmat9(ex, ey, ez, ew)
     # nominal state
-    R = np.empty((3, 3))
-    _rotmat(X[XQ : XQ + 4], R)
-    a = np.empty(3)
     for i in range(3):
-        a[i] = acc[i] - X[XBA + i]
-    for i in range(3):
-        an = R[i, 0] * a[0] + R[i, 1] * a[1] + R[i, 2] * a[2] + PRM[PRM_G + i]
+        if i == 0:
+            an = r00 * ax + r01 * ay + r02 * az
+        elif i == 1:
+            an = r10 * ax + r11 * ay + r12 * az
+        else:
+            an = r20 * ax + r21 * ay + r22 * az
+        an += PRM[PRM_G + i]
         X[XP + i] += X[XV + i] * dt + 0.5 * an * dt * dt
         X[XV + i] += an * dt
-    _qmul_exp(
-        X[XQ : XQ + 4], (gyro[0] - X[XBG]) * dt, (gyro[1] - X[XBG + 1]) * dt, (gyro[2] - X[XBG + 2]) * dt
-    )
-    # covariance: rows 0:15 become F P; then columns 0:15 become (F P) F^T; the bias block only gains Q
-    for i in range(15):
-        for j in range(n):
-            s = 0.0
-            for k in range(15):
-                f = F[i, k]
-                if f != 0.0:
-                    s += f * P[k, j]
-            FP[i, j] = s
-    for i in range(15):
-        for j in range(i, 15):
-            s = 0.0
-            for k in range(15):
-                f = F[j, k]
-                if f != 0.0:
-                    s += FP[i, k] * f
-            P[i, j] = s
-            P[j, i] = s
-        for j in range(15, n):
-            P[i, j] = FP[i, j]
-            P[j, i] = FP[i, j]
+    _qmul_exp(X[XQ : XQ + 4], wx, wy, wz)
+    # P <- F P: every column j; then P <- P F^T: every row i (the same algebra on the transpose)
+    for j in range(n):
+        v0, v1, v2 = P[EV, j], P[EV + 1, j], P[EV + 2, j]
+        t0, t1, t2 = P[ETH, j], P[ETH + 1, j], P[ETH + 2, j]
+        b0, b1, b2 = P[EBA, j], P[EBA + 1, j], P[EBA + 2, j]
+        P[EP, j] += dt * v0
+        P[EP + 1, j] += dt * v1
+        P[EP + 2, j] += dt * v2
+        P[EV, j] = v0 + a00 * t0 + a01 * t1 + a02 * t2 - dt * (r00 * b0 + r01 * b1 + r02 * b2)
+        P[EV + 1, j] = v1 + a10 * t0 + a11 * t1 + a12 * t2 - dt * (r10 * b0 + r11 * b1 + r12 * b2)
+        P[EV + 2, j] = v2 + a20 * t0 + a21 * t1 + a22 * t2 - dt * (r20 * b0 + r21 * b1 + r22 * b2)
+        P[ETH, j] = e00 * t0 + e01 * t1 + e02 * t2 - dt * P[EBG, j]
+        P[ETH + 1, j] = e10 * t0 + e11 * t1 + e12 * t2 - dt * P[EBG + 1, j]
+        P[ETH + 2, j] = e20 * t0 + e21 * t1 + e22 * t2 - dt * P[EBG + 2, j]
+    for i in range(N_CORE):  # the range-bias rows: their new columns 0:9 are the rows' transpose, below
+        v0, v1, v2 = P[i, EV], P[i, EV + 1], P[i, EV + 2]
+        t0, t1, t2 = P[i, ETH], P[i, ETH + 1], P[i, ETH + 2]
+        b0, b1, b2 = P[i, EBA], P[i, EBA + 1], P[i, EBA + 2]
+        P[i, EP] += dt * v0
+        P[i, EP + 1] += dt * v1
+        P[i, EP + 2] += dt * v2
+        P[i, EV] = v0 + a00 * t0 + a01 * t1 + a02 * t2 - dt * (r00 * b0 + r01 * b1 + r02 * b2)
+        P[i, EV + 1] = v1 + a10 * t0 + a11 * t1 + a12 * t2 - dt * (r10 * b0 + r11 * b1 + r12 * b2)
+        P[i, EV + 2] = v2 + a20 * t0 + a21 * t1 + a22 * t2 - dt * (r20 * b0 + r21 * b1 + r22 * b2)
+        P[i, ETH] = e00 * t0 + e01 * t1 + e02 * t2 - dt * P[i, EBG]
+        P[i, ETH + 1] = e10 * t0 + e11 * t1 + e12 * t2 - dt * P[i, EBG + 1]
+        P[i, ETH + 2] = e20 * t0 + e21 * t1 + e22 * t2 - dt * P[i, EBG + 2]
+    for i in range(9):  # rows and columns 0:9 changed: exactly symmetric again, the bias rows mirrored
+        for j in range(i + 1, N_CORE):
+            m = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = m
+            P[j, i] = m
+        for j in range(N_CORE, n):
+            P[j, i] = P[i, j]
     qa, qg = PRM[PRM_SIG_A] ** 2 * dt, PRM[PRM_SIG_G] ** 2 * dt
     qba, qbg, qrb = PRM[PRM_SIG_BA] ** 2 * dt, PRM[PRM_SIG_BG] ** 2 * dt, PRM[PRM_SIG_RB] ** 2 * dt
     for i in range(3):
@@ -171,26 +193,24 @@ def predict_one(X, P, gyro, acc, dt, PRM, F, FP):
 def range_row(X, anchor, bias_index, lever, H):
     """The predicted range ``|p + R(q) l - a| + b_r`` and its Jacobian row ``H`` (N,) with respect to the
     error state: ``u^T`` on ``dp``, ``-(u_b x l)`` on ``dtheta`` (``u_b = R^T u``, from
-    ``R (I + [dtheta]x) l``),
-    1 on the anchor's bias (``bias_index`` >= 0, its error-state index)."""
-    R = np.empty((3, 3))
-    _rotmat(X[XQ : XQ + 4], R)
-    d = np.empty(3)
-    for i in range(3):
-        d[i] = X[XP + i] + R[i, 0] * lever[0] + R[i, 1] * lever[1] + R[i, 2] * lever[2] - anchor[i]
-    r = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    ``R (I + [dtheta]x) l``), 1 on the anchor's bias (``bias_index`` >= 0, its error-state index)."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = qmat9(X[XQ], X[XQ + 1], X[XQ + 2], X[XQ + 3])
+    l0, l1, l2 = lever[0], lever[1], lever[2]
+    d0 = X[XP] + r00 * l0 + r01 * l1 + r02 * l2 - anchor[0]
+    d1 = X[XP + 1] + r10 * l0 + r11 * l1 + r12 * l2 - anchor[1]
+    d2 = X[XP + 2] + r20 * l0 + r21 * l1 + r22 * l2 - anchor[2]
+    r = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     H[:] = 0.0
     if r < 1e-9:
         return r
-    u = d / r
-    ub = np.empty(3)
-    for j in range(3):
-        ub[j] = R[0, j] * u[0] + R[1, j] * u[1] + R[2, j] * u[2]
-    for i in range(3):
-        H[EP + i] = u[i]
-    H[ETH + 0] = -(ub[1] * lever[2] - ub[2] * lever[1])
-    H[ETH + 1] = -(ub[2] * lever[0] - ub[0] * lever[2])
-    H[ETH + 2] = -(ub[0] * lever[1] - ub[1] * lever[0])
+    u0, u1, u2 = d0 / r, d1 / r, d2 / r
+    b0 = r00 * u0 + r10 * u1 + r20 * u2
+    b1 = r01 * u0 + r11 * u1 + r21 * u2
+    b2 = r02 * u0 + r12 * u1 + r22 * u2
+    H[EP], H[EP + 1], H[EP + 2] = u0, u1, u2
+    H[ETH] = -(b1 * l2 - b2 * l1)
+    H[ETH + 1] = -(b2 * l0 - b0 * l2)
+    H[ETH + 2] = -(b0 * l1 - b1 * l0)
     h = r
     if bias_index >= 0:
         H[bias_index] = 1.0
@@ -201,8 +221,7 @@ def range_row(X, anchor, bias_index, lever, H):
 @njit(cache=True)
 def inject(X, P, dx):
     """Add the observed error to the nominal state and reset it (Sola 2017 sec. 6.2-6.3): ``q <- q (x)
-    exp(dtheta)`` and ``P <- G P G^T`` with ``G = I - [dtheta / 2]x`` on the attitude block (eq. of sec.
-    6.3.1)."""
+    exp(dtheta)`` and ``P <- G P G^T`` with ``G = I - [dtheta / 2]x`` on the attitude block (sec. 6.3.1)."""
     n = P.shape[0]
     for i in range(3):
         X[XP + i] += dx[EP + i]
@@ -211,46 +230,44 @@ def inject(X, P, dx):
         X[XBG + i] += dx[EBG + i]
     for i in range(15, n):
         X[XRB + i - ERB] += dx[i]
-    hx, hy, hz = 0.5 * dx[ETH], 0.5 * dx[ETH + 1], 0.5 * dx[ETH + 2]
     _qmul_exp(X[XQ : XQ + 4], dx[ETH], dx[ETH + 1], dx[ETH + 2])
-    G = np.array([[1.0, hz, -hy], [-hz, 1.0, hx], [hy, -hx, 1.0]])  # I - [dtheta/2]x
-    rows = np.empty((3, n))
-    for i in range(3):
-        for j in range(n):
-            rows[i, j] = G[i, 0] * P[ETH, j] + G[i, 1] * P[ETH + 1, j] + G[i, 2] * P[ETH + 2, j]
-    for i in range(3):
-        for j in range(n):
-            P[ETH + i, j] = rows[i, j]
-    for i in range(3):
-        for j in range(n):
-            rows[i, j] = G[i, 0] * P[j, ETH] + G[i, 1] * P[j, ETH + 1] + G[i, 2] * P[j, ETH + 2]
-    for i in range(3):
-        for j in range(n):
-            P[j, ETH + i] = rows[i, j]
+    hx, hy, hz = 0.5 * dx[ETH], 0.5 * dx[ETH + 1], 0.5 * dx[ETH + 2]
+    # G = [[1, hz, -hy], [-hz, 1, hx], [hy, -hx, 1]]: rows of P, then columns
+    for j in range(n):
+        t0, t1, t2 = P[ETH, j], P[ETH + 1, j], P[ETH + 2, j]
+        P[ETH, j] = t0 + hz * t1 - hy * t2
+        P[ETH + 1, j] = -hz * t0 + t1 + hx * t2
+        P[ETH + 2, j] = hy * t0 - hx * t1 + t2
+    for i in range(n):
+        t0, t1, t2 = P[i, ETH], P[i, ETH + 1], P[i, ETH + 2]
+        P[i, ETH] = t0 + hz * t1 - hy * t2
+        P[i, ETH + 1] = -hz * t0 + t1 + hx * t2
+        P[i, ETH + 2] = hy * t0 - hx * t1 + t2
 
 
 @njit(cache=True)
-def update_range_one(X, P, anchor, bias_index, z, sigma, PRM, H, out):
+def update_range_one(X, P, anchor, bias_index, z, sigma, PRM, work, out):
     """One UWB range ``z`` [m] (noise ``sigma`` [m]) to ``anchor``: gated on its squared Mahalanobis
     distance (``PRM_GATE``), then, if the normalised innovation ``e`` exceeds the Huber threshold ``k``,
     underweighted by inflating its variance by ``|e| / k`` (Huber's M-estimator as an iteratively reweighted
-    Kalman update; an NLOS range that passes the gate pulls with a bounded influence). ``out`` receives
-    ``(outcome, d2, innovation)``; returns the outcome."""
+    Kalman update; an NLOS range that passes the gate pulls with a bounded influence). ``work`` (3, N) is
+    scratch; ``out`` receives ``(outcome, d2, innovation)``; returns the outcome."""
     out[1] = 0.0
     out[2] = 0.0
     if not (np.isfinite(z) and np.isfinite(sigma) and sigma > 0.0 and z >= 0.0):
         out[0] = REFUSED
         return REFUSED
     n = P.shape[0]
+    H, b, dx = work[0], work[1], work[2]
     h = range_row(X, anchor, bias_index, PRM[PRM_LEVER : PRM_LEVER + 3], H)
     nu = z - h
-    b = np.empty(n)
     hph = 0.0
-    for i in range(n):
-        s = 0.0
-        for j in range(n):
-            if H[j] != 0.0:
-                s += P[i, j] * H[j]
+    nz = bias_index >= 0
+    for i in range(n):  # b = P H^T over H's nonzero entries: dp, dtheta and the anchor's bias
+        s = (P[i, 0] * H[0] + P[i, 1] * H[1] + P[i, 2] * H[2] + P[i, 6] * H[6] + P[i, 7] * H[7]
+             + P[i, 8] * H[8])  # fmt: skip
+        if nz:
+            s += P[i, bias_index]
         b[i] = s
         hph += H[i] * s
     r = sigma * sigma
@@ -264,7 +281,6 @@ def update_range_one(X, P, anchor, bias_index, z, sigma, PRM, H, out):
     if k > 0.0 and d2 > k * k:
         r *= math.sqrt(d2) / k
         S = hph + r
-    dx = np.empty(n)
     for i in range(n):
         dx[i] = b[i] * nu / S
     for i in range(n):
@@ -304,9 +320,7 @@ def replay(
     ones above ``nis_limit[n_accepted]`` (chi-square quantiles computed by the caller)."""
     n_imu, n_rng = imu_t.shape[0], rng_t.shape[0]
     n = P.shape[0]
-    F = np.empty((15, 15))
-    FP = np.empty((15, n))
-    H = np.empty(n)
+    work = np.empty((3, n))
     res = np.empty(3)
     W = win_rej.shape[0]
     tcur = tf[0]
@@ -326,7 +340,7 @@ def replay(
             continue
         if ST[ST_HELD] >= 0:
             h = ST[ST_HELD]
-            if not predict_one(X, P, imu_gyro[h], imu_acc[h], t - tcur, PRM, F, FP):
+            if not predict_one(X, P, imu_gyro[h], imu_acc[h], t - tcur, PRM):
                 ST[ST_IMU_REFUSED] += 1
         tcur = t
         if take_imu:
@@ -343,7 +357,7 @@ def replay(
             continue
         ST[ST_I_RNG] += 1
         a = rng_anchor[j]
-        outcome = update_range_one(X, P, anchors[a], bias_of[a], rng_z[j], sigma_of[a], PRM, H, res)
+        outcome = update_range_one(X, P, anchors[a], bias_of[a], rng_z[j], sigma_of[a], PRM, work, res)
         nis_t[j], nis_anchor[j], nis_d2[j], nis_outcome[j] = t, a, res[1], outcome
         counts[a, outcome] += 1
         if outcome == REFUSED:
@@ -367,3 +381,22 @@ def replay(
                 return EV_DIVERGED
     tf[0] = tcur
     return EV_DONE
+
+
+# ------------------------------------------------------------------------------------------- batches
+
+
+@njit(cache=True)
+def predict_batch(X, P, gyro, acc, dt, PRM, refused):
+    """:func:`predict_one` on every filter of the batch (``gyro``, ``acc`` (n, 3)); counts refusals."""
+    for i in range(X.shape[0]):
+        if not predict_one(X[i], P[i], gyro[i], acc[i], dt, PRM):
+            refused[0] += 1
+
+
+@njit(cache=True)
+def update_range_batch(X, P, anchor, bias_index, z, sigma, PRM, work, res, out, d2):
+    """:func:`update_range_one` on every filter of the batch (``z`` (n,)): outcomes and squared distances."""
+    for i in range(X.shape[0]):
+        out[i] = update_range_one(X[i], P[i], anchor, bias_index, z[i], sigma, PRM, work, res)
+        d2[i] = res[1]

@@ -154,9 +154,7 @@ class ImuFilter:
         self.counts = np.zeros((m, 3), dtype=np.int64)
         self.dropped = 0
         self.imu_refused = 0
-        self._F = np.empty((N_CORE, N_CORE))
-        self._FP = np.empty((N_CORE, ne))
-        self._H = np.empty(ne)
+        self._work = np.empty((3, ne))
         self._res = np.empty(3)
 
     @classmethod
@@ -229,18 +227,9 @@ class ImuFilter:
 
     def _predict_to(self, t_s: float) -> None:
         if self._gyro is not None and t_s > self.t:
-            for i in range(self.n):
-                if not nb.predict_one(
-                    self.X[i],
-                    self.P[i],
-                    self._gyro[i],
-                    self._acc[i],
-                    t_s - self.t,
-                    self.prm,
-                    self._F,
-                    self._FP,
-                ):
-                    self.imu_refused += 1
+            refused = np.zeros(1, dtype=np.int64)
+            nb.predict_batch(self.X, self.P, self._gyro, self._acc, t_s - self.t, self.prm, refused)
+            self.imu_refused += int(refused[0])
         self.t = max(self.t, t_s)
 
     def imu(self, t_s: float, gyro_body, acc_body) -> bool:
@@ -265,20 +254,20 @@ class ImuFilter:
         z = np.broadcast_to(np.asarray(range_m, dtype=float), (self.n,))
         out = np.empty(self.n, dtype=np.int64)
         self.last_d2 = np.empty(self.n)
-        for i in range(self.n):
-            out[i] = nb.update_range_one(
-                self.X[i],
-                self.P[i],
-                self.anchors[anchor],
-                self.bias_of[anchor],
-                z[i],
-                self.sigma[anchor],
-                self.prm,
-                self._H,
-                self._res,
-            )
-            self.last_d2[i] = self._res[1]
-            self.counts[anchor, out[i]] += 1
+        nb.update_range_batch(
+            self.X,
+            self.P,
+            self.anchors[anchor],
+            self.bias_of[anchor],
+            np.ascontiguousarray(z),
+            self.sigma[anchor],
+            self.prm,
+            self._work,
+            self._res,
+            out,
+            self.last_d2,
+        )
+        np.add.at(self.counts[anchor], out, 1)
         return out
 
     def reset_position(self, i: int, p_nav, cov_p, sigma_v_m_s: float) -> None:

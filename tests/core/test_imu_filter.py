@@ -49,7 +49,7 @@ def _minus(Y, X):
 def _propagate(X, gyro, acc, dt):
     Y = X.copy()
     P = np.eye(len(X) - 1)
-    nb.predict_one(Y, P, gyro, acc, dt, PARAMS.vector(), np.empty((15, 15)), np.empty((15, len(X) - 1)))
+    nb.predict_one(Y, P, gyro, acc, dt, PARAMS.vector())
     return Y
 
 
@@ -68,6 +68,37 @@ def test_the_error_state_transition_matches_finite_differences(seed):
         col = _minus(_propagate(_plus(X, dx), gyro, acc, dt), Y0)[:15] / eps
         # first order in dt (Sola 2017 sec. 5.4.3 truncates the transition there): the O(dt^2) terms remain
         np.testing.assert_allclose(col, F[:, k], atol=5 * dt * dt, err_msg=f"column {k}")
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_in_place_covariance_propagation_is_f_p_f_transpose_plus_q(seed):
+    """predict_one applies F_x block by block in place; against the dense F P F^T + Q of transition()."""
+    rng = np.random.default_rng(seed)
+    X = _state(rng)
+    A = rng.normal(size=(19, 19))
+    P = A @ A.T
+    gyro, acc, dt = rng.normal(size=3), rng.normal(size=3) + np.array([0, 0, 9.81]), 0.004
+    F = np.eye(19)
+    nb.transition(X, gyro, acc, dt, F[:15, :15])
+    prm = PARAMS.vector()
+    q = (
+        np.concatenate(
+            [
+                np.zeros(3),
+                np.full(3, prm[nb.PRM_SIG_A] ** 2),
+                np.full(3, prm[nb.PRM_SIG_G] ** 2),
+                np.full(3, prm[nb.PRM_SIG_BA] ** 2),
+                np.full(3, prm[nb.PRM_SIG_BG] ** 2),
+                np.full(4, prm[nb.PRM_SIG_RB] ** 2),
+            ]
+        )
+        * dt
+    )
+    want = F @ P @ F.T + np.diag(q)
+    got = P.copy()
+    assert nb.predict_one(X.copy(), got, gyro, acc, dt, prm)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+    assert np.array_equal(got, got.T)
 
 
 @pytest.mark.parametrize("seed", range(3))
