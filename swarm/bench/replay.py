@@ -160,8 +160,8 @@ def format_report(r: dict) -> str:
     s = r["step_us"]
     return "\n".join([
         f"replay of a {r['duration_s']:g} s log ({r['imu_samples']} IMU samples, {r['ranges']} ranges): "
-        f"filter {r['replay_s']:.3f} s, reading the CSV files {r['read_s']:.3f} s (goal: <= 1 s on one core); "
-        f"RMSE {r['rmse_m']:.3f} m",
+        f"filter {r['replay_s']:.3f} s, reading the CSV files {r['read_s']:.3f} s (goal: <= 1 s on one "
+        f"core); RMSE {r['rmse_m']:.3f} m",
         "one predict + one range update per filter [us]:",
         f"  single  IMU-driven {s['imu_single']:.2f}, tandem {s['tandem_single']:.2f}: "
         f"{r['imu_over_tandem_single']:.2f}x (goal <= 2x)",
