@@ -223,13 +223,13 @@ class AgentProcess:
         a = self.agent
         e = a.est
         args = (
-            k, a.t_s, e.p_nav[0], e.v_nav[0], e.q_nav_body[0], e.P[0], a.sigma_pos_max_m, a.mahalanobis_d,
-            a.rejection_fraction, self._counts(),
+            k, a.t_s, e.p_nav[0], e.v_nav[0], e.q_nav_body[0], a.published_cov(), a.sigma_pos_max_m,
+            a.mahalanobis_d, a.rejection_fraction, self._counts(),
         )  # fmt: skip
         try:
             msg = Estimate(*args)
         except MessageError:  # a covariance off symmetry by rounding only: send its symmetric part
-            P = 0.5 * (e.P[0] + e.P[0].T)
+            P = 0.5 * (args[5] + args[5].T)
             msg = Estimate(*args[:5], P, *args[6:])
         self.pub_estimate.put(encode(msg))
 

@@ -379,7 +379,14 @@ class DockingSim:
             i = int(self.referee.pairs[c, 0])
             row = self.SER[c, self.SER_n[c]]
             record_series(
-                row, t, self.world.X[i], agent.est.X[0], agent.est.P[0], mode, bool(agent.relative_nav)
+                row,
+                t,
+                self.world.X[i],
+                agent.est.X[0],
+                agent.est.P[0],
+                agent.TGT,
+                mode,
+                bool(agent.relative_nav),
             )
             self.SER_n[c] += 1
 

@@ -260,6 +260,13 @@ class VehicleAgent:
             self.t_s, self._last_vision_s, self.sc.agent.vision_recent_s, self.docking_on_vision
         )
 
+    def published_cov(self) -> np.ndarray:
+        """The 9 x 9 covariance this vehicle publishes: its filter's, with the position block in nav
+        (:func:`absolute_cov_pos`: the target's uncertainty added while it navigates relative to it)."""
+        P = self.est.P[0].copy()
+        absolute_cov_pos(self.est.P[0], self.TGT, self.role == "chaser" and self.relative_nav, P[:3, :3])
+        return P
+
     @property
     def target(self) -> TargetEstimate | None:
         """The target's estimate this chaser uses (None before the first)."""
@@ -387,6 +394,24 @@ def agent_control(role, code, t, dt, X, P, h_ok, h_d2, h_meta, last_vision, rece
 
 
 _NO_Q = np.zeros(4)
+
+
+@njit(cache=True)
+def absolute_cov_pos(P_est, TGT, rel, out):
+    """The covariance (3, 3) of the chaser's position in nav, into ``out``: while it navigates relative to
+    its target (``rel``), its filter's position covariance is that of the position *relative to the
+    target's estimate* it used (vision with millimetre noise, ranges off), and the target's estimate error
+    is in its nav position whole: ``P_pos + P_target`` (a first-order consider covariance; the target
+    estimate is latched while vision lasts, ``agent.latch_target_with_vision``, so that error is one
+    constant). Otherwise its filter's own position covariance. Published in ``Estimate.cov`` and recorded
+    in the series (the NEES against truth); guidance keeps the relative one, which is what docking needs."""
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = P_est[i, j]
+    if rel and TGT[TG_HAS] != 0.0:
+        for i in range(3):
+            for j in range(3):
+                out[i, j] += TGT[TG_COV + 3 * i + j]
 
 
 @njit(cache=True)

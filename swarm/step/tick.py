@@ -35,6 +35,7 @@ from swarm.step.agent import (
     TG_P,
     TG_Q,
     TG_T,
+    absolute_cov_pos,
     agent_control,
     agent_features,
     agent_imu,
@@ -144,8 +145,9 @@ def set_target(TGT, X_t, P_t, t, latch, rel_nav):
 
 
 @njit(cache=True)
-def record_series(row, t, x, X_est, P_est, mode, rel):
-    """One time-series sample of a chaser (``S_*``): its truth ``x`` and estimate at ``t``."""
+def record_series(row, t, x, X_est, P_est, TGT, mode, rel):
+    """One time-series sample of a chaser (``S_*``): its truth ``x`` and estimate at ``t``, the position
+    covariance in nav (:func:`swarm.step.agent.absolute_cov_pos`)."""
     row[S_T] = t
     for i in range(3):
         row[S_PTRUE + i] = x[i]
@@ -153,9 +155,11 @@ def record_series(row, t, x, X_est, P_est, mode, rel):
     for i in range(4):
         row[S_QTRUE + i] = x[6 + i]
         row[S_QEST + i] = X_est[6 + i]
+    cov = np.empty((3, 3))
+    absolute_cov_pos(P_est, TGT, rel, cov)
     for i in range(3):
         for j in range(3):
-            row[S_COV + 3 * i + j] = P_est[i, j]
+            row[S_COV + 3 * i + j] = cov[i, j]
     row[S_MODE] = mode
     row[S_REL] = 1.0 if rel else 0.0
 
@@ -274,7 +278,7 @@ def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
                 if not done[c]:
                     dock = docking_on_vision(REF[v, gnb.R_MODE], last_vision[v])
                     rel = relative_nav(t_agent[v], last_vision[v], recent_s, dock)
-                    record_series(SER[c, SER_n[c]], t, X[v], AX[v], AP[v], REF[v, gnb.R_MODE], rel)
+                    record_series(SER[c, SER_n[c]], t, X[v], AX[v], AP[v], TGT[v], REF[v, gnb.R_MODE], rel)
                     SER_n[c] += 1
         c = referee_tick(X, pairs, done, docking, n_target, q_tc, half, keepout_r, corridor_cos, contact_d,
                          ko_flag, ko_t, ko_r, closest, t)  # fmt: skip

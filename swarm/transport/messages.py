@@ -541,7 +541,9 @@ class Estimate(Message):
     cov: np.ndarray
     """Error-state covariance (9, 9) of ``(d_p [m], d_v [m/s], d_theta [rad])``, ``d_theta`` a body-frame
     rotation vector (``q = q_est (x) exp(d_theta)``); symmetric, non-negative diagonal. The tandem
-    filter's cross terms between translation and attitude are zero."""
+    filter's cross terms between translation and attitude are zero. While a chaser navigates relative to
+    its target (vision), the position block includes the target's estimate covariance: its position in nav
+    is known only as well as the target's (``swarm.step.agent.absolute_cov_pos``)."""
     sigma_pos_max_m: float
     """Largest position standard deviation [m] (>= 0), Algorithm 1's ``max(sigma_pos)``."""
     mahalanobis_d: float
