@@ -10,12 +10,15 @@ from pathlib import Path
 
 from swarm.args import positive_float, seed
 from swarm.config import parse_override
+from swarm.transport.session import add_zenoh_arguments
 
 REPLAY = """Run the IMU-driven error-state filter over a recorded log (a folder of CSV files and a log.toml,
 docs/logs.md) as fast as it can: calibration from the static segment, IMU-driven propagation, ranges with
 per-anchor biases, robust NLOS weighting, divergence detection and recovery. Writes the estimate series
 (--series); with a truth.csv, reports the 3-D and per-axis RMSE, the NEES and NIS against their chi-square
-bands and the rejections per anchor (--json for all of it)."""
+bands and the rejections per anchor (--json for all of it). With --zenoh it runs no filter: it publishes
+the log on the swarm's keys at --speed times real time, as sensor drivers would (imu with the specific
+force, uwb, the anchors), so that a process of the swarm runs on recorded sensors."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -44,6 +47,27 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="KEY=VALUE",
         help="override a log.toml key, e.g. --set estimator.huber_k=0 (repeatable)",
     )
+    z = p.add_argument_group("publishing the log on a swarm (--zenoh)")
+    z.add_argument(
+        "--zenoh", action="store_true", help="publish the log on the swarm's keys instead of filtering"
+    )
+    z.add_argument(
+        "--speed",
+        type=positive_float("--speed"),
+        default=1.0,
+        metavar="N",
+        help="times real time (default 1)",
+    )
+    z.add_argument("--vehicle", default="uav", metavar="ID", help="the vehicle id of the keys (default uav)")
+    z.add_argument("--namespace", default="tpods", help="key namespace of the swarm (default tpods)")
+    z.add_argument(
+        "--wait",
+        type=positive_float("--wait"),
+        default=5.0,
+        metavar="S",
+        help="wait this long for a subscriber of the IMU key before starting (default 5 s)",
+    )
+    add_zenoh_arguments(z)
     p.set_defaults(func=run)
 
     s = sub.add_parser(
@@ -94,6 +118,8 @@ def run(args: argparse.Namespace) -> int:
 
     overrides = dict(parse_override(o) for o in args.overrides)
     log = read_log(args.log, overrides)
+    if args.zenoh:
+        return _publish(log, args)
     result = replay_log(log)
     s = result.summary()
     print(
@@ -146,6 +172,34 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None:
         _plot(result, args.plot)
         print(f"wrote {args.plot}")
+    return 0
+
+
+def _publish(log, args: argparse.Namespace) -> int:
+    import threading
+
+    from swarm.transport.keys import Keys, check_id
+    from swarm.transport.logfeed import feed
+    from swarm.transport.session import open_session, zenoh_args_from
+
+    check_id(args.vehicle, "--vehicle")
+    keys = Keys(args.namespace)
+    stop = threading.Event()
+    with open_session(zenoh_args_from(args)) as session:
+        print(
+            f"publishing {log.path} as {keys.imu(args.vehicle)} and uwb at {args.speed:g}x real time",
+            flush=True,
+        )
+        try:
+            out = feed(log, session, keys, args.vehicle, args.speed, stop, args.wait)
+        except KeyboardInterrupt:
+            stop.set()
+            return 130
+    print(
+        f"sent {out['imu']} imu and {out['uwb']} uwb samples: {out['log_s']:.1f} s of log in "
+        f"{out['wall_s']:.1f} s",
+        flush=True,
+    )
     return 0
 
 

@@ -445,6 +445,9 @@ class Imu(Message):
     q_ahrs_nav_body: np.ndarray | None = None
     """AHRS attitude (4,), unit quaternion (x, y, z, w) mapping body into nav; ``None`` when the vehicle has
     no AHRS or on ticks without an AHRS output (it runs at 10 Hz of the 100 Hz)."""
+    acc_body: np.ndarray | None = None
+    """Measured specific force (3,) [m/s^2], body frame, from a 6-axis IMU (what an accelerometer reads:
+    about +9.81 up at rest); ``None`` for a gyro-only sensor (the simulated CubeSats)."""
 
     def __post_init__(self) -> None:
         _set(
@@ -452,6 +455,7 @@ class Imu(Message):
             dt_s=_float(self.dt_s, "dt_s", positive=True),
             gyro_body=_array(self.gyro_body, "gyro_body", (3,)),
             q_ahrs_nav_body=_quat(self.q_ahrs_nav_body, "q_ahrs_nav_body", nullable=True),
+            acc_body=_array(self.acc_body, "acc_body", (3,), nullable=True),
         )  # fmt: skip
 
 
@@ -947,6 +951,7 @@ class _ImuWire(_Wire):
     dt_s: Annotated[float, msgspec.Meta(gt=0.0)]
     gyro_body: _Array
     q_ahrs_nav_body: _Array | None = None
+    acc_body: _Array | None = None
 
 
 class _UwbWire(_Wire):
@@ -1050,7 +1055,7 @@ def _q(a: _Array | None, name: str) -> Any:
 def _imu(w: _ImuWire) -> dict[str, Any]:
     return {
         "tick": w.tick, "t_s": _fin(w.t_s), "dt_s": _fin(w.dt_s), "gyro_body": _arr(w.gyro_body, (3,)),
-        "q_ahrs_nav_body": _q(w.q_ahrs_nav_body, "q_ahrs_nav_body"),
+        "q_ahrs_nav_body": _q(w.q_ahrs_nav_body, "q_ahrs_nav_body"), "acc_body": _arr(w.acc_body, (3,)),
     }  # fmt: skip
 
 

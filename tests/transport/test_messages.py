@@ -167,7 +167,7 @@ def visions(draw):
 
 
 STRATEGIES = {
-    Imu: st.builds(Imu, ticks, times, st.floats(1e-6, 10.0), vec(3), st.none() | quats),
+    Imu: st.builds(Imu, ticks, times, st.floats(1e-6, 10.0), vec(3), st.none() | quats, st.none() | vec(3)),
     Uwb: st.builds(Uwb, ticks, times, st.integers(0, 2**31 - 1), st.none() | nonneg),
     Vision: visions(),
     Estimate: st.builds(

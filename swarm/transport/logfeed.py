@@ -1,0 +1,83 @@
+"""Publish a recorded log on the swarm's keys as sensor drivers would (``swarm replay DIR --zenoh``).
+
+One vehicle's sensors, in time order, paced at ``speed`` times real time: every ``imu.csv`` row as an
+:class:`~swarm.transport.messages.Imu` (``tick`` = the row's index, ``t_s`` from the log's first IMU sample,
+``dt_s`` the interval since the previous sample, ``acc_body`` the specific force) on
+``<ns>/agent/<vehicle>/imu``; every ``uwb.csv`` row as a :class:`~swarm.transport.messages.Uwb` (``tick``
+= the latest IMU sample's, the anchor's id from the file) on ``<ns>/agent/<vehicle>/uwb``; and the
+anchors on ``<ns>/mothership/anchors``, published at the start and once a second, and answered to queries,
+as the mothership does. Rows the reader skipped (a NaN sample) are not sent; a UWB row before the first
+IMU sample is sent with tick 0.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+
+import numpy as np
+
+from swarm.logs.reader import Log
+from swarm.transport.keys import Keys
+from swarm.transport.messages import Anchors, Imu, Uwb, encode
+from swarm.transport.process import declare_reliable
+
+_LOG = logging.getLogger("swarm.replay")
+
+
+def feed(log: Log, session, keys: Keys, vehicle: str, speed: float, stop: threading.Event,
+         wait_s: float = 5.0) -> dict:  # fmt: skip
+    """Publish ``log`` (module docstring); returns the counts sent and the wall time. Waits up to ``wait_s``
+    for a subscriber of the IMU key before the first sample (then starts anyway)."""
+    anchors = Anchors(tuple(int(i) for i in log.anchor_ids), log.anchors_nav)
+    anchors_payload = encode(anchors)
+    pub_imu = declare_reliable(session, keys.imu(vehicle))
+    pub_uwb = declare_reliable(session, keys.uwb(vehicle))
+    pub_anchors = declare_reliable(session, keys.anchors(), express=False)
+
+    def on_query(query) -> None:
+        try:
+            query.reply(keys.anchors(), anchors_payload)
+        except Exception as exc:  # a query must never kill the queryable's thread
+            _LOG.warning("anchors query not answered: %s", exc)
+
+    queryable = session.declare_queryable(keys.anchors(), on_query)
+    try:
+        deadline = time.monotonic() + wait_s
+        while not pub_imu.matching_status.matching and time.monotonic() < deadline and not stop.is_set():
+            time.sleep(0.01)
+        if not pub_imu.matching_status.matching:
+            _LOG.warning("nobody subscribes to %s after %.1f s: publishing anyway", keys.imu(vehicle), wait_s)
+        pub_anchors.put(anchors_payload)
+        t0 = float(log.imu_t[0])
+        dt0 = float(np.median(np.diff(log.imu_t))) if len(log.imu_t) > 1 else 0.001
+        start = time.monotonic()
+        last_anchors = start
+        i = j = 0
+        n_imu, n_uwb = len(log.imu_t), len(log.uwb_t)
+        while (i < n_imu or j < n_uwb) and not stop.is_set():
+            take_imu = j >= n_uwb or (i < n_imu and log.imu_t[i] <= log.uwb_t[j])
+            t = float(log.imu_t[i] if take_imu else log.uwb_t[j])
+            due = start + max(t - t0, 0.0) / speed
+            now = time.monotonic()
+            if due > now:
+                time.sleep(min(due - now, 0.1))
+                continue
+            if take_imu:
+                dt = float(log.imu_t[i] - log.imu_t[i - 1]) if i > 0 else dt0
+                pub_imu.put(encode(Imu(i, t - t0, dt, log.gyro[i], None, log.acc[i])))
+                i += 1
+            else:
+                tick = max(i - 1, 0)
+                aid = int(log.anchor_ids[log.uwb_anchor[j]])
+                pub_uwb.put(encode(Uwb(tick, max(t - t0, 0.0), aid, float(log.uwb_range[j]))))
+                j += 1
+            if now - last_anchors >= 1.0:
+                pub_anchors.put(anchors_payload)
+                last_anchors = now
+        wall = time.monotonic() - start
+        time.sleep(0.2)  # let the last samples leave before the session closes
+    finally:
+        queryable.undeclare()
+    return {"imu": i, "uwb": j, "wall_s": wall, "log_s": float(log.imu_t[-1] - t0)}
