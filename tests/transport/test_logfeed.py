@@ -38,8 +38,8 @@ def test_a_log_published_on_the_swarm_keys_arrives_whole_in_order_and_paced(tmp_
         session.declare_subscriber(keys.imu("uav"), on("imu", Imu))
         session.declare_subscriber(keys.uwb("uav"), on("uwb", Uwb))
         speed = 10.0
-        proc = procs.start([sys.executable, "-m", "swarm.cli.main", "replay", str(d), "--zenoh", "--speed",
-                            str(speed), "--vehicle", "uav", "--namespace", ns, "--connect", endpoint])  # fmt: skip
+        args = ["replay", str(d), "--zenoh", "--speed", str(speed), "--vehicle", "uav", "--namespace", ns]
+        proc = procs.start([sys.executable, "-m", "swarm.cli.main", *args, "--connect", endpoint])
         wait_until(lambda: len(got["imu"]) > 100, 60.0, "the first IMU samples")
         # asked while it publishes: it answers the anchors query as the mothership does
         anchors = [decode(r.ok.payload, Anchors) for r in session.get(keys.anchors(), timeout=2.0) if r.ok]
