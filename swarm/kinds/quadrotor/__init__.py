@@ -1,0 +1,25 @@
+"""The ``quadrotor`` vehicle kind's physics and controller (issue 15, paper section VI-B).
+
+:mod:`.params` (its ``[kinds.quadrotor.*]`` tables), :mod:`.dynamics` (rigid body, rotor lag, drag,
+gravity, ground contact, rotor power), :mod:`.control` (PX4's cascaded controller and the mixer). These are
+the compiled steps with the signatures of docs/architecture.md, "Vehicle kinds"; the kind is registered
+in :data:`swarm.kinds.KINDS` together with the landing runner that flies it (the docking runner's filter
+takes no gravity and no accelerometer: the quadrotor's is the IMU-driven filter of
+:mod:`swarm.core.imu_filter`).
+"""
+
+from swarm.kinds.quadrotor.control import control_row, quadrotor_control, quadrotor_idle
+from swarm.kinds.quadrotor.dynamics import quadrotor_hold, quadrotor_truth_step, truth_row
+from swarm.kinds.quadrotor.params import AirframeParams, ControlParams, QuadrotorParams
+
+__all__ = [
+    "AirframeParams",
+    "ControlParams",
+    "QuadrotorParams",
+    "control_row",
+    "quadrotor_control",
+    "quadrotor_hold",
+    "quadrotor_idle",
+    "quadrotor_truth_step",
+    "truth_row",
+]
