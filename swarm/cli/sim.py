@@ -12,7 +12,7 @@ from swarm.errors import ConfigError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("sim", help="run one docking in-process and print its outcome")
+    p = sub.add_parser("sim", help="run one docking or landing in-process and print its outcome")
     add_scenario_args(p)
     p.add_argument(
         "--policy", choices=("fixed", "mdp"), default=None, help="switching policy (default: scenario's)"
@@ -64,9 +64,66 @@ def print_summary(res: dict) -> None:
     )
 
 
+def print_landing(res: dict) -> None:
+    print(
+        f"scenario {res['scenario']}  policy {res['policy']}  seed {res['seed']}  camera {res['camera_mode']}"
+    )
+    status = (
+        "LANDED"
+        if res["landed"]
+        else (
+            "ABORTED (safe)"
+            if res["aborted"]
+            else ("LANDED OFF THE PAD" if res["landed_off_pad"] else res["final_mode"])
+        )
+    )
+    print(f"  {status}")
+    print(f"    landing error     {_fmt(res['landing_error_m'], ' cm', 100.0, 1)}")
+    print(f"    landing time      {_fmt(res['landing_time_s'], ' s', digits=2)}")
+    print(f"    energy            {_fmt(res['energy_j'], ' J', digits=0)}")
+    print(
+        f"    deviation at      {_fmt(res['deviation_distance_m'], ' m', digits=2)} from the pad (horizontal)"
+    )
+    print(
+        f"    pad seen          {res['pad_detections']} of {res['pad_frames']} frames; "
+        f"retries {res['retries']}"
+    )
+    print("    modes:")
+    for m in res["modes"]:
+        print(f"      t = {m['t_s']:7.2f} s  -> {m['mode']:<8} {m['reason']}")
+    print(
+        f"  wall {res['wall_s']:.2f} s for {res['sim_time_s']:.1f} s simulated: "
+        f"{res['realtime_factor']:.0f}x real time"
+    )
+
+
+def _run_landing(args: argparse.Namespace) -> int:
+    from swarm.config import parse_override
+    from swarm.sim.landing import load_landing, run_landing
+
+    if args.agents != 1:
+        raise ConfigError("--agents: a landing scenario has one UAV (several UAVs and pads: not yet)")
+    sc = load_landing(args.scenario, dict(parse_override(text) for text in args.overrides))
+    res = run_landing(sc, args.policy, args.seed, record_series=not args.no_series or args.json is not None)
+    print_landing(res)
+    if args.json is not None:
+        try:
+            args.json.write_text(json.dumps(res, indent=1))
+        except OSError as exc:
+            raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc}") from None
+        print(f"  summary written to {args.json}")
+    if args.plot is not None:
+        raise ConfigError("--plot: not drawn for a landing yet (the series is in --json)")
+    return 0 if res["landed"] or res["aborted"] else 1
+
+
 def run(args: argparse.Namespace) -> int:
     from swarm.sim.docking import run_docking
+    from swarm.sim.landing import SCENARIO_DIR, is_landing_file
 
+    path = Path(args.scenario)
+    if is_landing_file(path if path.suffix or path.exists() else SCENARIO_DIR / f"{args.scenario}.toml"):
+        return _run_landing(args)
     sc = load_from_args(args).with_pairs(args.agents)
     record = not args.no_series or args.plot is not None or args.json is not None
     res = run_docking(sc, args.policy, args.seed, record_series=record)

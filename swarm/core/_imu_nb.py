@@ -400,3 +400,67 @@ def update_range_batch(X, P, anchor, bias_index, z, sigma, PRM, work, res, out, 
     for i in range(X.shape[0]):
         out[i] = update_range_one(X[i], P[i], anchor, bias_index, z[i], sigma, PRM, work, res)
         d2[i] = res[1]
+
+
+# ------------------------------------------------------------------------------------ pad-relative vision
+
+
+@njit(cache=True)
+def pad_row(X, p_pad, cam_pos, R_bc, H):
+    """The pad origin in the camera frame, ``t = R_bc^T (R(q)^T (p_pad - p) - c)``, and its Jacobian ``H``
+    (3, N) with respect to the error state: ``-R_bc^T R^T`` on ``dp`` and ``R_bc^T [R^T (p_pad - p)]x`` on
+    ``dtheta`` (from ``R(q exp(dtheta))^T = (I - [dtheta]x) R^T``)."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = qmat9(X[XQ], X[XQ + 1], X[XQ + 2], X[XQ + 3])
+    d0, d1, d2 = p_pad[0] - X[XP], p_pad[1] - X[XP + 1], p_pad[2] - X[XP + 2]
+    b0 = r00 * d0 + r10 * d1 + r20 * d2  # R^T d: the pad from the centre of mass, body frame
+    b1 = r01 * d0 + r11 * d1 + r21 * d2
+    b2 = r02 * d0 + r12 * d1 + r22 * d2
+    e0, e1, e2 = b0 - cam_pos[0], b1 - cam_pos[1], b2 - cam_pos[2]
+    t = np.empty(3)
+    H[:, :] = 0.0
+    for i in range(3):
+        t[i] = R_bc[0, i] * e0 + R_bc[1, i] * e1 + R_bc[2, i] * e2
+        # -R_bc^T R^T on dp: row i of R_bc^T times R^T
+        H[i, EP + 0] = -(R_bc[0, i] * r00 + R_bc[1, i] * r01 + R_bc[2, i] * r02)
+        H[i, EP + 1] = -(R_bc[0, i] * r10 + R_bc[1, i] * r11 + R_bc[2, i] * r12)
+        H[i, EP + 2] = -(R_bc[0, i] * r20 + R_bc[1, i] * r21 + R_bc[2, i] * r22)
+        # R_bc^T [b]x on dtheta: [b]x = [[0, -b2, b1], [b2, 0, -b0], [-b1, b0, 0]]
+        H[i, ETH + 0] = R_bc[1, i] * b2 - R_bc[2, i] * b1
+        H[i, ETH + 1] = -R_bc[0, i] * b2 + R_bc[2, i] * b0
+        H[i, ETH + 2] = R_bc[0, i] * b1 - R_bc[1, i] * b0
+    return t
+
+
+@njit(cache=True)
+def update_pad_one(X, P, p_pad, cam_pos, R_bc, t_meas, R_meas, gate, out):
+    """The pad's position in the camera frame ``t_meas`` (3,) with covariance ``R_meas`` (3, 3) (the
+    translation block of the PnP covariance, :mod:`swarm.core.pad_vision`), of a pad surveyed at ``p_pad``
+    in nav: gated on the squared Mahalanobis distance (``gate``, chi-square(3)), then a Kalman update with
+    the Joseph form. ``out`` receives ``(outcome, d2)``; returns the outcome."""
+    out[1] = 0.0
+    for i in range(3):
+        if not np.isfinite(t_meas[i]):
+            out[0] = REFUSED
+            return REFUSED
+    n = P.shape[0]
+    H = np.zeros((3, n))
+    h = pad_row(X, p_pad, cam_pos, R_bc, H)
+    nu = t_meas - h
+    PHt = P @ H.T
+    S = H @ PHt + R_meas
+    d2 = nu @ np.linalg.solve(S, nu)
+    out[1] = d2
+    if not (np.isfinite(d2) and d2 >= 0.0):
+        out[0] = REFUSED
+        return REFUSED
+    if d2 > gate:
+        out[0] = REJECTED
+        return REJECTED
+    K = np.linalg.solve(S, PHt.T).T
+    A = np.eye(n) - K @ H
+    Pn = A @ P @ A.T + K @ R_meas @ K.T
+    P[:, :] = 0.5 * (Pn + Pn.T)
+    dx = K @ nu
+    inject(X, P, dx)
+    out[0] = ACCEPTED
+    return ACCEPTED

@@ -270,6 +270,41 @@ class ImuFilter:
         np.add.at(self.counts[anchor], out, 1)
         return out
 
+    def update_pad(
+        self,
+        t_s: float,
+        p_pad_nav,
+        t_cam_m,
+        cov_t,
+        cam_pos_body,
+        R_body_cam,
+        gate_probability: float = 0.9995,
+    ) -> np.ndarray:
+        """The pad's position ``t_cam_m`` (3,) in the camera frame with its covariance ``cov_t`` (3, 3),
+        measured
+        at ``t_s``, of a pad surveyed at ``p_pad_nav``, from a camera at ``cam_pos_body`` turned by
+        ``R_body_cam`` (camera to body): predict to it, then update every filter. Returns the outcomes, or an
+        empty array if the sample is older than the filter's time (dropped, counted)."""
+        if not t_s >= self.t:
+            self.dropped += 1
+            return np.zeros(0, dtype=np.int64)
+        self._predict_to(t_s)
+        gate = float(chi2.ppf(gate_probability, 3))
+        out = np.empty(self.n, dtype=np.int64)
+        self.last_pad_d2 = np.empty(self.n)
+        res = np.empty(2)
+        args = (
+            np.asarray(p_pad_nav, float),
+            np.asarray(cam_pos_body, float),
+            np.ascontiguousarray(R_body_cam, float),
+            np.asarray(t_cam_m, float),
+            np.ascontiguousarray(cov_t, float),
+        )
+        for i in range(self.n):
+            out[i] = nb.update_pad_one(self.X[i], self.P[i], *args[:4], args[4], gate, res)
+            self.last_pad_d2[i] = res[1]
+        return out
+
     def reset_position(self, i: int, p_nav, cov_p, sigma_v_m_s: float) -> None:
         """Re-initialise filter ``i``'s position (and its covariance ``cov_p`` (3, 3)) and its velocity (zero,
         ``sigma_v_m_s``) after a divergence; attitude and biases are kept, their cross terms with position

@@ -223,3 +223,24 @@ def test_bad_parameters_are_refused_naming_the_field(field, value):
 
     with pytest.raises(ConfigError, match=rf"^estimator\.{field}"):
         ImuFilterParams(**{field: value})
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_pad_measurement_jacobian_matches_finite_differences(seed):
+    rng = np.random.default_rng(seed)
+    X = _state(rng)
+    p_pad = X[0:3] + rng.normal(size=3) * 2.0
+    cam = np.array([0.02, -0.01, -0.05])
+    R_bc = rot.quat_to_matrix(rot.quat_normalize(rng.normal(size=4)))
+    H = np.empty((3, len(X) - 1))
+    t0 = nb.pad_row(X, p_pad, cam, R_bc, H)
+    # the model itself: the pad in the camera frame
+    R = rot.quat_to_matrix(X[6:10])
+    np.testing.assert_allclose(t0, R_bc.T @ (R.T @ (p_pad - X[0:3]) - cam), atol=1e-12)
+    eps = 1e-7
+    fd = np.empty_like(H)
+    for k in range(H.shape[1]):
+        dx = np.zeros(H.shape[1])
+        dx[k] = eps
+        fd[:, k] = (nb.pad_row(_plus(X, dx), p_pad, cam, R_bc, np.empty_like(H)) - t0) / eps
+    np.testing.assert_allclose(H, fd, atol=1e-6)
