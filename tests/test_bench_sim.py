@@ -25,3 +25,11 @@ def test_bench_sim_quick_writes_realtime_factors(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "goal: one docking >= 500x real time for every kind" in text
     assert "ground" in text and "cubesat" in text
+    landing = rec["landing"]
+    for policy in ("fixed", "mdp"):
+        assert landing["cases"][policy]["realtime_factor_median"] > 0
+        assert landing["cases"][policy]["sim_time_s"] > 10.0  # a whole landing
+    frame = landing["rendered_frame_ms"]
+    assert all(frame[k] > 0 for k in ("render", "detect", "pnp"))
+    assert frame["total"] == frame["render"] + frame["detect"] + frame["pnp"]
+    assert "UAV landing" in text and "rendered camera, per 640 x 480 frame" in text

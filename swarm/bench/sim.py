@@ -51,6 +51,48 @@ def _cases(sc, seeds) -> dict:
     return cases
 
 
+def _landing(quick: bool) -> dict:
+    """One landing per policy and seed in the corner mode (real-time factor), and the rendered mode's cost
+    per camera frame: render, detect, PnP (medians over frames along a descent)."""
+    import numpy as np
+
+    from swarm.core import rotations as rot
+    from swarm.core.pad_vision import Renderer, detect, estimate_pose, make_detector
+    from swarm.sim.landing import load_landing, run_landing
+
+    sc = load_landing("landing")
+    run_landing(sc, "fixed", 0, record_series=False)  # warm-up
+    cases = {}
+    for policy in ("fixed", "mdp"):
+        rtf = []
+        for seed in (0,) if quick else (0, 1, 2):
+            r = run_landing(sc, policy, seed, record_series=False)
+            rtf.append(r["sim_time_s"] / r["wall_s"])
+        cases[policy] = {"realtime_factor_median": sorted(rtf)[len(rtf) // 2], "sim_time_s": r["sim_time_s"]}
+    board, cam = sc.pad.board, sc.camera.intrinsics
+    renderer, detector = Renderer(board, cam), make_detector(board)
+    rng = np.random.default_rng(0)
+    q_cam_pad = rot.quat_conj(np.array([1.0, 0.0, 0.0, 0.0]))
+    ms: dict[str, list[float]] = {"render": [], "detect": [], "pnp": []}
+    for h in np.linspace(0.5, 6.0, 12 if quick else 48):
+        t_cam = np.array([0.05, -0.03, h])
+        t0 = time.perf_counter()
+        img = renderer.render(t_cam, q_cam_pad, rng)
+        t1 = time.perf_counter()
+        ids, corners = detect(img, board, detector)
+        t2 = time.perf_counter()
+        estimate_pose(ids, corners, board, cam)
+        t3 = time.perf_counter()
+        ms["render"].append((t1 - t0) * 1e3)
+        ms["detect"].append((t2 - t1) * 1e3)
+        ms["pnp"].append((t3 - t2) * 1e3)
+    frame = {k: float(np.median(v)) for k, v in ms.items()}
+    frame["total"] = sum(frame.values())
+    return {"scenario": sc.name, "camera_mode": "corners", "cases": cases,
+            "realtime_factor": min(c["realtime_factor_median"] for c in cases.values()),
+            "rendered_frame_ms": frame, "image_px": [cam.width_px, cam.height_px]}  # fmt: skip
+
+
 def run(quick: bool = False) -> dict:
     from swarm.scenario import load_scenario
     from swarm.sim.docking import run_docking
@@ -76,6 +118,7 @@ def run(quick: bool = False) -> dict:
         "cases": kinds["cubesat"]["cases"],  # the cube's, as before kinds
         "load_avg_1m": round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None,
         "profile_top": buf.getvalue(),
+        "landing": _landing(quick),
     }
 
 
@@ -96,6 +139,26 @@ def format_report(rec: dict) -> str:
     lines.append(
         f"goal: one docking >= {rec['target_realtime_factor']:.0f}x real time for every kind: "
         f"{'met' if met else 'NOT met'} ({rec['realtime_factor']:.0f}x, the slowest kind)"
+    )
+    lnd = rec["landing"]
+    lines.append("")
+    lines.append(
+        f"UAV landing ({lnd['scenario']}, corner-projection camera; a Python loop, not yet compiled):"
+    )
+    for policy, c in lnd["cases"].items():
+        lines.append(
+            f"  {policy:<8} {c['realtime_factor_median']:>6.0f}x real time "
+            f"({c['sim_time_s']:.1f} s simulated)"
+        )
+    met_l = lnd["realtime_factor"] >= rec["target_realtime_factor"]
+    lines.append(
+        f"  goal: one landing >= {rec['target_realtime_factor']:.0f}x: {'met' if met_l else 'NOT met'}"
+    )
+    f = lnd["rendered_frame_ms"]
+    w, h = lnd["image_px"]
+    lines.append(
+        f"  rendered camera, per {w} x {h} frame: render {f['render']:.1f} ms, detect {f['detect']:.1f} ms, "
+        f"PnP {f['pnp']:.2f} ms, total {f['total']:.1f} ms"
     )
     lines.append(f"machine: 1-min load {rec['load_avg_1m']}")
     lines.append("")
