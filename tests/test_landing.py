@@ -16,11 +16,12 @@ from swarm.errors import ConfigError
 from swarm.sim.landing import load_landing, run_landing
 
 SEEDS = (0, 1, 2)
+NOMINAL = {"dispersions.enabled": False}  # the scenario's start and anchors: what these tests reason about
 
 
 @pytest.fixture(scope="module")
 def runs():
-    sc = load_landing("landing")
+    sc = load_landing("landing", NOMINAL)
     return sc, {(p, s): run_landing(sc, p, s, record_series=True) for p in ("fixed", "mdp") for s in SEEDS}
 
 
@@ -65,7 +66,9 @@ def test_summary_has_the_issue_keys_and_a_consistent_series(runs):
 
 
 def test_a_lost_pad_during_the_descent_triggers_a_retry_and_then_lands():
-    sc = load_landing("landing", {"faults.pad_hidden_from_s": 10.0, "faults.pad_hidden_for_s": 3.0})
+    sc = load_landing(
+        "landing", {**NOMINAL, "faults.pad_hidden_from_s": 10.0, "faults.pad_hidden_for_s": 3.0}
+    )
     r = run_landing(sc, "mdp", 0, record_series=False)
     modes = [m["mode"] for m in r["modes"]]
     assert "CLIMB" in modes and r["retries"] == 1
@@ -74,7 +77,7 @@ def test_a_lost_pad_during_the_descent_triggers_a_retry_and_then_lands():
 
 @pytest.mark.parametrize("policy", ["fixed", "mdp"])
 def test_a_pad_never_seen_ends_in_a_safe_abort(policy):
-    sc = load_landing("landing", {"faults.pad_hidden_always": True})
+    sc = load_landing("landing", {**NOMINAL, "faults.pad_hidden_always": True})
     r = run_landing(sc, policy, 0, record_series=True)
     assert r["aborted"] and not r["landed"] and not r["landed_off_pad"]
     assert r["retries"] == sc.landing.max_retries + 1
@@ -84,14 +87,26 @@ def test_a_pad_never_seen_ends_in_a_safe_abort(policy):
 
 
 def test_the_rendered_camera_lands_as_well():
-    sc = load_landing("landing", {"camera.mode": "rendered"})
+    sc = load_landing("landing", {**NOMINAL, "camera.mode": "rendered"})
     r = run_landing(sc, "mdp", 0, record_series=False)
     assert r["landed"] and r["landing_error_m"] <= sc.pad_tolerance_m and r["pad_detections"] > 50
 
 
 def test_swarm_sim_landing_writes_the_json(tmp_path):
     out = tmp_path / "landing.json"
-    args = [sys.executable, "-m", "swarm.cli.main", "sim", "landing", "--seed", "1", "--json", str(out)]
+    args = [
+        sys.executable,
+        "-m",
+        "swarm.cli.main",
+        "sim",
+        "landing",
+        "--seed",
+        "1",
+        "--json",
+        str(out),
+        "--set",
+        "dispersions.enabled=false",
+    ]
     p = subprocess.run(args, capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     res = json.loads(out.read_text())
@@ -103,3 +118,28 @@ def test_a_bad_landing_scenario_names_the_field():
         load_landing("landing", {"landing.accept_radius_m": -1.0})
     with pytest.raises(ConfigError, match=r"camera\.mode must be 'corners' or 'rendered'"):
         load_landing("landing", {"camera.mode": "sonar"})
+
+
+def test_a_paired_landing_campaign_writes_rows_report_and_figures(tmp_path):
+    """A small campaign through the CLI: every run of every policy is a row, the pairs share a seed (the
+    same start), and the report compares them with paired differences."""
+    import csv
+
+    out = tmp_path / "mc"
+    args = [sys.executable, "-m", "swarm.cli.main", "montecarlo", "landing", "--runs", "4", "--workers", "2",
+            "--out", str(out), "--no-progress", "--json", str(tmp_path / "mc.json")]  # fmt: skip
+    p = subprocess.run(args, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    rows = list(csv.DictReader((out / "runs.csv").open()))
+    assert len(rows) == 8 and {r["policy"] for r in rows} == {"fixed", "mdp"}
+    by_run = {}
+    for r in rows:
+        by_run.setdefault(r["run"], []).append(r)
+    for pair in by_run.values():
+        assert len({(r["seed"], r["start_x_m"], r["uwb_range_m"]) for r in pair}) == 1  # paired: same draws
+    rec = json.loads((tmp_path / "mc.json").read_text())
+    assert rec["policies"]["mdp"]["landed"]["n"] == 4 and "mdp-fixed" in rec["paired"]
+    report = (out / "report.md").read_text()
+    assert "Paired differences mdp-fixed" in report and "energy_j:" in report
+    for fig in ("fig9_trajectories.png", "fig10_distributions.png", "deviation_points.png"):
+        assert (out / fig).stat().st_size > 5000

@@ -71,10 +71,48 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _run_landing(args: argparse.Namespace) -> int:
+    from swarm.config import parse_override
+    from swarm.montecarlo.landing import run_landing_campaign
+    from swarm.montecarlo.report import finite_or_null
+    from swarm.sim.landing import load_landing
+
+    for flag, value in (("--resume", args.resume), ("--dask", args.dask)):
+        if value is not None:
+            raise ConfigError(f"{flag}: not available for a landing campaign yet (run it again instead)")
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers must be a positive integer, got {args.workers}")
+    sc = load_landing(args.scenario, dict(parse_override(text) for text in args.overrides))
+    runs = 500 if args.runs is None else args.runs
+    if runs < 1:
+        raise ConfigError(f"--runs must be a positive integer, got {runs}")
+    seed = 0 if args.seed is None else args.seed
+    policies = tuple(args.policies) if args.policies else ("fixed", "mdp")
+    for p in policies:
+        if p not in ("fixed", "mdp"):
+            raise ConfigError(f"--policy must be fixed or mdp, got {p!r}")
+    out = args.out if args.out is not None else Path(f"mc-{sc.name}-seed{seed}")
+    rec = run_landing_campaign(sc, runs, seed, policies, out, args.workers, progress=not args.no_progress)
+    for p, s in rec["policies"].items():
+        ld = s["landed"]
+        print(
+            f"{p:<6} landed {ld['k']}/{ld['n']}, aborted {s['aborted']}, off the pad {s['landed_off_pad']}; "
+            f"energy {s['energy_j']['mean']:.0f} J, time {s['landing_time_s']['mean']:.2f} s"
+        )
+    print(f"report: {out / 'report.md'}")
+    if args.json is not None:
+        args.json.write_text(json.dumps(finite_or_null(rec), indent=1) + "\n")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from swarm.montecarlo.campaign import CampaignSpec, read_manifest, run_campaign
     from swarm.montecarlo.report import finite_or_null, write_report
+    from swarm.sim.landing import SCENARIO_DIR, is_landing_file
 
+    path = Path(args.scenario)
+    if is_landing_file(path if path.suffix or path.exists() else SCENARIO_DIR / f"{args.scenario}.toml"):
+        return _run_landing(args)
     sc = load_from_args(args)
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers must be a positive integer, got {args.workers}")

@@ -125,6 +125,18 @@ class LandingFaults:
 
 
 @dataclass(frozen=True)
+class LandingDispersions:
+    """``[dispersions]``: what varies from run to run of a campaign (all drawn from the run's seed)."""
+
+    enabled: bool = False
+    start_sigma_m: Vec3 = (3.0, 3.0, 1.0)
+    """Start position, normal per axis [m]."""
+    uwb_range_m: tuple[float, float] = (8.0, 30.0)
+    """The anchors' reach, uniform in this interval [m]: from a pad seen by the anchors only in the last
+    metres to one covered during the whole approach (the navigation quality the switching rule adapts to)."""
+
+
+@dataclass(frozen=True)
 class LandingKinds:
     quadrotor: QuadrotorParams = field(default_factory=QuadrotorParams)
 
@@ -149,6 +161,7 @@ class LandingScenario:
     estimator: ImuFilterParams = field(default_factory=lambda: ImuFilterParams(range_bias=False, huber_k=2.0))
     landing: LandingGuidanceParams = field(default_factory=LandingGuidanceParams)
     faults: LandingFaults = LandingFaults()
+    dispersions: LandingDispersions = LandingDispersions()
     kinds: LandingKinds = LandingKinds()
 
     def __post_init__(self) -> None:
@@ -197,9 +210,17 @@ def run_landing(
     dt = sc.dt_s
     pad = np.asarray(sc.pad.position_m, float)
     q_nav_pad = rot.rotvec_exp(np.array([0.0, 0.0, math.radians(sc.pad.yaw_deg)]))
-    # truth
+    # truth, with the run's dispersions
+    disp = sc.dispersions
+    start = np.asarray(sc.vehicle.start_m, float)
+    uwb_range = sc.uwb.max_range_m
+    if disp.enabled:
+        drng = np.random.default_rng(np.random.SeedSequence([seed, 16]))
+        start = start + drng.normal(0.0, 1.0, 3) * np.asarray(disp.start_sigma_m)
+        start[2] = max(start[2], 2.0)
+        uwb_range = float(drng.uniform(*disp.uwb_range_m))
     x = np.zeros(13)
-    x[0:3] = sc.vehicle.start_m
+    x[0:3] = start
     x[6:10] = rot.rotvec_exp(np.array([0.0, 0.0, math.radians(sc.vehicle.yaw_deg)]))
     s = np.zeros(qd.S_N)
     s[0:4] = air.hover_omega_rad_s
@@ -283,7 +304,7 @@ def run_landing(
             next_anchor = (next_anchor + 1) % len(anchors)
             tag = x[0:3] + rot.quat_rotate(x[6:10], np.asarray(sc.uwb.lever_arm_m, float))
             true_r = float(np.linalg.norm(tag - anchors[a]))
-            if true_r <= sc.uwb.max_range_m:
+            if true_r <= uwb_range:
                 out = filt.update_range(t, a, true_r + rng.normal(0.0, sc.uwb.sigma_m))
                 if len(out) and out[0] != 2:
                     nis.append(float(filt.last_d2[0]))
@@ -370,6 +391,8 @@ def run_landing(
         "energy_j": float(energy),
         "deviation_distance_m": float(np.linalg.norm(dev[:2] - pad[:2])) if dev is not None else None,
         "retries": guidance.retries,
+        "start_m": [float(v) for v in start],
+        "uwb_range_m": uwb_range,
         "pad_frames": frames,
         "pad_detections": detections,
         "sim_time_s": round(k * dt, 4),
