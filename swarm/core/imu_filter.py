@@ -305,6 +305,21 @@ class ImuFilter:
             self.last_pad_d2[i] = res[1]
         return out
 
+    def update_position(self, t_s: float, p_nav, cov, gate_probability: float = 0.9995) -> np.ndarray:
+        """A position fix ``p_nav`` (3,) with covariance ``cov`` (3, 3) at ``t_s`` (GNSS): predict to it,
+        then update every filter. The outcomes, or an empty array if it is older than the filter (dropped)."""
+        if not t_s >= self.t:
+            self.dropped += 1
+            return np.zeros(0, dtype=np.int64)
+        self._predict_to(t_s)
+        gate = float(chi2.ppf(gate_probability, 3))
+        out = np.empty(self.n, dtype=np.int64)
+        res = np.empty(2)
+        z, R = np.asarray(p_nav, float), np.ascontiguousarray(cov, float)
+        for i in range(self.n):
+            out[i] = nb.update_position_one(self.X[i], self.P[i], z, R, gate, res)
+        return out
+
     def reset_position(self, i: int, p_nav, cov_p, sigma_v_m_s: float) -> None:
         """Re-initialise filter ``i``'s position (and its covariance ``cov_p`` (3, 3)) and its velocity (zero,
         ``sigma_v_m_s``) after a divergence; attitude and biases are kept, their cross terms with position

@@ -185,6 +185,22 @@ def summarize(rows: list[dict], policies: tuple[str, ...]) -> dict:
     base = policies[0]
     for other in policies[1:]:
         rec["paired"][f"{other}-{base}"] = {m: _paired(rows, base, other, m) for m in METRICS[:3]}
+    # by navigation quality: the anchors' reach against the distance at which the fixed rule deviates plus
+    # the glide's height, split at the middle of the dispersion's interval
+    reach = [r["uwb_range_m"] for r in rows if r.get("uwb_range_m") is not None]
+    if reach:
+        split = float(np.median(reach))
+        rec["reach_split_m"] = split
+        rec["paired_by_reach"] = {}
+        for name, keep in (
+            ("short", lambda r: r["uwb_range_m"] < split),
+            ("long", lambda r: r["uwb_range_m"] >= split),
+        ):
+            sub_rows = [r for r in rows if keep(r)]
+            for other in policies[1:]:
+                rec["paired_by_reach"][f"{name}:{other}-{base}"] = {
+                    m: _paired(sub_rows, base, other, m) for m in ("energy_j", "landing_time_s")
+                }
     return rec
 
 
@@ -250,19 +266,54 @@ def write_report(
                 f"Wilcoxon p = {p['wilcoxon_p_value']}"
             )
         lines.append("")
-        e, tm = pr["energy_j"], pr["landing_time_s"]
-        lines.append(
-            "What it means: the Markov rule leaves the energy-optimal glide where the navigation says the "
-            "pad will not be seen from it, so with good navigation (the anchors reach the approach) it "
-            "flies the glide to within a few metres and skips the climb to the fixed policy's viewpoint, "
-            "and with poor navigation it deviates as early as the fixed rule or earlier. "
-            + (
-                "Here that saves energy and time."
-                if e["ci95"] and e["ci95"][1] < 0 and tm["ci95"] and tm["ci95"][1] < 0
-                else "Here the difference in energy or time is not significant or not a saving: see the "
-                "intervals above."
+        if "paired_by_reach" in rec:
+            split = rec["reach_split_m"]
+            lines.append(
+                f"By navigation quality (the anchors' reach in the run, split at its median {split:.1f} m):"
             )
+            lines.append("")
+            for name, label in (("short", f"reach < {split:.1f} m"), ("long", f"reach >= {split:.1f} m")):
+                prs = rec["paired_by_reach"].get(f"{name}:{key}")
+                if prs:
+                    lines.append(
+                        f"- {label}: {_verdict(prs['energy_j'], 'energy_j', 'J')}; "
+                        f"{_verdict(prs['landing_time_s'], 'landing_time_s', 's')}"
+                    )
+            lines.append("")
+        e = pr["energy_j"]
+        by = rec.get("paired_by_reach", {})
+        short, long_ = by.get(f"short:{key}", {}).get("energy_j"), by.get(f"long:{key}", {}).get("energy_j")
+
+        def sign(p):
+            if not p or not p.get("ci95"):
+                return 0
+            return -1 if p["ci95"][1] < 0 else (1 if p["ci95"][0] > 0 else 0)
+
+        text = (
+            "What it means: the Markov rule leaves the energy-optimal glide where the navigation says "
+            "the pad will not be seen from its end. With good navigation (the anchors reach the approach) "
+            "it flies the glide to within a few metres and skips the fixed policy's detour to the "
+            "viewpoint; with poor navigation it deviates at its activation radius, earlier than the fixed "
+            "rule, and flies a longer detour. "
         )
+        if sign(long_) < 0 and sign(short) > 0:
+            text += (
+                "Here it saves energy where the navigation is good and costs energy where it is poor, and "
+                "over the whole campaign the two "
+                + (
+                    "cancel."
+                    if sign(e) == 0
+                    else ("leave a net saving." if sign(e) < 0 else "leave a net cost.")
+                )
+            )
+        elif sign(e) < 0:
+            text += "Here it saves energy overall."
+        elif sign(e) > 0:
+            text += "Here it costs energy overall."
+        else:
+            text += "Here the difference in energy is not significant."
+        text += " Precision and safety are the same for both policies (the table)."
+        lines.append(text)
         lines.append("")
     if figures:
         _figures(out_dir, rows, trajs, policies, sc)

@@ -104,6 +104,16 @@ class LandingUwb:
 
 
 @dataclass(frozen=True)
+class LandingGnss:
+    """``[gnss]``: a satellite receiver's position fixes, white noise (the "less accurate" navigation of the
+    paper's approach phase; multipath and biases are not modelled)."""
+
+    enabled: bool = True
+    rate_hz: float = 5.0
+    sigma_m: Vec3 = (1.0, 1.0, 1.5)
+
+
+@dataclass(frozen=True)
 class LandingInitial:
     """``[initial]``: the first estimate's errors (drawn) and sigmas."""
 
@@ -157,6 +167,7 @@ class LandingScenario:
     camera: LandingCamera = LandingCamera()
     imu: LandingImu = LandingImu()
     uwb: LandingUwb = LandingUwb()
+    gnss: LandingGnss = LandingGnss()
     initial: LandingInitial = LandingInitial()
     estimator: ImuFilterParams = field(default_factory=lambda: ImuFilterParams(range_bias=False, huber_k=2.0))
     landing: LandingGuidanceParams = field(default_factory=LandingGuidanceParams)
@@ -271,6 +282,8 @@ def run_landing(
     cs, u, act = np.zeros(qc.CS_N), np.zeros(4), np.zeros(9)
     cam_every = max(1, round(1.0 / (cam.rate_hz * dt)))
     uwb_every = max(1, round(1.0 / (sc.uwb.rate_hz * dt)))
+    gnss_every = max(1, round(1.0 / (sc.gnss.rate_hz * dt)))
+    gnss_cov = np.diag(np.asarray(sc.gnss.sigma_m, float) ** 2)
     nis = deque(maxlen=20)
     pad_seen: float | None = None
     energy = 0.0
@@ -308,6 +321,8 @@ def run_landing(
                 out = filt.update_range(t, a, true_r + rng.normal(0.0, sc.uwb.sigma_m))
                 if len(out) and out[0] != 2:
                     nis.append(float(filt.last_d2[0]))
+        if sc.gnss.enabled and k % gnss_every == 0:
+            filt.update_position(t, x[0:3] + rng.normal(0.0, 1.0, 3) * np.asarray(sc.gnss.sigma_m), gnss_cov)
         if k % cam_every == 0:
             hidden = sc.faults.pad_hidden_always or (
                 sc.faults.pad_hidden_from_s is not None
