@@ -143,3 +143,21 @@ def test_a_paired_landing_campaign_writes_rows_report_and_figures(tmp_path):
     assert "Paired differences mdp-fixed" in report and "energy_j:" in report
     for fig in ("fig9_trajectories.png", "fig10_distributions.png", "deviation_points.png"):
         assert (out / fig).stat().st_size > 5000
+
+
+def test_the_committed_landing_campaign_reproduces_run_by_run():
+    """docs/results/landing-500-seed0 was written by `swarm montecarlo landing --runs 500`: its first runs,
+    flown again from the seeds in runs.csv, give the same rows (the campaign is a pure function of the
+    scenario and the seed)."""
+    import csv
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "docs" / "results" / "landing-500-seed0" / "runs.csv"
+    rows = [r for r in csv.DictReader(path.open()) if int(r["run"]) < 2]
+    sc = load_landing("landing")
+    assert len(rows) == 4
+    for row in rows:
+        r = run_landing(sc, row["policy"], int(row["seed"]), record_series=False)
+        assert str(r["landed"]) == row["landed"]
+        for key in ("energy_j", "landing_time_s", "landing_error_m", "deviation_distance_m", "uwb_range_m"):
+            assert repr(float(r[key])) == row[key] or str(r[key]) == row[key], key
