@@ -12,7 +12,19 @@ from swarm.errors import SwarmError
 def build_parser() -> argparse.ArgumentParser:
     from agents import cli as agent_cli
     from mothership import cli as mothership_cli
-    from swarm.cli import analyze, bench, dashboard, demo, fault, launch, montecarlo, replay, router, sim
+    from swarm.cli import (
+        analyze,
+        bench,
+        dashboard,
+        demo,
+        fault,
+        launch,
+        montecarlo,
+        record,
+        replay,
+        router,
+        sim,
+    )
     from swarm.world import cli as world_cli
 
     parser = argparse.ArgumentParser(
@@ -27,6 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
         montecarlo,
         analyze,
         replay,
+        record,
         bench,
         launch,
         router,

@@ -21,12 +21,31 @@ the log on the swarm's keys at --speed times real time, as sensor drivers would 
 force, uwb, the anchors), so that a process of the swarm runs on recorded sensors."""
 
 
+def _speed(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--speed must be a number > 0 or inf, got {text!r}") from None
+    if not v > 0 or math.isnan(v):
+        raise argparse.ArgumentTypeError(f"--speed must be a number > 0 or inf, got {text!r}")
+    return v
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "replay", help="run the estimator over a recorded sensor log (docs/logs.md)", description=REPLAY
     )
     p.add_argument(
-        "log", type=Path, metavar="DIR", help="the log folder (imu.csv, uwb.csv, anchors.csv, ...)"
+        "log",
+        type=Path,
+        metavar="DIR|FILE.mcap",
+        help="a log folder (imu.csv, uwb.csv, anchors.csv, ...), or a recording of `swarm record`",
+    )
+    p.add_argument(
+        "--only",
+        default=None,
+        metavar="KEY,KEY",
+        help="FILE.mcap: publish only these keys (fnmatch patterns, e.g. '*/imu,*/uwb')",
     )
     p.add_argument("--json", type=Path, default=None, metavar="FILE", help="write the report as JSON")
     p.add_argument(
@@ -53,10 +72,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     z.add_argument(
         "--speed",
-        type=positive_float("--speed"),
+        type=_speed,
         default=1.0,
         metavar="N",
-        help="times real time (default 1)",
+        help="times real time (default 1; 'inf' for as fast as possible, a recording only)",
     )
     z.add_argument("--vehicle", default="uav", metavar="ID", help="the vehicle id of the keys (default uav)")
     z.add_argument("--namespace", default="tpods", help="key namespace of the swarm (default tpods)")
@@ -116,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
     from swarm.logs.reader import read_log
     from swarm.logs.replay import replay_log
 
+    if args.log.suffix == ".mcap":
+        return _publish_recording(args)
     overrides = dict(parse_override(o) for o in args.overrides)
     log = read_log(args.log, overrides)
     if args.zenoh:
@@ -172,6 +193,28 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None:
         _plot(result, args.plot)
         print(f"wrote {args.plot}")
+    return 0
+
+
+def _publish_recording(args: argparse.Namespace) -> int:
+    """``swarm replay FILE.mcap``: every recorded message again on its key, paced by ``--speed`` (swarm
+    time; ``--speed inf``: as fast as possible)."""
+    import threading
+
+    from swarm.transport.recording import read_recording, replay_recording
+    from swarm.transport.session import open_session, zenoh_args_from
+
+    messages, _meta = read_recording(args.log)
+    only = tuple(p for p in (args.only or "").split(",") if p)
+    stop = threading.Event()
+    with open_session(zenoh_args_from(args)) as session:
+        print(f"replaying {args.log}: {len(messages)} messages at {args.speed:g}x", flush=True)
+        try:
+            sent = replay_recording(messages, session, args.speed, stop, only)
+        except KeyboardInterrupt:
+            stop.set()
+            return 130
+    print(f"sent {sum(sent.values())} messages on {len(sent)} keys", flush=True)
     return 0
 
 

@@ -1,0 +1,192 @@
+"""Record a swarm to an MCAP file, read it back, re-publish it (issue 16: ``swarm record``, ``swarm replay
+FILE.mcap``).
+
+**Recording** (:class:`Recorder`): one Zenoh subscriber on ``<ns>/**`` (every key of the swarm,
+``docs/protocol.md``) writes each sample, as it arrives, to an MCAP file (the ``mcap`` package): one channel
+per key, topic = the key, ``message_encoding = "msgpack"``, no schema (the wire schema is
+``docs/protocol.md``), the payload byte for byte. ``log_time`` is the **swarm time** of the message (its
+``t_s`` field; a message without one, such as ``Anchors``, takes the latest swarm time seen),
+``publish_time`` the wall-clock time it was received (ns since the epoch). The world's ``run_start`` event
+is written as MCAP metadata ``run`` (seed, scenario, clock, ...); the recorder's own facts (namespace,
+package version) as metadata ``recorder``.
+
+**Reading** (:func:`read_recording`): the plain ``mcap`` reader; a truncated or corrupt file is a
+:class:`~swarm.errors.LogError` naming the file and the byte offset where reading stopped.
+
+**Re-publishing** (:func:`replay_recording`): every message in ``log_time`` order (ties in file order), each
+on its own key with the recorded bytes, paced at ``speed`` times the recorded swarm time (``inf``: as fast
+as possible), optionally only some keys.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import logging
+import math
+import queue
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgpack
+
+from swarm.errors import LogError
+
+_LOG = logging.getLogger("swarm.record")
+
+ENCODING = "msgpack"
+
+
+def _swarm_time_ns(payload: bytes, last_ns: int) -> int:
+    """The ``t_s`` of a msgpack-map payload in ns, else ``last_ns`` (never raises: a garbage sample is
+    recorded too, at the latest swarm time)."""
+    try:
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+        t = obj.get("t_s") if isinstance(obj, dict) else None
+        if isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t) and t >= 0:
+            return round(t * 1e9)
+    except Exception:  # anything on the wire, even garbage, is recorded as it came
+        pass
+    return last_ns
+
+
+class Recorder:
+    """Write every sample of ``<namespace>/**`` seen by ``session`` to ``path`` (module docstring).
+
+    The Zenoh callback only queues ``(key, payload, received_ns)``; :meth:`run` writes them on the calling
+    thread until ``stop`` is set, then finishes the file (its summary and indexes), so the file is complete
+    whenever the recorder stops cleanly (SIGINT, SIGTERM, the end of the run)."""
+
+    def __init__(self, session, keys, path: str | Path, metadata: dict[str, str] | None = None) -> None:
+        self.session, self.keys, self.path = session, keys, Path(path)
+        self.metadata = {"namespace": keys.namespace, **(metadata or {})}
+        self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self.counts: dict[str, int] = {}
+        self.run_end_seen = threading.Event()
+
+    def _on_sample(self, sample) -> None:
+        self._q.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+
+    def run(self, stop: threading.Event, ready=None) -> dict[str, int]:
+        from mcap.writer import CompressionType, Writer
+
+        __version__ = package_version()
+
+        with open(self.path, "wb") as fh:
+            writer = Writer(fh, compression=CompressionType.LZ4)
+            writer.start(profile="", library=f"tpods-swarm {__version__}")
+            writer.add_metadata("recorder", {**self.metadata, "version": __version__})
+            sub = self.session.declare_subscriber(self.keys.everything(), self._on_sample)
+            if ready is not None:
+                ready()
+            channels: dict[str, int] = {}
+            last_ns = 0
+            world_event = self.keys.world_event()
+            try:
+                while not (stop.is_set() and self._q.empty()):
+                    try:
+                        key, payload, recv_ns = self._q.get(timeout=0.05)
+                    except queue.Empty:
+                        continue
+                    cid = channels.get(key)
+                    if cid is None:
+                        cid = channels[key] = writer.register_channel(topic=key, message_encoding=ENCODING,
+                                                                      schema_id=0)  # fmt: skip
+                    last_ns = _swarm_time_ns(payload, last_ns)
+                    writer.add_message(cid, log_time=last_ns, data=payload, publish_time=recv_ns)
+                    self.counts[key] = self.counts.get(key, 0) + 1
+                    if key == world_event:
+                        self._world_event(writer, payload)
+            finally:
+                sub.undeclare()
+                writer.finish()
+        return dict(self.counts)
+
+    def _world_event(self, writer, payload: bytes) -> None:
+        try:
+            ev = msgpack.unpackb(payload, raw=False)
+        except Exception:  # a garbage event: recorded, not described
+            return
+        if (
+            isinstance(ev, dict)
+            and ev.get("kind") in ("run_start", "run_end")
+            and isinstance(ev.get("data"), dict)
+        ):
+            writer.add_metadata(str(ev["kind"]), {str(k): str(v) for k, v in ev["data"].items()})
+            if ev["kind"] == "run_end":
+                self.run_end_seen.set()
+
+
+def package_version() -> str:
+    """This package's version, as installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("tpods-swarm")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+@dataclass(frozen=True)
+class RecordedMessage:
+    key: str
+    log_time_ns: int
+    publish_time_ns: int
+    payload: bytes
+
+
+def read_recording(path: str | Path) -> tuple[list[RecordedMessage], dict[str, dict[str, str]]]:
+    """Every message of the MCAP file at ``path`` in ``log_time`` order (ties in file order), and its
+    metadata by name. LogError naming the file and the byte offset if it is truncated or corrupt."""
+    from mcap.reader import make_reader
+
+    p = Path(path)
+    try:
+        fh = open(p, "rb")
+    except OSError as exc:
+        raise LogError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    with fh:
+        try:
+            reader = make_reader(fh)
+            msgs = [RecordedMessage(ch.topic, m.log_time, m.publish_time, bytes(m.data))
+                    for _, ch, m in reader.iter_messages(log_time_order=False)]  # fmt: skip
+            meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        except LogError:
+            raise
+        except Exception as exc:  # the mcap reader's errors: bad magic, short reads, bad records, CRC
+            offset = fh.tell()
+            raise LogError(f"{p}: not a complete MCAP recording: {type(exc).__name__}: {exc} "
+                           f"(reading stopped at byte {offset} of {p.stat().st_size})") from None  # fmt: skip
+    order = sorted(range(len(msgs)), key=lambda i: (msgs[i].log_time_ns, i))
+    return [msgs[i] for i in order], meta
+
+
+def replay_recording(messages: list[RecordedMessage], session, speed: float, stop: threading.Event,
+                     only: tuple[str, ...] = ()) -> dict[str, int]:  # fmt: skip
+    """Publish ``messages`` on their keys (module docstring); ``only``: key patterns (``fnmatch``, e.g.
+    ``tpods/agent/chaser/imu`` or ``*/imu``) to keep. Returns the count sent per key."""
+    from swarm.transport.process import declare_reliable
+
+    pubs: dict[str, object] = {}
+    sent: dict[str, int] = {}
+    chosen = [m for m in messages if not only or any(fnmatch.fnmatchcase(m.key, pat) for pat in only)]
+    if not chosen:
+        return sent
+    t0 = chosen[0].log_time_ns
+    start = time.monotonic()
+    for m in chosen:
+        if stop.is_set():
+            break
+        if math.isfinite(speed):
+            due = start + (m.log_time_ns - t0) / 1e9 / speed
+            delay = due - time.monotonic()
+            if delay > 0:
+                stop.wait(delay)
+        pub = pubs.get(m.key)
+        if pub is None:
+            pub = pubs[m.key] = declare_reliable(session, m.key)
+        pub.put(m.payload)
+        sent[m.key] = sent.get(m.key, 0) + 1
+    time.sleep(0.2)  # let the last samples leave before the session closes
+    return sent

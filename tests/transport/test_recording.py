@@ -1,0 +1,127 @@
+"""Recording (issue 16): a launched lockstep docking recorded by `swarm record` (a real process on a real
+router), read back with the plain `mcap` reader; the counts per key equal an independent subscriber's; the
+payloads decode with plain msgpack; record -> replay -> record gives the same payloads in the same order;
+a truncated or corrupt file is refused naming the file and the offset, without hanging."""
+
+from __future__ import annotations
+
+import collections
+import sys
+import threading
+
+import msgpack
+import pytest
+from mcap.reader import make_reader
+
+from swarm.errors import LogError
+from swarm.transport.keys import Keys
+from swarm.transport.recording import read_recording
+from swarm.transport.session import ZenohArgs, open_session
+from tests.transport.procs import Procs, free_port, loopback, wait_until
+
+PY = [sys.executable, "-m", "swarm.cli.main"]
+
+
+def _router(procs: Procs, endpoint: str):
+    proc = procs.start([*PY, "router", "--listen", endpoint])
+    proc.wait_for_line(r"^router listening on ", 60.0)
+    return proc
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """One lockstep docking, recorded by `swarm record` and counted by this test's own subscriber, both on an
+    outside router the launcher's router connects to (so both subscribe before the run starts)."""
+    d = tmp_path_factory.mktemp("rec")
+    ns, ep = f"rec-{free_port()}", loopback(free_port())
+    keys = Keys(ns)
+    counts: collections.Counter = collections.Counter()
+    lock = threading.Lock()
+
+    def count(sample) -> None:
+        with lock:
+            counts[str(sample.key_expr)] += 1
+
+    with Procs() as procs:
+        _router(procs, ep)
+        with open_session(ZenohArgs(mode="client", connect=(ep,))) as session:
+            session.declare_subscriber(keys.everything(), count)
+            rec = procs.start([*PY, "record", str(d / "run.mcap"), "--until-end", "--namespace", ns,
+                               "--mode", "client", "--connect", ep])  # fmt: skip
+            rec.wait_for_line(r"^recording ", 60.0)
+            launch = procs.start([*PY, "launch", "docking", "--headless", "--until-docked", "--namespace", ns,
+                                  "--connect", ep, "--listen", loopback(free_port())])  # fmt: skip
+            assert launch.wait(300.0) == 0, launch.output()
+            assert rec.wait(60.0) == 0, rec.output()
+            with lock:
+                seen = dict(counts)
+    return {"path": d / "run.mcap", "counts": seen, "ns": ns, "dir": d, "recorder": rec.output()}
+
+
+def test_every_key_on_the_wire_has_its_channel_and_its_count(recorded):
+    with open(recorded["path"], "rb") as fh:  # the plain mcap reader
+        reader = make_reader(fh)
+        summary = reader.get_summary()
+        by_topic = collections.Counter(ch.topic for _, ch, _ in reader.iter_messages())
+    channels = {ch.topic for ch in summary.channels.values()}
+    assert channels == set(recorded["counts"])
+    assert by_topic == collections.Counter(recorded["counts"])
+    assert all(ch.message_encoding == "msgpack" for ch in summary.channels.values())
+    ns = recorded["ns"]
+    for key in (
+        f"{ns}/agent/chaser/imu",
+        f"{ns}/agent/chaser/estimate",
+        f"{ns}/world/clock",
+        f"{ns}/world/event",
+    ):
+        assert by_topic[key] > 0, key
+
+
+def test_payloads_decode_with_plain_msgpack_and_log_time_is_swarm_time(recorded):
+    msgs, meta = read_recording(recorded["path"])
+    last_t = {}
+    for m in msgs:
+        obj = msgpack.unpackb(m.payload, raw=False)
+        assert isinstance(obj, dict) and obj["v"] == 2 and isinstance(obj["type"], str)
+        if "t_s" in obj:
+            assert m.log_time_ns == round(obj["t_s"] * 1e9)
+            last_t[m.key] = obj["t_s"]
+    assert meta["run_start"]["scenario"] == "docking" and meta["run_start"]["clock"] == "lockstep"
+    assert meta["recorder"]["namespace"] == recorded["ns"] and "version" in meta["recorder"]
+    assert "run_end" in meta
+
+
+def test_record_replay_record_gives_the_same_payloads_in_the_same_order(recorded, tmp_path):
+    ep = loopback(free_port())
+    again = tmp_path / "again.mcap"
+    with Procs() as procs:
+        _router(procs, ep)
+        rec = procs.start([*PY, "record", str(again), "--namespace", recorded["ns"], "--mode", "client",
+                           "--connect", ep])  # fmt: skip
+        rec.wait_for_line(r"^recording ", 60.0)
+        rep = procs.start([*PY, "replay", str(recorded["path"]), "--speed", "inf", "--mode", "client",
+                           "--connect", ep])  # fmt: skip
+        assert rep.wait(300.0) == 0, rep.output()
+        n = sum(recorded["counts"].values())
+        wait_until(lambda: f"sent {n} messages" in rep.output(), 10.0, "the replay's summary")
+        rec.signal(2)  # SIGINT: the recorder finishes its file
+        assert rec.wait(60.0) == 0, rec.output()
+    first, _ = read_recording(recorded["path"])
+    second, _ = read_recording(again)
+    assert [(m.key, m.payload) for m in second] == [(m.key, m.payload) for m in first]
+
+
+def test_a_truncated_or_corrupt_recording_is_refused_naming_file_and_offset(recorded, tmp_path):
+    data = recorded["path"].read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(
+        LogError, match=r"cut\.mcap: not a complete MCAP recording: .* \(reading stopped at byte \d+ of \d+\)"
+    ):
+        read_recording(cut)
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap file at all" * 10)
+    with pytest.raises(LogError, match=r"bad\.mcap: not a complete MCAP recording"):
+        read_recording(bad)
+    with pytest.raises(LogError, match=r"nowhere\.mcap: cannot read"):
+        read_recording(tmp_path / "nowhere.mcap")
