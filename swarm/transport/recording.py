@@ -38,7 +38,7 @@ _LOG = logging.getLogger("swarm.record")
 ENCODING = "msgpack"
 
 
-def _swarm_time_ns(payload: bytes, last_ns: int) -> int:
+def swarm_time_ns(payload: bytes, last_ns: int) -> int:
     """The ``t_s`` of a msgpack-map payload in ns, else ``last_ns`` (never raises: a garbage sample is
     recorded too, at the latest swarm time)."""
     try:
@@ -93,7 +93,7 @@ class Recorder:
                     if cid is None:
                         cid = channels[key] = writer.register_channel(topic=key, message_encoding=ENCODING,
                                                                       schema_id=0)  # fmt: skip
-                    last_ns = _swarm_time_ns(payload, last_ns)
+                    last_ns = swarm_time_ns(payload, last_ns)
                     writer.add_message(cid, log_time=last_ns, data=payload, publish_time=recv_ns)
                     self.counts[key] = self.counts.get(key, 0) + 1
                     if key == world_event:
