@@ -2,11 +2,12 @@
 FILE.mcap``).
 
 **Recording** (:class:`Recorder`): one Zenoh subscriber on ``<ns>/**`` (every key of the swarm,
-``docs/protocol.md``) writes each sample, as it arrives, to an MCAP file (the ``mcap`` package): one channel
-per key, topic = the key, ``message_encoding = "msgpack"``, no schema (the wire schema is
-``docs/protocol.md``), the payload byte for byte. ``log_time`` is the **swarm time** of the message (its
-``t_s`` field; a message without one, such as ``Anchors``, takes the latest swarm time seen),
-``publish_time`` the wall-clock time it was received (ns since the epoch). The world's ``run_start`` event
+``docs/protocol.md``) writes each sample, as it arrives, to an MCAP file through ``foxglove-sdk``: one
+channel per key, topic = the key, ``message_encoding = "msgpack"`` (a schema named after the message type,
+with no content: the wire schema is ``docs/protocol.md``), the payload byte for byte, and the Foxglove views
+of :mod:`swarm.transport.foxglove_views` (``/tf``, ``/events``, ``/scene``). ``log_time`` (and
+``publish_time``) is the **swarm time** of the message (its ``t_s`` field; a message without one, such as
+``Anchors``, takes the latest swarm time seen). The world's ``run_start`` event
 is written as MCAP metadata ``run`` (seed, scenario, clock, ...); the recorder's own facts (namespace,
 package version) as metadata ``recorder``.
 
@@ -69,38 +70,39 @@ class Recorder:
         self._q.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
 
     def run(self, stop: threading.Event, ready=None) -> dict[str, int]:
-        from mcap.writer import CompressionType, Writer
+        import warnings
 
-        __version__ = package_version()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            import foxglove
+            from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
-        with open(self.path, "wb") as fh:
-            writer = Writer(fh, compression=CompressionType.LZ4)
-            writer.start(profile="", library=f"tpods-swarm {__version__}")
-            writer.add_metadata("recorder", {**self.metadata, "version": __version__})
-            sub = self.session.declare_subscriber(self.keys.everything(), self._on_sample)
-            if ready is not None:
-                ready()
-            channels: dict[str, int] = {}
-            last_ns = 0
-            world_event = self.keys.world_event()
-            try:
-                while not (stop.is_set() and self._q.empty()):
-                    try:
-                        key, payload, recv_ns = self._q.get(timeout=0.05)
-                    except queue.Empty:
-                        continue
-                    cid = channels.get(key)
-                    if cid is None:
-                        cid = channels[key] = writer.register_channel(topic=key, message_encoding=ENCODING,
-                                                                      schema_id=0)  # fmt: skip
-                    last_ns = swarm_time_ns(payload, last_ns)
-                    writer.add_message(cid, log_time=last_ns, data=payload, publish_time=recv_ns)
-                    self.counts[key] = self.counts.get(key, 0) + 1
-                    if key == world_event:
-                        self._world_event(writer, payload)
-            finally:
-                sub.undeclare()
-                writer.finish()
+        from swarm.transport.foxglove_views import SwarmViews
+
+        ctx = foxglove.Context()
+        options = MCAPWriteOptions(compression=MCAPCompression.Lz4, profile="")
+        writer = foxglove.open_mcap(str(self.path), allow_overwrite=True, context=ctx, writer_options=options)
+        writer.write_metadata("recorder", {**self.metadata, "version": package_version()})
+        views = SwarmViews(ctx, self.keys)
+        sub = self.session.declare_subscriber(self.keys.everything(), self._on_sample)
+        if ready is not None:
+            ready()
+        last_ns = 0
+        world_event = self.keys.world_event()
+        try:
+            while not (stop.is_set() and self._q.empty()):
+                try:
+                    key, payload, _recv_ns = self._q.get(timeout=0.05)
+                except queue.Empty:
+                    continue
+                last_ns = swarm_time_ns(payload, last_ns)
+                views.handle(key, payload, last_ns)
+                self.counts[key] = self.counts.get(key, 0) + 1
+                if key == world_event:
+                    self._world_event(writer, payload)
+        finally:
+            sub.undeclare()
+            writer.close()
         return dict(self.counts)
 
     def _world_event(self, writer, payload: bytes) -> None:
@@ -113,7 +115,7 @@ class Recorder:
             and ev.get("kind") in ("run_start", "run_end")
             and isinstance(ev.get("data"), dict)
         ):
-            writer.add_metadata(str(ev["kind"]), {str(k): str(v) for k, v in ev["data"].items()})
+            writer.write_metadata(str(ev["kind"]), {str(k): str(v) for k, v in ev["data"].items()})
             if ev["kind"] == "run_end":
                 self.run_end_seen.set()
 
@@ -149,8 +151,11 @@ def read_recording(path: str | Path) -> tuple[list[RecordedMessage], dict[str, d
     with fh:
         try:
             reader = make_reader(fh)
-            msgs = [RecordedMessage(ch.topic, m.log_time, m.publish_time, bytes(m.data))
-                    for _, ch, m in reader.iter_messages(log_time_order=False)]  # fmt: skip
+            msgs = [
+                RecordedMessage(ch.topic, m.log_time, m.publish_time, bytes(m.data))
+                for _, ch, m in reader.iter_messages(log_time_order=False)
+                if ch.message_encoding == ENCODING  # the swarm's keys, not the Foxglove views
+            ]  # fmt: skip
             meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
         except LogError:
             raise

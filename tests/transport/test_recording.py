@@ -63,10 +63,23 @@ def test_every_key_on_the_wire_has_its_channel_and_its_count(recorded):
         reader = make_reader(fh)
         summary = reader.get_summary()
         by_topic = collections.Counter(ch.topic for _, ch, _ in reader.iter_messages())
-    channels = {ch.topic for ch in summary.channels.values()}
-    assert channels == set(recorded["counts"])
-    assert by_topic == collections.Counter(recorded["counts"])
-    assert all(ch.message_encoding == "msgpack" for ch in summary.channels.values())
+    raw = {ch.topic for ch in summary.channels.values() if ch.message_encoding == "msgpack"}
+    assert raw == set(recorded["counts"])
+    assert {t: n for t, n in by_topic.items() if t in raw} == recorded["counts"]
+    views = {
+        ch.topic: summary.schemas[ch.schema_id].name
+        for ch in summary.channels.values()
+        if ch.topic not in raw
+    }
+    assert views == {
+        "/tf": "foxglove.FrameTransforms",
+        "/events": "foxglove.Log",
+        "/scene": "foxglove.SceneUpdate",
+    }
+    ns, c = recorded["ns"], recorded["counts"]
+    poses = sum(c[f"{ns}/agent/{v}/{k}"] for v in ("chaser", "target") for k in ("truth", "estimate"))
+    assert by_topic["/tf"] == poses  # one transform per truth and per estimate
+    assert by_topic["/events"] == sum(n for t, n in c.items() if t.endswith("/event"))
     ns = recorded["ns"]
     for key in (
         f"{ns}/agent/chaser/imu",
