@@ -71,6 +71,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--json", type=Path, default=None, metavar="FILE", help="write the summary (DESIGN.md sec. 8)"
     )
     g.add_argument(
+        "--record",
+        type=Path,
+        default=None,
+        metavar="FILE.mcap",
+        help="record every message to an MCAP file (a `swarm record` child, subscribed before the run)",
+    )
+    g.add_argument(
         "--max-restarts", type=count("--max-restarts"), default=3, metavar="N",
         help="restarts of one process (an agent, the mothership or the world) before giving up on it "
         "(default 3); a world restarts from its checkpoint of the last tick and the run goes on",
@@ -263,6 +270,7 @@ def run(args: argparse.Namespace) -> int:
 
     sc = scenario_from(args)
     _hosts(args, sc)  # the agent processes' layout, checked before anything starts
+    _check_record(args)
     keys = Keys(args.namespace)
     policy = args.policy or sc.policy
     listen = list(args.listen) if args.listen else [free_loopback_endpoint()]
@@ -367,7 +375,7 @@ def run(args: argparse.Namespace) -> int:
                         )
                         if not asked:
                             stop.wait(3.0)  # a moment to look at the docked pair
-                        sup.stop_all(keep=("dashboard",))
+                        sup.stop_all(keep=("dashboard", "recorder"))
                         box[0] = RunLog()
                         continue
                     if not args.until_docked:
@@ -400,9 +408,45 @@ def _checkpoint_root() -> Path:
     return private_dir("swarm-world-", base)
 
 
+def _check_record(args: argparse.Namespace) -> None:
+    rec = getattr(args, "record", None)
+    if rec is None:
+        return
+    if rec.suffix != ".mcap":
+        raise ConfigError(f"--record: the recording's name must end in .mcap, got {str(rec)!r}")
+    if not rec.resolve().parent.is_dir():
+        raise ConfigError(f"--record: no such directory {str(rec.parent)!r}")
+    if getattr(args, "secure", False):
+        raise ConfigError(
+            "--record and --secure: the recorder would need its own identity and ACL rule; record a secure "
+            "swarm with `swarm record` and a certificate of your own"
+        )
+
+
+def _start_recorder(args, endpoint, sup, Child) -> None:
+    """The recorder child (``--record``), kept across runs; the run starts once it is subscribed."""
+    old = sup.children.get("recorder")
+    if args.record is None or (old is not None and old.running):
+        return
+    ready = threading.Event()
+
+    def on_line(line: str) -> None:
+        if line.startswith("recording "):
+            ready.set()
+
+    rec = ["swarm.cli.main", "record", str(args.record.resolve()), "--namespace", args.namespace,
+           "--mode", "client", "--connect", endpoint]  # fmt: skip
+    sup.start(Child("recorder", rec, restartable=False, on_line=on_line))
+    if not ready.wait(60.0):
+        raise ConfigError(f"--record: the recorder did not subscribe within 60 s (writing {args.record})")
+    print(f"recording to {args.record}", flush=True)
+
+
 def _start_run(args, sc, seed, endpoint, sup, Child):
     common = _child_args(args, endpoint, seed)
     from swarm.transport.security import agent_name
+
+    _start_recorder(args, endpoint, sup, Child)
 
     mothership = ["mothership", *common, *_config_args(args, "mothership")]
     sup.start(Child("mothership", mothership, restartable=True, rejoin_args=["--rejoin"]))

@@ -37,6 +37,9 @@ from swarm.errors import LogError
 _LOG = logging.getLogger("swarm.record")
 
 ENCODING = "msgpack"
+QUIET_S = 0.5
+"""On stop, the recorder keeps recording until no sample has come for this long [s]: the samples still in
+flight when it was asked to stop are in the file."""
 
 
 def swarm_time_ns(payload: bytes, last_ns: int) -> int:
@@ -57,7 +60,8 @@ class Recorder:
 
     The Zenoh callback only queues ``(key, payload, received_ns)``; :meth:`run` writes them on the calling
     thread until ``stop`` is set, then finishes the file (its summary and indexes), so the file is complete
-    whenever the recorder stops cleanly (SIGINT, SIGTERM, the end of the run)."""
+    whenever the recorder stops cleanly (SIGINT, SIGTERM, the end of the run), with every sample that
+    arrives until :data:`QUIET_S` passes without one."""
 
     def __init__(self, session, keys, path: str | Path, metadata: dict[str, str] | None = None) -> None:
         self.session, self.keys, self.path = session, keys, Path(path)
@@ -89,12 +93,15 @@ class Recorder:
             ready()
         last_ns = 0
         world_event = self.keys.world_event()
+        quiet = time.monotonic()
         try:
-            while not (stop.is_set() and self._q.empty()):
+            # after stop: everything queued, and what is still in flight (until QUIET_S without a sample)
+            while not (stop.is_set() and self._q.empty() and time.monotonic() - quiet >= QUIET_S):
                 try:
                     key, payload, _recv_ns = self._q.get(timeout=0.05)
                 except queue.Empty:
                     continue
+                quiet = time.monotonic()
                 last_ns = swarm_time_ns(payload, last_ns)
                 views.handle(key, payload, last_ns)
                 self.counts[key] = self.counts.get(key, 0) + 1

@@ -1,7 +1,8 @@
-"""Recording (issue 16): a launched lockstep docking recorded by `swarm record` (a real process on a real
-router), read back with the plain `mcap` reader; the counts per key equal an independent subscriber's; the
-payloads decode with plain msgpack; record -> replay -> record gives the same payloads in the same order;
-a truncated or corrupt file is refused naming the file and the offset, without hanging."""
+"""Recording (issue 16): a launched lockstep docking recorded (`swarm launch --record`: a `swarm record`
+child on the launcher's router), read back with the plain `mcap` reader; the counts per key equal an
+independent subscriber's; the payloads decode with plain msgpack; record -> replay -> record gives the same
+payloads in the same order; a truncated or corrupt file is refused naming the file and the offset, without
+hanging."""
 
 from __future__ import annotations
 
@@ -30,8 +31,9 @@ def _router(procs: Procs, endpoint: str):
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    """One lockstep docking, recorded by `swarm record` and counted by this test's own subscriber, both on an
-    outside router the launcher's router connects to (so both subscribe before the run starts)."""
+    """One lockstep docking launched with `--record` (its recorder child is subscribed before the run
+    starts), counted by this test's own subscriber on an outside router that the launcher's router connects
+    to (subscribed before the launch)."""
     d = tmp_path_factory.mktemp("rec")
     ns, ep = f"rec-{free_port()}", loopback(free_port())
     keys = Keys(ns)
@@ -46,16 +48,14 @@ def recorded(tmp_path_factory):
         _router(procs, ep)
         with open_session(ZenohArgs(mode="client", connect=(ep,))) as session:
             session.declare_subscriber(keys.everything(), count)
-            rec = procs.start([*PY, "record", str(d / "run.mcap"), "--until-end", "--namespace", ns,
-                               "--mode", "client", "--connect", ep])  # fmt: skip
-            rec.wait_for_line(r"^recording ", 60.0)
             launch = procs.start([*PY, "launch", "docking", "--headless", "--until-docked", "--namespace", ns,
-                                  "--connect", ep, "--listen", loopback(free_port())])  # fmt: skip
+                                  "--connect", ep, "--listen", loopback(free_port()),
+                                  "--record", str(d / "run.mcap")])  # fmt: skip
             assert launch.wait(300.0) == 0, launch.output()
-            assert rec.wait(60.0) == 0, rec.output()
             with lock:
                 seen = dict(counts)
-    return {"path": d / "run.mcap", "counts": seen, "ns": ns, "dir": d, "recorder": rec.output()}
+    assert "recording to" in launch.output()
+    return {"path": d / "run.mcap", "counts": seen, "ns": ns, "dir": d}
 
 
 def test_every_key_on_the_wire_has_its_channel_and_its_count(recorded):
