@@ -426,6 +426,8 @@ BAD_FLAGS = [
     (["--set", "uwb.sigma_m=-1"], "uwb.sigma_m"),
     ([VPP, "0"], f"{VPP} must be an integer in 1..64, got 0"),
     ([VPP, "2", "--secure"], f"{VPP} > 1 and --secure: an agent host would need every hosted vehicle's"),
+    (["--record", "run.txt"], "--record: the recording's name must end in .mcap, got 'run.txt'"),
+    (["--record", "/nowhere/run.mcap"], "--record: no such directory '/nowhere'"),
 ]
 
 
