@@ -59,6 +59,10 @@ from swarm.transport.session import declare_liveliness, subscribe_decoded, watch
 _LOG = logging.getLogger("swarm.agent")
 
 _OUTCOMES = ("accepted", "rejected", "refused")
+END_DRAIN_S = 5.0
+"""After the world's stopped clock at tick ``k``, a lockstep agent processes the ticks up to ``k`` (their
+samples may come after the stopped clock, on other subscribers' threads, or all at once from a recording),
+and gives up on them after this long without a complete tick [s]."""
 _KINDS = {
     "range": MeasKind.RANGE,
     "features": MeasKind.FEATURES,
@@ -126,6 +130,7 @@ class AgentProcess:
         self._mode = "HOLD" if self.chaser else "STATION"
         self._started = threading.Event()
         self._ended = threading.Event()
+        self._end_tick = 0
         self._init_ranges: dict[int, float] = {}
         self._init_q: np.ndarray | None = None
         self._last_decision_t: float | None = None
@@ -148,6 +153,7 @@ class AgentProcess:
         if msg.state in ("running", "paused"):
             self._started.set()
         elif msg.state == "stopped" and self._started.is_set():
+            self._end_tick = msg.tick
             self._ended.set()
 
     def _on_world_event(self, _key: str, msg: Event) -> None:
@@ -330,6 +336,9 @@ class AgentProcess:
         self._publish_command(k)
         self.ticks += 1
 
+    def _done_through(self, k: int) -> bool:
+        return self._last_tick is not None and self._last_tick >= k
+
     def _set_target(self, e: Estimate) -> None:
         self.agent.set_target_estimate(_target(e))
 
@@ -338,7 +347,10 @@ class AgentProcess:
             while not (self._started.wait(0.05) or self.stop.is_set()):
                 pass
         waited_since = time.monotonic()
-        while not self.stop.is_set() and not self._ended.is_set():
+        while not self.stop.is_set():
+            if self._ended.is_set() and (self._done_through(self._end_tick) or
+                                         time.monotonic() - waited_since >= END_DRAIN_S):  # fmt: skip
+                break  # the world stopped at tick k: every tick up to k processed (or none came for a while)
             inp = self.assembler.next_tick(0.05)
             if inp is None:
                 if time.monotonic() - waited_since > 5.0:

@@ -42,6 +42,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="a log folder (imu.csv, uwb.csv, anchors.csv, ...), or a recording of `swarm record`",
     )
     p.add_argument(
+        "--lockstep",
+        default=None,
+        metavar="ID",
+        help="FILE.mcap: pace the replay by agent ID's commands (tick k once it has sent command(k-1))",
+    )
+    p.add_argument(
         "--only",
         default=None,
         metavar="KEY,KEY",
@@ -201,7 +207,8 @@ def _publish_recording(args: argparse.Namespace) -> int:
     time; ``--speed inf``: as fast as possible)."""
     import threading
 
-    from swarm.transport.recording import read_recording, replay_recording
+    from swarm.transport.keys import Keys, check_id
+    from swarm.transport.recording import LockstepAck, read_recording, replay_recording
     from swarm.transport.session import open_session, zenoh_args_from
 
     messages, _meta = read_recording(args.log)
@@ -209,8 +216,12 @@ def _publish_recording(args: argparse.Namespace) -> int:
     stop = threading.Event()
     with open_session(zenoh_args_from(args)) as session:
         print(f"replaying {args.log}: {len(messages)} messages at {args.speed:g}x", flush=True)
+        ack = None
+        if args.lockstep is not None:
+            check_id(args.lockstep, "--lockstep")
+            ack = LockstepAck(session, Keys(args.namespace).command(args.lockstep))
         try:
-            sent = replay_recording(messages, session, args.speed, stop, only)
+            sent = replay_recording(messages, session, args.speed, stop, only, ack)
         except KeyboardInterrupt:
             stop.set()
             return 130

@@ -174,10 +174,57 @@ def read_recording(path: str | Path) -> tuple[list[RecordedMessage], dict[str, d
     return [msgs[i] for i in order], meta
 
 
-def replay_recording(messages: list[RecordedMessage], session, speed: float, stop: threading.Event,
-                     only: tuple[str, ...] = ()) -> dict[str, int]:  # fmt: skip
+def _tick(payload: bytes) -> int | None:
+    try:
+        obj = msgpack.unpackb(payload, raw=False)
+    except Exception:  # a garbage sample has no tick
+        return None
+    t = obj.get("tick") if isinstance(obj, dict) else None
+    return t if isinstance(t, int) and not isinstance(t, bool) and t >= 0 else None
+
+
+class LockstepAck:
+    """The lockstep barrier of a replay into one agent: the agent's ``command(k)`` says it has processed tick
+    ``k`` (as the world's barrier, docs/protocol.md, "Clocks and lockstep")."""
+
+    def __init__(self, session, command_key: str, timeout_s: float = 30.0) -> None:
+        self.done = -1
+        self.timeout_s = timeout_s
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(command_key, self._on)
+
+    def _on(self, sample) -> None:
+        k = _tick(sample.payload.to_bytes())
+        if k is not None:
+            with self._cond:
+                if k > self.done:
+                    self.done = k
+                    self._cond.notify_all()
+
+    def wait(self, k: int, stop: threading.Event) -> None:
+        """Until tick ``k`` is processed; LogError after ``timeout_s`` without it."""
+        deadline = time.monotonic() + self.timeout_s
+        with self._cond:
+            while self.done < k and not stop.is_set():
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise LogError(f"replay: no command({k}) from the agent within {self.timeout_s:g} s "
+                                   f"(its last: command({self.done}))")  # fmt: skip
+                self._cond.wait(min(left, 0.1))
+
+
+def replay_recording(
+    messages: list[RecordedMessage],
+    session,
+    speed: float,
+    stop: threading.Event,
+    only: tuple[str, ...] = (),
+    ack: LockstepAck | None = None,
+) -> dict[str, int]:
     """Publish ``messages`` on their keys (module docstring); ``only``: key patterns (``fnmatch``, e.g.
-    ``tpods/agent/chaser/imu`` or ``*/imu``) to keep. Returns the count sent per key."""
+    ``tpods/agent/chaser/imu`` or ``*/imu``) to keep. With ``ack`` (a lockstep replay into one agent), a
+    message of tick ``k`` leaves only once the agent has processed tick ``k - 1``: nothing is sent faster
+    than the agent takes it. Returns the count sent per key."""
     from swarm.transport.process import declare_reliable
 
     pubs: dict[str, object] = {}
@@ -195,6 +242,10 @@ def replay_recording(messages: list[RecordedMessage], session, speed: float, sto
             delay = due - time.monotonic()
             if delay > 0:
                 stop.wait(delay)
+        if ack is not None:
+            k = _tick(m.payload)
+            if k is not None and k > 0:
+                ack.wait(k - 1, stop)
         pub = pubs.get(m.key)
         if pub is None:
             pub = pubs[m.key] = declare_reliable(session, m.key)
