@@ -45,6 +45,10 @@ BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
         _bench("replay", presets=True),
         "a 60 s UWB + IMU log through the IMU-driven filter; its step against the tandem's",
     ),
+    "record": (
+        _bench("record", presets=True),
+        "what --record costs a 4-pair realtime swarm (CPU with and without the MCAP recorder)",
+    ),
     "sim": (_bench("sim", presets=False), "one in-process docking: real-time factor and profile"),
     "transport": (
         _bench("transport", presets=True),

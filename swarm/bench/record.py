@@ -1,0 +1,85 @@
+"""``swarm bench record``: what recording costs a running swarm (issue 16: at most 5 % CPU on a 4-pair
+realtime run).
+
+The same launch twice, ``swarm launch docking --agents P --clock realtime`` for a fixed simulated span,
+without and with ``--record``; the CPU of the whole swarm is the launcher's and every process it started
+and reaped (``os.wait4`` on the launcher: its own and its children's user + system time). The overhead is
+the difference over the run without recording, the recorder's CPU included. One run each, interleaved as
+without, with: the machine's noise is in the number; repeat on a quiet machine.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from swarm.transport.session import free_loopback_endpoint
+
+FULL = {"pairs": 4, "clock": "realtime", "span_s": 30.0}
+QUICK = {"pairs": 1, "clock": "scaled:5", "span_s": 10.0}
+
+
+def _launch(pairs: int, clock: str, span_s: float, record: Path | None) -> dict:
+    args = [
+        sys.executable,
+        "-m",
+        "swarm.cli.main",
+        "launch",
+        "docking",
+        "--headless",
+        "--until-docked",
+        "--agents",
+        str(pairs),
+        "--clock",
+        clock,
+        "--set",
+        f"sim.max_duration_s={span_s}",
+        "--listen",
+        free_loopback_endpoint(),
+    ]
+    if record is not None:
+        args += ["--record", str(record)]
+    t0 = time.monotonic()
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _, status, ru = os.wait4(proc.pid, 0)
+    wall = time.monotonic() - t0
+    return {
+        "cpu_s": ru.ru_utime + ru.ru_stime,
+        "wall_s": wall,
+        "status": os.waitstatus_to_exitcode(status),
+        "file_mb": record.stat().st_size / 1e6 if record is not None and record.exists() else None,
+    }
+
+
+def run(preset: dict) -> dict:
+    with tempfile.TemporaryDirectory(prefix="swarm-bench-record-") as d:
+        plain = _launch(preset["pairs"], preset["clock"], preset["span_s"], None)
+        recorded = _launch(preset["pairs"], preset["clock"], preset["span_s"], Path(d) / "run.mcap")
+    return {
+        "bench": "record",
+        **preset,
+        "without": plain,
+        "with": recorded,
+        "overhead": (recorded["cpu_s"] - plain["cpu_s"]) / plain["cpu_s"],
+        "target_overhead": 0.05,
+    }
+
+
+def format_report(r: dict) -> str:
+    w, o = r["with"], r["without"]
+    met = r["overhead"] <= r["target_overhead"]
+    return "\n".join(
+        [
+            f"swarm launch docking --agents {r['pairs']} --clock {r['clock']}, {r['span_s']:g} s simulated, "
+            "CPU of the launcher and all its processes:",
+            f"  without recording {o['cpu_s']:.1f} s CPU ({o['wall_s']:.1f} s wall)",
+            f"  with --record     {w['cpu_s']:.1f} s CPU ({w['wall_s']:.1f} s wall), "
+            f"file {w['file_mb'] or 0:.1f} MB",
+            f"  overhead {r['overhead']:+.1%} "
+            f"(goal <= {r['target_overhead']:.0%}: {'met' if met else 'NOT met'})",
+        ]
+    )

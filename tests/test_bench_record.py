@@ -1,0 +1,21 @@
+"""``swarm bench record`` launches a swarm with and without --record and reports the CPU difference (no
+timing assertion: the numbers are checked for what they must be whatever the machine's load)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+
+def test_bench_record_measures_both_launches(tmp_path):
+    out = tmp_path / "record.json"
+    args = [sys.executable, "-m", "swarm.cli.main", "bench", "record", "--quick", "--json", str(out)]
+    r = subprocess.run(args, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    rec = json.loads(out.read_text())
+    for case in ("without", "with"):
+        assert rec[case]["status"] == 0 and rec[case]["cpu_s"] > 1.0  # a whole swarm's CPU, children included
+    assert rec["with"]["file_mb"] > 0.5 and rec["without"]["file_mb"] is None
+    assert rec["overhead"] == (rec["with"]["cpu_s"] - rec["without"]["cpu_s"]) / rec["without"]["cpu_s"]
+    assert "overhead" in r.stdout
