@@ -16,6 +16,6 @@ def test_bench_record_measures_both_launches(tmp_path):
     rec = json.loads(out.read_text())
     for case in ("without", "with"):
         assert rec[case]["status"] == 0 and rec[case]["cpu_s"] > 1.0  # a whole swarm's CPU, children included
-    assert rec["with"]["file_mb"] > 0.5 and rec["without"]["file_mb"] is None
+    assert rec["with"]["file_mb"] > 0.1 and rec["without"]["file_mb"] is None
     assert rec["overhead"] == (rec["with"]["cpu_s"] - rec["without"]["cpu_s"]) / rec["without"]["cpu_s"]
     assert "overhead" in r.stdout

@@ -20,7 +20,7 @@ from pathlib import Path
 from swarm.transport.session import free_loopback_endpoint
 
 FULL = {"pairs": 4, "clock": "realtime", "span_s": 30.0}
-QUICK = {"pairs": 1, "clock": "scaled:5", "span_s": 10.0}
+QUICK = {"pairs": 1, "clock": "scaled:10", "span_s": 4.0}
 
 
 def _launch(pairs: int, clock: str, span_s: float, record: Path | None) -> dict:
