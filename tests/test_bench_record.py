@@ -15,7 +15,10 @@ def test_bench_record_measures_both_launches(tmp_path):
     assert r.returncode == 0, r.stderr
     rec = json.loads(out.read_text())
     for case in ("without", "with"):
-        assert rec[case]["status"] == 0 and rec[case]["cpu_s"] > 1.0  # a whole swarm's CPU, children included
+        # 0: docked within the span, 1: the span ended first (the quick preset's 4 s); a crash is neither
+        assert (
+            rec[case]["status"] in (0, 1) and rec[case]["cpu_s"] > 1.0
+        )  # the swarm's CPU, children included
     assert rec["with"]["file_mb"] > 0.1 and rec["without"]["file_mb"] is None
     assert rec["overhead"] == (rec["with"]["cpu_s"] - rec["without"]["cpu_s"]) / rec["without"]["cpu_s"]
     assert "overhead" in r.stdout

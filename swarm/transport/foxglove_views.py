@@ -5,7 +5,8 @@ well-known schemas, logged to a ``foxglove.Context`` whose sinks are a live WebS
 * every key: a channel of that topic, ``message_encoding`` ``msgpack`` with a schema named after its message
   type (``tpods.Truth``; empty: docs/protocol.md is the schema), the payload byte for byte;
 * ``/tf`` (``foxglove.FrameTransforms``): each vehicle's true pose (frame ``<id>/truth``) and estimated pose
-  (``<id>/estimate``) in frame ``nav``, from its ``truth`` and ``estimate`` messages;
+  (``<id>/estimate``) in frame ``nav``, from its ``truth`` and ``estimate`` messages, at most
+  ``tf_rate_hz`` per frame (a view for the eye; every sample is in the raw channels);
 * ``/events`` (``foxglove.Log``): every event, the vehicle's or the run's, as a log line;
 * ``/scene`` (``foxglove.SceneUpdate``): the UWB anchors as spheres in ``nav``.
 
@@ -58,8 +59,10 @@ class SwarmViews:
     """Log a swarm's samples (key, payload, swarm time) on Foxglove channels of ``context`` (module
     docstring)."""
 
-    def __init__(self, context: foxglove.Context, keys: Keys) -> None:
+    def __init__(self, context: foxglove.Context, keys: Keys, tf_rate_hz: float = 20.0) -> None:
         self.ctx, self.keys = context, keys
+        self.tf_period_ns = round(1e9 / tf_rate_hz)
+        self._tf_last: dict[str, int] = {}
         self.raw: dict[str, foxglove.Channel] = {}
         self.tf = FrameTransformsChannel("/tf", context=context)
         self.events = LogChannel("/events", context=context)
@@ -82,6 +85,10 @@ class SwarmViews:
             return
         kind, vid = parsed
         if kind in ("truth", "estimate"):
+            last = self._tf_last.get(key)
+            if last is not None and 0 <= log_time_ns - last < self.tf_period_ns:
+                return  # decimated: the view at tf_rate_hz
+            self._tf_last[key] = log_time_ns
             msg = safe_decode(payload, Truth if kind == "truth" else Estimate, key, self.drops)
             if msg is not None:
                 p, q = msg.p_nav, msg.q_nav_body
