@@ -108,10 +108,9 @@ def _run_landing(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     from swarm.montecarlo.campaign import CampaignSpec, read_manifest, run_campaign
     from swarm.montecarlo.report import finite_or_null, write_report
-    from swarm.sim.landing import SCENARIO_DIR, is_landing_file
+    from swarm.sim.landing import is_landing_scenario
 
-    path = Path(args.scenario)
-    if is_landing_file(path if path.suffix or path.exists() else SCENARIO_DIR / f"{args.scenario}.toml"):
+    if is_landing_scenario(args.scenario):
         return _run_landing(args)
     sc = load_from_args(args)
     if args.workers is not None and args.workers < 1:

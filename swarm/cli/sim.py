@@ -97,6 +97,17 @@ def print_landing(res: dict) -> None:
     )
 
 
+def _write_json(path: Path | None, res: dict) -> None:
+    """``--json FILE``: the run's summary (and series), or a clear error naming the file."""
+    if path is None:
+        return
+    try:
+        path.write_text(json.dumps(res, indent=1))
+    except OSError as exc:
+        raise ConfigError(f"--json: cannot write {str(path)!r}: {exc}") from None
+    print(f"  summary written to {path}")
+
+
 def _run_landing(args: argparse.Namespace) -> int:
     from swarm.config import parse_override
     from swarm.sim.landing import load_landing, run_landing
@@ -106,12 +117,7 @@ def _run_landing(args: argparse.Namespace) -> int:
     sc = load_landing(args.scenario, dict(parse_override(text) for text in args.overrides))
     res = run_landing(sc, args.policy, args.seed, record_series=not args.no_series or args.json is not None)
     print_landing(res)
-    if args.json is not None:
-        try:
-            args.json.write_text(json.dumps(res, indent=1))
-        except OSError as exc:
-            raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc}") from None
-        print(f"  summary written to {args.json}")
+    _write_json(args.json, res)
     if args.plot is not None:
         raise ConfigError("--plot: not drawn for a landing yet (the series is in --json)")
     return 0 if res["landed"] or res["aborted"] else 1
@@ -119,21 +125,15 @@ def _run_landing(args: argparse.Namespace) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from swarm.sim.docking import run_docking
-    from swarm.sim.landing import SCENARIO_DIR, is_landing_file
+    from swarm.sim.landing import is_landing_scenario
 
-    path = Path(args.scenario)
-    if is_landing_file(path if path.suffix or path.exists() else SCENARIO_DIR / f"{args.scenario}.toml"):
+    if is_landing_scenario(args.scenario):
         return _run_landing(args)
     sc = load_from_args(args).with_pairs(args.agents)
     record = not args.no_series or args.plot is not None or args.json is not None
     res = run_docking(sc, args.policy, args.seed, record_series=record)
     print_summary(res)
-    if args.json is not None:
-        try:
-            args.json.write_text(json.dumps(res, indent=1))
-        except OSError as exc:
-            raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc}") from None
-        print(f"  summary written to {args.json}")
+    _write_json(args.json, res)
     if args.plot is not None:
         from swarm.sim.plot import plot_run
 

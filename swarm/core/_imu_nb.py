@@ -432,54 +432,11 @@ def pad_row(X, p_pad, cam_pos, R_bc, H):
 
 
 @njit(cache=True)
-def update_pad_one(X, P, p_pad, cam_pos, R_bc, t_meas, R_meas, gate, out):
-    """The pad's position in the camera frame ``t_meas`` (3,) with covariance ``R_meas`` (3, 3) (the
-    translation block of the PnP covariance, :mod:`swarm.core.pad_vision`), of a pad surveyed at ``p_pad``
-    in nav: gated on the squared Mahalanobis distance (``gate``, chi-square(3)), then a Kalman update with
-    the Joseph form. ``out`` receives ``(outcome, d2)``; returns the outcome."""
-    out[1] = 0.0
-    for i in range(3):
-        if not np.isfinite(t_meas[i]):
-            out[0] = REFUSED
-            return REFUSED
+def _vector_update(X, P, H, nu, R_meas, gate, out):
+    """A vector measurement's update, shared by the pad and position fixes: innovation ``nu`` with Jacobian
+    ``H`` and noise ``R_meas``, gated on its squared Mahalanobis distance, then the Joseph form and the
+    injection. ``out[1]`` receives the distance; returns the outcome (also ``out[0]``)."""
     n = P.shape[0]
-    H = np.zeros((3, n))
-    h = pad_row(X, p_pad, cam_pos, R_bc, H)
-    nu = t_meas - h
-    PHt = P @ H.T
-    S = H @ PHt + R_meas
-    d2 = nu @ np.linalg.solve(S, nu)
-    out[1] = d2
-    if not (np.isfinite(d2) and d2 >= 0.0):
-        out[0] = REFUSED
-        return REFUSED
-    if d2 > gate:
-        out[0] = REJECTED
-        return REJECTED
-    K = np.linalg.solve(S, PHt.T).T
-    A = np.eye(n) - K @ H
-    Pn = A @ P @ A.T + K @ R_meas @ K.T
-    P[:, :] = 0.5 * (Pn + Pn.T)
-    dx = K @ nu
-    inject(X, P, dx)
-    out[0] = ACCEPTED
-    return ACCEPTED
-
-
-@njit(cache=True)
-def update_position_one(X, P, z, R_meas, gate, out):
-    """A position fix ``z`` (3,) [m, nav] with covariance ``R_meas`` (3, 3) (a GNSS receiver): gated on its
-    squared Mahalanobis distance, then a Joseph-form update. ``out`` receives ``(outcome, d2)``."""
-    out[1] = 0.0
-    for i in range(3):
-        if not np.isfinite(z[i]):
-            out[0] = REFUSED
-            return REFUSED
-    n = P.shape[0]
-    H = np.zeros((3, n))
-    for i in range(3):
-        H[i, EP + i] = 1.0
-    nu = z - X[XP : XP + 3]
     PHt = P @ H.T
     S = H @ PHt + R_meas
     d2 = nu @ np.linalg.solve(S, nu)
@@ -497,3 +454,38 @@ def update_position_one(X, P, z, R_meas, gate, out):
     inject(X, P, K @ nu)
     out[0] = ACCEPTED
     return ACCEPTED
+
+
+@njit(cache=True)
+def update_pad_one(X, P, p_pad, cam_pos, R_bc, t_meas, R_meas, gate, out):
+    """The pad's position in the camera frame ``t_meas`` (3,) with covariance ``R_meas`` (3, 3) (the
+    translation block of the PnP covariance, :mod:`swarm.core.pad_vision`), of a pad surveyed at ``p_pad``
+    in nav: gated on the squared Mahalanobis distance (``gate``, chi-square(3)), then a Kalman update with
+    the Joseph form. ``out`` receives ``(outcome, d2)``; returns the outcome."""
+    out[1] = 0.0
+    for i in range(3):
+        if not np.isfinite(t_meas[i]):
+            out[0] = REFUSED
+            return REFUSED
+    n = P.shape[0]
+    H = np.zeros((3, n))
+    h = pad_row(X, p_pad, cam_pos, R_bc, H)
+    nu = t_meas - h
+    return _vector_update(X, P, H, nu, R_meas, gate, out)
+
+
+@njit(cache=True)
+def update_position_one(X, P, z, R_meas, gate, out):
+    """A position fix ``z`` (3,) [m, nav] with covariance ``R_meas`` (3, 3) (a GNSS receiver): gated on its
+    squared Mahalanobis distance, then a Joseph-form update. ``out`` receives ``(outcome, d2)``."""
+    out[1] = 0.0
+    for i in range(3):
+        if not np.isfinite(z[i]):
+            out[0] = REFUSED
+            return REFUSED
+    n = P.shape[0]
+    H = np.zeros((3, n))
+    for i in range(3):
+        H[i, EP + i] = 1.0
+    nu = z - X[XP : XP + 3]
+    return _vector_update(X, P, H, nu, R_meas, gate, out)

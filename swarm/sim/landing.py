@@ -184,22 +184,25 @@ class LandingScenario:
             raise ConfigError(f"dt_s must be in (0, 0.02], got {self.dt_s!r}")
 
 
-def is_landing_file(path: Path) -> bool:
-    """Whether a scenario file is a landing one (``mission = "landing"``)."""
+def _scenario_path(name_or_path) -> Path:
+    """A scenario file, or a bundled one by name (as :func:`swarm.scenario.load_scenario` finds them)."""
+    path = Path(name_or_path)
+    return SCENARIO_DIR / f"{name_or_path}.toml" if not path.suffix and not path.exists() else path
+
+
+def is_landing_scenario(name_or_path) -> bool:
+    """Whether a scenario (a file, or a bundled one by name) is a landing one (``mission = "landing"``)."""
     import tomllib
 
     try:
-        with open(path, "rb") as fh:
+        with open(_scenario_path(name_or_path), "rb") as fh:
             return tomllib.load(fh).get("mission") == "landing"
     except (OSError, tomllib.TOMLDecodeError):
         return False
 
 
 def load_landing(name_or_path, overrides: dict | None = None) -> LandingScenario:
-    path = Path(name_or_path)
-    if not path.suffix and not path.exists():
-        path = SCENARIO_DIR / f"{name_or_path}.toml"
-    return load_toml(LandingScenario, path, overrides)
+    return load_toml(LandingScenario, _scenario_path(name_or_path), overrides)
 
 
 def _specific_force(v_before, x, dt: float, g: float) -> np.ndarray:

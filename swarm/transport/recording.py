@@ -184,11 +184,11 @@ def read_recording(path: str | Path) -> tuple[list[RecordedMessage], dict[str, d
 
 
 def _tick(payload: bytes) -> int | None:
+    """The ``tick`` field of a msgpack-map payload, None if it has none (or is not a map)."""
     try:
-        obj = msgpack.unpackb(payload, raw=False)
+        t = _STAMP.decode(payload).tick
     except Exception:  # a garbage sample has no tick
         return None
-    t = obj.get("tick") if isinstance(obj, dict) else None
     return t if isinstance(t, int) and not isinstance(t, bool) and t >= 0 else None
 
 

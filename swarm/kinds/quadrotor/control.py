@@ -26,7 +26,7 @@ import math
 import numba
 import numpy as np
 
-from swarm.kinds.quadrotor.dynamics import U_N, mixer_matrix
+from swarm.kinds.quadrotor.dynamics import U_N, _rotmat, mixer_matrix
 from swarm.kinds.quadrotor.params import QuadrotorParams
 
 (CP_MASS, CP_J, CP_G, CP_KP_XY, CP_KP_Z, CP_KV_XY, CP_KI_XY, CP_KV_Z, CP_KI_Z, CP_VMAX_XY, CP_VMAX_Z,
@@ -66,16 +66,6 @@ def control_row(p: QuadrotorParams) -> np.ndarray:
     cp[CP_KT], cp[CP_OMIN], cp[CP_OMAX] = a.thrust_coeff, a.omega_min_rad_s, a.omega_max_rad_s
     cp[CP_MINV : CP_MINV + 16] = np.linalg.inv(mixer_matrix(a)).ravel()
     return cp
-
-
-@numba.njit(cache=True)
-def _rotmat(q):
-    x, y, z, w = q[0], q[1], q[2], q[3]
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])  # fmt: skip
 
 
 @numba.njit(cache=True)
