@@ -110,6 +110,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="S",
         help="flight length [s] (default 60)",
     )
+    s.add_argument(
+        "--vision",
+        type=positive_float("--vision"),
+        default=None,
+        metavar="HZ",
+        help="add a downward camera seeing floor markers at HZ frames per second (vision.csv, markers.csv)",
+    )
     s.set_defaults(func=run_synth)
 
 
@@ -117,17 +124,17 @@ def run_synth(args: argparse.Namespace) -> int:
     from swarm.errors import ConfigError
     from swarm.logs.synthetic import SyntheticSpec, make_log
 
-    spec = SyntheticSpec(duration_s=args.duration)
+    spec = SyntheticSpec(duration_s=args.duration, vision_rate_hz=args.vision or 0.0)
     if args.duration <= spec.static_s + spec.takeoff_s:
         raise ConfigError(
             f"--duration must exceed the static segment and take-off ({spec.static_s + spec.takeoff_s:g} s), "
             f"got {args.duration:g}"
         )
     make_log(args.out, args.seed, spec)
-    print(
-        f"wrote {args.out}/ (imu.csv, uwb.csv, anchors.csv, truth.csv, log.toml): {args.duration:g} s, "
-        f"seed {args.seed}"
+    files = "imu.csv, uwb.csv, anchors.csv, truth.csv, " + (
+        "vision.csv, markers.csv, " if args.vision else ""
     )
+    print(f"wrote {args.out}/ ({files}log.toml): {args.duration:g} s, seed {args.seed}")
     return 0
 
 
@@ -176,6 +183,15 @@ def run(args: argparse.Namespace) -> int:
         f"  range NIS mean {_fmt(s['nis_mean'])} (1 expected), inside [{lo1:.3f}, {hi1:.2f}] "
         f"{(s['nis_in_band_share'] or 0):.0%} of accepted ranges"
     )
+    v = s.get("vision")
+    if v is not None and v["used"]:
+        print(
+            f"  vision: {v['accepted']} of {v['detections']} detections accepted, {v['rejected']} rejected; "
+            f"NIS mean {_fmt(v['nis_mean'])} (3 expected), inside [{v['nis_band'][0]:.3f}, "
+            f"{v['nis_band'][1]:.2f}] {(v['nis_in_band_share'] or 0):.0%} of accepted"
+        )
+    elif v is not None:
+        print(f"  vision: {v['detections']} detections not used (vision.enabled = false)")
     print("  anchor  accepted  rejected  refused  rejected share  range bias [m]")
     for a, c in s["counts_by_anchor"].items():
         share = s["rejected_share_by_anchor"][a]

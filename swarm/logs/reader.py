@@ -32,6 +32,9 @@ IMU_COLUMNS = (
 UWB_COLUMNS = ("t_s", "anchor_id", "range_m")
 ANCHOR_COLUMNS = ("anchor_id", "x_m", "y_m", "z_m")
 TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "qx", "qy", "qz", "qw")
+VISION_COLUMNS = ("t_s", "marker_id", "x_m", "y_m", "z_m")
+VISION_SIGMA_COLUMNS = ("sigma_x_m", "sigma_y_m", "sigma_z_m")
+MARKER_COLUMNS = ("marker_id", "x_m", "y_m", "z_m")
 QUAT_NORM_TOL = 1e-3
 
 
@@ -50,6 +53,42 @@ class UwbLog:
             raise ConfigError(f"uwb.sigma_m must be a finite number > 0, got {self.sigma_m!r}")
         if not (math.isfinite(self.sigma_floor_m) and self.sigma_floor_m > 0):
             raise ConfigError(f"uwb.sigma_floor_m must be a finite number > 0, got {self.sigma_floor_m!r}")
+
+
+@dataclass(frozen=True)
+class VisionLog:
+    """``[vision]`` of log.toml: the camera that measured ``vision.csv``."""
+
+    enabled: bool = True
+    """Use ``vision.csv`` when the log has one (false: replay on IMU and UWB alone, to compare)."""
+    camera_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """The camera's optical centre from the IMU, body frame [m]."""
+    camera_quaternion: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    """Camera to body rotation, scalar-last (the default turns the optical axis, camera +z, to body -z: a
+    downward camera on a vehicle whose body z is up)."""
+    sigma_m: tuple[float, float, float] = (0.01, 0.01, 0.03)
+    """Standard deviation of each camera-frame axis [m] for rows without ``sigma_*`` columns."""
+    gate_probability: float = 0.9995
+    """Hard gate: chi-square(3) quantile of the squared Mahalanobis distance of a detection."""
+
+    def __post_init__(self) -> None:
+        q = self.camera_quaternion
+        if (
+            len(q) != 4
+            or not all(math.isfinite(v) for v in q)
+            or abs(math.sqrt(sum(v * v for v in q)) - 1) > 1e-6
+        ):
+            raise ConfigError(
+                f"vision.camera_quaternion must be 4 finite numbers of unit norm (x, y, z, w), got {q!r}"
+            )
+        if len(self.camera_position_m) != 3 or not all(math.isfinite(v) for v in self.camera_position_m):
+            raise ConfigError(
+                f"vision.camera_position_m must be 3 finite numbers, got {self.camera_position_m!r}"
+            )
+        if len(self.sigma_m) != 3 or not all(math.isfinite(v) and v > 0 for v in self.sigma_m):
+            raise ConfigError(f"vision.sigma_m must be 3 finite numbers > 0, got {self.sigma_m!r}")
+        if not 0.0 < self.gate_probability < 1.0:
+            raise ConfigError(f"vision.gate_probability must be in (0, 1), got {self.gate_probability!r}")
 
 
 @dataclass(frozen=True)
@@ -130,6 +169,7 @@ class LogConfig:
     name: str = ""
     estimator: ImuFilterParams = field(default_factory=ImuFilterParams)
     uwb: UwbLog = UwbLog()
+    vision: VisionLog = VisionLog()
     calibration: Calibration = Calibration()
     initial: Initial = Initial()
     recovery: Recovery = Recovery()
@@ -160,6 +200,16 @@ class Log:
     truth_t: np.ndarray | None = None
     truth_p: np.ndarray | None = None
     truth_q: np.ndarray | None = None
+    vision_t: np.ndarray | None = None
+    """Detection times (sorted); with :attr:`vision_marker`, :attr:`vision_xyz`, :attr:`vision_sigma`."""
+    vision_marker: np.ndarray | None = None
+    """Index into :attr:`markers_nav` of each detection."""
+    vision_xyz: np.ndarray | None = None
+    """The marker's position in the camera frame (n, 3) [m] (a PnP translation)."""
+    vision_sigma: np.ndarray | None = None
+    """Its standard deviation per camera axis (n, 3) [m]."""
+    marker_ids: np.ndarray | None = None
+    markers_nav: np.ndarray | None = None
     skipped: dict[str, int] = field(default_factory=dict)
     """Rows skipped per file (a NaN or empty sample value)."""
 
@@ -169,8 +219,9 @@ def _at(name: str, line: int, col: int, column: str) -> str:
     return f"{name}, line {line}, column {col + 1} ({column})"
 
 
-def _rows(path: Path, columns: tuple[str, ...], optional: bool = False):
-    """The header's positions of ``columns`` and the data rows ``(line number, fields)`` of a CSV file."""
+def _rows(path: Path, columns: tuple[str, ...], optional: bool = False, maybe: tuple[str, ...] = ()):
+    """The header's positions of ``columns`` (and of those of ``maybe`` it has) and the data rows ``(line
+    number, fields)`` of a CSV file."""
     name = path.name
     if not path.is_file():
         if optional:
@@ -198,6 +249,9 @@ def _rows(path: Path, columns: tuple[str, ...], optional: bool = False):
                 f"{name}, line {head_no}: missing column {c!r} (the header has {', '.join(header)})"
             )
         where[c] = header.index(c)
+    for c in maybe:
+        if c in header:
+            where[c] = header.index(c)
     rows = []
     for no, ln in lines[1:]:
         fields = next(csv.reader([ln]))
@@ -215,13 +269,16 @@ def _table(
     nan_ok: tuple[str, ...],
     skipped: dict[str, int],
     optional: bool = False,
+    maybe: tuple[str, ...] = (),
 ):
     """The columns as a float array (rows, len(columns)); a NaN or empty value in a ``nan_ok`` column skips
-    the row (counted), anywhere else it is an error naming line and column."""
-    got = _rows(path, columns, optional)
+    the row (counted), anywhere else it is an error naming line and column. The columns of ``maybe`` that
+    the header has follow ``columns``."""
+    got = _rows(path, columns, optional, maybe)
     if got is None:
-        return None, None
+        return None, None, None
     where, rows = got
+    columns = tuple(columns) + tuple(c for c in maybe if c in where)
     cols = [where[c] for c in columns]
     out = np.empty((len(rows), len(columns)))
     lines = np.empty(len(rows), dtype=np.int64)
@@ -247,6 +304,31 @@ def _table(
         lines[keep] = no
         keep += 1
     return out[:keep], lines[:keep], cols
+
+
+def _ids(name: str, what: str, ids: np.ndarray, lines: np.ndarray, col: int):
+    """Integer ids >= 0, each once: the ids and their index."""
+    for k, v in enumerate(ids):
+        if v != int(v) or v < 0:
+            raise LogError(f"{_at(name, lines[k], col, what + '_id')}: not an integer id >= 0: {float(v)!r}")
+    ids = ids.astype(np.int64)
+    if len(set(ids.tolist())) != len(ids):
+        dup = next(int(v) for v in ids if (ids == v).sum() > 1)
+        raise LogError(f"{name}: {what} {dup} is listed twice")
+    return ids, {int(v): k for k, v in enumerate(ids)}
+
+
+def _lookup(name: str, column: str, values: np.ndarray, lines, col: int, index: dict, ids, listing: str):
+    """The index of each id in ``values``; an unknown or non-integer id names its line and column."""
+    out = np.empty(len(values), dtype=np.int64)
+    for k, v in enumerate(values):
+        if v != int(v) or int(v) not in index:
+            raise LogError(
+                f"{_at(name, lines[k], col, column)}: unknown {column[:-3]} {v:g}; "
+                f"{listing} has {', '.join(str(i) for i in ids)}"
+            )
+        out[k] = index[int(v)]
+    return out
 
 
 def _monotonic(name: str, t: np.ndarray, lines: np.ndarray, col: int, strict: bool) -> None:
@@ -276,31 +358,13 @@ def read_log(directory: str | os.PathLike[str], overrides: dict[str, object] | N
         config = from_mapping(LogConfig, apply_overrides({}, overrides or {}))
     skipped: dict[str, int] = {}
     a, a_lines, a_cols = _table(d / "anchors.csv", ANCHOR_COLUMNS, (), skipped)
-    ids = a[:, 0]
-    for k, v in enumerate(ids):
-        if v != int(v) or v < 0:
-            raise LogError(
-                f"{_at('anchors.csv', a_lines[k], a_cols[0], 'anchor_id')}: not an integer id >= 0: "
-                f"{float(v)!r}"
-            )
-    ids = ids.astype(np.int64)
-    if len(set(ids.tolist())) != len(ids):
-        dup = next(int(v) for v in ids if (ids == v).sum() > 1)
-        raise LogError(f"anchors.csv: anchor {dup} is listed twice")
-    index = {int(v): k for k, v in enumerate(ids)}
+    ids, index = _ids("anchors.csv", "anchor", a[:, 0], a_lines, a_cols[0])
 
     imu, i_lines, i_cols = _table(d / "imu.csv", IMU_COLUMNS, IMU_COLUMNS[1:], skipped)
     _monotonic("imu.csv", imu[:, 0], i_lines, i_cols[0], strict=True)
     uwb, u_lines, u_cols = _table(d / "uwb.csv", UWB_COLUMNS, ("range_m",), skipped)
     _monotonic("uwb.csv", uwb[:, 0], u_lines, u_cols[0], strict=False)
-    anchor_index = np.empty(len(uwb), dtype=np.int64)
-    for k, v in enumerate(uwb[:, 1]):
-        if v != int(v) or int(v) not in index:
-            raise LogError(
-                f"{_at('uwb.csv', u_lines[k], u_cols[1], 'anchor_id')}: unknown anchor {v:g}; "
-                f"anchors.csv has {', '.join(str(i) for i in ids)}"
-            )
-        anchor_index[k] = index[int(v)]
+    anchor_index = _lookup("uwb.csv", "anchor_id", uwb[:, 1], u_lines, u_cols[1], index, ids, "anchors.csv")
     neg = np.flatnonzero(uwb[:, 2] < 0.0)
     if len(neg):
         k = int(neg[0])
@@ -337,4 +401,46 @@ def read_log(directory: str | os.PathLike[str], overrides: dict[str, object] | N
             truth[:, 1:4].copy(),
             truth[:, 4:8] / norms[:, None],
         )
+    _read_vision(d, log, skipped)
     return log
+
+
+def _read_vision(d: Path, log: Log, skipped: dict[str, int]) -> None:
+    """``vision.csv`` and its ``markers.csv`` into ``log`` (nothing without a ``vision.csv``)."""
+    vis, v_lines, v_cols = _table(
+        d / "vision.csv",
+        VISION_COLUMNS,
+        ("x_m", "y_m", "z_m", *VISION_SIGMA_COLUMNS),
+        skipped,
+        optional=True,
+        maybe=VISION_SIGMA_COLUMNS,
+    )
+    if vis is None:
+        return
+    if len(v_cols) not in (len(VISION_COLUMNS), len(VISION_COLUMNS) + 3):
+        raise LogError(
+            f"vision.csv: give all three of {', '.join(VISION_SIGMA_COLUMNS)} or none (then log.toml's "
+            "vision.sigma_m applies)"
+        )
+    if not (d / "markers.csv").is_file():
+        raise LogError("vision.csv: needs markers.csv (marker_id, x_m, y_m, z_m: the surveyed markers)")
+    mk, m_lines, m_cols = _table(d / "markers.csv", MARKER_COLUMNS, (), skipped)
+    mids, mindex = _ids("markers.csv", "marker", mk[:, 0], m_lines, m_cols[0])
+    _monotonic("vision.csv", vis[:, 0], v_lines, v_cols[0], strict=False)
+    marker = _lookup("vision.csv", "marker_id", vis[:, 1], v_lines, v_cols[1], mindex, mids, "markers.csv")
+    if vis.shape[1] == len(VISION_COLUMNS) + 3:
+        sig = vis[:, 5:8]
+        bad = np.argwhere(sig <= 0.0)
+        if len(bad):
+            k, c = int(bad[0, 0]), int(bad[0, 1])
+            raise LogError(
+                f"{_at('vision.csv', v_lines[k], v_cols[5 + c], VISION_SIGMA_COLUMNS[c])}: a standard "
+                f"deviation must be > 0, got {float(sig[k, c])!r}"
+            )
+    else:
+        sig = np.broadcast_to(np.asarray(log.config.vision.sigma_m, dtype=float), (len(vis), 3))
+    log.vision_t = vis[:, 0].copy()
+    log.vision_marker = marker
+    log.vision_xyz = vis[:, 2:5].copy()
+    log.vision_sigma = np.array(sig, dtype=float)
+    log.marker_ids, log.markers_nav = mids, mk[:, 1:4].copy()

@@ -48,6 +48,11 @@ class ReplayResult:
     gyro_bias: np.ndarray
     wall_s: float
     events: list[dict] = field(default_factory=list)
+    vision_outcome: np.ndarray | None = None
+    """Per ``vision.csv`` row: accepted, rejected, refused (:mod:`swarm.core._imu_nb`), -1 not used (older
+    than the filter, after the last sample, or ``vision.enabled = false``)."""
+    vision_d2: np.ndarray | None = None
+    """Per row: the squared Mahalanobis distance of the detection (NaN if not used)."""
 
     # ------------------------------------------------------------------------------------- against truth
 
@@ -97,6 +102,8 @@ class ReplayResult:
             "gyro_bias_rad_s": self.gyro_bias.tolist(),
             "events": self.events,
         }
+        if self.vision_outcome is not None:
+            out["vision"] = self._vision_summary()
         acc = self.nis_outcome == nb.ACCEPTED
         lo1, hi1 = chi2.ppf([(1 - BAND) / 2, (1 + BAND) / 2], 1)
         d2 = self.nis_d2[acc]
@@ -132,6 +139,31 @@ class ReplayResult:
                 }
             )
         return out
+
+    def _vision_summary(self) -> dict:
+        lg = self.log
+        o, d2 = self.vision_outcome, self.vision_d2
+        lo3, hi3 = chi2.ppf([(1 - BAND) / 2, (1 + BAND) / 2], 3)
+        acc = d2[o == nb.ACCEPTED]
+        by_marker = {}
+        for k, mid in enumerate(lg.marker_ids):
+            mine = lg.vision_marker == k
+            by_marker[str(int(mid))] = {
+                "accepted": int(np.sum(mine & (o == nb.ACCEPTED))),
+                "rejected": int(np.sum(mine & (o == nb.REJECTED))),
+            }
+        return {
+            "detections": len(o),
+            "used": bool(lg.config.vision.enabled),
+            "accepted": int(np.sum(o == nb.ACCEPTED)),
+            "rejected": int(np.sum(o == nb.REJECTED)),
+            "refused": int(np.sum(o == nb.REFUSED)),
+            "not_used": int(np.sum(o < 0)),
+            "nis_mean": float(acc.mean()) if len(acc) else None,
+            "nis_band": [float(lo3), float(hi3)],
+            "nis_in_band_share": float(((acc >= lo3) & (acc <= hi3)).mean()) if len(acc) else None,
+            "by_marker": by_marker,
+        }
 
     def series(self) -> tuple[list[str], np.ndarray]:
         """The estimate series: header and rows (``docs/logs.md``, ``estimate.csv``)."""
@@ -283,14 +315,16 @@ def replay_log(log: Log) -> ReplayResult:
     t_stop = faults.jump_at_s if faults.jump_at_s is not None else math.inf
     events: list[dict] = []
     X, P = f.X[0], f.P[0]
+    vision = _Vision(log) if log.vision_t is not None else None
     t0 = time.perf_counter()
     while True:
+        t_vis = vision.next_t() if vision is not None and cfg.vision.enabled else math.inf
         ev = nb.replay(
             X,
             P,
             f.prm,
             tf,
-            t_stop,
+            min(t_stop, t_vis),
             imu_t,
             gyro,
             acc,
@@ -319,6 +353,9 @@ def replay_log(log: Log) -> ReplayResult:
         )
         if ev == nb.EV_DONE:
             break
+        if ev == nb.EV_PAUSE and t_vis <= t_stop:  # a detection of vision.csv is next
+            vision.update(X, P, f.prm, tf, ST, gyro, acc)
+            continue
         if ev == nb.EV_PAUSE:  # the forced divergence of [faults]
             X[nb.XP : nb.XP + 3] += faults.jump_m
             P[0:3, :] = 0.0
@@ -358,7 +395,49 @@ def replay_log(log: Log) -> ReplayResult:
         f.gyro_bias[0].copy(),
         wall,
         events,
+        None if vision is None else vision.outcome,
+        None if vision is None else vision.d2,
     )
+
+
+class _Vision:
+    """The detections of ``vision.csv``, fed between the compiled loop's pauses: the loop stops before the
+    first sample after the next detection; the filter predicts to the detection's time with the held IMU
+    sample and takes the marker's position in the camera frame (:func:`swarm.core._imu_nb.update_pad_one`,
+    ``t = R_bc^T (R(q)^T (m - p) - c)``)."""
+
+    def __init__(self, log: Log) -> None:
+        v = log.config.vision
+        self.log = log
+        self.k = 0
+        self.cam = np.asarray(v.camera_position_m, dtype=float)
+        self.R_bc = np.ascontiguousarray(rot.quat_to_matrix(np.asarray(v.camera_quaternion, dtype=float)))
+        self.gate = float(chi2.ppf(v.gate_probability, 3))
+        n = len(log.vision_t)
+        self.outcome = np.full(n, -1, dtype=np.int64)
+        self.d2 = np.full(n, np.nan)
+        self.res = np.empty(2)
+
+    def next_t(self) -> float:
+        return float(self.log.vision_t[self.k]) if self.k < len(self.log.vision_t) else math.inf
+
+    def update(self, X, P, prm, tf, ST, gyro, acc) -> None:
+        lg, k = self.log, self.k
+        self.k += 1
+        t = float(lg.vision_t[k])
+        if t < tf[0]:  # older than the filter (before the first IMU sample): dropped, counted
+            ST[nb.ST_DROPPED] += 1
+            return
+        h = int(ST[nb.ST_HELD])
+        if h >= 0 and t > tf[0] and not nb.predict_one(X, P, gyro[h], acc[h], t - tf[0], prm):
+            ST[nb.ST_IMU_REFUSED] += 1
+        tf[0] = t
+        cov = np.diag(lg.vision_sigma[k] ** 2)
+        m = lg.markers_nav[lg.vision_marker[k]]
+        self.outcome[k] = nb.update_pad_one(
+            X, P, m, self.cam, self.R_bc, lg.vision_xyz[k], cov, self.gate, self.res
+        )
+        self.d2[k] = self.res[1]
 
 
 def _recover(f: ImuFilter, log: Log, cfg, t: float, win_rej, win_d2, last_range, last_range_t) -> dict:

@@ -11,6 +11,10 @@ turning slowly). From that trajectory, sampled exactly at each sensor's (jittere
   a per-anchor bias drawn in ``range_bias_m`` that steps once airborne and then drifts (random walk), white
   noise, lost exchanges, and one NLOS anchor whose ranges, once airborne, are long by an exponential excess
   most of the time;
+* with ``vision_rate_hz > 0``, a downward camera that sees the floor markers (a 3 x 3 grid, the pad at its
+  centre) inside its field of view: each marker's position in the camera frame with the noise a PnP of a
+  ``marker_size_m`` marker gives for ``pixel_sigma`` (lateral ``z s_px / f``, depth ``z^2 s_px / (f w)``),
+  written with its sigma, and now and then a misdetection off by ``outlier_m``;
 * the truth at 100 Hz, and a ``log.toml`` with the noise densities and the pad's position (the
   calibration segment), as a user would write it.
 
@@ -60,6 +64,15 @@ class SyntheticSpec:
     pad_m: tuple[float, float, float] = (0.0, 0.0, 0.05)
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.03)
     yaw0_deg: float = 30.0
+    vision_rate_hz: float = 0.0  # 0: no camera, no vision.csv
+    camera_position_m: tuple[float, float, float] = (0.0, 0.0, -0.02)
+    fov_half_deg: float = 40.0
+    vision_max_range_m: float = 4.0
+    focal_px: float = 400.0
+    pixel_sigma: float = 1.0
+    marker_size_m: float = 0.15
+    outlier_probability: float = 0.01
+    outlier_m: float = 0.5
 
 
 ANCHORS = np.array(
@@ -75,6 +88,16 @@ ANCHORS = np.array(
     ]
 )
 """Eight anchors in the corners of an 8 x 6 x 3 m room, nav frame (z up)."""
+
+R_BODY_CAM = np.diag([1.0, -1.0, -1.0])
+"""Camera to body of the downward camera: optical axis (camera +z) along body -z, image x along body x."""
+
+
+def markers(spec: SyntheticSpec) -> np.ndarray:
+    """Nine floor markers, nav [m]: a 3 x 3 grid of 2.5 x 1.8 m, the pad's marker at its centre."""
+    g = np.array([[x, y, 0.0] for y in (-1.8, 0.0, 1.8) for x in (-2.5, 0.0, 2.5)])
+    g[4] = spec.pad_m
+    return g
 
 
 def _blend(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
@@ -205,6 +228,16 @@ def make_log(directory, seed: int = 0, spec: SyntheticSpec | None = None) -> dic
     pt, _, qt, _, _ = truth_at(spec, t_truth)
     _write(d / "truth.csv", "t_s,x_m,y_m,z_m,qx,qy,qz,qw", np.column_stack([t_truth, pt, qt]), "%.7f")
 
+    vision_toml = ""
+    outliers = np.zeros(0, dtype=np.int64)
+    if spec.vision_rate_hz > 0:
+        outliers = _write_vision(d, spec, rng)
+        cam = ", ".join(f"{v:g}" for v in spec.camera_position_m)
+        vision_toml = f"""
+[vision]
+camera_position_m = [{cam}]
+camera_quaternion = [1.0, 0.0, 0.0, 0.0]   # camera +z along body -z: looking down
+"""
     pad = ", ".join(f"{v:g}" for v in spec.pad_m)
     lever = ", ".join(f"{v:g}" for v in spec.lever_arm_m)
     (
@@ -231,7 +264,7 @@ position_m = [{pad}]
 sigma_position_m = 0.02
 yaw_deg = {spec.yaw0_deg:g}
 sigma_range_bias_m = {max(spec.range_bias_step_m, 0.03):g}
-""")  # noqa: E501
+{vision_toml}""")  # noqa: E501
     return {
         "accel_bias": ba0,
         "gyro_bias": bg0,
@@ -240,4 +273,44 @@ sigma_range_bias_m = {max(spec.range_bias_step_m, 0.03):g}
         "nlos_anchor": spec.nlos_anchor,
         "range_bias_final": b0 + step + walk[-1],
         "nlos_t": t_rng[nlos & ~lost],
+        "vision_outliers": outliers,
     }
+
+
+def _write_vision(d: Path, spec: SyntheticSpec, rng: np.random.Generator) -> np.ndarray:
+    """``markers.csv`` and ``vision.csv``: every marker in the camera's field of view at each frame. Returns
+    the rows (from 0, after the header) that are misdetections."""
+    mk = markers(spec)
+    t = np.arange(0.0, spec.duration_s, 1.0 / spec.vision_rate_hz)
+    p, _, q, _, _ = truth_at(spec, t)
+    R = rot.quat_to_matrix(q)  # (n, 3, 3) body to nav
+    cam = np.asarray(spec.camera_position_m)
+    # t_c = R_bc^T (R^T (m - p) - c) for every frame and marker
+    rel = mk[None, :, :] - p[:, None, :]
+    body = np.einsum("nji,nmj->nmi", R, rel) - cam
+    tc = body @ R_BODY_CAM  # row-vector form of R_bc^T b
+    z = tc[..., 2]
+    off_axis = np.degrees(np.arctan2(np.linalg.norm(tc[..., :2], axis=-1), z))
+    seen = (z > 0.3) & (z < spec.vision_max_range_m) & (off_axis < spec.fov_half_deg)
+    frame, marker = np.nonzero(seen)
+    zc = z[frame, marker]
+    lateral = zc * spec.pixel_sigma / spec.focal_px
+    depth = zc * zc * spec.pixel_sigma / (spec.focal_px * spec.marker_size_m)
+    sig = np.column_stack([lateral, lateral, depth])
+    meas = tc[frame, marker] + rng.normal(size=sig.shape) * sig
+    wrong = rng.random(len(frame)) < spec.outlier_probability
+    direction = rng.normal(size=(int(wrong.sum()), 3))
+    meas[wrong] += spec.outlier_m * direction / np.linalg.norm(direction, axis=1, keepdims=True)
+    _write(
+        d / "markers.csv",
+        "marker_id,x_m,y_m,z_m",
+        np.column_stack([np.arange(len(mk)), mk]),
+        ["%d"] + ["%.4f"] * 3,
+    )
+    _write(
+        d / "vision.csv",
+        "t_s,marker_id,x_m,y_m,z_m,sigma_x_m,sigma_y_m,sigma_z_m",
+        np.column_stack([t[frame], marker, meas, sig]),
+        ["%.6f", "%d"] + ["%.6f"] * 6,
+    )
+    return np.flatnonzero(wrong)
