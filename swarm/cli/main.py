@@ -11,6 +11,7 @@ from swarm.errors import SwarmError
 
 def build_parser() -> argparse.ArgumentParser:
     from agents import cli as agent_cli
+    from agents import navigator
     from mothership import cli as mothership_cli
     from swarm.cli import (
         analyze,
@@ -40,6 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
         montecarlo,
         analyze,
         replay,
+        navigator,
         record,
         foxglove_bridge,
         bench,

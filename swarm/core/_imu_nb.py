@@ -322,7 +322,6 @@ def replay(
     n = P.shape[0]
     work = np.empty((3, n))
     res = np.empty(3)
-    W = win_rej.shape[0]
     tcur = tf[0]
     while ST[ST_I_IMU] < n_imu or ST[ST_I_RNG] < n_rng:
         i, j = ST[ST_I_IMU], ST[ST_I_RNG]
@@ -363,24 +362,35 @@ def replay(
         if outcome == REFUSED:
             continue
         last_range[a], last_range_t[a] = rng_z[j], t
-        pos = ST[ST_WIN_POS]
-        win_rej[pos] = 1.0 if outcome == REJECTED else 0.0
-        win_d2[pos] = res[1] if outcome == ACCEPTED else 0.0
-        ST[ST_WIN_POS] = (pos + 1) % W
-        if ST[ST_WIN_FILL] < W:
-            ST[ST_WIN_FILL] += 1
-        if ST[ST_WIN_FILL] == W:
-            rej = 0.0
-            d2 = 0.0
-            for k in range(W):
-                rej += win_rej[k]
-                d2 += win_d2[k]
-            n_acc = W - int(rej)
-            if rej / W > reject_share_max or (n_acc > 0 and d2 / n_acc > nis_limit[n_acc]):
-                tf[0] = tcur
-                return EV_DIVERGED
+        if window_push(win_rej, win_d2, ST, outcome, res[1], nis_limit, reject_share_max):
+            tf[0] = tcur
+            return EV_DIVERGED
     tf[0] = tcur
     return EV_DONE
+
+
+@njit(cache=True)
+def window_push(win_rej, win_d2, ST, outcome, d2, nis_limit, reject_share_max):
+    """One gated range (``outcome`` accepted or rejected, squared distance ``d2``) into the divergence test's
+    window (cursors in ``ST``); True if the full window now declares the filter inconsistent: the share
+    rejected above ``reject_share_max``, or the mean NIS of the accepted ones above ``nis_limit[n_accepted]``.
+    Shared by :func:`replay` and the live navigator (:mod:`swarm.logs.online`), so both decide alike."""
+    W = win_rej.shape[0]
+    pos = ST[ST_WIN_POS]
+    win_rej[pos] = 1.0 if outcome == REJECTED else 0.0
+    win_d2[pos] = d2 if outcome == ACCEPTED else 0.0
+    ST[ST_WIN_POS] = (pos + 1) % W
+    if ST[ST_WIN_FILL] < W:
+        ST[ST_WIN_FILL] += 1
+    if ST[ST_WIN_FILL] < W:
+        return False
+    rej = 0.0
+    s = 0.0
+    for k in range(W):
+        rej += win_rej[k]
+        s += win_d2[k]
+    n_acc = W - int(rej)
+    return rej / W > reject_share_max or (n_acc > 0 and s / n_acc > nis_limit[n_acc])
 
 
 # ------------------------------------------------------------------------------------------- batches

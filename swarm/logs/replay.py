@@ -216,8 +216,9 @@ def _initial_position(log: Log, lever_nav: np.ndarray) -> np.ndarray:
 
 
 def build_filter(log: Log) -> tuple[ImuFilter, StaticCalibration | None, np.ndarray]:
-    """The filter a replay starts from (calibration, ``[initial]``), and the ranges it is fed (less the
-    calibrated biases when the filter does not estimate them)."""
+    """The filter a replay starts from (calibration, ``[initial]``), and what it subtracts from each
+    anchor's ranges before feeding them (the calibrated biases when the filter does not estimate them,
+    else zeros)."""
     cfg = log.config
     prm = cfg.estimator
     ini = cfg.initial
@@ -258,14 +259,14 @@ def build_filter(log: Log) -> tuple[ImuFilter, StaticCalibration | None, np.ndar
         p0 = cal.position_nav
     else:
         p0 = _initial_position(log, lever_nav)
-    ranges = log.uwb_range
+    correction = np.zeros(m)
     rb0 = None
     if cal is not None and cfg.calibration.range_bias:
         rb = np.nan_to_num(cal.range_bias, nan=0.0)
         if prm.range_bias:
             rb0 = rb
         else:
-            ranges = ranges - rb[log.uwb_anchor]  # constant biases, corrected before the filter
+            correction = rb  # constant biases, corrected before the filter
     sigmas = (
         ini.sigma_position_m,
         ini.sigma_velocity_m_s,
@@ -287,14 +288,15 @@ def build_filter(log: Log) -> tuple[ImuFilter, StaticCalibration | None, np.ndar
         gyro_bias=None if cal is None else cal.gyro_bias,
         range_bias=rb0,
     )
-    return f, cal, np.ascontiguousarray(ranges)
+    return f, cal, correction
 
 
 def replay_log(log: Log) -> ReplayResult:
     """Run the filter over ``log`` (module docstring)."""
     cfg = log.config
     prm = cfg.estimator
-    f, cal, ranges = build_filter(log)
+    f, cal, correction = build_filter(log)
+    ranges = log.uwb_range - correction[log.uwb_anchor]
     m = len(log.anchors_nav)
     n_imu, n_rng = len(log.imu_t), len(log.uwb_t)
     every = cfg.output_every

@@ -1,0 +1,250 @@
+"""The log replay's filter on live sensors (``swarm navigate``): samples arrive one by one, from two streams
+whose relative order the transport does not keep, and the estimates must be those ``swarm replay`` gives
+for the same samples.
+
+Samples go into a reorder buffer and are processed in time order once they are ``delay_s`` older than the
+newest sample seen (the *delayed fusion horizon* of PX4's EKF2, which fuses every sensor at a time behind
+the newest IMU sample so that late sensors still arrive in order). A sample that comes later than that,
+older than the filter, is dropped and counted, as the replay drops one.
+
+Until the filter can start, samples are kept: with a calibration segment (``[calibration] until_s``) the
+filter is built from the samples before ``until_s`` exactly as the replay builds it
+(:func:`swarm.logs.replay.build_filter`); without one and without ``[initial] position_m``, from the first
+second of ranges. Then every kept sample is processed from the first IMU sample on, and every later one as
+it comes. Each sample takes the steps of the compiled replay loop (:func:`swarm.core._imu_nb.replay`):
+the same kernels in the same order, the same divergence window (:func:`~swarm.core._imu_nb.window_push`),
+the same recovery and forced fault, so a log fed in time order gives the replay's estimates bit for bit
+(tests/logs/test_online.py). Times are those of the samples (``swarm replay --zenoh`` sends them from the
+log's first IMU sample), and log.toml's times (``until_s``, ``jump_at_s``) are read on that clock.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from swarm.core import _imu_nb as nb
+from swarm.core.imu_filter import ImuFilter, divergence_limits
+from swarm.errors import ConfigError
+from swarm.logs.reader import Log, LogConfig
+from swarm.logs.replay import _recover, build_filter
+
+_IMU, _UWB = 0, 1
+
+
+@dataclass
+class OnlineEstimate:
+    """One output row: after the IMU sample ``tick`` (every ``output_every``-th, as the replay writes)."""
+
+    t_s: float
+    tick: int
+    X: np.ndarray
+    P9: np.ndarray
+    """The position, velocity and attitude block of the covariance (9, 9)."""
+    d2: float
+    """Squared Mahalanobis distance of the latest gated range."""
+    reject_share: float
+    """Share of the divergence window's ranges rejected (over the ranges seen so far while it fills)."""
+    counts: dict[str, int] = field(default_factory=dict)
+
+
+class OnlineNavigator:
+    """The IMU-driven filter of a log's ``log.toml`` on samples pushed as they arrive (module docstring).
+    ``imu`` and ``uwb`` may be called from any thread; ``drain`` from one."""
+
+    def __init__(self, config: LogConfig, anchor_ids, anchors_nav, delay_s: float = 0.05) -> None:
+        if not (math.isfinite(delay_s) and delay_s >= 0):
+            raise ValueError(f"delay_s must be a finite number >= 0, got {delay_s!r}")
+        if config.uwb.sigma_m is None and config.calibration.until_s <= 0:
+            raise ConfigError(
+                "log.toml: uwb.sigma_m is required without a calibration segment (calibration.until_s)"
+            )
+        self.config = config
+        self.anchor_ids = np.asarray(anchor_ids, dtype=np.int64)
+        self.anchors_nav = np.ascontiguousarray(anchors_nav, dtype=float)
+        self._index = {int(a): k for k, a in enumerate(self.anchor_ids)}
+        self.delay_s = float(delay_s)
+        self._lock = threading.Lock()
+        self._heap: list = []
+        self._seq = 0
+        self._newest = -math.inf
+        self._kept: list = []  # samples before the filter starts, in time order
+        self.f: ImuFilter | None = None
+        self.unknown_anchor = 0
+        self.dropped = 0
+        self.imu_refused = 0
+        self.events: list[dict] = []
+        self.estimates: list[OnlineEstimate] = []
+
+    # ------------------------------------------------------------------------------------------ input
+
+    def imu(self, t_s: float, tick: int, gyro_body, acc_body) -> None:
+        g = np.array(gyro_body, dtype=float)
+        a = np.array(acc_body, dtype=float)
+        self._push(float(t_s), _IMU, (int(tick), g, a))
+
+    def uwb(self, t_s: float, anchor_id: int, range_m: float) -> None:
+        k = self._index.get(int(anchor_id))
+        if k is None:
+            with self._lock:
+                self.unknown_anchor += 1
+            return
+        self._push(float(t_s), _UWB, (k, float(range_m)))
+
+    def _push(self, t: float, kind: int, data) -> None:
+        with self._lock:
+            heapq.heappush(self._heap, (t, kind, self._seq, data))
+            self._seq += 1
+            self._newest = max(self._newest, t)
+
+    # ------------------------------------------------------------------------------------------ output
+
+    def drain(self, final: bool = False) -> tuple[list[OnlineEstimate], list[dict]]:
+        """Process every sample older than the horizon (all of them if ``final``: the stream has ended);
+        returns the estimates and the events that came of it."""
+        n_est, n_ev = len(self.estimates), len(self.events)
+        while True:
+            with self._lock:
+                if not self._heap or not (final or self._heap[0][0] <= self._newest - self.delay_s):
+                    break
+                sample = heapq.heappop(self._heap)
+            if self.f is None:
+                self._kept.append(sample)
+                if self._ready(sample[0]):
+                    self._start()
+            else:
+                self._process(sample)
+        if final and self.f is None and self._kept:
+            self._start()
+        return self.estimates[n_est:], self.events[n_ev:]
+
+    # -------------------------------------------------------------------------------------- the filter
+
+    def _ready(self, t: float) -> bool:
+        cfg = self.config
+        if cfg.calibration.until_s > 0 and t < cfg.calibration.until_s:
+            return False
+        if cfg.calibration.until_s <= 0 and cfg.initial.position_m is None:
+            first = next((s[0] for s in self._kept if s[1] == _UWB), None)
+            return first is not None and t > first + 1.0  # the first second of ranges (replay's fix)
+        return any(s[1] == _IMU for s in self._kept)
+
+    def _start(self) -> None:
+        """Build the filter from the kept samples as the replay builds it from a log, then process them."""
+        kept = [s for s in self._kept if s[1] == _IMU]
+        rng = [s for s in self._kept if s[1] == _UWB]
+        if not kept:
+            return  # no IMU sample yet: keep waiting
+        log = Log(
+            Path("<live>"),
+            self.config,
+            np.array([s[0] for s in kept]),
+            np.array([s[3][1] for s in kept]).reshape(-1, 3),
+            np.array([s[3][2] for s in kept]).reshape(-1, 3),
+            np.array([s[0] for s in rng]),
+            np.array([s[3][0] for s in rng], dtype=np.int64),
+            np.array([s[3][1] for s in rng]),
+            self.anchor_ids,
+            self.anchors_nav,
+        )
+        f, _, self._correction = build_filter(log)
+        self.f = f
+        prm = self.config.estimator
+        self.X, self.P = f.X[0], f.P[0]
+        self.t = f.t
+        self._held = False
+        self._gyro, self._acc = np.zeros(3), np.zeros(3)
+        self._ST = np.zeros(nb.N_ST, dtype=np.int64)
+        self._win_rej, self._win_d2 = np.zeros(prm.window), np.zeros(prm.window)
+        self._limits = divergence_limits(prm.window, prm.divergence_alpha)
+        m = len(self.anchors_nav)
+        self._last_range, self._last_range_t = np.full(m, np.nan), np.full(m, -np.inf)
+        self._work, self._res = np.empty((3, self.P.shape[0])), np.empty(3)
+        self._d2 = math.nan
+        faults = self.config.faults
+        self._t_stop = faults.jump_at_s if faults.jump_at_s is not None else math.inf
+        kept_all, self._kept = self._kept, []
+        for s in kept_all:
+            self._process(s)
+
+    def _process(self, sample) -> None:
+        """One sample: the body of :func:`swarm.core._imu_nb.replay`'s loop, kernel for kernel."""
+        t, kind, _, data = sample
+        if t > self._t_stop:  # the forced divergence of [faults], applied as the replay's pause applies it
+            self._jump()
+        if t < self.t:  # older than the filter: dropped, counted
+            self.dropped += 1
+            return
+        X, P, prm = self.X, self.P, self.f.prm
+        if self._held and not nb.predict_one(X, P, self._gyro, self._acc, t - self.t, prm):
+            self.imu_refused += 1
+        self.t = t
+        if kind == _IMU:
+            tick, g, a = data
+            self._gyro, self._acc, self._held = g, a, True
+            if tick % self.config.output_every == 0:
+                self._estimate(t, tick)
+            return
+        k, z = data
+        f = self.f
+        z = z - self._correction[k]
+        outcome = nb.update_range_one(
+            X, P, f.anchors[k], f.bias_of[k], z, f.sigma[k], prm, self._work, self._res
+        )
+        f.counts[k, outcome] += 1
+        if outcome == nb.REFUSED:
+            return
+        self._d2 = float(self._res[1])
+        self._last_range[k], self._last_range_t[k] = z, t
+        cfg = self.config
+        if nb.window_push(
+            self._win_rej,
+            self._win_d2,
+            self._ST,
+            outcome,
+            self._res[1],
+            self._limits,
+            cfg.estimator.reject_share_max,
+        ):
+            self.events.append(
+                _recover(f, None, cfg, t, self._win_rej, self._win_d2, self._last_range, self._last_range_t)
+            )
+            self._ST[nb.ST_WIN_FILL] = self._ST[nb.ST_WIN_POS] = 0
+            self._win_rej[:] = 0.0
+            self._win_d2[:] = 0.0
+
+    def _jump(self) -> None:
+        faults = self.config.faults
+        X, P = self.X, self.P
+        X[nb.XP : nb.XP + 3] += faults.jump_m
+        P[0:3, :] = 0.0
+        P[:, 0:3] = 0.0
+        P[0:3, 0:3] = np.eye(3) * faults.jump_sigma_m**2
+        self.events.append(
+            {"t_s": float(self.t), "kind": "fault", "fault": "position_jump", "jump_m": list(faults.jump_m)}
+        )
+        self._t_stop = math.inf
+
+    def _estimate(self, t: float, tick: int) -> None:
+        c = self.f.counts
+        fill = int(self._ST[nb.ST_WIN_FILL])
+        self.estimates.append(
+            OnlineEstimate(
+                t,
+                tick,
+                self.X.copy(),
+                self.P[0:9, 0:9].copy(),
+                self._d2,
+                float(self._win_rej.sum() / fill) if fill else 0.0,
+                {
+                    "range_accepted": int(c[:, nb.ACCEPTED].sum()),
+                    "range_rejected": int(c[:, nb.REJECTED].sum()),
+                    "range_refused": int(c[:, nb.REFUSED].sum()),
+                },
+            )
+        )
