@@ -34,6 +34,7 @@ import zenoh
 from dashboard import kinds, mapping, panels
 from dashboard.faults import FaultPanel
 from dashboard.link import SwarmLink
+from dashboard.playback import PlaybackPanel, Player, Recording, Timeline
 from dashboard.state import AgentSnap, FramePacer, RateLimiter, Snapshot, SwarmState
 from swarm.errors import ConfigError
 from swarm.scenario import Scenario
@@ -211,6 +212,16 @@ class SceneView:
                 nodes = self.nodes[agent_id] = _AgentNodes(self.server.scene, a, self.sc)
             self._update_agent(nodes, a, snap, trails_due or new_run)
 
+    def invalidate(self) -> None:
+        """Push everything again at the next frame (the store was restored: a playback's backward seek, after
+        which a message or a trail version may equal one drawn before for a different time)."""
+        self._anchors_version = None
+        self._run = None
+        for nodes in list(self.nodes.values()):
+            nodes.truth_msg = nodes.estimate_msg = nodes.cov_key = nodes.color = nodes.radii_key = _STALE
+            nodes.fov_state = None
+            nodes.trail_versions = None
+
     def set_show_trails(self, show: bool) -> None:
         """Show or hide every trail (their history is kept): all are pushed again at the next trail frame."""
         self.show_trails = show
@@ -304,33 +315,42 @@ class SceneView:
 
 class GuiView:
     """The control panel: run status and controls, agents table, the selected chaser's decision panel and
-    plots, the event log, the Faults panel (:class:`~dashboard.faults.FaultPanel`), and view settings."""
+    plots, the event log, the Faults panel (:class:`~dashboard.faults.FaultPanel`), and view settings.
+
+    With ``link=None`` (a recording's playback, ``player`` given) nothing commands a swarm: the Playback
+    folder (:class:`~dashboard.playback.PlaybackPanel`) replaces the run controls, and the Faults panel only
+    lists the recorded faults."""
 
     def __init__(
         self,
         server: viser.ViserServer,
-        link: SwarmLink,
+        link: SwarmLink | None,
         chasers: list[str],
         vehicles: list[str],
         scene: SceneView,
         state: SwarmState,
+        player: tuple[Player, Recording] | None = None,
     ) -> None:
         gui = server.gui
-        self._send = link.send
-        gui.add_markdown("#### TPODS swarm")
+        gui.add_markdown("#### TPODS swarm" + (" · playback" if link is None else ""))
         self.status = gui.add_markdown("**no clock yet**")
-        with gui.add_folder("Run"):
-            self.buttons = {}
-            for label, command, color in (
-                ("Pause", "pause", "yellow"),
-                ("Resume", "resume", "green"),
-                ("Reset", "reset", "gray"),
-                ("New seed", "new_seed", "blue"),
-            ):
-                button = gui.add_button(label, color=color)
-                button.on_click(self._make_handler(command))
-                self.buttons[command] = button
-            self.sent = gui.add_markdown("")
+        self.buttons = {}
+        self.playback = None
+        if player is not None:
+            self.playback = PlaybackPanel(gui, *player)
+        if link is not None:
+            self._send = link.send
+            with gui.add_folder("Run"):
+                for label, command, color in (
+                    ("Pause", "pause", "yellow"),
+                    ("Resume", "resume", "green"),
+                    ("Reset", "reset", "gray"),
+                    ("New seed", "new_seed", "blue"),
+                ):
+                    button = gui.add_button(label, color=color)
+                    button.on_click(self._make_handler(command))
+                    self.buttons[command] = button
+                self.sent = gui.add_markdown("")
         with gui.add_folder("Agents"):
             self.table = gui.add_markdown("no agents yet")
         with gui.add_folder("Chaser"):
@@ -361,7 +381,10 @@ class GuiView:
             self.modes = gui.add_markdown("")
         with gui.add_folder("Events"):
             self.events = gui.add_markdown("no events yet")
-        self.faults = FaultPanel(gui, link.send_fault, link.listeners, vehicles)
+        if link is not None:
+            self.faults = FaultPanel(gui, link.send_fault, link.listeners, vehicles)
+        else:
+            self.faults = FaultPanel(gui, None, lambda: False, vehicles)
         with gui.add_folder("View", expand_by_default=False):
             sigma = gui.add_slider("ellipsoid σ", min=1.0, max=5.0, step=0.5, initial_value=scene.n_sigma)
             trails = gui.add_checkbox("trails", initial_value=True)
@@ -381,6 +404,13 @@ class GuiView:
 
         self._plot_key: object = None
         self._events_version: int | None = None
+
+    def invalidate(self) -> None:
+        """Push the event log, the fault log and the plots again at their next update (the store was
+        restored, :meth:`SceneView.invalidate`)."""
+        self._events_version = None
+        self._plot_key = None
+        self.faults.invalidate()
 
     def _make_handler(self, command: str) -> Callable[[object], None]:
         def on_click(_event: object) -> None:
@@ -417,6 +447,8 @@ class GuiView:
             self._events_version = snap.events_version
             _set(self.events, "content", panels.events_markdown(snap.events))
         self.faults.update(snap)
+        if self.playback is not None:
+            self.playback.update()
 
     def update_plots(self, snap: Snapshot) -> None:
         selected = snap.agents.get(self.chaser.value)
@@ -433,6 +465,10 @@ class GuiView:
         self.mode_plot.data = panels.mode_steps(selected.modes, t_end)
 
 
+_STALE = object()
+"""What a scene node "last pushed" after :meth:`SceneView.invalidate`: equal to nothing the store holds."""
+
+
 def _set(handle: object, attr: str, value: object) -> None:
     """Assign only when the value changed (each assignment is a message to every browser)."""
     if getattr(handle, attr) != value:
@@ -441,40 +477,56 @@ def _set(handle: object, attr: str, value: object) -> None:
 
 class DashboardApp:
     """The dashboard of one swarm: a Viser server on ``host:port`` drawing what ``session`` hears under
-    ``keys``'s namespace. ``start()`` starts the render thread; ``close()`` stops it, the Zenoh side and
-    the server (the caller closes ``session``)."""
+    ``keys``'s namespace, or, with ``recording`` (and ``session=None``), a recording's playback
+    (:mod:`dashboard.playback`: no Zenoh at all). ``start()`` starts the render thread; ``close()`` stops
+    it, the Zenoh side and the server (the caller closes ``session``)."""
 
     def __init__(
         self,
         sc: Scenario,
-        session: zenoh.Session,
+        session: zenoh.Session | None,
         keys: Keys,
         host: str = "localhost",
         port: int = 8080,
         params: DashboardParams | None = None,
         process_id: str = "dashboard",
+        recording: Recording | None = None,
     ) -> None:
+        if (session is None) == (recording is None):
+            raise ValueError("a DashboardApp draws either a Zenoh session or a recording")
         self.params = params if params is not None else DashboardParams()
         self.drops = DropCounter()
         vehicles = {k: (v.role, v.target) for k, v in sc.vehicles.items()}
-        self.state = SwarmState(
-            vehicles,
-            np.array(sc.anchors_m, dtype=float),
-            trail_cap=self.params.trail_cap,
-            trail_step_m=self.params.trail_step_m,
-            series_cap=self.params.series_cap,
-        )
+
+        def make_state() -> SwarmState:
+            return SwarmState(
+                vehicles,
+                np.array(sc.anchors_m, dtype=float),
+                trail_cap=self.params.trail_cap,
+                trail_step_m=self.params.trail_step_m,
+                series_cap=self.params.series_cap,
+            )
+
+        self.state = make_state()
+        self.link: SwarmLink | None = None
+        self.player: Player | None = None
+        if recording is not None:  # before the server: a long pass over the file, nothing served meanwhile
+            self.player = Player(Timeline(recording, self.state, make_state))
         with contextlib.redirect_stdout(sys.stderr):  # Viser's banner: stdout is for the ready line
             self.server = viser.ViserServer(host=host, port=port, verbose=False)
         try:
             self.server.gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
             _frame_the_scene(self.server, sc)
-            self.link = SwarmLink(session, keys, self.state, self.drops, process_id=process_id)
+            if session is not None:
+                self.link = SwarmLink(session, keys, self.state, self.drops, process_id=process_id)
             self.scene = SceneView(self.server, sc, self.params)
             chasers = sorted(
                 (k for k, v in sc.vehicles.items() if v.role == "chaser"), key=panels.natural_key
             )
-            self.gui = GuiView(self.server, self.link, chasers, list(sc.vehicles), self.scene, self.state)
+            playback = None if self.player is None else (self.player, recording)
+            self.gui = GuiView(
+                self.server, self.link, chasers, list(sc.vehicles), self.scene, self.state, playback
+            )
         except BaseException:
             with contextlib.redirect_stdout(sys.stderr):
                 self.server.stop()
@@ -495,8 +547,15 @@ class DashboardApp:
         return self.server.get_port()
 
     def frame(self) -> None:
-        """One frame: poll Zenoh, snapshot, push the changes to every browser as one atomic update."""
-        self.link.poll()
+        """One frame: poll Zenoh (or move the playback), snapshot, push the changes to every browser as one
+        atomic update."""
+        if self.player is not None:
+            if self.player.advance():
+                self.scene.invalidate()
+                self.gui.invalidate()
+        else:
+            assert self.link is not None
+            self.link.poll()
         snap = self.state.snapshot(self.scene.trail_versions())
         with self.server.atomic():
             self.scene.update(snap, self._trails.due())
@@ -524,7 +583,8 @@ class DashboardApp:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
-        self.link.close()
+        if self.link is not None:
+            self.link.close()
         self.drops.flush()
         with contextlib.redirect_stdout(sys.stderr):
             self.server.stop()

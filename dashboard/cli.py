@@ -1,9 +1,12 @@
-"""Command line of the dashboard: ``python -m dashboard SCENARIO`` and ``swarm dashboard SCENARIO``.
+"""Command line of the dashboard: ``python -m dashboard SCENARIO`` and ``swarm dashboard SCENARIO``; with
+``--open FILE.mcap`` the playback of a recording instead of a live swarm (:mod:`dashboard.playback`: no
+Zenoh session; the scenario and the namespace are the recording's unless given).
 
 Once serving, it prints one line on stdout (flushed), ``dashboard listening on http://<host>:<port>``, so
 that a launcher or a test can wait for it and read the URL (with ``--port 0`` the OS picks the port;
 if the requested port is busy, Viser takes the next free one and the line says which). It runs until
-SIGINT or SIGTERM, then closes its Zenoh session and the Viser server and exits 0; 2 for bad input.
+SIGINT or SIGTERM, then closes its Zenoh session and the Viser server and exits 0; 2 for bad input (a
+missing, truncated or corrupt recording: one line naming the file and the byte offset where reading stopped).
 
 ``--host`` defaults to ``localhost``: the dashboard can pause and reset the swarm, so it is not offered
 to the network unless asked (``--host 0.0.0.0``).
@@ -16,6 +19,7 @@ import logging
 import signal
 import sys
 import threading
+from pathlib import Path
 
 from swarm.errors import SwarmError
 
@@ -29,7 +33,9 @@ DEFAULT_PORT = 8080
 DESCRIPTION = (
     "Viser web dashboard of a running swarm: live 3D scene (poses, trails, covariance, camera cones, "
     "switch radii), agents table, mode timeline, Algorithm 1 decisions and run controls. It only "
-    "subscribes and sends run controls. Prints 'dashboard listening on <url>' once up."
+    "subscribes and sends run controls. Prints 'dashboard listening on <url>' once up. With --open "
+    "FILE.mcap it plays a recording (swarm record, swarm launch --record) instead: time slider, "
+    "play/pause and speed, no Zenoh."
 )
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -46,7 +52,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from swarm.transport.session import add_zenoh_arguments
 
     p.add_argument(
-        "scenario", nargs="?", default="docking", help="bundled scenario name or TOML file (default docking)"
+        "scenario",
+        nargs="?",
+        default=None,
+        help="bundled scenario name or TOML file (default docking; with --open, the recording's)",
+    )
+    p.add_argument(
+        "--open",
+        dest="recording",
+        type=Path,
+        default=None,
+        metavar="FILE.mcap",
+        help="play this recording instead of subscribing to a swarm (no Zenoh session is opened)",
     )
     p.add_argument(
         "--set",
@@ -59,9 +76,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--agents",
         type=_agents,
-        default=1,
+        default=None,
         metavar="N",
-        help="copies of the pairs, as launched (1)",
+        help="copies of the pairs, as launched (1; with --open, as recorded)",
     )
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help="HTTP port (default 8080; 0: any port)")
     p.add_argument(
@@ -69,7 +86,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default="localhost",
         help="address to serve on (default localhost; 0.0.0.0 to let other machines in)",
     )
-    p.add_argument("--namespace", default="tpods", help="Zenoh key namespace of the swarm (default tpods)")
+    p.add_argument(
+        "--namespace",
+        default="tpods",
+        help="Zenoh key namespace of the swarm (default tpods; with --open, the recorder's if it says)",
+    )
     p.add_argument("--id", dest="process_id", default="dashboard", help="liveliness id (default dashboard)")
     p.add_argument("--max-hz", type=float, default=30.0, help="most frames per second sent to browsers (30)")
     add_zenoh_arguments(p)
@@ -95,10 +116,47 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     if not (0 <= args.port <= 65535):
         raise ConfigError(f"--port must be in 0..65535, got {args.port}")
     check_id(args.process_id, "--id")
-    keys = Keys(args.namespace)
     params = DashboardParams(max_hz=args.max_hz)
-    sc = load_from_args(args).with_pairs(args.agents)
+    if args.recording is not None:
+        return _serve(args, stop, lambda: _playback_app(args, params))
+    keys = Keys(args.namespace)
+    if args.scenario is None:
+        args.scenario = "docking"
+    sc = load_from_args(args).with_pairs(args.agents or 1)
     zargs = zenoh_args_from(args)
+    with open_session(zargs) as session:
+        make = lambda: DashboardApp(sc, session, keys, args.host, args.port, params, args.process_id)  # noqa: E731
+        return _serve(args, stop, make)
+
+
+def _playback_app(args: argparse.Namespace, params):
+    """The DashboardApp of ``--open FILE.mcap``: the recording, its scenario, no Zenoh session."""
+    from dashboard.app import DashboardApp
+    from dashboard.playback import load_recording, scenario_of
+    from swarm.config import parse_override
+    from swarm.errors import ConfigError
+    from swarm.transport.keys import Keys
+
+    for flag in ("connect", "listen", "zenoh_config"):
+        if getattr(args, flag, None):
+            flag_name = "--" + flag.replace("_", "-")
+            raise ConfigError(f"{flag_name}: --open plays a recording and opens no Zenoh session")
+    recording = load_recording(args.recording, default_namespace=args.namespace)
+    overrides = dict(parse_override(text) for text in args.overrides)
+    sc = scenario_of(recording, args.scenario, overrides)
+    if args.agents is not None:
+        sc = sc.with_pairs(args.agents)
+    span_s = recording.end_s - recording.start_s
+    _LOG.info(
+        "playing %s: %d messages over %.2f s of swarm time, scenario %s, namespace %s",
+        recording.path, len(recording.items), span_s, sc.name, recording.namespace,
+    )  # fmt: skip
+    keys = Keys(recording.namespace)
+    return DashboardApp(sc, None, keys, args.host, args.port, params, args.process_id, recording=recording)
+
+
+def _serve(args: argparse.Namespace, stop: threading.Event | None, make) -> int:
+    """Serve the app ``make()`` builds until ``stop`` (or a signal, module docstring)."""
     previous: dict[int, object] = {}
     if stop is None:
         stop = threading.Event()
@@ -111,20 +169,19 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
         for sig in _STOP_SIGNALS:
             previous[sig] = signal.signal(sig, on_signal)
     try:
-        with open_session(zargs) as session:
-            try:
-                app = DashboardApp(sc, session, keys, args.host, args.port, params, args.process_id)
-            except OSError as exc:
-                raise SwarmError(f"cannot serve on {args.host}:{args.port}: {exc}") from None
-            try:
-                app.start()
-                if args.port not in (0, app.port):
-                    _LOG.warning("port %d is busy: serving on %d instead", args.port, app.port)
-                print(READY_PREFIX + _url(args.host, app.port), flush=True)
-                while not stop.wait(0.5):
-                    pass
-            finally:
-                app.close()
+        try:
+            app = make()
+        except OSError as exc:
+            raise SwarmError(f"cannot serve on {args.host}:{args.port}: {exc}") from None
+        try:
+            app.start()
+            if args.port not in (0, app.port):
+                _LOG.warning("port %d is busy: serving on %d instead", args.port, app.port)
+            print(READY_PREFIX + _url(args.host, app.port), flush=True)
+            while not stop.wait(0.5):
+                pass
+        finally:
+            app.close()
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)  # type: ignore[arg-type]

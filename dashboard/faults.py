@@ -151,12 +151,13 @@ def sent_text(msg: Fault, listening: bool, at: str) -> str:
 class FaultPanel:
     """The Faults folder of the GUI: kind, vehicle, the kind's parameters, Inject, the last action and the
     faults applied or refused. ``send`` publishes a :class:`Fault`; ``listening`` says whether anyone
-    subscribes to ``control/fault``."""
+    subscribes to ``control/fault``. With ``send=None`` (a recording's playback) the panel only lists the
+    faults: its inputs and Inject are hidden."""
 
     def __init__(
         self,
         gui: viser.GuiApi,
-        send: Callable[[Fault], object],
+        send: Callable[[Fault], object] | None,
         listening: Callable[[], bool],
         vehicles: Sequence[str],
     ) -> None:
@@ -180,6 +181,10 @@ class FaultPanel:
         self._clock_mode: str | None = None
         self._faults_version: int | None = None
         self._show_inputs()
+        if send is None:
+            for handle in (self.kind, *self.inputs.values(), self.button):
+                handle.visible = False
+            self.hint.content = "a recording: the faults of the run as applied (none can be injected)"
 
         @self.kind.on_update
         def _(_event: object) -> None:
@@ -190,6 +195,8 @@ class FaultPanel:
             self.inject()
 
     def _show_inputs(self) -> None:
+        if self._send is None:
+            return
         uses = FAULT_INPUTS.get(str(self.kind.value), ())
         for name, handle in self.inputs.items():
             if handle.visible != (name in uses):
@@ -209,6 +216,9 @@ class FaultPanel:
         say why not (and publish nothing). Returns the fault sent, or None."""
         form = self.form() if form is None else form
         at = time.strftime("%H:%M:%S")
+        if self._send is None:
+            self.sent.content = f"**not sent** ({at}): a recording is played, there is no swarm to send to"
+            return None
         try:
             msg = fault_of(form)
         except ConfigError as exc:
@@ -232,9 +242,13 @@ class FaultPanel:
         if any(a not in known for a in snap.agents):
             ids = sorted(set(known) | set(snap.agents), key=panels.natural_key)
             vehicle.options = [EVERY_CHASER, *ids]  # type: ignore[attr-defined]
-        if snap.clock_mode != self._clock_mode:
+        if snap.clock_mode != self._clock_mode and self._send is not None:
             self._clock_mode = snap.clock_mode
             self.hint.content = kind_hint(str(self.kind.value), self._clock_mode)
         if snap.faults_version != self._faults_version:
             self._faults_version = snap.faults_version
             self.log.content = panels.faults_markdown(snap.faults)
+
+    def invalidate(self) -> None:
+        """List the faults again at the next :meth:`update`."""
+        self._faults_version = None

@@ -90,7 +90,7 @@ class SwarmLink:
         self.state = state
         self.drops = drops
         self._stop = threading.Event()
-        self._rings: list[tuple[str, type[Message], zenoh.Subscriber]] = []
+        self._rings: list[tuple[str, str, type[Message], zenoh.Subscriber]] = []
         self._clock = session.declare_subscriber(keys.world_clock(), zenoh.handlers.RingChannel(1))
         self._add_vehicles(state.take_new_agents())
         subscribe_decoded(session, keys.agent_all("event"), Event, self._on_event, drops)
@@ -113,7 +113,7 @@ class SwarmLink:
             for kind, cls in LATEST_KINDS.items():
                 key = getattr(self.keys, kind)(agent_id)
                 sub = self.session.declare_subscriber(key, zenoh.handlers.RingChannel(1))
-                self._rings.append((agent_id, cls, sub))
+                self._rings.append((agent_id, kind, cls, sub))
             _LOG.debug("subscribed to vehicle %s", agent_id)
 
     def poll(self) -> int:
@@ -126,9 +126,9 @@ class SwarmLink:
             clock = safe_decode(sample.payload, Clock, str(sample.key_expr), self.drops)
             if clock is not None:
                 n += 1
-                if self.state.on_clock(clock):
+                if self.state.on_message("world_clock", None, clock):
                     _LOG.info("new run: seed %d (tick %d)", clock.seed, clock.tick)
-        for agent_id, cls, sub in self._rings:
+        for agent_id, kind, cls, sub in self._rings:
             sample = sub.try_recv()
             if sample is None or sample.kind != zenoh.SampleKind.PUT:
                 continue
@@ -136,14 +136,7 @@ class SwarmLink:
             if msg is None:
                 continue
             n += 1
-            if cls is Truth:
-                self.state.on_truth(agent_id, msg)  # type: ignore[arg-type]
-            elif cls is Estimate:
-                self.state.on_estimate(agent_id, msg)  # type: ignore[arg-type]
-            elif cls is Guidance:
-                self.state.on_guidance(agent_id, msg)  # type: ignore[arg-type]
-            else:
-                self.state.on_vision(agent_id, msg)  # type: ignore[arg-type]
+            self.state.on_message(kind, agent_id, msg)
         return n
 
     # ---------------------------------------------------------------------------------- any thread
@@ -178,13 +171,13 @@ class SwarmLink:
     def _on_event(self, key: str, msg: Event) -> None:
         parsed = self.keys.parse(key)
         if parsed is not None and parsed[1] is not None:
-            self.state.on_event(parsed[1], msg)
+            self.state.on_message("event", parsed[1], msg)
 
     def _on_world_event(self, _key: str, msg: Event) -> None:
-        self.state.on_run_event("world", msg)
+        self.state.on_message("world_event", None, msg)
 
     def _on_anchors(self, _key: str, msg: Anchors) -> None:
-        self.state.on_anchors(msg)
+        self.state.on_message("anchors", None, msg)
         self._have_anchors.set()
 
     def _on_liveliness(self, role: str, process_id: str, alive: bool) -> None:

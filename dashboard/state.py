@@ -11,6 +11,7 @@ trails and series keep at most ``cap`` samples, thinning the whole history by ha
 
 from __future__ import annotations
 
+import copy
 import math
 import threading
 from collections import deque
@@ -19,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from swarm.transport.messages import Anchors, Clock, Estimate, Event, Guidance, Truth, Vision
+from swarm.transport.messages import Anchors, Clock, Estimate, Event, Guidance, Message, Truth, Vision
 
 __all__ = [
     "AgentSnap",
@@ -441,6 +442,44 @@ class SwarmState:
                     view.alive = after
             return after if after != before else None
 
+    def on_message(self, kind: str, agent_id: str | None, msg: Message) -> bool:
+        """One decoded message into the store, by the kind of its key
+        (:meth:`swarm.transport.keys.Keys.parse`: ``truth``, ``estimate``, ``guidance``, ``vision`` and
+        ``event`` of vehicle ``agent_id``; ``world_event``, ``world_clock``, ``anchors``): the one entry point
+        of the live link (:mod:`dashboard.link`) and of a recording's playback (:mod:`dashboard.playback`),
+        so that playback shows what live shows. Other kinds are ignored. True if the message is a clock that
+        starts a new run."""
+        if agent_id is not None:
+            if kind == "truth":
+                self.on_truth(agent_id, msg)  # type: ignore[arg-type]
+            elif kind == "estimate":
+                self.on_estimate(agent_id, msg)  # type: ignore[arg-type]
+            elif kind == "guidance":
+                self.on_guidance(agent_id, msg)  # type: ignore[arg-type]
+            elif kind == "vision":
+                self.on_vision(agent_id, msg)  # type: ignore[arg-type]
+            elif kind == "event":
+                self.on_event(agent_id, msg)  # type: ignore[arg-type]
+        elif kind == "world_clock":
+            return self.on_clock(msg)  # type: ignore[arg-type]
+        elif kind == "world_event":
+            self.on_run_event("world", msg)  # type: ignore[arg-type]
+        elif kind == "anchors":
+            self.on_anchors(msg)  # type: ignore[arg-type]
+        return False
+
+    def checkpoint(self) -> dict:
+        """A deep copy of everything the store holds, for :meth:`restore` (a playback's seek)."""
+        with self._lock:
+            data = {k: v for k, v in self.__dict__.items() if k != "_lock"}
+            return copy.deepcopy(data, _immutable_memo(data))
+
+    def restore(self, checkpoint: dict) -> None:
+        """Make the store what it was at :meth:`checkpoint` (which stays usable for another restore)."""
+        data = copy.deepcopy(checkpoint, _immutable_memo(checkpoint))
+        with self._lock:
+            self.__dict__.update(data)
+
     def clear_trails(self) -> None:
         with self._lock:
             for view in self.agents.values():
@@ -489,3 +528,25 @@ class SwarmState:
                 faults_version=self._faults_version,
                 clock_mode=self.clock_mode,
             )
+
+
+def _immutable_memo(data: dict) -> dict[int, object]:
+    """A ``deepcopy`` memo that shares the messages (frozen, never changed after decoding) instead of copying
+    them: a checkpoint copies only the store's own containers."""
+    memo: dict[int, object] = {}
+
+    def share(value: object) -> None:
+        if isinstance(value, Message):
+            memo[id(value)] = value
+
+    for view in data.get("agents", {}).values():
+        for msg in (view.truth, view.estimate, view.guidance):
+            share(msg)
+    for name in ("clock", "_events", "_faults"):
+        value = data.get(name)
+        if isinstance(value, deque):
+            for _, ev in value:
+                share(ev)
+        else:
+            share(value)
+    return memo

@@ -4,7 +4,8 @@ loopback Zenoh, watching the world's clock from the test, and a headless Chromiu
 :func:`launch_swarm` is the one place that starts "a launched swarm with its dashboard": ``swarm launch
 docking --clock lockstep --dashboard-port 0 ...``, the real world, mothership and agent processes. Other
 dashboard tests drive the dashboard with :mod:`tests.dashboard.fake_swarm`, a scripted swarm whose every
-message a test controls.
+message a test controls. :func:`recording` is an MCAP recording of that scripted swarm for the playback
+tests (:mod:`tests.dashboard.recorded`).
 """
 
 from __future__ import annotations
@@ -238,6 +239,16 @@ def clock_watch() -> Iterator[Callable[[str, str], ClockWatch]]:
     yield make
     for w in watches:
         w.close()
+
+
+@pytest.fixture(scope="session")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An MCAP recording of the scripted docking run (:mod:`tests.dashboard.recorded`), written once."""
+    from tests.dashboard.recorded import write_recording
+
+    path = tmp_path_factory.mktemp("recording") / "run.mcap"
+    write_recording(path)
+    return path
 
 
 def chromium_path() -> str | None:

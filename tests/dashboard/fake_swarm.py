@@ -163,6 +163,39 @@ def _estimate(tick: int, t_s: float, p: np.ndarray, q: np.ndarray, wobble: float
     )  # fmt: skip
 
 
+def tick_messages(keys: Keys, pairs: list[Pair], k: int, t: float) -> list[tuple[str, bytes]]:
+    """What every pair publishes at tick ``k`` (time ``t`` [s]), in order, as ``(key, payload)``: mode events,
+    truth and estimate of both vehicles, guidance, and every 5th tick a camera frame (the clock is the
+    caller's). Advances each pair's scripted guidance to ``t``."""
+    out: list[tuple[str, bytes]] = []
+    for i, pair in enumerate(pairs):
+        for frm, to, reason, r in pair.step(t):
+            data = {"from": frm, "to": to, "t_s": t, "range_m": r, "reason": reason}
+            out.append((keys.event(pair.chaser), encode(Event(t_s=t, kind="mode", data=data))))
+            if to == "DOCKED":
+                out.append((keys.event(pair.chaser), encode(Event(t_s=t, kind="contact", data={}))))
+        p_c, q_c = pair.chaser_pose(t)
+        for vid, p, q in ((pair.chaser, p_c, q_c), (pair.target, pair.p_target, np.array(Q_TARGET))):
+            truth = Truth(tick=k, t_s=t, p_nav=p, v_nav=np.zeros(3), q_nav_body=q, w_body=np.zeros(3))
+            out.append((keys.truth(vid), encode(truth)))
+            out.append((keys.estimate(vid), encode(_estimate(k, t, p, q, float(i)))))
+        r = pair.range_at(t)
+        guidance = Guidance(
+            tick=k, t_s=t, mode=pair.mode, range_m=r, r1_m=pair.r1, r2_m=pair.r2, r_t_m=R_T,
+            decision=pair.decision, reason=f"{pair.mode} at r = {r:.3f} m",
+        )  # fmt: skip
+        out.append((keys.guidance(pair.chaser), encode(guidance)))
+        out.append((keys.guidance(pair.target), encode(Guidance(tick=k, t_s=t, mode="STATION"))))
+        if k % 5 == 0 and pair.mode in ("REORIENT", "ALIGN", "DOCK"):
+            feats = np.array([[0.01 * j, 0.0, r] for j in range(6)])
+            vision = Vision(
+                tick=k, t_s=t, target_id=pair.target, face="+x", kind="features", data=feats,
+                marker_ids=tuple(range(6)),
+            )  # fmt: skip
+            out.append((keys.vision(pair.chaser), encode(vision)))
+    return out
+
+
 class FakeSwarm:
     def __init__(self, session: zenoh.Session, keys: Keys, args: argparse.Namespace) -> None:
         self.session = session
@@ -228,39 +261,10 @@ class FakeSwarm:
 
     def step(self) -> None:
         """Publish tick ``self.tick`` of every pair, then advance the clock."""
-        k, t = self.tick, self.tick * self.args.dt
-        for i, pair in enumerate(self.pairs):
-            for frm, to, reason, r in pair.step(t):
-                data = {"from": frm, "to": to, "t_s": t, "range_m": r, "reason": reason}
-                self.put(self.keys.event(pair.chaser), encode(Event(t_s=t, kind="mode", data=data)))
-                if to == "DOCKED":
-                    self.put(self.keys.event(pair.chaser), encode(Event(t_s=t, kind="contact", data={})))
-            p_c, q_c = pair.chaser_pose(t)
-            for vid, p, q in ((pair.chaser, p_c, q_c), (pair.target, pair.p_target, np.array(Q_TARGET))):
-                truth = Truth(tick=k, t_s=t, p_nav=p, v_nav=np.zeros(3), q_nav_body=q, w_body=np.zeros(3))
-                self.put(self.keys.truth(vid), encode(truth))
-                self.put(self.keys.estimate(vid), encode(_estimate(k, t, p, q, float(i))))
-            r = pair.range_at(t)
-            self.put(
-                self.keys.guidance(pair.chaser),
-                encode(Guidance(
-                    tick=k, t_s=t, mode=pair.mode, range_m=r, r1_m=pair.r1, r2_m=pair.r2, r_t_m=R_T,
-                    decision=pair.decision, reason=f"{pair.mode} at r = {r:.3f} m",
-                )),
-            )  # fmt: skip
-            self.put(
-                self.keys.guidance(pair.target),
-                encode(Guidance(tick=k, t_s=t, mode="STATION")),
-            )
-            if k % 5 == 0 and pair.mode in ("REORIENT", "ALIGN", "DOCK"):
-                feats = np.array([[0.01 * j, 0.0, r] for j in range(6)])
-                vision = Vision(
-                    tick=k, t_s=t, target_id=pair.target, face="+x", kind="features", data=feats,
-                    marker_ids=tuple(range(6)),
-                )  # fmt: skip
-                self.put(self.keys.vision(pair.chaser), encode(vision))
+        for key, payload in tick_messages(self.keys, self.pairs, self.tick, self.tick * self.args.dt):
+            self.put(key, payload)
         self.clock("running")
-        if self.args.garbage and k % 2 == 1:
+        if self.args.garbage and self.tick % 2 == 1:
             self.garbage()
         self.tick += 1
 

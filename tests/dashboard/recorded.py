@@ -1,0 +1,94 @@
+"""A small MCAP recording for the playback tests, made cheaply and faithfully: the real
+:class:`~swarm.transport.recording.Recorder` (the one ``swarm record`` and ``swarm launch --record`` run)
+writes the file, fed by a stand-in Zenoh session with the messages the scripted fake swarm
+(:mod:`tests.dashboard.fake_swarm`) publishes tick by tick, plus the world's ``run_start`` / ``run_end``
+events, its clock and the anchors. A launched lockstep run with ``--record`` would take a minute here; this
+takes ~2 s.
+
+The run: one chaser/target pair, the chaser flying a straight line from (0, 1, 0) m onto its target at
+(1, 2, 1) m at ``speed_m_s`` (docked at ~16 s with the defaults), through APPROACH, REORIENT, ALIGN, DOCK
+and DOCKED, one tick every ``dt_s`` of swarm time.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from swarm.transport.keys import Keys
+from swarm.transport.messages import Anchors, Clock, Event, encode
+from swarm.transport.recording import Recorder
+from tests.dashboard.fake_swarm import ANCHORS_M, Pair, tick_messages, vehicle_ids
+
+NAMESPACE = "rec-test"
+
+
+@dataclass(frozen=True)
+class _Bytes:
+    data: bytes
+
+    def to_bytes(self) -> bytes:
+        return self.data
+
+
+@dataclass(frozen=True)
+class _Sample:
+    key_expr: str
+    payload: _Bytes
+
+
+class _Subscriber:
+    def undeclare(self) -> None:
+        pass
+
+
+class _FeedingSession:
+    """What the Recorder needs of a Zenoh session: one subscriber, called here with every sample."""
+
+    def __init__(self) -> None:
+        self.callback = None
+
+    def declare_subscriber(self, _key: str, callback) -> _Subscriber:
+        self.callback = callback
+        return _Subscriber()
+
+
+def scripted_messages(
+    keys: Keys, duration_s: float = 20.0, dt_s: float = 0.01, speed_m_s: float = 0.1, seed: int = 7
+) -> list[tuple[str, bytes]]:
+    """The messages of the scripted run in the order a recorder would see them (module docstring)."""
+    pairs = [Pair(i, c, t, speed_m_s) for i, (c, t) in enumerate(vehicle_ids(1))]
+    ids = [v for p in pairs for v in (p.chaser, p.target)]
+    start = {"seed": seed, "vehicles": ids, "clock": "lockstep", "scenario": "docking"}
+    out = [
+        (keys.anchors(), encode(Anchors(anchor_ids=(0, 1, 2, 3), positions_nav=np.array(ANCHORS_M)))),
+        (keys.world_event(), encode(Event(t_s=0.0, kind="run_start", data=start))),
+    ]
+    n = round(duration_s / dt_s)
+    for k in range(n + 1):
+        t = k * dt_s
+        out += tick_messages(keys, pairs, k, t)
+        out.append((keys.world_clock(), encode(Clock(tick=k, t_s=t, state="running", seed=seed))))
+    end = {"reason": "all_contact", "tick": n, "t_s": n * dt_s, "seed": seed}
+    out.append((keys.world_event(), encode(Event(t_s=n * dt_s, kind="run_end", data=end))))
+    return out
+
+
+def write_recording(path: Path, **script) -> list[tuple[str, bytes]]:
+    """Record the scripted run (``script``: :func:`scripted_messages`'s arguments) to ``path`` with the
+    Recorder; returns the messages recorded, in order."""
+    keys = Keys(NAMESPACE)
+    messages = scripted_messages(keys, **script)
+    session = _FeedingSession()
+    stop = threading.Event()
+
+    def ready() -> None:  # subscribed: everything arrives, then the recorder is asked to finish
+        for key, payload in messages:
+            session.callback(_Sample(key, _Bytes(payload)))
+        stop.set()
+
+    Recorder(session, keys, path).run(stop, ready)
+    return messages

@@ -1,0 +1,281 @@
+"""Playback of an MCAP recording (issue 16, dashboard.playback): the store at time t holds the recorded
+poses and mode at t; seeking backward then forward gives the store a straight play gives; the player's clock;
+the app draws the recorded pose at the chosen time, commands nothing and opens no Zenoh session; a missing,
+truncated or corrupt file exits 2 with one line naming the file (and the byte offset).
+
+The recording is the scripted fake swarm written by the real Recorder (``tests/dashboard/recorded.py``); the
+oracle for "the pose at t" is the recorded payload read with plain msgpack, not the project's decoder."""
+
+from __future__ import annotations
+
+import sys
+import threading
+import urllib.request
+from pathlib import Path
+
+import msgpack
+import numpy as np
+import pytest
+
+from dashboard import cli
+from dashboard.app import DashboardApp
+from dashboard.playback import Player, Timeline, load_recording, scenario_of
+from dashboard.state import Snapshot, SwarmState
+from swarm.errors import LogError
+from swarm.scenario import load_scenario
+from swarm.transport.keys import Keys
+from swarm.transport.recording import read_recording
+from tests.dashboard.conftest import START_TIMEOUT_S
+from tests.dashboard.recorded import NAMESPACE
+from tests.transport.procs import Procs, wait_until
+
+VEHICLES = {"chaser": ("chaser", "target"), "target": ("target", None)}
+
+
+def _make_state() -> SwarmState:
+    sc = load_scenario("docking")
+    return SwarmState(VEHICLES, np.array(sc.anchors_m, dtype=float))
+
+
+def _ns(t_s: float) -> int:
+    """A time in ns, as the recorder's log time (``t_s`` of 1999 ticks of 0.01 s is 19.990000000000002)."""
+    return round(t_s * 1e9)
+
+
+def _recorded_truths(path: Path, agent_id: str) -> list[tuple[float, np.ndarray]]:
+    """``(t_s, p_nav)`` of every recorded truth of ``agent_id``, read with plain msgpack."""
+    msgs, _ = read_recording(path)
+    out = []
+    for m in msgs:
+        if m.key == f"{NAMESPACE}/agent/{agent_id}/truth":
+            obj = msgpack.unpackb(m.payload, raw=False)
+            p = obj["p_nav"]
+            out.append((obj["t_s"], np.frombuffer(p["data"], dtype=p["dtype"]).reshape(p["shape"])))
+    return out
+
+
+def _straight(recording, t_s: float) -> SwarmState:
+    """The store after every message of log time <= t_s, applied one by one from an empty store."""
+    state = _make_state()
+    for (kind, agent_id, msg), t_ns in zip(recording.items, recording.times_ns, strict=True):
+        if t_ns > _ns(t_s):
+            break
+        state.on_message(kind, agent_id, msg)
+    return state
+
+
+def _assert_same(a: Snapshot, b: Snapshot) -> None:
+    assert a.agents.keys() == b.agents.keys()
+    for k, x in a.agents.items():
+        y = b.agents[k]
+        assert (x.truth, x.estimate, x.guidance) == (y.truth, y.estimate, y.guidance), k
+        assert (x.vision_t_s, x.modes, x.trail_versions, x.radii_version) == (
+            y.vision_t_s, y.modes, y.trail_versions, y.radii_version,
+        ), k  # fmt: skip
+        for u, v in ((x.truth_trail, y.truth_trail), (x.estimate_trail, y.estimate_trail)):
+            np.testing.assert_array_equal(u, v)
+        np.testing.assert_array_equal(x.radii_t, y.radii_t)
+        np.testing.assert_array_equal(x.radii_v, y.radii_v)
+    assert (a.clock, a.run, a.events, a.faults, a.clock_mode) == (
+        b.clock,
+        b.run,
+        b.events,
+        b.faults,
+        b.clock_mode,
+    )
+    assert a.anchors[0] == b.anchors[0] and np.array_equal(a.anchors[1], b.anchors[1])
+
+
+def test_a_recording_is_read_with_its_namespace_scenario_and_vehicles(recording: Path) -> None:
+    rec = load_recording(recording)
+    assert rec.namespace == NAMESPACE and rec.scenario_name == "docking"
+    assert rec.vehicle_ids == ("chaser", "target")
+    assert (
+        list(rec.times_ns) == sorted(rec.times_ns) and rec.start_s == 0.0 and rec.end_s == pytest.approx(20.0)
+    )
+    kinds = {kind for kind, _, _ in rec.items}
+    assert kinds == {
+        "truth",
+        "estimate",
+        "guidance",
+        "vision",
+        "event",
+        "world_event",
+        "world_clock",
+        "anchors",
+    }
+    sc = scenario_of(rec, None)
+    assert sc.name == "docking" and set(sc.vehicles) == {"chaser", "target"}
+
+
+def test_the_store_at_t_holds_the_recorded_poses_and_mode_at_t(recording: Path) -> None:
+    rec = load_recording(recording)
+    state = _make_state()
+    timeline = Timeline(rec, state, _make_state)
+    truths = _recorded_truths(recording, "chaser")
+    for t in (0.0, 3.333, 7.5, 12.0, 19.99, 20.0):
+        timeline.seek(t)
+        t_want, p_want = [(ts, p) for ts, p in truths if _ns(ts) <= _ns(t)][-1]
+        chaser = state.agents["chaser"]
+        assert chaser.truth.t_s == t_want
+        np.testing.assert_array_equal(chaser.truth.p_nav, p_want)
+        assert state.clock.t_s == pytest.approx(t_want)
+    timeline.seek(5.0)
+    assert state.agents["chaser"].guidance.mode == "APPROACH"  # 1.73 m - 0.1 m/s * 5 s = 1.23 m > 0.7 m
+    timeline.seek(19.0)
+    assert state.agents["chaser"].guidance.mode == "DOCKED"
+    modes = [m for _, m, _, _ in state.agents["chaser"].modes]
+    assert modes == ["APPROACH", "REORIENT", "ALIGN", "DOCK", "DOCKED"]
+
+
+def test_seeking_backward_then_forward_gives_the_store_of_a_straight_play(recording: Path) -> None:
+    rec = load_recording(recording)
+    state = _make_state()
+    timeline = Timeline(rec, state, _make_state, checkpoint_every=700)  # many checkpoints, between ticks
+    assert timeline.checkpoints > 10
+    for t in (18.0, 2.5, 11.111, 11.0, 20.0, 0.0, 6.0):
+        restored = timeline.seek(t)
+        _assert_same(state.snapshot(), _straight(rec, t).snapshot())
+        assert isinstance(restored, bool)
+    t = 6.0  # then played forward frame by frame at 10x and 30 frames/s
+    while t < 9.0:
+        t += 10.0 / 30.0
+        timeline.seek(t)
+    _assert_same(state.snapshot(), _straight(rec, t).snapshot())
+
+
+def test_a_backward_seek_says_the_store_was_restored(recording: Path) -> None:
+    rec = load_recording(recording)
+    timeline = Timeline(rec, _make_state(), _make_state, checkpoint_every=700)
+    timeline.seek(10.0)
+    assert not timeline.seek(10.05)  # a frame forward: applied, nothing restored
+    assert timeline.seek(4.0)
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_the_player_plays_at_its_speed_stops_at_the_end_and_plays_again_from_the_start(
+    recording: Path,
+) -> None:
+    rec = load_recording(recording)
+    clock = _Clock()
+    player = Player(Timeline(rec, _make_state(), _make_state), clock)
+    player.seek(2.0)
+    player.advance()
+    assert player.timeline.t_s == 2.0 and not player.playing
+    clock.now += 5.0  # paused: time stands still
+    player.advance()
+    assert player.timeline.t_s == 2.0
+    player.set_speed(2.0)
+    player.play()
+    clock.now += 1.5
+    player.advance()
+    assert player.timeline.t_s == pytest.approx(5.0)
+    player.seek(1.0)  # a seek while playing: playing goes on from there
+    clock.now += 0.5
+    player.advance()
+    assert player.timeline.t_s == pytest.approx(2.0) and player.playing
+    clock.now += 60.0
+    player.advance()
+    assert player.timeline.t_s == rec.end_s and not player.playing
+    player.play()
+    player.advance()
+    assert player.timeline.t_s == rec.start_s and player.playing
+
+
+def test_the_app_draws_the_recorded_pose_at_the_chosen_time_and_commands_nothing(recording: Path) -> None:
+    rec = load_recording(recording)
+    app = DashboardApp(load_scenario("docking"), None, Keys(rec.namespace), "127.0.0.1", 0, recording=rec)
+    try:
+        truths = _recorded_truths(recording, "chaser")
+        for t in (15.0, 4.0):  # forward, then backward (the store restored, the scene drawn again)
+            app.player.seek(t)
+            app.frame()
+            p_want = [p for ts, p in truths if _ns(ts) <= _ns(t)][-1]
+            np.testing.assert_allclose(app.scene.nodes["chaser"].truth.position, p_want)
+            app.gui.playback.update()  # (the render thread's panel update, at its own rate)
+            assert f"t = {t:.2f} s of 20.00 s" in app.gui.playback.time.content
+            assert app.gui.playback.slider.value == t
+        assert app.link is None and app.gui.buttons == {}  # no Pause/Resume/Reset/New seed
+        assert not app.gui.faults.button.visible and app.gui.faults.inject() is None
+        assert "not sent" in app.gui.faults.sent.content
+    finally:
+        app.close()
+
+
+def test_playback_opens_no_zenoh_session(recording: Path, monkeypatch, capsys) -> None:
+    import zenoh
+
+    import swarm.transport.session
+
+    opened = []
+
+    def refuse(*args, **kwargs):
+        opened.append(args)
+        raise AssertionError("a Zenoh session was opened")
+
+    monkeypatch.setattr(zenoh, "open", refuse)
+    monkeypatch.setattr(swarm.transport.session, "open_session", refuse)
+    parser = cli.argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    args = parser.parse_args(["--open", str(recording), "--port", "0", "--host", "127.0.0.1"])
+    stop = threading.Event()
+    result: list[object] = []
+    thread = threading.Thread(target=lambda: result.append(cli.run(args, stop)), daemon=True)
+    thread.start()
+    out: list[str] = []
+    try:
+        wait_until(
+            lambda: out.append(capsys.readouterr().out) or cli.READY_PREFIX in "".join(out),
+            START_TIMEOUT_S,
+            "the ready line",
+            poll_s=0.05,
+        )
+        url = "".join(out).split(cli.READY_PREFIX, 1)[1].split()[0]
+        with urllib.request.urlopen(url, timeout=10.0) as response:
+            assert response.status == 200
+    finally:
+        stop.set()
+        thread.join(START_TIMEOUT_S)
+    assert result == [0] and opened == []
+
+
+def _bad_files(recording: Path, tmp_path: Path) -> dict[str, tuple[Path, str]]:
+    data = recording.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    garbage = tmp_path / "garbage.mcap"
+    garbage.write_bytes(b"not an mcap file at all" * 10)
+    offset = r"\(reading stopped at byte \d+ of \d+\)"
+    return {
+        "truncated": (cut, rf"cut\.mcap: not a complete MCAP recording: .* {offset}$"),
+        "corrupt": (garbage, rf"garbage\.mcap: not a complete MCAP recording: .* {offset}$"),
+        "missing": (tmp_path / "nowhere.mcap", r"nowhere\.mcap: cannot read: No such file or directory$"),
+    }
+
+
+@pytest.mark.parametrize("case", ["truncated", "corrupt", "missing"])
+@pytest.mark.parametrize(
+    "command", [["-m", "dashboard"], ["-m", "swarm.cli.main", "dashboard"]], ids=["module", "swarm"]
+)
+def test_a_bad_recording_exits_2_with_one_line_naming_the_file(recording, tmp_path, case, command) -> None:
+    import re
+
+    path, pattern = _bad_files(recording, tmp_path)[case]
+    with pytest.raises(LogError, match=pattern):  # the same message, from the loader
+        load_recording(path)
+    prog = "dashboard" if command == ["-m", "dashboard"] else "swarm"
+    with Procs() as procs:
+        proc = procs.start([sys.executable, *command, "--open", str(path), "--port", "0"])
+        assert proc.wait(START_TIMEOUT_S) == 2, proc.output()
+    assert proc.stdout == [], proc.output()  # no ready line: nothing was served
+    errors = [line for line in proc.stderr if "error" in line]
+    assert len(errors) == 1 and errors[0].startswith(f"{prog}: error: "), proc.output()
+    assert re.search(pattern, errors[0]), proc.output()
+    assert "Traceback" not in proc.output()
