@@ -17,7 +17,13 @@ def test_bench_replay_reports_the_replay_and_both_steps(tmp_path):
     assert rec["imu_samples"] > 19_000 and rec["ranges"] > 1400  # 20 s at 1 kHz and 80 Hz, less dropouts
     assert 0 < rec["replay_s"] and 0 < rec["read_s"] and rec["rmse_m"] < 0.2
     steps = rec["step_us"]
-    assert set(steps) == {"imu_single", "tandem_single", "imu_batched", "tandem_batched"}
+    assert set(steps) == {
+        "imu_single",
+        "tandem_single",
+        "imu_batched",
+        "tandem_batched",
+        "imu_single_no_range_bias",
+    }
     assert all(v > 0 for v in steps.values())
     assert rec["imu_over_tandem_single"] == steps["imu_single"] / steps["tandem_single"]
     assert "goal <= 2x" in r.stdout
