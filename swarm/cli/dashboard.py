@@ -1,5 +1,5 @@
-"""``swarm dashboard SCENARIO``: the Viser web dashboard of a running swarm (the ``dashboard`` package;
-the same as ``python -m dashboard``)."""
+"""``swarm dashboard SCENARIO``: the Viser web dashboard of a running swarm, or with ``--open FILE.mcap``
+of a recording (the ``dashboard`` package; the same as ``python -m dashboard``)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     from dashboard.cli import DESCRIPTION, add_arguments
 
     p = sub.add_parser(
-        "dashboard", help="serve the web dashboard of a running swarm (Viser)", description=DESCRIPTION
+        "dashboard",
+        help="serve the web dashboard of a running swarm or of a recording (Viser)",
+        description=DESCRIPTION,
     )
     add_arguments(p)
     p.set_defaults(func=run)
