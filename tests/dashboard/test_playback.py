@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 import threading
 import urllib.request
+from dataclasses import replace
 from pathlib import Path
 
 import msgpack
@@ -21,7 +22,7 @@ from dashboard import cli
 from dashboard.app import DashboardApp
 from dashboard.playback import Player, Timeline, load_recording, scenario_of
 from dashboard.state import Snapshot, SwarmState
-from swarm.errors import LogError
+from swarm.errors import ConfigError, LogError
 from swarm.scenario import load_scenario
 from swarm.transport.keys import Keys
 from swarm.transport.recording import read_recording
@@ -128,6 +129,18 @@ def test_the_store_at_t_holds_the_recorded_poses_and_mode_at_t(recording: Path) 
     assert modes == ["APPROACH", "REORIENT", "ALIGN", "DOCK", "DOCKED"]
 
 
+def test_the_scenario_is_the_recorded_one_in_as_many_pairs_unless_one_is_given(recording: Path) -> None:
+    rec = load_recording(recording)
+    four = "['chaser0', 'target0', 'chaser1', 'target1']"
+    pairs = replace(rec, metadata={"run_start": {"scenario": "ground-docking", "vehicles": four}})
+    sc = scenario_of(pairs, None)
+    assert set(sc.vehicles) == {"chaser0", "target0", "chaser1", "target1"}
+    assert sc.vehicles["chaser1"].target == "target1" and sc.kind("chaser0").name == "ground"
+    assert scenario_of(pairs, "docking").kind("chaser0").name == "cubesat"  # given: it overrides
+    with pytest.raises(ConfigError, match=r"run\.mcap: its scenario 'my-own' cannot be loaded .* --open"):
+        scenario_of(replace(rec, metadata={"run_start": {"scenario": "my-own"}}), None)
+
+
 def test_seeking_backward_then_forward_gives_the_store_of_a_straight_play(recording: Path) -> None:
     rec = load_recording(recording)
     state = _make_state()
@@ -198,7 +211,11 @@ def test_the_app_draws_the_recorded_pose_at_the_chosen_time_and_commands_nothing
             app.player.seek(t)
             app.frame()
             p_want = [p for ts, p in truths if _ns(ts) <= _ns(t)][-1]
-            np.testing.assert_allclose(app.scene.nodes["chaser"].truth.position, p_want)
+            nodes = app.scene.nodes["chaser"]
+            np.testing.assert_allclose(nodes.truth.position, p_want)
+            np.testing.assert_allclose(
+                nodes.trail_truth.points[-1, 1], p_want, atol=1e-6
+            )  # the trail ends there
             app.gui.playback.update()  # (the render thread's panel update, at its own rate)
             assert f"t = {t:.2f} s of 20.00 s" in app.gui.playback.time.content
             assert app.gui.playback.slider.value == t
