@@ -1,0 +1,226 @@
+"""The landing scenario (paper section VI-B; ``swarm/scenarios/landing.toml``, ``landing-swarm.toml``): one
+quadrotor and one pad (``[vehicle]``, ``[pad]``), or a fleet of them (``[[fleet]]``: one UAV per entry, each
+with its own pad), the sensors, the estimator, the guidance and the per-run dispersions. The tick that flies
+it is :mod:`swarm.step.landing`."""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from swarm.config import load_toml
+from swarm.core.imu_filter import ImuFilterParams
+from swarm.core.landing import LandingGuidanceParams
+from swarm.core.pad_vision import PadBoardParams, PadCameraParams
+from swarm.errors import ConfigError
+from swarm.kinds.quadrotor import QuadrotorParams
+
+Vec3 = tuple[float, float, float]
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+
+
+@dataclass(frozen=True)
+class LandingVehicle:
+    """``[vehicle]``: where the UAV starts."""
+
+    start_m: Vec3 = (25.0, 6.0, 8.0)
+    yaw_deg: float = 180.0
+
+
+@dataclass(frozen=True)
+class PadSpec:
+    """``[pad]``: the landing pad (surveyed: its position is known in nav)."""
+
+    position_m: Vec3 = (0.0, 0.0, 0.0)
+    yaw_deg: float = 0.0
+    board: PadBoardParams = field(default_factory=PadBoardParams)
+
+
+@dataclass(frozen=True)
+class LandingCamera:
+    """``[camera]``: the downward camera (``PadCameraParams``) and how the runner uses it."""
+
+    mode: str = "corners"
+    """``"corners"`` (Monte Carlo) or ``"rendered"`` (render, detect, PnP)."""
+    rate_hz: float = 20.0
+    pos_body_m: Vec3 = (0.0, 0.0, -0.05)
+    intrinsics: PadCameraParams = field(default_factory=PadCameraParams)
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("corners", "rendered"):
+            raise ConfigError(f"camera.mode must be 'corners' or 'rendered', got {self.mode!r}")
+        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise ConfigError(f"camera.rate_hz must be > 0, got {self.rate_hz!r}")
+
+
+@dataclass(frozen=True)
+class LandingImu:
+    """``[imu]``: the 6-axis IMU at the tick rate; biases drawn per run, uniform in ``[-x, x]`` per axis,
+    then known to the filter to its ``initial`` sigmas (a bias calibration on the ground)."""
+
+    accel_noise: float = 0.01
+    gyro_noise: float = 0.001
+    accel_bias_m_s2: float = 0.02
+    gyro_bias_rad_s: float = 0.002
+
+
+@dataclass(frozen=True)
+class LandingUwb:
+    """``[uwb]``: anchors around the pad, ranged round-robin, only within ``max_range_m``."""
+
+    enabled: bool = True
+    anchors_m: tuple[Vec3, ...] = ((6.0, 6.0, 0.3), (-6.0, 6.0, 0.3), (-6.0, -6.0, 0.3), (6.0, -6.0, 2.5))
+    rate_hz: float = 40.0
+    sigma_m: float = 0.10
+    max_range_m: float = 15.0
+    lever_arm_m: Vec3 = (0.0, 0.0, 0.05)
+
+
+@dataclass(frozen=True)
+class LandingGnss:
+    """``[gnss]``: a satellite receiver's position fixes, white noise (the "less accurate" navigation of the
+    paper's approach phase; multipath and biases are not modelled)."""
+
+    enabled: bool = True
+    rate_hz: float = 5.0
+    sigma_m: Vec3 = (1.0, 1.0, 1.5)
+
+
+@dataclass(frozen=True)
+class LandingInitial:
+    """``[initial]``: the first estimate's errors (drawn) and sigmas."""
+
+    sigma_position_m: float = 1.0
+    """GNSS-class start."""
+    sigma_velocity_m_s: float = 0.05
+    sigma_attitude_deg: float = 1.0
+    sigma_accel_bias_m_s2: float = 0.02
+    sigma_gyro_bias_rad_s: float = 0.002
+
+
+@dataclass(frozen=True)
+class LandingFaults:
+    """``[faults]``: the pad hidden from the camera (an obstruction, a glare) in a window, or always."""
+
+    pad_hidden_from_s: float | None = None
+    pad_hidden_for_s: float = 0.0
+    pad_hidden_always: bool = False
+
+
+@dataclass(frozen=True)
+class LandingDispersions:
+    """``[dispersions]``: what varies from run to run of a campaign (all drawn from the run's seed)."""
+
+    enabled: bool = False
+    start_sigma_m: Vec3 = (3.0, 3.0, 1.0)
+    """Start position, normal per axis [m]."""
+    uwb_range_m: tuple[float, float] = (8.0, 30.0)
+    """The anchors' reach, uniform in this interval [m]: from a pad seen by the anchors only in the last
+    metres to one covered during the whole approach (the navigation quality the switching rule adapts to)."""
+
+
+@dataclass(frozen=True)
+class LandingKinds:
+    quadrotor: QuadrotorParams = field(default_factory=QuadrotorParams)
+
+
+ID_PATTERN = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+
+
+@dataclass(frozen=True)
+class FleetUav:
+    """``[[fleet]]``: one UAV of a swarm variant and the pad it lands on (its own; pads may not be shared)."""
+
+    id: str
+    start_m: Vec3
+    pad_m: Vec3
+    yaw_deg: float = 180.0
+    pad_yaw_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.id, str) and ID_PATTERN.match(self.id)):
+            raise ConfigError(f"fleet.id must be 1-64 letters, digits, '_' or '-', got {self.id!r}")
+
+
+@dataclass(frozen=True)
+class Uav:
+    """One UAV of a run, the single ``[vehicle]`` or a ``[[fleet]]`` entry: id, start, heading, pad."""
+
+    index: int
+    id: str
+    start_m: Vec3
+    yaw_deg: float
+    pad_m: Vec3
+    pad_yaw_deg: float
+
+
+@dataclass(frozen=True)
+class LandingScenario:
+    """A landing scenario file (``swarm/scenarios/landing.toml``)."""
+
+    mission: str = "landing"
+    name: str = "landing"
+    policy: str = "mdp"
+    dt_s: float = 0.01
+    max_duration_s: float = 90.0
+    pad_tolerance_m: float = 0.25
+    """A landing within this horizontal distance of the pad's centre is on the pad."""
+    vehicle: LandingVehicle = LandingVehicle()
+    pad: PadSpec = PadSpec()
+    camera: LandingCamera = LandingCamera()
+    imu: LandingImu = LandingImu()
+    uwb: LandingUwb = LandingUwb()
+    gnss: LandingGnss = LandingGnss()
+    initial: LandingInitial = LandingInitial()
+    estimator: ImuFilterParams = field(default_factory=lambda: ImuFilterParams(range_bias=False, huber_k=2.0))
+    landing: LandingGuidanceParams = field(default_factory=LandingGuidanceParams)
+    faults: LandingFaults = LandingFaults()
+    dispersions: LandingDispersions = LandingDispersions()
+    kinds: LandingKinds = LandingKinds()
+    fleet: tuple[FleetUav, ...] = ()
+    """Several UAVs, each with its pad (``landing-swarm.toml``); empty: the one ``[vehicle]`` on ``[pad]``."""
+
+    def uavs(self) -> list[Uav]:
+        """The run's UAVs in order (index 0 draws the one-UAV scenario's random streams)."""
+        if not self.fleet:
+            v, p = self.vehicle, self.pad
+            return [Uav(0, "uav", v.start_m, v.yaw_deg, p.position_m, p.yaw_deg)]
+        return [Uav(i, f.id, f.start_m, f.yaw_deg, f.pad_m, f.pad_yaw_deg) for i, f in enumerate(self.fleet)]
+
+    def __post_init__(self) -> None:
+        ids = [f.id for f in self.fleet]
+        if len(set(ids)) != len(ids):
+            dup = next(i for i in ids if ids.count(i) > 1)
+            raise ConfigError(f"fleet: UAV {dup!r} is listed twice")
+        pads = [tuple(f.pad_m) for f in self.fleet]
+        if len(set(pads)) != len(pads):
+            raise ConfigError("fleet: two UAVs share a pad; give each its own pad_m")
+        if self.mission != "landing":
+            raise ConfigError(f"mission must be 'landing' for a landing scenario, got {self.mission!r}")
+        if self.policy not in ("fixed", "mdp"):
+            raise ConfigError(f"policy must be 'fixed' or 'mdp', got {self.policy!r}")
+        if not (math.isfinite(self.dt_s) and 0 < self.dt_s <= 0.02):
+            raise ConfigError(f"dt_s must be in (0, 0.02], got {self.dt_s!r}")
+
+
+def _scenario_path(name_or_path) -> Path:
+    """A scenario file, or a bundled one by name (as :func:`swarm.scenario.load_scenario` finds them)."""
+    path = Path(name_or_path)
+    return SCENARIO_DIR / f"{name_or_path}.toml" if not path.suffix and not path.exists() else path
+
+
+def is_landing_scenario(name_or_path) -> bool:
+    """Whether a scenario (a file, or a bundled one by name) is a landing one (``mission = "landing"``)."""
+    import tomllib
+
+    try:
+        with open(_scenario_path(name_or_path), "rb") as fh:
+            return tomllib.load(fh).get("mission") == "landing"
+    except (OSError, tomllib.TOMLDecodeError):
+        return False
+
+
+def load_landing(name_or_path, overrides: dict | None = None) -> LandingScenario:
+    return load_toml(LandingScenario, _scenario_path(name_or_path), overrides)
