@@ -53,6 +53,12 @@ MODE_COLORS: dict[str, Rgb] = {
     "DOCKED": (30, 132, 73),
     "ABORT": (231, 76, 60),
     "STATION": (93, 109, 126),
+    "CRUISE": (41, 128, 185),
+    "DEVIATE": (230, 126, 34),
+    "DESCEND": (142, 68, 173),
+    "FINAL": (39, 174, 96),
+    "CLIMB": (241, 196, 15),
+    "LANDED": (22, 160, 133),
 }
 """Colour of each guidance mode (``messages.MODES``): a chaser's body is drawn in its mode's colour."""
 UNKNOWN_COLOR: Rgb = (127, 127, 127)
@@ -69,6 +75,12 @@ MODE_LEVELS: dict[str, int] = {
     "DOCK": 4,
     "DOCKED": 5,
     "STATION": 0,
+    "CRUISE": 1,
+    "DEVIATE": 2,
+    "CLIMB": 2,
+    "DESCEND": 3,
+    "FINAL": 4,
+    "LANDED": 5,
 }
 """Height of each mode on the mode-timeline plot: the paper's stages in order (Fig. 1), HOLD at 0 and
 ABORT below it."""

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from swarm.errors import ConfigError
-from swarm.sim.landing import load_landing, run_landing
+from swarm.sim.landing import SCENARIO_DIR, load_landing, run_landing
 
 SEEDS = (0, 1, 2)
 NOMINAL = {"dispersions.enabled": False}  # the scenario's start and anchors: what these tests reason about
@@ -161,3 +161,30 @@ def test_the_committed_landing_campaign_reproduces_run_by_run():
         assert str(r["landed"]) == row["landed"]
         for key in ("energy_j", "landing_time_s", "landing_error_m", "deviation_distance_m", "uwb_range_m"):
             assert repr(float(r[key])) == row[key] or str(r[key]) == row[key], key
+
+
+def test_a_fleet_s_uavs_fly_their_own_streams_and_the_scenario_refuses_shared_pads(tmp_path):
+    import dataclasses
+
+    from swarm.sim.landing import run_landing_fleet
+
+    sc = load_landing("landing-swarm")
+    full = run_landing_fleet(sc, seed=3, record_series=False)
+    two = run_landing_fleet(dataclasses.replace(sc, fleet=sc.fleet[:2]), seed=3, record_series=False)
+    # each UAV draws from its own stream: taking two UAVs away changes nothing for the others
+    for uid in ("uav1", "uav2"):
+        a, b = full["uavs"][uid], two["uavs"][uid]
+        assert (a["energy_j"], a["landing_error_m"], a["modes"]) == (
+            b["energy_j"],
+            b["landing_error_m"],
+            b["modes"],
+        )
+    assert full["landed"] == 4  # the bundled swarm variant lands every UAV on its own pad
+    text = (SCENARIO_DIR / "landing-swarm.toml").read_text()
+    bad = tmp_path / "shared.toml"
+    bad.write_text(text.replace("pad_m = [-8.0, 8.0, 0.0]", "pad_m = [8.0, 8.0, 0.0]"))
+    with pytest.raises(ConfigError, match="fleet: two UAVs share a pad"):
+        load_landing(bad)
+    bad.write_text(text.replace('id = "uav2"', 'id = "uav1"'))
+    with pytest.raises(ConfigError, match="fleet: UAV 'uav1' is listed twice"):
+        load_landing(bad)

@@ -33,6 +33,7 @@ import threading
 import time
 from pathlib import Path
 
+from swarm.cli.children import check_record, child_args, client_endpoint, start_recorder
 from swarm.errors import ConfigError, SwarmError
 from swarm.private_dirs import private_dir
 from swarm.step.outcome import chaser_summary, run_summary
@@ -110,15 +111,6 @@ def _hosts(args: argparse.Namespace, sc) -> dict[str, list[str]]:
 def _child_of(args: argparse.Namespace, sc) -> dict[str, str]:
     """Vehicle id -> the name of the child process that hosts its agent."""
     return {v: name for name, vids in _hosts(args, sc).items() for v in vids}
-
-
-def _client_endpoint(listen: str) -> str:
-    """The endpoint a local child connects to for a listen endpoint (``0.0.0.0``/``[::]`` -> loopback)."""
-    proto, _, addr = listen.partition("/")
-    host, _, port = addr.split("?")[0].split("#")[0].rpartition(":")
-    if host in ("0.0.0.0", "[::]", "::"):
-        host = "127.0.0.1"
-    return f"{proto}/{host}:{port}"
 
 
 class RunLog:
@@ -229,19 +221,6 @@ def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
     return out
 
 
-def _child_args(args: argparse.Namespace, endpoint: str, seed: int) -> list[str]:
-    common = [str(args.scenario)]
-    for o in args.overrides:
-        common += ["--set", o]
-    common += ["--agents", str(args.agents), "--seed", str(seed), "--namespace", args.namespace]
-    if args.policy:
-        common += ["--policy", args.policy]
-    common += ["--mode", "client", "--connect", endpoint]
-    if args.lease_ms:
-        common += ["--lease-ms", str(args.lease_ms)]
-    return common
-
-
 def _config_args(args: argparse.Namespace, identity: str) -> list[str]:
     """``--zenoh-config`` of one child: its own file in a ``--secure`` swarm, else the launcher's flag."""
     material = getattr(args, "secure_material", None)
@@ -254,6 +233,13 @@ def run(args: argparse.Namespace) -> int:
     import zenoh
 
     zenoh.try_init_log_from_env()  # RUST_LOG=...: Zenoh's own log (its ACL decisions: access_control=trace)
+
+    from swarm.landing_scenario import is_landing_scenario
+
+    if is_landing_scenario(args.scenario):
+        from swarm.cli.launch_landing import run_landing_launch
+
+        return run_landing_launch(args)
 
     from swarm.cli.sim import print_summary
     from swarm.cli.supervisor import Child, Supervisor
@@ -270,7 +256,7 @@ def run(args: argparse.Namespace) -> int:
 
     sc = scenario_from(args)
     _hosts(args, sc)  # the agent processes' layout, checked before anything starts
-    _check_record(args)
+    check_record(args)
     keys = Keys(args.namespace)
     policy = args.policy or sc.policy
     listen = list(args.listen) if args.listen else [free_loopback_endpoint()]
@@ -285,7 +271,7 @@ def run(args: argparse.Namespace) -> int:
         mode="router", connect=tuple(args.connect or ()), listen=tuple(listen), config_file=args.zenoh_config,
         multicast_scouting=args.multicast_scouting, lease_ms=args.lease_ms,
     )  # fmt: skip
-    endpoint = _client_endpoint(listen[0])
+    endpoint = client_endpoint(listen[0])
     stop = threading.Event()
     interrupted = threading.Event()
 
@@ -408,45 +394,11 @@ def _checkpoint_root() -> Path:
     return private_dir("swarm-world-", base)
 
 
-def _check_record(args: argparse.Namespace) -> None:
-    rec = getattr(args, "record", None)
-    if rec is None:
-        return
-    if rec.suffix != ".mcap":
-        raise ConfigError(f"--record: the recording's name must end in .mcap, got {str(rec)!r}")
-    if not rec.resolve().parent.is_dir():
-        raise ConfigError(f"--record: no such directory {str(rec.parent)!r}")
-    if getattr(args, "secure", False):
-        raise ConfigError(
-            "--record and --secure: the recorder would need its own identity and ACL rule; record a secure "
-            "swarm with `swarm record` and a certificate of your own"
-        )
-
-
-def _start_recorder(args, endpoint, sup, Child) -> None:
-    """The recorder child (``--record``), kept across runs; the run starts once it is subscribed."""
-    old = sup.children.get("recorder")
-    if args.record is None or (old is not None and old.running):
-        return
-    ready = threading.Event()
-
-    def on_line(line: str) -> None:
-        if line.startswith("recording "):
-            ready.set()
-
-    rec = ["swarm.cli.main", "record", str(args.record.resolve()), "--namespace", args.namespace,
-           "--mode", "client", "--connect", endpoint]  # fmt: skip
-    sup.start(Child("recorder", rec, restartable=False, on_line=on_line))
-    if not ready.wait(60.0):
-        raise ConfigError(f"--record: the recorder did not subscribe within 60 s (writing {args.record})")
-    print(f"recording to {args.record}", flush=True)
-
-
 def _start_run(args, sc, seed, endpoint, sup, Child):
-    common = _child_args(args, endpoint, seed)
+    common = child_args(args, endpoint, seed)
     from swarm.transport.security import agent_name
 
-    _start_recorder(args, endpoint, sup, Child)
+    start_recorder(args, endpoint, sup, Child)
 
     mothership = ["mothership", *common, *_config_args(args, "mothership")]
     sup.start(Child("mothership", mothership, restartable=True, rejoin_args=["--rejoin"]))

@@ -110,17 +110,29 @@ def _write_json(path: Path | None, res: dict) -> None:
 
 def _run_landing(args: argparse.Namespace) -> int:
     from swarm.config import parse_override
-    from swarm.sim.landing import load_landing, run_landing
+    from swarm.sim.landing import load_landing, run_landing, run_landing_fleet
 
     if args.agents != 1:
-        raise ConfigError("--agents: a landing scenario has one UAV (several UAVs and pads: not yet)")
-    sc = load_landing(args.scenario, dict(parse_override(text) for text in args.overrides))
-    res = run_landing(sc, args.policy, args.seed, record_series=not args.no_series or args.json is not None)
-    print_landing(res)
-    _write_json(args.json, res)
+        raise ConfigError(
+            "--agents: a landing scenario lists its UAVs ([[fleet]] in the file, e.g. landing-swarm)"
+        )
     if args.plot is not None:
         raise ConfigError("--plot: not drawn for a landing yet (the series is in --json)")
-    return 0 if res["landed"] or res["aborted"] else 1
+    sc = load_landing(args.scenario, dict(parse_override(text) for text in args.overrides))
+    record = not args.no_series or args.json is not None
+    if not sc.fleet:
+        res = run_landing(sc, args.policy, args.seed, record_series=record)
+        print_landing(res)
+        _write_json(args.json, res)
+        return 0 if res["landed"] or res["aborted"] else 1
+    res = run_landing_fleet(sc, args.policy, args.seed, record_series=record)
+    for uid, r in res["uavs"].items():
+        print(f"[{uid}]", end=" ")
+        print_landing(r)
+    n = len(res["uavs"])
+    print(f"{res['landed']} of {n} UAVs landed on their pads in {res['sim_time_s']:.1f} s simulated")
+    _write_json(args.json, res)
+    return 0 if all(r["landed"] or r["aborted"] for r in res["uavs"].values()) else 1
 
 
 def run(args: argparse.Namespace) -> int:

@@ -21,7 +21,7 @@ from swarm.landing_scenario import (  # noqa: F401  (the scenario's names, where
     is_landing_scenario,
     load_landing,
 )
-from swarm.step.landing import LandingAgent, LandingWorld
+from swarm.step.landing import LandingAgent, LandingWorld, landing_summary
 
 
 def run_landing(
@@ -80,33 +80,7 @@ def run_landing_fleet(
 def summary(sc: LandingScenario, policy: str, seed: int, world: LandingWorld, agent: LandingAgent, uid: str,
             wall: float, record_series: bool = True) -> dict:  # fmt: skip
     """One UAV's summary (``swarm sim landing --json``): the world's half (where it ended) and the agent's."""
-    w, a = world.outcome(uid), agent.outcome()
-    landed = bool(a["final_mode"] == "LANDED" and w["on_ground"])
-    end_k = world.uavs[uid].end_k
-    out = {
-        "scenario": sc.name,
-        "policy": policy,
-        "seed": seed,
-        "camera_mode": sc.camera.mode,
-        "landed": landed and w["error_m"] <= sc.pad_tolerance_m,
-        "landed_off_pad": bool(w["on_ground"] and w["error_m"] > sc.pad_tolerance_m),
-        "aborted": a["final_mode"] == "ABORT",
-        "final_mode": a["final_mode"],
-        "landing_error_m": w["error_m"] if landed else None,
-        "landing_time_s": a["landing_time_s"],
-        "energy_j": w["energy_j"],
-        "deviation_distance_m": a["deviation_distance_m"],
-        "retries": a["retries"],
-        "start_m": w["start_m"],
-        "uwb_range_m": w["uwb_range_m"],
-        "pad_frames": w["pad_frames"],
-        "pad_detections": a["pad_detections"],
-        "sim_time_s": round(end_k * sc.dt_s, 4),
-        "wall_s": wall,
-        "realtime_factor": end_k * sc.dt_s / wall if wall > 0 else None,
-        "modes": a["modes"],
-        "decisions": a["decisions"],
-    }
+    out = landing_summary(sc, policy, seed, world.outcome(uid), agent.outcome(), world.uavs[uid].end_k, wall)
     if record_series:
         out["series"] = dict(agent.series.__dict__)
     return out

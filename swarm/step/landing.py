@@ -407,3 +407,35 @@ class LandingAgent:
             "modes": g.modes,
             "decisions": [dd.as_dict() for dd in g.decisions if dd.switched or self.policy == "mdp"],
         }
+
+
+def landing_summary(sc: LandingScenario, policy: str, seed: int, world_half: dict, agent_half: dict,
+                    end_k: int, wall: float) -> dict:  # fmt: skip
+    """One UAV's summary (``swarm sim landing --json``) from the world's half (:meth:`LandingWorld.outcome`:
+    where it ended) and the agent's (:meth:`LandingAgent.outcome`), in process or gathered over Zenoh."""
+    w, a = world_half, agent_half
+    landed = bool(a["final_mode"] == "LANDED" and w["on_ground"])
+    return {
+        "scenario": sc.name,
+        "policy": policy,
+        "seed": seed,
+        "camera_mode": sc.camera.mode,
+        "landed": landed and w["error_m"] <= sc.pad_tolerance_m,
+        "landed_off_pad": bool(w["on_ground"] and w["error_m"] > sc.pad_tolerance_m),
+        "aborted": a["final_mode"] == "ABORT",
+        "final_mode": a["final_mode"],
+        "landing_error_m": w["error_m"] if landed else None,
+        "landing_time_s": a["landing_time_s"],
+        "energy_j": w["energy_j"],
+        "deviation_distance_m": a["deviation_distance_m"],
+        "retries": a["retries"],
+        "start_m": w["start_m"],
+        "uwb_range_m": w["uwb_range_m"],
+        "pad_frames": w["pad_frames"],
+        "pad_detections": a["pad_detections"],
+        "sim_time_s": round(end_k * sc.dt_s, 4),
+        "wall_s": wall,
+        "realtime_factor": end_k * sc.dt_s / wall if wall > 0 else None,
+        "modes": a["modes"],
+        "decisions": a["decisions"],
+    }

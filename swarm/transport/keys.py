@@ -21,7 +21,9 @@ __all__ = ["AGENT_KINDS", "ID_PATTERN", "Keys", "check_id"]
 ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")
 """An agent id, a role or any other single key chunk chosen by a user (``fullmatch``)."""
 
-AGENT_KINDS: tuple[str, ...] = ("imu", "uwb", "vision", "estimate", "guidance", "command", "truth", "event")
+AGENT_KINDS: tuple[str, ...] = (
+    "imu", "uwb", "vision", "gnss", "estimate", "guidance", "command", "truth", "event",
+)  # fmt: skip
 """The per-vehicle topics ``<ns>/agent/<id>/<kind>``."""
 
 _FORBIDDEN_NS_CHARS = frozenset("*$?#")  # wildcards and characters Zenoh reserves in key expressions
@@ -81,6 +83,10 @@ class Keys:
     def vision(self, agent_id: str) -> str:
         """Camera observations of the target's markers: world or camera driver -> agent."""
         return self._agent(agent_id, "vision")
+
+    def gnss(self, agent_id: str) -> str:
+        """Position fixes of one vehicle's satellite receiver: world or GNSS driver -> agent."""
+        return self._agent(agent_id, "gnss")
 
     def estimate(self, agent_id: str) -> str:
         """Pose estimate of one vehicle: agent -> its chasers, dashboard."""

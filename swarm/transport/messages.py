@@ -42,9 +42,11 @@ from swarm.transport.keys import ID_PATTERN
 
 __all__ = [
     "CLOCK_STATES",
+    "DOCKING_MODES",
     "EVENT_KINDS",
     "FACES",
     "FAULT_KINDS",
+    "LANDING_MODES",
     "MAX_ITEMS",
     "MAX_PAYLOAD_BYTES",
     "MESSAGE_FOR_KIND",
@@ -61,6 +63,7 @@ __all__ = [
     "Estimate",
     "Event",
     "Fault",
+    "Gnss",
     "Guidance",
     "Imu",
     "Message",
@@ -95,8 +98,21 @@ _I64_MIN = -(2**63)
 
 # These sets mirror swarm.core.guidance.Mode and swarm.core.camera.FACES (a test asserts they agree): the
 # codec stays importable without scipy/numba/OpenCV (0.13 s instead of 0.54 s), for thin sensor drivers.
-MODES: tuple[str, ...] = ("HOLD", "APPROACH", "REORIENT", "ALIGN", "DOCK", "DOCKED", "ABORT", "STATION")
-"""Guidance modes (paper section V; ``STATION`` is the station-keeping target)."""
+DOCKING_MODES: tuple[str, ...] = (
+    "HOLD",
+    "APPROACH",
+    "REORIENT",
+    "ALIGN",
+    "DOCK",
+    "DOCKED",
+    "ABORT",
+    "STATION",
+)
+"""Docking guidance modes (paper section V; ``STATION`` is the station-keeping target)."""
+LANDING_MODES: tuple[str, ...] = ("CRUISE", "DEVIATE", "DESCEND", "FINAL", "CLIMB", "LANDED", "ABORT")
+"""Landing guidance modes (paper section VI-B, ``swarm.core.landing``)."""
+MODES: tuple[str, ...] = DOCKING_MODES + tuple(m for m in LANDING_MODES if m not in DOCKING_MODES)
+"""Every guidance mode a ``Guidance`` or ``Command`` may carry."""
 FACES: tuple[str, ...] = ("+x", "-x", "+y", "-y", "+z", "-z")
 """Faces of the target cube, named by the outward normal in the target body frame."""
 VISION_KINDS: tuple[str, ...] = ("features", "pixels", "pose")
@@ -482,6 +498,26 @@ class Uwb(Message):
 
 
 @dataclass(frozen=True, eq=False)
+class Gnss(Message):
+    """A satellite receiver's position fix of one vehicle: ``<ns>/agent/<id>/gnss`` (the landing's UAVs)."""
+
+    tick: int
+    """Tick ``k`` of the fix (>= 0)."""
+    t_s: float
+    """Time of the fix [s] (>= 0)."""
+    p_nav: np.ndarray
+    """Antenna position (3,) [m], frame nav."""
+    cov: np.ndarray
+    """Its covariance (3, 3) [m^2]: symmetric, non-negative diagonal."""
+
+    def __post_init__(self) -> None:
+        _set(
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+            p_nav=_array(self.p_nav, "p_nav", (3,)), cov=_cov(self.cov, "cov", 3),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
 class Vision(Message):
     """One camera frame's observations of the target's markers: ``<ns>/agent/<id>/vision``."""
 
@@ -810,6 +846,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         Imu,
         Uwb,
         Vision,
+        Gnss,
         Estimate,
         Guidance,
         Command,
@@ -824,7 +861,8 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
 """Every message class by its wire ``"type"``."""
 
 MESSAGE_FOR_KIND: dict[str, type[Message]] = {
-    "imu": Imu, "uwb": Uwb, "vision": Vision, "estimate": Estimate, "guidance": Guidance, "command": Command,
+    "imu": Imu, "uwb": Uwb, "vision": Vision, "gnss": Gnss, "estimate": Estimate, "guidance": Guidance,
+    "command": Command,
     "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "anchors": Anchors,
     "run_control": RunControl, "fault": Fault,
 }  # fmt: skip

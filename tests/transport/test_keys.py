@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from swarm.errors import ConfigError
 from swarm.transport.keys import AGENT_KINDS, ID_PATTERN, Keys, check_id
 
-EXPECTED_AGENT_KINDS = ("imu", "uwb", "vision", "estimate", "guidance", "command", "truth", "event")
+EXPECTED_AGENT_KINDS = ("imu", "uwb", "vision", "gnss", "estimate", "guidance", "command", "truth", "event")
 
 
 @pytest.mark.parametrize("ns", ["tpods", "lab/swarm-2"])
@@ -41,7 +41,7 @@ def test_default_namespace_is_tpods():
     assert Keys().imu("a") == "tpods/agent/a/imu"
 
 
-def test_agent_kinds_are_the_eight_per_vehicle_topics():
+def test_agent_kinds_are_the_nine_per_vehicle_topics():
     assert AGENT_KINDS == EXPECTED_AGENT_KINDS
 
 

@@ -40,6 +40,7 @@ from swarm.transport.messages import (
     Estimate,
     Event,
     Fault,
+    Gnss,
     Guidance,
     Imu,
     RunControl,
@@ -73,6 +74,7 @@ VALID = {
     Anchors: Anchors((0, 1, 2, 3), ANCHORS_MS),
     RunControl: RunControl("reset", 7),
     Fault: Fault("nlos_burst", 5.0, 12.5, None, 0.3),
+    Gnss: Gnss(9, 0.2, [1.0, -2.0, 8.0], np.diag([1.0, 1.0, 2.25])),
 }  # fmt: skip
 
 SILENT = logging.getLogger("tests.transport.silent")
@@ -187,6 +189,7 @@ STRATEGIES = {
     Event: st.builds(Event, times, st.from_regex(r"[a-z][a-z0-9_]{0,20}", fullmatch=True), event_data),
     Clock: st.builds(Clock, ticks, times, st.sampled_from(msgs.CLOCK_STATES), ticks),
     Anchors: marked(3).map(lambda m: Anchors(m[1], m[0])),
+    Gnss: st.builds(Gnss, ticks, times, vec(3), covs.map(lambda c: c[0:3, 0:3])),
     RunControl: st.builds(RunControl, st.sampled_from(msgs.RUN_COMMANDS), st.none() | ticks),
     Fault: st.one_of(
         st.builds(Fault, st.sampled_from(("uwb_dropout", "camera_loss")), st.floats(1e-3, 1e3),
@@ -688,8 +691,11 @@ def test_drop_counter_refuses_bad_settings(kwargs):
 def test_mirrored_modes_and_faces_agree_with_the_core():
     from swarm.core.camera import FACES
     from swarm.core.guidance import Mode
+    from swarm.core.landing import LandingMode
 
-    assert msgs.MODES == tuple(m.value for m in Mode)
+    assert msgs.DOCKING_MODES == tuple(m.value for m in Mode)
+    assert msgs.LANDING_MODES == tuple(m.value for m in LandingMode)
+    assert set(msgs.MODES) == set(msgs.DOCKING_MODES) | set(msgs.LANDING_MODES)
     assert msgs.FACES == FACES
 
 

@@ -1,0 +1,163 @@
+"""``swarm launch`` of a landing scenario (``swarm launch landing-swarm --headless``): the landing world
+process (:mod:`swarm.world.landing`) and one landing agent process per UAV (:mod:`agents.landing`), Zenoh
+clients of the launcher's router, in lockstep. The launcher waits for the world's ``run_end`` and each
+agent's ``summary``, prints every UAV's outcome as ``swarm sim`` does (``--json FILE`` writes the same
+summary as ``swarm sim landing-swarm --json``, but ``decisions`` is the number of Algorithm 1 records, the
+records themselves stay in the agent), stops every process and exits 0 if every UAV landed on its pad or
+aborted safely. With ``--record FILE.mcap`` a recorder child writes the run.
+
+Not yet for a landing: the dashboard (``--headless`` is required), ``--secure``, agent hosts, a realtime
+clock, restarts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import threading
+import time
+
+from swarm.errors import ConfigError
+
+_LOG = logging.getLogger("swarm.launch")
+
+
+def _refuse(args: argparse.Namespace) -> None:
+    if not args.headless:
+        raise ConfigError("a landing scenario: the dashboard does not draw a landing yet; add --headless")
+    if getattr(args, "secure", False):
+        raise ConfigError("--secure: not yet for a landing scenario (its processes have no ACL rules)")
+    if args.agents != 1:
+        raise ConfigError("--agents: a landing scenario lists its UAVs ([[fleet]] in the file)")
+    if args.vehicles_per_process != 1:
+        raise ConfigError("--vehicles-per-process: not yet for a landing scenario (one process per UAV)")
+    if not args.clock.lockstep:
+        raise ConfigError(f"--clock: a landing swarm runs in lockstep only, got {args.clock}")
+    if args.repeat:
+        raise ConfigError("--repeat: not yet for a landing scenario")
+
+
+def run_landing_launch(args: argparse.Namespace) -> int:
+    from swarm.cli.children import check_record, child_args, client_endpoint, start_recorder
+    from swarm.cli.sim import print_landing
+    from swarm.cli.supervisor import Child, Supervisor
+    from swarm.config import parse_override
+    from swarm.landing_scenario import load_landing
+    from swarm.step.landing import landing_summary
+    from swarm.transport.keys import Keys
+    from swarm.transport.messages import DropCounter, Event
+    from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session, subscribe_decoded
+
+    _refuse(args)
+    check_record(args)
+    sc = load_landing(args.scenario, dict(parse_override(o) for o in args.overrides))
+    ids = [u.id for u in sc.uavs()]
+    policy = args.policy or sc.policy
+    keys = Keys(args.namespace)
+    listen = list(args.listen) if args.listen else [free_loopback_endpoint()]
+    zargs = ZenohArgs(
+        mode="router", connect=tuple(args.connect or ()), listen=tuple(listen), config_file=args.zenoh_config,
+        multicast_scouting=args.multicast_scouting, lease_ms=args.lease_ms,
+    )  # fmt: skip
+    endpoint = client_endpoint(listen[0])
+    stop = threading.Event()
+    previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    cond = threading.Condition()
+    got: dict = {"run_end": None, "summaries": {}}
+    sup = Supervisor(max_restarts=0)
+    wall0 = time.monotonic()
+    result = None
+    try:
+        with open_session(zargs) as session:
+            print(
+                f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",
+                flush=True,
+            )
+            drops = DropCounter()
+
+            def on_world_event(_key: str, msg: Event) -> None:
+                if msg.kind == "run_end":
+                    with cond:
+                        got["run_end"] = msg.data
+                        cond.notify_all()
+
+            def on_agent_event(key: str, msg: Event) -> None:
+                parsed = keys.parse(key)
+                if parsed is not None and msg.kind == "summary":
+                    with cond:
+                        got["summaries"][parsed[1]] = msg.data
+                        cond.notify_all()
+
+            subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
+            subscribe_decoded(session, keys.agent_all("event"), Event, on_agent_event, drops)
+            start_recorder(args, endpoint, sup, Child)
+            common = child_args(args, endpoint, args.seed)
+            for uid in ids:
+                sup.start(Child(f"agent/{uid}", ["agents.landing", "--id", uid, *common]))
+            world = ["swarm.world.landing", "--step-timeout", str(args.step_timeout),
+                     "--start-timeout", str(args.start_timeout), *common]  # fmt: skip
+            sup.start(Child("world", world))
+            print(
+                f"swarm up: world and {len(ids)} landing agents, seed {args.seed}, clock lockstep", flush=True
+            )
+            deadline = None if args.timeout is None else wall0 + args.timeout
+            with cond:
+                while got["run_end"] is None:
+                    if stop.is_set():
+                        break
+                    if deadline is not None and time.monotonic() > deadline:
+                        _LOG.error("--timeout: %.0f s passed before the run ended", args.timeout)
+                        break
+                    dead = sup.exited()
+                    if dead and got["run_end"] is None:
+                        _LOG.error("%s exited with status %s before the run ended", dead[0].name,
+                                   dead[0].popen.returncode)  # fmt: skip
+                        break
+                    cond.wait(0.1)
+                end = time.monotonic() + 10.0
+                while got["run_end"] is not None and not set(ids) <= set(got["summaries"]):
+                    if time.monotonic() > end:
+                        _LOG.error("no summary from %s", ", ".join(sorted(set(ids) - set(got["summaries"]))))
+                        break
+                    cond.wait(0.1)
+            if got["run_end"] is not None and set(ids) <= set(got["summaries"]):
+                end_data = got["run_end"]
+                wall = float(end_data.get("wall_s", time.monotonic() - wall0))
+                uavs = {}
+                for uid in ids:
+                    w = end_data["uavs"][uid]
+                    uavs[uid] = landing_summary(
+                        sc, policy, args.seed, w, got["summaries"][uid], w["end_tick"], wall
+                    )
+                result = {
+                    "scenario": sc.name,
+                    "policy": policy,
+                    "seed": args.seed,
+                    "camera_mode": sc.camera.mode,
+                    "landed": sum(1 for v in uavs.values() if v["landed"]),
+                    "uavs": uavs,
+                    "sim_time_s": round(int(end_data["ticks"]) * sc.dt_s, 4),
+                    "wall_s": wall,
+                    "run_end_reason": end_data.get("reason"),
+                }
+                for uid, r in uavs.items():
+                    print(f"[{uid}]", end=" ")
+                    print_landing(r)
+                n_ok, sim_s = result["landed"], result["sim_time_s"]
+                print(f"{n_ok} of {len(ids)} UAVs landed on their pads in {sim_s:.1f} s simulated "
+                      f"({wall:.1f} s of wall time, lockstep over Zenoh)", flush=True)  # fmt: skip
+                if args.json is not None:
+                    args.json.write_text(json.dumps(result, indent=1))
+            sup.stop_all()
+    finally:
+        sup.stop_all()
+        for s, h in previous.items():
+            signal.signal(s, h)  # type: ignore[arg-type]
+    if result is None:
+        return 130 if stop.is_set() else 1
+    ok = result["run_end_reason"] == "done" and all(
+        r["landed"] or r["aborted"] for r in result["uavs"].values()
+    )
+    return 0 if ok else 1

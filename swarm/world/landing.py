@@ -1,0 +1,195 @@
+"""The landing world process (``python -m swarm.world.landing SCENARIO``; started by ``swarm launch`` for a
+landing scenario): the world step of :mod:`swarm.step.landing` for every UAV, over Zenoh, in lockstep.
+
+Per tick ``k``, for every UAV not done: the truth steps, then the tick's samples go out on the UAV's keys
+(``docs/protocol.md``): an ``Imu`` with ``acc_body`` (stamped ``t - dt``), on a UWB tick a ``Uwb`` (the
+anchor's index; ``range_m`` nil when the anchor is out of reach), on a GNSS tick a ``Gnss``, on a camera
+tick a ``Vision`` of kind ``pixels`` (target ``pad-<uav>``, face ``+z``, every corner of every detected
+marker: row ``4 m + c`` is corner ``c`` of marker ``m``; none when the pad is not in view), and a
+``Truth``; then ``world/clock``. The world waits for each such UAV's ``Command`` of tick ``k`` (its mode
+one of the landing modes), holds it, and steps on. When every UAV is done (landed for a second, or hovering
+at the abort height) it publishes ``run_end`` on ``world/event`` with each UAV's outcome and a ``stopped``
+clock, and exits 0. It waits for every UAV's agent (liveliness ``alive/agent/<id>``) before the first tick.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import threading
+import time
+
+import numpy as np
+
+from swarm.transport.process import print_ready, process_main
+
+_LOG = logging.getLogger("swarm.world.landing")
+DESCRIPTION = "The landing world: quadrotor truth and sensors of every UAV, lockstep over Zenoh."
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from swarm.args import positive_float
+    from swarm.transport.process import add_process_arguments
+
+    add_process_arguments(p)
+    p.add_argument("--step-timeout", type=positive_float("--step-timeout"), default=30.0, metavar="S",
+                   help="give up when an agent's command of a tick has not come after this long")  # fmt: skip
+    p.add_argument("--start-timeout", type=positive_float("--start-timeout"), default=60.0, metavar="S",
+                   help="give up when the agents are not all up after this long")  # fmt: skip
+
+
+def run(args: argparse.Namespace, stop: threading.Event) -> int:
+    from swarm.config import parse_override
+    from swarm.core.landing import LandingMode
+    from swarm.errors import ConfigError
+    from swarm.landing_scenario import load_landing
+    from swarm.step.landing import LandingCommand, LandingWorld
+    from swarm.transport.keys import Keys
+    from swarm.transport.messages import (
+        LANDING_MODES,
+        Clock,
+        Command,
+        DropCounter,
+        Event,
+        Gnss,
+        Imu,
+        Truth,
+        Uwb,
+        Vision,
+        encode,
+    )
+    from swarm.transport.process import declare_reliable
+    from swarm.transport.session import (
+        declare_liveliness,
+        open_session,
+        subscribe_decoded,
+        watch_liveliness,
+        zenoh_args_from,
+    )
+
+    if not args.clock.lockstep:
+        raise ConfigError(f"--clock: a landing world runs in lockstep only, got {args.clock}")
+    sc = load_landing(args.scenario, dict(parse_override(o) for o in args.overrides))
+    policy = args.policy or sc.policy
+    keys = Keys(args.namespace)
+    world = LandingWorld(sc, args.seed)
+    ids = list(world.uavs)
+    dt = sc.dt_s
+    gnss_cov = np.diag(np.asarray(sc.gnss.sigma_m, float) ** 2)
+    drops = DropCounter()
+    cond = threading.Condition()
+    commands: dict[tuple[str, int], Command] = {}
+    alive: set[str] = set()
+
+    def on_command(key: str, msg: Command) -> None:
+        parsed = keys.parse(key)
+        uid = parsed[1] if parsed else None
+        if uid not in world.uavs or msg.mode not in LANDING_MODES or len(msg.actuators) != 4:
+            drops.drop(key, f"not a landing UAV's rotor command: {uid!r}, mode {msg.mode}")
+            return
+        with cond:
+            commands[(uid, msg.tick)] = msg
+            cond.notify_all()
+
+    def on_alive(role: str, pid: str, up: bool) -> None:
+        if role == "agent":
+            with cond:
+                (alive.add if up else alive.discard)(pid)
+                cond.notify_all()
+
+    with open_session(zenoh_args_from(args)) as session:
+        pubs = {
+            uid: {
+                kind: declare_reliable(session, getattr(keys, kind)(uid))
+                for kind in ("imu", "uwb", "gnss", "vision", "truth")
+            }
+            for uid in ids
+        }
+        pub_clock = declare_reliable(session, keys.world_clock())
+        pub_event = declare_reliable(session, keys.world_event(), express=False)
+        subscribe_decoded(session, keys.agent_all("command"), Command, on_command, drops)
+        watch_liveliness(session, keys, on_alive)
+        _token = declare_liveliness(session, keys, "world", "world")
+        print_ready("world", "landing")
+        deadline = time.monotonic() + args.start_timeout
+        with cond:
+            while not set(ids) <= alive:
+                if stop.is_set():
+                    return 130
+                if time.monotonic() > deadline:
+                    raise ConfigError(
+                        f"agents not up after {args.start_timeout:g} s: {sorted(set(ids) - alive)}"
+                    )
+                cond.wait(0.1)
+        pub_event.put(
+            encode(Event(0.0, "run_start", {"scenario": sc.name, "mission": "landing", "seed": args.seed,
+                                            "policy": policy, "uavs": ids, "clock": str(args.clock)}))
+        )  # fmt: skip
+        n_ticks = round(sc.max_duration_s / dt)
+        k = 0
+        t_wall = time.monotonic()
+        reason = "done"
+        for k in range(1, n_ticks + 1):
+            t = k * dt
+            inputs = world.step(k)
+            if not inputs:
+                k -= 1
+                break
+            for uid, inp in inputs.items():
+                p = pubs[uid]
+                p["imu"].put(encode(Imu(k, t - dt, dt, inp.gyro, None, inp.acc)))
+                if world.rates.uwb_tick(sc, k):
+                    a, z = inp.uwb if inp.uwb is not None else (world.uavs[uid].next_anchor - 1, None)
+                    p["uwb"].put(encode(Uwb(k, t, int(a) % len(world.anchors), z)))
+                if inp.gnss is not None:
+                    p["gnss"].put(encode(Gnss(k, t, inp.gnss, gnss_cov)))
+                if inp.camera is not None:
+                    mids, corners = inp.camera
+                    rows = tuple(int(m) * 4 + c for m in mids for c in range(4))
+                    p["vision"].put(
+                        encode(Vision(k, t, f"pad-{uid}", "+z", "pixels", corners.reshape(-1, 2), rows))
+                    )
+                x = world.uavs[uid].x
+                p["truth"].put(
+                    encode(Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], world.uavs[uid].energy_j))
+                )
+            pub_clock.put(encode(Clock(k, t, "running", args.seed)))
+            step_deadline = time.monotonic() + args.step_timeout
+            with cond:
+                while not all((uid, k) in commands for uid in inputs):
+                    if stop.is_set():
+                        reason = "stopped"
+                        break
+                    if time.monotonic() > step_deadline:
+                        reason = "agent_missing"
+                        break
+                    cond.wait(0.05)
+                got = {uid: commands.pop((uid, k), None) for uid in inputs}
+            if reason != "done":
+                missing = [u for u, c in got.items() if c is None]
+                _LOG.error("tick %d: %s (no command from %s)", k, reason, ", ".join(missing) or "-")
+                break
+            for uid, cmd in got.items():
+                world.hold(uid, LandingCommand(k, cmd.actuators, LandingMode(cmd.mode)))
+        for uid in ids:
+            if not world.uavs[uid].done:
+                world.uavs[uid].end_k = k
+        wall = time.monotonic() - t_wall
+        outcome = {uid: {**world.outcome(uid), "end_tick": world.uavs[uid].end_k} for uid in ids}
+        t_end = k * dt
+        pub_event.put(encode(Event(t_end, "run_end", {"reason": reason, "ticks": k, "wall_s": wall,
+                                                      "uavs": outcome})))  # fmt: skip
+        pub_clock.put(encode(Clock(k, t_end, "stopped", args.seed)))
+        _LOG.info("run ended (%s) at tick %d, %.1f s simulated in %.1f s", reason, k, t_end, wall)
+        time.sleep(0.2)  # let the last messages leave before the session closes
+        _ = _token
+    return 0 if reason == "done" else 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    return process_main("swarm.world.landing", DESCRIPTION, add_arguments, run, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

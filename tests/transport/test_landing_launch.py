@@ -1,0 +1,71 @@
+"""``swarm launch landing-swarm``: four UAVs, each its own agent process, a landing world process, lockstep
+over real Zenoh on loopback, land on four pads and equal ``swarm sim landing-swarm`` of the same seed."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from swarm.landing_scenario import load_landing
+from swarm.sim.landing import run_landing_fleet
+from tests.transport.procs import Procs, free_port, loopback
+
+
+@pytest.fixture(scope="module")
+def launched(tmp_path_factory):
+    from agents.landing import _warm_up
+
+    sc = load_landing("landing-swarm")
+    _warm_up(sc, 0, 0, sc.policy)  # numba's cache filled once here, not by five processes at once
+    out = tmp_path_factory.mktemp("landing") / "launch.json"
+    ns = f"land-{free_port()}"
+    args = [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--headless", "--seed", "0",
+            "--namespace", ns, "--listen", loopback(free_port()), "--json", str(out),
+            "--timeout", "400"]  # fmt: skip
+    with Procs() as procs:
+        proc = procs.start(args)
+        code = proc.wait(480.0)
+        text = proc.output()
+    return code, text, json.loads(out.read_text()) if out.exists() else None, sc
+
+
+def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
+    code, text, got, sc = launched
+    assert code == 0, text
+    assert "Traceback" not in text
+    assert got["run_end_reason"] == "done" and got["landed"] == 4
+    want = run_landing_fleet(sc, seed=0, record_series=False)
+    assert set(got["uavs"]) == set(want["uavs"]) == {"uav1", "uav2", "uav3", "uav4"}
+    for uid, w in want["uavs"].items():
+        g = got["uavs"][uid]
+        # the same kernels on the same samples in the same order: equal, not close
+        for key in ("landed", "landing_error_m", "energy_j", "landing_time_s", "final_mode", "retries",
+                    "pad_frames", "pad_detections", "deviation_distance_m", "sim_time_s", "start_m",
+                    "uwb_range_m"):  # fmt: skip
+            assert g[key] == w[key], (uid, key, g[key], w[key])
+        assert g["modes"] == w["modes"], uid  # every switch: time, mode, reason, the estimate it saw
+        assert g["decisions"] == len(w["decisions"]), uid
+        assert g["landing_error_m"] <= sc.pad_tolerance_m
+    assert got["sim_time_s"] == want["sim_time_s"]
+
+
+@pytest.mark.parametrize(
+    "extra, expected",
+    [
+        ([], "the dashboard does not draw a landing yet; add --headless"),
+        (["--headless", "--agents", "2"], "--agents: a landing scenario lists its UAVs"),
+        (["--headless", "--clock", "realtime"], "--clock: a landing swarm runs in lockstep only"),
+        (["--headless", "--secure"], "--secure: not yet for a landing scenario"),
+    ],
+)
+def test_what_a_landing_launch_does_not_do_yet_is_refused_before_anything_starts(extra, expected):
+    r = subprocess.run(
+        [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", *extra],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 2 and expected in r.stderr, r.stderr
