@@ -39,20 +39,9 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     from swarm.errors import ConfigError
     from swarm.landing_scenario import load_landing
     from swarm.step.landing import LandingAgent, LandingInputs, Rates
+    from swarm.transport import landing_wire as wire
     from swarm.transport.keys import Keys
-    from swarm.transport.messages import (
-        Command,
-        DropCounter,
-        Estimate,
-        Event,
-        Gnss,
-        Guidance,
-        Imu,
-        MessageError,
-        Uwb,
-        Vision,
-        encode,
-    )
+    from swarm.transport.messages import DropCounter, Event, Gnss, Imu, Uwb, Vision
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import declare_liveliness, open_session, subscribe_decoded, zenoh_args_from
 
@@ -105,12 +94,11 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
             inp.gnss = g.p_nav
         v = inbox["vision"].pop(k, None)
         if v is not None:
-            mids = np.array(v.marker_ids[::4], dtype=np.int64) // 4
-            inp.camera = (mids, v.data.reshape(-1, 4, 2))
+            inp.camera = wire.camera_frame(v)
         return inp
 
     with open_session(zenoh_args_from(args)) as session:
-        pub = {kind: declare_reliable(session, getattr(keys, kind)(args.id))
+        pub = {getattr(keys, kind)(args.id): declare_reliable(session, getattr(keys, kind)(args.id))
                for kind in ("command", "estimate", "guidance", "event")}  # fmt: skip
         for kind, cls in (("imu", Imu), ("uwb", Uwb), ("gnss", Gnss), ("vision", Vision)):
             subscribe_decoded(session, getattr(keys, kind)(args.id), cls, on_sample(kind), drops)
@@ -133,25 +121,13 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
                 drops.drop(keys.imu(args.id), "an IMU sample without acc_body cannot drive this filter")
                 inp.acc = np.full(3, np.nan)  # refused by the filter's predict, counted there
             cmd = agent.tick(inp)
-            t = k * dt
-            pub["command"].put(encode(Command(k, t, cmd.u, str(cmd.mode))))
-            _publish_estimate(pub["estimate"], agent, k, t, Estimate, MessageError, encode)
-            dist = float(np.linalg.norm(agent.p_est[:2] - agent.setup.pad[:2]))
-            pub["guidance"].put(encode(Guidance(k, t, str(cmd.mode), dist, reason=_reason(agent))))
-            for m in agent.guidance.modes[n_modes:]:
-                data = {
-                    "from": m["from"],
-                    "to": m["mode"],
-                    "reason": m["reason"],
-                    "p_est_nav": m["p_est_nav"],
-                }
-                pub["event"].put(encode(Event(m["t_s"], "mode", data)))
-            n_modes = len(agent.guidance.modes)
+            out, n_modes = wire.agent_tick(keys, args.id, agent, cmd, n_modes)
+            for key, payload in out:
+                pub[key].put(payload)
         if state["ended"]:
-            out = agent.outcome()
-            out["decisions"] = len(out["decisions"])
-            pub["event"].put(encode(Event(agent.landed_t or 0.0, "summary", out)))
-            _LOG.info("run ended: %s", out["final_mode"])
+            key, payload = wire.agent_summary(keys, args.id, agent)
+            pub[key].put(payload)
+            _LOG.info("run ended: %s", agent.outcome()["final_mode"])
             stop.wait()
         _ = _token
     return 0
@@ -170,29 +146,6 @@ def _warm_up(sc, seed: int, index: int, policy: str) -> None:
     f, t = agent.filt, agent.filt.t
     f.update_position(t, f.p_nav[0], np.eye(3))
     f.update_pad(t, agent.setup.pad, np.array([0.0, 0.0, 5.0]), np.eye(3) * 1e-4, agent.cam_pos, R_BODY_CAM)
-
-
-def _reason(agent) -> str:
-    modes = agent.guidance.modes
-    return str(modes[-1]["reason"])[:1024] if modes else ""
-
-
-def _publish_estimate(pub, agent, k, t, Estimate, MessageError, encode) -> None:
-    f = agent.filt
-    P = f.P[0, 0:9, 0:9]
-    d2 = getattr(f, "last_d2", None)  # the latest range's (none before the first)
-    d = float(np.sqrt(d2[0])) if d2 is not None and np.isfinite(d2[0]) else 0.0
-    counts = {
-        f"range_{w}": int(f.counts[:, i].sum()) for i, w in enumerate(("accepted", "rejected", "refused"))
-    }
-    sigma = float(np.sqrt(np.max(np.diag(P)[0:3])))
-    args = [k, t, f.p_nav[0], f.v_nav[0], f.q_nav_body[0], P, sigma, d, 0.0, counts]
-    try:
-        msg = Estimate(*args)
-    except MessageError:  # a covariance off symmetry by rounding only: send its symmetric part
-        args[5] = 0.5 * (P + P.T)
-        msg = Estimate(*args)
-    pub.put(encode(msg))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -188,3 +188,18 @@ def test_a_fleet_s_uavs_fly_their_own_streams_and_the_scenario_refuses_shared_pa
     bad.write_text(text.replace('id = "uav2"', 'id = "uav1"'))
     with pytest.raises(ConfigError, match="fleet: UAV 'uav1' is listed twice"):
         load_landing(bad)
+
+
+@pytest.mark.parametrize(
+    "args, expected",
+    [
+        (["landing", "--mcap", "run.txt"], "--mcap: the recording's name must end in .mcap"),
+        (["landing", "--mcap", "/no/such/dir/run.mcap"], "--mcap: no such directory"),
+        (["docking", "--mcap", "run.mcap"], "--mcap: written for a landing scenario so far"),
+    ],
+)
+def test_swarm_sim_mcap_refuses_what_it_cannot_write(args, expected):
+    r = subprocess.run(
+        [sys.executable, "-m", "swarm", "sim", *args], capture_output=True, text=True, timeout=120
+    )
+    assert r.returncode == 2 and expected in r.stderr, r.stderr

@@ -26,6 +26,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--plot", type=Path, default=None, metavar="FILE.png", help="draw trajectory and errors")
     p.add_argument("--no-series", action="store_true", help="do not record time series (faster)")
+    p.add_argument(
+        "--mcap", type=Path, default=None, metavar="FILE.mcap",
+        help="write the run as its processes would have published it, an MCAP recording (landing scenarios)",
+    )  # fmt: skip
+    p.add_argument(
+        "--namespace", default="tpods", help="key namespace of the --mcap recording (default tpods)"
+    )
     p.set_defaults(func=run)
 
 
@@ -120,12 +127,24 @@ def _run_landing(args: argparse.Namespace) -> int:
         raise ConfigError("--plot: not drawn for a landing yet (the series is in --json)")
     sc = load_landing(args.scenario, dict(parse_override(text) for text in args.overrides))
     record = not args.no_series or args.json is not None
-    if not sc.fleet:
+    tap = None
+    if args.mcap is not None:
+        from swarm.transport.landing_wire import McapTap
+
+        tap = McapTap(args.mcap, args.seed, args.namespace)
+    if not sc.fleet and tap is None:
         res = run_landing(sc, args.policy, args.seed, record_series=record)
         print_landing(res)
         _write_json(args.json, res)
         return 0 if res["landed"] or res["aborted"] else 1
-    res = run_landing_fleet(sc, args.policy, args.seed, record_series=record)
+    res = run_landing_fleet(sc, args.policy, args.seed, record_series=record, tap=tap)
+    if tap is not None:
+        print(f"  wrote {args.mcap}: {sum(tap.sink.counts.values())} messages on {len(tap.sink.counts)} keys")
+    if not sc.fleet:
+        res = res["uavs"][sc.uavs()[0].id]
+        print_landing(res)
+        _write_json(args.json, res)
+        return 0 if res["landed"] or res["aborted"] else 1
     for uid, r in res["uavs"].items():
         print(f"[{uid}]", end=" ")
         print_landing(r)
@@ -141,6 +160,11 @@ def run(args: argparse.Namespace) -> int:
 
     if is_landing_scenario(args.scenario):
         return _run_landing(args)
+    if args.mcap is not None:
+        raise ConfigError(
+            "--mcap: written for a landing scenario so far; record a docking run with "
+            "`swarm launch SCENARIO --headless --until-docked --record FILE.mcap` (lockstep equals swarm sim)"
+        )
     sc = load_from_args(args).with_pairs(args.agents)
     record = not args.no_series or args.plot is not None or args.json is not None
     res = run_docking(sc, args.policy, args.seed, record_series=record)

@@ -37,9 +37,12 @@ def run_landing_fleet(
     seed: int = 0,
     record_series: bool = True,
     only_first: bool = False,
+    tap=None,
 ) -> dict:
     """Fly every UAV of the scenario (module docstring): ``{"uavs": {id: summary}, ...}``, or the first
-    UAV's summary alone with ``only_first``."""
+    UAV's summary alone with ``only_first``. ``tap`` (``swarm sim --mcap``) sees the run as the processes
+    would publish it: ``tap.start(world, policy)``, then per tick ``tap.world(k, world, inputs)`` and
+    ``tap.agent(uid, agent, command)`` for each UAV, and ``tap.end(world, agents, k, wall_s)``."""
     policy = policy or sc.policy
     world = LandingWorld(sc, seed)
     uavs = sc.uavs()[:1] if only_first else sc.uavs()
@@ -48,6 +51,8 @@ def run_landing_fleet(
             world.uavs[extra.id].done = True
     agents = {u.id: LandingAgent(sc, seed, u.index, policy) for u in uavs}
     n_ticks = round(sc.max_duration_s / sc.dt_s)
+    if tap is not None:
+        tap.start(world, policy)
     t0_wall = time.perf_counter()
     k = 0
     for k in range(1, n_ticks + 1):
@@ -55,13 +60,19 @@ def run_landing_fleet(
         if not inputs:
             k -= 1
             break
+        if tap is not None:
+            tap.world(k, world, inputs)
         for uid, inp in inputs.items():
             cmd = agents[uid].tick(inp, world.uavs[uid].x[0:3] if record_series else None)
+            if tap is not None:
+                tap.agent(uid, agents[uid], cmd)
             world.hold(uid, cmd)
     wall = time.perf_counter() - t0_wall
     for uid in agents:
         if not world.uavs[uid].done:
             world.uavs[uid].end_k = k
+    if tap is not None:
+        tap.end(world, agents, k, wall)
     out = {u.id: summary(sc, policy, seed, world, agents[u.id], u.id, wall, record_series) for u in uavs}
     if only_first:
         return out[uavs[0].id]

@@ -74,7 +74,7 @@ class Recorder:
 
     def __init__(self, session, keys, path: str | Path, metadata: dict[str, str] | None = None) -> None:
         self.session, self.keys, self.path = session, keys, Path(path)
-        self.metadata = {"namespace": keys.namespace, **(metadata or {})}
+        self.metadata = dict(metadata or {})
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self.counts: dict[str, int] = {}
         self.run_end_seen = threading.Event()
@@ -83,25 +83,10 @@ class Recorder:
         self._q.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
 
     def run(self, stop: threading.Event, ready=None) -> dict[str, int]:
-        import warnings
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", DeprecationWarning)
-            import foxglove
-            from foxglove.mcap import MCAPCompression, MCAPWriteOptions
-
-        from swarm.transport.foxglove_views import SwarmViews
-
-        ctx = foxglove.Context()
-        options = MCAPWriteOptions(compression=MCAPCompression.Lz4, profile="")
-        writer = foxglove.open_mcap(str(self.path), allow_overwrite=True, context=ctx, writer_options=options)
-        writer.write_metadata("recorder", {**self.metadata, "version": package_version()})
-        views = SwarmViews(ctx, self.keys)
+        sink = McapSink(self.path, self.keys, self.metadata)
         sub = self.session.declare_subscriber(self.keys.everything(), self._on_sample)
         if ready is not None:
             ready()
-        last_ns = 0
-        world_event = self.keys.world_event()
         quiet = time.monotonic()
         try:
             # after stop: everything queued, and what is still in flight (until QUIET_S without a sample)
@@ -111,17 +96,53 @@ class Recorder:
                 except queue.Empty:
                     continue
                 quiet = time.monotonic()
-                last_ns = swarm_time_ns(payload, last_ns)
-                views.handle(key, payload, last_ns)
-                self.counts[key] = self.counts.get(key, 0) + 1
-                if key == world_event:
-                    self._world_event(writer, payload)
+                sink.write(key, payload)
+                if sink.run_end_seen:
+                    self.run_end_seen.set()
         finally:
             sub.undeclare()
-            writer.close()
+            sink.close()
+        self.counts = dict(sink.counts)
         return dict(self.counts)
 
-    def _world_event(self, writer, payload: bytes) -> None:
+
+class McapSink:
+    """An MCAP file being written (the module docstring's layout): :meth:`write` one sample as it is on the
+    wire, ``log_time`` = its swarm time (``t_s``, else the latest seen), with its Foxglove views and, for the
+    world's ``run_start`` and ``run_end`` events, MCAP metadata. The recorder writes what it hears; ``swarm
+    sim --mcap`` writes what the in-process run's processes would have published."""
+
+    def __init__(self, path: str | Path, keys, metadata: dict[str, str] | None = None) -> None:
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            import foxglove
+            from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+        from swarm.transport.foxglove_views import SwarmViews
+
+        self.keys = keys
+        self.ctx = foxglove.Context()
+        options = MCAPWriteOptions(compression=MCAPCompression.Lz4, profile="")
+        self.writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=self.ctx,
+                                         writer_options=options)  # fmt: skip
+        self.writer.write_metadata("recorder", {"namespace": keys.namespace, **(metadata or {}),
+                                                "version": package_version()})  # fmt: skip
+        self.views = SwarmViews(self.ctx, keys)
+        self.counts: dict[str, int] = {}
+        self.last_ns = 0
+        self.run_end_seen = False
+        self._world_event = keys.world_event()
+
+    def write(self, key: str, payload: bytes) -> None:
+        self.last_ns = swarm_time_ns(payload, self.last_ns)
+        self.views.handle(key, payload, self.last_ns)
+        self.counts[key] = self.counts.get(key, 0) + 1
+        if key == self._world_event:
+            self._metadata(payload)
+
+    def _metadata(self, payload: bytes) -> None:
         try:
             ev = msgpack.unpackb(payload, raw=False)
         except Exception:  # a garbage event: recorded, not described
@@ -131,9 +152,12 @@ class Recorder:
             and ev.get("kind") in ("run_start", "run_end")
             and isinstance(ev.get("data"), dict)
         ):
-            writer.write_metadata(str(ev["kind"]), {str(k): str(v) for k, v in ev["data"].items()})
+            self.writer.write_metadata(str(ev["kind"]), {str(k): str(v) for k, v in ev["data"].items()})
             if ev["kind"] == "run_end":
-                self.run_end_seen.set()
+                self.run_end_seen = True
+
+    def close(self) -> None:
+        self.writer.close()
 
 
 def package_version() -> str:

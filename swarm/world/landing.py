@@ -20,8 +20,6 @@ import sys
 import threading
 import time
 
-import numpy as np
-
 from swarm.transport.process import print_ready, process_main
 
 _LOG = logging.getLogger("swarm.world.landing")
@@ -45,20 +43,9 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     from swarm.errors import ConfigError
     from swarm.landing_scenario import load_landing
     from swarm.step.landing import LandingCommand, LandingWorld
+    from swarm.transport import landing_wire as wire
     from swarm.transport.keys import Keys
-    from swarm.transport.messages import (
-        LANDING_MODES,
-        Clock,
-        Command,
-        DropCounter,
-        Event,
-        Gnss,
-        Imu,
-        Truth,
-        Uwb,
-        Vision,
-        encode,
-    )
+    from swarm.transport.messages import LANDING_MODES, Command, DropCounter
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import (
         declare_liveliness,
@@ -76,7 +63,6 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     world = LandingWorld(sc, args.seed)
     ids = list(world.uavs)
     dt = sc.dt_s
-    gnss_cov = np.diag(np.asarray(sc.gnss.sigma_m, float) ** 2)
     drops = DropCounter()
     cond = threading.Condition()
     commands: dict[tuple[str, int], Command] = {}
@@ -99,15 +85,15 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
                 cond.notify_all()
 
     with open_session(zenoh_args_from(args)) as session:
-        pubs = {
-            uid: {
-                kind: declare_reliable(session, getattr(keys, kind)(uid))
-                for kind in ("imu", "uwb", "gnss", "vision", "truth")
-            }
-            for uid in ids
-        }
-        pub_clock = declare_reliable(session, keys.world_clock())
-        pub_event = declare_reliable(session, keys.world_event(), express=False)
+        pubs: dict[str, object] = {}
+
+        def put(wire) -> None:
+            for key, payload in wire:
+                pub = pubs.get(key)
+                if pub is None:
+                    pub = pubs[key] = declare_reliable(session, key, express=key != keys.world_event())
+                pub.put(payload)
+
         subscribe_decoded(session, keys.agent_all("command"), Command, on_command, drops)
         watch_liveliness(session, keys, on_alive)
         _token = declare_liveliness(session, keys, "world", "world")
@@ -122,39 +108,17 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
                         f"agents not up after {args.start_timeout:g} s: {sorted(set(ids) - alive)}"
                     )
                 cond.wait(0.1)
-        pub_event.put(
-            encode(Event(0.0, "run_start", {"scenario": sc.name, "mission": "landing", "seed": args.seed,
-                                            "policy": policy, "uavs": ids, "clock": str(args.clock)}))
-        )  # fmt: skip
+        put([wire.run_start(keys, sc, args.seed, policy, ids, str(args.clock))])
         n_ticks = round(sc.max_duration_s / dt)
         k = 0
         t_wall = time.monotonic()
         reason = "done"
         for k in range(1, n_ticks + 1):
-            t = k * dt
             inputs = world.step(k)
             if not inputs:
                 k -= 1
                 break
-            for uid, inp in inputs.items():
-                p = pubs[uid]
-                p["imu"].put(encode(Imu(k, t - dt, dt, inp.gyro, None, inp.acc)))
-                if world.rates.uwb_tick(sc, k):
-                    a, z = inp.uwb if inp.uwb is not None else (world.uavs[uid].next_anchor - 1, None)
-                    p["uwb"].put(encode(Uwb(k, t, int(a) % len(world.anchors), z)))
-                if inp.gnss is not None:
-                    p["gnss"].put(encode(Gnss(k, t, inp.gnss, gnss_cov)))
-                if inp.camera is not None:
-                    mids, corners = inp.camera
-                    rows = tuple(int(m) * 4 + c for m in mids for c in range(4))
-                    p["vision"].put(
-                        encode(Vision(k, t, f"pad-{uid}", "+z", "pixels", corners.reshape(-1, 2), rows))
-                    )
-                x = world.uavs[uid].x
-                p["truth"].put(
-                    encode(Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], world.uavs[uid].energy_j))
-                )
-            pub_clock.put(encode(Clock(k, t, "running", args.seed)))
+            put(wire.world_tick(keys, world, k, inputs, args.seed))
             step_deadline = time.monotonic() + args.step_timeout
             with cond:
                 while not all((uid, k) in commands for uid in inputs):
@@ -176,12 +140,8 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
             if not world.uavs[uid].done:
                 world.uavs[uid].end_k = k
         wall = time.monotonic() - t_wall
-        outcome = {uid: {**world.outcome(uid), "end_tick": world.uavs[uid].end_k} for uid in ids}
-        t_end = k * dt
-        pub_event.put(encode(Event(t_end, "run_end", {"reason": reason, "ticks": k, "wall_s": wall,
-                                                      "uavs": outcome})))  # fmt: skip
-        pub_clock.put(encode(Clock(k, t_end, "stopped", args.seed)))
-        _LOG.info("run ended (%s) at tick %d, %.1f s simulated in %.1f s", reason, k, t_end, wall)
+        put(wire.run_end(keys, world, k, reason, wall))
+        _LOG.info("run ended (%s) at tick %d, %.1f s simulated in %.1f s", reason, k, k * dt, wall)
         time.sleep(0.2)  # let the last messages leave before the session closes
         _ = _token
     return 0 if reason == "done" else 1

@@ -20,20 +20,21 @@ def launched(tmp_path_factory):
 
     sc = load_landing("landing-swarm")
     _warm_up(sc, 0, 0, sc.policy)  # numba's cache filled once here, not by five processes at once
-    out = tmp_path_factory.mktemp("landing") / "launch.json"
+    d = tmp_path_factory.mktemp("landing")
+    out, rec = d / "launch.json", d / "launch.mcap"
     ns = f"land-{free_port()}"
     args = [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--headless", "--seed", "0",
-            "--namespace", ns, "--listen", loopback(free_port()), "--json", str(out),
+            "--namespace", ns, "--listen", loopback(free_port()), "--json", str(out), "--record", str(rec),
             "--timeout", "400"]  # fmt: skip
     with Procs() as procs:
         proc = procs.start(args)
         code = proc.wait(480.0)
         text = proc.output()
-    return code, text, json.loads(out.read_text()) if out.exists() else None, sc
+    return code, text, json.loads(out.read_text()) if out.exists() else None, sc, rec, ns
 
 
 def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
-    code, text, got, sc = launched
+    code, text, got, sc, _, _ = launched
     assert code == 0, text
     assert "Traceback" not in text
     assert got["run_end_reason"] == "done" and got["landed"] == 4
@@ -50,6 +51,35 @@ def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
         assert g["decisions"] == len(w["decisions"]), uid
         assert g["landing_error_m"] <= sc.pad_tolerance_m
     assert got["sim_time_s"] == want["sim_time_s"]
+
+
+def test_swarm_sim_mcap_writes_what_the_launched_processes_published(launched, tmp_path):
+    from swarm.transport.landing_wire import McapTap
+    from swarm.transport.recording import read_recording
+
+    code, text, _, sc, rec, ns = launched
+    assert code == 0, text
+    sim = tmp_path / "sim.mcap"
+    run_landing_fleet(sc, seed=0, record_series=False, tap=McapTap(sim, 0, ns))
+    heard, _ = read_recording(rec)
+    wrote, meta = read_recording(sim)
+
+    def by_key(msgs):
+        out = {}
+        for m in msgs:
+            if "/agent/" in m.key:  # every UAV's keys (world events carry wall times)
+                out.setdefault(m.key, []).append(m.payload)
+        return out
+
+    a, b = by_key(heard), by_key(wrote)
+    # sensors, truth, commands, estimates, guidance, mode and summary events: the same bytes in the same
+    # order on every key, from the processes over Zenoh and from the in-process run
+    kinds = {k.rsplit("/", 1)[1] for k in a}
+    assert kinds == {"imu", "uwb", "gnss", "vision", "truth", "command", "estimate", "guidance", "event"}
+    assert set(a) == set(b)
+    for key in a:
+        assert a[key] == b[key], key
+    assert meta["recorder"]["source"] == "swarm sim" and "run_end" in meta
 
 
 @pytest.mark.parametrize(

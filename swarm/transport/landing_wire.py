@@ -1,0 +1,165 @@
+"""The landing tick's messages (``docs/protocol.md``, the landing swarm): what the landing world and a landing
+agent publish for tick ``k``, encoded once here for the processes (:mod:`swarm.world.landing`,
+:mod:`agents.landing`) and for ``swarm sim landing --mcap`` (the in-process run written as the processes
+would have published it)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarm.transport.keys import Keys
+from swarm.transport.messages import (
+    Clock,
+    Command,
+    Estimate,
+    Event,
+    Gnss,
+    Guidance,
+    Imu,
+    MessageError,
+    Truth,
+    Uwb,
+    Vision,
+    encode,
+)
+
+Wire = list[tuple[str, bytes]]
+"""``(key, payload)`` in publishing order."""
+
+
+def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int) -> Wire:
+    """The world's tick ``k``: per UAV ``imu``, ``uwb`` (a UWB tick), ``gnss`` (a fix), ``vision`` (a camera
+    tick: the pad's corners as pixels) and ``truth``; then the clock."""
+    sc, dt = world.sc, world.sc.dt_s
+    t = k * dt
+    gnss_cov = np.diag(np.asarray(sc.gnss.sigma_m, float) ** 2)
+    out: Wire = []
+    for uid, inp in inputs.items():
+        out.append((keys.imu(uid), encode(Imu(k, t - dt, dt, inp.gyro, None, inp.acc))))
+        if world.rates.uwb_tick(sc, k):
+            a, z = inp.uwb if inp.uwb is not None else (world.uavs[uid].next_anchor - 1, None)
+            out.append((keys.uwb(uid), encode(Uwb(k, t, int(a) % len(world.anchors), z))))
+        if inp.gnss is not None:
+            out.append((keys.gnss(uid), encode(Gnss(k, t, inp.gnss, gnss_cov))))
+        if inp.camera is not None:
+            mids, corners = inp.camera
+            rows = tuple(int(m) * 4 + c for m in mids for c in range(4))
+            vis = Vision(k, t, f"pad-{uid}", "+z", "pixels", corners.reshape(-1, 2), rows)
+            out.append((keys.vision(uid), encode(vis)))
+        u = world.uavs[uid]
+        x = u.x
+        out.append((keys.truth(uid), encode(Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], u.energy_j))))
+    out.append((keys.world_clock(), encode(Clock(k, t, "running", seed))))
+    return out
+
+
+def camera_frame(msg: Vision) -> tuple[np.ndarray, np.ndarray]:
+    """The pad's frame back from a ``Vision`` of :func:`world_tick`: marker ids (n,), corners (n, 4, 2)."""
+    return np.array(msg.marker_ids[::4], dtype=np.int64) // 4, msg.data.reshape(-1, 4, 2)
+
+
+def agent_tick(keys: Keys, uid: str, agent, cmd, n_modes: int) -> tuple[Wire, int]:
+    """A landing agent's answer to tick ``k = cmd.k``: ``command``, ``estimate``, ``guidance`` and a ``mode``
+    event per switch since the ``n_modes`` already sent; returns them and the new count."""
+    k, t = cmd.k, cmd.k * agent.dt
+    mode = str(cmd.mode)
+    out: Wire = [(keys.command(uid), encode(Command(k, t, cmd.u, mode)))]
+    out.append((keys.estimate(uid), encode(_estimate(agent, k, t))))
+    dist = float(np.linalg.norm(agent.p_est[:2] - agent.setup.pad[:2]))
+    modes = agent.guidance.modes
+    reason = str(modes[-1]["reason"])[:1024] if modes else ""
+    out.append((keys.guidance(uid), encode(Guidance(k, t, mode, dist, reason=reason))))
+    for m in modes[n_modes:]:
+        data = {"from": m["from"], "to": m["mode"], "reason": m["reason"], "p_est_nav": m["p_est_nav"]}
+        out.append((keys.event(uid), encode(Event(m["t_s"], "mode", data))))
+    return out, len(modes)
+
+
+def _estimate(agent, k: int, t: float) -> Estimate:
+    f = agent.filt
+    P = f.P[0, 0:9, 0:9]
+    d2 = getattr(f, "last_d2", None)  # the latest range's (none before the first)
+    d = float(np.sqrt(d2[0])) if d2 is not None and np.isfinite(d2[0]) else 0.0
+    counts = {
+        f"range_{w}": int(f.counts[:, i].sum()) for i, w in enumerate(("accepted", "rejected", "refused"))
+    }
+    sigma = float(np.sqrt(np.max(np.diag(P)[0:3])))
+    args = [k, t, f.p_nav[0], f.v_nav[0], f.q_nav_body[0], P, sigma, d, 0.0, counts]
+    try:
+        return Estimate(*args)
+    except MessageError:  # a covariance off symmetry by rounding only: send its symmetric part
+        args[5] = 0.5 * (P + P.T)
+        return Estimate(*args)
+
+
+def agent_summary(keys: Keys, uid: str, agent) -> tuple[str, bytes]:
+    """The agent's ``summary`` event at the run's end: its half of the outcome (the number of Algorithm 1
+    records, not the records)."""
+    out = agent.outcome()
+    out["decisions"] = len(out["decisions"])
+    return keys.event(uid), encode(Event(agent.landed_t or 0.0, "summary", out))
+
+
+def run_start(keys: Keys, sc, seed: int, policy: str, ids: list[str], clock: str) -> tuple[str, bytes]:
+    data = {
+        "scenario": sc.name,
+        "mission": "landing",
+        "seed": seed,
+        "policy": policy,
+        "uavs": ids,
+        "clock": clock,
+    }
+    return keys.world_event(), encode(Event(0.0, "run_start", data))
+
+
+def run_end(keys: Keys, world, k: int, reason: str, wall_s: float) -> Wire:
+    """The world's ``run_end`` (each UAV's outcome) and its ``stopped`` clock."""
+    outcome = {uid: {**world.outcome(uid), "end_tick": world.uavs[uid].end_k} for uid in world.uavs}
+    t = k * world.sc.dt_s
+    data = {"reason": reason, "ticks": k, "wall_s": wall_s, "uavs": outcome}
+    return [
+        (keys.world_event(), encode(Event(t, "run_end", data))),
+        (keys.world_clock(), encode(Clock(k, t, "stopped", world.seed))),
+    ]
+
+
+class McapTap:
+    """``swarm sim landing --mcap FILE``: the in-process run written as its processes would have published
+    it (the same encoders, in the same order per key), through the recorder's :class:`McapSink`; a tap of
+    :func:`swarm.sim.landing.run_landing_fleet`."""
+
+    def __init__(self, path, seed: int, namespace: str = "tpods") -> None:
+        from pathlib import Path
+
+        from swarm.errors import ConfigError
+        from swarm.transport.recording import McapSink
+
+        p = Path(path)
+        if p.suffix != ".mcap":
+            raise ConfigError(f"--mcap: the recording's name must end in .mcap, got {str(p)!r}")
+        if not p.resolve().parent.is_dir():
+            raise ConfigError(f"--mcap: no such directory {str(p.parent)!r}")
+        self.keys = Keys(namespace)
+        self.seed = seed
+        self.sink = McapSink(p, self.keys, {"source": "swarm sim"})
+        self.n_modes: dict[str, int] = {}
+
+    def _write(self, wire: Wire) -> None:
+        for key, payload in wire:
+            self.sink.write(key, payload)
+
+    def start(self, world, policy: str) -> None:
+        ids = [u for u in world.uavs if not world.uavs[u].done]
+        self._write([run_start(self.keys, world.sc, self.seed, policy, ids, "sim")])
+
+    def world(self, k: int, world, inputs: dict) -> None:
+        self._write(world_tick(self.keys, world, k, inputs, self.seed))
+
+    def agent(self, uid: str, agent, cmd) -> None:
+        out, self.n_modes[uid] = agent_tick(self.keys, uid, agent, cmd, self.n_modes.get(uid, 0))
+        self._write(out)
+
+    def end(self, world, agents: dict, k: int, wall_s: float) -> None:
+        self._write(run_end(self.keys, world, k, "done", wall_s))
+        self._write([agent_summary(self.keys, uid, a) for uid, a in agents.items()])
+        self.sink.close()
