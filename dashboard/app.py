@@ -33,10 +33,12 @@ import zenoh
 
 from dashboard import kinds, mapping, panels
 from dashboard.faults import FaultPanel
+from dashboard.landing import LandingSceneView, frame_landing_scene, uav_vehicles
 from dashboard.link import SwarmLink
 from dashboard.playback import PlaybackPanel, Player, Recording, Timeline
 from dashboard.state import AgentSnap, FramePacer, RateLimiter, Snapshot, SwarmState
 from swarm.errors import ConfigError
+from swarm.landing_scenario import LandingScenario
 from swarm.scenario import Scenario
 from swarm.transport.keys import Keys
 from swarm.transport.messages import DropCounter
@@ -330,15 +332,21 @@ class GuiView:
         scene: SceneView,
         state: SwarmState,
         player: tuple[Player, Recording] | None = None,
+        landing: LandingScenario | None = None,
     ) -> None:
         gui = server.gui
-        gui.add_markdown("#### TPODS swarm" + (" · playback" if link is None else ""))
+        self.landing = landing
+        self.pads = {u.id: u.pad_m for u in landing.uavs()} if landing is not None else {}
+        title = "#### TPODS swarm" + (" · landing" if landing is not None else "")
+        gui.add_markdown(title + (" · playback" if link is None else ""))
         self.status = gui.add_markdown("**no clock yet**")
         self.buttons = {}
         self.playback = None
         if player is not None:
             self.playback = PlaybackPanel(gui, *player)
-        if link is not None:
+        if link is not None and landing is not None:  # the landing world takes no run control yet
+            self._send = link.send
+        elif link is not None:
             self._send = link.send
             with gui.add_folder("Run"):
                 for label, command, color in (
@@ -353,35 +361,45 @@ class GuiView:
                 self.sent = gui.add_markdown("")
         with gui.add_folder("Agents"):
             self.table = gui.add_markdown("no agents yet")
-        with gui.add_folder("Chaser"):
+        with gui.add_folder("UAV" if landing is not None else "Chaser"):
             options = chasers or ["-"]
-            self.chaser = gui.add_dropdown("chaser", options, initial_value=options[0])
+            label = "uav" if landing is not None else "chaser"
+            self.chaser = gui.add_dropdown(label, options, initial_value=options[0])
             self.decision = gui.add_markdown("")
             axes_x = {"x": {"time": False, "auto": True}}
-            self.radii_plot = gui.add_uplot(
-                (np.zeros(1), *(np.full(1, np.nan) for _ in range(4))),
-                (
+            if landing is not None:  # no switch radii: the distance to the pad only
+                series = ({"label": "t [s]"}, {"label": "to pad [m]", "stroke": "#2c3e50", "width": 2})
+                title, mode_title = "distance to the pad", LANDING_MODE_TITLE
+            else:
+                series = (
                     {"label": "t [s]"},
                     {"label": "range [m]", "stroke": "#2c3e50", "width": 2},
                     {"label": "r1 [m]", "stroke": "#9b59b6", "width": 2},
                     {"label": "r2 [m]", "stroke": "#f39c12", "width": 2},
                     {"label": "r_t [m]", "stroke": "#3498db", "width": 1},
-                ),
-                title="range and switch radii",
+                )
+                title, mode_title = "range and switch radii", DOCKING_MODE_TITLE
+            self.radii_plot = gui.add_uplot(
+                (np.zeros(1), *(np.full(1, np.nan) for _ in series[1:])),
+                series,
+                title=title,
                 scales=axes_x,
                 aspect=1.6,
             )
             self.mode_plot = gui.add_uplot(
                 (np.zeros(1), np.full(1, np.nan)),
                 ({"label": "t [s]"}, {"label": "mode", "stroke": "#27ae60", "width": 2}),
-                title="mode: -1 ABORT · 0 HOLD · 1 APPROACH · 2 REORIENT · 3 ALIGN · 4 DOCK · 5 DOCKED",
+                title=mode_title,
                 scales={**axes_x, "y": {"auto": False, "range": (-1.5, 5.5)}},
                 aspect=2.2,
             )
             self.modes = gui.add_markdown("")
         with gui.add_folder("Events"):
             self.events = gui.add_markdown("no events yet")
-        if link is not None:
+        self.faults: FaultPanel | None = None
+        if landing is not None:
+            pass  # the landing world applies no run-time fault yet: no Faults panel
+        elif link is not None:
             self.faults = FaultPanel(gui, link.send_fault, link.listeners, vehicles)
         else:
             self.faults = FaultPanel(gui, None, lambda: False, vehicles)
@@ -410,7 +428,8 @@ class GuiView:
         restored, :meth:`SceneView.invalidate`)."""
         self._events_version = None
         self._plot_key = None
-        self.faults.invalidate()
+        if self.faults is not None:
+            self.faults.invalidate()
 
     def _make_handler(self, command: str) -> Callable[[object], None]:
         def on_click(_event: object) -> None:
@@ -428,8 +447,12 @@ class GuiView:
             _LOG.warning("could not send run control %s: %s", command, exc)
 
     def update_panels(self, snap: Snapshot, dropped: int) -> None:
-        _set(self.status, "content", panels.status_markdown(snap, dropped))
-        _set(self.table, "content", panels.agents_table(snap))
+        if self.landing is not None:
+            _set(self.status, "content", panels.status_markdown(snap, dropped, roles=("world",)))
+            _set(self.table, "content", panels.landing_table(snap, self.pads))
+        else:
+            _set(self.status, "content", panels.status_markdown(snap, dropped))
+            _set(self.table, "content", panels.agents_table(snap))
         chasers = [k for k, a in snap.agents.items() if a.role != "target" and a.guidance is not None]
         known = list(self.chaser.options)
         if chasers and any(c not in known for c in chasers):
@@ -437,16 +460,17 @@ class GuiView:
                 {c for c in known if c != "-"} | set(chasers), key=panels.natural_key
             )
         selected = snap.agents.get(self.chaser.value)
-        _set(
-            self.decision,
-            "content",
-            panels.decision_markdown(self.chaser.value, selected.guidance if selected else None),
-        )
+        if self.landing is not None:
+            text = panels.landing_uav_markdown(self.chaser.value, selected, self.pads)
+        else:
+            text = panels.decision_markdown(self.chaser.value, selected.guidance if selected else None)
+        _set(self.decision, "content", text)
         _set(self.modes, "content", panels.modes_markdown(selected.modes if selected else ()))
         if snap.events_version != self._events_version:
             self._events_version = snap.events_version
             _set(self.events, "content", panels.events_markdown(snap.events))
-        self.faults.update(snap)
+        if self.faults is not None:
+            self.faults.update(snap)
         if self.playback is not None:
             self.playback.update()
 
@@ -460,10 +484,15 @@ class GuiView:
         self._plot_key = key
         t, v = selected.radii_t, selected.radii_v
         if len(t) >= 1:
-            self.radii_plot.data = (t, *(v[:, i] for i in range(v.shape[1])))
+            width = 1 if self.landing is not None else v.shape[1]
+            self.radii_plot.data = (t, *(v[:, i] for i in range(width)))
         t_end = float(t[-1]) if len(t) else None
         self.mode_plot.data = panels.mode_steps(selected.modes, t_end)
 
+
+DOCKING_MODE_TITLE = "mode: -1 ABORT · 0 HOLD · 1 APPROACH · 2 REORIENT · 3 ALIGN · 4 DOCK · 5 DOCKED"
+LANDING_MODE_TITLE = "mode: -1 ABORT · 1 CRUISE · 2 DEVIATE, CLIMB · 3 DESCEND · 4 FINAL · 5 LANDED"
+"""Titles of the mode-timeline plot: the levels of :data:`dashboard.mapping.MODE_LEVELS`."""
 
 _STALE = object()
 """What a scene node "last pushed" after :meth:`SceneView.invalidate`: equal to nothing the store holds."""
@@ -483,7 +512,7 @@ class DashboardApp:
 
     def __init__(
         self,
-        sc: Scenario,
+        sc: Scenario | LandingScenario,
         session: zenoh.Session | None,
         keys: Keys,
         host: str = "localhost",
@@ -496,12 +525,18 @@ class DashboardApp:
             raise ValueError("a DashboardApp draws either a Zenoh session or a recording")
         self.params = params if params is not None else DashboardParams()
         self.drops = DropCounter()
-        vehicles = {k: (v.role, v.target) for k, v in sc.vehicles.items()}
+        landing = sc if isinstance(sc, LandingScenario) else None
+        if landing is not None:
+            vehicles = uav_vehicles(landing)
+            anchors = np.array(landing.uwb.anchors_m, dtype=float)
+        else:
+            vehicles = {k: (v.role, v.target) for k, v in sc.vehicles.items()}
+            anchors = np.array(sc.anchors_m, dtype=float)
 
         def make_state() -> SwarmState:
             return SwarmState(
                 vehicles,
-                np.array(sc.anchors_m, dtype=float),
+                anchors,
                 trail_cap=self.params.trail_cap,
                 trail_step_m=self.params.trail_step_m,
                 series_cap=self.params.series_cap,
@@ -516,16 +551,22 @@ class DashboardApp:
             self.server = viser.ViserServer(host=host, port=port, verbose=False)
         try:
             self.server.gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
-            _frame_the_scene(self.server, sc)
             if session is not None:
                 self.link = SwarmLink(session, keys, self.state, self.drops, process_id=process_id)
-            self.scene = SceneView(self.server, sc, self.params)
-            chasers = sorted(
-                (k for k, v in sc.vehicles.items() if v.role == "chaser"), key=panels.natural_key
-            )
+            self.scene: SceneView | LandingSceneView
+            if landing is not None:
+                frame_landing_scene(self.server, landing)
+                self.scene = LandingSceneView(self.server, landing, self.params)
+                chasers = sorted(vehicles, key=panels.natural_key)
+            else:
+                _frame_the_scene(self.server, sc)
+                self.scene = SceneView(self.server, sc, self.params)
+                chasers = sorted(
+                    (k for k, v in sc.vehicles.items() if v.role == "chaser"), key=panels.natural_key
+                )
             playback = None if self.player is None else (self.player, recording)
             self.gui = GuiView(
-                self.server, self.link, chasers, list(sc.vehicles), self.scene, self.state, playback
+                self.server, self.link, chasers, list(vehicles), self.scene, self.state, playback, landing
             )
         except BaseException:
             with contextlib.redirect_stdout(sys.stderr):

@@ -32,7 +32,8 @@ READY_PREFIX = "dashboard listening on "
 DEFAULT_PORT = 8080
 DESCRIPTION = (
     "Viser web dashboard of a running swarm: live 3D scene (poses, trails, covariance, camera cones, "
-    "switch radii), agents table, mode timeline, Algorithm 1 decisions and run controls. It only "
+    "switch radii; for a landing scenario the pads, quadrotors and camera frustums), agents table, mode "
+    "timeline, Algorithm 1 decisions and run controls. It only "
     "subscribes and sends run controls. Prints 'dashboard listening on <url>' once up. With --open "
     "FILE.mcap it plays a recording (swarm record, swarm launch --record) instead: time slider, "
     "play/pause and speed, no Zenoh."
@@ -110,6 +111,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     from dashboard.app import DashboardApp, DashboardParams
     from swarm.args import load_from_args
     from swarm.errors import ConfigError
+    from swarm.landing_scenario import is_landing_scenario
     from swarm.transport.keys import Keys, check_id
     from swarm.transport.session import open_session, zenoh_args_from
 
@@ -122,11 +124,26 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     keys = Keys(args.namespace)
     if args.scenario is None:
         args.scenario = "docking"
-    sc = load_from_args(args).with_pairs(args.agents or 1)
+    if is_landing_scenario(args.scenario):
+        sc = _landing(args)
+    else:
+        sc = load_from_args(args).with_pairs(args.agents or 1)
     zargs = zenoh_args_from(args)
     with open_session(zargs) as session:
         make = lambda: DashboardApp(sc, session, keys, args.host, args.port, params, args.process_id)  # noqa: E731
         return _serve(args, stop, make)
+
+
+def _landing(args: argparse.Namespace, name=None):
+    """The landing scenario ``name`` (default ``args.scenario``) with ``--set``; its UAVs are listed in the
+    file (``[[fleet]]``), so ``--agents`` other than 1 is refused."""
+    from swarm.config import parse_override
+    from swarm.errors import ConfigError
+    from swarm.landing_scenario import load_landing
+
+    if args.agents not in (None, 1):
+        raise ConfigError("--agents: a landing scenario lists its UAVs ([[fleet]] in the file)")
+    return load_landing(name or args.scenario, dict(parse_override(o) for o in args.overrides))
 
 
 def _playback_app(args: argparse.Namespace, params):
@@ -145,7 +162,10 @@ def _playback_app(args: argparse.Namespace, params):
     overrides = dict(parse_override(text) for text in args.overrides)
     sc = scenario_of(recording, args.scenario, overrides)
     if args.agents is not None:
-        sc = sc.with_pairs(args.agents)
+        if not hasattr(sc, "with_pairs"):
+            _landing(args, sc.name)  # refuses --agents other than 1
+        else:
+            sc = sc.with_pairs(args.agents)
     span_s = recording.end_s - recording.start_s
     _LOG.info(
         "playing %s: %d messages over %.2f s of swarm time, scenario %s, namespace %s",

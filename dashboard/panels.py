@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -23,6 +23,8 @@ __all__ = [
     "fault_text",
     "faults_markdown",
     "fmt",
+    "landing_table",
+    "landing_uav_markdown",
     "mode_steps",
     "modes_markdown",
     "natural_key",
@@ -79,16 +81,73 @@ def agents_table(snap: Snapshot) -> str:
     return "\n".join(lines)
 
 
-def status_markdown(snap: Snapshot, dropped: int) -> str:
-    """One line about the run: clock state, tick, time, seed, the world and mothership processes, and the
-    number of invalid messages the dashboard dropped."""
+def _pad_markers(a: AgentSnap) -> str:
+    """Pad markers in the UAV's latest camera frame (its rows are marker corners, four a marker)."""
+    return _DASH if a.vision_rows is None else str(a.vision_rows // 4)
+
+
+def _altitude(a: AgentSnap, pads: Mapping[str, Sequence[float]]) -> float | None:
+    pad = pads.get(a.agent_id)
+    return None if a.truth is None or pad is None else float(a.truth.p_nav[2]) - float(pad[2])
+
+
+def landing_table(snap: Snapshot, pads: Mapping[str, Sequence[float]]) -> str:
+    """Markdown table of a landing swarm, one row per UAV: mode, estimated horizontal distance to its pad
+    [m] (the guidance's ``range_m``), true altitude above its pad [m] (``pads``: each UAV's pad position),
+    largest position sigma [cm], pad markers detected in its latest camera frame, rotor energy so far [kJ]
+    (``Truth.effort`` of a quadrotor, J), and whether its agent process is alive."""
+    lines = [
+        "| UAV | mode | to pad [m] | altitude [m] | σ [cm] | pad markers | energy [kJ] | agent process |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for agent_id in sorted(snap.agents, key=natural_key):
+        a = snap.agents[agent_id]
+        g = a.guidance
+        cells = (
+            agent_id,
+            g.mode if g is not None else _DASH,
+            fmt(g.range_m if g is not None else None, 2),
+            fmt(_altitude(a, pads), 2),
+            fmt(a.estimate.sigma_pos_max_m if a.estimate is not None else None, 1, 100.0),
+            _pad_markers(a),
+            fmt(a.truth.effort if a.truth is not None else None, 2, 1e-3),
+            a.alive,
+        )
+        lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
+    return "\n".join(lines)
+
+
+def landing_uav_markdown(
+    agent_id: str | None, a: AgentSnap | None, pads: Mapping[str, Sequence[float]]
+) -> str:
+    """The selected UAV of a landing: mode, distance to its pad, altitude, speed, energy, the pad markers of
+    its latest camera frame and the reason of its latest mode switch."""
+    if agent_id is None or a is None:
+        return "no UAV"
+    g = a.guidance
+    if g is None and a.truth is None:
+        return f"**{agent_id}**: nothing heard yet"
+    speed = float(np.linalg.norm(a.truth.v_nav)) if a.truth is not None else None
+    energy = fmt(a.truth.effort if a.truth is not None else None, 2, 1e-3)
+    text = (
+        f"**{agent_id}** · {g.mode if g is not None else _DASH} · {fmt(g.range_m if g else None, 2)} m to "
+        f"its pad  \naltitude {fmt(_altitude(a, pads), 2)} m · speed {fmt(speed, 2)} m/s · energy {energy} "
+        f"kJ · pad markers in the latest frame {_pad_markers(a)}"
+    )
+    return text + (f"  \n_{_cell(g.reason)}_" if g is not None and g.reason else "")
+
+
+def status_markdown(snap: Snapshot, dropped: int, roles: Sequence[str] = ("world", "mothership")) -> str:
+    """One line about the run: clock state, tick, time, seed, the processes of ``roles`` (the world and the
+    mothership; a landing swarm has no mothership), and the number of invalid messages the dashboard
+    dropped."""
     c = snap.clock
     if c is None:
         run = "**no clock yet**"
     else:
         run = f"**{c.state}** · tick {c.tick} · t = {c.t_s:.2f} s · seed {c.seed}"
     procs = []
-    for role in ("world", "mothership"):
+    for role in roles:
         states = [s for (r, _), s in snap.processes.items() if r == role]
         procs.append(f"{role} {'alive' if 'alive' in states else (states[0] if states else 'unseen')}")
     return f"{run}  \n{' · '.join(procs)} · dropped messages {dropped}"

@@ -100,6 +100,11 @@ class Recording:
         return self.metadata.get("run_start", {}).get("scenario") or None
 
     @property
+    def mission(self) -> str:
+        """The recorded run's mission (its ``run_start``): ``landing`` for a landing swarm, else docking."""
+        return self.metadata.get("run_start", {}).get("mission") or "docking"
+
+    @property
     def vehicle_ids(self) -> tuple[str, ...] | None:
         """The world's vehicles (its ``run_start`` event, written as a Python list by the recorder)."""
         text = self.metadata.get("run_start", {}).get("vehicles")
@@ -147,17 +152,21 @@ def load_recording(path: str | Path, default_namespace: str = "tpods") -> Record
 
 def scenario_of(recording: Recording, scenario: str | None, overrides: dict | None = None):
     """The scenario to draw ``recording`` with: ``scenario`` (a name or TOML file) if given, else the one
-    its ``run_start`` names (``docking`` if it has none, with a warning); copied into as many pairs as the
-    recorded vehicles are (``swarm launch --agents N``). ConfigError if the recorded name is not a bundled
+    its ``run_start`` names (``docking`` if it has none, with a warning); a docking one copied into as many
+    pairs as the recorded vehicles are (``swarm launch --agents N``), a landing one
+    (:class:`~swarm.landing_scenario.LandingScenario`: the file says ``mission = "landing"``, or the
+    recording's ``run_start`` does) as it is. ConfigError if the recorded name is not a bundled
     scenario (a TOML file of the user's: pass it)."""
+    from swarm.landing_scenario import is_landing_scenario, load_landing
     from swarm.scenario import load_scenario
 
     name = scenario or recording.scenario_name
     if name is None:
         _LOG.warning("%s has no run_start (recorded after the run started): drawn as docking", recording.path)
         name = "docking"
+    landing = is_landing_scenario(name) or (scenario is None and recording.mission == "landing")
     try:
-        sc = load_scenario(name, overrides)
+        sc = load_landing(name, overrides) if landing else load_scenario(name, overrides)
     except ConfigError as exc:
         if scenario is None:
             raise ConfigError(
@@ -165,6 +174,8 @@ def scenario_of(recording: Recording, scenario: str | None, overrides: dict | No
                 f"swarm dashboard SCENARIO --open {recording.path}"
             ) from None
         raise
+    if landing:  # its UAVs are the file's ([[fleet]]): nothing to copy
+        return sc
     ids = recording.vehicle_ids
     if ids is None or set(ids) == set(sc.vehicles):
         return sc

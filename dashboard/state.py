@@ -206,6 +206,9 @@ class AgentView:
     guidance: Guidance | None = None
     vision_t_s: float | None = None
     """Time of the latest camera frame with markers."""
+    vision_rows: int | None = None
+    """Rows (detected markers, or a landing pad's marker corners) of the latest camera frame; None before
+    the first."""
     alive: str = UNSEEN
     truth_trail: Trail = field(default_factory=Trail)
     estimate_trail: Trail = field(default_factory=Trail)
@@ -228,6 +231,7 @@ class AgentView:
         self.modes.clear()
         self.radii.clear()
         self.vision_t_s = None
+        self.vision_rows = None
         self.truth = self.estimate = self.guidance = None
 
 
@@ -251,6 +255,8 @@ class AgentSnap:
     radii_t: np.ndarray
     radii_v: np.ndarray
     radii_version: int
+    vision_rows: int | None = None
+    """Rows of the latest camera frame (:attr:`AgentView.vision_rows`)."""
 
     def latest_t_s(self) -> float | None:
         """The latest swarm time [s] heard from this vehicle (truth, estimate or guidance)."""
@@ -376,10 +382,13 @@ class SwarmState:
 
     def on_vision(self, agent_id: str, msg: Vision) -> None:
         """A camera frame: its time if it measured markers (a camera reports every frame, docs/protocol.md
-        "Vision": a frame without a marker says only that the camera works)."""
+        "Vision": a frame without a marker says only that the camera works), and its number of rows."""
         with self._lock:
             view = self._add(agent_id, "?", None)
-            if view is not None and len(msg.marker_ids) > 0:
+            if view is None:
+                return
+            view.vision_rows = len(msg.marker_ids)
+            if len(msg.marker_ids) > 0:
                 view.vision_t_s = msg.t_s
 
     def on_event(self, agent_id: str, msg: Event) -> None:
@@ -514,6 +523,7 @@ class SwarmState:
                     radii_t=rt,
                     radii_v=rv,
                     radii_version=v.radii.version,
+                    vision_rows=v.vision_rows,
                 )
             return Snapshot(
                 agents=agents,

@@ -6,8 +6,14 @@ summary as ``swarm sim landing-swarm --json``, but ``decisions`` is the number o
 records themselves stay in the agent), stops every process and exits 0 if every UAV landed on its pad or
 aborted safely. With ``--record FILE.mcap`` a recorder child writes the run.
 
-Not yet for a landing: the dashboard (``--headless`` is required), ``--secure``, agent hosts, a realtime
-clock, restarts.
+Unless ``--headless``, the dashboard (``python -m dashboard SCENARIO``: pads, quadrotors, camera frustums,
+energy; :mod:`dashboard.landing`) is started first, on ``--dashboard-port``, and the run starts once it
+serves (it prints ``dashboard on <url>``), so that it shows the whole run; after the run the processes stay
+up for it until Ctrl-C or ``--timeout`` (``--until-docked``: exit when the run ends, as headless). A
+dashboard that exits is reported and the run goes on without it.
+
+Not yet for a landing: ``--secure``, agent hosts, a realtime clock, restarts, run controls and faults from
+the dashboard.
 """
 
 from __future__ import annotations
@@ -25,8 +31,6 @@ _LOG = logging.getLogger("swarm.launch")
 
 
 def _refuse(args: argparse.Namespace) -> None:
-    if not args.headless:
-        raise ConfigError("a landing scenario: the dashboard does not draw a landing yet; add --headless")
     if getattr(args, "secure", False):
         raise ConfigError("--secure: not yet for a landing scenario (its processes have no ACL rules)")
     if args.agents != 1:
@@ -37,6 +41,37 @@ def _refuse(args: argparse.Namespace) -> None:
         raise ConfigError(f"--clock: a landing swarm runs in lockstep only, got {args.clock}")
     if args.repeat:
         raise ConfigError("--repeat: not yet for a landing scenario")
+
+
+def _start_dashboard(args, endpoint: str, sup, Child, stop: threading.Event) -> None:
+    """The dashboard child (module docstring), once it serves: it prints its URL as ``dashboard on <url>``.
+    ConfigError if it exits or does not serve within ``--start-timeout``."""
+    ready = threading.Event()
+
+    def on_line(line: str) -> None:
+        if line.startswith("dashboard listening on "):
+            print(f"dashboard on {line.split()[-1]}", flush=True)
+            ready.set()
+
+    dash = [str(args.scenario), "--namespace", args.namespace, "--port", str(args.dashboard_port),
+            "--mode", "client", "--connect", endpoint]  # fmt: skip
+    for o in args.overrides:
+        dash += ["--set", o]
+    sup.start(Child("dashboard", ["dashboard", *dash], on_line=on_line))
+    deadline = time.monotonic() + args.start_timeout
+    while not ready.wait(0.1):
+        if stop.is_set():
+            return
+        if sup.exited() or time.monotonic() > deadline:
+            raise ConfigError(f"the dashboard did not serve within {args.start_timeout:g} s (its log says)")
+
+
+def _hold(args: argparse.Namespace, stop: threading.Event, wall0: float) -> None:
+    """After the run, keep the processes (the dashboard) up until Ctrl-C or ``--timeout``."""
+    print("run over; the dashboard stays up until Ctrl-C (or --timeout)", flush=True)
+    while not stop.wait(0.1):
+        if args.timeout is not None and time.monotonic() - wall0 > args.timeout:
+            return
 
 
 def run_landing_launch(args: argparse.Namespace) -> int:
@@ -93,6 +128,8 @@ def run_landing_launch(args: argparse.Namespace) -> int:
             subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
             subscribe_decoded(session, keys.agent_all("event"), Event, on_agent_event, drops)
             start_recorder(args, endpoint, sup, Child)
+            if not args.headless:
+                _start_dashboard(args, endpoint, sup, Child, stop)
             common = child_args(args, endpoint, args.seed)
             for uid in ids:
                 sup.start(Child(f"agent/{uid}", ["agents.landing", "--id", uid, *common]))
@@ -111,6 +148,11 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                         _LOG.error("--timeout: %.0f s passed before the run ended", args.timeout)
                         break
                     dead = sup.exited()
+                    for c in [c for c in dead if c.name == "dashboard"]:  # the run does not need it
+                        _LOG.warning("the dashboard exited with status %s; the run goes on without it",
+                                     c.popen.returncode)  # fmt: skip
+                        c.popen = None
+                    dead = [c for c in dead if c.name != "dashboard"]
                     if dead and got["run_end"] is None:
                         _LOG.error("%s exited with status %s before the run ended", dead[0].name,
                                    dead[0].popen.returncode)  # fmt: skip
@@ -150,6 +192,8 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                       f"({wall:.1f} s of wall time, lockstep over Zenoh)", flush=True)  # fmt: skip
                 if args.json is not None:
                     args.json.write_text(json.dumps(result, indent=1))
+            if not args.headless and not args.until_docked and got["run_end"] is not None:
+                _hold(args, stop, wall0)
             sup.stop_all()
     finally:
         sup.stop_all()

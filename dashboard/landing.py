@@ -1,0 +1,326 @@
+"""The dashboard of a landing swarm (issue 15): ``swarm dashboard landing-swarm``, live or from a recording.
+
+A landing scenario (:class:`swarm.landing_scenario.LandingScenario`, ``mission = "landing"``) has UAVs and
+pads instead of chasers and targets; the messages are the same (truth, estimate, guidance, vision, events,
+the world's clock and events: docs/protocol.md, "Processes and topology"), stored by the same
+:class:`~dashboard.state.SwarmState`. What differs is drawn here:
+
+- each pad: a white square of the ArUco board's size (``[pad]`` ``board``) with its markers in black and
+  an arrow along the pad's x axis (its heading), at the UAV's ``pad_m`` turned by ``pad_yaw_deg``;
+- the UWB anchors around the pads (from the scenario: a landing swarm has no mothership to ask);
+- every UAV as a quadrotor (:func:`dashboard.kinds.draw_quadrotor`) in its guidance mode's colour, drawn
+  :data:`DRAW_SCALE` times its size (a 0.45 m airframe would be a few pixels in a 60 m scene), its label,
+  its true and estimated trails, its estimated pose (axes) and the estimate's covariance ellipsoid;
+- its downward camera's frustum (the four image corners through the intrinsics, ``[camera]``), reaching
+  down to the pad's plane, so that its footprint is what the camera sees: green when the latest camera
+  frame detected pad markers (the Vision message's ``marker_ids`` not empty), yellow when the pad's centre
+  projects into the image but nothing was detected (hidden, too small, not in this frame), red when the pad
+  is out of the image.
+
+The pure functions (geometry, colours) are tested without a server; :class:`LandingSceneView` has the
+interface of :class:`dashboard.app.SceneView` so that :class:`dashboard.app.DashboardApp` drives either.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import viser
+
+from dashboard import kinds, mapping
+from dashboard.state import AgentSnap, Snapshot
+from swarm.core import rotations as rot
+from swarm.core.pad_vision import PadBoardParams, PadCameraParams
+from swarm.landing_scenario import LandingScenario, Uav
+from swarm.step.landing import R_BODY_CAM
+from swarm.transport.keys import check_id
+
+__all__ = [
+    "DRAW_SCALE",
+    "LandingSceneView",
+    "camera_wxyz",
+    "frame_landing_scene",
+    "frustum_depth",
+    "frustum_mesh",
+    "frustum_state",
+    "pad_pixel",
+    "pad_wxyz",
+    "uav_vehicles",
+]
+
+DRAW_SCALE = 4.0
+"""How much larger than life a UAV is drawn (its frame, not its camera frustum or its covariance)."""
+FRUSTUM_MIN_M = 0.3
+"""Shortest frustum drawn [m] (a UAV on its pad still shows its camera)."""
+PAD_COLOR = (236, 240, 241)
+MARKER_COLOR = (30, 30, 30)
+ANCHOR_COLOR = (192, 57, 43)
+
+
+def uav_vehicles(sc: LandingScenario) -> dict[str, tuple[str, str | None]]:
+    """The store's vehicles of a landing scenario: every UAV, role ``uav``, no target."""
+    return {u.id: ("uav", None) for u in sc.uavs()}
+
+
+def camera_wxyz() -> np.ndarray:
+    """Viser orientation of the downward camera frame (OpenCV: +z optical axis) in the body frame:
+    ``R_BODY_CAM`` of the landing tick (:mod:`swarm.step.landing`), body -z looking down."""
+    return mapping.wxyz_from_xyzw(rot.matrix_to_quat(R_BODY_CAM))
+
+
+def frustum_mesh(cam: PadCameraParams, depth_m: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The camera's view pyramid in the camera frame (OpenCV), apex at the optical centre, base at
+    ``z = depth_m``: the four image corners ``(0, 0)``, ``(w, 0)``, ``(w, h)``, ``(0, h)`` [px] back-projected
+    through the pinhole ``x = (u - c_x) / f_x z``, ``y = (v - c_y) / f_y z`` (distortion left out: it bends
+    the edges by a few pixels). Returns vertices (5, 3) float32 (apex, then the corners) and faces (6, 3)
+    uint32 (four sides and the base)."""
+    if not (math.isfinite(depth_m) and depth_m > 0):
+        raise ValueError(f"depth_m must be a positive finite number, got {depth_m!r}")
+    corners = [(0.0, 0.0), (cam.width_px, 0.0), (cam.width_px, cam.height_px), (0.0, cam.height_px)]
+    base = [((u - cam.cx_px) / cam.fx_px * depth_m, (v - cam.cy_px) / cam.fy_px * depth_m, depth_m)
+            for u, v in corners]  # fmt: skip
+    vertices = np.array([(0.0, 0.0, 0.0), *base], dtype=np.float32)
+    faces = np.array([(0, 1, 2), (0, 2, 3), (0, 3, 4), (0, 4, 1), (1, 3, 2), (1, 4, 3)], dtype=np.uint32)
+    return vertices, faces
+
+
+def pad_pixel(
+    p_nav: np.ndarray,
+    q_nav_body: np.ndarray,
+    pad_nav: np.ndarray,
+    cam_pos_body_m: np.ndarray,
+    cam: PadCameraParams,
+) -> tuple[float, float] | None:
+    """Where the pad's centre ``pad_nav`` (3,) [m] projects in the downward camera's image [px] of a UAV at
+    ``p_nav`` with attitude ``q_nav_body`` (x, y, z, w), its camera at ``cam_pos_body_m`` (3,) [m] in the
+    body frame; None if the pad is behind the camera or outside the image (pinhole, no distortion).
+    ``p_cam = R_body_cam^T (R_nav_body^T (pad - p) - cam_pos)``."""
+    r_nav_body = rot.quat_to_matrix(np.asarray(q_nav_body, dtype=np.float64))
+    d_body = r_nav_body.T @ (np.asarray(pad_nav, float) - np.asarray(p_nav, float))
+    p_cam = R_BODY_CAM.T @ (d_body - np.asarray(cam_pos_body_m, dtype=np.float64))
+    if p_cam[2] <= 1e-6:
+        return None
+    u = cam.fx_px * p_cam[0] / p_cam[2] + cam.cx_px
+    v = cam.fy_px * p_cam[1] / p_cam[2] + cam.cy_px
+    if not (0.0 <= u <= cam.width_px and 0.0 <= v <= cam.height_px):
+        return None
+    return float(u), float(v)
+
+
+def frustum_state(marker_rows: int | None, pad_in_image: bool) -> str:
+    """Key of :data:`dashboard.mapping.FOV_COLORS` for a UAV's camera: ``seen`` if its latest camera frame
+    (``marker_rows``: rows of that Vision message, None before the first) detected pad markers, else
+    ``in_cone`` if the pad's centre is in the image, else ``out``."""
+    if marker_rows:
+        return "seen"
+    return "in_cone" if pad_in_image else "out"
+
+
+def frustum_depth(z_nav_m: float, pad_z_m: float) -> float:
+    """How far down the frustum reaches [m]: to the pad's plane, at least :data:`FRUSTUM_MIN_M`."""
+    return max(float(z_nav_m) - float(pad_z_m), FRUSTUM_MIN_M)
+
+
+def pad_wxyz(pad_yaw_deg: float) -> np.ndarray:
+    """Viser orientation of a pad turned by ``pad_yaw_deg`` about nav z (as the landing tick turns it)."""
+    return mapping.wxyz_from_xyzw(rot.rotvec_exp(np.array([0.0, 0.0, math.radians(pad_yaw_deg)])))
+
+
+def frame_landing_scene(server: viser.ViserServer, sc: LandingScenario) -> None:
+    """A floor grid (1 m cells) under the UAVs' starts, the pads and the anchors, and the initial camera
+    looking at their centre from the south-west, above."""
+    uavs = sc.uavs()
+    pts = np.vstack([np.array([u.start_m for u in uavs], float), np.array([u.pad_m for u in uavs], float),
+                     np.asarray(sc.uwb.anchors_m, float).reshape(-1, 3)])  # fmt: skip
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    extent = float(np.max(hi - lo))
+    size = float(np.ceil(extent + 4.0))
+    ground = min(u.pad_m[2] for u in uavs)
+    server.scene.add_grid(
+        "/grid", width=size, height=size, cell_size=1.0, section_size=5.0, plane="xy",
+        position=(*np.round(0.5 * (lo[:2] + hi[:2])).tolist(), float(ground) - 0.01),
+    )  # fmt: skip
+    centre = 0.5 * (lo + hi)
+    direction = np.array([-0.55, -1.0, 0.9])
+    eye = centre + 1.05 * max(extent, 1.0) * direction / np.linalg.norm(direction)
+    server.initial_camera.position = tuple(eye)
+    server.initial_camera.look_at = tuple(centre)
+
+
+def _draw_pad(scene: viser.SceneApi, uav: Uav, board: PadBoardParams) -> None:
+    """A pad (module docstring) under ``/pads/<uav>``: the board's square with a margin, its markers, the
+    heading arrow and a label."""
+    name = f"/pads/{check_id(uav.id)}"
+    scene.add_frame(name, show_axes=False, position=tuple(float(x) for x in uav.pad_m),
+                    wxyz=pad_wxyz(uav.pad_yaw_deg))  # fmt: skip
+    half = board.half_extent_m
+    side = 2.0 * half + 0.2
+    scene.add_box(f"{name}/board", color=PAD_COLOR, dimensions=(side, side, 0.02), position=(0.0, 0.0, 0.01))
+    _, centres, sizes = board.markers
+    for i, (c, s) in enumerate(zip(centres, sizes, strict=True)):
+        scene.add_box(f"{name}/marker{i}", color=MARKER_COLOR, dimensions=(s, s, 0.005),
+                      position=(float(c[0]), float(c[1]), 0.0225))  # fmt: skip
+    tip = half + 0.6
+    arrow = np.array([[[half, 0.0, 0.03], [tip, 0.0, 0.03]], [[tip, 0.0, 0.03], [tip - 0.2, 0.12, 0.03]],
+                      [[tip, 0.0, 0.03], [tip - 0.2, -0.12, 0.03]]])  # fmt: skip
+    scene.add_line_segments(f"{name}/heading", arrow, (192, 57, 43), thickness=3.0, thickness_units="screen")
+    scene.add_label(f"{name}/label", f"pad {uav.id}", position=(0.0, -half - 0.3, 0.05))
+
+
+class _UavNodes:
+    """The scene nodes of one UAV and what was last pushed to them."""
+
+    def __init__(self, scene: viser.SceneApi, a: AgentSnap, sc: LandingScenario) -> None:
+        base = f"/uavs/{check_id(a.agent_id)}"
+        self.truth = scene.add_frame(f"{base}/truth", show_axes=False, visible=False)
+        scene.add_frame(f"{base}/truth/quad", show_axes=False, scale=DRAW_SCALE)
+        quad = _QuadKind(sc)
+        self.body = kinds.draw_quadrotor(scene, f"{base}/truth/quad", quad, mapping.mode_color(None, "uav"))
+        scene.add_label(f"{base}/truth/label", a.agent_id, position=(0.0, 0.0, 1.5))
+        vertices, faces = frustum_mesh(sc.camera.intrinsics)
+        self.fov = scene.add_mesh_simple(
+            f"{base}/truth/fov", vertices, faces, color=mapping.FOV_COLORS["out"], opacity=0.2, side="double",
+            position=tuple(float(x) for x in sc.camera.pos_body_m), wxyz=camera_wxyz(), cast_shadow=False,
+            receive_shadow=False,
+        )  # fmt: skip
+        self.estimate = scene.add_frame(f"{base}/estimate", axes_length=1.0, axes_radius=0.04, visible=False)
+        self.cov = scene.add_icosphere(
+            f"{base}/cov", radius=1.0, color=(52, 73, 94), opacity=0.2, subdivisions=2, visible=False,
+            cast_shadow=False, receive_shadow=False,
+        )  # fmt: skip
+        empty = np.zeros((1, 2, 3))
+        self.trail_truth = scene.add_line_segments(
+            f"{base}/trail/truth", empty, (90, 90, 90), thickness=2.0, thickness_units="screen", visible=False
+        )
+        self.trail_estimate = scene.add_line_segments(
+            f"{base}/trail/estimate", empty, (52, 152, 219), thickness=1.5, thickness_units="screen",
+            visible=False,
+        )  # fmt: skip
+        self.truth_msg: object = None
+        self.estimate_msg: object = None
+        self.cov_key: object = None
+        self.color: object = None
+        self.fov_key: object = None
+        self.trail_versions: tuple[int, int] | None = None
+
+
+class _QuadKind:
+    """What :func:`dashboard.kinds.draw_quadrotor` reads of a kind (``.p``): the scenario's quadrotor."""
+
+    def __init__(self, sc: LandingScenario) -> None:
+        self.p = sc.kinds.quadrotor
+
+
+_STALE = object()
+
+
+class LandingSceneView:
+    """The 3D scene of a landing swarm (module docstring): pads and anchors at start, each UAV on first
+    sight. The interface of :class:`dashboard.app.SceneView`."""
+
+    def __init__(self, server: viser.ViserServer, sc: LandingScenario, params) -> None:
+        self.server = server
+        self.sc = sc
+        self.params = params
+        self.nodes: dict[str, _UavNodes] = {}
+        self.n_sigma = params.n_sigma
+        self.show_trails = True
+        self.uavs = {u.id: u for u in sc.uavs()}
+        self._anchors_version: int | None = None
+        self._anchor_nodes: list[object] = []
+        self._run: int | None = None
+        for u in self.uavs.values():
+            _draw_pad(server.scene, u, sc.pad.board)
+
+    def _draw_anchors(self, ids: tuple[int, ...], positions: np.ndarray) -> None:
+        for node in self._anchor_nodes:
+            node.remove()  # type: ignore[attr-defined]
+        self._anchor_nodes = []
+        for anchor_id, p in zip(ids, positions, strict=True):
+            node = self.server.scene.add_icosphere(
+                mapping.anchor_node(anchor_id), radius=0.25, color=ANCHOR_COLOR, position=tuple(p)
+            )
+            self._anchor_nodes.append(node)
+            self.server.scene.add_label(f"{mapping.anchor_node(anchor_id)}/label", f"anchor {anchor_id}",
+                                        position=(0.0, 0.0, 0.5))  # fmt: skip
+
+    def update(self, snap: Snapshot, trails_due: bool) -> None:
+        if snap.anchors_version != self._anchors_version:
+            self._anchors_version = snap.anchors_version
+            self._draw_anchors(*snap.anchors)
+        new_run = snap.run != self._run
+        self._run = snap.run
+        for agent_id, a in snap.agents.items():
+            nodes = self.nodes.get(agent_id)
+            if nodes is None:
+                nodes = self.nodes[agent_id] = _UavNodes(self.server.scene, a, self.sc)
+            self._update_uav(nodes, a, trails_due or new_run)
+
+    def invalidate(self) -> None:
+        """Push everything again at the next frame (a playback's backward seek)."""
+        self._anchors_version = None
+        self._run = None
+        for nodes in list(self.nodes.values()):
+            nodes.truth_msg = nodes.estimate_msg = nodes.cov_key = nodes.color = nodes.fov_key = _STALE
+            nodes.trail_versions = None
+
+    def set_show_trails(self, show: bool) -> None:
+        self.show_trails = show
+        for nodes in list(self.nodes.values()):
+            nodes.trail_versions = None
+
+    def trail_versions(self) -> dict[str, tuple[int, int]]:
+        return {k: n.trail_versions for k, n in self.nodes.items() if n.trail_versions is not None}
+
+    def _update_uav(self, nodes: _UavNodes, a: AgentSnap, trails_due: bool) -> None:
+        uav = self.uavs.get(a.agent_id)
+        if a.truth is not nodes.truth_msg:
+            nodes.truth_msg = a.truth
+            if a.truth is not None:
+                nodes.truth.position, nodes.truth.wxyz = mapping.pose_wxyz(a.truth.p_nav, a.truth.q_nav_body)
+            _set(nodes.truth, "visible", a.truth is not None)
+        color = mapping.mode_color(a.guidance.mode if a.guidance is not None else None, "uav")
+        if color != nodes.color:
+            nodes.color = color
+            nodes.body.color = color
+        est = a.estimate
+        if est is not nodes.estimate_msg:
+            nodes.estimate_msg = est
+            _set(nodes.estimate, "visible", est is not None)
+            _set(nodes.cov, "visible", est is not None)
+            if est is not None:
+                nodes.estimate.position, nodes.estimate.wxyz = mapping.pose_wxyz(est.p_nav, est.q_nav_body)
+                nodes.cov.position = est.p_nav
+            else:
+                nodes.cov_key = None
+        if est is not None and (trails_due or nodes.cov_key != self.n_sigma):
+            nodes.cov_key = self.n_sigma
+            radii, wxyz = mapping.covariance_ellipsoid(est.cov[:3, :3], self.n_sigma)
+            nodes.cov.wxyz = wxyz
+            nodes.cov.scale = tuple(float(r) for r in radii)
+        if a.truth is not None and uav is not None:
+            cam = self.sc.camera
+            in_image = pad_pixel(a.truth.p_nav, a.truth.q_nav_body, np.asarray(uav.pad_m, float),
+                                 np.asarray(cam.pos_body_m, float), cam.intrinsics) is not None  # fmt: skip
+            state = frustum_state(a.vision_rows, in_image)
+            depth = round(frustum_depth(a.truth.p_nav[2], uav.pad_m[2]), 2)
+            key = (state, depth)
+            if key != nodes.fov_key:
+                nodes.fov_key = key
+                nodes.fov.color = mapping.FOV_COLORS[state]
+                nodes.fov.scale = depth
+        if trails_due and a.truth_trail is not None:
+            nodes.trail_versions = a.trail_versions
+            for handle, pts in ((nodes.trail_truth, a.truth_trail), (nodes.trail_estimate, a.estimate_trail)):
+                if pts is None or len(pts) < 2 or not self.show_trails:
+                    _set(handle, "visible", False)
+                else:
+                    handle.points = np.stack([pts[:-1], pts[1:]], axis=1).astype(np.float32)
+                    _set(handle, "visible", True)
+
+
+def _set(handle: object, attr: str, value: object) -> None:
+    """Assign only when the value changed (each assignment is a message to every browser)."""
+    if getattr(handle, attr) != value:
+        setattr(handle, attr, value)
