@@ -143,7 +143,7 @@ def frame_landing_scene(server: viser.ViserServer, sc: LandingScenario) -> None:
     )  # fmt: skip
     centre = 0.5 * (lo + hi)
     direction = np.array([-0.55, -1.0, 0.9])
-    eye = centre + 1.05 * max(extent, 1.0) * direction / np.linalg.norm(direction)
+    eye = centre + 0.8 * max(extent, 1.0) * direction / np.linalg.norm(direction)
     server.initial_camera.position = tuple(eye)
     server.initial_camera.look_at = tuple(centre)
 

@@ -85,7 +85,6 @@ def test_swarm_sim_mcap_writes_what_the_launched_processes_published(launched, t
 @pytest.mark.parametrize(
     "extra, expected",
     [
-        ([], "the dashboard does not draw a landing yet; add --headless"),
         (["--headless", "--agents", "2"], "--agents: a landing scenario lists its UAVs"),
         (["--headless", "--clock", "realtime"], "--clock: a landing swarm runs in lockstep only"),
         (["--headless", "--secure"], "--secure: not yet for a landing scenario"),

@@ -1,0 +1,198 @@
+"""The dashboard of a landing swarm in a real browser (issue 15, part 5): ``swarm launch landing-swarm`` with
+its dashboard (no ``--headless``) and ``--record``, the real landing world and four landing agent processes
+in lockstep over loopback Zenoh. Headless Chromium on the live page sees the four UAVs, their landing modes
+and their rotor energy, and all four LANDED when the run ends; the launcher then holds until SIGINT, which
+stops it cleanly. The run's recording played back (``python -m dashboard --open``) shows the landing from
+its recorded scenario: at two times of the time slider the screenshots differ where the recorded UAVs are
+(their poses projected through the dashboard's initial camera).
+
+numba's cache is warmed in this process first (a cold compile in five processes at once outlasts the
+world's start timeout on two cores); the launched run then takes ~15 s. Screenshots are kept in
+``artifacts/`` (``dashboard-landing-*.png``).
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+from unittest.mock import MagicMock
+
+import cv2
+import msgpack
+import numpy as np
+import pytest
+
+from dashboard.landing import frame_landing_scene
+from swarm.core.landing import LandingMode
+from swarm.landing_scenario import load_landing
+from swarm.transport.recording import read_recording
+from tests.dashboard.conftest import ARTIFACTS, START_TIMEOUT_S, new_namespace
+from tests.dashboard.test_browser import MIN_SCENE_VARIANCE, SCENE_REGION, UI_TIMEOUT_MS
+from tests.dashboard.test_browser_playback import _seek, _steady_screenshot, _window
+from tests.transport.procs import Proc, Procs, free_port, loopback
+
+WIDTH, HEIGHT = 1280, 800
+UAVS = ("uav1", "uav2", "uav3", "uav4")
+LANDING_MODES = {m.value for m in LandingMode}
+RUN_TIMEOUT_S = 240.0  # the launched run: ~15 s here with numba's cache warm, far more on a loaded machine
+T1_S, T2_S = 2.0, 12.0  # cruising or deviating far from the pads, then descending over them
+MIN_MOVED = 8.0  # mean grey-level change in the window of a UAV that moved away or came
+
+
+@dataclass
+class LandingRun:
+    launcher: Proc
+    url: str
+    recording: Path
+    namespace: str
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LandingRun]:
+    from agents.landing import _warm_up
+
+    sc = load_landing("landing-swarm")
+    _warm_up(sc, 0, 0, sc.policy)
+    rec = tmp_path_factory.mktemp("landing") / "run.mcap"
+    ns = new_namespace("land")
+    with Procs() as procs:
+        launcher = procs.start(
+            [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--seed", "0",
+             "--dashboard-port", "0", "--namespace", ns, "--listen", loopback(free_port()),
+             "--record", str(rec), "--timeout", "600"]
+        )  # fmt: skip
+        url = launcher.wait_for_line(r"^dashboard on (http://\S+)$", 120.0).group(1)
+        yield LandingRun(launcher, url, rec, ns)
+
+
+@pytest.fixture(scope="module")
+def live_page(browser, run: LandingRun) -> Iterator[object]:
+    context = browser.new_context(viewport={"width": WIDTH, "height": HEIGHT})
+    pg = context.new_page()
+    pg.goto(run.url)
+    pg.get_by_text("Connected").first.wait_for(timeout=UI_TIMEOUT_MS)
+    pg.get_by_text("energy [kJ]").first.wait_for(timeout=UI_TIMEOUT_MS)  # the landing agents table
+    yield pg
+    context.close()
+
+
+def _rows(pg) -> dict[str, list[str]]:
+    """The agents table's rows by UAV id, as the page shows them (tab-separated cells)."""
+    rows = {}
+    for line in pg.inner_text("body").splitlines():
+        cells = [c.strip() for c in line.split("\t")]
+        if cells[0] in UAVS and len(cells) >= 8:
+            rows[cells[0]] = cells
+    return rows
+
+
+def _wait_rows(pg, ok, what: str, timeout_s: float) -> dict[str, list[str]]:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        rows = _rows(pg)
+        if set(rows) == set(UAVS) and all(ok(r) for r in rows.values()):
+            return rows
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what} never showed; table rows: {rows}\n{pg.inner_text('body')}")
+        time.sleep(0.2)
+
+
+def test_the_live_page_shows_four_uavs_flying_landing_modes_then_all_landed(live_page, run: LandingRun):
+    ARTIFACTS.mkdir(exist_ok=True)
+    flying = _wait_rows(live_page, lambda r: r[1] in LANDING_MODES, "four UAVs with a landing mode", 120.0)
+    live_page.screenshot(path=str(ARTIFACTS / "dashboard-landing-live.png"))
+    assert all(r[7] == "alive" for r in flying.values()), flying  # the agent process column
+    landed = _wait_rows(live_page, lambda r: r[1] == "LANDED", "four LANDED UAVs", RUN_TIMEOUT_S)
+    live_page.screenshot(path=str(ARTIFACTS / "dashboard-landing-landed.png"))
+    energy_kj = {u: float(r[6]) for u, r in landed.items()}
+    # a quadrotor of 1.5 kg hovers on ~170 W: every landing of 15-50 s took kilojoules
+    assert all(1.0 < e < 30.0 for e in energy_kj.values()), energy_kj
+    assert "landing" in live_page.inner_text("body")  # the title says what is drawn
+    assert live_page.get_by_role("button", name="Pause", exact=True).count() == 0  # no run control
+    run.launcher.wait_for_line(r"^4 of 4 UAVs landed on their pads", 30.0)
+    run.launcher.wait_for_line(r"^run over; the dashboard stays up", 30.0)
+
+
+def test_after_the_run_sigint_stops_the_launcher_and_its_recording_is_complete(live_page, run: LandingRun):
+    run.launcher.wait_for_line(r"^run over; the dashboard stays up", RUN_TIMEOUT_S)
+    run.launcher.signal(signal.SIGINT)
+    assert run.launcher.wait(60.0) == 0, run.launcher.output()
+    messages, metadata = read_recording(run.recording)
+    assert metadata["run_start"]["mission"] == "landing" and "run_end" in metadata
+    assert {f"{run.namespace}/agent/{u}/truth" for u in UAVS} <= {m.key for m in messages}
+
+
+def _camera() -> tuple[np.ndarray, np.ndarray]:
+    """The dashboard's initial camera (position, look-at) of landing-swarm, from its own code."""
+    server = SimpleNamespace(scene=MagicMock(), initial_camera=SimpleNamespace())
+    frame_landing_scene(server, load_landing("landing-swarm"))
+    return np.array(server.initial_camera.position), np.array(server.initial_camera.look_at)
+
+
+def _project(p_nav: np.ndarray) -> tuple[int, int]:
+    """Pixel (column, row) of ``p_nav`` [m]: a pinhole at the initial camera, Viser's default vertical field
+    of view (75 deg) and up direction (+z), over the whole page."""
+    eye, look_at = _camera()
+    forward = (look_at - eye) / np.linalg.norm(look_at - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    v = np.asarray(p_nav) - eye
+    f_px = (HEIGHT / 2) / np.tan(np.radians(75.0) / 2)
+    return round(WIDTH / 2 + f_px * (v @ right) / (v @ forward)), round(
+        HEIGHT / 2 - f_px * (v @ up) / (v @ forward)
+    )
+
+
+def _recorded_positions(recording: Path, namespace: str, t_s: float) -> dict[str, np.ndarray]:
+    """Each UAV's last recorded true position at ``t_s``, read with plain msgpack."""
+    last: dict[str, np.ndarray] = {}
+    for m in read_recording(recording)[0]:
+        for u in UAVS:
+            if m.key == f"{namespace}/agent/{u}/truth" and m.log_time_ns <= round(t_s * 1e9):
+                p = msgpack.unpackb(m.payload, raw=False)["p_nav"]
+                last[u] = np.frombuffer(p["data"], dtype=p["dtype"]).reshape(p["shape"])
+    assert set(last) == set(UAVS)
+    return last
+
+
+def test_the_recording_plays_back_as_a_landing_and_the_uavs_move(browser, run: LandingRun):
+    run.launcher.wait_for_line(r"^run over; the dashboard stays up", RUN_TIMEOUT_S)
+    assert run.recording.exists()
+    with Procs() as procs:
+        dash = procs.start([sys.executable, "-m", "dashboard", "--open", str(run.recording), "--port", "0"])
+        url = dash.wait_for_line(r"^dashboard listening on (http://\S+)$", START_TIMEOUT_S + 30).group(1)
+        context = browser.new_context(viewport={"width": WIDTH, "height": HEIGHT})
+        try:
+            pg = context.new_page()
+            pg.goto(url)
+            pg.get_by_text("Connected").first.wait_for(timeout=UI_TIMEOUT_MS)
+            pg.get_by_text("energy [kJ]").first.wait_for(timeout=UI_TIMEOUT_MS)
+            shots, modes = {}, {}
+            for t in (T1_S, T2_S):
+                _seek(pg, t)
+                shots[t] = _steady_screenshot(pg, ARTIFACTS / f"dashboard-landing-playback-{t:g}s.png")
+                modes[t] = {u: r[1] for u, r in _rows(pg).items()}
+        finally:
+            context.close()
+    assert set(modes[T1_S]) == set(UAVS) and set(modes[T1_S].values()) <= {"CRUISE", "DEVIATE"}, modes
+    assert set(modes[T2_S].values()) <= LANDING_MODES - {"CRUISE"}, modes
+    assert shots[T1_S][SCENE_REGION].var() > MIN_SCENE_VARIANCE
+    diff = np.abs(shots[T1_S] - shots[T2_S])
+    cv2.imwrite(
+        str(ARTIFACTS / "dashboard-landing-playback-diff.png"), np.clip(4 * diff, 0, 255).astype(np.uint8)
+    )
+    moved = {}
+    for t in (T1_S, T2_S):
+        for u, p in _recorded_positions(run.recording, run.namespace, t).items():
+            px = _project(p)
+            if 0 <= px[0] < SCENE_REGION[1].stop and SCENE_REGION[0].start <= px[1] < HEIGHT:  # in the view
+                moved[(u, t)] = float(_window(diff, px).mean())
+    print(f"change around each UAV at either time: {moved}")
+    assert len(moved) >= 4, moved  # most of them are in the view at either time
+    assert all(v > MIN_MOVED for v in moved.values()), moved
