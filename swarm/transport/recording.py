@@ -24,7 +24,6 @@ from __future__ import annotations
 import fnmatch
 import logging
 import math
-import queue
 import threading
 import time
 from dataclasses import dataclass
@@ -42,6 +41,10 @@ ENCODING = "msgpack"
 QUIET_S = 0.5
 """On stop, the recorder keeps recording until no sample has come for this long [s]: the samples still in
 flight when it was asked to stop are in the file."""
+FIFO_DEPTH = 1 << 16
+"""Samples the recorder's channel holds before Zenoh waits for it (a FIFO: none is dropped)."""
+IDLE_S = 0.002
+"""The recorder's nap when its channel is empty [s]."""
 
 
 class _Stamp(msgspec.Struct):
@@ -67,7 +70,7 @@ def swarm_time_ns(payload: bytes, last_ns: int) -> int:
 class Recorder:
     """Write every sample of ``<namespace>/**`` seen by ``session`` to ``path`` (module docstring).
 
-    The Zenoh callback only queues ``(key, payload, received_ns)``; :meth:`run` writes them on the calling
+    Zenoh queues the samples in a FIFO channel; :meth:`run` drains it and writes them on the calling
     thread until ``stop`` is set, then finishes the file (its summary and indexes), so the file is complete
     whenever the recorder stops cleanly (SIGINT, SIGTERM, the end of the run), with every sample that
     arrives until :data:`QUIET_S` passes without one."""
@@ -75,28 +78,29 @@ class Recorder:
     def __init__(self, session, keys, path: str | Path, metadata: dict[str, str] | None = None) -> None:
         self.session, self.keys, self.path = session, keys, Path(path)
         self.metadata = dict(metadata or {})
-        self._q: queue.SimpleQueue = queue.SimpleQueue()
         self.counts: dict[str, int] = {}
         self.run_end_seen = threading.Event()
 
-    def _on_sample(self, sample) -> None:
-        self._q.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
-
     def run(self, stop: threading.Event, ready=None) -> dict[str, int]:
+        import zenoh
+
         sink = McapSink(self.path, self.keys, self.metadata)
-        sub = self.session.declare_subscriber(self.keys.everything(), self._on_sample)
+        # a FIFO channel, drained by this thread: no Python callback (and thread hand-off) per sample
+        sub = self.session.declare_subscriber(self.keys.everything(), zenoh.handlers.FifoChannel(FIFO_DEPTH))
         if ready is not None:
             ready()
         quiet = time.monotonic()
         try:
-            # after stop: everything queued, and what is still in flight (until QUIET_S without a sample)
-            while not (stop.is_set() and self._q.empty() and time.monotonic() - quiet >= QUIET_S):
-                try:
-                    key, payload, _recv_ns = self._q.get(timeout=0.05)
-                except queue.Empty:
+            # after stop: everything received, and what is still in flight (until QUIET_S without a sample)
+            while True:
+                sample = sub.try_recv()
+                if sample is None:
+                    if stop.is_set() and time.monotonic() - quiet >= QUIET_S:
+                        break
+                    time.sleep(IDLE_S)
                     continue
                 quiet = time.monotonic()
-                sink.write(key, payload)
+                sink.write(str(sample.key_expr), sample.payload.to_bytes())
                 if sink.run_end_seen:
                     self.run_end_seen.set()
         finally:
