@@ -203,3 +203,24 @@ def test_swarm_sim_mcap_refuses_what_it_cannot_write(args, expected):
         [sys.executable, "-m", "swarm", "sim", *args], capture_output=True, text=True, timeout=120
     )
     assert r.returncode == 2 and expected in r.stderr, r.stderr
+
+
+def test_a_landing_campaign_refuses_a_fleet_rather_than_fly_only_its_first_uav(tmp_path):
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "swarm",
+            "montecarlo",
+            "landing-swarm",
+            "--runs",
+            "2",
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode == 2 and "a landing campaign flies one UAV per run" in r.stderr, r.stderr
+    assert not (tmp_path / "o").exists()

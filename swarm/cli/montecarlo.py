@@ -83,6 +83,11 @@ def _run_landing(args: argparse.Namespace) -> int:
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers must be a positive integer, got {args.workers}")
     sc = load_landing(args.scenario, dict(parse_override(text) for text in args.overrides))
+    if sc.fleet:
+        raise ConfigError(
+            f"{args.scenario}: a landing campaign flies one UAV per run, this scenario has a [[fleet]] of "
+            f"{len(sc.fleet)}; run it with `swarm sim` or `swarm launch`, or campaign on `landing`"
+        )
     runs = 500 if args.runs is None else args.runs
     if runs < 1:
         raise ConfigError(f"--runs must be a positive integer, got {runs}")
