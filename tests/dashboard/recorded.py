@@ -1,6 +1,6 @@
-"""A small MCAP recording for the playback tests, made cheaply and faithfully: the real
-:class:`~swarm.transport.recording.Recorder` (the one ``swarm record`` and ``swarm launch --record`` run)
-writes the file, fed by a stand-in Zenoh session with the messages the scripted fake swarm
+"""A small MCAP recording for the playback tests, made cheaply and faithfully: the recorder's writer
+(:class:`~swarm.transport.recording.McapSink`, what ``swarm record`` and ``swarm launch --record`` write every
+sample they hear with) writes the file, fed with the messages the scripted fake swarm
 (:mod:`tests.dashboard.fake_swarm`) publishes tick by tick, plus the world's ``run_start`` / ``run_end``
 events, its clock and the anchors. A launched lockstep run with ``--record`` would take a minute here; this
 takes ~2 s.
@@ -12,48 +12,16 @@ and DOCKED, one tick every ``dt_s`` of swarm time.
 
 from __future__ import annotations
 
-import threading
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from swarm.transport.keys import Keys
 from swarm.transport.messages import Anchors, Clock, Event, encode
-from swarm.transport.recording import Recorder
+from swarm.transport.recording import McapSink
 from tests.dashboard.fake_swarm import ANCHORS_M, Pair, tick_messages, vehicle_ids
 
 NAMESPACE = "rec-test"
-
-
-@dataclass(frozen=True)
-class _Bytes:
-    data: bytes
-
-    def to_bytes(self) -> bytes:
-        return self.data
-
-
-@dataclass(frozen=True)
-class _Sample:
-    key_expr: str
-    payload: _Bytes
-
-
-class _Subscriber:
-    def undeclare(self) -> None:
-        pass
-
-
-class _FeedingSession:
-    """What the Recorder needs of a Zenoh session: one subscriber, called here with every sample."""
-
-    def __init__(self) -> None:
-        self.callback = None
-
-    def declare_subscriber(self, _key: str, callback) -> _Subscriber:
-        self.callback = callback
-        return _Subscriber()
 
 
 def scripted_messages(
@@ -79,16 +47,12 @@ def scripted_messages(
 
 def write_recording(path: Path, **script) -> list[tuple[str, bytes]]:
     """Record the scripted run (``script``: :func:`scripted_messages`'s arguments) to ``path`` with the
-    Recorder; returns the messages recorded, in order."""
+    recorder's writer (:class:`~swarm.transport.recording.McapSink`, what ``swarm record`` writes each
+    sample it hears with); returns the messages recorded, in order."""
     keys = Keys(NAMESPACE)
     messages = scripted_messages(keys, **script)
-    session = _FeedingSession()
-    stop = threading.Event()
-
-    def ready() -> None:  # subscribed: everything arrives, then the recorder is asked to finish
-        for key, payload in messages:
-            session.callback(_Sample(key, _Bytes(payload)))
-        stop.set()
-
-    Recorder(session, keys, path).run(stop, ready)
+    sink = McapSink(path, keys)
+    for key, payload in messages:
+        sink.write(key, payload)
+    sink.close()
     return messages
