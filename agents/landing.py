@@ -41,7 +41,7 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     from swarm.step.landing import LandingAgent, LandingInputs, Rates
     from swarm.transport import landing_wire as wire
     from swarm.transport.keys import Keys
-    from swarm.transport.messages import DropCounter, Event, Gnss, Imu, Uwb, Vision
+    from swarm.transport.messages import DropCounter, Event, Gnss, Imu, MessageError, Uwb, Vision
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import declare_liveliness, open_session, subscribe_decoded, zenoh_args_from
 
@@ -60,11 +60,31 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     state = {"k": 1, "ended": False}
     drops = DropCounter()
 
+    n_anchors = len(sc.uwb.anchors_m) if sc.uwb.enabled else 0
+
+    def usable(kind: str, msg):
+        """What the agent step takes of a message (None for nothing), or MessageError: a message of the
+        protocol that this agent cannot use is dropped and counted like one that does not decode."""
+        if kind == "vision":
+            return wire.camera_frame(msg)
+        if kind == "uwb":
+            return wire.range_input(msg, n_anchors)
+        if kind == "gnss":
+            return msg.p_nav
+        if msg.acc_body is None:
+            raise MessageError("acc_body: an IMU sample without the specific force cannot drive this filter")
+        return msg.gyro_body, msg.acc_body
+
     def on_sample(kind: str):
-        def handler(_key: str, msg) -> None:
+        def handler(key: str, msg) -> None:
+            try:
+                value = usable(kind, msg)
+            except MessageError as exc:
+                drops.drop(key, str(exc))
+                return
             with cond:
                 if msg.tick >= state["k"]:
-                    inbox[kind][msg.tick] = msg
+                    inbox[kind][msg.tick] = value
                     cond.notify_all()
 
         return handler
@@ -84,17 +104,11 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
         )
 
     def inputs(k: int) -> LandingInputs:
-        imu = inbox["imu"].pop(k)
-        inp = LandingInputs(k, k * dt, imu.gyro_body, imu.acc_body)
-        u = inbox["uwb"].pop(k, None)
-        if u is not None and u.range_m is not None:
-            inp.uwb = (u.anchor_id, u.range_m)
-        g = inbox["gnss"].pop(k, None)
-        if g is not None:
-            inp.gnss = g.p_nav
-        v = inbox["vision"].pop(k, None)
-        if v is not None:
-            inp.camera = wire.camera_frame(v)
+        gyro, acc = inbox["imu"].pop(k)
+        inp = LandingInputs(k, k * dt, gyro, acc)
+        inp.uwb = inbox["uwb"].pop(k, None)
+        inp.gnss = inbox["gnss"].pop(k, None)
+        inp.camera = inbox["vision"].pop(k, None)
         return inp
 
     with open_session(zenoh_args_from(args)) as session:
@@ -117,9 +131,6 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
                     break
                 inp = inputs(k)
                 state["k"] = k + 1
-            if inp.acc is None:
-                drops.drop(keys.imu(args.id), "an IMU sample without acc_body cannot drive this filter")
-                inp.acc = np.full(3, np.nan)  # refused by the filter's predict, counted there
             cmd = agent.tick(inp)
             out, n_modes = wire.agent_tick(keys, args.id, agent, cmd, n_modes)
             for key, payload in out:

@@ -54,8 +54,26 @@ def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int) -> Wire:
 
 
 def camera_frame(msg: Vision) -> tuple[np.ndarray, np.ndarray]:
-    """The pad's frame back from a ``Vision`` of :func:`world_tick`: marker ids (n,), corners (n, 4, 2)."""
-    return np.array(msg.marker_ids[::4], dtype=np.int64) // 4, msg.data.reshape(-1, 4, 2)
+    """The pad's frame back from a ``Vision`` of :func:`world_tick`: marker ids (n,), corners (n, 4, 2).
+    MessageError for a frame that is not one (another kind, or rows that are not every corner ``4 m + c``
+    of each marker in order): a valid message of the protocol that a landing agent cannot use."""
+    if msg.kind != "pixels":
+        raise MessageError(f"kind: a landing camera frame is 'pixels', got {msg.kind!r}")
+    ids = np.asarray(msg.marker_ids, dtype=np.int64)
+    if len(ids) % 4:
+        raise MessageError(f"marker_ids: {len(ids)} rows, not the four corners of each marker")
+    quads = ids.reshape(-1, 4)
+    if np.any(quads % 4 != np.arange(4)) or np.any(quads // 4 != quads[:, :1] // 4):
+        raise MessageError("marker_ids: rows must be 4 m, 4 m + 1, 4 m + 2, 4 m + 3 for each marker m")
+    return quads[:, 0] // 4, msg.data.reshape(-1, 4, 2)
+
+
+def range_input(msg: Uwb, n_anchors: int) -> tuple[int, float] | None:
+    """A ``Uwb`` as the agent step's ``(anchor index, range)`` (None: no reply in this slot). MessageError for
+    an anchor the scenario does not have."""
+    if not 0 <= msg.anchor_id < n_anchors:
+        raise MessageError(f"anchor_id: {msg.anchor_id} is not one of the scenario's {n_anchors} anchors")
+    return None if msg.range_m is None else (msg.anchor_id, msg.range_m)
 
 
 def agent_tick(keys: Keys, uid: str, agent, cmd, n_modes: int) -> tuple[Wire, int]:

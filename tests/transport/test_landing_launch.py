@@ -4,13 +4,20 @@ over real Zenoh on loopback, land on four pads and equal ``swarm sim landing-swa
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
+import time
 
+import msgpack
+import numpy as np
 import pytest
 
 from swarm.landing_scenario import load_landing
 from swarm.sim.landing import run_landing_fleet
+from swarm.transport.keys import Keys
+from swarm.transport.messages import Command, Imu, Uwb, Vision, encode
+from swarm.transport.session import ZenohArgs, open_session
 from tests.transport.procs import Procs, free_port, loopback
 
 
@@ -26,17 +33,60 @@ def launched(tmp_path_factory):
     args = [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--headless", "--seed", "0",
             "--namespace", ns, "--listen", loopback(free_port()), "--json", str(out), "--record", str(rec),
             "--timeout", "400"]  # fmt: skip
+    endpoint = loopback(free_port())
+    args[args.index("--listen") + 1] = endpoint
+    injected = _garbage(Keys(ns), [u.id for u in sc.uavs()])
     with Procs() as procs:
         proc = procs.start(args)
+        proc.wait_for_line(r"^swarm up:", 300.0)
+        # while the UAVs fly: garbage on every key a landing process listens to, and messages of the
+        # protocol that a landing process cannot use; every one must be dropped and counted, none may crash
+        # a process or change the run
+        with open_session(ZenohArgs(mode="client", connect=(endpoint,))) as session:
+            deadline = time.monotonic() + 3.0
+            while time.monotonic() < deadline and proc.popen.poll() is None:
+                for key, payload in injected:
+                    session.put(key, payload)
+                time.sleep(0.05)
         code = proc.wait(480.0)
         text = proc.output()
-    return code, text, json.loads(out.read_text()) if out.exists() else None, sc, rec, ns
+    garbage = {payload for _, payload in injected}
+    return code, text, json.loads(out.read_text()) if out.exists() else None, sc, rec, ns, garbage
+
+
+def _garbage(keys, ids: list[str]) -> list[tuple[str, bytes]]:
+    imu = {"v": 2, "type": "Imu", "tick": 10**9, "t_s": 0.05, "dt_s": 0.01, "gyro_body": [0.0, 0.0, 0.0]}
+    bad = [
+        b"\x00\xff garbage",
+        msgpack.packb([1, 2, 3]),
+        msgpack.packb({**imu, "gyro_body": [math.nan, 0, 0]}),
+    ]
+    out = [(key, b) for key in (keys.world_clock(), keys.world_event()) for b in bad]
+    for uid in ids:
+        unusable = [
+            (keys.imu(uid), encode(Imu(5, 0.04, 0.01, np.zeros(3)))),  # no acc_body
+            (keys.uwb(uid), encode(Uwb(6, 0.06, 99, 3.0))),  # no such anchor
+            (keys.vision(uid), encode(Vision(5, 0.05, "pad", "+z", "pixels", np.zeros((3, 2)), (0, 1, 2)))),
+            (
+                keys.vision(uid),
+                encode(Vision(5, 0.05, "pad", "+z", "features", np.zeros((4, 3)), (0, 1, 2, 3))),
+            ),
+            (keys.command(uid), encode(Command(7, 0.07, np.zeros(10), "APPROACH"))),  # a docking command
+            (keys.command(uid), encode(Command(7, 0.07, np.zeros(3), "CRUISE"))),  # three rotors
+        ]
+        out += unusable
+        out += [
+            (getattr(keys, kind)(uid), b) for kind in ("imu", "uwb", "gnss", "vision", "command") for b in bad
+        ]
+    return out
 
 
 def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
-    code, text, got, sc, _, _ = launched
+    code, text, got, sc, _, _, _ = launched
     assert code == 0, text
     assert "Traceback" not in text
+    # the garbage was seen, dropped and counted by the agents and the world (rate-limited warnings)
+    assert "agents.landing: dropped" in text and "swarm.world.landing: dropped" in text, text
     assert got["run_end_reason"] == "done" and got["landed"] == 4
     want = run_landing_fleet(sc, seed=0, record_series=False)
     assert set(got["uavs"]) == set(want["uavs"]) == {"uav1", "uav2", "uav3", "uav4"}
@@ -57,7 +107,7 @@ def test_swarm_sim_mcap_writes_what_the_launched_processes_published(launched, t
     from swarm.transport.landing_wire import McapTap
     from swarm.transport.recording import read_recording
 
-    code, text, _, sc, rec, ns = launched
+    code, text, _, sc, rec, ns, garbage = launched
     assert code == 0, text
     sim = tmp_path / "sim.mcap"
     run_landing_fleet(sc, seed=0, record_series=False, tap=McapTap(sim, 0, ns))
@@ -67,7 +117,7 @@ def test_swarm_sim_mcap_writes_what_the_launched_processes_published(launched, t
     def by_key(msgs):
         out = {}
         for m in msgs:
-            if "/agent/" in m.key:  # every UAV's keys (world events carry wall times)
+            if "/agent/" in m.key and m.payload not in garbage:  # UAV keys (world events carry wall times)
                 out.setdefault(m.key, []).append(m.payload)
         return out
 
