@@ -117,6 +117,12 @@ def divergence_limits(window: int, alpha: float) -> np.ndarray:
     return np.concatenate([[np.inf], chi2.ppf(1.0 - alpha, n) / n])
 
 
+@lru_cache(maxsize=64)
+def _gate3(probability: float) -> float:
+    """The chi-square(3) gate of a vector fix, once per probability (scipy's ppf costs ~80 us a call)."""
+    return float(chi2.ppf(probability, 3))
+
+
 def state_size(n_anchors: int, params: ImuFilterParams) -> tuple[int, int]:
     """(nominal, error) state sizes for ``n_anchors`` anchors."""
     m = n_anchors if params.range_bias else 0
@@ -239,8 +245,10 @@ class ImuFilter:
             self.dropped += 1
             return False
         self._predict_to(t_s)
-        self._gyro = np.ascontiguousarray(np.broadcast_to(gyro_body, (self.n, 3)), dtype=float)
-        self._acc = np.ascontiguousarray(np.broadcast_to(acc_body, (self.n, 3)), dtype=float)
+        if self._gyro is None:
+            self._gyro, self._acc = np.empty((self.n, 3)), np.empty((self.n, 3))
+        self._gyro[:] = gyro_body  # the held sample, in place: no allocation per sample
+        self._acc[:] = acc_body
         return True
 
     def update_range(self, t_s: float, anchor: int, range_m) -> np.ndarray:
@@ -289,7 +297,7 @@ class ImuFilter:
             self.dropped += 1
             return np.zeros(0, dtype=np.int64)
         self._predict_to(t_s)
-        gate = float(chi2.ppf(gate_probability, 3))
+        gate = _gate3(gate_probability)
         out = np.empty(self.n, dtype=np.int64)
         self.last_pad_d2 = np.empty(self.n)
         res = np.empty(2)
@@ -312,7 +320,7 @@ class ImuFilter:
             self.dropped += 1
             return np.zeros(0, dtype=np.int64)
         self._predict_to(t_s)
-        gate = float(chi2.ppf(gate_probability, 3))
+        gate = _gate3(gate_probability)
         out = np.empty(self.n, dtype=np.int64)
         res = np.empty(2)
         z, R = np.asarray(p_nav, float), np.ascontiguousarray(cov, float)
