@@ -12,8 +12,11 @@ serves (it prints ``dashboard on <url>``), so that it shows the whole run; after
 up for it until Ctrl-C or ``--timeout`` (``--until-docked``: exit when the run ends, as headless). A
 dashboard that exits is reported and the run goes on without it.
 
-Not yet for a landing: ``--secure``, agent hosts, a realtime clock, restarts, run controls and faults from
-the dashboard.
+``--clock realtime`` or ``scaled:N`` paces the lockstep to the wall clock (to watch the landing): the world
+still waits for every command, so the run still equals ``swarm sim``.
+
+Not yet for a landing: ``--secure``, agent hosts, a free-running clock that skips a late agent, restarts,
+run controls and faults from the dashboard.
 """
 
 from __future__ import annotations
@@ -37,8 +40,6 @@ def _refuse(args: argparse.Namespace) -> None:
         raise ConfigError("--agents: a landing scenario lists its UAVs ([[fleet]] in the file)")
     if args.vehicles_per_process != 1:
         raise ConfigError("--vehicles-per-process: not yet for a landing scenario (one process per UAV)")
-    if not args.clock.lockstep:
-        raise ConfigError(f"--clock: a landing swarm runs in lockstep only, got {args.clock}")
     if args.repeat:
         raise ConfigError("--repeat: not yet for a landing scenario")
 
@@ -133,11 +134,14 @@ def run_landing_launch(args: argparse.Namespace) -> int:
             common = child_args(args, endpoint, args.seed)
             for uid in ids:
                 sup.start(Child(f"agent/{uid}", ["agents.landing", "--id", uid, *common]))
-            world = ["swarm.world.landing", "--step-timeout", str(args.step_timeout),
+            world = ["swarm.world.landing", "--clock", str(args.clock),
+                     "--step-timeout", str(args.step_timeout),
                      "--start-timeout", str(args.start_timeout), *common]  # fmt: skip
             sup.start(Child("world", world))
             print(
-                f"swarm up: world and {len(ids)} landing agents, seed {args.seed}, clock lockstep", flush=True
+                f"swarm up: world and {len(ids)} landing agents, seed {args.seed}, "
+                f"clock {_clock_name(args.clock)}",
+                flush=True,
             )
             deadline = None if args.timeout is None else wall0 + args.timeout
             with cond:
@@ -188,8 +192,9 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                     print(f"[{uid}]", end=" ")
                     print_landing(r)
                 n_ok, sim_s = result["landed"], result["sim_time_s"]
+                how = _clock_name(args.clock)
                 print(f"{n_ok} of {len(ids)} UAVs landed on their pads in {sim_s:.1f} s simulated "
-                      f"({wall:.1f} s of wall time, lockstep over Zenoh)", flush=True)  # fmt: skip
+                      f"({wall:.1f} s of wall time, {how} over Zenoh)", flush=True)  # fmt: skip
                 if args.json is not None:
                     args.json.write_text(json.dumps(result, indent=1))
             if not args.headless and not args.until_docked and got["run_end"] is not None:
@@ -205,3 +210,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         r["landed"] or r["aborted"] for r in result["uavs"].values()
     )
     return 0 if ok else 1
+
+
+def _clock_name(clock) -> str:
+    return "lockstep" if clock.lockstep else f"lockstep paced at {clock}"

@@ -10,6 +10,11 @@ marker: row ``4 m + c`` is corner ``c`` of marker ``m``; none when the pad is no
 one of the landing modes), holds it, and steps on. When every UAV is done (landed for a second, or hovering
 at the abort height) it publishes ``run_end`` on ``world/event`` with each UAV's outcome and a ``stopped``
 clock, and exits 0. It waits for every UAV's agent (liveliness ``alive/agent/<id>``) before the first tick.
+
+``--clock lockstep`` (the default) steps as fast as the agents answer; ``realtime`` and ``scaled:N`` pace the
+same lockstep to the wall clock (never more than ``N`` times real time, to watch it on the dashboard): the
+world still waits for every command, so the run is still ``swarm sim``'s, and a slow agent slows the run
+rather than being skipped (the docking world's free-running clocks skip; a landing's do not yet).
 """
 
 from __future__ import annotations
@@ -55,8 +60,6 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
         zenoh_args_from,
     )
 
-    if not args.clock.lockstep:
-        raise ConfigError(f"--clock: a landing world runs in lockstep only, got {args.clock}")
     sc = load_landing(args.scenario, dict(parse_override(o) for o in args.overrides))
     policy = args.policy or sc.policy
     keys = Keys(args.namespace)
@@ -136,6 +139,10 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
                 break
             for uid, cmd in got.items():
                 world.hold(uid, LandingCommand(k, cmd.actuators, LandingMode(cmd.mode)))
+            if not args.clock.lockstep:  # paced: never ahead of the wall clock (and still every command)
+                left = t_wall + k * dt / args.clock.factor - time.monotonic()
+                if left > 0:
+                    stop.wait(left)
         for uid in ids:
             if not world.uavs[uid].done:
                 world.uavs[uid].end_k = k
