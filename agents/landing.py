@@ -31,35 +31,73 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from swarm.transport.process import add_process_arguments
 
     add_process_arguments(p)
-    p.add_argument("--id", required=True, help="the UAV this agent flies (a [[fleet]] id, or 'uav')")
+    p.add_argument(
+        "--id",
+        required=True,
+        help="the UAV this agent flies (a [[fleet]] id, or 'uav'); several, comma-separated, make this "
+        "process an agent host: their agents on one Zenoh session, each on its own thread, keys and "
+        "liveliness per UAV",
+    )
 
 
 def run(args: argparse.Namespace, stop: threading.Event) -> int:
     from swarm.config import parse_override
     from swarm.errors import ConfigError
     from swarm.landing_scenario import load_landing
-    from swarm.step.landing import LandingAgent, LandingInputs, Rates
-    from swarm.transport import landing_wire as wire
-    from swarm.transport.keys import Keys
-    from swarm.transport.messages import DropCounter, Event, Gnss, Imu, MessageError, Uwb, Vision
-    from swarm.transport.process import declare_reliable
-    from swarm.transport.session import declare_liveliness, open_session, subscribe_decoded, zenoh_args_from
+    from swarm.transport.keys import Keys, check_id
+    from swarm.transport.session import open_session, zenoh_args_from
 
     sc = load_landing(args.scenario, dict(parse_override(o) for o in args.overrides))
     uavs = {u.id: u for u in sc.uavs()}
-    if args.id not in uavs:
-        raise ConfigError(f"--id: no UAV {args.id!r} in the scenario; it has {', '.join(uavs)}")
+    ids = args.id.split(",")
+    for uid in ids:
+        check_id(uid, "--id")
+        if uid not in uavs:
+            raise ConfigError(f"--id: no UAV {uid!r} in the scenario; it has {', '.join(uavs)}")
+    if len(set(ids)) != len(ids):
+        raise ConfigError(f"--id names a UAV twice: {args.id!r}")
     policy = args.policy or sc.policy
-    _warm_up(sc, args.seed, uavs[args.id].index, policy)
-    agent = LandingAgent(sc, args.seed, uavs[args.id].index, policy)
-    rates = Rates.of(sc)
+    _warm_up(sc, args.seed, uavs[ids[0]].index, policy)
     keys = Keys(args.namespace)
+    with open_session(zenoh_args_from(args)) as session:
+        if len(ids) == 1:
+            _fly(session, keys, sc, args.seed, uavs[ids[0]], policy, stop)
+            return 0
+        # an agent host: one session, one thread per UAV; the first that fails stops the others
+        failed: list[BaseException] = []
+
+        def fly(uav) -> None:
+            try:
+                _fly(session, keys, sc, args.seed, uav, policy, stop)
+            except BaseException as exc:  # reported, then the whole host stops
+                _LOG.exception("%s: agent failed: %s", uav.id, exc)
+                failed.append(exc)
+                stop.set()
+
+        threads = [threading.Thread(target=fly, args=(uavs[u],), name=f"agent-{u}", daemon=True) for u in ids]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    return 1 if failed else 0
+
+
+def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event) -> None:
+    """One UAV's agent on ``session`` until the run ends (then its summary, and it waits for ``stop``)."""
+    from swarm.step.landing import LandingAgent, LandingInputs, Rates
+    from swarm.transport import landing_wire as wire
+    from swarm.transport.messages import DropCounter, Event, Gnss, Imu, MessageError, Uwb, Vision
+    from swarm.transport.process import declare_reliable
+    from swarm.transport.session import declare_liveliness, subscribe_decoded
+
+    uid = uav.id
+    agent = LandingAgent(sc, seed, uav.index, policy)
+    rates = Rates.of(sc)
     dt = sc.dt_s
     cond = threading.Condition()
     inbox: dict[str, dict[int, object]] = {"imu": {}, "uwb": {}, "gnss": {}, "vision": {}}
     state = {"k": 1, "ended": False}
     drops = DropCounter()
-
     n_anchors = len(sc.uwb.anchors_m) if sc.uwb.enabled else 0
 
     def usable(kind: str, msg):
@@ -111,37 +149,33 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
         inp.camera = inbox["vision"].pop(k, None)
         return inp
 
-    with open_session(zenoh_args_from(args)) as session:
-        pub = {getattr(keys, kind)(args.id): declare_reliable(session, getattr(keys, kind)(args.id))
-               for kind in ("command", "estimate", "guidance", "event")}  # fmt: skip
-        for kind, cls in (("imu", Imu), ("uwb", Uwb), ("gnss", Gnss), ("vision", Vision)):
-            subscribe_decoded(session, getattr(keys, kind)(args.id), cls, on_sample(kind), drops)
-        subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
-        _token = declare_liveliness(session, keys, "agent", args.id)
-        print_ready("agent", args.id)
-        n_modes = 0
-        while not stop.is_set():
-            with cond:
-                k = state["k"]
-                while not (complete(k) or state["ended"] or stop.is_set()):
-                    cond.wait(0.05)
-                if stop.is_set():
-                    break
-                if not complete(k):  # the run ended
-                    break
-                inp = inputs(k)
-                state["k"] = k + 1
-            cmd = agent.tick(inp)
-            out, n_modes = wire.agent_tick(keys, args.id, agent, cmd, n_modes)
-            for key, payload in out:
-                pub[key].put(payload)
-        if state["ended"]:
-            key, payload = wire.agent_summary(keys, args.id, agent)
+    pub = {getattr(keys, kind)(uid): declare_reliable(session, getattr(keys, kind)(uid))
+           for kind in ("command", "estimate", "guidance", "event")}  # fmt: skip
+    for kind, cls in (("imu", Imu), ("uwb", Uwb), ("gnss", Gnss), ("vision", Vision)):
+        subscribe_decoded(session, getattr(keys, kind)(uid), cls, on_sample(kind), drops)
+    subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
+    token = declare_liveliness(session, keys, "agent", uid)
+    print_ready("agent", uid)
+    n_modes = 0
+    while not stop.is_set():
+        with cond:
+            k = state["k"]
+            while not (complete(k) or state["ended"] or stop.is_set()):
+                cond.wait(0.05)
+            if stop.is_set() or not complete(k):  # stopped, or the run ended
+                break
+            inp = inputs(k)
+            state["k"] = k + 1
+        cmd = agent.tick(inp)
+        out, n_modes = wire.agent_tick(keys, uid, agent, cmd, n_modes)
+        for key, payload in out:
             pub[key].put(payload)
-            _LOG.info("run ended: %s", agent.outcome()["final_mode"])
-            stop.wait()
-        _ = _token
-    return 0
+    if state["ended"]:
+        key, payload = wire.agent_summary(keys, uid, agent)
+        pub[key].put(payload)
+        _LOG.info("%s: run ended: %s", uid, agent.outcome()["final_mode"])
+        stop.wait()
+    token.undeclare()
 
 
 def _warm_up(sc, seed: int, index: int, policy: str) -> None:

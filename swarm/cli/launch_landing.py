@@ -15,7 +15,9 @@ dashboard that exits is reported and the run goes on without it.
 ``--clock realtime`` or ``scaled:N`` paces the lockstep to the wall clock (to watch the landing): the world
 still waits for every command, so the run still equals ``swarm sim``.
 
-Not yet for a landing: ``--secure``, agent hosts, a free-running clock that skips a late agent, restarts,
+``--vehicles-per-process N`` runs N UAVs' agents in one process (an agent host, as for a docking swarm).
+
+Not yet for a landing: ``--secure``, a free-running clock that skips a late agent, restarts,
 run controls and faults from the dashboard.
 """
 
@@ -38,8 +40,6 @@ def _refuse(args: argparse.Namespace) -> None:
         raise ConfigError("--secure: not yet for a landing scenario (its processes have no ACL rules)")
     if args.agents != 1:
         raise ConfigError("--agents: a landing scenario lists its UAVs ([[fleet]] in the file)")
-    if args.vehicles_per_process != 1:
-        raise ConfigError("--vehicles-per-process: not yet for a landing scenario (one process per UAV)")
     if args.repeat:
         raise ConfigError("--repeat: not yet for a landing scenario")
 
@@ -132,15 +132,18 @@ def run_landing_launch(args: argparse.Namespace) -> int:
             if not args.headless:
                 _start_dashboard(args, endpoint, sup, Child, stop)
             common = child_args(args, endpoint, args.seed)
-            for uid in ids:
-                sup.start(Child(f"agent/{uid}", ["agents.landing", "--id", uid, *common]))
+            n = args.vehicles_per_process  # agent hosts: N UAVs' agents in one process (default 1)
+            for i in range(0, len(ids), n):
+                host = ids[i : i + n]
+                name = f"agent/{host[0]}" if n == 1 else f"agents/{'+'.join(host)}"
+                sup.start(Child(name, ["agents.landing", "--id", ",".join(host), *common]))
             world = ["swarm.world.landing", "--clock", str(args.clock),
                      "--step-timeout", str(args.step_timeout),
                      "--start-timeout", str(args.start_timeout), *common]  # fmt: skip
             sup.start(Child("world", world))
             print(
-                f"swarm up: world and {len(ids)} landing agents, seed {args.seed}, "
-                f"clock {_clock_name(args.clock)}",
+                f"swarm up: world and {len(ids)} landing agents in {-(-len(ids) // n)} processes, "
+                f"seed {args.seed}, clock {_clock_name(args.clock)}",
                 flush=True,
             )
             deadline = None if args.timeout is None else wall0 + args.timeout

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 import time
@@ -32,7 +33,7 @@ def launched(tmp_path_factory):
     ns = f"land-{free_port()}"
     args = [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--headless", "--seed", "0",
             "--namespace", ns, "--listen", loopback(free_port()), "--json", str(out), "--record", str(rec),
-            "--clock", "scaled:10",
+            "--clock", "scaled:10", "--vehicles-per-process", "2",
             "--timeout", "400"]  # fmt: skip
     endpoint = loopback(free_port())
     args[args.index("--listen") + 1] = endpoint
@@ -92,6 +93,9 @@ def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
     # paced at scaled:10: the lockstep never ran ahead of ten times the wall clock, and still equals swarm sim
     assert got["wall_s"] >= 0.99 * got["sim_time_s"] / 10, got["wall_s"]
     assert "clock lockstep paced at scaled:10" in text
+    # two agent hosts of two UAVs each: the same run as one process per UAV (swarm sim's)
+    assert "4 landing agents in 2 processes" in text
+    assert len(re.findall(r"^agent uav\d ready$", text, re.M)) == 4
     want = run_landing_fleet(sc, seed=0, record_series=False)
     assert set(got["uavs"]) == set(want["uavs"]) == {"uav1", "uav2", "uav3", "uav4"}
     for uid, w in want["uavs"].items():
