@@ -3,7 +3,9 @@ or replayed sensors (``swarm replay DIR --zenoh``, a vehicle's drivers).
 
 It asks for the anchors (``<ns>/mothership/anchors``, a query, as an agent would ask the mothership), then
 subscribes ``<ns>/agent/<ID>/imu`` (an :class:`~swarm.transport.messages.Imu` with ``acc_body``: the
-specific force drives the filter) and ``<ns>/agent/<ID>/uwb``, runs :class:`swarm.logs.online.OnlineNavigator`
+specific force drives the filter), ``<ns>/agent/<ID>/uwb`` and ``<ns>/agent/<ID>/vision`` (``features``: a
+surveyed marker's position in the camera frame, fused with ``[vision]`` of log.toml and the ``markers.csv``
+beside it), runs :class:`swarm.logs.online.OnlineNavigator`
 (the replay's filter, calibration, divergence test and recovery, behind a reorder horizon of ``--delay``
 seconds of sensor time) and publishes an :class:`~swarm.transport.messages.Estimate` on
 ``<ns>/agent/<ID>/estimate`` for every ``output_every``-th IMU sample and an ``estimator_reset`` (or forced
@@ -94,7 +96,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     from swarm.logs.online import OnlineNavigator
     from swarm.logs.reader import LogConfig
     from swarm.transport.keys import Keys, check_id
-    from swarm.transport.messages import DropCounter, Event, Imu, Uwb, encode
+    from swarm.transport.messages import DropCounter, Event, Imu, Uwb, Vision, encode
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import open_session, subscribe_decoded, zenoh_args_from
 
@@ -109,7 +111,15 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     drops = DropCounter()
     with open_session(zenoh_args_from(args)) as session:
         anchors = _anchors(session, keys, args.wait, stop)
-        nav = OnlineNavigator(config, anchors.anchor_ids, anchors.positions_nav, args.delay)
+        marker_ids, markers_nav = (), None
+        markers = args.config.parent / "markers.csv"
+        if markers.is_file():  # the surveyed markers of vision.csv, beside the log's log.toml
+            from swarm.logs.reader import read_markers
+
+            marker_ids, markers_nav = read_markers(markers)
+        nav = OnlineNavigator(
+            config, anchors.anchor_ids, anchors.positions_nav, args.delay, marker_ids, markers_nav
+        )
         last = [time.monotonic(), 0]  # wall time of the last sample, samples seen
         no_acc = [0]
 
@@ -125,10 +135,22 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
             if m.range_m is not None:
                 nav.uwb(m.t_s, m.anchor_id, m.range_m)
 
+        def on_vision(key: str, m: Vision) -> None:
+            last[0], last[1] = time.monotonic(), last[1] + 1
+            if m.kind != "features":
+                drops.drop(
+                    key,
+                    f"kind: a marker detection is 'features' (a position in the camera frame), got {m.kind}",
+                )
+                return
+            for mid, xyz in zip(m.marker_ids, m.data, strict=True):
+                nav.vision(m.t_s, mid, xyz)
+
         pub_est = declare_reliable(session, keys.estimate(args.id))
         pub_ev = declare_reliable(session, keys.event(args.id), express=False)
         subscribe_decoded(session, keys.imu(args.id), Imu, on_imu, drops)
         subscribe_decoded(session, keys.uwb(args.id), Uwb, on_uwb, drops)
+        subscribe_decoded(session, keys.vision(args.id), Vision, on_vision, drops)
         print(f"navigator {args.id} ready", flush=True)
 
         def publish(final: bool = False) -> None:
@@ -152,7 +174,9 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     print(
         f"navigator {args.id}: {len(nav.estimates)} estimates, ranges accepted {int(c[:, 0].sum())} "
         f"rejected {int(c[:, 1].sum())}, dropped (older than the filter) {nav.dropped}, unknown anchor "
-        f"{nav.unknown_anchor}, IMU without acc_body {no_acc[0]}, undecodable {drops.total}, events "
+        f"{nav.unknown_anchor}, vision accepted {int(nav.vision_counts[0])} rejected "
+        f"{int(nav.vision_counts[1])}, unknown marker {nav.unknown_marker}, "
+        f"IMU without acc_body {no_acc[0]}, undecodable {drops.total}, events "
         f"{len(nav.events)}",
         flush=True,
     )

@@ -266,8 +266,8 @@ def _publish(log, args: argparse.Namespace) -> int:
             stop.set()
             return 130
     print(
-        f"sent {out['imu']} imu and {out['uwb']} uwb samples: {out['log_s']:.1f} s of log in "
-        f"{out['wall_s']:.1f} s",
+        f"sent {out['imu']} imu, {out['uwb']} uwb and {out['vision']} vision samples: "
+        f"{out['log_s']:.1f} s of log in {out['wall_s']:.1f} s",
         flush=True,
     )
     return 0

@@ -27,14 +27,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import chi2
 
 from swarm.core import _imu_nb as nb
+from swarm.core import rotations as rot
 from swarm.core.imu_filter import ImuFilter, divergence_limits
 from swarm.errors import ConfigError
 from swarm.logs.reader import Log, LogConfig
 from swarm.logs.replay import _recover, build_filter
 
-_IMU, _UWB = 0, 1
+_IMU, _UWB, _VISION = 0, 1, 2  # the order of samples of one time: the replay's
 
 
 @dataclass
@@ -57,7 +59,8 @@ class OnlineNavigator:
     """The IMU-driven filter of a log's ``log.toml`` on samples pushed as they arrive (module docstring).
     ``imu`` and ``uwb`` may be called from any thread; ``drain`` from one."""
 
-    def __init__(self, config: LogConfig, anchor_ids, anchors_nav, delay_s: float = 0.05) -> None:
+    def __init__(self, config: LogConfig, anchor_ids, anchors_nav, delay_s: float = 0.05,
+                 marker_ids=(), markers_nav=None) -> None:  # fmt: skip
         if not (math.isfinite(delay_s) and delay_s >= 0):
             raise ValueError(f"delay_s must be a finite number >= 0, got {delay_s!r}")
         if config.uwb.sigma_m is None and config.calibration.until_s <= 0:
@@ -76,6 +79,17 @@ class OnlineNavigator:
         self._kept: list = []  # samples before the filter starts, in time order
         self.f: ImuFilter | None = None
         self.unknown_anchor = 0
+        self.marker_ids = np.asarray(marker_ids, dtype=np.int64)
+        self.markers_nav = np.zeros((0, 3)) if markers_nav is None else np.asarray(markers_nav, dtype=float)
+        self._marker_index = {int(m): k for k, m in enumerate(self.marker_ids)}
+        v = config.vision
+        self._cam = np.asarray(v.camera_position_m, dtype=float)
+        self._R_bc = np.ascontiguousarray(rot.quat_to_matrix(np.asarray(v.camera_quaternion, dtype=float)))
+        self._vision_cov = np.diag(np.asarray(v.sigma_m, dtype=float) ** 2)
+        self._vision_gate = float(chi2.ppf(v.gate_probability, 3))
+        self.unknown_marker = 0
+        self.vision_counts = np.zeros(3, dtype=np.int64)
+        """Detections accepted, rejected, refused."""
         self.dropped = 0
         self.imu_refused = 0
         self.events: list[dict] = []
@@ -95,6 +109,18 @@ class OnlineNavigator:
                 self.unknown_anchor += 1
             return
         self._push(float(t_s), _UWB, (k, float(range_m)))
+
+    def vision(self, t_s: float, marker_id: int, xyz_cam) -> None:
+        """A detection of marker ``marker_id`` at ``xyz_cam`` (3,) [m] in the camera frame (``vision.csv``);
+        its sigma is ``[vision] sigma_m`` of log.toml. An unknown marker is counted, not fed; with
+        ``vision.enabled = false`` nothing is fed."""
+        k = self._marker_index.get(int(marker_id))
+        if k is None:
+            with self._lock:
+                self.unknown_marker += 1
+            return
+        if self.config.vision.enabled:
+            self._push(float(t_s), _VISION, (k, np.array(xyz_cam, dtype=float)))
 
     def _push(self, t: float, kind: int, data) -> None:
         with self._lock:
@@ -136,7 +162,7 @@ class OnlineNavigator:
 
     def _start(self) -> None:
         """Build the filter from the kept samples as the replay builds it from a log, then process them."""
-        kept = [s for s in self._kept if s[1] == _IMU]
+        kept = [s for s in self._kept if s[1] == _IMU]  # vision is not used to build the filter
         rng = [s for s in self._kept if s[1] == _UWB]
         if not kept:
             return  # no IMU sample yet: keep waiting
@@ -181,6 +207,16 @@ class OnlineNavigator:
             self.dropped += 1
             return
         X, P, prm = self.X, self.P, self.f.prm
+        if kind == _VISION:  # swarm.logs.replay._Vision.update: predict only over a positive interval
+            if self._held and t > self.t and not nb.predict_one(X, P, self._gyro, self._acc, t - self.t, prm):
+                self.imu_refused += 1
+            self.t = t
+            m, xyz = data
+            res = np.empty(2)
+            marker, gate = self.markers_nav[m], self._vision_gate
+            outcome = nb.update_pad_one(X, P, marker, self._cam, self._R_bc, xyz, self._vision_cov, gate, res)
+            self.vision_counts[outcome] += 1
+            return
         if self._held and not nb.predict_one(X, P, self._gyro, self._acc, t - self.t, prm):
             self.imu_refused += 1
         self.t = t

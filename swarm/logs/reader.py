@@ -424,8 +424,8 @@ def _read_vision(d: Path, log: Log, skipped: dict[str, int]) -> None:
         )
     if not (d / "markers.csv").is_file():
         raise LogError("vision.csv: needs markers.csv (marker_id, x_m, y_m, z_m: the surveyed markers)")
-    mk, m_lines, m_cols = _table(d / "markers.csv", MARKER_COLUMNS, (), skipped)
-    mids, mindex = _ids("markers.csv", "marker", mk[:, 0], m_lines, m_cols[0])
+    mids, markers_nav = read_markers(d / "markers.csv", skipped)
+    mindex = {int(v): k for k, v in enumerate(mids)}
     _monotonic("vision.csv", vis[:, 0], v_lines, v_cols[0], strict=False)
     marker = _lookup("vision.csv", "marker_id", vis[:, 1], v_lines, v_cols[1], mindex, mids, "markers.csv")
     if vis.shape[1] == len(VISION_COLUMNS) + 3:
@@ -443,4 +443,12 @@ def _read_vision(d: Path, log: Log, skipped: dict[str, int]) -> None:
     log.vision_marker = marker
     log.vision_xyz = vis[:, 2:5].copy()
     log.vision_sigma = np.array(sig, dtype=float)
-    log.marker_ids, log.markers_nav = mids, mk[:, 1:4].copy()
+    log.marker_ids, log.markers_nav = mids, markers_nav
+
+
+def read_markers(path: Path, skipped: dict[str, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``markers.csv``: the marker ids (integers >= 0, each once) and their surveyed positions (n, 3), nav
+    [m]; LogError naming the line and column of a bad row."""
+    mk, m_lines, m_cols = _table(Path(path), MARKER_COLUMNS, (), {} if skipped is None else skipped)
+    mids, _ = _ids(Path(path).name, "marker", mk[:, 0], m_lines, m_cols[0])
+    return mids, mk[:, 1:4].copy()

@@ -4,7 +4,10 @@ One vehicle's sensors, in time order, paced at ``speed`` times real time: every 
 :class:`~swarm.transport.messages.Imu` (``tick`` = the row's index, ``t_s`` from the log's first IMU sample,
 ``dt_s`` the interval since the previous sample, ``acc_body`` the specific force) on
 ``<ns>/agent/<vehicle>/imu``; every ``uwb.csv`` row as a :class:`~swarm.transport.messages.Uwb` (``tick``
-= the latest IMU sample's, the anchor's id from the file) on ``<ns>/agent/<vehicle>/uwb``; and the
+= the latest IMU sample's, the anchor's id from the file) on ``<ns>/agent/<vehicle>/uwb``; every
+``vision.csv`` row as a ``Vision`` of kind ``features`` (target ``markers``, face ``+z``: one marker's
+position in the camera frame, ``marker_ids`` = its id; the row's sigmas are not sent) on
+``<ns>/agent/<vehicle>/vision``; and the
 anchors on ``<ns>/mothership/anchors``, published at the start and once a second, and answered to queries,
 as the mothership does. Rows the reader skipped (a NaN sample) are not sent; a UWB row before the first
 IMU sample is sent with tick 0.
@@ -20,7 +23,7 @@ import numpy as np
 
 from swarm.logs.reader import Log
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Anchors, Imu, Uwb, encode
+from swarm.transport.messages import Anchors, Imu, Uwb, Vision, encode
 from swarm.transport.process import declare_reliable
 
 _LOG = logging.getLogger("swarm.replay")
@@ -34,6 +37,7 @@ def feed(log: Log, session, keys: Keys, vehicle: str, speed: float, stop: thread
     anchors_payload = encode(anchors)
     pub_imu = declare_reliable(session, keys.imu(vehicle))
     pub_uwb = declare_reliable(session, keys.uwb(vehicle))
+    pub_vis = declare_reliable(session, keys.vision(vehicle))
     pub_anchors = declare_reliable(session, keys.anchors(), express=False)
 
     def on_query(query) -> None:
@@ -54,25 +58,39 @@ def feed(log: Log, session, keys: Keys, vehicle: str, speed: float, stop: thread
         dt0 = float(np.median(np.diff(log.imu_t))) if len(log.imu_t) > 1 else 0.001
         start = time.monotonic()
         last_anchors = start
-        i = j = 0
+        i = j = v = 0
         n_imu, n_uwb = len(log.imu_t), len(log.uwb_t)
-        while (i < n_imu or j < n_uwb) and not stop.is_set():
-            take_imu = j >= n_uwb or (i < n_imu and log.imu_t[i] <= log.uwb_t[j])
-            t = float(log.imu_t[i] if take_imu else log.uwb_t[j])
+        vis_t = log.vision_t if log.vision_t is not None else np.zeros(0)
+        n_vis = len(vis_t)
+        inf = float("inf")
+        while (i < n_imu or j < n_uwb or v < n_vis) and not stop.is_set():
+            # the next sample; at one time an IMU sample, a range, then a detection (the replay's order)
+            ti = log.imu_t[i] if i < n_imu else inf
+            tj = log.uwb_t[j] if j < n_uwb else inf
+            tv = vis_t[v] if v < n_vis else inf
+            kind = 0 if ti <= tj and ti <= tv else (1 if tj <= tv else 2)
+            t = float((ti, tj, tv)[kind])
             due = start + max(t - t0, 0.0) / speed
             now = time.monotonic()
             if due > now:
                 time.sleep(min(due - now, 0.1))
                 continue
-            if take_imu:
+            if kind == 0:
                 dt = float(log.imu_t[i] - log.imu_t[i - 1]) if i > 0 else dt0
                 pub_imu.put(encode(Imu(i, t - t0, dt, log.gyro[i], None, log.acc[i])))
                 i += 1
-            else:
+            elif kind == 1:
                 tick = max(i - 1, 0)
                 aid = int(log.anchor_ids[log.uwb_anchor[j]])
                 pub_uwb.put(encode(Uwb(tick, max(t - t0, 0.0), aid, float(log.uwb_range[j]))))
                 j += 1
+            else:
+                mid = (int(log.marker_ids[log.vision_marker[v]]),)
+                vis = Vision(
+                    max(i - 1, 0), max(t - t0, 0.0), "markers", "+z", "features", log.vision_xyz[v][None], mid
+                )
+                pub_vis.put(encode(vis))
+                v += 1
             if now - last_anchors >= 1.0:
                 pub_anchors.put(anchors_payload)
                 last_anchors = now
@@ -80,4 +98,4 @@ def feed(log: Log, session, keys: Keys, vehicle: str, speed: float, stop: thread
         time.sleep(0.2)  # let the last samples leave before the session closes
     finally:
         queryable.undeclare()
-    return {"imu": i, "uwb": j, "wall_s": wall, "log_s": float(log.imu_t[-1] - t0)}
+    return {"imu": i, "uwb": j, "vision": v, "wall_s": wall, "log_s": float(log.imu_t[-1] - t0)}

@@ -98,3 +98,58 @@ def test_an_unknown_anchor_is_counted_not_fed_and_a_config_that_cannot_start_is_
         OnlineNavigator(bad.config, bad.anchor_ids, bad.anchors_nav)
     with pytest.raises(ValueError, match="delay_s"):
         OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, delay_s=float("nan"))
+
+
+@pytest.fixture(scope="module")
+def seen(tmp_path_factory):
+    """A flight with a camera over markers, its vision.csv without sigma columns (a live feed carries none:
+    log.toml's vision.sigma_m applies on both sides)."""
+    d = tmp_path_factory.mktemp("online-vision")
+    make_log(d, seed=6, spec=SyntheticSpec(duration_s=14.0, vision_rate_hz=15.0))
+    rows = [ln.split(",") for ln in (d / "vision.csv").read_text().splitlines()]
+    (d / "vision.csv").write_text("\n".join(",".join(r[:5]) for r in rows) + "\n")
+    return d
+
+
+def _with_vision(log):
+    order = _samples(log)
+    order += [
+        (float(t), 2, (float(t), int(log.marker_ids[m]), xyz))
+        for t, m, xyz in zip(log.vision_t, log.vision_marker, log.vision_xyz, strict=True)
+    ]
+    order.sort(key=lambda s: (s[0], s[1]))  # at one time: IMU, range, then the detection (the replay's order)
+    return order
+
+
+def _run_v(log, order):
+    nav = OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, 0.05, log.marker_ids, log.markers_nav)
+    for n, (_, kind, args) in enumerate(order):
+        (nav.imu, nav.uwb, nav.vision)[kind](*args)
+        if n % 97 == 0:
+            nav.drain()
+    nav.drain(final=True)
+    return nav
+
+
+def test_marker_detections_are_fused_as_the_replay_fuses_them(seen):
+    log = read_log(seen)
+    r = replay_log(log)
+    nav = _run_v(log, _with_vision(log))
+    _same(nav, r)
+    v = r.summary()["vision"]
+    assert v["accepted"] > 50  # the camera saw markers: vision took part
+    assert list(nav.vision_counts) == [v["accepted"], v["rejected"], v["refused"]]
+    # and without vision the estimates differ: the equality above is not vacuous
+    blind = _run(log, _samples(log))
+    assert not np.array_equal(np.array([e.X for e in blind.estimates]), r.X)
+
+
+def test_an_unknown_marker_is_counted_and_disabled_vision_feeds_nothing(seen):
+    log = read_log(seen)
+    nav = OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, 0.05, log.marker_ids, log.markers_nav)
+    nav.vision(1.0, 77, [0.0, 0.0, 1.0])
+    assert nav.unknown_marker == 1
+    off = read_log(seen, {"vision.enabled": False})
+    nav = _run_v(off, _with_vision(off))
+    assert nav.vision_counts.sum() == 0
+    _same(nav, replay_log(off))

@@ -1,6 +1,6 @@
-"""``swarm navigate``: the log replay's filter as a process, fed by ``swarm replay DIR --zenoh`` over real
-Zenoh on loopback, gives the offline replay's estimates bit for bit, and publishes them and its events on the
-vehicle's keys (counted by an independent subscriber)."""
+"""``swarm navigate``: the log replay's filter as a process, fed by ``swarm replay DIR --zenoh`` (IMU, ranges
+and marker detections) over real Zenoh on loopback, gives the offline replay's estimates bit for bit, and
+publishes them and its events on the vehicle's keys (counted by an independent subscriber)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,10 @@ from tests.transport.procs import Procs, free_port, loopback, wait_until
 
 def test_a_navigator_on_replayed_sensors_gives_the_offline_replay_bit_for_bit(tmp_path):
     d = tmp_path / "log"
-    make_log(d, seed=5, spec=SyntheticSpec(duration_s=12.0))
+    make_log(d, seed=5, spec=SyntheticSpec(duration_s=12.0, vision_rate_hz=15.0))
+    # a live feed carries no per-detection sigma: both sides use log.toml's vision.sigma_m
+    rows = [ln.split(",") for ln in (d / "vision.csv").read_text().splitlines()]
+    (d / "vision.csv").write_text("\n".join(",".join(r[:5]) for r in rows) + "\n")
     fault = {"faults.jump_at_s": 9.0}  # a forced divergence: the event and the recovery go out too
     offline = replay_log(read_log(d, fault))
     ns, endpoint = f"nav-{free_port()}", loopback(free_port())
@@ -60,6 +63,8 @@ def test_a_navigator_on_replayed_sensors_gives_the_offline_replay_bit_for_bit(tm
             wait_until(lambda: len(got["estimate"]) >= len(offline.t), 5.0, "every estimate")
     out = nav.output()
     assert "Traceback" not in out and "dropped (older than the filter) 0" in out and "undecodable 0" in out
+    v = offline.summary()["vision"]
+    assert v["accepted"] > 0 and f"vision accepted {v['accepted']} rejected {v['rejected']}," in out
     rows = np.loadtxt(series, delimiter=",", skiprows=1)
     # the same samples in the same order through the same kernels: equal to the last bit
     assert np.array_equal(rows[:, 0], offline.t)
