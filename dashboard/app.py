@@ -32,9 +32,11 @@ import viser
 import zenoh
 
 from dashboard import kinds, mapping, panels
+from dashboard import nodes as scene_nodes
 from dashboard.faults import FaultPanel
 from dashboard.landing import LandingSceneView, frame_landing_scene, uav_vehicles
 from dashboard.link import SwarmLink
+from dashboard.nodes import set_if_changed as _set
 from dashboard.playback import PlaybackPanel, Player, Recording, Timeline
 from dashboard.state import AgentSnap, FramePacer, RateLimiter, Snapshot, SwarmState
 from swarm.errors import ConfigError
@@ -234,49 +236,18 @@ class SceneView:
         return {k: n.trail_versions for k, n in self.nodes.items() if n.trail_versions is not None}
 
     def _update_agent(self, nodes: _AgentNodes, a: AgentSnap, snap: Snapshot, trails_due: bool) -> None:
-        shapes_due = trails_due
-        if a.truth is not nodes.truth_msg:
-            nodes.truth_msg = a.truth
+        if scene_nodes.update_truth(nodes, a) and nodes.keepout is not None:
             if a.truth is not None:
-                nodes.truth.position, nodes.truth.wxyz = mapping.pose_wxyz(a.truth.p_nav, a.truth.q_nav_body)
-            _set(nodes.truth, "visible", a.truth is not None)
-            if nodes.keepout is not None:
-                if a.truth is not None:
-                    nodes.keepout.position = a.truth.p_nav
-                _set(nodes.keepout, "visible", a.truth is not None)
-        color = mapping.mode_color(a.guidance.mode if a.guidance is not None else None, a.role)
-        if color != nodes.color:
-            nodes.color = color
-            nodes.body.color = color
-        est = a.estimate
-        if est is not nodes.estimate_msg:
-            nodes.estimate_msg = est
-            _set(nodes.estimate, "visible", est is not None)
-            _set(nodes.cov, "visible", est is not None)
-            if est is not None:
-                nodes.estimate.position, nodes.estimate.wxyz = mapping.pose_wxyz(est.p_nav, est.q_nav_body)
-                nodes.cov.position = est.p_nav
-            else:
-                nodes.cov_key = None
-        # The covariance changes slowly: the ellipsoid's shape (an eigen-decomposition and two messages per
-        # vehicle) follows at the trail rate, and at once for a first estimate or a new sigma.
-        if est is not None and (shapes_due or nodes.cov_key != self.n_sigma):
-            nodes.cov_key = self.n_sigma
-            radii, wxyz = mapping.covariance_ellipsoid(est.cov[:3, :3], self.n_sigma)
-            nodes.cov.wxyz = wxyz
-            nodes.cov.scale = tuple(float(r) for r in radii)
+                nodes.keepout.position = a.truth.p_nav
+            _set(nodes.keepout, "visible", a.truth is not None)
+        scene_nodes.update_color(nodes, a, a.role)
+        scene_nodes.update_estimate(nodes, a, self.n_sigma, trails_due)
         if nodes.fov is not None:
             self._update_fov(nodes, a, snap)
         if nodes.radii:
             self._update_radii(nodes, a, snap)
         if trails_due and a.truth_trail is not None:
-            nodes.trail_versions = a.trail_versions
-            for handle, pts in ((nodes.trail_truth, a.truth_trail), (nodes.trail_estimate, a.estimate_trail)):
-                if pts is None or len(pts) < 2 or not self.show_trails:
-                    _set(handle, "visible", False)
-                else:
-                    handle.points = np.stack([pts[:-1], pts[1:]], axis=1).astype(np.float32)
-                    _set(handle, "visible", True)
+            scene_nodes.update_trails(nodes, a, self.show_trails)
 
     def _update_fov(self, nodes: _AgentNodes, a: AgentSnap, snap: Snapshot) -> None:
         target = snap.agents.get(a.target) if a.target is not None else None
@@ -496,12 +467,6 @@ LANDING_MODE_TITLE = "mode: -1 ABORT · 1 CRUISE · 2 DEVIATE, CLIMB · 3 DESCEN
 
 _STALE = object()
 """What a scene node "last pushed" after :meth:`SceneView.invalidate`: equal to nothing the store holds."""
-
-
-def _set(handle: object, attr: str, value: object) -> None:
-    """Assign only when the value changed (each assignment is a message to every browser)."""
-    if getattr(handle, attr) != value:
-        setattr(handle, attr, value)
 
 
 class DashboardApp:

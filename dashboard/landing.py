@@ -29,6 +29,7 @@ import numpy as np
 import viser
 
 from dashboard import kinds, mapping
+from dashboard import nodes as scene_nodes
 from dashboard.state import AgentSnap, Snapshot
 from swarm.core import rotations as rot
 from swarm.core.pad_vision import PadBoardParams, PadCameraParams
@@ -275,30 +276,9 @@ class LandingSceneView:
 
     def _update_uav(self, nodes: _UavNodes, a: AgentSnap, trails_due: bool) -> None:
         uav = self.uavs.get(a.agent_id)
-        if a.truth is not nodes.truth_msg:
-            nodes.truth_msg = a.truth
-            if a.truth is not None:
-                nodes.truth.position, nodes.truth.wxyz = mapping.pose_wxyz(a.truth.p_nav, a.truth.q_nav_body)
-            _set(nodes.truth, "visible", a.truth is not None)
-        color = mapping.mode_color(a.guidance.mode if a.guidance is not None else None, "uav")
-        if color != nodes.color:
-            nodes.color = color
-            nodes.body.color = color
-        est = a.estimate
-        if est is not nodes.estimate_msg:
-            nodes.estimate_msg = est
-            _set(nodes.estimate, "visible", est is not None)
-            _set(nodes.cov, "visible", est is not None)
-            if est is not None:
-                nodes.estimate.position, nodes.estimate.wxyz = mapping.pose_wxyz(est.p_nav, est.q_nav_body)
-                nodes.cov.position = est.p_nav
-            else:
-                nodes.cov_key = None
-        if est is not None and (trails_due or nodes.cov_key != self.n_sigma):
-            nodes.cov_key = self.n_sigma
-            radii, wxyz = mapping.covariance_ellipsoid(est.cov[:3, :3], self.n_sigma)
-            nodes.cov.wxyz = wxyz
-            nodes.cov.scale = tuple(float(r) for r in radii)
+        scene_nodes.update_truth(nodes, a)
+        scene_nodes.update_color(nodes, a, "uav")
+        scene_nodes.update_estimate(nodes, a, self.n_sigma, trails_due)
         if a.truth is not None and uav is not None:
             cam = self.sc.camera
             in_image = pad_pixel(a.truth.p_nav, a.truth.q_nav_body, np.asarray(uav.pad_m, float),
@@ -311,16 +291,4 @@ class LandingSceneView:
                 nodes.fov.color = mapping.FOV_COLORS[state]
                 nodes.fov.scale = depth
         if trails_due and a.truth_trail is not None:
-            nodes.trail_versions = a.trail_versions
-            for handle, pts in ((nodes.trail_truth, a.truth_trail), (nodes.trail_estimate, a.estimate_trail)):
-                if pts is None or len(pts) < 2 or not self.show_trails:
-                    _set(handle, "visible", False)
-                else:
-                    handle.points = np.stack([pts[:-1], pts[1:]], axis=1).astype(np.float32)
-                    _set(handle, "visible", True)
-
-
-def _set(handle: object, attr: str, value: object) -> None:
-    """Assign only when the value changed (each assignment is a message to every browser)."""
-    if getattr(handle, attr) != value:
-        setattr(handle, attr, value)
+            scene_nodes.update_trails(nodes, a, self.show_trails)
