@@ -65,6 +65,7 @@ class SyntheticSpec:
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.03)
     yaw0_deg: float = 30.0
     vision_rate_hz: float = 0.0  # 0: no camera, no vision.csv
+    vision_sigma_columns: bool = True  # False: no sigma columns (log.toml's vision.sigma_m, as a live feed)
     camera_position_m: tuple[float, float, float] = (0.0, 0.0, -0.02)
     fov_half_deg: float = 40.0
     vision_max_range_m: float = 4.0
@@ -307,10 +308,9 @@ def _write_vision(d: Path, spec: SyntheticSpec, rng: np.random.Generator) -> np.
         np.column_stack([np.arange(len(mk)), mk]),
         ["%d"] + ["%.4f"] * 3,
     )
-    _write(
-        d / "vision.csv",
-        "t_s,marker_id,x_m,y_m,z_m,sigma_x_m,sigma_y_m,sigma_z_m",
-        np.column_stack([t[frame], marker, meas, sig]),
-        ["%.6f", "%d"] + ["%.6f"] * 6,
-    )
+    header, cols = "t_s,marker_id,x_m,y_m,z_m", [t[frame], marker, meas]
+    if spec.vision_sigma_columns:
+        header, cols = header + ",sigma_x_m,sigma_y_m,sigma_z_m", [*cols, sig]
+    rows = np.column_stack(cols)
+    _write(d / "vision.csv", header, rows, ["%.6f", "%d"] + ["%.6f"] * (rows.shape[1] - 2))
     return np.flatnonzero(wrong)

@@ -184,3 +184,26 @@ class Procs:
     def __exit__(self, *exc: object) -> None:
         for proc in self.procs:
             proc.kill_group()
+
+
+class Inbox:
+    """Messages an independent subscriber received, by kind: ``session.declare_subscriber(key,
+    inbox.on(kind, cls))`` decodes each sample as ``cls`` (an invalid one is counted in ``drops`` and kept
+    as None) into ``got[kind]``, in arrival order; thread-safe."""
+
+    def __init__(self, *kinds: str) -> None:
+        from swarm.transport.messages import DropCounter
+
+        self.got: dict[str, list] = {k: [] for k in kinds}
+        self.drops = DropCounter()
+        self._lock = threading.Lock()
+
+    def on(self, kind: str, cls):
+        from swarm.transport.messages import safe_decode
+
+        def cb(sample) -> None:
+            msg = safe_decode(sample.payload, cls, str(sample.key_expr), self.drops)
+            with self._lock:
+                self.got[kind].append(msg)
+
+        return cb

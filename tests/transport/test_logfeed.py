@@ -4,16 +4,15 @@ Zenoh on loopback, received by an independent subscriber, decoded by the codec."
 from __future__ import annotations
 
 import sys
-import threading
 
 import numpy as np
 
 from swarm.logs.reader import read_log
 from swarm.logs.synthetic import SyntheticSpec, make_log
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Anchors, DropCounter, Imu, Uwb, decode, safe_decode
+from swarm.transport.messages import Anchors, Imu, Uwb, decode
 from swarm.transport.session import ZenohArgs, open_session
-from tests.transport.procs import Procs, free_port, loopback, wait_until
+from tests.transport.procs import Inbox, Procs, free_port, loopback, wait_until
 
 
 def test_a_log_published_on_the_swarm_keys_arrives_whole_in_order_and_paced(tmp_path):
@@ -22,17 +21,8 @@ def test_a_log_published_on_the_swarm_keys_arrives_whole_in_order_and_paced(tmp_
     log = read_log(d)
     ns, endpoint = f"feed-{free_port()}", loopback(free_port())
     keys = Keys(ns)
-    got: dict[str, list] = {"imu": [], "uwb": []}
-    lock = threading.Lock()
-    drops = DropCounter()
-
-    def on(kind, cls):
-        def cb(sample):
-            msg = safe_decode(sample.payload, cls, str(sample.key_expr), drops)
-            with lock:
-                got[kind].append(msg)
-
-        return cb
+    inbox = Inbox("imu", "uwb")
+    got, drops, on = inbox.got, inbox.drops, inbox.on
 
     with open_session(ZenohArgs(mode="peer", listen=(endpoint,))) as session, Procs() as procs:
         session.declare_subscriber(keys.imu("uav"), on("imu", Imu))

@@ -5,7 +5,6 @@ publishes them and its events on the vehicle's keys (counted by an independent s
 from __future__ import annotations
 
 import sys
-import threading
 
 import numpy as np
 
@@ -13,32 +12,21 @@ from swarm.logs.reader import read_log
 from swarm.logs.replay import replay_log
 from swarm.logs.synthetic import SyntheticSpec, make_log
 from swarm.transport.keys import Keys
-from swarm.transport.messages import DropCounter, Estimate, Event, safe_decode
+from swarm.transport.messages import Estimate, Event
 from swarm.transport.session import ZenohArgs, open_session
-from tests.transport.procs import Procs, free_port, loopback, wait_until
+from tests.transport.procs import Inbox, Procs, free_port, loopback, wait_until
 
 
 def test_a_navigator_on_replayed_sensors_gives_the_offline_replay_bit_for_bit(tmp_path):
     d = tmp_path / "log"
-    make_log(d, seed=5, spec=SyntheticSpec(duration_s=12.0, vision_rate_hz=15.0))
     # a live feed carries no per-detection sigma: both sides use log.toml's vision.sigma_m
-    rows = [ln.split(",") for ln in (d / "vision.csv").read_text().splitlines()]
-    (d / "vision.csv").write_text("\n".join(",".join(r[:5]) for r in rows) + "\n")
+    make_log(d, seed=5, spec=SyntheticSpec(duration_s=12.0, vision_rate_hz=15.0, vision_sigma_columns=False))
     fault = {"faults.jump_at_s": 9.0}  # a forced divergence: the event and the recovery go out too
     offline = replay_log(read_log(d, fault))
     ns, endpoint = f"nav-{free_port()}", loopback(free_port())
     keys = Keys(ns)
-    got: dict[str, list] = {"estimate": [], "event": []}
-    lock = threading.Lock()
-    drops = DropCounter()
-
-    def on(kind, cls):
-        def cb(sample):
-            msg = safe_decode(sample.payload, cls, str(sample.key_expr), drops)
-            with lock:
-                got[kind].append(msg)
-
-        return cb
+    inbox = Inbox("estimate", "event")
+    got, drops, on = inbox.got, inbox.drops, inbox.on
 
     series = tmp_path / "online.csv"
     with Procs() as procs:
