@@ -445,7 +445,13 @@ def pad_row(X, p_pad, cam_pos, R_bc, H):
 def _vector_update(X, P, H, nu, R_meas, gate, out):
     """A vector measurement's update, shared by the pad and position fixes: innovation ``nu`` with Jacobian
     ``H`` and noise ``R_meas``, gated on its squared Mahalanobis distance, then the Joseph form and the
-    injection. ``out[1]`` receives the distance; returns the outcome (also ``out[0]``)."""
+    injection. ``out[1]`` receives the distance; returns the outcome (also ``out[0]``). A non-finite
+    measurement (so a non-finite innovation) is refused with distance 0."""
+    out[1] = 0.0
+    for i in range(nu.shape[0]):
+        if not np.isfinite(nu[i]):
+            out[0] = REFUSED
+            return REFUSED
     n = P.shape[0]
     PHt = P @ H.T
     S = H @ PHt + R_meas
@@ -472,11 +478,6 @@ def update_pad_one(X, P, p_pad, cam_pos, R_bc, t_meas, R_meas, gate, out):
     translation block of the PnP covariance, :mod:`swarm.core.pad_vision`), of a pad surveyed at ``p_pad``
     in nav: gated on the squared Mahalanobis distance (``gate``, chi-square(3)), then a Kalman update with
     the Joseph form. ``out`` receives ``(outcome, d2)``; returns the outcome."""
-    out[1] = 0.0
-    for i in range(3):
-        if not np.isfinite(t_meas[i]):
-            out[0] = REFUSED
-            return REFUSED
     n = P.shape[0]
     H = np.zeros((3, n))
     h = pad_row(X, p_pad, cam_pos, R_bc, H)
@@ -488,11 +489,6 @@ def update_pad_one(X, P, p_pad, cam_pos, R_bc, t_meas, R_meas, gate, out):
 def update_position_one(X, P, z, R_meas, gate, out):
     """A position fix ``z`` (3,) [m, nav] with covariance ``R_meas`` (3, 3) (a GNSS receiver): gated on its
     squared Mahalanobis distance, then a Joseph-form update. ``out`` receives ``(outcome, d2)``."""
-    out[1] = 0.0
-    for i in range(3):
-        if not np.isfinite(z[i]):
-            out[0] = REFUSED
-            return REFUSED
     n = P.shape[0]
     H = np.zeros((3, n))
     for i in range(3):

@@ -159,6 +159,12 @@ def test_non_finite_inputs_never_reach_the_state():
     f.imu(0.02, np.zeros(3), [0, 0, 9.81])
     assert f.imu_refused == 1
     assert f.update_range(0.03, 1, np.inf)[0] == nb.REFUSED and f.counts[1, nb.REFUSED] == 1
+    # a vector fix (GNSS, the pad) with a non-finite component is refused, distance 0, state untouched
+    X, P = f.X.copy(), f.P.copy()
+    assert f.update_position(0.03, [1.0, np.nan, 0.0], np.eye(3))[0] == nb.REFUSED
+    out = f.update_pad(0.03, np.zeros(3), [0.0, 0.0, np.inf], np.eye(3), np.zeros(3), np.eye(3))
+    assert out[0] == nb.REFUSED and f.last_pad_d2[0] == 0.0
+    assert np.array_equal(f.X, X) and np.array_equal(f.P, P)
     assert np.isfinite(f.X).all() and np.isfinite(f.P).all()
 
 
