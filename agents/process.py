@@ -35,7 +35,7 @@ import numpy as np
 from swarm.core import rotations as rot
 from swarm.core.estimator import MeasKind
 from swarm.core.ranging import position_from_ranges
-from swarm.errors import ConfigError, MessageError
+from swarm.errors import ConfigError
 from swarm.step.agent import AgentInputs, TargetEstimate, VehicleAgent
 from swarm.step.initial import initial_estimate
 from swarm.step.world import initial_truth
@@ -52,6 +52,7 @@ from swarm.transport.messages import (
     Uwb,
     Vision,
     encode,
+    estimate_message,
 )
 from swarm.transport.process import ClockSpec, declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
@@ -232,12 +233,7 @@ class AgentProcess:
             k, a.t_s, e.p_nav[0], e.v_nav[0], e.q_nav_body[0], a.published_cov(), a.sigma_pos_max_m,
             a.mahalanobis_d, a.rejection_fraction, self._counts(),
         )  # fmt: skip
-        try:
-            msg = Estimate(*args)
-        except MessageError:  # a covariance off symmetry by rounding only: send its symmetric part
-            P = 0.5 * (args[5] + args[5].T)
-            msg = Estimate(*args[:5], P, *args[6:])
-        self.pub_estimate.put(encode(msg))
+        self.pub_estimate.put(encode(estimate_message(*args)))
 
     def _publish_command(self, k: int) -> None:
         payload = encode(Command(k, k * self.dt, self._u, self._mode, self._force, self._torque))

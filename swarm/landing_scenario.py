@@ -167,6 +167,12 @@ class LandingScenario:
     max_duration_s: float = 90.0
     pad_tolerance_m: float = 0.25
     """A landing within this horizontal distance of the pad's centre is on the pad."""
+    end_after_landed_s: float = 1.0
+    """A UAV's run ends this long after its touchdown (the rotors stopped, the UAV settled) [s]."""
+    abort_hold_tolerance_m: float = 0.3
+    abort_hold_speed_m_s: float = 0.2
+    """After an abort, a UAV's run ends once it hovers within ``abort_hold_tolerance_m`` of the abort height
+    above its pad, slower than ``abort_hold_speed_m_s``."""
     vehicle: LandingVehicle = LandingVehicle()
     pad: PadSpec = PadSpec()
     camera: LandingCamera = LandingCamera()
@@ -203,6 +209,10 @@ class LandingScenario:
             raise ConfigError(f"policy must be 'fixed' or 'mdp', got {self.policy!r}")
         if not (math.isfinite(self.dt_s) and 0 < self.dt_s <= 0.02):
             raise ConfigError(f"dt_s must be in (0, 0.02], got {self.dt_s!r}")
+        for name in ("end_after_landed_s", "abort_hold_tolerance_m", "abort_hold_speed_m_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ConfigError(f"{name} must be a finite number > 0, got {v!r}")
 
 
 def _scenario_path(name_or_path) -> Path:

@@ -224,3 +224,14 @@ def test_a_landing_campaign_refuses_a_fleet_rather_than_fly_only_its_first_uav(t
     )
     assert r.returncode == 2 and "a landing campaign flies one UAV per run" in r.stderr, r.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_the_end_of_a_run_is_the_scenario_s(tmp_path):
+    base = run_landing(load_landing("landing"), seed=2, record_series=False)
+    later = run_landing(load_landing("landing", {"end_after_landed_s": 3.0}), seed=2, record_series=False)
+    assert base["landed"] and later["landed"]
+    # the same flight, ended two seconds later on the ground
+    assert later["landing_time_s"] == base["landing_time_s"]
+    assert later["sim_time_s"] == pytest.approx(base["sim_time_s"] + 2.0, abs=1e-9)
+    with pytest.raises(ConfigError, match=r"abort_hold_speed_m_s must be a finite number > 0, got -1"):
+        load_landing("landing", {"abort_hold_speed_m_s": -1})

@@ -40,8 +40,6 @@ from swarm.landing_scenario import LandingScenario, Uav
 
 R_BODY_CAM = rot.quat_to_matrix(np.array([1.0, 0.0, 0.0, 0.0]))
 """Camera to body of the downward camera: its optical axis (+z) along body -z."""
-LANDED_HOLD_S = 1.0
-"""A run ends this long after the touchdown (the rotors stopped, the UAV settled)."""
 
 
 def _seeds(seed: int, index: int, stream: int) -> np.random.SeedSequence:
@@ -179,6 +177,8 @@ class LandingWorld:
         self.lever = np.asarray(sc.uwb.lever_arm_m, float)
         self.cam_pos = np.asarray(sc.camera.pos_body_m, float)
         self.gnss_sigma = np.asarray(sc.gnss.sigma_m, float)
+        self.gnss_cov = np.diag(self.gnss_sigma**2)
+        """The fixes' covariance, the receiver's claim (what the GNSS message carries)."""
         cam = sc.camera
         self.renderer = Renderer(sc.pad.board, cam.intrinsics) if cam.mode == "rendered" else None
         self.detector = make_detector(sc.pad.board) if cam.mode == "rendered" else None
@@ -274,12 +274,17 @@ class LandingWorld:
 
 
 def landing_done(sc: LandingScenario, pad, mode: LandingMode, landed_t: float | None, t: float, x) -> bool:
-    """A UAV's run is over: a second after its touchdown, or hovering (within 0.3 m, under 0.2 m/s) at the
-    abort height above its pad after an abort."""
-    if landed_t is not None and t - landed_t >= LANDED_HOLD_S:
+    """A UAV's run is over: ``end_after_landed_s`` after its touchdown, or hovering (within
+    ``abort_hold_tolerance_m``, under ``abort_hold_speed_m_s``) at the abort height above its pad after an
+    abort."""
+    if landed_t is not None and t - landed_t >= sc.end_after_landed_s:
         return True
     climb_to = float(pad[2]) + sc.landing.abort_height_m
-    return bool(mode == LandingMode.ABORT and abs(x[2] - climb_to) < 0.3 and np.linalg.norm(x[3:6]) < 0.2)
+    return bool(
+        mode == LandingMode.ABORT
+        and abs(x[2] - climb_to) < sc.abort_hold_tolerance_m
+        and np.linalg.norm(x[3:6]) < sc.abort_hold_speed_m_s
+    )
 
 
 @dataclass

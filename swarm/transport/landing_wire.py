@@ -21,6 +21,7 @@ from swarm.transport.messages import (
     Uwb,
     Vision,
     encode,
+    estimate_message,
 )
 
 Wire = list[tuple[str, bytes]]
@@ -32,7 +33,6 @@ def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int) -> Wire:
     tick: the pad's corners as pixels) and ``truth``; then the clock."""
     sc, dt = world.sc, world.sc.dt_s
     t = k * dt
-    gnss_cov = np.diag(np.asarray(sc.gnss.sigma_m, float) ** 2)
     out: Wire = []
     for uid, inp in inputs.items():
         out.append((keys.imu(uid), encode(Imu(k, t - dt, dt, inp.gyro, None, inp.acc))))
@@ -40,7 +40,7 @@ def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int) -> Wire:
             a, z = inp.uwb if inp.uwb is not None else (world.uavs[uid].next_anchor - 1, None)
             out.append((keys.uwb(uid), encode(Uwb(k, t, int(a) % len(world.anchors), z))))
         if inp.gnss is not None:
-            out.append((keys.gnss(uid), encode(Gnss(k, t, inp.gnss, gnss_cov))))
+            out.append((keys.gnss(uid), encode(Gnss(k, t, inp.gnss, world.gnss_cov))))
         if inp.camera is not None:
             mids, corners = inp.camera
             rows = tuple(int(m) * 4 + c for m in mids for c in range(4))
@@ -102,12 +102,7 @@ def _estimate(agent, k: int, t: float) -> Estimate:
         f"range_{w}": int(f.counts[:, i].sum()) for i, w in enumerate(("accepted", "rejected", "refused"))
     }
     sigma = float(np.sqrt(np.max(np.diag(P)[0:3])))
-    args = [k, t, f.p_nav[0], f.v_nav[0], f.q_nav_body[0], P, sigma, d, 0.0, counts]
-    try:
-        return Estimate(*args)
-    except MessageError:  # a covariance off symmetry by rounding only: send its symmetric part
-        args[5] = 0.5 * (P + P.T)
-        return Estimate(*args)
+    return estimate_message(k, t, f.p_nav[0], f.v_nav[0], f.q_nav_body[0], P, sigma, d, 0.0, counts)
 
 
 def agent_summary(keys: Keys, uid: str, agent) -> tuple[str, bytes]:

@@ -73,6 +73,7 @@ __all__ = [
     "Vision",
     "decode",
     "encode",
+    "estimate_message",
     "safe_decode",
 ]
 
@@ -606,6 +607,16 @@ class Estimate(Message):
             mahalanobis_d=_float(self.mahalanobis_d, "mahalanobis_d", lo=0.0),
             rejection_fraction=rf, counts=_counts(self.counts, "counts"),
         )  # fmt: skip
+
+
+def estimate_message(*args) -> Estimate:
+    """``Estimate(*args)``, or, when its covariance (``args[5]``) is off symmetry by rounding only, the same
+    with the covariance's symmetric part: what a filter publishes after an update."""
+    try:
+        return Estimate(*args)
+    except MessageError:
+        cov = np.asarray(args[5])
+        return Estimate(*args[:5], 0.5 * (cov + cov.T), *args[6:])
 
 
 @dataclass(frozen=True, eq=False)
