@@ -9,6 +9,17 @@ import threading
 from swarm.errors import ConfigError
 
 
+def router_args(args: argparse.Namespace, listen: list[str]):
+    """The launcher's own Zenoh session: a router on ``listen`` with the launch flags' connect, config,
+    scouting and lease."""
+    from swarm.transport.session import ZenohArgs
+
+    return ZenohArgs(
+        mode="router", connect=tuple(args.connect or ()), listen=tuple(listen), config_file=args.zenoh_config,
+        multicast_scouting=args.multicast_scouting, lease_ms=args.lease_ms,
+    )  # fmt: skip
+
+
 def client_endpoint(listen: str) -> str:
     """The endpoint a local child connects to for a listen endpoint (``0.0.0.0``/``[::]`` -> loopback)."""
     proto, _, addr = listen.partition("/")

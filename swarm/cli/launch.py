@@ -33,7 +33,7 @@ import threading
 import time
 from pathlib import Path
 
-from swarm.cli.children import check_record, child_args, client_endpoint, start_recorder
+from swarm.cli.children import check_record, child_args, client_endpoint, router_args, start_recorder
 from swarm.errors import ConfigError, SwarmError
 from swarm.private_dirs import private_dir
 from swarm.step.outcome import chaser_summary, run_summary
@@ -247,7 +247,6 @@ def run(args: argparse.Namespace) -> int:
     from swarm.transport.messages import Clock, DropCounter, Event, Guidance, encode
     from swarm.transport.process import scenario_from
     from swarm.transport.session import (
-        ZenohArgs,
         free_loopback_endpoint,
         open_session,
         subscribe_decoded,
@@ -267,10 +266,7 @@ def run(args: argparse.Namespace) -> int:
         listen = secure_listen(
             args.listen, args.zenoh_config, int(free_loopback_endpoint().rpartition(":")[2])
         )
-    zargs = ZenohArgs(
-        mode="router", connect=tuple(args.connect or ()), listen=tuple(listen), config_file=args.zenoh_config,
-        multicast_scouting=args.multicast_scouting, lease_ms=args.lease_ms,
-    )  # fmt: skip
+    zargs = router_args(args, listen)
     endpoint = client_endpoint(listen[0])
     stop = threading.Event()
     interrupted = threading.Event()

@@ -76,7 +76,7 @@ def _hold(args: argparse.Namespace, stop: threading.Event, wall0: float) -> None
 
 
 def run_landing_launch(args: argparse.Namespace) -> int:
-    from swarm.cli.children import check_record, child_args, client_endpoint, start_recorder
+    from swarm.cli.children import check_record, child_args, client_endpoint, router_args, start_recorder
     from swarm.cli.sim import print_landing
     from swarm.cli.supervisor import Child, Supervisor
     from swarm.config import parse_override
@@ -84,7 +84,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     from swarm.step.landing import landing_summary
     from swarm.transport.keys import Keys
     from swarm.transport.messages import DropCounter, Event
-    from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session, subscribe_decoded
+    from swarm.transport.session import free_loopback_endpoint, open_session, subscribe_decoded
 
     _refuse(args)
     check_record(args)
@@ -93,10 +93,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     policy = args.policy or sc.policy
     keys = Keys(args.namespace)
     listen = list(args.listen) if args.listen else [free_loopback_endpoint()]
-    zargs = ZenohArgs(
-        mode="router", connect=tuple(args.connect or ()), listen=tuple(listen), config_file=args.zenoh_config,
-        multicast_scouting=args.multicast_scouting, lease_ms=args.lease_ms,
-    )  # fmt: skip
+    zargs = router_args(args, listen)
     endpoint = client_endpoint(listen[0])
     stop = threading.Event()
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
