@@ -112,8 +112,10 @@ def predict_one(X, P, gyro, acc, dt, PRM):
     ``P <- F_x P F_x^T + F_i Q_i F_i^T`` of sec. 5.4.3 for the covariance, with ``Q_i`` from the noise
     densities: ``V_i = sigma_a^2 dt I``, ``Theta_i = sigma_g^2 dt I``, ``A_i = sigma_ba^2 dt I``,
     ``Omega_i = sigma_bg^2 dt I``, and ``sigma_rb^2 dt`` per range bias). ``F_x`` is that of
-    :func:`transition`, applied block by block in place (rows, then columns): only its non-identity blocks
-    cost anything, and nothing is allocated. Returns False (and changes nothing) on a non-finite input."""
+    :func:`transition`, applied block by block in place: ``F P`` on the rows of ``(dp, dv, dtheta)``, then
+    ``. F^T`` on their columns of those rows, the bias rows mirrored (the comment below): only its
+    non-identity blocks cost anything, and nothing is allocated. Returns False (and changes nothing) on a
+    non-finite input."""
     for k in range(3):
         if not (np.isfinite(gyro[k]) and np.isfinite(acc[k])):
             return False
@@ -143,21 +145,29 @@ def predict_one(X, P, gyro, acc, dt, PRM):
         X[XP + i] += X[XV + i] * dt + 0.5 * an * dt * dt
         X[XV + i] += an * dt
     _qmul_exp(X[XQ : XQ + 4], wx, wy, wz)
-    # P <- F P: every column j; then P <- P F^T: every row i (the same algebra on the transpose)
+    # F = [[F_AA, F_AB], [0, I]] over A = (dp, dv, dtheta) and B = the rest (biases), so
+    # F P F^T = [[F_A P F_A^T, F_A P_B], [., P_BB]]: P <- F P changes rows A only (every column j); then
+    # P F^T on those rows alone gives the AA block; the BA block is the transpose of the new AB block
+    # (one short loop per row: contiguous in j, so the compiler vectorises them)
+    for r in range(3):
+        for j in range(n):
+            P[EP + r, j] += dt * P[EV + r, j]
+    for r in range(3):
+        if r == 0:
+            c0, c1, c2, d0, d1, d2 = a00, a01, a02, r00, r01, r02
+        elif r == 1:
+            c0, c1, c2, d0, d1, d2 = a10, a11, a12, r10, r11, r12
+        else:
+            c0, c1, c2, d0, d1, d2 = a20, a21, a22, r20, r21, r22
+        for j in range(n):
+            P[EV + r, j] = (P[EV + r, j] + c0 * P[ETH, j] + c1 * P[ETH + 1, j] + c2 * P[ETH + 2, j]
+                            - dt * (d0 * P[EBA, j] + d1 * P[EBA + 1, j] + d2 * P[EBA + 2, j]))  # fmt: skip
     for j in range(n):
-        v0, v1, v2 = P[EV, j], P[EV + 1, j], P[EV + 2, j]
         t0, t1, t2 = P[ETH, j], P[ETH + 1, j], P[ETH + 2, j]
-        b0, b1, b2 = P[EBA, j], P[EBA + 1, j], P[EBA + 2, j]
-        P[EP, j] += dt * v0
-        P[EP + 1, j] += dt * v1
-        P[EP + 2, j] += dt * v2
-        P[EV, j] = v0 + a00 * t0 + a01 * t1 + a02 * t2 - dt * (r00 * b0 + r01 * b1 + r02 * b2)
-        P[EV + 1, j] = v1 + a10 * t0 + a11 * t1 + a12 * t2 - dt * (r10 * b0 + r11 * b1 + r12 * b2)
-        P[EV + 2, j] = v2 + a20 * t0 + a21 * t1 + a22 * t2 - dt * (r20 * b0 + r21 * b1 + r22 * b2)
         P[ETH, j] = e00 * t0 + e01 * t1 + e02 * t2 - dt * P[EBG, j]
         P[ETH + 1, j] = e10 * t0 + e11 * t1 + e12 * t2 - dt * P[EBG + 1, j]
         P[ETH + 2, j] = e20 * t0 + e21 * t1 + e22 * t2 - dt * P[EBG + 2, j]
-    for i in range(N_CORE):  # the range-bias rows: their new columns 0:9 are the rows' transpose, below
+    for i in range(9):  # the rows A: P F^T on their columns A (the column's B entries are P's B rows)
         v0, v1, v2 = P[i, EV], P[i, EV + 1], P[i, EV + 2]
         t0, t1, t2 = P[i, ETH], P[i, ETH + 1], P[i, ETH + 2]
         b0, b1, b2 = P[i, EBA], P[i, EBA + 1], P[i, EBA + 2]
@@ -170,12 +180,12 @@ def predict_one(X, P, gyro, acc, dt, PRM):
         P[i, ETH] = e00 * t0 + e01 * t1 + e02 * t2 - dt * P[i, EBG]
         P[i, ETH + 1] = e10 * t0 + e11 * t1 + e12 * t2 - dt * P[i, EBG + 1]
         P[i, ETH + 2] = e20 * t0 + e21 * t1 + e22 * t2 - dt * P[i, EBG + 2]
-    for i in range(9):  # rows and columns 0:9 changed: exactly symmetric again, the bias rows mirrored
-        for j in range(i + 1, N_CORE):
+    for i in range(9):  # exactly symmetric again: the AA block averaged with its transpose, BA mirrored
+        for j in range(i + 1, 9):
             m = 0.5 * (P[i, j] + P[j, i])
             P[i, j] = m
             P[j, i] = m
-        for j in range(N_CORE, n):
+        for j in range(9, n):
             P[j, i] = P[i, j]
     qa, qg = PRM[PRM_SIG_A] ** 2 * dt, PRM[PRM_SIG_G] ** 2 * dt
     qba, qbg, qrb = PRM[PRM_SIG_BA] ** 2 * dt, PRM[PRM_SIG_BG] ** 2 * dt, PRM[PRM_SIG_RB] ** 2 * dt
@@ -283,12 +293,13 @@ def update_range_one(X, P, anchor, bias_index, z, sigma, PRM, work, out):
         S = hph + r
     for i in range(n):
         dx[i] = b[i] * nu / S
+    # P <- P - b b^T / S over the whole matrix, row by row (contiguous, vectorised); ``(b_i b_j) (1 / S)``
+    # is the same number for (i, j) and (j, i), so P stays exactly symmetric
+    inv_s = 1.0 / S
     for i in range(n):
-        bi = b[i] / S
-        for j in range(i, n):
-            v = P[i, j] - bi * b[j]
-            P[i, j] = v
-            P[j, i] = v
+        bi = b[i]
+        for j in range(n):
+            P[i, j] -= (bi * b[j]) * inv_s
     inject(X, P, dx)
     out[0] = ACCEPTED
     return ACCEPTED
