@@ -33,43 +33,39 @@ import time
 import numpy as np
 
 from swarm.core import rotations as rot
-from swarm.core.estimator import MeasKind
 from swarm.core.ranging import position_from_ranges
 from swarm.errors import ConfigError
 from swarm.step.agent import AgentInputs, TargetEstimate, VehicleAgent
 from swarm.step.initial import initial_estimate
 from swarm.step.world import initial_truth
+from swarm.transport.docking_wire import (
+    command_payload,
+    estimate_payload,
+    filter_counts,
+    guidance_payload,
+    mode_events,
+)
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import AgentTickAssembler, TickInputs
 from swarm.transport.messages import (
     Clock,
-    Command,
     DropCounter,
     Estimate,
     Event,
-    Guidance,
     Imu,
     Uwb,
     Vision,
     encode,
-    estimate_message,
 )
 from swarm.transport.process import ClockSpec, declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
 
 _LOG = logging.getLogger("swarm.agent")
 
-_OUTCOMES = ("accepted", "rejected", "refused")
 END_DRAIN_S = 5.0
 """After the world's stopped clock at tick ``k``, a lockstep agent processes the ticks up to ``k`` (their
 samples may come after the stopped clock, on other subscribers' threads, or all at once from a recording),
 and gives up on them after this long without a complete tick [s]."""
-_KINDS = {
-    "range": MeasKind.RANGE,
-    "features": MeasKind.FEATURES,
-    "pose": MeasKind.POSE,
-    "ahrs": MeasKind.ATTITUDE,
-}
 
 
 def _target(e: Estimate) -> TargetEstimate:
@@ -216,27 +212,13 @@ class AgentProcess:
         self.pub_event = declare_reliable(self.session, k.event(self.id))
 
     def _counts(self) -> dict[str, int]:
-        """The filter's cumulative update counters ``<kind>_<outcome>``, the non-zero ones (an absent
-        counter is zero: a dozen zeros per tick would cost every receiver their validation)."""
-        counts = self.agent.est.counts[0]  # (outcome, kind)
-        return {
-            f"{name}_{what}": int(counts[row, int(kind)])
-            for name, kind in _KINDS.items()
-            for row, what in enumerate(_OUTCOMES)
-            if counts[row, int(kind)]
-        }
+        return filter_counts(self.agent)
 
     def _publish_estimate(self, k: int) -> None:
-        a = self.agent
-        e = a.est
-        args = (
-            k, a.t_s, e.p_nav[0], e.v_nav[0], e.q_nav_body[0], a.published_cov(), a.sigma_pos_max_m,
-            a.mahalanobis_d, a.rejection_fraction, self._counts(),
-        )  # fmt: skip
-        self.pub_estimate.put(encode(estimate_message(*args)))
+        self.pub_estimate.put(estimate_payload(self.agent, k))
 
     def _publish_command(self, k: int) -> None:
-        payload = encode(Command(k, k * self.dt, self._u, self._mode, self._force, self._torque))
+        payload = command_payload(k, self.dt, self._u, self._mode, self._force, self._torque)
         with self._command_lock:
             self.pub_command.put(payload)
             self._last_command = (k, payload)
@@ -246,26 +228,9 @@ class AgentProcess:
         a = self.agent
         self._u, self._force, self._torque = cmd.u, cmd.force_body_n, cmd.torque_body_nm
         self._mode = a.mode.value
-        for ev in cmd.events:
-            self.pub_event.put(encode(Event(float(ev["t_s"]), "mode", dict(ev))))
-        self._publish_guidance(k, cmd)
-
-    def _publish_guidance(self, k: int, cmd) -> None:
-        a = self.agent
-        sw = a.switcher
-        range_m = decision = r_t = None
-        if a.target is not None and self.chaser:
-            range_m = float(np.linalg.norm(a.est.p_nav[0] - a.target.p_nav))
-        if sw is not None and self.policy == "mdp":
-            r_t = float(self.sc.mdp.r_t_m)
-            if sw.decisions:
-                decision = sw.decisions[-1].as_dict()
-        reason = cmd.events[-1]["reason"] if cmd.events else ""
-        msg = Guidance(
-            k, k * self.dt, self._mode, range_m, None if sw is None else sw.r1_m,
-            None if sw is None else sw.r2_m, r_t, decision, str(reason)[:1024],
-        )  # fmt: skip
-        self.pub_guidance.put(encode(msg))
+        for payload in mode_events(cmd):
+            self.pub_event.put(payload)
+        self.pub_guidance.put(guidance_payload(self.sc, self.policy, self.chaser, a, k, self._mode, cmd))
 
     # ------------------------------------------------------------------------------ re-initialisation
 

@@ -25,8 +25,9 @@ import numpy as np
 import zenoh
 
 from swarm.step.radio import UwbNetwork
+from swarm.transport.docking_wire import uwb_slot
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Anchors, Clock, DropCounter, Truth, Uwb, encode
+from swarm.transport.messages import Anchors, Clock, DropCounter, Truth, encode
 from swarm.transport.process import declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
 
@@ -103,10 +104,8 @@ class MothershipProcess:
             lost[i], p_nlos[i] = m.uwb_lost, m.nlos_probability
         t = k * self.sc.dt_s
         self.network.step(k, t, X, lost, p_nlos)
-        net = self.network
-        for i, vid in enumerate(self.ids):
-            rng = None if net.lost[i] else float(net.range_m[i])
-            self.pub_uwb[vid].put(encode(Uwb(k, t, int(net.anchor_id[i]), rng)))
+        for vid, payload in uwb_slot(self.network, self.ids, k, t):
+            self.pub_uwb[vid].put(payload)
         self.slots += 1
 
     def run(self) -> None:

@@ -28,7 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-series", action="store_true", help="do not record time series (faster)")
     p.add_argument(
         "--mcap", type=Path, default=None, metavar="FILE.mcap",
-        help="write the run as its processes would have published it, an MCAP recording (landing scenarios)",
+        help="write the run as its processes would have published it in lockstep, an MCAP recording",
     )  # fmt: skip
     p.add_argument(
         "--namespace", default="tpods", help="key namespace of the --mcap recording (default tpods)"
@@ -160,14 +160,16 @@ def run(args: argparse.Namespace) -> int:
 
     if is_landing_scenario(args.scenario):
         return _run_landing(args)
-    if args.mcap is not None:
-        raise ConfigError(
-            "--mcap: written for a landing scenario so far; record a docking run with "
-            "`swarm launch SCENARIO --headless --until-docked --record FILE.mcap` (lockstep equals swarm sim)"
-        )
     sc = load_from_args(args).with_pairs(args.agents)
+    tap = None
+    if args.mcap is not None:
+        from swarm.transport.docking_wire import DockingTap
+
+        tap = DockingTap(args.mcap, args.seed, args.namespace)
     record = not args.no_series or args.plot is not None or args.json is not None
-    res = run_docking(sc, args.policy, args.seed, record_series=record)
+    res = run_docking(sc, args.policy, args.seed, record_series=record, tap=tap)
+    if tap is not None:
+        print(f"  wrote {args.mcap}: {sum(tap.sink.counts.values())} messages on {len(tap.sink.counts)} keys")
     print_summary(res)
     _write_json(args.json, res)
     if args.plot is not None:

@@ -102,6 +102,7 @@ class DockingSim:
         record_series: bool = True,
         fast: bool = True,
         series_keys: tuple[str, ...] | None = None,
+        tap=None,
     ):
         sc = scenario
         self.sc = sc
@@ -111,7 +112,13 @@ class DockingSim:
         # the series keys the summary carries (None: all of them); the compiled loop records every column
         # either way, this only saves turning the others into lists (a campaign needs two of eight)
         self.series_keys = series_keys
-        self.fast = fast  # False: every tick through the per-object Python path (the reference)
+        # fast=False: every tick through the per-object Python path (the reference); so with a tap:
+        # ``swarm sim --mcap`` (swarm.transport.docking_wire.DockingTap) sees every tick as the processes
+        # would publish it: tap.start(sim), then per tick tap.world(sim, k, frames), tap.uwb(sim, k) and
+        # tap.agent(sim, vid, k, command or None) of every vehicle, tap.keepout(cid, t, mode, range_m) and
+        # tap.contact(cid, t, mode, contact) for the referee's verdicts, and tap.end(sim, k, reason, wall_s)
+        self.fast = fast and tap is None
+        self.tap = tap
         self.world = World(sc, self.seed)  # draws and applies the run's dispersions, owns its faults
         self.dispersion = self.world.dispersion
         self.network = UwbNetwork(sc, self.seed)
@@ -235,6 +242,9 @@ class DockingSim:
         max_k = round(sc.sim.max_duration_s / dt)
         watched = {sc.vehicles[c].target for c in sc.chasers}
         frames = None  # tick k's sensor frames; NO_VISION: they are in the world's arrays, no camera frame
+        tap = self.tap
+        if tap is not None:
+            tap.start(self)
         wall0 = time.perf_counter()
         k = 0
         while k <= max_k:
@@ -254,7 +264,11 @@ class DockingSim:
             targets = {cid: snap[sc.vehicles[cid].target] for cid in sc.chasers}
             commands = {}
             if frames is not None:
+                if tap is not None:
+                    tap.world(self, k, frames)
                 ranges = self.network.step(k, t, self.world.X, *self.world.radio_env(t))
+                if tap is not None:
+                    tap.uwb(self, k)
                 for vid, agent in self.agents.items():
                     fr = frames[vid]
                     r = ranges.get(vid)
@@ -272,6 +286,9 @@ class DockingSim:
                     self.agents[cid].set_target_estimate(est)
                 for vid, agent in self.agents.items():
                     commands[vid] = agent.control(t, agent.control_dt)
+            if tap is not None:
+                for vid in self.agents:
+                    tap.agent(self, vid, k, commands.get(vid))
             if self._finish_tick(k, commands, series=True):
                 break
             self._update_camera()
@@ -281,6 +298,9 @@ class DockingSim:
                 frames = NO_VISION
             k += 1
         wall = time.perf_counter() - wall0
+        if tap is not None:
+            reason = "all_contact" if len(self.done) == len(self.outcomes) else "max_duration"
+            tap.end(self, min(k, max_k), reason, wall)
         return self._summary(min(k, max_k) * dt, wall)
 
     def _finish_tick(self, k: int, commands: dict, series: bool) -> bool:
@@ -395,8 +415,12 @@ class DockingSim:
             self.world.X, t, {c: self.agents[c].mode for c in self.referee.chasers}
         )
         for cid, range_m in keepouts:
+            if self.tap is not None:
+                self.tap.keepout(cid, t, self.agents[cid].mode.value, range_m)
             self._keepout(cid, t, range_m)
         for cid, ct in contacts:
+            if self.tap is not None:
+                self.tap.contact(cid, t, self.agents[cid].mode.value, ct)
             out = self.outcomes[cid]
             out.docked, out.collided = ct.docked, not ct.docked
             out.contact = ct.contact
@@ -464,6 +488,9 @@ class DockingSim:
         return run_summary(sc, self.policy, self.seed, t_end, wall, self.world.effort_by_vehicle, chasers)
 
 
-def run_docking(scenario, policy: str | None = None, seed: int = 0, record_series: bool = True) -> dict:
-    """Run one docking in-process and return its summary (DESIGN.md section 8 fields per chaser)."""
-    return DockingSim(scenario, policy, seed, record_series).run()
+def run_docking(
+    scenario, policy: str | None = None, seed: int = 0, record_series: bool = True, tap=None
+) -> dict:
+    """Run one docking in-process and return its summary (DESIGN.md section 8 fields per chaser); ``tap``:
+    :class:`DockingSim`'s (``swarm sim --mcap``)."""
+    return DockingSim(scenario, policy, seed, record_series, tap=tap).run()

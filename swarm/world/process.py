@@ -41,6 +41,7 @@ import numpy as np
 
 from swarm.step.referee import Referee
 from swarm.step.world import World
+from swarm.transport.docking_wire import contact_event, keepout_event, world_sensors
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import CommandBarrier
 from swarm.transport.messages import (
@@ -49,10 +50,7 @@ from swarm.transport.messages import (
     DropCounter,
     Event,
     Fault,
-    Imu,
     RunControl,
-    Truth,
-    Vision,
     encode,
 )
 from swarm.transport.process import ClockSpec, declare_reliable
@@ -323,34 +321,9 @@ class WorldProcess:
         self.pub_world_event.put(encode(Event(t_s, kind, data)))
 
     def _encode_tick(self, k: int, frames) -> list[tuple[str, str, bytes]]:
-        """The samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle (on UWB slot
-        ticks), then per vehicle vision(k) (camera ticks, chasers) and imu(k): ``(kind, vehicle,
-        payload)``."""
-        w, t = self.world, k * self.sc.dt_s
-        camera_tick = k % w.vision_every == 0
-        face = self.sc.guidance.docking_face
-        out = []
-        lost, p_nlos = w.radio_env(t)
-        # truth only on UWB slot ticks: the mothership's radios need no other, and a viewer draws at 50 Hz
-        # as well as at 100 (docs/protocol.md, "Rates")
-        for i, vid in enumerate(self.ids if k % self._truth_every == 0 else ()):
-            x = w.X[i]
-            truth = Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], effort=float(w.effort[i]),
-                          uwb_lost=bool(lost), nlos_probability=float(p_nlos))  # fmt: skip
-            out.append(("truth", vid, encode(truth)))
-        for vid in self.ids:
-            fr = frames[vid]
-            if camera_tick and vid in self.chasers:
-                target = self.sc.vehicles[vid].target
-                if fr.vision is None:
-                    data, kind, ids = np.zeros((0, 3)), "features", ()
-                elif fr.vision_kind == "pose":  # one pose, from every marker of the face
-                    data, kind, ids = fr.vision.reshape(1, -1), "pose", tuple(range(len(w.markers_target)))
-                else:
-                    data, kind, ids = fr.vision, fr.vision_kind, tuple(range(len(fr.vision)))
-                out.append(("vision", vid, encode(Vision(k, t, target, face, kind, data, ids))))
-            out.append(("imu", vid, encode(Imu(k, t, self.sc.dt_s, fr.gyro_body, fr.q_ahrs_nav_body))))
-        return out
+        """The samples of tick ``k``, encoded, in publishing order (:func:`~swarm.transport.docking_wire.
+        world_sensors`): ``(kind, vehicle, payload)``."""
+        return world_sensors(self.world, self.ids, self.chasers, k, frames, self._truth_every)
 
     def _pub(self, kind: str, vid: str):
         return self._pubs[kind][vid]
@@ -523,18 +496,11 @@ class WorldProcess:
         t = k * self.sc.dt_s
         keepouts, contacts = self.referee.judge(self.world.X, t, self.modes)
         for cid, range_m in keepouts:
-            ev = Event(t, "keepout_violation", {"t_s": t, "mode": self.modes[cid], "range_m": range_m})
-            self.pub_event[cid].put(encode(ev))
+            self.pub_event[cid].put(keepout_event(t, self.modes[cid], range_m))
         for cid, ct in contacts:
-            mode = self.modes[cid]
             self.world.attach(cid, self.sc.vehicles[cid].target)
-            data = {
-                **ct.event(mode), "docked": ct.docked, "docking_time_s": t, "contact": ct.contact,
-                "position_error_m": ct.position_error_m, "attitude_error_rad": ct.attitude_error_rad,
-            }  # fmt: skip
-            kind = "contact" if ct.docked else "collision"
-            self.pub_event[cid].put(encode(Event(t, kind, data)))
-            _LOG.info("%s: %s at t = %.2f s", cid, kind, t)
+            self.pub_event[cid].put(contact_event(t, self.modes[cid], ct))
+            _LOG.info("%s: %s at t = %.2f s", cid, "contact" if ct.docked else "collision", t)
 
     def _close_lost(self) -> None:
         with self._lock:

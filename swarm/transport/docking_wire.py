@@ -1,0 +1,234 @@
+"""The docking tick's messages (``docs/protocol.md``): what the world, the mothership and a docking agent
+publish for tick ``k``, encoded once here for the processes (:mod:`swarm.world.process`,
+:mod:`mothership.process`, :mod:`agents.process`) and for ``swarm sim docking --mcap`` (:class:`DockingTap`:
+the in-process run written as the processes would have published it)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarm.core.estimator import MeasKind
+from swarm.transport.keys import Keys
+from swarm.transport.messages import (
+    Clock,
+    Command,
+    Event,
+    Guidance,
+    Imu,
+    Truth,
+    Uwb,
+    Vision,
+    encode,
+    estimate_message,
+)
+
+Sensors = list[tuple[str, str, bytes]]
+"""``(kind, vehicle, payload)`` in publishing order; ``kind`` is ``truth``, ``vision`` or ``imu``."""
+
+FILTER_KINDS = {
+    "range": MeasKind.RANGE,
+    "features": MeasKind.FEATURES,
+    "pose": MeasKind.POSE,
+    "ahrs": MeasKind.ATTITUDE,
+}
+"""The filter's update kinds (its counters' columns) by their name in an ``Estimate``'s ``counts``."""
+FILTER_OUTCOMES = ("accepted", "rejected", "refused")
+
+
+def world_sensors(world, ids: list[str], chasers: list[str], k: int, frames, truth_every: int) -> Sensors:
+    """The world's samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle (on UWB
+    slot ticks: the mothership's radios need no other, and a viewer draws at 50 Hz as well as at 100;
+    docs/protocol.md, "Rates"), then per vehicle vision(k) (camera ticks, chasers) and imu(k)."""
+    sc = world.sc
+    t = k * sc.dt_s
+    camera_tick = k % world.vision_every == 0
+    face = sc.guidance.docking_face
+    out: Sensors = []
+    lost, p_nlos = world.radio_env(t)
+    for i, vid in enumerate(ids if k % truth_every == 0 else ()):
+        x = world.X[i]
+        truth = Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], effort=float(world.effort[i]),
+                      uwb_lost=bool(lost), nlos_probability=float(p_nlos))  # fmt: skip
+        out.append(("truth", vid, encode(truth)))
+    for vid in ids:
+        fr = frames[vid]
+        if camera_tick and vid in chasers:
+            target = sc.vehicles[vid].target
+            if fr.vision is None:
+                data, kind, mids = np.zeros((0, 3)), "features", ()
+            elif fr.vision_kind == "pose":  # one pose, from every marker of the face
+                data, kind, mids = fr.vision.reshape(1, -1), "pose", tuple(range(len(world.markers_target)))
+            else:
+                data, kind, mids = fr.vision, fr.vision_kind, tuple(range(len(fr.vision)))
+            out.append(("vision", vid, encode(Vision(k, t, target, face, kind, data, mids))))
+        out.append(("imu", vid, encode(Imu(k, t, sc.dt_s, fr.gyro_body, fr.q_ahrs_nav_body))))
+    return out
+
+
+def uwb_slot(network, ids: list[str], k: int, t: float) -> list[tuple[str, bytes]]:
+    """The mothership's ranges of slot tick ``k`` after ``network.step``: ``(vehicle, payload)``, one per
+    vehicle (``range_m`` None where the reply was lost)."""
+    return [
+        (
+            vid,
+            encode(
+                Uwb(k, t, int(network.anchor_id[i]), None if network.lost[i] else float(network.range_m[i]))
+            ),
+        )
+        for i, vid in enumerate(ids)
+    ]
+
+
+def filter_counts(agent) -> dict[str, int]:
+    """The filter's cumulative update counters ``<kind>_<outcome>``, the non-zero ones (an absent counter is
+    zero: a dozen zeros per tick would cost every receiver their validation)."""
+    counts = agent.est.counts[0]  # (outcome, kind)
+    return {
+        f"{name}_{what}": int(counts[row, int(kind)])
+        for name, kind in FILTER_KINDS.items()
+        for row, what in enumerate(FILTER_OUTCOMES)
+        if counts[row, int(kind)]
+    }
+
+
+def estimate_payload(agent, k: int) -> bytes:
+    """An agent's ``estimate(k)``."""
+    e = agent.est
+    return encode(estimate_message(
+        k, agent.t_s, e.p_nav[0], e.v_nav[0], e.q_nav_body[0], agent.published_cov(), agent.sigma_pos_max_m,
+        agent.mahalanobis_d, agent.rejection_fraction, filter_counts(agent),
+    ))  # fmt: skip
+
+
+def mode_events(cmd) -> list[bytes]:
+    """A control tick's mode switches, as ``mode`` events."""
+    return [encode(Event(float(ev["t_s"]), "mode", dict(ev))) for ev in cmd.events]
+
+
+def guidance_payload(sc, policy: str, chaser: bool, agent, k: int, mode: str, cmd) -> bytes:
+    """An agent's ``guidance(k)`` on a control tick: its mode, the range to its target, Algorithm 1's radii
+    and last decision (mdp), the reason of the last switch."""
+    sw = agent.switcher
+    range_m = decision = r_t = None
+    if agent.target is not None and chaser:
+        range_m = float(np.linalg.norm(agent.est.p_nav[0] - agent.target.p_nav))
+    if sw is not None and policy == "mdp":
+        r_t = float(sc.mdp.r_t_m)
+        if sw.decisions:
+            decision = sw.decisions[-1].as_dict()
+    reason = cmd.events[-1]["reason"] if cmd.events else ""
+    dt = sc.dt_s
+    msg = Guidance(
+        k, k * dt, mode, range_m, None if sw is None else sw.r1_m, None if sw is None else sw.r2_m, r_t,
+        decision, str(reason)[:1024],
+    )  # fmt: skip
+    return encode(msg)
+
+
+def command_payload(k: int, dt: float, u, mode: str, force, torque) -> bytes:
+    """An agent's ``command(k)``: the held actuator command and the mode it was decided in."""
+    return encode(Command(k, k * dt, u, mode, force, torque))
+
+
+def contact_event(t: float, mode: str, ct) -> bytes:
+    """The referee's ``contact`` (docked) or ``collision`` event on the chaser's event key."""
+    data = {
+        **ct.event(mode), "docked": ct.docked, "docking_time_s": t, "contact": ct.contact,
+        "position_error_m": ct.position_error_m, "attitude_error_rad": ct.attitude_error_rad,
+    }  # fmt: skip
+    return encode(Event(t, "contact" if ct.docked else "collision", data))
+
+
+def keepout_event(t: float, mode: str, range_m: float) -> bytes:
+    """The referee's ``keepout_violation`` event on the chaser's event key."""
+    return encode(Event(t, "keepout_violation", {"t_s": t, "mode": mode, "range_m": range_m}))
+
+
+class DockingTap:
+    """``swarm sim docking --mcap FILE``: the in-process run written as its processes would have published
+    it in lockstep (the same encoders, in the same order per key), through the recorder's
+    :class:`~swarm.transport.recording.McapSink`; a tap of :class:`swarm.sim.docking.DockingSim` (which then
+    runs every tick through its per-object Python path, so that each tick's samples exist)."""
+
+    def __init__(self, path, seed: int, namespace: str = "tpods", clock_every: int = 10) -> None:
+        from pathlib import Path
+
+        from swarm.errors import ConfigError
+        from swarm.transport.recording import McapSink
+
+        p = Path(path)
+        if p.suffix != ".mcap":
+            raise ConfigError(f"--mcap: the recording's name must end in .mcap, got {str(p)!r}")
+        if not p.resolve().parent.is_dir():
+            raise ConfigError(f"--mcap: no such directory {str(p.parent)!r}")
+        self.keys = Keys(namespace)
+        self.seed = seed
+        self.clock_every = clock_every
+        self.sink = McapSink(p, self.keys, {"source": "swarm sim"})
+        self._held: dict[str, tuple] = {}
+
+    def _write(self, key: str, payload: bytes) -> None:
+        self.sink.write(key, payload)
+
+    def _clock(self, k: int, t: float, state: str) -> None:
+        self._write(self.keys.world_clock(), encode(Clock(k, t, state, self.seed)))
+
+    def start(self, sim) -> None:
+        """Tick 0: ``run_start`` and the clock."""
+        sc = sim.sc
+        ids = list(sc.vehicles)
+        data = {"seed": self.seed, "vehicles": ids, "clock": "lockstep", "scenario": sc.name}
+        self._write(self.keys.world_event(), encode(Event(0.0, "run_start", data)))
+        self._clock(0, 0.0, "running")
+        for vid in ids:
+            mode = "HOLD" if vid in sc.chasers else "STATION"
+            self._held[vid] = (np.zeros(sc.kind(vid).U_N), mode, None, None)
+
+    def world(self, sim, k: int, frames) -> None:
+        """The world's samples of tick ``k`` (and the clock on its ticks)."""
+        w = sim.world
+        ids, chasers = list(sim.sc.vehicles), list(sim.sc.chasers)
+        for kind, vid, payload in world_sensors(w, ids, chasers, k, frames, sim.sc.every(sim.sc.uwb.rate_hz)):
+            self._write(getattr(self.keys, kind)(vid), payload)
+        if k % self.clock_every == 0:
+            self._clock(k, k * sim.sc.dt_s, "running")
+
+    def uwb(self, sim, k: int) -> None:
+        """The mothership's ranges of slot tick ``k`` (after the network's step)."""
+        if k == 0 or k % sim.network.every:
+            return
+        for vid, payload in uwb_slot(sim.network, list(sim.sc.vehicles), k, k * sim.sc.dt_s):
+            self._write(self.keys.uwb(vid), payload)
+
+    def agent(self, sim, vid: str, k: int, cmd) -> None:
+        """Agent ``vid``'s answer to tick ``k``: ``estimate``, then on a control tick its mode events and
+        ``guidance``, then the held ``command``."""
+        a, sc = sim.agents[vid], sim.sc
+        self._write(self.keys.estimate(vid), estimate_payload(a, k))
+        if cmd is not None:
+            mode = a.mode.value
+            self._held[vid] = (cmd.u, mode, cmd.force_body_n, cmd.torque_body_nm)
+            for payload in mode_events(cmd):
+                self._write(self.keys.event(vid), payload)
+            self._write(
+                self.keys.guidance(vid), guidance_payload(sc, sim.policy, vid in sc.chasers, a, k, mode, cmd)
+            )
+        u, mode, force, torque = self._held[vid]
+        self._write(self.keys.command(vid), command_payload(k, sc.dt_s, u, mode, force, torque))
+
+    def keepout(self, cid: str, t: float, mode: str, range_m: float) -> None:
+        """The referee's keep-out verdict on the chaser's event key."""
+        self._write(self.keys.event(cid), keepout_event(t, mode, range_m))
+
+    def contact(self, cid: str, t: float, mode: str, ct) -> None:
+        """The referee's contact or collision on the chaser's event key."""
+        self._write(self.keys.event(cid), contact_event(t, mode, ct))
+
+    def end(self, sim, k: int, reason: str, wall_s: float) -> None:
+        """``run_end`` and the stopped clock; the file is closed."""
+        t = k * sim.sc.dt_s
+        data = {"reason": reason, "tick": k, "t_s": t, "seed": self.seed, "wall_s": wall_s,
+                "effort": sim.world.effort_by_vehicle, "done": sorted(sim.done)}  # fmt: skip
+        self._write(self.keys.world_event(), encode(Event(t, "run_end", data)))
+        self._clock(k, t, "stopped")
+        self.sink.close()
