@@ -21,4 +21,7 @@ def test_bench_record_measures_both_launches(tmp_path):
         )  # the swarm's CPU, children included
     assert rec["with"]["file_mb"] > 0.1 and rec["without"]["file_mb"] is None
     assert rec["overhead"] == (rec["with"]["cpu_s"] - rec["without"]["cpu_s"]) / rec["without"]["cpu_s"]
+    # the reported pair is the median of the pairs launched (one in the quick preset)
+    assert len(rec["pairs_runs"]) == rec["repeats"] == 1
+    assert rec["pairs_runs"][0]["overhead"] == rec["overhead"]
     assert "overhead" in r.stdout

@@ -1,12 +1,15 @@
 """What every launcher shares (``swarm launch`` of a docking or a landing scenario): the children's common
-flags, the client endpoint of the launcher's router, and the ``--record`` child."""
+flags, the client endpoint of the launcher's router, and the ``--record`` recorder on the router's session."""
 
 from __future__ import annotations
 
 import argparse
+import logging
 import threading
 
 from swarm.errors import ConfigError
+
+_LOG = logging.getLogger("swarm.launch")
 
 
 def router_args(args: argparse.Namespace, listen: list[str]):
@@ -57,20 +60,49 @@ def check_record(args: argparse.Namespace) -> None:
         )
 
 
-def start_recorder(args, endpoint, sup, Child) -> None:
-    """The recorder child (``--record``), kept across runs; the run starts once it is subscribed."""
-    old = sup.children.get("recorder")
-    if args.record is None or (old is not None and old.running):
-        return
-    ready = threading.Event()
+class LauncherRecorder:
+    """``--record FILE.mcap``: the launcher's own router session records the swarm (a
+    :class:`~swarm.transport.recording.Recorder` on a thread of the launcher), as rosbag2's recorder runs as
+    a component inside a ROS 2 container: every sample that the router forwards reaches it inside the
+    process, where a ``swarm record`` child costs one more hop over TCP per sample (the router's sending,
+    the child's Zenoh receiving) and a Python interpreter of its own (``BENCHMARKS.md``, "Recording").
+    Kept across runs (``--repeat``); :meth:`close` finishes the file (its summary and indexes) once the
+    samples still in flight are in, before the session closes. Its channel holds
+    :data:`~swarm.transport.recording.FIFO_DEPTH` samples (~19 s of a 4-pair swarm): a recorder that far
+    behind makes the router wait rather than lose a sample."""
 
-    def on_line(line: str) -> None:
-        if line.startswith("recording "):
-            ready.set()
+    def __init__(self, args: argparse.Namespace, session, keys) -> None:
+        from swarm.transport.recording import Recorder
 
-    rec = ["swarm.cli.main", "record", str(args.record.resolve()), "--namespace", args.namespace,
-           "--mode", "client", "--connect", endpoint]  # fmt: skip
-    sup.start(Child("recorder", rec, restartable=False, on_line=on_line))
-    if not ready.wait(60.0):
-        raise ConfigError(f"--record: the recorder did not subscribe within 60 s (writing {args.record})")
-    print(f"recording to {args.record}", flush=True)
+        self.path = args.record
+        self.stop = threading.Event()
+        self.recorder = Recorder(session, keys, self.path)
+        self.error: BaseException | None = None
+        ready = threading.Event()
+
+        def run() -> None:
+            try:
+                self.recorder.run(self.stop, ready.set)
+            except BaseException as e:  # reported by close(); the launcher goes on
+                self.error = e
+                ready.set()
+
+        self.thread = threading.Thread(target=run, name="recorder", daemon=True)
+        self.thread.start()
+        if not ready.wait(60.0) or self.error is not None:
+            raise ConfigError(f"--record: could not start recording to {self.path}: {self.error}")
+        print(f"recording to {self.path}", flush=True)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(30.0)
+        if self.error is not None:
+            _LOG.error("--record: the recording of %s failed: %s", self.path, self.error)
+        else:
+            n = sum(self.recorder.counts.values())
+            print(f"recorded {n} messages on {len(self.recorder.counts)} keys to {self.path}", flush=True)
+
+
+def start_recorder(args: argparse.Namespace, session, keys) -> LauncherRecorder | None:
+    """The launcher's recorder (``--record``), or None."""
+    return None if args.record is None else LauncherRecorder(args, session, keys)

@@ -76,7 +76,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         metavar="FILE.mcap",
-        help="record every message to an MCAP file (a `swarm record` child, subscribed before the run)",
+        help="record every message to an MCAP file (on the launcher's router session, before the run starts)",
     )
     g.add_argument(
         "--max-restarts", type=count("--max-restarts"), default=3, metavar="N",
@@ -323,48 +323,55 @@ def run(args: argparse.Namespace) -> int:
                 key = keys.event(vid) if vid is not None else keys.world_event()
                 session.put(key, encode(Event(box[0].t_s, kind, data)))
 
-            while True:  # one iteration per run
-                log = box[0]
-                args.checkpoint_dir = args.checkpoint_root / f"run-{next(runs)}"
-                args.checkpoint_dir.mkdir()
-                _start_run(args, sc, seed, endpoint, sup, Child)
-                ok = _wait_alive(sc, sup, alive_changes, args.start_timeout, stop)
-                if not ok:
-                    result = None
+            recorder = start_recorder(args, session, keys)  # --record: on this router session
+            try:
+                while True:  # one iteration per run
+                    log = box[0]
+                    args.checkpoint_dir = args.checkpoint_root / f"run-{next(runs)}"
+                    args.checkpoint_dir.mkdir()
+                    _start_run(args, sc, seed, endpoint, sup, Child)
+                    ok = _wait_alive(sc, sup, alive_changes, args.start_timeout, stop)
+                    if not ok:
+                        result = None
+                        break
+                    n_proc = len(sup.children)
+                    print(f"swarm up: {n_proc} processes, seed {seed}, clock {args.clock}", flush=True)
+                    outcome = _supervise(args, sc, sup, alive_changes, log, stop, wall0, announce)
+                    if outcome == "ended":
+                        _wait_summaries(sc, log, sup, child_of=_child_of(args, sc))
+                        result = summarize(sc, policy, seed, log, time.monotonic() - wall0)
+                        result["restarts"] = {c.name: c.restarts for c in sup.children.values()}
+                        result["world_resumed_at"] = [d.get("tick") for d in log.resumed]
+                        print_summary(result)
+                        restarted = {n: r for n, r in result["restarts"].items() if r}
+                        if restarted:
+                            print("  restarts: " + ", ".join(f"{n} {r}" for n, r in restarted.items()))
+                        if args.json is not None:
+                            args.json.write_text(json.dumps(result, indent=1))
+                        end = log.run_end or {}
+                        # the dashboard asked for a new run
+                        asked = end.get("reason") in ("reset", "new_seed")
+                        if (args.repeat or asked) and not stop.is_set():
+                            nxt = end.get("next_seed")
+                            seed = (
+                                int(nxt)
+                                if nxt is not None
+                                else (seed if end.get("reason") == "reset" else seed + 1)
+                            )
+                            if not asked:
+                                stop.wait(3.0)  # a moment to look at the docked pair
+                            sup.stop_all(keep=("dashboard",))
+                            box[0] = RunLog()
+                            continue
+                        if not args.until_docked:
+                            _hold(args, stop, wall0)
                     break
-                n_proc = len(sup.children)
-                print(f"swarm up: {n_proc} processes, seed {seed}, clock {args.clock}", flush=True)
-                outcome = _supervise(args, sc, sup, alive_changes, log, stop, wall0, announce)
-                if outcome == "ended":
-                    _wait_summaries(sc, log, sup, child_of=_child_of(args, sc))
-                    result = summarize(sc, policy, seed, log, time.monotonic() - wall0)
-                    result["restarts"] = {c.name: c.restarts for c in sup.children.values()}
-                    result["world_resumed_at"] = [d.get("tick") for d in log.resumed]
-                    print_summary(result)
-                    restarted = {n: r for n, r in result["restarts"].items() if r}
-                    if restarted:
-                        print("  restarts: " + ", ".join(f"{n} {r}" for n, r in restarted.items()))
-                    if args.json is not None:
-                        args.json.write_text(json.dumps(result, indent=1))
-                    end = log.run_end or {}
-                    asked = end.get("reason") in ("reset", "new_seed")  # the dashboard asked for a new run
-                    if (args.repeat or asked) and not stop.is_set():
-                        nxt = end.get("next_seed")
-                        seed = (
-                            int(nxt)
-                            if nxt is not None
-                            else (seed if end.get("reason") == "reset" else seed + 1)
-                        )
-                        if not asked:
-                            stop.wait(3.0)  # a moment to look at the docked pair
-                        sup.stop_all(keep=("dashboard", "recorder"))
-                        box[0] = RunLog()
-                        continue
-                    if not args.until_docked:
-                        _hold(args, stop, wall0)
-                break
-            sup.stop_all()
-            _ = (_token, zenoh)
+                sup.stop_all()
+                _ = (_token, zenoh)
+            finally:
+                if recorder is not None:
+                    sup.stop_all()  # every process's last samples are in before the file is finished
+                    recorder.close()
     finally:
         sup.stop_all()
         shutil.rmtree(args.checkpoint_root, ignore_errors=True)
@@ -393,8 +400,6 @@ def _checkpoint_root() -> Path:
 def _start_run(args, sc, seed, endpoint, sup, Child):
     common = child_args(args, endpoint, seed)
     from swarm.transport.security import agent_name
-
-    start_recorder(args, endpoint, sup, Child)
 
     mothership = ["mothership", *common, *_config_args(args, "mothership")]
     sup.start(Child("mothership", mothership, restartable=True, rejoin_args=["--rejoin"]))

@@ -4,7 +4,8 @@ clients of the launcher's router, in lockstep. The launcher waits for the world'
 agent's ``summary``, prints every UAV's outcome as ``swarm sim`` does (``--json FILE`` writes the same
 summary as ``swarm sim landing-swarm --json``, but ``decisions`` is the number of Algorithm 1 records, the
 records themselves stay in the agent), stops every process and exits 0 if every UAV landed on its pad or
-aborted safely. With ``--record FILE.mcap`` a recorder child writes the run.
+aborted safely. With ``--record FILE.mcap`` the launcher's router session records the run
+(:class:`swarm.cli.children.LauncherRecorder`).
 
 Unless ``--headless``, the dashboard (``python -m dashboard SCENARIO``: pads, quadrotors, camera frustums,
 energy; :mod:`dashboard.landing`) is started first, on ``--dashboard-port``, and the run starts once it
@@ -125,81 +126,87 @@ def run_landing_launch(args: argparse.Namespace) -> int:
 
             subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
             subscribe_decoded(session, keys.agent_all("event"), Event, on_agent_event, drops)
-            start_recorder(args, endpoint, sup, Child)
-            if not args.headless:
-                _start_dashboard(args, endpoint, sup, Child, stop)
-            common = child_args(args, endpoint, args.seed)
-            n = args.vehicles_per_process  # agent hosts: N UAVs' agents in one process (default 1)
-            for i in range(0, len(ids), n):
-                host = ids[i : i + n]
-                name = f"agent/{host[0]}" if n == 1 else f"agents/{'+'.join(host)}"
-                sup.start(Child(name, ["agents.landing", "--id", ",".join(host), *common]))
-            world = ["swarm.world.landing", "--clock", str(args.clock),
-                     "--step-timeout", str(args.step_timeout),
-                     "--start-timeout", str(args.start_timeout), *common]  # fmt: skip
-            sup.start(Child("world", world))
-            print(
-                f"swarm up: world and {len(ids)} landing agents in {-(-len(ids) // n)} processes, "
-                f"seed {args.seed}, clock {_clock_name(args.clock)}",
-                flush=True,
-            )
-            deadline = None if args.timeout is None else wall0 + args.timeout
-            with cond:
-                while got["run_end"] is None:
-                    if stop.is_set():
-                        break
-                    if deadline is not None and time.monotonic() > deadline:
-                        _LOG.error("--timeout: %.0f s passed before the run ended", args.timeout)
-                        break
-                    dead = sup.exited()
-                    for c in [c for c in dead if c.name == "dashboard"]:  # the run does not need it
-                        _LOG.warning("the dashboard exited with status %s; the run goes on without it",
-                                     c.popen.returncode)  # fmt: skip
-                        c.popen = None
-                    dead = [c for c in dead if c.name != "dashboard"]
-                    if dead and got["run_end"] is None:
-                        _LOG.error("%s exited with status %s before the run ended", dead[0].name,
-                                   dead[0].popen.returncode)  # fmt: skip
-                        break
-                    cond.wait(0.1)
-                end = time.monotonic() + 10.0
-                while got["run_end"] is not None and not set(ids) <= set(got["summaries"]):
-                    if time.monotonic() > end:
-                        _LOG.error("no summary from %s", ", ".join(sorted(set(ids) - set(got["summaries"]))))
-                        break
-                    cond.wait(0.1)
-            if got["run_end"] is not None and set(ids) <= set(got["summaries"]):
-                end_data = got["run_end"]
-                wall = float(end_data.get("wall_s", time.monotonic() - wall0))
-                uavs = {}
-                for uid in ids:
-                    w = end_data["uavs"][uid]
-                    uavs[uid] = landing_summary(
-                        sc, policy, args.seed, w, got["summaries"][uid], w["end_tick"], wall
-                    )
-                result = {
-                    "scenario": sc.name,
-                    "policy": policy,
-                    "seed": args.seed,
-                    "camera_mode": sc.camera.mode,
-                    "landed": sum(1 for v in uavs.values() if v["landed"]),
-                    "uavs": uavs,
-                    "sim_time_s": round(int(end_data["ticks"]) * sc.dt_s, 4),
-                    "wall_s": wall,
-                    "run_end_reason": end_data.get("reason"),
-                }
-                for uid, r in uavs.items():
-                    print(f"[{uid}]", end=" ")
-                    print_landing(r)
-                n_ok, sim_s = result["landed"], result["sim_time_s"]
-                how = _clock_name(args.clock)
-                print(f"{n_ok} of {len(ids)} UAVs landed on their pads in {sim_s:.1f} s simulated "
-                      f"({wall:.1f} s of wall time, {how} over Zenoh)", flush=True)  # fmt: skip
-                if args.json is not None:
-                    args.json.write_text(json.dumps(result, indent=1))
-            if not args.headless and not args.until_docked and got["run_end"] is not None:
-                _hold(args, stop, wall0)
-            sup.stop_all()
+            recorder = start_recorder(args, session, keys)  # --record: on this router session
+            try:
+                if not args.headless:
+                    _start_dashboard(args, endpoint, sup, Child, stop)
+                common = child_args(args, endpoint, args.seed)
+                n = args.vehicles_per_process  # agent hosts: N UAVs' agents in one process (default 1)
+                for i in range(0, len(ids), n):
+                    host = ids[i : i + n]
+                    name = f"agent/{host[0]}" if n == 1 else f"agents/{'+'.join(host)}"
+                    sup.start(Child(name, ["agents.landing", "--id", ",".join(host), *common]))
+                world = ["swarm.world.landing", "--clock", str(args.clock),
+                         "--step-timeout", str(args.step_timeout),
+                         "--start-timeout", str(args.start_timeout), *common]  # fmt: skip
+                sup.start(Child("world", world))
+                print(
+                    f"swarm up: world and {len(ids)} landing agents in {-(-len(ids) // n)} processes, "
+                    f"seed {args.seed}, clock {_clock_name(args.clock)}",
+                    flush=True,
+                )
+                deadline = None if args.timeout is None else wall0 + args.timeout
+                with cond:
+                    while got["run_end"] is None:
+                        if stop.is_set():
+                            break
+                        if deadline is not None and time.monotonic() > deadline:
+                            _LOG.error("--timeout: %.0f s passed before the run ended", args.timeout)
+                            break
+                        dead = sup.exited()
+                        for c in [c for c in dead if c.name == "dashboard"]:  # the run does not need it
+                            _LOG.warning("the dashboard exited with status %s; the run goes on without it",
+                                         c.popen.returncode)  # fmt: skip
+                            c.popen = None
+                        dead = [c for c in dead if c.name != "dashboard"]
+                        if dead and got["run_end"] is None:
+                            _LOG.error("%s exited with status %s before the run ended", dead[0].name,
+                                       dead[0].popen.returncode)  # fmt: skip
+                            break
+                        cond.wait(0.1)
+                    end = time.monotonic() + 10.0
+                    while got["run_end"] is not None and not set(ids) <= set(got["summaries"]):
+                        if time.monotonic() > end:
+                            missing = sorted(set(ids) - set(got["summaries"]))
+                            _LOG.error("no summary from %s", ", ".join(missing))
+                            break
+                        cond.wait(0.1)
+                if got["run_end"] is not None and set(ids) <= set(got["summaries"]):
+                    end_data = got["run_end"]
+                    wall = float(end_data.get("wall_s", time.monotonic() - wall0))
+                    uavs = {}
+                    for uid in ids:
+                        w = end_data["uavs"][uid]
+                        uavs[uid] = landing_summary(
+                            sc, policy, args.seed, w, got["summaries"][uid], w["end_tick"], wall
+                        )
+                    result = {
+                        "scenario": sc.name,
+                        "policy": policy,
+                        "seed": args.seed,
+                        "camera_mode": sc.camera.mode,
+                        "landed": sum(1 for v in uavs.values() if v["landed"]),
+                        "uavs": uavs,
+                        "sim_time_s": round(int(end_data["ticks"]) * sc.dt_s, 4),
+                        "wall_s": wall,
+                        "run_end_reason": end_data.get("reason"),
+                    }
+                    for uid, r in uavs.items():
+                        print(f"[{uid}]", end=" ")
+                        print_landing(r)
+                    n_ok, sim_s = result["landed"], result["sim_time_s"]
+                    how = _clock_name(args.clock)
+                    print(f"{n_ok} of {len(ids)} UAVs landed on their pads in {sim_s:.1f} s simulated "
+                          f"({wall:.1f} s of wall time, {how} over Zenoh)", flush=True)  # fmt: skip
+                    if args.json is not None:
+                        args.json.write_text(json.dumps(result, indent=1))
+                if not args.headless and not args.until_docked and got["run_end"] is not None:
+                    _hold(args, stop, wall0)
+                sup.stop_all()
+            finally:
+                if recorder is not None:
+                    sup.stop_all()  # every process's last samples are in before the file is finished
+                    recorder.close()
     finally:
         sup.stop_all()
         for s, h in previous.items():

@@ -43,7 +43,7 @@ QUIET_S = 0.5
 flight when it was asked to stop are in the file."""
 FIFO_DEPTH = 1 << 16
 """Samples the recorder's channel holds before Zenoh waits for it (a FIFO: none is dropped)."""
-IDLE_S = 0.002
+IDLE_S = 0.02
 """The recorder's nap when its channel is empty [s]."""
 
 

@@ -31,9 +31,9 @@ def _router(procs: Procs, endpoint: str):
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    """One lockstep docking launched with `--record` (its recorder child is subscribed before the run
-    starts), counted by this test's own subscriber on an outside router that the launcher's router connects
-    to (subscribed before the launch)."""
+    """One lockstep docking launched with `--record` (its recorder, on the launcher's router session, is
+    subscribed before the run starts), counted by this test's own subscriber on an outside router that the
+    launcher's router connects to (subscribed before the launch)."""
     d = tmp_path_factory.mktemp("rec")
     ns, ep = f"rec-{free_port()}", loopback(free_port())
     keys = Keys(ns)
