@@ -195,7 +195,8 @@ def test_a_fleet_s_uavs_fly_their_own_streams_and_the_scenario_refuses_shared_pa
     [
         (["landing", "--mcap", "run.txt"], "--mcap: the recording's name must end in .mcap"),
         (["landing", "--mcap", "/no/such/dir/run.mcap"], "--mcap: no such directory"),
-        (["docking", "--mcap", "run.mcap"], "--mcap: written for a landing scenario so far"),
+        (["docking", "--mcap", "run.txt"], "--mcap: the recording's name must end in .mcap"),
+        (["docking", "--mcap", "/no/such/dir/run.mcap"], "--mcap: no such directory"),
     ],
 )
 def test_swarm_sim_mcap_refuses_what_it_cannot_write(args, expected):

@@ -151,20 +151,12 @@ class DockingTap:
     runs every tick through its per-object Python path, so that each tick's samples exist)."""
 
     def __init__(self, path, seed: int, namespace: str = "tpods", clock_every: int = 10) -> None:
-        from pathlib import Path
+        from swarm.transport.recording import sim_sink
 
-        from swarm.errors import ConfigError
-        from swarm.transport.recording import McapSink
-
-        p = Path(path)
-        if p.suffix != ".mcap":
-            raise ConfigError(f"--mcap: the recording's name must end in .mcap, got {str(p)!r}")
-        if not p.resolve().parent.is_dir():
-            raise ConfigError(f"--mcap: no such directory {str(p.parent)!r}")
         self.keys = Keys(namespace)
         self.seed = seed
         self.clock_every = clock_every
-        self.sink = McapSink(p, self.keys, {"source": "swarm sim"})
+        self.sink = sim_sink(path, self.keys)
         self._held: dict[str, tuple] = {}
 
     def _write(self, key: str, payload: bytes) -> None:

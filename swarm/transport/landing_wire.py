@@ -142,19 +142,11 @@ class McapTap:
     :func:`swarm.sim.landing.run_landing_fleet`."""
 
     def __init__(self, path, seed: int, namespace: str = "tpods") -> None:
-        from pathlib import Path
+        from swarm.transport.recording import sim_sink
 
-        from swarm.errors import ConfigError
-        from swarm.transport.recording import McapSink
-
-        p = Path(path)
-        if p.suffix != ".mcap":
-            raise ConfigError(f"--mcap: the recording's name must end in .mcap, got {str(p)!r}")
-        if not p.resolve().parent.is_dir():
-            raise ConfigError(f"--mcap: no such directory {str(p.parent)!r}")
         self.keys = Keys(namespace)
         self.seed = seed
-        self.sink = McapSink(p, self.keys, {"source": "swarm sim"})
+        self.sink = sim_sink(path, self.keys)
         self.n_modes: dict[str, int] = {}
 
     def _write(self, wire: Wire) -> None:

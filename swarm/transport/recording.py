@@ -164,6 +164,19 @@ class McapSink:
         self.writer.close()
 
 
+def sim_sink(path, keys) -> McapSink:
+    """The writer of ``swarm sim --mcap FILE`` (metadata ``recorder.source = "swarm sim"``); ConfigError
+    naming ``--mcap`` for a name without ``.mcap`` or a directory that does not exist."""
+    from swarm.errors import ConfigError
+
+    p = Path(path)
+    if p.suffix != ".mcap":
+        raise ConfigError(f"--mcap: the recording's name must end in .mcap, got {str(p)!r}")
+    if not p.resolve().parent.is_dir():
+        raise ConfigError(f"--mcap: no such directory {str(p.parent)!r}")
+    return McapSink(p, keys, {"source": "swarm sim"})
+
+
 def package_version() -> str:
     """This package's version, as installed."""
     from importlib.metadata import PackageNotFoundError, version
