@@ -8,8 +8,11 @@ that will not come), it fuses them, decides, and publishes its ``command`` (roto
 landing mode), its ``estimate`` (the position, velocity and attitude block of the IMU-driven filter's
 covariance), its ``guidance`` (mode, distance to its pad) and each mode switch as an ``event``. At the
 world's ``run_end`` it publishes a ``summary`` event (its half of the run's outcome) and stays up until
-stopped. A message that does not decode is dropped and counted; a sample of a tick already flown is
-ignored.
+stopped. Behind a free-running world (``--clock realtime`` or ``scaled:N``), a tick whose successor is
+already complete is only fused (its command would reach the world after it flew that tick): the agent
+decides and publishes on the newest tick, as a flight controller's estimator runs at the sensors' rate and
+its controller on the newest estimate. A message that does not decode is dropped and counted; a sample of a
+tick already flown is ignored.
 """
 
 from __future__ import annotations
@@ -60,15 +63,16 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     _warm_up(sc, args.seed, uavs[ids[0]].index, policy)
     keys = Keys(args.namespace)
     with open_session(zenoh_args_from(args)) as session:
+        free = not args.clock.lockstep
         if len(ids) == 1:
-            _fly(session, keys, sc, args.seed, uavs[ids[0]], policy, stop)
+            _fly(session, keys, sc, args.seed, uavs[ids[0]], policy, stop, free)
             return 0
         # an agent host: one session, one thread per UAV; the first that fails stops the others
         failed: list[BaseException] = []
 
         def fly(uav) -> None:
             try:
-                _fly(session, keys, sc, args.seed, uav, policy, stop)
+                _fly(session, keys, sc, args.seed, uav, policy, stop, free)
             except BaseException as exc:  # reported, then the whole host stops
                 _LOG.exception("%s: agent failed: %s", uav.id, exc)
                 failed.append(exc)
@@ -82,8 +86,10 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     return 1 if failed else 0
 
 
-def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event) -> None:
-    """One UAV's agent on ``session`` until the run ends (then its summary, and it waits for ``stop``)."""
+def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, free: bool = False) -> None:
+    """One UAV's agent on ``session`` until the run ends (then its summary, and it waits for ``stop``).
+    ``free``: the world is free-running (module docstring): a tick with a later one already complete is
+    fused, not decided on."""
     from swarm.step.landing import LandingAgent, LandingInputs, Rates
     from swarm.transport import landing_wire as wire
     from swarm.transport.messages import DropCounter, Event, Gnss, Imu, MessageError, Uwb, Vision
@@ -156,7 +162,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event) 
     subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
     token = declare_liveliness(session, keys, "agent", uid)
     print_ready("agent", uid)
-    n_modes = 0
+    n_modes = skipped = 0
     while not stop.is_set():
         with cond:
             k = state["k"]
@@ -164,8 +170,17 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event) 
                 cond.wait(0.05)
             if stop.is_set() or not complete(k):  # stopped, or the run ended
                 break
+            # free-running and behind: the ticks before the newest complete one would be flown before their
+            # commands came; they are fused, and the newest decided on
+            stale = []
+            while free and complete(k + 1):
+                stale.append(inputs(k))
+                k += 1
             inp = inputs(k)
             state["k"] = k + 1
+        for old in stale:
+            agent.fuse(old)
+        skipped += len(stale)
         cmd = agent.tick(inp)
         out, n_modes = wire.agent_tick(keys, uid, agent, cmd, n_modes)
         for key, payload in out:
@@ -173,7 +188,8 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event) 
     if state["ended"]:
         key, payload = wire.agent_summary(keys, uid, agent)
         pub[key].put(payload)
-        _LOG.info("%s: run ended: %s", uid, agent.outcome()["final_mode"])
+        _LOG.info("%s: run ended: %s (%d ticks fused without a decision, behind the world)", uid,
+                  agent.outcome()["final_mode"], skipped)  # fmt: skip
         stop.wait()
     token.undeclare()
 

@@ -46,7 +46,7 @@ VISION_COUNTS = ("features_accepted", "pose_accepted")
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from swarm.args import add_world_timeouts, count, positive_float
-    from swarm.transport.process import add_process_arguments
+    from swarm.transport.process import _clock_arg, add_process_arguments
 
     p = sub.add_parser(
         "launch",
@@ -88,6 +88,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="agent hosts: N vehicles' agents in one process (one Zenoh session), as ROS 2 component "
         "containers host nodes; keys and liveliness stay per vehicle, a lost host restarts its vehicles "
         "(default 1: one process per vehicle)",
+    )  # fmt: skip
+    g.add_argument(
+        "--pace", type=_clock_arg, default=None, metavar="realtime|scaled:N",
+        help="a landing scenario: a lockstep run (every command waited for, so it equals swarm sim) never "
+        "ahead of this wall clock, to watch it; --clock realtime or scaled:N alone is free-running",
     )  # fmt: skip
     add_world_timeouts(g)
     p.set_defaults(func=run)
@@ -240,6 +245,11 @@ def run(args: argparse.Namespace) -> int:
         from swarm.cli.launch_landing import run_landing_launch
 
         return run_landing_launch(args)
+    if args.pace is not None:
+        raise ConfigError(
+            "--pace: a landing scenario's lockstep pacing; a docking swarm runs --clock lockstep as fast as "
+            "it can, or free-running at --clock realtime or scaled:N"
+        )
 
     from swarm.cli.sim import print_summary
     from swarm.cli.supervisor import Child, Supervisor

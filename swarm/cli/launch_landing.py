@@ -13,12 +13,15 @@ serves (it prints ``dashboard on <url>``), so that it shows the whole run; after
 up for it until Ctrl-C or ``--timeout`` (``--until-docked``: exit when the run ends, as headless). A
 dashboard that exits is reported and the run goes on without it.
 
-``--clock realtime`` or ``scaled:N`` paces the lockstep to the wall clock (to watch the landing): the world
-still waits for every command, so the run still equals ``swarm sim``.
+``--clock lockstep --pace realtime`` (or ``scaled:N``) paces the lockstep to the wall clock (to watch the
+landing): the world still waits for every command, so the run still equals ``swarm sim``. ``--clock
+realtime`` or ``scaled:N`` alone is free-running, as a docking swarm's: the world steps at the wall clock,
+each UAV flies the newest command that has come (:mod:`swarm.world.landing`), and the summary gives each
+UAV's late ticks.
 
 ``--vehicles-per-process N`` runs N UAVs' agents in one process (an agent host, as for a docking swarm).
 
-Not yet for a landing: ``--secure``, a free-running clock that skips a late agent, restarts,
+Not yet for a landing: ``--secure``, restarts,
 run controls and faults from the dashboard.
 """
 
@@ -32,6 +35,7 @@ import threading
 import time
 
 from swarm.errors import ConfigError
+from swarm.transport.process import check_pace
 
 _LOG = logging.getLogger("swarm.launch")
 
@@ -43,6 +47,7 @@ def _refuse(args: argparse.Namespace) -> None:
         raise ConfigError("--agents: a landing scenario lists its UAVs ([[fleet]] in the file)")
     if args.repeat:
         raise ConfigError("--repeat: not yet for a landing scenario")
+    check_pace(args.clock, args.pace)
 
 
 def _start_dashboard(args, endpoint: str, sup, Child, stop: threading.Event) -> None:
@@ -137,12 +142,13 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                     name = f"agent/{host[0]}" if n == 1 else f"agents/{'+'.join(host)}"
                     sup.start(Child(name, ["agents.landing", "--id", ",".join(host), *common]))
                 world = ["swarm.world.landing", "--clock", str(args.clock),
+                         *(["--pace", str(args.pace)] if args.pace is not None else []),
                          "--step-timeout", str(args.step_timeout),
                          "--start-timeout", str(args.start_timeout), *common]  # fmt: skip
                 sup.start(Child("world", world))
                 print(
                     f"swarm up: world and {len(ids)} landing agents in {-(-len(ids) // n)} processes, "
-                    f"seed {args.seed}, clock {_clock_name(args.clock)}",
+                    f"seed {args.seed}, clock {_clock_name(args.clock, args.pace)}",
                     flush=True,
                 )
                 deadline = None if args.timeout is None else wall0 + args.timeout
@@ -180,6 +186,8 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                         uavs[uid] = landing_summary(
                             sc, policy, args.seed, w, got["summaries"][uid], w["end_tick"], wall
                         )
+                        if "late_ticks" in w:  # free-running: ticks flown on an older command
+                            uavs[uid]["late_ticks"] = int(w["late_ticks"])
                     result = {
                         "scenario": sc.name,
                         "policy": policy,
@@ -195,9 +203,14 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                         print(f"[{uid}]", end=" ")
                         print_landing(r)
                     n_ok, sim_s = result["landed"], result["sim_time_s"]
-                    how = _clock_name(args.clock)
+                    how = _clock_name(args.clock, args.pace)
                     print(f"{n_ok} of {len(ids)} UAVs landed on their pads in {sim_s:.1f} s simulated "
                           f"({wall:.1f} s of wall time, {how} over Zenoh)", flush=True)  # fmt: skip
+                    late = {u: r["late_ticks"] for u, r in uavs.items() if "late_ticks" in r}
+                    if late:
+                        ticks = max(1, int(end_data["ticks"]))
+                        print("late ticks (flown on an older command): " + ", ".join(
+                            f"{u} {n} ({n / ticks:.1%})" for u, n in late.items()), flush=True)  # fmt: skip
                     if args.json is not None:
                         args.json.write_text(json.dumps(result, indent=1))
                 if not args.headless and not args.until_docked and got["run_end"] is not None:
@@ -219,5 +232,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     return 0 if ok else 1
 
 
-def _clock_name(clock) -> str:
-    return "lockstep" if clock.lockstep else f"lockstep paced at {clock}"
+def _clock_name(clock, pace=None) -> str:
+    if not clock.lockstep:
+        return f"free-running at {clock}"
+    return "lockstep" if pace is None else f"lockstep paced at {pace}"

@@ -355,7 +355,15 @@ class LandingAgent:
         self.series = _Series()
 
     def tick(self, inp: LandingInputs, truth_p=None) -> LandingCommand:
-        """Step 2 (module docstring); ``truth_p``, the true position (in process only), goes to the series."""
+        """Step 2 (module docstring): :meth:`fuse` the tick's samples, then :meth:`decide`; ``truth_p``, the
+        true position (in process only), goes to the series."""
+        self.fuse(inp)
+        return self.decide(inp, truth_p)
+
+    def fuse(self, inp: LandingInputs) -> None:
+        """The filter's half of a tick: the IMU sample, then the range, the fix and the pad's pose from the
+        camera's corners (PnP). A free-running agent that has fallen behind fuses the ticks it missed with
+        this alone and decides only on the newest (:mod:`agents.landing`)."""
         sc, filt, t = self.sc, self.filt, inp.t
         filt.imu(t - self.dt, inp.gyro, inp.acc)
         if inp.uwb is not None:
@@ -374,6 +382,10 @@ class LandingAgent:
                     self.pad_seen = t
                     self.detections += 1
                     self.nis.append(float(filt.last_pad_d2[0]) / 3.0)
+
+    def decide(self, inp: LandingInputs, truth_p=None) -> LandingCommand:
+        """The guidance and control half of a tick, on the filter's estimate after :meth:`fuse`."""
+        filt, t = self.filt, inp.t
         p_est, v_est = filt.p_nav[0].copy(), filt.v_nav[0].copy()
         sigma_h = math.sqrt(max(np.linalg.eigvalsh(filt.P[0, 0:2, 0:2])))
         d = math.sqrt(float(np.mean(self.nis))) if self.nis else 0.0

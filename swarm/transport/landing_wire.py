@@ -125,9 +125,14 @@ def run_start(keys: Keys, sc, seed: int, policy: str, ids: list[str], clock: str
     return keys.world_event(), encode(Event(0.0, "run_start", data))
 
 
-def run_end(keys: Keys, world, k: int, reason: str, wall_s: float) -> Wire:
-    """The world's ``run_end`` (each UAV's outcome) and its ``stopped`` clock."""
+def run_end(
+    keys: Keys, world, k: int, reason: str, wall_s: float, late: dict[str, int] | None = None
+) -> Wire:
+    """The world's ``run_end`` (each UAV's outcome) and its ``stopped`` clock; a free-running world adds each
+    UAV's ``late_ticks`` (ticks whose command had not come by the tick's wall time)."""
     outcome = {uid: {**world.outcome(uid), "end_tick": world.uavs[uid].end_k} for uid in world.uavs}
+    for uid, n in (late or {}).items():
+        outcome[uid]["late_ticks"] = n
     t = k * world.sc.dt_s
     data = {"reason": reason, "ticks": k, "wall_s": wall_s, "uavs": outcome}
     return [

@@ -82,6 +82,18 @@ class ClockSpec:
         return self.mode if self.mode != "scaled" else f"scaled:{self.factor:g}"
 
 
+def check_pace(clock: ClockSpec, pace: ClockSpec | None) -> None:
+    """``--pace`` (a landing swarm) paces a lockstep run to realtime or scaled:N; ConfigError naming it
+    otherwise."""
+    if pace is None:
+        return
+    if pace.lockstep:
+        raise ConfigError("--pace must be realtime or scaled:N (the wall clock a lockstep run keeps to), "
+                          "got lockstep")  # fmt: skip
+    if not clock.lockstep:
+        raise ConfigError(f"--pace {pace} paces a lockstep run; --clock {clock} is free-running already")
+
+
 def _clock_arg(text: str) -> ClockSpec:
     try:
         return ClockSpec.parse(text)
@@ -149,9 +161,16 @@ def declare_reliable(session: zenoh.Session, key: str, express: bool = True) -> 
     )
 
 
+_READY_LOCK = threading.Lock()
+
+
 def print_ready(role: str, process_id: str) -> None:
-    """The ready line ``<role> <id> ready`` on stdout, flushed."""
-    print(f"{role} {process_id} ready", flush=True)
+    """The ready line ``<role> <id> ready`` on stdout, flushed: one write under a lock, so that the agents of
+    an agent host, each on its thread, never interleave their lines (``print`` writes the text and the
+    newline apart: two threads made ``agent uav3 readyagent uav4 ready``)."""
+    with _READY_LOCK:
+        sys.stdout.write(f"{role} {process_id} ready\n")
+        sys.stdout.flush()
 
 
 def install_stop_signals(stop: threading.Event) -> dict[int, object]:

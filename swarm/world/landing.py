@@ -11,10 +11,13 @@ one of the landing modes), holds it, and steps on. When every UAV is done (lande
 at the abort height) it publishes ``run_end`` on ``world/event`` with each UAV's outcome and a ``stopped``
 clock, and exits 0. It waits for every UAV's agent (liveliness ``alive/agent/<id>``) before the first tick.
 
-``--clock lockstep`` (the default) steps as fast as the agents answer; ``realtime`` and ``scaled:N`` pace the
-same lockstep to the wall clock (never more than ``N`` times real time, to watch it on the dashboard): the
-world still waits for every command, so the run is still ``swarm sim``'s, and a slow agent slows the run
-rather than being skipped (the docking world's free-running clocks skip; a landing's do not yet).
+``--clock lockstep`` (the default) steps as fast as the agents answer: the run is ``swarm sim``'s. With
+``--pace`` a lockstep world also never runs ahead of the wall clock (at ``realtime`` or ``scaled:N``, to watch
+the landing on the dashboard), still waiting for every command. ``--clock realtime`` or ``scaled:N`` alone is
+a free-running world, as the docking world is: tick ``k`` is stepped at its wall time whatever the agents
+did; each UAV flies the newest command it has (a command of tick ``k`` that comes after tick ``k``'s wall
+time is late: the rotors keep the previous one, as a flight controller's mixer keeps its last setpoint), and
+``run_end`` counts each UAV's late ticks. A slow agent then costs its UAV accuracy, not the swarm its pace.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import sys
 import threading
 import time
 
-from swarm.transport.process import print_ready, process_main
+from swarm.transport.process import check_pace, print_ready, process_main
 
 _LOG = logging.getLogger("swarm.world.landing")
 DESCRIPTION = "The landing world: quadrotor truth and sensors of every UAV, lockstep over Zenoh."
@@ -33,13 +36,16 @@ DESCRIPTION = "The landing world: quadrotor truth and sensors of every UAV, lock
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from swarm.args import positive_float
-    from swarm.transport.process import add_process_arguments
+    from swarm.transport.process import _clock_arg, add_process_arguments
 
     add_process_arguments(p)
     p.add_argument("--step-timeout", type=positive_float("--step-timeout"), default=30.0, metavar="S",
                    help="give up when an agent's command of a tick has not come after this long")  # fmt: skip
     p.add_argument("--start-timeout", type=positive_float("--start-timeout"), default=60.0, metavar="S",
                    help="give up when the agents are not all up after this long")  # fmt: skip
+    p.add_argument("--pace", type=_clock_arg, default=None, metavar="CLOCK",
+                   help="a lockstep world paced to this clock (realtime or scaled:N): every command waited "
+                        "for, never ahead of the wall clock")  # fmt: skip
 
 
 def run(args: argparse.Namespace, stop: threading.Event) -> int:
@@ -60,6 +66,7 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
         zenoh_args_from,
     )
 
+    check_pace(args.clock, args.pace)
     sc = load_landing(args.scenario, dict(parse_override(o) for o in args.overrides))
     policy = args.policy or sc.policy
     keys = Keys(args.namespace)
@@ -116,12 +123,44 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
         k = 0
         t_wall = time.monotonic()
         reason = "done"
+        free = not args.clock.lockstep
+        pace = args.clock if free else args.pace
+        held: dict[str, LandingCommand] = {}  # free-running: the command each UAV's rotors have
+        late = dict.fromkeys(ids, 0)
         for k in range(1, n_ticks + 1):
             inputs = world.step(k)
             if not inputs:
                 k -= 1
                 break
             put(wire.world_tick(keys, world, k, inputs, args.seed))
+            if free:  # until tick k's wall time: the newest command come by then is flown, the rest is late
+                due = t_wall + k * dt / pace.factor
+                with cond:
+                    while not stop.is_set():
+                        left = due - time.monotonic()
+                        if left <= 0:
+                            break
+                        cond.wait(left)
+                    newest = _newest(commands, k)
+                if stop.is_set():
+                    reason = "stopped"
+                    break
+                with cond:
+                    gone = sorted(uid for uid in inputs if uid not in alive)
+                if gone:  # nobody flies these UAVs any more: the run ends (a lockstep world would time out)
+                    reason = "agent_missing"
+                    _LOG.error("tick %d: agent_missing (%s lost)", k, ", ".join(gone))
+                    break
+                for uid in inputs:
+                    cmd = newest.get(uid)
+                    if cmd is None or cmd.tick < k:
+                        late[uid] += 1
+                    if cmd is not None and (uid not in held or cmd.tick > held[uid].k):
+                        held[uid] = LandingCommand(cmd.tick, cmd.actuators, LandingMode(cmd.mode))
+                    if uid in held:  # (before its first command a UAV keeps its hover trim)
+                        h = held[uid]
+                        world.hold(uid, LandingCommand(k, h.u, h.mode))
+                continue
             step_deadline = time.monotonic() + args.step_timeout
             with cond:
                 while not all((uid, k) in commands for uid in inputs):
@@ -139,19 +178,30 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
                 break
             for uid, cmd in got.items():
                 world.hold(uid, LandingCommand(k, cmd.actuators, LandingMode(cmd.mode)))
-            if not args.clock.lockstep:  # paced: never ahead of the wall clock (and still every command)
-                left = t_wall + k * dt / args.clock.factor - time.monotonic()
+            if pace is not None:  # paced lockstep: never ahead of the wall clock (and still every command)
+                left = t_wall + k * dt / pace.factor - time.monotonic()
                 if left > 0:
                     stop.wait(left)
         for uid in ids:
             if not world.uavs[uid].done:
                 world.uavs[uid].end_k = k
         wall = time.monotonic() - t_wall
-        put(wire.run_end(keys, world, k, reason, wall))
+        put(wire.run_end(keys, world, k, reason, wall, late if free else None))
         _LOG.info("run ended (%s) at tick %d, %.1f s simulated in %.1f s", reason, k, k * dt, wall)
         time.sleep(0.2)  # let the last messages leave before the session closes
         _ = _token
     return 0 if reason == "done" else 1
+
+
+def _newest(commands: dict, k: int) -> dict:
+    """Take every command of tick ``k`` or earlier out of ``commands`` (``(uid, tick) -> Command``): the
+    newest of each UAV."""
+    newest: dict = {}
+    for key in [key for key in commands if key[1] <= k]:
+        cmd = commands.pop(key)
+        if key[0] not in newest or cmd.tick > newest[key[0]].tick:
+            newest[key[0]] = cmd
+    return newest
 
 
 def main(argv: list[str] | None = None) -> int:
