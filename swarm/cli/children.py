@@ -53,11 +53,6 @@ def check_record(args: argparse.Namespace) -> None:
         raise ConfigError(f"--record: the recording's name must end in .mcap, got {str(rec)!r}")
     if not rec.resolve().parent.is_dir():
         raise ConfigError(f"--record: no such directory {str(rec.parent)!r}")
-    if getattr(args, "secure", False):
-        raise ConfigError(
-            "--record and --secure: the recorder would need its own identity and ACL rule; record a secure "
-            "swarm with `swarm record` and a certificate of your own"
-        )
 
 
 class LauncherRecorder:
@@ -65,7 +60,9 @@ class LauncherRecorder:
     :class:`~swarm.transport.recording.Recorder` on a thread of the launcher), as rosbag2's recorder runs as
     a component inside a ROS 2 container: every sample that the router forwards reaches it inside the
     process, where a ``swarm record`` child costs one more hop over TCP per sample (the router's sending,
-    the child's Zenoh receiving) and a Python interpreter of its own (``BENCHMARKS.md``, "Recording").
+    the child's Zenoh receiving) and a Python interpreter of its own (``BENCHMARKS.md``, "Recording"). In a
+    ``--secure`` swarm it needs no identity of its own: it is the router, and it records what the router's
+    access control let in.
     Kept across runs (``--repeat``); :meth:`close` finishes the file (its summary and indexes) once the
     samples still in flight are in, before the session closes. Its channel holds
     :data:`~swarm.transport.recording.FIFO_DEPTH` samples (~19 s of a 4-pair swarm): a recorder that far

@@ -30,6 +30,7 @@ from swarm.scenario import load_scenario
 from swarm.sim.docking import run_docking
 from swarm.transport.keys import AGENT_KINDS, Keys
 from swarm.transport.messages import Clock, Command, Imu, decode, encode
+from swarm.transport.recording import read_recording
 from swarm.transport.security import (
     ACL_MESSAGES,
     SecureMaterial,
@@ -488,7 +489,8 @@ def test_secure_launch_docks_as_the_simulation_while_intruders_are_denied_by_zen
 
     with Procs() as procs:
         args = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--secure",
-                "--until-docked", "--seed", str(SEED), "--namespace", ns, "--json", str(out)]  # fmt: skip
+                "--until-docked", "--seed", str(SEED), "--namespace", ns, "--json", str(out),
+                "--record", str(tmp_path / "secure.mcap")]  # fmt: skip
         proc = procs.start(args, env=env)
         d = Path(
             proc.wait_for_line(r"^swarm secure: certificates and Zenoh configs in (\S+) ", 60.0).group(1)
@@ -549,6 +551,15 @@ def test_secure_launch_docks_as_the_simulation_while_intruders_are_denied_by_zen
     assert matched and not any(matched)  # its session never hears of the world's subscriber
     assert "Traceback" not in text
     assert not d.exists()  # the launcher removed its certificates and keys
+    # --record in a secure swarm: the recorder is the router's own session; it has what the access control
+    # let in (every chaser imu the monitor got, in the same order), never an intruder's message
+    msgs, _ = read_recording(tmp_path / "secure.mcap")
+    rec_imu = [decode(m.payload, Imu) for m in msgs if m.key == keys.imu("chaser")]
+    rec_cmd = [decode(m.payload, Command) for m in msgs if m.key == keys.command("chaser")]
+    assert [m.tick for m in rec_imu] == [m.tick for m in imus]
+    assert len(rec_cmd) == len(cmds)
+    assert not any(tuple(m.gyro_body) == HOSTILE_GYRO for m in rec_imu)
+    assert not any(tuple(m.force_body_n) == HOSTILE_FORCE for m in rec_cmd)
 
 
 def test_a_world_killed_in_a_secure_run_resumes_with_its_identity_and_the_run_equals_the_simulation(
