@@ -23,6 +23,14 @@ def router_args(args: argparse.Namespace, listen: list[str]):
     )  # fmt: skip
 
 
+def config_args(args: argparse.Namespace, identity: str) -> list[str]:
+    """``--zenoh-config`` of one child: its own file in a ``--secure`` swarm, else the launcher's flag."""
+    material = getattr(args, "secure_material", None)
+    if material is not None:
+        return ["--zenoh-config", str(material.config_file(identity))]
+    return ["--zenoh-config", args.zenoh_config] if args.zenoh_config else []
+
+
 def client_endpoint(listen: str) -> str:
     """The endpoint a local child connects to for a listen endpoint (``0.0.0.0``/``[::]`` -> loopback)."""
     proto, _, addr = listen.partition("/")

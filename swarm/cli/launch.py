@@ -33,7 +33,14 @@ import threading
 import time
 from pathlib import Path
 
-from swarm.cli.children import check_record, child_args, client_endpoint, router_args, start_recorder
+from swarm.cli.children import (
+    check_record,
+    child_args,
+    client_endpoint,
+    config_args,
+    router_args,
+    start_recorder,
+)
 from swarm.errors import ConfigError, SwarmError
 from swarm.private_dirs import private_dir
 from swarm.step.outcome import chaser_summary, run_summary
@@ -226,14 +233,6 @@ def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
     return out
 
 
-def _config_args(args: argparse.Namespace, identity: str) -> list[str]:
-    """``--zenoh-config`` of one child: its own file in a ``--secure`` swarm, else the launcher's flag."""
-    material = getattr(args, "secure_material", None)
-    if material is not None:
-        return ["--zenoh-config", str(material.config_file(identity))]
-    return ["--zenoh-config", args.zenoh_config] if args.zenoh_config else []
-
-
 def run(args: argparse.Namespace) -> int:
     import zenoh
 
@@ -411,23 +410,23 @@ def _start_run(args, sc, seed, endpoint, sup, Child):
     common = child_args(args, endpoint, seed)
     from swarm.transport.security import agent_name
 
-    mothership = ["mothership", *common, *_config_args(args, "mothership")]
+    mothership = ["mothership", *common, *config_args(args, "mothership")]
     sup.start(Child("mothership", mothership, restartable=True, rejoin_args=["--rejoin"]))
     for name, vids in _hosts(args, sc).items():
         agent = ["agents", "--id", ",".join(vids), "--clock", str(args.clock), *common,
-                 *_config_args(args, agent_name(vids[0]))]  # fmt: skip
+                 *config_args(args, agent_name(vids[0]))]  # fmt: skip
         sup.start(Child(name, agent, restartable=True, rejoin_args=["--rejoin"]))
     world = ["swarm.world", "--clock", str(args.clock), "--step-timeout", str(args.step_timeout),
              "--start-timeout", str(args.start_timeout),
              "--checkpoint-dir", str(args.checkpoint_dir)]  # fmt: skip
-    world += [*common, *_config_args(args, "world")]
+    world += [*common, *config_args(args, "world")]
     sup.start(Child("world", world, restartable=True, rejoin_args=["--resume"]))
     if not args.headless and not (sup.children.get("dashboard") and sup.children["dashboard"].running):
         dash = [str(args.scenario), "--agents", str(args.agents), "--namespace", args.namespace,
                 "--port", str(args.dashboard_port), "--mode", "client", "--connect", endpoint]  # fmt: skip
         for o in args.overrides:
             dash += ["--set", o]
-        dash += _config_args(args, "dashboard")
+        dash += config_args(args, "dashboard")
 
         def on_line(line: str) -> None:
             if line.startswith("dashboard listening on "):

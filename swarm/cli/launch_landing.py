@@ -21,7 +21,10 @@ UAV's late ticks.
 
 ``--vehicles-per-process N`` runs N UAVs' agents in one process (an agent host, as for a docking swarm).
 
-Not yet for a landing: ``--secure``, restarts,
+``--secure`` gives every process its own certificate and the router an access control list of what each
+may publish and subscribe (:mod:`swarm.transport.security`, mission ``landing``), as for a docking swarm.
+
+Not yet for a landing: restarts,
 run controls and faults from the dashboard.
 """
 
@@ -41,8 +44,9 @@ _LOG = logging.getLogger("swarm.launch")
 
 
 def _refuse(args: argparse.Namespace) -> None:
-    if getattr(args, "secure", False):
-        raise ConfigError("--secure: not yet for a landing scenario (its processes have no ACL rules)")
+    if getattr(args, "secure", False) and args.vehicles_per_process > 1:
+        raise ConfigError("--vehicles-per-process > 1 and --secure: an agent host would need every hosted "
+                          "UAV's identity; run secure swarms with one process per UAV")  # fmt: skip
     if args.agents != 1:
         raise ConfigError("--agents: a landing scenario lists its UAVs ([[fleet]] in the file)")
     if args.repeat:
@@ -64,6 +68,9 @@ def _start_dashboard(args, endpoint: str, sup, Child, stop: threading.Event) -> 
             "--mode", "client", "--connect", endpoint]  # fmt: skip
     for o in args.overrides:
         dash += ["--set", o]
+    from swarm.cli.children import config_args
+
+    dash += config_args(args, "dashboard")
     sup.start(Child("dashboard", ["dashboard", *dash], on_line=on_line))
     deadline = time.monotonic() + args.start_timeout
     while not ready.wait(0.1):
@@ -82,7 +89,14 @@ def _hold(args: argparse.Namespace, stop: threading.Event, wall0: float) -> None
 
 
 def run_landing_launch(args: argparse.Namespace) -> int:
-    from swarm.cli.children import check_record, child_args, client_endpoint, router_args, start_recorder
+    from swarm.cli.children import (
+        check_record,
+        child_args,
+        client_endpoint,
+        config_args,
+        router_args,
+        start_recorder,
+    )
     from swarm.cli.sim import print_landing
     from swarm.cli.supervisor import Child, Supervisor
     from swarm.config import parse_override
@@ -99,6 +113,13 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     policy = args.policy or sc.policy
     keys = Keys(args.namespace)
     listen = list(args.listen) if args.listen else [free_loopback_endpoint()]
+    secure = getattr(args, "secure", False)
+    if secure:  # mutual TLS + Zenoh ACL (swarm.transport.security, mission "landing"): as a docking swarm
+        from swarm.transport.security import secure_listen
+
+        listen = secure_listen(
+            args.listen, args.zenoh_config, int(free_loopback_endpoint().rpartition(":")[2])
+        )
     zargs = router_args(args, listen)
     endpoint = client_endpoint(listen[0])
     stop = threading.Event()
@@ -108,7 +129,17 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     sup = Supervisor(max_restarts=0)
     wall0 = time.monotonic()
     result = None
+    args.secure_material = None
     try:
+        if secure:
+            from dataclasses import replace
+
+            from swarm.transport.security import SecureMaterial
+
+            args.secure_material = SecureMaterial(keys, ids, listen, mission="landing")
+            zargs = replace(zargs, config_file=str(args.secure_material.config_file("launcher")))
+            print(f"swarm secure: certificates and Zenoh configs in {args.secure_material.directory} "
+                  "(removed at exit)", flush=True)  # fmt: skip
         with open_session(zargs) as session:
             print(
                 f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",
@@ -140,11 +171,14 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                 for i in range(0, len(ids), n):
                     host = ids[i : i + n]
                     name = f"agent/{host[0]}" if n == 1 else f"agents/{'+'.join(host)}"
-                    sup.start(Child(name, ["agents.landing", "--id", ",".join(host), *common]))
+                    identity = f"agent-{host[0]}"  # (an agent host is refused with --secure above)
+                    agent = ["agents.landing", "--id", ",".join(host), *common, *config_args(args, identity)]
+                    sup.start(Child(name, agent))
                 world = ["swarm.world.landing", "--clock", str(args.clock),
                          *(["--pace", str(args.pace)] if args.pace is not None else []),
                          "--step-timeout", str(args.step_timeout),
-                         "--start-timeout", str(args.start_timeout), *common]  # fmt: skip
+                         "--start-timeout", str(args.start_timeout), *common,
+                         *config_args(args, "world")]  # fmt: skip
                 sup.start(Child("world", world))
                 print(
                     f"swarm up: world and {len(ids)} landing agents in {-(-len(ids) // n)} processes, "
@@ -222,6 +256,8 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                     recorder.close()
     finally:
         sup.stop_all()
+        if args.secure_material is not None:
+            args.secure_material.close()
         for s, h in previous.items():
             signal.signal(s, h)  # type: ignore[arg-type]
     if result is None:

@@ -93,13 +93,37 @@ def identities(vehicle_ids: Iterable[str]) -> tuple[str, ...]:
     return (*ROLES, *(agent_name(v) for v in vehicle_ids))
 
 
-def rights(keys: Keys, name: str) -> dict[str, tuple[str, ...]]:
-    """What identity ``name`` may send to the router: ACL message kind -> key expressions (wildcards
-    included, so a rule on ``<ns>/agent/*/imu`` covers every vehicle). Kinds not listed are denied.
-    ConfigError for a name that is not a swarm identity."""
+MISSIONS: tuple[str, ...] = ("docking", "landing")
+"""The swarms whose processes have rights: a docking swarm (world, mothership, agents) and a landing swarm
+(a landing world that also sends the ranges and the GNSS fixes, no mothership, landing agents)."""
+
+
+def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[str, ...]]:
+    """What identity ``name`` may send to the router in a ``mission`` swarm: ACL message kind -> key
+    expressions (wildcards included, so a rule on ``<ns>/agent/*/imu`` covers every vehicle). Kinds not
+    listed are denied. ConfigError for a name that is not a swarm identity or an unknown mission."""
+    if mission not in MISSIONS:
+        raise ConfigError(f"mission must be one of {', '.join(MISSIONS)}, got {mission!r}")
     ns = keys.namespace
     alive = (f"{ns}/alive/**",)
     watch = {"declare_liveliness_subscriber": alive, "liveliness_query": alive}
+    if mission == "landing" and name == "world":  # swarm.world.landing: every UAV's sensors, then its clock
+        return {
+            "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/uwb", "agent/*/gnss", "agent/*/vision",
+                                                "agent/*/truth", "world/clock", "world/event")),
+            "declare_subscriber": (keys.agent_all("command"),),
+            "liveliness_token": (f"{ns}/alive/world/*",),
+            **watch,
+        }  # fmt: skip
+    if mission == "landing" and name.startswith("agent-") and len(name) > len("agent-"):  # agents.landing
+        uid = check_id(name[len("agent-") :], "agent id of identity")
+        return {
+            "put": (keys.estimate(uid), keys.guidance(uid), keys.command(uid), keys.event(uid)),
+            "declare_subscriber": (keys.imu(uid), keys.uwb(uid), keys.gnss(uid), keys.vision(uid),
+                                   keys.world_event()),
+            "liveliness_token": (keys.alive("agent", uid),),
+            **watch,
+        }  # fmt: skip
     if name == "world":
         return {
             "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/vision", "agent/*/truth",
@@ -145,11 +169,11 @@ def rights(keys: Keys, name: str) -> dict[str, tuple[str, ...]]:
     raise ConfigError(f"security identity must be one of {', '.join(ROLES)} or agent-<id>, got {name!r}")
 
 
-def access_control(keys: Keys, names: Sequence[str]) -> dict:
+def access_control(keys: Keys, names: Sequence[str], mission: str = "docking") -> dict:
     """Zenoh's ``access_control`` configuration section (for the router) that gives each identity in
-    ``names`` exactly its :func:`rights` on what the router receives, lets the router forward anything
-    within the namespace to them, and denies everything else, including every message of a certificate
-    whose common name is not in ``names``."""
+    ``names`` exactly its :func:`rights` (in a ``mission`` swarm) on what the router receives, lets the
+    router forward anything within the namespace to them, and denies everything else, including every
+    message of a certificate whose common name is not in ``names``."""
     names = tuple(dict.fromkeys(names))
     rules: list[dict] = [{
         "id": "forward", "permission": "allow", "flows": ["egress"], "messages": list(ACL_MESSAGES),
@@ -159,7 +183,7 @@ def access_control(keys: Keys, names: Sequence[str]) -> dict:
     policies: list[dict] = [{"id": "forward", "rules": ["forward"], "subjects": ["swarm"]}]
     for name in names:
         own = []
-        for kind, key_exprs in rights(keys, name).items():
+        for kind, key_exprs in rights(keys, name, mission).items():
             rule_id = f"{name}:{kind}"
             rules.append({
                 "id": rule_id, "permission": "allow", "flows": ["ingress"], "messages": [kind],
@@ -316,7 +340,9 @@ class SecureMaterial:
     router's listen hosts to every certificate's ``subjectAltName``. SwarmError if ``openssl`` fails;
     ConfigError if the temporary directory would be inside the source tree (``TMPDIR`` pointing there)."""
 
-    def __init__(self, keys: Keys, vehicle_ids: Iterable[str], listen: Iterable[str] = ()) -> None:
+    def __init__(
+        self, keys: Keys, vehicle_ids: Iterable[str], listen: Iterable[str] = (), mission: str = "docking"
+    ) -> None:
         self.keys = keys
         self.names = identities(vehicle_ids)
         self.hosts = (*DEFAULT_HOSTS, *_listen_hosts(listen))
@@ -329,7 +355,7 @@ class SecureMaterial:
                 )
             os.chmod(self.directory, 0o700)
             make_ca(self.directory)
-            acl = access_control(keys, self.names)
+            acl = access_control(keys, self.names, mission)
             for name in self.names:
                 issue_certificate(self.directory, name, self.hosts)
                 config = router_config(self.directory, name, acl) if name == "launcher" else None

@@ -12,11 +12,13 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import msgpack
 import numpy as np
 import pytest
 
+from swarm.errors import SwarmError
 from swarm.landing_scenario import load_landing
 from swarm.sim.landing import run_landing_fleet
 from swarm.transport.keys import Keys
@@ -197,11 +199,49 @@ def test_a_free_running_landing_world_keeps_the_wall_clock_and_a_stalled_agent_c
     assert late["uav2"] <= 1.5 * stalled_ticks + max(others), late
 
 
+def test_a_secure_landing_swarm_lands_as_swarm_sim_with_every_process_on_its_own_certificate(tmp_path):
+    """``--secure``: mutual TLS and the router's access control (mission ``landing``: the landing world sends
+    every UAV's sensors, each landing agent its own command, estimate, guidance and events); the lockstep
+    run still equals ``swarm sim`` (a right missing would stall it), a client without the swarm's
+    certificate cannot connect, and the certificates are gone after the run."""
+    from agents.landing import _warm_up
+
+    sc = load_landing("landing-swarm")
+    _warm_up(sc, 0, 0, sc.policy)
+    ns, out = f"secland-{free_port()}", tmp_path / "secure.json"
+    args = [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--headless", "--secure",
+            "--seed", "0", "--namespace", ns, "--json", str(out), "--timeout", "400"]  # fmt: skip
+    with Procs() as procs:
+        proc = procs.start(args)
+        d = Path(
+            proc.wait_for_line(r"^swarm secure: certificates and Zenoh configs in (\S+) ", 60.0).group(1)
+        )
+        endpoint = proc.wait_for_line(r"^swarm listening on (tls/\S+) ", 60.0).group(1)
+        proc.wait_for_line(r"^swarm up:", 300.0)
+        with pytest.raises(SwarmError, match="Unable to connect"):  # plain TCP to the TLS listener
+            with open_session(ZenohArgs(mode="client", connect=(endpoint.replace("tls/", "tcp/"),))):
+                pass
+        code = proc.wait(480.0)
+        text = proc.output()
+    assert code == 0, text
+    assert "Traceback" not in text
+    got = json.loads(out.read_text())
+    want = run_landing_fleet(sc, seed=0, record_series=False)
+    for uid, w in want["uavs"].items():
+        g = got["uavs"][uid]
+        for key in ("landed", "landing_error_m", "landing_time_s", "energy_j", "modes"):
+            assert g[key] == w[key], (uid, key)
+    assert not d.exists()  # the launcher removed its certificates and keys
+
+
 @pytest.mark.parametrize(
     "extra, expected",
     [
         (["--headless", "--agents", "2"], "--agents: a landing scenario lists its UAVs"),
-        (["--headless", "--secure"], "--secure: not yet for a landing scenario"),
+        (
+            ["--headless", "--secure", "--vehicles-per-process", "2"],
+            "--vehicles-per-process > 1 and --secure",
+        ),
         (["--headless", "--pace", "lockstep"], "--pace must be realtime or scaled:N"),
         (["--headless", "--clock", "realtime", "--pace", "scaled:2"], "--clock realtime is free-running"),
     ],
