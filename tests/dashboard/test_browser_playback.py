@@ -22,6 +22,7 @@ import cv2
 import msgpack
 import numpy as np
 import pytest
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from dashboard.app import _frame_the_scene
 from swarm.scenario import load_scenario
@@ -65,9 +66,18 @@ def _seek(pg, t_s: float) -> None:
         "xpath=//label[text()='t [s]']/ancestor::div[contains(@class,'mantine-Flex-root')][1]"
         "//input[contains(@class,'NumberInput-input')]"
     )
-    field.fill(f"{t_s:g}", timeout=UI_TIMEOUT_MS)
-    field.press("Enter")
-    pg.get_by_text(f"t = {t_s:.2f} s of").first.wait_for(timeout=UI_TIMEOUT_MS)
+    # typed again if the dashboard has not said so after a while: on a loaded machine the page can still be
+    # re-rendering the field when it is first typed into, and the value is lost (a fresh-clone run saw it)
+    attempts = 3
+    for attempt in range(attempts):
+        field.fill(f"{t_s:g}", timeout=UI_TIMEOUT_MS)
+        field.press("Enter")
+        try:
+            pg.get_by_text(f"t = {t_s:.2f} s of").first.wait_for(timeout=UI_TIMEOUT_MS // attempts)
+            return
+        except PlaywrightTimeout:
+            if attempt == attempts - 1:
+                raise
 
 
 def _steady_screenshot(pg, path: Path) -> np.ndarray:
