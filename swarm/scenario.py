@@ -228,6 +228,12 @@ class Scenario:
         if not self.vehicles:
             raise ConfigError("vehicles must define at least one vehicle, got none")
         for vid, v in self.vehicles.items():
+            if v.kind == "quadrotor":  # a kind of its own runners, not (yet) a docking vehicle
+                raise ConfigError(
+                    f"vehicles.{vid}.kind must be one of {sorted(KINDS)}, got 'quadrotor': a quadrotor flies "
+                    'landing scenarios (mission = "landing": swarm/scenarios/landing.toml, '
+                    "swarm/landing_scenario.py), not docking ones"
+                )
             if v.kind not in KINDS:
                 raise ConfigError(f"vehicles.{vid}.kind must be one of {sorted(KINDS)}, got {v.kind!r}")
             if v.role == "chaser":

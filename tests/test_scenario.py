@@ -338,6 +338,9 @@ def test_a_vehicle_of_an_unknown_kind_is_named(tmp_path):
         ConfigError, match=r"vehicles\.chaser\.kind must be one of \['cubesat', 'ground'\], got 'boat'"
     ):
         load_variant(tmp_path, "vehicles.chaser", "kind", '"boat"')
+    # the quadrotor is a kind of the landing runners: the error says where it flies
+    with pytest.raises(ConfigError, match=r"got 'quadrotor': a quadrotor flies landing scenarios"):
+        load_variant(tmp_path, "vehicles.chaser", "kind", '"quadrotor"')
 
 
 def test_marker_cube_must_match_the_guidance_cube(tmp_path):
