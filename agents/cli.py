@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import threading
+from collections.abc import Callable
 
 DESCRIPTION = (
     "One vehicle's on-board software: subscribes its sensors (and its target's estimate), runs estimator, "
@@ -32,17 +33,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     from agents.process import AgentProcess
-    from swarm.transport.keys import check_id
     from swarm.transport.process import keys_from, scenario_from, zenoh_args
     from swarm.transport.session import open_session
 
-    ids = args.id.split(",")
-    for vid in ids:
-        check_id(vid, "--id")
-    if len(set(ids)) != len(ids):
-        from swarm.errors import ConfigError
-
-        raise ConfigError(f"--id names a vehicle twice: {args.id!r}")
+    ids = hosted_ids(args.id, "vehicle")
     sc = scenario_from(args)
     policy = args.policy or sc.policy
     stop = stop if stop is not None else threading.Event()
@@ -53,25 +47,40 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
         if len(procs) == 1:
             procs[0].run()
             return 0
-        return _host(procs, stop)
+        return run_host({p.id: p.run for p in procs}, stop)
 
 
-def _host(procs: list, stop: threading.Event) -> int:
-    """Run several agents in this process, each on its own thread; the first that fails stops the others
-    and the host exits 1 (its supervisor restarts all of its vehicles, which rejoin the run)."""
+def hosted_ids(text: str, noun: str) -> list[str]:
+    """``--id a,b,...``: the ids of the vehicles this process flies (several: an agent host), each a valid
+    id, none twice; ConfigError naming ``--id`` otherwise."""
+    from swarm.errors import ConfigError
+    from swarm.transport.keys import check_id
+
+    ids = text.split(",")
+    for vid in ids:
+        check_id(vid, "--id")
+    if len(set(ids)) != len(ids):
+        raise ConfigError(f"--id names a {noun} twice: {text!r}")
+    return ids
+
+
+def run_host(runs: dict[str, Callable[[], None]], stop: threading.Event) -> int:
+    """Run several agents in this process (an agent host), each ``runs[id]()`` on its own thread; the first
+    that fails stops the others and the host exits 1 (its supervisor restarts all of its vehicles, which
+    rejoin the run). Docking agents (:mod:`agents.process`) and landing agents (:mod:`agents.landing`)."""
     import logging
 
     failed: list[BaseException] = []
 
-    def run_one(proc) -> None:
+    def run_one(vid: str) -> None:
         try:
-            proc.run()
+            runs[vid]()
         except BaseException as exc:  # reported, then the whole host stops
-            logging.getLogger("agents").exception("%s: agent failed: %s", proc.id, exc)
+            logging.getLogger("agents").exception("%s: agent failed: %s", vid, exc)
             failed.append(exc)
             stop.set()
 
-    threads = [threading.Thread(target=run_one, args=(p,), name=f"agent-{p.id}", daemon=True) for p in procs]
+    threads = [threading.Thread(target=run_one, args=(v,), name=f"agent-{v}", daemon=True) for v in runs]
     for t in threads:
         t.start()
     for t in threads:

@@ -21,6 +21,7 @@ import argparse
 import logging
 import sys
 import threading
+from functools import partial
 
 import numpy as np
 
@@ -44,21 +45,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, stop: threading.Event) -> int:
+    from agents.cli import hosted_ids, run_host
     from swarm.config import parse_override
     from swarm.errors import ConfigError
     from swarm.landing_scenario import load_landing
-    from swarm.transport.keys import Keys, check_id
+    from swarm.transport.keys import Keys
     from swarm.transport.session import open_session, zenoh_args_from
 
     sc = load_landing(args.scenario, dict(parse_override(o) for o in args.overrides))
     uavs = {u.id: u for u in sc.uavs()}
-    ids = args.id.split(",")
+    ids = hosted_ids(args.id, "UAV")
     for uid in ids:
-        check_id(uid, "--id")
         if uid not in uavs:
             raise ConfigError(f"--id: no UAV {uid!r} in the scenario; it has {', '.join(uavs)}")
-    if len(set(ids)) != len(ids):
-        raise ConfigError(f"--id names a UAV twice: {args.id!r}")
     policy = args.policy or sc.policy
     _warm_up(sc, args.seed, uavs[ids[0]].index, policy)
     keys = Keys(args.namespace)
@@ -67,23 +66,9 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
         if len(ids) == 1:
             _fly(session, keys, sc, args.seed, uavs[ids[0]], policy, stop, free)
             return 0
-        # an agent host: one session, one thread per UAV; the first that fails stops the others
-        failed: list[BaseException] = []
-
-        def fly(uav) -> None:
-            try:
-                _fly(session, keys, sc, args.seed, uav, policy, stop, free)
-            except BaseException as exc:  # reported, then the whole host stops
-                _LOG.exception("%s: agent failed: %s", uav.id, exc)
-                failed.append(exc)
-                stop.set()
-
-        threads = [threading.Thread(target=fly, args=(uavs[u],), name=f"agent-{u}", daemon=True) for u in ids]
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join()
-    return 1 if failed else 0
+        # an agent host: one session, one thread per UAV (agents.cli.run_host)
+        flights = {u: partial(_fly, session, keys, sc, args.seed, uavs[u], policy, stop, free) for u in ids}
+        return run_host(flights, stop)
 
 
 def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, free: bool = False) -> None:

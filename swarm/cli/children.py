@@ -12,6 +12,35 @@ from swarm.errors import ConfigError
 _LOG = logging.getLogger("swarm.launch")
 
 
+def launch_listen(args: argparse.Namespace) -> list[str]:
+    """The launcher router's listen endpoints: ``--listen``, else a free loopback port; in a ``--secure``
+    swarm the TLS ones (:func:`swarm.transport.security.secure_listen`)."""
+    from swarm.transport.session import free_loopback_endpoint
+
+    if getattr(args, "secure", False):
+        from swarm.transport.security import secure_listen
+
+        free_port = int(free_loopback_endpoint().rpartition(":")[2])
+        return secure_listen(args.listen, args.zenoh_config, free_port)
+    return list(args.listen) if args.listen else [free_loopback_endpoint()]
+
+
+def secure_router(args: argparse.Namespace, keys, vehicle_ids, listen: list[str], zargs, mission: str):
+    """``--secure``: the swarm's certificates and Zenoh configurations (``args.secure_material``, whose
+    ``close`` the launcher owes), and the router's session arguments with the launcher's configuration (the
+    access control list of ``mission``). Without ``--secure``: ``zargs`` as they are."""
+    if not getattr(args, "secure", False):
+        return zargs
+    from dataclasses import replace
+
+    from swarm.transport.security import SecureMaterial
+
+    args.secure_material = SecureMaterial(keys, vehicle_ids, listen, mission=mission)
+    print(f"swarm secure: certificates and Zenoh configs in {args.secure_material.directory} "
+          "(removed at exit)", flush=True)  # fmt: skip
+    return replace(zargs, config_file=str(args.secure_material.config_file("launcher")))
+
+
 def router_args(args: argparse.Namespace, listen: list[str]):
     """The launcher's own Zenoh session: a router on ``listen`` with the launch flags' connect, config,
     scouting and lease."""
@@ -54,13 +83,10 @@ def child_args(args: argparse.Namespace, endpoint: str, seed: int) -> list[str]:
 
 
 def check_record(args: argparse.Namespace) -> None:
-    rec = getattr(args, "record", None)
-    if rec is None:
-        return
-    if rec.suffix != ".mcap":
-        raise ConfigError(f"--record: the recording's name must end in .mcap, got {str(rec)!r}")
-    if not rec.resolve().parent.is_dir():
-        raise ConfigError(f"--record: no such directory {str(rec.parent)!r}")
+    from swarm.transport.recording import check_mcap_path
+
+    if getattr(args, "record", None) is not None:
+        check_mcap_path(args.record, "--record")
 
 
 class LauncherRecorder:

@@ -38,7 +38,9 @@ from swarm.cli.children import (
     child_args,
     client_endpoint,
     config_args,
+    launch_listen,
     router_args,
+    secure_router,
     start_recorder,
 )
 from swarm.errors import ConfigError, SwarmError
@@ -53,7 +55,7 @@ VISION_COUNTS = ("features_accepted", "pose_accepted")
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from swarm.args import add_world_timeouts, count, positive_float
-    from swarm.transport.process import _clock_arg, add_process_arguments
+    from swarm.transport.process import add_process_arguments, clock_arg
 
     p = sub.add_parser(
         "launch",
@@ -97,7 +99,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "(default 1: one process per vehicle)",
     )  # fmt: skip
     g.add_argument(
-        "--pace", type=_clock_arg, default=None, metavar="realtime|scaled:N",
+        "--pace", type=clock_arg, default=None, metavar="realtime|scaled:N",
         help="a landing scenario: a lockstep run (every command waited for, so it equals swarm sim) never "
         "ahead of this wall clock, to watch it; --clock realtime or scaled:N alone is free-running",
     )  # fmt: skip
@@ -256,7 +258,6 @@ def run(args: argparse.Namespace) -> int:
     from swarm.transport.messages import Clock, DropCounter, Event, Guidance, encode
     from swarm.transport.process import scenario_from
     from swarm.transport.session import (
-        free_loopback_endpoint,
         open_session,
         subscribe_decoded,
         watch_liveliness,
@@ -267,14 +268,8 @@ def run(args: argparse.Namespace) -> int:
     check_record(args)
     keys = Keys(args.namespace)
     policy = args.policy or sc.policy
-    listen = list(args.listen) if args.listen else [free_loopback_endpoint()]
+    listen = launch_listen(args)  # (--secure: mutual TLS + Zenoh ACL, each process its own certificate)
     args.secure_material = None
-    if getattr(args, "secure", False):  # mutual TLS + Zenoh ACL: each process its own certificate and config
-        from swarm.transport.security import secure_listen
-
-        listen = secure_listen(
-            args.listen, args.zenoh_config, int(free_loopback_endpoint().rpartition(":")[2])
-        )
     zargs = router_args(args, listen)
     endpoint = client_endpoint(listen[0])
     stop = threading.Event()
@@ -294,15 +289,7 @@ def run(args: argparse.Namespace) -> int:
     args.checkpoint_root = _checkpoint_root()
     runs = itertools.count()
     try:
-        if getattr(args, "secure", False):
-            from dataclasses import replace
-
-            from swarm.transport.security import SecureMaterial
-
-            args.secure_material = SecureMaterial(keys, sc.vehicles, listen)
-            zargs = replace(zargs, config_file=str(args.secure_material.config_file("launcher")))
-            print(f"swarm secure: certificates and Zenoh configs in {args.secure_material.directory} "
-                  "(removed at exit)", flush=True)  # fmt: skip
+        zargs = secure_router(args, keys, sc.vehicles, listen, zargs, "docking")
         with open_session(zargs) as session:
             print(
                 f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",

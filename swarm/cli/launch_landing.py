@@ -94,7 +94,9 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         child_args,
         client_endpoint,
         config_args,
+        launch_listen,
         router_args,
+        secure_router,
         start_recorder,
     )
     from swarm.cli.sim import print_landing
@@ -104,7 +106,8 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     from swarm.step.landing import landing_summary
     from swarm.transport.keys import Keys
     from swarm.transport.messages import DropCounter, Event
-    from swarm.transport.session import free_loopback_endpoint, open_session, subscribe_decoded
+    from swarm.transport.security import agent_name
+    from swarm.transport.session import open_session, subscribe_decoded
 
     _refuse(args)
     check_record(args)
@@ -112,14 +115,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     ids = [u.id for u in sc.uavs()]
     policy = args.policy or sc.policy
     keys = Keys(args.namespace)
-    listen = list(args.listen) if args.listen else [free_loopback_endpoint()]
-    secure = getattr(args, "secure", False)
-    if secure:  # mutual TLS + Zenoh ACL (swarm.transport.security, mission "landing"): as a docking swarm
-        from swarm.transport.security import secure_listen
-
-        listen = secure_listen(
-            args.listen, args.zenoh_config, int(free_loopback_endpoint().rpartition(":")[2])
-        )
+    listen = launch_listen(args)  # (--secure: mutual TLS + Zenoh ACL, mission "landing", as a docking swarm)
     zargs = router_args(args, listen)
     endpoint = client_endpoint(listen[0])
     stop = threading.Event()
@@ -131,15 +127,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     result = None
     args.secure_material = None
     try:
-        if secure:
-            from dataclasses import replace
-
-            from swarm.transport.security import SecureMaterial
-
-            args.secure_material = SecureMaterial(keys, ids, listen, mission="landing")
-            zargs = replace(zargs, config_file=str(args.secure_material.config_file("launcher")))
-            print(f"swarm secure: certificates and Zenoh configs in {args.secure_material.directory} "
-                  "(removed at exit)", flush=True)  # fmt: skip
+        zargs = secure_router(args, keys, ids, listen, zargs, "landing")
         with open_session(zargs) as session:
             print(
                 f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",
@@ -171,7 +159,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                 for i in range(0, len(ids), n):
                     host = ids[i : i + n]
                     name = f"agent/{host[0]}" if n == 1 else f"agents/{'+'.join(host)}"
-                    identity = f"agent-{host[0]}"  # (an agent host is refused with --secure above)
+                    identity = agent_name(host[0])  # (an agent host is refused with --secure above)
                     agent = ["agents.landing", "--id", ",".join(host), *common, *config_args(args, identity)]
                     sup.start(Child(name, agent))
                 world = ["swarm.world.landing", "--clock", str(args.clock),

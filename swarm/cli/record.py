@@ -34,15 +34,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from swarm.errors import ConfigError
     from swarm.transport.keys import Keys
-    from swarm.transport.recording import Recorder
+    from swarm.transport.recording import Recorder, check_mcap_path
     from swarm.transport.session import open_session, zenoh_args_from
 
-    if args.file.suffix != ".mcap":
-        raise ConfigError(f"FILE.mcap: the recording's name must end in .mcap, got {str(args.file)!r}")
-    if args.file.parent and not args.file.parent.is_dir():
-        raise ConfigError(f"FILE.mcap: no such directory {str(args.file.parent)!r}")
+    check_mcap_path(args.file, "FILE.mcap")
     keys = Keys(args.namespace)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -168,7 +168,9 @@ class DockingTap:
     def start(self, sim) -> None:
         """Tick 0: ``run_start`` and the clock."""
         sc = sim.sc
-        ids = list(sc.vehicles)
+        self._ids, self._chasers = list(sc.vehicles), list(sc.chasers)
+        self._truth_every = sc.every(sc.uwb.rate_hz)  # as the world process: truth on UWB slot ticks
+        ids = self._ids
         data = {"seed": self.seed, "vehicles": ids, "clock": "lockstep", "scenario": sc.name}
         self._write(self.keys.world_event(), encode(Event(0.0, "run_start", data)))
         self._clock(0, 0.0, "running")
@@ -178,9 +180,9 @@ class DockingTap:
 
     def world(self, sim, k: int, frames) -> None:
         """The world's samples of tick ``k`` (and the clock on its ticks)."""
-        w = sim.world
-        ids, chasers = list(sim.sc.vehicles), list(sim.sc.chasers)
-        for kind, vid, payload in world_sensors(w, ids, chasers, k, frames, sim.sc.every(sim.sc.uwb.rate_hz)):
+        for kind, vid, payload in world_sensors(
+            sim.world, self._ids, self._chasers, k, frames, self._truth_every
+        ):
             self._write(getattr(self.keys, kind)(vid), payload)
         if k % self.clock_every == 0:
             self._clock(k, k * sim.sc.dt_s, "running")
@@ -189,7 +191,7 @@ class DockingTap:
         """The mothership's ranges of slot tick ``k`` (after the network's step)."""
         if k == 0 or k % sim.network.every:
             return
-        for vid, payload in uwb_slot(sim.network, list(sim.sc.vehicles), k, k * sim.sc.dt_s):
+        for vid, payload in uwb_slot(sim.network, self._ids, k, k * sim.sc.dt_s):
             self._write(self.keys.uwb(vid), payload)
 
     def agent(self, sim, vid: str, k: int, cmd) -> None:

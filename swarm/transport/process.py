@@ -94,7 +94,7 @@ def check_pace(clock: ClockSpec, pace: ClockSpec | None) -> None:
         raise ConfigError(f"--pace {pace} paces a lockstep run; --clock {clock} is free-running already")
 
 
-def _clock_arg(text: str) -> ClockSpec:
+def clock_arg(text: str) -> ClockSpec:
     try:
         return ClockSpec.parse(text)
     except ConfigError as exc:
@@ -119,7 +119,7 @@ def add_process_arguments(p: argparse.ArgumentParser, *, clock: bool = True) -> 
     if clock:
         p.add_argument(
             "--clock",
-            type=_clock_arg,
+            type=clock_arg,
             default=ClockSpec(),
             metavar="lockstep|realtime|scaled:N",
             help="how the world's clock advances (default lockstep)",

@@ -164,17 +164,24 @@ class McapSink:
         self.writer.close()
 
 
-def sim_sink(path, keys) -> McapSink:
-    """The writer of ``swarm sim --mcap FILE`` (metadata ``recorder.source = "swarm sim"``); ConfigError
-    naming ``--mcap`` for a name without ``.mcap`` or a directory that does not exist."""
+def check_mcap_path(path, what: str) -> Path:
+    """``path`` as a recording to write: ConfigError naming ``what`` (the flag or argument) for a name
+    without ``.mcap`` or a directory that does not exist. Every writer checks with this (``swarm record``,
+    ``swarm launch --record``, ``swarm sim --mcap``)."""
     from swarm.errors import ConfigError
 
     p = Path(path)
     if p.suffix != ".mcap":
-        raise ConfigError(f"--mcap: the recording's name must end in .mcap, got {str(p)!r}")
+        raise ConfigError(f"{what}: the recording's name must end in .mcap, got {str(p)!r}")
     if not p.resolve().parent.is_dir():
-        raise ConfigError(f"--mcap: no such directory {str(p.parent)!r}")
-    return McapSink(p, keys, {"source": "swarm sim"})
+        raise ConfigError(f"{what}: no such directory {str(p.parent)!r}")
+    return p
+
+
+def sim_sink(path, keys) -> McapSink:
+    """The writer of ``swarm sim --mcap FILE`` (metadata ``recorder.source = "swarm sim"``), its path checked
+    (:func:`check_mcap_path`)."""
+    return McapSink(check_mcap_path(path, "--mcap"), keys, {"source": "swarm sim"})
 
 
 def package_version() -> str:

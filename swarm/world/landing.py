@@ -36,14 +36,14 @@ DESCRIPTION = "The landing world: quadrotor truth and sensors of every UAV, lock
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from swarm.args import positive_float
-    from swarm.transport.process import _clock_arg, add_process_arguments
+    from swarm.transport.process import add_process_arguments, clock_arg
 
     add_process_arguments(p)
     p.add_argument("--step-timeout", type=positive_float("--step-timeout"), default=30.0, metavar="S",
                    help="give up when an agent's command of a tick has not come after this long")  # fmt: skip
     p.add_argument("--start-timeout", type=positive_float("--start-timeout"), default=60.0, metavar="S",
                    help="give up when the agents are not all up after this long")  # fmt: skip
-    p.add_argument("--pace", type=_clock_arg, default=None, metavar="CLOCK",
+    p.add_argument("--pace", type=clock_arg, default=None, metavar="CLOCK",
                    help="a lockstep world paced to this clock (realtime or scaled:N): every command waited "
                         "for, never ahead of the wall clock")  # fmt: skip
 
