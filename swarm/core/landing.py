@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from swarm.core.mdp import reorient_align_probabilities, stationary_2state
+from swarm.core import _landing_nb as nb
 from swarm.errors import ConfigError
 
 
@@ -171,21 +171,73 @@ class Reference:
     q_nav_body: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
 
 
-def _toward(
-    p: np.ndarray, goal: np.ndarray, speed: float, gain: float = 1.0
-) -> tuple[np.ndarray, np.ndarray]:
-    """A reference that flies from ``p`` straight to ``goal`` at ``speed``, slowing in
-    (``v = gain * distance``)."""
-    d = goal - p
-    dist = float(np.linalg.norm(d))
-    if dist < 1e-9:
-        return goal.copy(), np.zeros(3)
-    v = d / dist * min(speed, gain * dist)
-    return p.copy(), v
+MODES = tuple(LandingMode)
+"""The modes by their codes in the compiled guidance (``_landing_nb.L_*``)."""
+
+
+def guidance_row(params: LandingGuidanceParams, policy: str, pad_nav, half_fov_rad: float,
+                 gear_height_m: float) -> np.ndarray:  # fmt: skip
+    """The compiled guidance's parameter vector ``GP`` (:mod:`swarm.core._landing_nb`)."""
+    P = params
+    GP = np.zeros(nb.GP_N)
+    for i, x in (
+        (nb.GP_CRUISE_V, P.cruise_speed_m_s), (nb.GP_GLIDE_H, P.glide_end_height_m),
+        (nb.GP_VIEW_MIN, P.view_height_min_m), (nb.GP_DESCEND_V, P.descend_speed_m_s),
+        (nb.GP_FINAL_H, P.final_height_m), (nb.GP_FINAL_V, P.final_speed_m_s),
+        (nb.GP_ACCEPT, P.accept_radius_m), (nb.GP_LOST_T, P.lost_timeout_s),
+        (nb.GP_MAX_RETRIES, P.max_retries), (nb.GP_RETRY_CLIMB, P.retry_climb_m),
+        (nb.GP_ABORT_H, P.abort_height_m), (nb.GP_VIEW_MAX, P.view_height_max_m),
+        (nb.GP_TOUCH_H, P.touchdown_height_m), (nb.GP_TOUCH_V, P.touchdown_speed_m_s),
+        (nb.GP_TOUCH_HOLD, P.touchdown_hold_s), (nb.GP_FIXED_D, P.fixed_deviation_m), (nb.GP_R_T, P.r_t_m),
+        (nb.GP_A11_THR, P.a11_threshold), (nb.GP_PI2_THR, P.pi2_threshold), (nb.GP_SIGMA_REF, P.sigma_ref_m),
+    ):  # fmt: skip
+        GP[i] = x
+    GP[nb.GP_MDP] = 1.0 if policy == "mdp" else 0.0
+    GP[nb.GP_TAN_VIEW] = math.tan(P.view_margin * half_fov_rad)
+    GP[nb.GP_GEAR] = gear_height_m
+    pad = np.asarray(pad_nav, dtype=float)
+    GP[nb.GP_PAD : nb.GP_PAD + 3] = pad
+    GP[nb.GP_GLIDE_END : nb.GP_GLIDE_END + 3] = pad + np.array([0.0, 0.0, P.glide_end_height_m])
+    return GP
+
+
+def reason_text(params: LandingGuidanceParams, policy: str, code: int, a: float, b: float, c: float) -> str:
+    """The words of a mode switch's reason ``code`` (``_landing_nb.RS_*``), quoting ``a``, ``b``, ``c``."""
+    P = params
+    no_view, lost = "no pad in view from the viewpoint", f"pad lost for {P.lost_timeout_s:g} s"
+    if code == nb.RS_DEVIATE:
+        return (
+            f"{policy}: deviate at r = {a:.2f} m to a viewpoint {b:.1f} m above the pad (sigma_h {c:.2f} m)"
+        )
+    if code == nb.RS_DESCEND:
+        return f"{policy}: descend at r = {a:.2f} m, pad in view"
+    if code == nb.RS_FINAL:
+        return f"below {P.final_height_m:g} m: final descent"
+    if code in (nb.RS_CLIMB_NO_VIEW, nb.RS_CLIMB_LOST):
+        why = no_view if code == nb.RS_CLIMB_NO_VIEW else lost
+        return f"{why}: climb and retry ({int(a)} of {P.max_retries})"
+    if code in (nb.RS_ABORT_NO_VIEW, nb.RS_ABORT_LOST):
+        why = no_view if code == nb.RS_ABORT_NO_VIEW else lost
+        return f"{why}; {P.max_retries} retries spent: abort, climb to {P.abort_height_m:g} m and hold"
+    if code == nb.RS_CLIMBED:
+        return "climbed: back to the viewpoint"
+    if code == nb.RS_LANDED:
+        return "on the skids: rotors stopped"
+    raise ValueError(f"unknown landing reason code {code!r}")
+
+
+def _opt(x: float) -> float | None:
+    return None if math.isnan(x) else float(x)
 
 
 class LandingGuidance:
-    """The guidance of one quadrotor landing on one pad (module docstring). ``step`` once per control tick."""
+    """The guidance of one quadrotor landing on one pad (module docstring): the arrays of the compiled
+    guidance (:mod:`swarm.core._landing_nb`), its switches and passes as records. ``step`` once per control
+    tick, or the compiled agent tick calls :func:`~swarm.core._landing_nb.landing_step` on :attr:`G` and the
+    others and then :meth:`drain`."""
+
+    EV_ROWS = 16
+    DEC_ROWS = 64
 
     def __init__(
         self,
@@ -201,178 +253,82 @@ class LandingGuidance:
         self.p, self.policy = params, policy
         self.pad = np.asarray(pad_nav, dtype=float)
         self.start = np.asarray(start_nav, dtype=float)
-        self.glide_end = self.pad + np.array([0.0, 0.0, params.glide_end_height_m])
-        self.tan_view = math.tan(params.view_margin * half_fov_rad)
-        self.gear = gear_height_m
-        self.mode = LandingMode.CRUISE
-        self.r1, self.r2 = params.r1_init_m, params.r2_init_m
-        self.retries = 0
+        self.GP = guidance_row(params, policy, self.pad, half_fov_rad, gear_height_m)
+        self.G = np.full(nb.G_N, np.nan)
+        self.G[nb.G_MODE], self.G[nb.G_RETRIES] = nb.L_CRUISE, 0.0
+        self.G[nb.G_R1], self.G[nb.G_R2] = params.r1_init_m, params.r2_init_m
+        self.REF = np.zeros(nb.REF_N)
+        self.EV, self.EV_n = np.zeros((self.EV_ROWS, nb.EV_N)), np.zeros(1, dtype=np.int64)
+        self.DEC, self.DEC_n = np.zeros((self.DEC_ROWS, nb.DEC_N)), np.zeros(1, dtype=np.int64)
         self.decisions: list[LandingDecision] = []
         self.modes: list[dict] = []
-        self.deviation_point: np.ndarray | None = None
-        self.viewpoint: np.ndarray | None = None
-        self._hold: np.ndarray | None = None
-        self._touch_since: float | None = None
-        self._climb_to: float | None = None
-        self._at_view: float | None = None
 
-    # ---- helpers ---------------------------------------------------------------------------------
-    def _switch(self, t: float, mode: LandingMode, p: np.ndarray, reason: str) -> None:
-        self.modes.append(
-            {
-                "t_s": float(t),
-                "from": str(self.mode),
-                "mode": str(mode),
-                "reason": reason,
-                "p_est_nav": [float(x) for x in p],
-            }
-        )
-        self.mode = mode
+    @property
+    def mode(self) -> LandingMode:
+        return MODES[int(self.G[nb.G_MODE])]
+
+    @property
+    def retries(self) -> int:
+        return int(self.G[nb.G_RETRIES])
+
+    @property
+    def r1(self) -> float:
+        return float(self.G[nb.G_R1])
+
+    @property
+    def r2(self) -> float:
+        return float(self.G[nb.G_R2])
+
+    def _point(self, i: int) -> np.ndarray | None:
+        x = self.G[i : i + 3]
+        return None if math.isnan(x[0]) else x.copy()
+
+    @property
+    def deviation_point(self) -> np.ndarray | None:
+        return self._point(nb.G_DEV)
+
+    @property
+    def viewpoint(self) -> np.ndarray | None:
+        return self._point(nb.G_VIEW)
 
     def view_height(self, sigma_h: float) -> float:
         """The viewpoint's height above the pad for a horizontal sigma ``sigma_h`` [m]."""
-        h = 3.0 * sigma_h / self.tan_view
-        return float(min(max(h, self.p.view_height_min_m), self.p.view_height_max_m))
+        return float(nb.view_height(self.GP, float(sigma_h)))
 
-    def _decide(self, t, p, r, d, sigma_h) -> bool:
-        """One pass of the switching rule in CRUISE or DEVIATE; True to switch to the next mode."""
-        P = self.p
-        rec = LandingDecision(
-            float(t), str(self.mode), float(r), float(d), float(sigma_h), r1_m=self.r1, r2_m=self.r2
-        )
-        switch = False
-        if self.policy == "fixed":
-            if self.mode == LandingMode.CRUISE:
-                switch = r <= P.fixed_deviation_m
-            else:
-                switch = float(np.linalg.norm(p[:2] - self.viewpoint[:2])) <= P.accept_radius_m
-            rec.switched = switch
-            if switch:
-                self.decisions.append(rec)
-            return switch
-        if r > P.r_t_m:
-            return False
-        if self.mode == LandingMode.CRUISE:
-            footprint = P.glide_end_height_m * self.tan_view
-            rho = footprint / max(3.0 * sigma_h, 1e-9)
-            a11 = min(max((r / P.r_t_m) * (1.0 / (1.0 + d)) * rho, 0.0), 1.0)
-            rec.rho, rec.A11 = float(rho), float(a11)
-            if a11 <= P.a11_threshold:
-                self.r2 = float(r)
-                switch = True
-        else:
-            a22, a23, a32, a33 = reorient_align_probabilities(
-                float(r), float(self.r2), float(d), float(sigma_h), P.sigma_ref_m, P.accept_radius_m
+    def drain(self) -> None:
+        """Turn the switches and passes the kernel left in ``EV`` and ``DEC`` into records."""
+        for row in self.EV[: self.EV_n[0]]:
+            self.modes.append(
+                {
+                    "t_s": float(row[nb.E_T]),
+                    "from": str(MODES[int(row[nb.E_FROM])]),
+                    "mode": str(MODES[int(row[nb.E_TO])]),
+                    "reason": reason_text(
+                        self.p, self.policy, int(row[nb.E_REASON]), *row[nb.E_A : nb.E_C + 1]
+                    ),
+                    "p_est_nav": [float(x) for x in row[nb.E_P : nb.E_P + 3]],
+                }
             )
-            rec.A22, rec.A23, rec.A32, rec.A33 = a22, a23, a32, a33
-            pi = stationary_2state(a23, a32)
-            if pi is not None:
-                rec.pi1, rec.pi2 = pi
-                if pi[1] <= P.pi2_threshold:
-                    self.r1 = float(r)
-            switch = r <= self.r1
-        rec.r1_m, rec.r2_m, rec.switched = self.r1, self.r2, switch
-        self.decisions.append(rec)
-        return switch
+        self.EV_n[0] = 0
+        for row in self.DEC[: self.DEC_n[0]]:
+            self.decisions.append(
+                LandingDecision(
+                    float(row[nb.D_T]), str(MODES[int(row[nb.D_MODE])]),
+                    float(row[nb.D_R]), float(row[nb.D_D]),
+                    float(row[nb.D_SIGMA]), *(_opt(x) for x in row[nb.D_RHO : nb.D_PI2 + 1]),
+                    r1_m=float(row[nb.D_R1]), r2_m=float(row[nb.D_R2]), switched=bool(row[nb.D_SWITCHED]),
+                )
+            )  # fmt: skip
+        self.DEC_n[0] = 0
 
-    def _lost(self, t, p, v, sigma_h, d, pad_seen_s, why: str) -> Reference:
-        """The target is lost: climb and retry, or abort after ``max_retries``."""
-        P = self.p
-        self.retries += 1
-        if self.retries > P.max_retries:
-            self._climb_to = self.pad[2] + P.abort_height_m
-            self._switch(
-                t,
-                LandingMode.ABORT,
-                p,
-                f"{why}; {P.max_retries} retries spent: abort, climb to {P.abort_height_m:g} m and hold",
-            )
-        else:
-            self._climb_to = min(p[2] + P.retry_climb_m, self.pad[2] + P.abort_height_m)
-            self._switch(
-                t, LandingMode.CLIMB, p, f"{why}: climb and retry ({self.retries} of {P.max_retries})"
-            )
-        self._hold = p.copy()
-        return self.step(t, p, v, sigma_h, d, pad_seen_s)
-
-    # ---- one control step ------------------------------------------------------------------------
     def step(
         self, t: float, p: np.ndarray, v: np.ndarray, sigma_h: float, d: float, pad_seen_s: float | None
     ) -> Reference:
         """The reference at time ``t`` [s] from the estimate ``p``, ``v`` (nav), its horizontal sigma
         ``sigma_h`` [m], the filter's consistency ``d`` and the time of the last pad measurement (None:
         never)."""
-        P = self.p
-        r = float(np.linalg.norm(p[:2] - self.pad[:2]))
-        height = float(p[2] - self.pad[2])
-        seen = pad_seen_s is not None and t - pad_seen_s <= P.lost_timeout_s
-        m = self.mode
-        if m == LandingMode.CRUISE:
-            if self._decide(t, p, r, d, sigma_h):
-                self.deviation_point = p.copy()
-                self.viewpoint = self.pad + np.array([0.0, 0.0, self.view_height(sigma_h)])
-                self._switch(
-                    t,
-                    LandingMode.DEVIATE,
-                    p,
-                    f"{self.policy}: deviate at r = {r:.2f} m to a viewpoint "
-                    f"{self.viewpoint[2] - self.pad[2]:.1f} m above the pad (sigma_h {sigma_h:.2f} m)",
-                )
-                return self.step(t, p, v, sigma_h, d, pad_seen_s)
-            goal = self.glide_end if r > 0.5 else self.pad + np.array([0.0, 0.0, self.gear])
-            speed = P.cruise_speed_m_s if r > 0.5 else P.descend_speed_m_s
-            _, vref = _toward(p, goal, speed, gain=0.8)
-            return Reference(p.copy(), vref)
-        if m == LandingMode.DEVIATE:
-            if seen and self._decide(t, p, r, d, sigma_h):
-                self._switch(
-                    t, LandingMode.DESCEND, p, f"{self.policy}: descend at r = {r:.2f} m, pad in view"
-                )
-                return self.step(t, p, v, sigma_h, d, pad_seen_s)
-            at_view = float(np.linalg.norm(p - self.viewpoint)) <= max(P.accept_radius_m, 0.3)
-            if at_view and not seen:
-                self._at_view = t if self._at_view is None else self._at_view
-                if t - self._at_view >= P.lost_timeout_s:  # at the viewpoint and still no pad: a lost target
-                    self._at_view = None
-                    return self._lost(t, p, v, sigma_h, d, pad_seen_s, "no pad in view from the viewpoint")
-            else:
-                self._at_view = None
-            _, vref = _toward(p, self.viewpoint, P.cruise_speed_m_s, gain=0.8)
-            return Reference(p.copy(), vref)
-        if m == LandingMode.DESCEND:
-            if height <= P.final_height_m:
-                self._switch(t, LandingMode.FINAL, p, f"below {P.final_height_m:g} m: final descent")
-                return self.step(t, p, v, sigma_h, d, pad_seen_s)
-            if not seen:
-                return self._lost(t, p, v, sigma_h, d, pad_seen_s, f"pad lost for {P.lost_timeout_s:g} s")
-            vref = np.zeros(3)
-            e = self.pad[:2] - p[:2]
-            vref[:2] = e * 1.0
-            n = float(np.linalg.norm(vref[:2]))
-            if n > P.cruise_speed_m_s:
-                vref[:2] *= P.cruise_speed_m_s / n
-            if r <= P.accept_radius_m:
-                vref[2] = -P.descend_speed_m_s
-            return Reference(p.copy(), vref)
-        if m == LandingMode.FINAL:
-            if height <= P.touchdown_height_m and abs(v[2]) <= P.touchdown_speed_m_s:
-                self._touch_since = t if self._touch_since is None else self._touch_since
-                if t - self._touch_since >= P.touchdown_hold_s:
-                    self._switch(t, LandingMode.LANDED, p, "on the skids: rotors stopped")
-            else:
-                self._touch_since = None
-            vref = np.zeros(3)
-            vref[:2] = (self.pad[:2] - p[:2]) * 1.0
-            vref[2] = -P.final_speed_m_s
-            return Reference(p.copy(), vref)
-        if m == LandingMode.CLIMB:
-            if p[2] >= self._climb_to - 0.1:
-                self.viewpoint = self.pad + np.array(
-                    [0.0, 0.0, max(self.view_height(sigma_h), p[2] - self.pad[2])]
-                )
-                self._switch(t, LandingMode.DEVIATE, p, "climbed: back to the viewpoint")
-                return self.step(t, p, v, sigma_h, d, pad_seen_s)
-            return Reference(np.array([self._hold[0], self._hold[1], self._climb_to]), np.zeros(3))
-        if m == LandingMode.ABORT:
-            return Reference(np.array([self._hold[0], self._hold[1], self._climb_to]), np.zeros(3))
-        return Reference(p.copy(), np.zeros(3))  # LANDED
+        seen = math.nan if pad_seen_s is None else float(pad_seen_s)
+        nb.landing_step(self.G, self.GP, float(t), np.asarray(p, float), np.asarray(v, float), float(sigma_h),
+                        float(d), seen, self.REF, self.EV, self.EV_n, self.DEC, self.DEC_n)  # fmt: skip
+        self.drain()
+        return Reference(self.REF[nb.R_P : nb.R_P + 3].copy(), self.REF[nb.R_V : nb.R_V + 3].copy())
