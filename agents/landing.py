@@ -23,8 +23,6 @@ import sys
 import threading
 from functools import partial
 
-import numpy as np
-
 from swarm.transport.process import print_ready, process_main
 
 _LOG = logging.getLogger("agents.landing")
@@ -180,18 +178,16 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
 
 
 def _warm_up(sc, seed: int, index: int, policy: str) -> None:
-    """Compile (or load from numba's cache) every kernel a tick may call, on a scratch agent, before the
-    agent says it is up: a first compilation inside the run would outlast the world's step timeout."""
-    from swarm.step.landing import R_BODY_CAM, LandingAgent, LandingWorld, Rates
+    """Compile (or load from numba's cache) every kernel a tick may call, on a scratch world and agent, before
+    the agent says it is up: a first compilation inside the run would outlast the world's step timeout. One
+    tick of each sensor's rate compiles them all (numba compiles a kernel whole, every branch)."""
+    from swarm.step.landing import LandingAgent, LandingWorld, Rates
 
     world, agent = LandingWorld(sc, seed), LandingAgent(sc, seed, index, policy)
     uid = sc.uavs()[index].id
     for k in range(1, max(vars(Rates.of(sc)).values()) + 1):
         inp = world.step(k)[uid]
         world.hold(uid, agent.tick(inp))
-    f, t = agent.filt, agent.filt.t
-    f.update_position(t, f.p_nav[0], np.eye(3))
-    f.update_pad(t, agent.setup.pad, np.array([0.0, 0.0, 5.0]), np.eye(3) * 1e-4, agent.cam_pos, R_BODY_CAM)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -17,6 +17,7 @@ from swarm.sim.landing import SCENARIO_DIR, load_landing, run_landing
 
 SEEDS = (0, 1, 2)
 NOMINAL = {"dispersions.enabled": False}  # the scenario's start and anchors: what these tests reason about
+LOST_3S = {"faults.pad_hidden_from_s": 10.0, "faults.pad_hidden_for_s": 3.0}  # during the descent
 
 
 @pytest.fixture(scope="module")
@@ -66,9 +67,7 @@ def test_summary_has_the_issue_keys_and_a_consistent_series(runs):
 
 
 def test_a_lost_pad_during_the_descent_triggers_a_retry_and_then_lands():
-    sc = load_landing(
-        "landing", {**NOMINAL, "faults.pad_hidden_from_s": 10.0, "faults.pad_hidden_for_s": 3.0}
-    )
+    sc = load_landing("landing", {**NOMINAL, **LOST_3S})
     r = run_landing(sc, "mdp", 0, record_series=False)
     modes = [m["mode"] for m in r["modes"]]
     assert "CLIMB" in modes and r["retries"] == 1
@@ -236,3 +235,48 @@ def test_the_end_of_a_run_is_the_scenario_s(tmp_path):
     assert later["sim_time_s"] == pytest.approx(base["sim_time_s"] + 2.0, abs=1e-9)
     with pytest.raises(ConfigError, match=r"abort_hold_speed_m_s must be a finite number > 0, got -1"):
         load_landing("landing", {"abort_hold_speed_m_s": -1})
+
+
+def _without_wall(r: dict) -> dict:
+    r = {k: v for k, v in r.items() if k not in ("wall_s", "realtime_factor")}
+    if "uavs" in r:
+        r["uavs"] = {u: _without_wall(s) for u, s in r["uavs"].items()}
+    return r
+
+
+@pytest.mark.parametrize(
+    "scenario, overrides, policy, seed",
+    [
+        ("landing", {}, "mdp", 1),  # dispersed start and anchors' reach
+        ("landing", {**NOMINAL, **LOST_3S}, "fixed", 0),
+        ("landing", {**NOMINAL, "faults.pad_hidden_always": True}, "mdp", 0),  # the abort
+        ("landing-swarm", {}, "mdp", 3),  # four UAVs, each on its own stream
+    ],
+)
+def test_the_compiled_landing_is_the_tick_by_tick_landing_to_the_bit(scenario, overrides, policy, seed):
+    """swarm.sim.landing flies a corner-mode landing in compiled code (fly_compiled); the processes step the
+    same kernels one tick at a time through LandingWorld and LandingAgent. Every number of the summary, the
+    series, the modes and the decisions is the same."""
+    from swarm.sim.landing import run_landing_fleet
+
+    sc = load_landing(scenario, overrides)
+    fast = run_landing_fleet(sc, policy, seed, record_series=True)
+    slow = run_landing_fleet(sc, policy, seed, record_series=True, compiled=False)
+    assert json.dumps(_without_wall(fast)) == json.dumps(_without_wall(slow))
+
+
+def test_the_sensor_draws_are_the_generator_s_whatever_the_buffer():
+    """The compiled world reads standard normals from a buffer (swarm.step.landing.NoiseStream) where the
+    per-tick world drew rng.normal(0, s, n): s times the generator's next n standard normals, bit for bit,
+    however the buffer is cut."""
+    from swarm.step.landing import NoiseStream
+
+    a, b = np.random.default_rng(7), np.random.default_rng(7)
+    stream = NoiseStream(b)
+    stream.BLOCK = 5  # refills inside a request
+    for n, s in ((3, 0.1), (3, 0.01), (1, 0.2), (8, 1.0), (13, 0.3)):
+        stream.ensure(n)
+        i = int(stream.pos[0])
+        got = s * stream.Z[i : i + n]
+        stream.pos[0] = i + n
+        assert np.array_equal(got, a.normal(0.0, s, n))

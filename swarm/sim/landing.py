@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from swarm.landing_scenario import (  # noqa: F401  (the scenario's names, where the runner's users look)
     SCENARIO_DIR,
     FleetUav,
@@ -21,6 +23,7 @@ from swarm.landing_scenario import (  # noqa: F401  (the scenario's names, where
     is_landing_scenario,
     load_landing,
 )
+from swarm.step import landing_nb as lnb
 from swarm.step.landing import LandingAgent, LandingWorld, landing_summary
 
 
@@ -38,11 +41,16 @@ def run_landing_fleet(
     record_series: bool = True,
     only_first: bool = False,
     tap=None,
+    compiled: bool = True,
 ) -> dict:
     """Fly every UAV of the scenario (module docstring): ``{"uavs": {id: summary}, ...}``, or the first
     UAV's summary alone with ``only_first``. ``tap`` (``swarm sim --mcap``) sees the run as the processes
     would publish it: ``tap.start(world, policy)``, then per tick ``tap.world(k, world, inputs)`` and
-    ``tap.agent(uid, agent, command)`` for each UAV, and ``tap.end(world, agents, k, wall_s)``."""
+    ``tap.agent(uid, agent, command)`` for each UAV, and ``tap.end(world, agents, k, wall_s)``.
+
+    With the corner-projection camera and no tap, each UAV flies in compiled code (:func:`fly_compiled`);
+    otherwise, or with ``compiled=False``, tick by tick on the objects the processes run, with the same
+    result to the bit."""
     policy = policy or sc.policy
     world = LandingWorld(sc, seed)
     uavs = sc.uavs()[:1] if only_first else sc.uavs()
@@ -54,19 +62,22 @@ def run_landing_fleet(
     if tap is not None:
         tap.start(world, policy)
     t0_wall = time.perf_counter()
-    k = 0
-    for k in range(1, n_ticks + 1):
-        inputs = world.step(k)
-        if not inputs:
-            k -= 1
-            break
-        if tap is not None:
-            tap.world(k, world, inputs)
-        for uid, inp in inputs.items():
-            cmd = agents[uid].tick(inp, world.uavs[uid].x[0:3] if record_series else None)
+    if compiled and tap is None and sc.camera.mode == "corners":
+        k = max(fly_compiled(world, agents[u.id], u.id, n_ticks, record_series) for u in uavs)
+    else:
+        k = 0
+        for k in range(1, n_ticks + 1):
+            inputs = world.step(k)
+            if not inputs:
+                k -= 1
+                break
             if tap is not None:
-                tap.agent(uid, agents[uid], cmd)
-            world.hold(uid, cmd)
+                tap.world(k, world, inputs)
+            for uid, inp in inputs.items():
+                cmd = agents[uid].tick(inp, world.uavs[uid].x[0:3] if record_series else None)
+                if tap is not None:
+                    tap.agent(uid, agents[uid], cmd)
+                world.hold(uid, cmd)
     wall = time.perf_counter() - t0_wall
     for uid in agents:
         if not world.uavs[uid].done:
@@ -86,6 +97,38 @@ def run_landing_fleet(
         "sim_time_s": round(k * sc.dt_s, 4),
         "wall_s": wall,
     }
+
+
+SERIES_EVERY = 10
+"""A series sample every this many ticks (:meth:`swarm.step.landing.LandingAgent.decide`'s)."""
+
+
+def fly_compiled(
+    world: LandingWorld, agent: LandingAgent, uid: str, n_ticks: int, record_series: bool
+) -> int:
+    """UAV ``uid``'s run, ticks ``1 .. n_ticks``, in compiled code (:func:`swarm.step.landing_nb.
+    run_landing_ticks`), back in Python only to refill its draws and to turn its records into the guidance's
+    modes and decisions and the agent's series; the tick at which it ended."""
+    u = world.uavs[uid]
+    wa, aa, ga = world.arrays(u), agent.arrays(), agent.guidance_arrays()
+    ctl = (agent.cs, agent.cp, agent.u, agent.act)
+    SER, SER_n = np.zeros((256, lnb.SER_N)), np.zeros(1, dtype=np.int64)
+    every = SERIES_EVERY if record_series else 0
+    k = 1
+    while True:
+        u.noise.ensure(world.draws)
+        noise = (u.noise.Z, u.noise.pos, world.draws)
+        code, k = lnb.run_landing_ticks(k, n_ticks + 1, wa, aa, ga, ctl, *noise, SER, SER_n, every)
+        agent.guidance.drain()
+        for row in SER[: SER_n[0]]:
+            agent.series.add(row[lnb.SER_T], row[lnb.SER_PTRUE : lnb.SER_PTRUE + 3],
+                             row[lnb.SER_PEST : lnb.SER_PEST + 3], row[lnb.SER_SIGMA], row[lnb.SER_MODE],
+                             bool(row[lnb.SER_SEEN]))  # fmt: skip
+        SER_n[0] = 0
+        if code == lnb.RUN_DONE:
+            if not u.done:
+                u.end_k = n_ticks
+            return k
 
 
 def summary(sc: LandingScenario, policy: str, seed: int, world: LandingWorld, agent: LandingAgent, uid: str,

@@ -24,19 +24,20 @@ no world starts from the same first estimate as the in-process agent.
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from swarm.core import rotations as rot
-from swarm.core.imu_filter import ImuFilter, ImuFilterParams
-from swarm.core.landing import LandingGuidance, LandingMode
-from swarm.core.pad_vision import Renderer, corner_frame, detect, estimate_pose, make_detector
+from swarm.core._pad_nb import camera_vector
+from swarm.core.imu_filter import ImuFilter, ImuFilterParams, _gate3
+from swarm.core.landing import MODES, LandingGuidance, LandingMode
+from swarm.core.pad_vision import Renderer, detect, estimate_pose, make_detector
 from swarm.kinds.quadrotor import control as qc
 from swarm.kinds.quadrotor import control_row, truth_row
 from swarm.kinds.quadrotor import dynamics as qd
 from swarm.landing_scenario import LandingScenario, Uav
+from swarm.step import landing_nb as lnb
 
 R_BODY_CAM = rot.quat_to_matrix(np.array([1.0, 0.0, 0.0, 0.0]))
 """Camera to body of the downward camera: its optical axis (+z) along body -z."""
@@ -150,22 +151,104 @@ class LandingCommand:
     mode: LandingMode
 
 
-@dataclass
+class NoiseStream:
+    """A UAV's sensor draws: standard normals from its generator, read in order by the compiled world step
+    (:mod:`swarm.step.landing_nb`, "Random draws") from ``Z`` at ``pos[0]``."""
+
+    BLOCK = 4096
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+        self.Z = np.zeros(0)
+        self.pos = np.zeros(1, dtype=np.int64)
+
+    def ensure(self, n: int) -> None:
+        """At least ``n`` draws left in ``Z``."""
+        left = len(self.Z) - int(self.pos[0])
+        if left < n:
+            self.Z = np.concatenate([self.Z[self.pos[0] :], self.rng.standard_normal(max(self.BLOCK, n))])
+            self.pos[0] = 0
+
+
 class _Truth:
-    setup: LandingSetup
-    x: np.ndarray
-    s: np.ndarray
-    held: np.ndarray
-    next_anchor: int = 0
-    energy_j: float = 0.0
-    frames: int = 0
-    landed_t: float | None = None
-    done: bool = False
-    end_k: int = 0
+    """One UAV's truth, its world state (``WSC``) and its sensors' draws."""
+
+    def __init__(self, setup: LandingSetup, x: np.ndarray, s: np.ndarray, held: np.ndarray, n_markers: int,
+                 render_rng: np.random.Generator) -> None:  # fmt: skip
+        self.setup, self.x, self.s, self.held = setup, x, s, held
+        self.WSC = np.zeros(lnb.WSC_N)
+        self.WSC[lnb.WSC_LANDED_T] = np.nan
+        self.WC = np.zeros(lnb.WC_N)
+        self.WC[lnb.WC_BA : lnb.WC_BA + 3] = setup.accel_bias
+        self.WC[lnb.WC_BG : lnb.WC_BG + 3] = setup.gyro_bias
+        self.WC[lnb.WC_PAD : lnb.WC_PAD + 3] = setup.pad
+        self.WC[lnb.WC_UWB_RANGE] = setup.uwb_range_m
+        self.WC[lnb.WC_R_NAV_PAD : lnb.WC_R_NAV_PAD + 9] = rot.quat_to_matrix(setup.q_nav_pad).ravel()
+        self.noise = NoiseStream(setup.rng)
+        self.render_rng = render_rng
+        self.INP = np.zeros(lnb.INP_N)
+        self.CIDX = np.zeros(n_markers, dtype=np.int64)
+        self.CPX = np.zeros((n_markers, 4, 2))
+
+    @property
+    def next_anchor(self) -> int:
+        return int(self.WSC[lnb.WSC_NEXT_ANCHOR])
+
+    @property
+    def energy_j(self) -> float:
+        return float(self.WSC[lnb.WSC_ENERGY])
+
+    @property
+    def frames(self) -> int:
+        return int(self.WSC[lnb.WSC_FRAMES])
+
+    @property
+    def landed_t(self) -> float | None:
+        t = self.WSC[lnb.WSC_LANDED_T]
+        return None if math.isnan(t) else float(t)
+
+    @property
+    def done(self) -> bool:
+        return bool(self.WSC[lnb.WSC_DONE])
+
+    @done.setter
+    def done(self, v: bool) -> None:
+        self.WSC[lnb.WSC_DONE] = float(v)
+
+    @property
+    def end_k(self) -> int:
+        return int(self.WSC[lnb.WSC_END_K])
+
+    @end_k.setter
+    def end_k(self, k: int) -> None:
+        self.WSC[lnb.WSC_END_K] = k
+
+
+def world_row(sc: LandingScenario) -> np.ndarray:
+    """The compiled world step's scenario parameters ``WP`` (:mod:`swarm.step.landing_nb`)."""
+    rates, f = Rates.of(sc), sc.faults
+    WP = np.zeros(lnb.WP_N)
+    for i, v in (
+        (lnb.WP_DT, sc.dt_s), (lnb.WP_G, sc.kinds.quadrotor.airframe.gravity_m_s2),
+        (lnb.WP_ACC_NOISE, sc.imu.accel_noise), (lnb.WP_GYRO_NOISE, sc.imu.gyro_noise),
+        (lnb.WP_UWB_SIGMA, sc.uwb.sigma_m), (lnb.WP_RATE_CAM, rates.camera), (lnb.WP_RATE_UWB, rates.uwb),
+        (lnb.WP_RATE_GNSS, rates.gnss), (lnb.WP_UWB_ON, sc.uwb.enabled and len(sc.uwb.anchors_m) > 0),
+        (lnb.WP_GNSS_ON, sc.gnss.enabled), (lnb.WP_HIDDEN_ALWAYS, f.pad_hidden_always),
+        (lnb.WP_HIDDEN_FROM, math.nan if f.pad_hidden_from_s is None else f.pad_hidden_from_s),
+        (lnb.WP_HIDDEN_FOR, f.pad_hidden_for_s), (lnb.WP_CORNERS, sc.camera.mode == "corners"),
+        (lnb.WP_END_AFTER, sc.end_after_landed_s), (lnb.WP_ABORT_H, sc.landing.abort_height_m),
+        (lnb.WP_ABORT_TOL, sc.abort_hold_tolerance_m), (lnb.WP_ABORT_V, sc.abort_hold_speed_m_s),
+    ):  # fmt: skip
+        WP[i] = float(v)
+    WP[lnb.WP_GNSS_SIGMA : lnb.WP_GNSS_SIGMA + 3] = sc.gnss.sigma_m
+    WP[lnb.WP_CAM_POS : lnb.WP_CAM_POS + 3] = sc.camera.pos_body_m
+    WP[lnb.WP_LEVER : lnb.WP_LEVER + 3] = sc.uwb.lever_arm_m
+    return WP
 
 
 class LandingWorld:
-    """The truth and the sensors of every UAV of a landing scenario (module docstring)."""
+    """The truth and the sensors of every UAV of a landing scenario (module docstring), on the compiled
+    steps of :mod:`swarm.step.landing_nb`."""
 
     def __init__(self, sc: LandingScenario, seed: int) -> None:
         self.sc, self.seed = sc, seed
@@ -173,13 +256,16 @@ class LandingWorld:
         self.air = qp.airframe
         self.kp = truth_row(self.air)
         self.rates = Rates.of(sc)
-        self.anchors = anchors_of(sc)
-        self.lever = np.asarray(sc.uwb.lever_arm_m, float)
-        self.cam_pos = np.asarray(sc.camera.pos_body_m, float)
-        self.gnss_sigma = np.asarray(sc.gnss.sigma_m, float)
-        self.gnss_cov = np.diag(self.gnss_sigma**2)
+        self.anchors = np.ascontiguousarray(anchors_of(sc))
+        self.gnss_cov = np.diag(np.asarray(sc.gnss.sigma_m, float) ** 2)
         """The fixes' covariance, the receiver's claim (what the GNSS message carries)."""
         cam = sc.camera
+        self.WP = world_row(sc)
+        self.board = sc.pad.board
+        self.corners = np.ascontiguousarray(self.board.corners)
+        self.CAM = camera_vector(cam.intrinsics)
+        n_markers = len(self.corners)
+        self.draws = lnb.draws_per_tick(n_markers)
         self.renderer = Renderer(sc.pad.board, cam.intrinsics) if cam.mode == "rendered" else None
         self.detector = make_detector(sc.pad.board) if cam.mode == "rendered" else None
         self.uavs: dict[str, _Truth] = {}
@@ -190,7 +276,9 @@ class LandingWorld:
             x[6:10] = rot.rotvec_exp(np.array([0.0, 0.0, st.yaw_rad]))
             s = np.zeros(qd.S_N)
             s[0:4] = self.air.hover_omega_rad_s
-            self.uavs[u.id] = _Truth(st, x, s, np.full(4, self.air.hover_omega_rad_s))
+            held = np.full(4, self.air.hover_omega_rad_s)
+            render_rng = np.random.default_rng(_seeds(seed, u.index, 17))
+            self.uavs[u.id] = _Truth(st, x, s, held, n_markers, render_rng)
 
     def active(self) -> list[str]:
         return [i for i, u in self.uavs.items() if not u.done]
@@ -199,65 +287,34 @@ class LandingWorld:
         """Step 1 of the tick for every UAV not done."""
         return {i: self._step_one(u, k) for i, u in self.uavs.items() if not u.done}
 
-    def _step_one(self, u: _Truth, k: int) -> LandingInputs:
-        sc, dt, x, st = self.sc, self.sc.dt_s, u.x, u.setup
-        rng = st.rng
-        t = k * dt
-        v_before = x[3:6].copy()
-        w_before = x[10:13].copy()
-        u.energy_j += qd.quadrotor_truth_step(x, u.s, u.held, self.kp, dt)
-        # what an ideal accelerometer integrates over the tick: the mean non-gravitational acceleration
-        # (v(t) - v(t - dt)) / dt + g e_z (so the touchdown's stop too), body frame
-        f_nav = (x[3:6] - v_before) / dt + np.array([0.0, 0.0, self.air.gravity_m_s2])
-        f = rot.quat_rotate(rot.quat_conj(x[6:10]), f_nav) + st.accel_bias
-        f += rng.normal(0.0, sc.imu.accel_noise / math.sqrt(dt), 3)
-        w = 0.5 * (w_before + x[10:13]) + st.gyro_bias + rng.normal(0.0, sc.imu.gyro_noise / math.sqrt(dt), 3)
-        inp = LandingInputs(k, t, w, f)
-        if self.rates.uwb_tick(sc, k):
-            a = u.next_anchor
-            u.next_anchor = (u.next_anchor + 1) % len(self.anchors)
-            tag = x[0:3] + rot.quat_rotate(x[6:10], self.lever)
-            true_r = float(np.linalg.norm(tag - self.anchors[a]))
-            if true_r <= st.uwb_range_m:
-                inp.uwb = (a, true_r + rng.normal(0.0, sc.uwb.sigma_m))
-        if self.rates.gnss_tick(sc, k):
-            inp.gnss = x[0:3] + rng.normal(0.0, 1.0, 3) * self.gnss_sigma
-        if self.rates.camera_tick(k):
-            inp.camera = self._camera(u, t, rng)
-        return inp
+    def arrays(self, u: _Truth) -> tuple:
+        """The arrays of :func:`swarm.step.landing_nb.world_sample` (after ``k``, without the draws), in
+        :func:`~swarm.step.landing_nb.run_landing_ticks`' order."""
+        return (u.x, u.s, u.held, self.kp, u.WSC, u.WC, self.WP, self.anchors, self.corners, self.CAM, u.INP,
+                u.CIDX, u.CPX)  # fmt: skip
 
-    def _camera(self, u: _Truth, t: float, rng) -> tuple[np.ndarray, np.ndarray]:
-        sc, x, st = self.sc, u.x, u.setup
-        f = sc.faults
-        hidden = f.pad_hidden_always or (
-            f.pad_hidden_from_s is not None
-            and f.pad_hidden_from_s <= t < f.pad_hidden_from_s + f.pad_hidden_for_s
-        )
-        # the pad in the camera: X_cam = R_cam_nav (X_nav - p_cam)
-        R_nav_body = rot.quat_to_matrix(x[6:10])
-        p_cam = x[0:3] + R_nav_body @ self.cam_pos
-        R_cam_nav = (R_nav_body @ R_BODY_CAM).T
-        t_cam = R_cam_nav @ (st.pad - p_cam)
-        q_cam_pad = rot.matrix_to_quat(R_cam_nav @ rot.quat_to_matrix(st.q_nav_pad))
-        u.frames += 1
-        if hidden or t_cam[2] <= 0.05:
-            return np.zeros(0, dtype=np.int64), np.zeros((0, 4, 2))
-        board, intr = sc.pad.board, sc.camera.intrinsics
-        if self.renderer is not None:
-            ids, corners = detect(self.renderer.render(t_cam, q_cam_pad, rng), board, self.detector)
-        else:
-            ids, corners = corner_frame(board, intr, t_cam, q_cam_pad, rng)
-        return np.asarray(ids, dtype=np.int64).reshape(-1), np.asarray(corners, dtype=float).reshape(-1, 4, 2)
+    def _step_one(self, u: _Truth, k: int) -> LandingInputs:
+        u.noise.ensure(self.draws)
+        lnb.world_sample(k, *self.arrays(u)[:10], u.noise.Z, u.noise.pos, u.INP, u.CIDX, u.CPX)
+        inp = inputs_of(u.INP, u.CIDX, u.CPX, self.board)
+        if u.INP[lnb.INP_CAM] == lnb.CAM_RENDER:
+            t_cam = u.INP[lnb.INP_T_CAM : lnb.INP_T_CAM + 3].copy()
+            q_cam_pad = rot.matrix_to_quat(u.INP[lnb.INP_R_CAM_PAD : lnb.INP_R_CAM_PAD + 9].reshape(3, 3))
+            ids, corners = detect(
+                self.renderer.render(t_cam, q_cam_pad, u.render_rng), self.board, self.detector
+            )
+            inp.camera = (
+                np.asarray(ids, dtype=np.int64).reshape(-1),
+                np.asarray(corners, float).reshape(-1, 4, 2),
+            )
+        return inp
 
     def hold(self, uav_id: str, cmd: LandingCommand) -> None:
         """Step 3: the rotors take the command; the UAV's run ends if :func:`landing_done` says so."""
         u = self.uavs[uav_id]
-        qd.quadrotor_hold(cmd.u, u.s, u.held, self.kp)
-        t = cmd.k * self.sc.dt_s
-        if cmd.mode == LandingMode.LANDED and u.landed_t is None:
-            u.landed_t = t
-        if landing_done(self.sc, u.setup.pad, cmd.mode, u.landed_t, t, u.x):
-            u.done, u.end_k = True, cmd.k
+        mode = float(MODES.index(cmd.mode))
+        lnb.world_hold(np.asarray(cmd.u, float), mode, cmd.k, u.x, u.s, u.held, self.kp,
+                       u.WSC, u.WC, self.WP)  # fmt: skip
 
     def outcome(self, uav_id: str) -> dict:
         """The world's half of a UAV's summary: where and how it ended."""
@@ -271,6 +328,25 @@ class LandingWorld:
             "start_m": [float(v) for v in u.setup.start],
             "uwb_range_m": u.setup.uwb_range_m,
         }
+
+
+def inputs_of(INP: np.ndarray, CIDX: np.ndarray, CPX: np.ndarray, board) -> LandingInputs:
+    """The samples of the compiled world step as :class:`LandingInputs` (marker ids, not board indices)."""
+    k = int(INP[lnb.INP_K])
+    inp = LandingInputs(k, float(INP[lnb.INP_T]), INP[lnb.INP_GYRO : lnb.INP_GYRO + 3].copy(),
+                        INP[lnb.INP_ACC : lnb.INP_ACC + 3].copy())  # fmt: skip
+    if INP[lnb.INP_HAS_UWB]:
+        inp.uwb = (int(INP[lnb.INP_ANCHOR]), float(INP[lnb.INP_RANGE]))
+    if INP[lnb.INP_HAS_GNSS]:
+        inp.gnss = INP[lnb.INP_GNSS : lnb.INP_GNSS + 3].copy()
+    if INP[lnb.INP_CAM] == lnb.CAM_MARKERS:
+        n = int(INP[lnb.INP_N_MARKERS])
+        inp.camera = (board.markers[0][CIDX[:n]].astype(np.int64), CPX[:n].copy())
+    return inp
+
+
+def _opt_time(x: float) -> float | None:
+    return None if math.isnan(x) else float(x)
 
 
 def landing_done(sc: LandingScenario, pad, mode: LandingMode, landed_t: float | None, t: float, x) -> bool:
@@ -296,9 +372,22 @@ class _Series:
     mode: list = field(default_factory=list)
     pad_seen: list = field(default_factory=list)
 
+    def add(self, t: float, p_true, p_est, sigma_h: float, mode: float, seen: bool) -> None:
+        """One sample (every tenth tick); ``seen``: the pad measured within the last ``SEEN_RECENT_S``."""
+        self.t_s.append(round(float(t), 4))
+        self.p_true_nav.append([float(v) for v in p_true])
+        self.p_est_nav.append([float(v) for v in p_est])
+        self.sigma_h_m.append(float(sigma_h))
+        self.mode.append(str(MODES[int(mode)]))
+        self.pad_seen.append(bool(seen))
+
 
 class LandingAgent:
-    """One UAV's on-board software (module docstring, step 2): filter, guidance, controller."""
+    """One UAV's on-board software (module docstring, step 2): filter, guidance, controller, on the compiled
+    steps of :mod:`swarm.step.landing_nb`."""
+
+    NIS_WINDOW = 20
+    """The filter's consistency ``d`` is the RMS of this many recent normalised innovations."""
 
     def __init__(self, sc: LandingScenario, seed: int, index: int, policy: str) -> None:
         self.sc, self.policy = sc, policy
@@ -345,14 +434,67 @@ class LandingAgent:
         half_fov = math.atan(min(cam.intrinsics.cx_px, cam.intrinsics.cy_px) / cam.intrinsics.fx_px)
         self.guidance = LandingGuidance(sc.landing, policy, st.pad, st.start, half_fov, air.gear_height_m)
         self.cs, self.u, self.act = np.zeros(qc.CS_N), np.zeros(4), np.zeros(9)
-        self.gnss_cov = np.diag(np.asarray(sc.gnss.sigma_m, float) ** 2)
-        self.nis: deque = deque(maxlen=20)
-        self.pad_seen: float | None = None
-        self.detections = 0
-        self.landed_t: float | None = None
-        self.p_est = st.p0.copy()
-        self.sigma_h = 0.0
+        self.board = sc.pad.board
+        self.corners = np.ascontiguousarray(self.board.corners)
+        self.CAM = camera_vector(cam.intrinsics)
+        m = len(self.corners)
+        self.AC = np.zeros(lnb.AC_N)
+        self.AC[lnb.AC_DT], self.AC[lnb.AC_GATE3] = self.dt, _gate3(0.9995)
+        self.AC[lnb.AC_PAD : lnb.AC_PAD + 3] = st.pad
+        self.AC[lnb.AC_CAM_POS : lnb.AC_CAM_POS + 3] = self.cam_pos
+        self.AC[lnb.AC_R_BC : lnb.AC_R_BC + 9] = R_BODY_CAM.ravel()
+        self.AC[lnb.AC_GNSS_COV : lnb.AC_GNSS_COV + 9] = np.diag(
+            np.asarray(sc.gnss.sigma_m, float) ** 2
+        ).ravel()
+        self.AF = np.zeros(lnb.AF_N)
+        for i in (lnb.AF_PAD_SEEN, lnb.AF_LANDED_T, lnb.AF_LAST_D2, lnb.AF_LAST_PAD_D2):
+            self.AF[i] = np.nan
+        self.AF[lnb.AF_P_EST : lnb.AF_P_EST + 3] = st.p0
+        self.HELD, self.NIS = np.zeros((2, 3)), np.zeros(self.NIS_WINDOW)
+        self.INP, self.POSE = np.zeros(lnb.INP_N), np.zeros(lnb.POSE_N)
+        self.CIDX, self.CPX = np.zeros(m, dtype=np.int64), np.zeros((m, 4, 2))
+        self.OBJ, self.IMG, self.VAR = np.zeros((4 * m, 3)), np.zeros((4 * m, 2)), np.zeros(4 * m)
+        self.T_OUT, self.R_OUT, self.COV_OUT = np.zeros(3), np.zeros((3, 3)), np.zeros((6, 6))
         self.series = _Series()
+
+    # the agent's state, as the wire and the summary read it
+    @property
+    def pad_seen(self) -> float | None:
+        return _opt_time(self.AF[lnb.AF_PAD_SEEN])
+
+    @property
+    def landed_t(self) -> float | None:
+        return _opt_time(self.AF[lnb.AF_LANDED_T])
+
+    @property
+    def detections(self) -> int:
+        return int(self.AF[lnb.AF_DETECTIONS])
+
+    @property
+    def p_est(self) -> np.ndarray:
+        """The estimate the last decision used."""
+        return self.AF[lnb.AF_P_EST : lnb.AF_P_EST + 3].copy()
+
+    @property
+    def sigma_h(self) -> float:
+        return float(self.AF[lnb.AF_SIGMA_H])
+
+    @property
+    def last_d2(self) -> float | None:
+        """The squared Mahalanobis distance of the latest range (None before the first)."""
+        return _opt_time(self.AF[lnb.AF_LAST_D2])
+
+    def arrays(self) -> tuple:
+        """The arrays of :func:`swarm.step.landing_nb.agent_fuse` after ``INP, CIDX, CPX``, in
+        :func:`~swarm.step.landing_nb.run_landing_ticks`' order (the agent tuple)."""
+        f = self.filt
+        return (self.POSE, f.X[0], f.P[0], self.AF, self.HELD, self.NIS, f.counts, f.anchors, f.bias_of,
+                f.sigma, f.prm, f._work, f._res, self.AC, self.OBJ, self.IMG, self.VAR, self.T_OUT,
+                self.R_OUT, self.COV_OUT)  # fmt: skip
+
+    def guidance_arrays(self) -> tuple:
+        g = self.guidance
+        return g.G, g.GP, g.REF, g.EV, g.EV_n, g.DEC, g.DEC_n
 
     def tick(self, inp: LandingInputs, truth_p=None) -> LandingCommand:
         """Step 2 (module docstring): :meth:`fuse` the tick's samples, then :meth:`decide`; ``truth_p``, the
@@ -360,55 +502,54 @@ class LandingAgent:
         self.fuse(inp)
         return self.decide(inp, truth_p)
 
+    def _load(self, inp: LandingInputs) -> None:
+        """``inp`` into the kernels' ``INP``: the markers as board indices (ids not on the board dropped), or,
+        for a rendered camera, the pad's pose solved by OpenCV
+        (:func:`swarm.core.pad_vision.estimate_pose`)."""
+        I = self.INP
+        I[:] = 0.0
+        I[lnb.INP_K], I[lnb.INP_T] = inp.k, inp.t
+        I[lnb.INP_GYRO : lnb.INP_GYRO + 3], I[lnb.INP_ACC : lnb.INP_ACC + 3] = inp.gyro, inp.acc
+        if inp.uwb is not None:
+            I[lnb.INP_HAS_UWB], I[lnb.INP_ANCHOR], I[lnb.INP_RANGE] = 1.0, inp.uwb[0], inp.uwb[1]
+        if inp.gnss is not None:
+            I[lnb.INP_HAS_GNSS] = 1.0
+            I[lnb.INP_GNSS : lnb.INP_GNSS + 3] = inp.gnss
+        if inp.camera is None or not len(inp.camera[0]):
+            return
+        ids, corners = inp.camera
+        if self.sc.camera.mode == "rendered":
+            est = estimate_pose(ids, corners, self.board, self.sc.camera.intrinsics)
+            if est is not None:
+                I[lnb.INP_CAM] = lnb.CAM_POSE
+                self.POSE[0:3], self.POSE[3:12] = est.t_cam_m, est.cov_cam[:3, :3].ravel()
+            return
+        index = np.asarray(ids, dtype=np.int64) - self.board.first_id
+        ok = (index >= 0) & (index < len(self.corners))
+        n = int(ok.sum())
+        I[lnb.INP_CAM], I[lnb.INP_N_MARKERS] = lnb.CAM_MARKERS, n
+        self.CIDX[:n], self.CPX[:n] = index[ok], np.asarray(corners, float)[ok]
+
     def fuse(self, inp: LandingInputs) -> None:
         """The filter's half of a tick: the IMU sample, then the range, the fix and the pad's pose from the
         camera's corners (PnP). A free-running agent that has fallen behind fuses the ticks it missed with
         this alone and decides only on the newest (:mod:`agents.landing`)."""
-        sc, filt, t = self.sc, self.filt, inp.t
-        filt.imu(t - self.dt, inp.gyro, inp.acc)
-        if inp.uwb is not None:
-            out = filt.update_range(t, inp.uwb[0], inp.uwb[1])
-            if len(out) and out[0] != 2:
-                self.nis.append(float(filt.last_d2[0]))
-        if inp.gnss is not None:
-            filt.update_position(t, inp.gnss, self.gnss_cov)
-        if inp.camera is not None and len(inp.camera[0]):
-            est = estimate_pose(inp.camera[0], inp.camera[1], sc.pad.board, sc.camera.intrinsics)
-            if est is not None:
-                out = filt.update_pad(
-                    t, self.setup.pad, est.t_cam_m, est.cov_cam[:3, :3], self.cam_pos, R_BODY_CAM
-                )
-                if len(out) and out[0] == 0:
-                    self.pad_seen = t
-                    self.detections += 1
-                    self.nis.append(float(filt.last_pad_d2[0]) / 3.0)
+        self._load(inp)
+        lnb.agent_fuse(self.INP, self.CIDX, self.CPX, *self.arrays()[:14], self.corners, self.CAM,
+                       *self.arrays()[14:])  # fmt: skip
 
     def decide(self, inp: LandingInputs, truth_p=None) -> LandingCommand:
         """The guidance and control half of a tick, on the filter's estimate after :meth:`fuse`."""
-        filt, t = self.filt, inp.t
-        p_est, v_est = filt.p_nav[0].copy(), filt.v_nav[0].copy()
-        sigma_h = math.sqrt(max(np.linalg.eigvalsh(filt.P[0, 0:2, 0:2])))
-        d = math.sqrt(float(np.mean(self.nis))) if self.nis else 0.0
-        g = self.guidance
-        ref = g.step(t, p_est, v_est, sigma_h, d, self.pad_seen)
-        if g.mode == LandingMode.LANDED:
-            qc.quadrotor_idle(self.cp, self.u, self.act)
-            self.landed_t = self.landed_t if self.landed_t is not None else t
-        else:
-            qc.quadrotor_control(
-                self.cs, self.cp, p_est, v_est, filt.q_nav_body[0], inp.gyro - filt.gyro_bias[0],
-                ref.p_nav, ref.v_nav, ref.a_nav, ref.q_nav_body, self.u, self.act,
-            )  # fmt: skip
-        self.p_est, self.sigma_h = p_est, sigma_h
+        f = self.filt
+        if int(self.INP[lnb.INP_K]) != inp.k:
+            self._load(inp)
+        mode = lnb.agent_decide(self.INP, f.X[0], f.P[0], self.AF, self.NIS, *self.guidance_arrays(), self.cs,
+                                self.cp, self.u, self.act)  # fmt: skip
+        self.guidance.drain()
         if truth_p is not None and inp.k % 10 == 0:
-            s = self.series
-            s.t_s.append(round(t, 4))
-            s.p_true_nav.append(truth_p.tolist())
-            s.p_est_nav.append(p_est.tolist())
-            s.sigma_h_m.append(sigma_h)
-            s.mode.append(str(g.mode))
-            s.pad_seen.append(self.pad_seen is not None and t - self.pad_seen <= 0.2)
-        return LandingCommand(inp.k, self.u.copy(), g.mode)
+            seen = self.pad_seen is not None and inp.t - self.pad_seen <= lnb.SEEN_RECENT_S
+            self.series.add(inp.t, truth_p, self.p_est, self.sigma_h, mode, seen)
+        return LandingCommand(inp.k, self.u.copy(), MODES[int(mode)])
 
     def outcome(self) -> dict:
         """The agent's half of a UAV's summary: modes, decisions, deviation, detections."""

@@ -96,8 +96,8 @@ def agent_tick(keys: Keys, uid: str, agent, cmd, n_modes: int) -> tuple[Wire, in
 def _estimate(agent, k: int, t: float) -> Estimate:
     f = agent.filt
     P = f.P[0, 0:9, 0:9]
-    d2 = getattr(f, "last_d2", None)  # the latest range's (none before the first)
-    d = float(np.sqrt(d2[0])) if d2 is not None and np.isfinite(d2[0]) else 0.0
+    d2 = agent.last_d2  # the latest range's (none before the first)
+    d = float(np.sqrt(d2)) if d2 is not None else 0.0
     counts = {
         f"range_{w}": int(f.counts[:, i].sum()) for i, w in enumerate(("accepted", "rejected", "refused"))
     }

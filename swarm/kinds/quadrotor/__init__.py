@@ -2,10 +2,10 @@
 
 :mod:`.params` (its ``[kinds.quadrotor.*]`` tables), :mod:`.dynamics` (rigid body, rotor lag, drag,
 gravity, ground contact, rotor power), :mod:`.control` (PX4's cascaded controller and the mixer). These are
-compiled steps with the shapes of docs/architecture.md, "Vehicle kinds", flown today by the in-process
-landing runner (:mod:`swarm.sim.landing`). It is not yet registered in :data:`swarm.kinds.KINDS`: the
+compiled steps with the shapes of docs/architecture.md, "Vehicle kinds", flown by the compiled
+landing tick (:mod:`swarm.step.landing_nb`). It is not registered in :data:`swarm.kinds.KINDS`: the
 docking runners' filter takes no gravity and no accelerometer (the quadrotor's is the IMU-driven filter of
-:mod:`swarm.core.imu_filter`), and the compiled one tick has no landing guidance yet.
+:mod:`swarm.core.imu_filter`), and the docking tick has no landing guidance.
 """
 
 from swarm.kinds.quadrotor.control import control_row, quadrotor_control, quadrotor_idle

@@ -1,0 +1,372 @@
+"""The landing tick compiled (:mod:`swarm.step.landing`; docs/architecture.md, "The landing tick").
+
+The three steps of a landing tick over explicit arrays: :func:`world_sample` (step 1: the truth and the
+sensors of tick ``k``), :func:`agent_fuse` and :func:`agent_decide` (step 2: the filter, then the guidance
+and the controller) and :func:`world_hold` (step 3). The per-tick objects
+(:class:`~swarm.step.landing.LandingWorld`, :class:`~swarm.step.landing.LandingAgent`), which the landing
+world and agent processes call one tick at a time, call these kernels; :func:`run_landing_ticks` calls the
+same kernels in the same order for one UAV from tick to tick in compiled code, so an in-process landing is
+bit for bit the per-tick one (a test checks it), as :func:`swarm.step.tick.run_ticks` is for docking.
+
+Random draws: a UAV's sensors read standard normal draws in order from a buffer ``Z`` filled from the UAV's
+generator (:class:`~swarm.step.landing.NoiseStream`); ``rng.normal(0, s, n)`` is ``s`` times the next ``n``
+standard normals of the same generator, so the draws are those of the generator, whatever the buffer's
+size. A tick takes at most :func:`draws_per_tick` of them; the caller refills ``Z`` before a tick that could
+run out.
+
+Layouts (indices into float64 arrays; a flag as 0.0/1.0, an absent time as NaN):
+
+* ``WP`` (:data:`WP_N`,) the scenario's world parameters, ``WC`` (:data:`WC_N`,) one UAV's (its sensor
+  biases, its pad, the anchors' reach), ``WSC`` (:data:`WSC_N`,) its world state besides the truth.
+* ``INP`` (:data:`INP_N`,) one tick's samples (:class:`~swarm.step.landing.LandingInputs`); the camera's
+  markers (board indices) in ``CIDX`` and their corners in ``CPX``.
+* ``AC`` (:data:`AC_N`,) an agent's constants, ``AF`` (:data:`AF_N`,) its state besides the filter's
+  ``X``, ``P`` and the guidance's and controller's arrays.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from swarm.core import _imu_nb as inb
+from swarm.core import _landing_nb as lnb
+from swarm.core._pad_nb import corner_frame_nb, pack_frame_nb
+from swarm.core._pnp_nb import solve_pose_nb
+from swarm.core._rot_nb import qmat, qrotate
+from swarm.kinds.quadrotor import control as qc
+from swarm.kinds.quadrotor import dynamics as qd
+
+# ---- world parameters WP ----------------------------------------------------------------------------------
+(WP_DT, WP_G, WP_ACC_NOISE, WP_GYRO_NOISE, WP_UWB_SIGMA, WP_RATE_CAM, WP_RATE_UWB, WP_RATE_GNSS, WP_UWB_ON,
+ WP_GNSS_ON, WP_HIDDEN_ALWAYS, WP_HIDDEN_FROM, WP_HIDDEN_FOR, WP_CORNERS, WP_END_AFTER, WP_ABORT_H,
+ WP_ABORT_TOL, WP_ABORT_V) = range(18)  # fmt: skip
+WP_GNSS_SIGMA = 18  # 18:21
+WP_CAM_POS = 21  # 21:24 the camera, body frame [m]
+WP_LEVER = 24  # 24:27 the UWB tag, body frame [m]
+WP_N = 27
+
+# ---- one UAV's world constants WC -------------------------------------------------------------------------
+WC_BA = 0  # 0:3 accelerometer bias
+WC_BG = 3  # 3:6 gyro bias
+WC_PAD = 6  # 6:9 its pad (nav)
+WC_UWB_RANGE = 9  # the anchors' reach [m]
+WC_R_NAV_PAD = 10  # 10:19 the pad's attitude, row-major
+WC_N = 19
+
+# ---- one UAV's world state WSC ----------------------------------------------------------------------------
+WSC_NEXT_ANCHOR, WSC_ENERGY, WSC_FRAMES, WSC_LANDED_T, WSC_DONE, WSC_END_K = range(6)
+WSC_N = 6
+
+# ---- one tick's samples INP -------------------------------------------------------------------------------
+INP_K, INP_T = 0, 1
+INP_GYRO = 2  # 2:5
+INP_ACC = 5  # 5:8
+INP_HAS_UWB, INP_ANCHOR, INP_RANGE, INP_HAS_GNSS = 8, 9, 10, 11
+INP_GNSS = 12  # 12:15
+INP_CAM = 15  # CAM_NONE, CAM_MARKERS (CIDX, CPX), CAM_RENDER (the caller renders the pose below)
+INP_N_MARKERS = 16
+INP_T_CAM = 17  # 17:20 the pad in the camera (CAM_RENDER)
+INP_R_CAM_PAD = 20  # 20:29 row-major (CAM_RENDER)
+INP_N = 29
+CAM_NONE, CAM_MARKERS, CAM_RENDER, CAM_POSE = 0.0, 1.0, 2.0, 3.0
+"""CAM_POSE (agent side): the pad's pose is already solved (``POSE``), by OpenCV on a rendered image."""
+
+# ---- an agent's constants AC ------------------------------------------------------------------------------
+AC_DT, AC_GATE3 = 0, 1
+AC_PAD = 2  # 2:5
+AC_CAM_POS = 5  # 5:8
+AC_R_BC = 8  # 8:17 camera to body, row-major
+AC_GNSS_COV = 17  # 17:26 row-major
+AC_N = 26
+
+# ---- an agent's state AF ----------------------------------------------------------------------------------
+(AF_T, AF_HELD, AF_DROPPED, AF_IMU_REFUSED, AF_PAD_SEEN, AF_DETECTIONS, AF_LANDED_T, AF_NIS_N, AF_NIS_HEAD,
+ AF_SIGMA_H, AF_LAST_D2, AF_LAST_PAD_D2) = range(12)  # fmt: skip
+AF_P_EST = 12  # 12:15 the estimate the last decision used
+AF_N = 15
+
+# ---- a series sample, a row of SER (in process only) ------------------------------------------------------
+SER_T, SER_PTRUE, SER_PEST, SER_SIGMA, SER_MODE, SER_SEEN = 0, 1, 4, 7, 8, 9
+SER_N = 10
+
+SEEN_RECENT_S = 0.2
+"""A series sample marks the pad seen when its last measurement is at most this old [s]."""
+
+POSE_N = 12
+"""``POSE``: the pad's position in the camera (3) and its covariance (9, row-major)."""
+
+# run_landing_ticks' answers
+RUN_DONE = 0
+"""The UAV's run is over at tick ``k`` (``WSC_DONE``), or tick ``k = k1 - 1`` is done."""
+RUN_NOISE = 1
+"""Tick ``k`` may run out of noise draws: refill ``Z`` and call again from ``k``."""
+RUN_DRAIN = 2
+"""A record buffer (mode switches, passes, series) may overflow at tick ``k``: drain and call again."""
+
+
+def draws_per_tick(n_markers: int) -> int:
+    """The most standard normals one tick takes: IMU (6), range (1), fix (3), each marker's corners (8)."""
+    return 10 + 8 * n_markers
+
+
+@njit(cache=True)
+def _camera_pose(x, WP, WC, t_cam, R_cam_pad):
+    """The pad's pose in the downward camera from the truth ``x``: ``X_cam = R_cam_nav (X_nav - p_cam)``.
+    The camera's optical axis is body -z (``R_BODY_CAM``, a half turn about body x)."""
+    R_nb = qmat(x[6:10])
+    p_cam = x[0:3] + R_nb @ WP[WP_CAM_POS : WP_CAM_POS + 3]
+    # R_cam_nav = (R_nav_body R_body_cam)^T with R_body_cam = diag(1, -1, -1)
+    R_cn = np.empty((3, 3))
+    for j in range(3):
+        R_cn[0, j] = R_nb[j, 0]
+        R_cn[1, j] = -R_nb[j, 1]
+        R_cn[2, j] = -R_nb[j, 2]
+    d = WC[WC_PAD : WC_PAD + 3] - p_cam
+    t_cam[:] = R_cn @ d
+    R_cam_pad[:] = R_cn @ WC[WC_R_NAV_PAD : WC_R_NAV_PAD + 9].reshape(3, 3)
+
+
+@njit(cache=True)
+def world_sample(k, x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, Z, zpos, INP, CIDX, CPX):
+    """Step 1 of tick ``k`` for one UAV (:meth:`swarm.step.landing.LandingWorld.step`): the truth advances
+    by ``dt`` under the held command, then the IMU, the range, the fix and the camera sample, drawing from
+    ``Z`` at ``zpos[0]``."""
+    dt = WP[WP_DT]
+    t = k * dt
+    vb0, vb1, vb2 = x[3], x[4], x[5]
+    wb0, wb1, wb2 = x[10], x[11], x[12]
+    WSC[WSC_ENERGY] += qd.quadrotor_truth_step(x, s, held, kp, dt)
+    # what an ideal accelerometer integrates over the tick: the mean non-gravitational acceleration
+    # (v(t) - v(t - dt)) / dt + g e_z (so the touchdown's stop too), body frame
+    f_nav = np.empty(3)
+    f_nav[0] = (x[3] - vb0) / dt
+    f_nav[1] = (x[4] - vb1) / dt
+    f_nav[2] = (x[5] - vb2) / dt + WP[WP_G]
+    q_bn = np.empty(4)
+    q_bn[0], q_bn[1], q_bn[2], q_bn[3] = -x[6], -x[7], -x[8], x[9]
+    f = qrotate(q_bn, f_nav)
+    i = zpos[0]
+    sa = WP[WP_ACC_NOISE] / math.sqrt(dt)
+    sg = WP[WP_GYRO_NOISE] / math.sqrt(dt)
+    INP[INP_K], INP[INP_T] = k, t
+    for j in range(3):
+        INP[INP_ACC + j] = f[j] + WC[WC_BA + j] + sa * Z[i + j]
+    wb = (wb0, wb1, wb2)
+    for j in range(3):
+        INP[INP_GYRO + j] = 0.5 * (wb[j] + x[10 + j]) + WC[WC_BG + j] + sg * Z[i + 3 + j]
+    i += 6
+    INP[INP_HAS_UWB] = 0.0
+    INP[INP_HAS_GNSS] = 0.0
+    INP[INP_CAM] = CAM_NONE
+    INP[INP_N_MARKERS] = 0.0
+    n_a = anchors.shape[0]
+    if WP[WP_UWB_ON] != 0.0 and n_a > 0 and k % int(WP[WP_RATE_UWB]) == 0:
+        a = int(WSC[WSC_NEXT_ANCHOR])
+        WSC[WSC_NEXT_ANCHOR] = (a + 1) % n_a
+        tag = x[0:3] + qrotate(x[6:10], WP[WP_LEVER : WP_LEVER + 3])
+        e0, e1, e2 = tag[0] - anchors[a, 0], tag[1] - anchors[a, 1], tag[2] - anchors[a, 2]
+        true_r = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        if true_r <= WC[WC_UWB_RANGE]:
+            INP[INP_HAS_UWB], INP[INP_ANCHOR] = 1.0, a
+            INP[INP_RANGE] = true_r + WP[WP_UWB_SIGMA] * Z[i]
+            i += 1
+    if WP[WP_GNSS_ON] != 0.0 and k % int(WP[WP_RATE_GNSS]) == 0:
+        INP[INP_HAS_GNSS] = 1.0
+        for j in range(3):
+            INP[INP_GNSS + j] = x[j] + Z[i + j] * WP[WP_GNSS_SIGMA + j]
+        i += 3
+    if k % int(WP[WP_RATE_CAM]) == 0:
+        hf = WP[WP_HIDDEN_FROM]
+        hidden = WP[WP_HIDDEN_ALWAYS] != 0.0 or (not math.isnan(hf) and hf <= t < hf + WP[WP_HIDDEN_FOR])
+        t_cam = INP[INP_T_CAM : INP_T_CAM + 3]
+        R_cp = np.empty((3, 3))
+        _camera_pose(x, WP, WC, t_cam, R_cp)
+        WSC[WSC_FRAMES] += 1.0
+        INP[INP_CAM] = CAM_MARKERS
+        if not (hidden or t_cam[2] <= 0.05):
+            if WP[WP_CORNERS] != 0.0:
+                n, i = corner_frame_nb(corners, R_cp, t_cam, CAM, Z, i, CIDX, CPX)
+                INP[INP_N_MARKERS] = n
+            else:
+                INP[INP_CAM] = CAM_RENDER
+                for r in range(3):
+                    for c in range(3):
+                        INP[INP_R_CAM_PAD + 3 * r + c] = R_cp[r, c]
+    zpos[0] = i
+
+
+@njit(cache=True)
+def world_hold(u, mode, k, x, s, held, kp, WSC, WC, WP):
+    """Step 3 for one UAV (:meth:`swarm.step.landing.LandingWorld.hold`): the rotors take the command ``u``
+    of guidance mode ``mode``; the run ends (``WSC_DONE``) ``end_after_landed_s`` after the touchdown, or
+    hovering at the abort height after an abort (:func:`swarm.step.landing.landing_done`)."""
+    qd.quadrotor_hold(u, s, held, kp)
+    t = k * WP[WP_DT]
+    if mode == lnb.L_LANDED and math.isnan(WSC[WSC_LANDED_T]):
+        WSC[WSC_LANDED_T] = t
+    done = not math.isnan(WSC[WSC_LANDED_T]) and t - WSC[WSC_LANDED_T] >= WP[WP_END_AFTER]
+    if not done and mode == lnb.L_ABORT:
+        climb_to = WC[WC_PAD + 2] + WP[WP_ABORT_H]
+        speed = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
+        done = abs(x[2] - climb_to) < WP[WP_ABORT_TOL] and speed < WP[WP_ABORT_V]
+    if done:
+        WSC[WSC_DONE], WSC[WSC_END_K] = 1.0, k
+    return done
+
+
+@njit(cache=True)
+def _predict_to(X, P, AF, HELD, t, prm):
+    """The filter's clock to ``t``: predict with the held IMU sample (``ImuFilter._predict_to``)."""
+    if AF[AF_HELD] != 0.0 and t > AF[AF_T]:
+        if not inb.predict_one(X, P, HELD[0], HELD[1], t - AF[AF_T], prm):
+            AF[AF_IMU_REFUSED] += 1.0
+    AF[AF_T] = max(AF[AF_T], t)
+
+
+@njit(cache=True)
+def _nis_push(AF, NIS, x):
+    """The last ``len(NIS)`` normalised innovations, a ring."""
+    w = NIS.shape[0]
+    NIS[int(AF[AF_NIS_HEAD])] = x
+    AF[AF_NIS_HEAD] = (AF[AF_NIS_HEAD] + 1.0) % w
+    AF[AF_NIS_N] = min(AF[AF_NIS_N] + 1.0, w)
+
+
+@njit(cache=True)
+def agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchors, bias_of, sigma, prm, work, res,
+               AC, corners, CAM, OBJ, IMG, VAR, T_OUT, R_OUT, COV_OUT):  # fmt: skip
+    """The filter's half of step 2 (:meth:`swarm.step.landing.LandingAgent.fuse`): the IMU sample (stamped
+    ``t - dt``), the range, the fix and the pad's position in the camera, solved from the markers' corners
+    (:func:`swarm.core._pnp_nb.solve_pose_nb`) or given in ``POSE`` (``CAM_POSE``). A sample older than the
+    filter's time is dropped and counted, as :class:`swarm.core.imu_filter.ImuFilter` does."""
+    t = INP[INP_T]
+    ts = t - AC[AC_DT]
+    if ts >= AF[AF_T]:
+        _predict_to(X, P, AF, HELD, ts, prm)
+        AF[AF_HELD] = 1.0
+        HELD[0, :] = INP[INP_GYRO : INP_GYRO + 3]
+        HELD[1, :] = INP[INP_ACC : INP_ACC + 3]
+    else:
+        AF[AF_DROPPED] += 1.0
+    if INP[INP_HAS_UWB] != 0.0:
+        if t >= AF[AF_T]:
+            _predict_to(X, P, AF, HELD, t, prm)
+            a = int(INP[INP_ANCHOR])
+            out = inb.update_range_one(X, P, anchors[a], bias_of[a], INP[INP_RANGE], sigma[a], prm, work, res)
+            counts[a, out] += 1
+            AF[AF_LAST_D2] = res[1]
+            if out != inb.REFUSED:
+                _nis_push(AF, NIS, res[1])
+        else:
+            AF[AF_DROPPED] += 1.0
+    if INP[INP_HAS_GNSS] != 0.0:
+        if t >= AF[AF_T]:
+            _predict_to(X, P, AF, HELD, t, prm)
+            R = AC[AC_GNSS_COV : AC_GNSS_COV + 9].reshape(3, 3)
+            inb.update_position_one(X, P, INP[INP_GNSS : INP_GNSS + 3], R, AC[AC_GATE3], res)
+        else:
+            AF[AF_DROPPED] += 1.0
+    cam = INP[INP_CAM]
+    have = False
+    if cam == CAM_MARKERS and INP[INP_N_MARKERS] > 0:
+        n = pack_frame_nb(corners, CIDX, CPX, int(INP[INP_N_MARKERS]), CAM, OBJ, IMG, VAR)
+        have = solve_pose_nb(OBJ, IMG, VAR, n, CAM, T_OUT, R_OUT, COV_OUT)
+    elif cam == CAM_POSE:
+        have = True
+        T_OUT[:] = POSE[0:3]
+        COV_OUT[0:3, 0:3] = POSE[3:12].reshape(3, 3)
+    if have:
+        if t >= AF[AF_T]:
+            _predict_to(X, P, AF, HELD, t, prm)
+            R_bc = AC[AC_R_BC : AC_R_BC + 9].reshape(3, 3)
+            cov = np.ascontiguousarray(COV_OUT[0:3, 0:3])
+            pad, cam_pos = AC[AC_PAD : AC_PAD + 3], AC[AC_CAM_POS : AC_CAM_POS + 3]
+            out = inb.update_pad_one(X, P, pad, cam_pos, R_bc, T_OUT, cov, AC[AC_GATE3], res)
+            AF[AF_LAST_PAD_D2] = res[1]
+            if out == inb.ACCEPTED:
+                AF[AF_PAD_SEEN] = t
+                AF[AF_DETECTIONS] += 1.0
+                _nis_push(AF, NIS, res[1] / 3.0)
+        else:
+            AF[AF_DROPPED] += 1.0
+
+
+@njit(cache=True)
+def agent_decide(INP, X, P, AF, NIS, G, GP, REF, EV, EV_n, DEC, DEC_n, cs, cp, u, act):
+    """The guidance and control half of step 2 (:meth:`swarm.step.landing.LandingAgent.decide`), on the
+    filter's estimate: the horizontal sigma (the larger eigenvalue of the 2 x 2 position block), the
+    consistency ``d`` (RMS of the recent normalised innovations), the guidance
+    (:func:`swarm.core._landing_nb.landing_step`) and the controller, or the idle rotors once landed.
+    Returns the guidance mode."""
+    t = INP[INP_T]
+    p = X[inb.XP : inb.XP + 3].copy()
+    v = X[inb.XV : inb.XV + 3].copy()
+    a, b, c = P[0, 0], P[0, 1], P[1, 1]
+    h = 0.5 * (a - c)
+    sigma_h = math.sqrt(max(0.5 * (a + c) + math.sqrt(h * h + b * b), 0.0))
+    n = int(AF[AF_NIS_N])
+    d = 0.0
+    if n > 0:
+        acc = 0.0
+        for i in range(n):
+            acc += NIS[i]
+        d = math.sqrt(acc / n)
+    lnb.landing_step(G, GP, t, p, v, sigma_h, d, AF[AF_PAD_SEEN], REF, EV, EV_n, DEC, DEC_n)
+    mode = G[lnb.G_MODE]
+    if mode == lnb.L_LANDED:
+        qc.quadrotor_idle(cp, u, act)
+        if math.isnan(AF[AF_LANDED_T]):
+            AF[AF_LANDED_T] = t
+    else:
+        w = INP[INP_GYRO : INP_GYRO + 3] - X[inb.XBG : inb.XBG + 3]
+        a_ref = np.zeros(3)
+        q_ref = np.array([0.0, 0.0, 0.0, 1.0])
+        qc.quadrotor_control(cs, cp, p, v, X[inb.XQ : inb.XQ + 4], w, REF[lnb.R_P : lnb.R_P + 3],
+                             REF[lnb.R_V : lnb.R_V + 3], a_ref, q_ref, u, act)  # fmt: skip
+    AF[AF_SIGMA_H] = sigma_h
+    AF[AF_P_EST : AF_P_EST + 3] = p
+    return mode
+
+
+@njit(cache=True)
+def _series(SER, SER_n, t, x, AF, mode):
+    i = SER_n[0]
+    SER[i, SER_T] = t
+    SER[i, SER_PTRUE : SER_PTRUE + 3] = x[0:3]
+    SER[i, SER_PEST : SER_PEST + 3] = AF[AF_P_EST : AF_P_EST + 3]
+    SER[i, SER_SIGMA] = AF[AF_SIGMA_H]
+    SER[i, SER_MODE] = mode
+    seen = AF[AF_PAD_SEEN]
+    SER[i, SER_SEEN] = 1.0 if (not math.isnan(seen) and t - seen <= SEEN_RECENT_S) else 0.0
+    SER_n[0] = i + 1
+
+
+@njit(cache=True)
+def run_landing_ticks(k, k1, world, agent, guid, ctl, Z, zpos, need, SER, SER_n, series_every):
+    """Ticks ``k .. k1 - 1`` of one UAV (module docstring), each :func:`world_sample`, :func:`agent_fuse`,
+    :func:`agent_decide`, :func:`world_hold` and, every ``series_every`` ticks (0: never), a series sample.
+    Returns ``(RUN_*, k)``: done (or ``k1`` reached), or the tick at which ``Z`` needs ``need`` more draws or
+    a record buffer may overflow (nothing of that tick done)."""
+    x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, INP, CIDX, CPX = world
+    POSE, X, P, AF, HELD, NIS, counts, anchs, bias_of, sigma, prm, work, res, AC = agent[:14]
+    OBJ, IMG, VAR, T_OUT, R_OUT, COV_OUT = agent[14:]
+    G, GP, REF, EV, EV_n, DEC, DEC_n = guid
+    cs, cp, u, act = ctl
+    while k < k1:
+        if Z.shape[0] - zpos[0] < need:
+            return RUN_NOISE, k
+        if EV_n[0] + 4 > EV.shape[0] or DEC_n[0] + 4 > DEC.shape[0] or SER_n[0] + 1 > SER.shape[0]:
+            return RUN_DRAIN, k
+        world_sample(k, x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, Z, zpos, INP, CIDX, CPX)
+        agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchs, bias_of, sigma, prm, work, res,
+                   AC, corners, CAM, OBJ, IMG, VAR, T_OUT, R_OUT, COV_OUT)  # fmt: skip
+        mode = agent_decide(INP, X, P, AF, NIS, G, GP, REF, EV, EV_n, DEC, DEC_n, cs, cp, u, act)
+        if series_every > 0 and k % series_every == 0:
+            _series(SER, SER_n, INP[INP_T], x, AF, mode)
+        if world_hold(u, mode, k, x, s, held, kp, WSC, WC, WP):
+            return RUN_DONE, k
+        k += 1
+    return RUN_DONE, k1 - 1
