@@ -32,4 +32,7 @@ def test_bench_sim_quick_writes_realtime_factors(tmp_path, capsys):
     frame = landing["rendered_frame_ms"]
     assert all(frame[k] > 0 for k in ("render", "detect", "pnp"))
     assert frame["total"] == frame["render"] + frame["detect"] + frame["pnp"]
-    assert "UAV landing" in text and "rendered camera, per 640 x 480 frame" in text
+    assert landing["corner_frame_us"] > 0 and landing["corner_frames_solved"] == landing["corner_frames"] > 0
+    assert (
+        "UAV landing" in text and "rendered camera, per 640 x 480 frame" in text and "corner camera" in text
+    )
