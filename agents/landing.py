@@ -1,18 +1,18 @@
 """The landing agent process (``python -m agents.landing SCENARIO --id UAV``; started by ``swarm launch`` for
 a landing scenario): one UAV's on-board software, the agent step of :mod:`swarm.step.landing`, over Zenoh.
 
-It subscribes its UAV's ``imu``, ``uwb``, ``gnss`` and ``vision`` and the world's events, declares its
-liveliness, and runs tick by tick in lockstep: once tick ``k``'s samples are all in (the IMU every tick,
-a range, a fix and a camera frame on their ticks, as the scenario's rates say, so nothing is waited for
-that will not come), it fuses them, decides, and publishes its ``command`` (rotor speeds [rad/s], the
-landing mode), its ``estimate`` (the position, velocity and attitude block of the IMU-driven filter's
-covariance), its ``guidance`` (mode, distance to its pad) and each mode switch as an ``event``. At the
-world's ``run_end`` it publishes a ``summary`` event (its half of the run's outcome) and stays up until
-stopped. Behind a free-running world (``--clock realtime`` or ``scaled:N``), a tick whose successor is
-already complete is only fused (its command would reach the world after it flew that tick): the agent
-decides and publishes on the newest tick, as a flight controller's estimator runs at the sensors' rate and
-its controller on the newest estimate. A message that does not decode is dropped and counted; a sample of a
-tick already flown is ignored.
+It subscribes its UAV's ``imu``, ``uwb``, ``gnss``, ``rangefinder`` and ``vision`` and the world's events,
+declares its liveliness, and runs tick by tick in lockstep: once tick ``k``'s samples are all in (the IMU
+every tick, a range, a fix, a distance and a camera frame on their ticks, as the scenario's rates say, so
+nothing is waited for that will not come), it fuses them, decides, and publishes its ``command`` (rotor speeds
+[rad/s], the landing mode), its ``estimate`` (the position, velocity and attitude block of the IMU-driven
+filter's covariance), its ``guidance`` (mode, distance to its pad) and each mode switch as an ``event``. At
+the world's ``run_end`` it publishes a ``summary`` event (its half of the run's outcome) and stays up until
+stopped. Behind a free-running world (``--clock realtime`` or ``scaled:N``), a tick whose successor is already
+complete is only fused (its command would reach the world after it flew that tick): the agent decides and
+publishes on the newest tick, as a flight controller's estimator runs at the sensors' rate and its controller
+on the newest estimate. A message that does not decode is dropped and counted; a sample of a tick already
+flown is ignored.
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
     fused, not decided on."""
     from swarm.step.landing import LandingAgent, LandingInputs, Rates
     from swarm.transport import landing_wire as wire
-    from swarm.transport.messages import DropCounter, Event, Gnss, Imu, MessageError, Uwb, Vision
+    from swarm.transport.messages import DropCounter, Event, Gnss, Imu, MessageError, Rangefinder, Uwb, Vision
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import declare_liveliness, subscribe_decoded
 
@@ -84,7 +84,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
     rates = Rates.of(sc)
     dt = sc.dt_s
     cond = threading.Condition()
-    inbox: dict[str, dict[int, object]] = {"imu": {}, "uwb": {}, "gnss": {}, "vision": {}}
+    inbox: dict[str, dict[int, object]] = {"imu": {}, "uwb": {}, "gnss": {}, "rangefinder": {}, "vision": {}}
     state = {"k": 1, "ended": False}
     drops = DropCounter()
     n_anchors = len(sc.uwb.anchors_m) if sc.uwb.enabled else 0
@@ -98,6 +98,8 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
             return wire.range_input(msg, n_anchors)
         if kind == "gnss":
             return msg.p_nav
+        if kind == "rangefinder":
+            return msg.range_m
         if msg.acc_body is None:
             raise MessageError("acc_body: an IMU sample without the specific force cannot drive this filter")
         return msg.gyro_body, msg.acc_body
@@ -127,6 +129,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
             k in inbox["imu"]
             and (not rates.uwb_tick(sc, k) or k in inbox["uwb"])
             and (not rates.gnss_tick(sc, k) or k in inbox["gnss"])
+            and (not rates.rangefinder_tick(sc, k) or k in inbox["rangefinder"])
             and (not rates.camera_tick(k) or k in inbox["vision"])
         )
 
@@ -135,12 +138,19 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         inp = LandingInputs(k, k * dt, gyro, acc)
         inp.uwb = inbox["uwb"].pop(k, None)
         inp.gnss = inbox["gnss"].pop(k, None)
+        inp.rangefinder = inbox["rangefinder"].pop(k, None)
         inp.camera = inbox["vision"].pop(k, None)
         return inp
 
     pub = {getattr(keys, kind)(uid): declare_reliable(session, getattr(keys, kind)(uid))
            for kind in ("command", "estimate", "guidance", "event")}  # fmt: skip
-    for kind, cls in (("imu", Imu), ("uwb", Uwb), ("gnss", Gnss), ("vision", Vision)):
+    for kind, cls in (
+        ("imu", Imu),
+        ("uwb", Uwb),
+        ("gnss", Gnss),
+        ("rangefinder", Rangefinder),
+        ("vision", Vision),
+    ):
         subscribe_decoded(session, getattr(keys, kind)(uid), cls, on_sample(kind), drops)
     subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
     token = declare_liveliness(session, keys, "agent", uid)

@@ -89,6 +89,32 @@ class LandingGnss:
 
 
 @dataclass(frozen=True)
+class LandingRangefinder:
+    """``[rangefinder]``: a downward distance sensor (a lidar altimeter, PX4's ``distance_sensor``) at the
+    body origin, pointing along body ``-z``: the distance to flat ground at the airframe's ``ground_z_m``
+    (``(p_z - ground_z) / cos(tilt)``), white noise ``sigma_m``, a reading only within ``[min_range_m,
+    max_range_m]`` and below ``max_tilt_deg`` (beyond, the sensor reports none)."""
+
+    enabled: bool = False
+    rate_hz: float = 20.0
+    sigma_m: float = 0.03
+    min_range_m: float = 0.1
+    max_range_m: float = 12.0
+    max_tilt_deg: float = 30.0
+
+    def __post_init__(self) -> None:
+        for name in ("rate_hz", "sigma_m", "min_range_m", "max_range_m", "max_tilt_deg"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ConfigError(f"rangefinder.{name} must be a finite number > 0, got {v!r}")
+        if not self.min_range_m < self.max_range_m:
+            lo, hi = self.min_range_m, self.max_range_m
+            raise ConfigError(f"rangefinder.min_range_m must be below max_range_m = {hi!r}, got {lo!r}")
+        if not self.max_tilt_deg < 90:
+            raise ConfigError(f"rangefinder.max_tilt_deg must be below 90, got {self.max_tilt_deg!r}")
+
+
+@dataclass(frozen=True)
 class LandingInitial:
     """``[initial]``: the first estimate's errors (drawn) and sigmas."""
 
@@ -179,6 +205,7 @@ class LandingScenario:
     imu: LandingImu = LandingImu()
     uwb: LandingUwb = LandingUwb()
     gnss: LandingGnss = LandingGnss()
+    rangefinder: LandingRangefinder = LandingRangefinder()
     initial: LandingInitial = LandingInitial()
     estimator: ImuFilterParams = field(default_factory=lambda: ImuFilterParams(range_bias=False, huber_k=2.0))
     landing: LandingGuidanceParams = field(default_factory=LandingGuidanceParams)

@@ -506,3 +506,43 @@ def update_position_one(X, P, z, R_meas, gate, out):
         H[i, EP + i] = 1.0
     nu = z - X[XP : XP + 3]
     return _vector_update(X, P, H, nu, R_meas, gate, out)
+
+
+# ------------------------------------------------------------------------------------- downward rangefinder
+
+
+@njit(cache=True)
+def height_row(X, ground_z, H):
+    """A downward rangefinder's distance from the body origin along body ``-z`` to flat ground at height
+    ``ground_z``, ``h = (p_z - ground_z) / R_22`` with ``R_22 = e_z^T R(q) e_z`` (the cosine of the tilt),
+    and its Jacobian ``H`` (1, N): ``1 / R_22`` on ``dp_z`` and, from ``R(q exp(dtheta)) e_z = R (e_z +
+    dtheta x e_z)``, ``dR_22 = (e_z x a) . dtheta`` with ``a = R^T e_z``, so ``(h / R_22) (a_1, -a_0, 0)`` on
+    ``dtheta``."""
+    _, _, _, _, _, _, r20, r21, r22 = qmat9(X[XQ], X[XQ + 1], X[XQ + 2], X[XQ + 3])
+    dz = X[XP + 2] - ground_z
+    h = dz / r22
+    H[:, :] = 0.0
+    H[0, EP + 2] = 1.0 / r22
+    H[0, ETH + 0] = h / r22 * r21
+    H[0, ETH + 1] = -h / r22 * r20
+    return h
+
+
+@njit(cache=True)
+def update_height_one(X, P, ground_z, z, sigma, min_cos_tilt, gate, out):
+    """A rangefinder's distance ``z`` [m] with white noise ``sigma`` [m] (:func:`height_row`): refused when
+    the estimated tilt's cosine is below ``min_cos_tilt`` (the beam misses the modelled ground), else gated
+    on its squared Mahalanobis distance (``gate``, chi-square(1)) and a Joseph-form update. ``out`` receives
+    ``(outcome, d2)``."""
+    r22 = qmat9(X[XQ], X[XQ + 1], X[XQ + 2], X[XQ + 3])[8]
+    if not r22 >= min_cos_tilt:
+        out[0], out[1] = REFUSED, 0.0
+        return REFUSED
+    n = P.shape[0]
+    H = np.zeros((1, n))
+    h = height_row(X, ground_z, H)
+    nu = np.empty(1)
+    nu[0] = z - h
+    R_meas = np.empty((1, 1))
+    R_meas[0, 0] = sigma * sigma
+    return _vector_update(X, P, H, nu, R_meas, gate, out)

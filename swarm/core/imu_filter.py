@@ -118,9 +118,15 @@ def divergence_limits(window: int, alpha: float) -> np.ndarray:
 
 
 @lru_cache(maxsize=64)
+def chi2_gate(probability: float, dof: int) -> float:
+    """The chi-square(``dof``) gate of a measurement, once per probability (scipy's ppf costs ~80 us a
+    call)."""
+    return float(chi2.ppf(probability, dof))
+
+
 def _gate3(probability: float) -> float:
-    """The chi-square(3) gate of a vector fix, once per probability (scipy's ppf costs ~80 us a call)."""
-    return float(chi2.ppf(probability, 3))
+    """The chi-square(3) gate of a vector fix."""
+    return chi2_gate(probability, 3)
 
 
 def state_size(n_anchors: int, params: ImuFilterParams) -> tuple[int, int]:

@@ -8,12 +8,13 @@ Per tick ``k`` (``t = k dt``), for each UAV not done:
 1. **world** (:meth:`LandingWorld.step`): the truth advances by ``dt`` under the held command, then the
    sensors of tick ``k`` sample, in this order, from the UAV's own random stream: the IMU (the mean specific
    force and rate over ``(t - dt, t]``, stamped ``t - dt``, with biases and white noise), the UWB range to the
-   next anchor (a UWB tick, within the anchors' reach), the GNSS fix (a GNSS tick), and the camera (a camera
+   next anchor (a UWB tick, within the anchors' reach), the GNSS fix (a GNSS tick), the rangefinder's
+   distance to the ground (a rangefinder tick, within its reach and tilt), and the camera (a camera
    tick): the pad's marker corners in pixels, by corner projection with pixel noise or by rendering the
    image and detecting the ArUco markers in it; none when the pad is hidden or behind the camera.
-2. **agent** (:meth:`LandingAgent.tick`): the IMU-driven filter takes the IMU sample, the range, the fix and
-   the pad's pose from PnP of the corners; the guidance (fixed deviation or Algorithm 1) and the quadrotor
-   controller give the rotor speeds, or the idle command once landed.
+2. **agent** (:meth:`LandingAgent.tick`): the IMU-driven filter takes the IMU sample, the range, the fix, the
+   rangefinder's distance and the pad's pose from PnP of the corners; the guidance (fixed deviation or
+   Algorithm 1) and the quadrotor controller give the rotor speeds, or the idle command once landed.
 3. **world** (:meth:`LandingWorld.hold`): the rotors take the command; :func:`landing_done` says whether the
    UAV's run is over (landed for a second, or hovering at the abort height after an abort).
 
@@ -30,7 +31,7 @@ import numpy as np
 
 from swarm.core import rotations as rot
 from swarm.core._pad_nb import camera_vector
-from swarm.core.imu_filter import ImuFilter, ImuFilterParams, _gate3
+from swarm.core.imu_filter import ImuFilter, ImuFilterParams, chi2_gate
 from swarm.core.landing import MODES, LandingGuidance, LandingMode
 from swarm.core.pad_vision import Renderer, detect, estimate_pose, make_detector
 from swarm.kinds.quadrotor import control as qc
@@ -38,6 +39,9 @@ from swarm.kinds.quadrotor import control_row, truth_row
 from swarm.kinds.quadrotor import dynamics as qd
 from swarm.landing_scenario import LandingScenario, Uav
 from swarm.step import landing_nb as lnb
+
+GATE_PROBABILITY = 0.9995
+"""The filter's gate on a fix, a pad measurement and a rangefinder distance: the chi-square quantile."""
 
 R_BODY_CAM = rot.quat_to_matrix(np.array([1.0, 0.0, 0.0, 0.0]))
 """Camera to body of the downward camera: its optical axis (+z) along body -z."""
@@ -104,6 +108,7 @@ class Rates:
     camera: int
     uwb: int
     gnss: int
+    rangefinder: int
 
     @classmethod
     def of(cls, sc: LandingScenario) -> Rates:
@@ -112,6 +117,7 @@ class Rates:
             max(1, round(1.0 / (sc.camera.rate_hz * dt))),
             max(1, round(1.0 / (sc.uwb.rate_hz * dt))),
             max(1, round(1.0 / (sc.gnss.rate_hz * dt))),
+            max(1, round(1.0 / (sc.rangefinder.rate_hz * dt))),
         )
 
     def uwb_tick(self, sc: LandingScenario, k: int) -> bool:
@@ -119,6 +125,9 @@ class Rates:
 
     def gnss_tick(self, sc: LandingScenario, k: int) -> bool:
         return bool(sc.gnss.enabled and k % self.gnss == 0)
+
+    def rangefinder_tick(self, sc: LandingScenario, k: int) -> bool:
+        return bool(sc.rangefinder.enabled and k % self.rangefinder == 0)
 
     def camera_tick(self, k: int) -> bool:
         return k % self.camera == 0
@@ -138,6 +147,8 @@ class LandingInputs:
     """(anchor index, range [m]) on a UWB tick within reach."""
     gnss: np.ndarray | None = None
     """Position fix [m], nav, on a GNSS tick."""
+    rangefinder: float | None = None
+    """The downward distance [m] on a rangefinder tick (None: none, or no reading: out of reach, tilted)."""
     camera: tuple[np.ndarray, np.ndarray] | None = None
     """On a camera tick: the detected marker ids (n,) and their corners (n, 4, 2) [px] (n = 0: nothing)."""
 
@@ -238,6 +249,11 @@ def world_row(sc: LandingScenario) -> np.ndarray:
         (lnb.WP_HIDDEN_FOR, f.pad_hidden_for_s), (lnb.WP_CORNERS, sc.camera.mode == "corners"),
         (lnb.WP_END_AFTER, sc.end_after_landed_s), (lnb.WP_ABORT_H, sc.landing.abort_height_m),
         (lnb.WP_ABORT_TOL, sc.abort_hold_tolerance_m), (lnb.WP_ABORT_V, sc.abort_hold_speed_m_s),
+        (lnb.WP_RF_ON, sc.rangefinder.enabled), (lnb.WP_RF_RATE, rates.rangefinder),
+        (lnb.WP_RF_SIGMA, sc.rangefinder.sigma_m), (lnb.WP_RF_MIN, sc.rangefinder.min_range_m),
+        (lnb.WP_RF_MAX, sc.rangefinder.max_range_m),
+        (lnb.WP_RF_COS_TILT, math.cos(math.radians(sc.rangefinder.max_tilt_deg))),
+        (lnb.WP_GROUND_Z, sc.kinds.quadrotor.airframe.ground_z_m),
     ):  # fmt: skip
         WP[i] = float(v)
     WP[lnb.WP_GNSS_SIGMA : lnb.WP_GNSS_SIGMA + 3] = sc.gnss.sigma_m
@@ -339,6 +355,8 @@ def inputs_of(INP: np.ndarray, CIDX: np.ndarray, CPX: np.ndarray, board) -> Land
         inp.uwb = (int(INP[lnb.INP_ANCHOR]), float(INP[lnb.INP_RANGE]))
     if INP[lnb.INP_HAS_GNSS]:
         inp.gnss = INP[lnb.INP_GNSS : lnb.INP_GNSS + 3].copy()
+    if INP[lnb.INP_HAS_RF] and not math.isnan(INP[lnb.INP_RF]):
+        inp.rangefinder = float(INP[lnb.INP_RF])
     if INP[lnb.INP_CAM] == lnb.CAM_MARKERS:
         n = int(INP[lnb.INP_N_MARKERS])
         inp.camera = (board.markers[0][CIDX[:n]].astype(np.int64), CPX[:n].copy())
@@ -439,7 +457,13 @@ class LandingAgent:
         self.CAM = camera_vector(cam.intrinsics)
         m = len(self.corners)
         self.AC = np.zeros(lnb.AC_N)
-        self.AC[lnb.AC_DT], self.AC[lnb.AC_GATE3] = self.dt, _gate3(0.9995)
+        self.AC[lnb.AC_DT], self.AC[lnb.AC_GATE3] = self.dt, chi2_gate(GATE_PROBABILITY, 3)
+        rf = sc.rangefinder
+        self.AC[lnb.AC_RF_SIGMA], self.AC[lnb.AC_GATE1] = rf.sigma_m, chi2_gate(GATE_PROBABILITY, 1)
+        self.AC[lnb.AC_GROUND_Z], self.AC[lnb.AC_RF_COS_TILT] = (
+            air.ground_z_m,
+            math.cos(math.radians(rf.max_tilt_deg)),
+        )
         self.AC[lnb.AC_PAD : lnb.AC_PAD + 3] = st.pad
         self.AC[lnb.AC_CAM_POS : lnb.AC_CAM_POS + 3] = self.cam_pos
         self.AC[lnb.AC_R_BC : lnb.AC_R_BC + 9] = R_BODY_CAM.ravel()
@@ -515,6 +539,9 @@ class LandingAgent:
         if inp.gnss is not None:
             I[lnb.INP_HAS_GNSS] = 1.0
             I[lnb.INP_GNSS : lnb.INP_GNSS + 3] = inp.gnss
+        I[lnb.INP_RF] = np.nan
+        if inp.rangefinder is not None:
+            I[lnb.INP_HAS_RF], I[lnb.INP_RF] = 1.0, inp.rangefinder
         if inp.camera is None or not len(inp.camera[0]):
             return
         ids, corners = inp.camera

@@ -35,7 +35,7 @@ from swarm.core import _imu_nb as inb
 from swarm.core import _landing_nb as lnb
 from swarm.core._pad_nb import corner_frame_nb, pack_frame_nb
 from swarm.core._pnp_nb import solve_pose_nb
-from swarm.core._rot_nb import qmat, qrotate
+from swarm.core._rot_nb import qmat, qmat9, qrotate
 from swarm.kinds.quadrotor import control as qc
 from swarm.kinds.quadrotor import dynamics as qd
 
@@ -46,7 +46,8 @@ from swarm.kinds.quadrotor import dynamics as qd
 WP_GNSS_SIGMA = 18  # 18:21
 WP_CAM_POS = 21  # 21:24 the camera, body frame [m]
 WP_LEVER = 24  # 24:27 the UWB tag, body frame [m]
-WP_N = 27
+WP_RF_ON, WP_RF_RATE, WP_RF_SIGMA, WP_RF_MIN, WP_RF_MAX, WP_RF_COS_TILT, WP_GROUND_Z = range(27, 34)
+WP_N = 34
 
 # ---- one UAV's world constants WC -------------------------------------------------------------------------
 WC_BA = 0  # 0:3 accelerometer bias
@@ -70,7 +71,9 @@ INP_CAM = 15  # CAM_NONE, CAM_MARKERS (CIDX, CPX), CAM_RENDER (the caller render
 INP_N_MARKERS = 16
 INP_T_CAM = 17  # 17:20 the pad in the camera (CAM_RENDER)
 INP_R_CAM_PAD = 20  # 20:29 row-major (CAM_RENDER)
-INP_N = 29
+INP_HAS_RF = 29  # a rangefinder tick
+INP_RF = 30  # its distance [m] (NaN: no reading, out of reach or too tilted)
+INP_N = 31
 CAM_NONE, CAM_MARKERS, CAM_RENDER, CAM_POSE = 0.0, 1.0, 2.0, 3.0
 """CAM_POSE (agent side): the pad's pose is already solved (``POSE``), by OpenCV on a rendered image."""
 
@@ -80,7 +83,8 @@ AC_PAD = 2  # 2:5
 AC_CAM_POS = 5  # 5:8
 AC_R_BC = 8  # 8:17 camera to body, row-major
 AC_GNSS_COV = 17  # 17:26 row-major
-AC_N = 26
+AC_RF_SIGMA, AC_GROUND_Z, AC_GATE1, AC_RF_COS_TILT = 26, 27, 28, 29
+AC_N = 30
 
 # ---- an agent's state AF ----------------------------------------------------------------------------------
 (AF_T, AF_HELD, AF_DROPPED, AF_IMU_REFUSED, AF_PAD_SEEN, AF_DETECTIONS, AF_LANDED_T, AF_NIS_N, AF_NIS_HEAD,
@@ -108,8 +112,9 @@ RUN_DRAIN = 2
 
 
 def draws_per_tick(n_markers: int) -> int:
-    """The most standard normals one tick takes: IMU (6), range (1), fix (3), each marker's corners (8)."""
-    return 10 + 8 * n_markers
+    """The most standard normals one tick takes: IMU (6), range (1), fix (3), rangefinder (1), each marker's
+    corners (8)."""
+    return 11 + 8 * n_markers
 
 
 @njit(cache=True)
@@ -178,6 +183,17 @@ def world_sample(k, x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, Z, zpos,
         for j in range(3):
             INP[INP_GNSS + j] = x[j] + Z[i + j] * WP[WP_GNSS_SIGMA + j]
         i += 3
+    INP[INP_HAS_RF] = 0.0
+    INP[INP_RF] = np.nan
+    if WP[WP_RF_ON] != 0.0 and k % int(WP[WP_RF_RATE]) == 0:
+        # the beam along body -z meets the ground at (z - ground_z) / cos(tilt), cos(tilt) = R_22
+        INP[INP_HAS_RF] = 1.0
+        cos_tilt = qmat9(x[6], x[7], x[8], x[9])[8]
+        if cos_tilt >= WP[WP_RF_COS_TILT]:
+            r = (x[2] - WP[WP_GROUND_Z]) / cos_tilt
+            if WP[WP_RF_MIN] <= r <= WP[WP_RF_MAX]:
+                INP[INP_RF] = r + WP[WP_RF_SIGMA] * Z[i]
+                i += 1
     if k % int(WP[WP_RATE_CAM]) == 0:
         hf = WP[WP_HIDDEN_FROM]
         hidden = WP[WP_HIDDEN_ALWAYS] != 0.0 or (not math.isnan(hf) and hf <= t < hf + WP[WP_HIDDEN_FOR])
@@ -239,11 +255,14 @@ def _nis_push(AF, NIS, x):
 def agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchors, bias_of, sigma, prm, work, res,
                AC, corners, CAM, OBJ, IMG, VAR, T_OUT, R_OUT, COV_OUT):  # fmt: skip
     """The filter's half of step 2 (:meth:`swarm.step.landing.LandingAgent.fuse`): the IMU sample (stamped
-    ``t - dt``), the range, the fix and the pad's position in the camera, solved from the markers' corners
-    (:func:`swarm.core._pnp_nb.solve_pose_nb`) or given in ``POSE`` (``CAM_POSE``). A sample older than the
-    filter's time is dropped and counted, as :class:`swarm.core.imu_filter.ImuFilter` does."""
+    ``t - dt``), the range, the fix, the rangefinder's distance and the pad's position in the camera, solved
+    from the markers' corners (:func:`swarm.core._pnp_nb.solve_pose_nb`) or given in ``POSE`` (``CAM_POSE``).
+    A sample older than the filter's time is dropped and counted, as :class:`swarm.core.imu_filter.ImuFilter`
+    does."""
     t = INP[INP_T]
-    ts = t - AC[AC_DT]
+    # the IMU sample's stamp, (k - 1) dt: the same product as the previous tick's t = k dt, so a measurement
+    # fused at that t never makes the filter drop this sample (k dt - dt can round below (k - 1) dt)
+    ts = (INP[INP_K] - 1.0) * AC[AC_DT]
     if ts >= AF[AF_T]:
         _predict_to(X, P, AF, HELD, ts, prm)
         AF[AF_HELD] = 1.0
@@ -267,6 +286,15 @@ def agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchors, bias_
             _predict_to(X, P, AF, HELD, t, prm)
             R = AC[AC_GNSS_COV : AC_GNSS_COV + 9].reshape(3, 3)
             inb.update_position_one(X, P, INP[INP_GNSS : INP_GNSS + 3], R, AC[AC_GATE3], res)
+        else:
+            AF[AF_DROPPED] += 1.0
+    if INP[INP_HAS_RF] != 0.0 and not math.isnan(INP[INP_RF]):
+        if t >= AF[AF_T]:
+            _predict_to(X, P, AF, HELD, t, prm)
+            ground, sigma_rf, cos_tilt = AC[AC_GROUND_Z], AC[AC_RF_SIGMA], AC[AC_RF_COS_TILT]
+            out = inb.update_height_one(X, P, ground, INP[INP_RF], sigma_rf, cos_tilt, AC[AC_GATE1], res)
+            if out != inb.REFUSED:
+                _nis_push(AF, NIS, res[1])
         else:
             AF[AF_DROPPED] += 1.0
     cam = INP[INP_CAM]

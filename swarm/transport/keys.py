@@ -22,7 +22,7 @@ ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")
 """An agent id, a role or any other single key chunk chosen by a user (``fullmatch``)."""
 
 AGENT_KINDS: tuple[str, ...] = (
-    "imu", "uwb", "vision", "gnss", "estimate", "guidance", "command", "truth", "event",
+    "imu", "uwb", "vision", "gnss", "rangefinder", "estimate", "guidance", "command", "truth", "event",
 )  # fmt: skip
 """The per-vehicle topics ``<ns>/agent/<id>/<kind>``."""
 
@@ -87,6 +87,10 @@ class Keys:
     def gnss(self, agent_id: str) -> str:
         """Position fixes of one vehicle's satellite receiver: world or GNSS driver -> agent."""
         return self._agent(agent_id, "gnss")
+
+    def rangefinder(self, agent_id: str) -> str:
+        """Distances to the ground of one vehicle's downward rangefinder: world or its driver -> agent."""
+        return self._agent(agent_id, "rangefinder")
 
     def estimate(self, agent_id: str) -> str:
         """Pose estimate of one vehicle: agent -> its chasers, dashboard."""

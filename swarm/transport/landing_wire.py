@@ -17,6 +17,7 @@ from swarm.transport.messages import (
     Guidance,
     Imu,
     MessageError,
+    Rangefinder,
     Truth,
     Uwb,
     Vision,
@@ -29,8 +30,9 @@ Wire = list[tuple[str, bytes]]
 
 
 def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int) -> Wire:
-    """The world's tick ``k``: per UAV ``imu``, ``uwb`` (a UWB tick), ``gnss`` (a fix), ``vision`` (a camera
-    tick: the pad's corners as pixels) and ``truth``; then the clock."""
+    """The world's tick ``k``: per UAV ``imu``, ``uwb`` (a UWB tick), ``gnss`` (a fix), ``rangefinder`` (a
+    rangefinder tick), ``vision`` (a camera tick: the pad's corners as pixels) and ``truth``; then the
+    clock."""
     sc, dt = world.sc, world.sc.dt_s
     t = k * dt
     out: Wire = []
@@ -41,6 +43,10 @@ def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int) -> Wire:
             out.append((keys.uwb(uid), encode(Uwb(k, t, int(a) % len(world.anchors), z))))
         if inp.gnss is not None:
             out.append((keys.gnss(uid), encode(Gnss(k, t, inp.gnss, world.gnss_cov))))
+        if world.rates.rangefinder_tick(sc, k):
+            out.append(
+                (keys.rangefinder(uid), encode(Rangefinder(k, t, inp.rangefinder, sc.rangefinder.sigma_m)))
+            )
         if inp.camera is not None:
             mids, corners = inp.camera
             rows = tuple(int(m) * 4 + c for m in mids for c in range(4))

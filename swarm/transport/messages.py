@@ -67,6 +67,7 @@ __all__ = [
     "Guidance",
     "Imu",
     "Message",
+    "Rangefinder",
     "RunControl",
     "Truth",
     "Uwb",
@@ -519,6 +520,30 @@ class Gnss(Message):
 
 
 @dataclass(frozen=True, eq=False)
+class Rangefinder(Message):
+    """A downward distance sensor's reading of one vehicle: ``<ns>/agent/<id>/rangefinder`` (the landing's
+    UAVs; PX4's ``distance_sensor``): the distance along the body's ``-z`` axis to the ground."""
+
+    tick: int
+    """Tick ``k`` of the reading (>= 0)."""
+    t_s: float
+    """Time of the reading [s] (>= 0)."""
+    range_m: float | None
+    """The distance [m] (>= 0); ``None`` when the sensor has no reading (the ground out of its reach, or the
+    vehicle too tilted): one message per rangefinder tick either way, so a lockstep agent knows not to
+    wait."""
+    sigma_m: float
+    """The reading's standard deviation [m] (> 0), the sensor's claim."""
+
+    def __post_init__(self) -> None:
+        _set(
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+            range_m=_float(self.range_m, "range_m", lo=0.0, nullable=True),
+            sigma_m=_float(self.sigma_m, "sigma_m", positive=True),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
 class Vision(Message):
     """One camera frame's observations of the target's markers: ``<ns>/agent/<id>/vision``."""
 
@@ -858,6 +883,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         Uwb,
         Vision,
         Gnss,
+        Rangefinder,
         Estimate,
         Guidance,
         Command,
@@ -872,7 +898,8 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
 """Every message class by its wire ``"type"``."""
 
 MESSAGE_FOR_KIND: dict[str, type[Message]] = {
-    "imu": Imu, "uwb": Uwb, "vision": Vision, "gnss": Gnss, "estimate": Estimate, "guidance": Guidance,
+    "imu": Imu, "uwb": Uwb, "vision": Vision, "gnss": Gnss, "rangefinder": Rangefinder, "estimate": Estimate,
+    "guidance": Guidance,
     "command": Command,
     "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "anchors": Anchors,
     "run_control": RunControl, "fault": Fault,

@@ -109,8 +109,9 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
     watch = {"declare_liveliness_subscriber": alive, "liveliness_query": alive}
     if mission == "landing" and name == "world":  # swarm.world.landing: every UAV's sensors, then its clock
         return {
-            "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/uwb", "agent/*/gnss", "agent/*/vision",
-                                                "agent/*/truth", "world/clock", "world/event")),
+            "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/uwb", "agent/*/gnss",
+                                                "agent/*/rangefinder", "agent/*/vision", "agent/*/truth",
+                                                "world/clock", "world/event")),
             "declare_subscriber": (keys.agent_all("command"),),
             "liveliness_token": (f"{ns}/alive/world/*",),
             **watch,
@@ -119,8 +120,8 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         uid = check_id(name[len("agent-") :], "agent id of identity")
         return {
             "put": (keys.estimate(uid), keys.guidance(uid), keys.command(uid), keys.event(uid)),
-            "declare_subscriber": (keys.imu(uid), keys.uwb(uid), keys.gnss(uid), keys.vision(uid),
-                                   keys.world_event()),
+            "declare_subscriber": (keys.imu(uid), keys.uwb(uid), keys.gnss(uid), keys.rangefinder(uid),
+                                   keys.vision(uid), keys.world_event()),
             "liveliness_token": (keys.alive("agent", uid),),
             **watch,
         }  # fmt: skip

@@ -250,3 +250,42 @@ def test_the_pad_measurement_jacobian_matches_finite_differences(seed):
         dx[k] = eps
         fd[:, k] = (nb.pad_row(_plus(X, dx), p_pad, cam, R_bc, np.empty_like(H)) - t0) / eps
     np.testing.assert_allclose(H, fd, atol=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_rangefinder_jacobian_matches_finite_differences(seed):
+    rng = np.random.default_rng(seed)
+    X = _state(rng)
+    X[2] = 3.0 + rng.uniform(0.0, 5.0)  # above the ground
+    tilt = rot.rotvec_exp(np.r_[rng.normal(0.0, 0.3, 2), rng.uniform(-3, 3)])  # up to ~30 deg, any heading
+    X[6:10] = tilt
+    ground = -0.2
+    H = np.empty((1, len(X) - 1))
+    h0 = nb.height_row(X, ground, H)
+    # the model itself: the ray along body -z meets the plane z = ground at this distance
+    down = rot.quat_to_matrix(X[6:10]) @ np.array([0.0, 0.0, -1.0])
+    assert abs((X[2] + h0 * down[2]) - ground) < 1e-12
+    eps = 1e-7
+    fd = np.empty(H.shape[1])
+    for k in range(H.shape[1]):
+        dx = np.zeros(H.shape[1])
+        dx[k] = eps
+        fd[k] = (nb.height_row(_plus(X, dx), ground, np.empty_like(H)) - h0) / eps
+    np.testing.assert_allclose(H[0], fd, atol=1e-6)
+
+
+def test_a_rangefinder_reading_corrects_the_height_and_a_tilted_one_is_refused():
+    rng = np.random.default_rng(4)
+    X = _state(rng)
+    X[2], X[6:10] = 5.0, np.array([0.0, 0.0, 0.0, 1.0])  # level, 5 m up
+    P = np.eye(len(X) - 1) * 0.01
+    P[2, 2] = 1.0  # 1 m of height uncertainty
+    out = np.zeros(2)
+    gate = 10.83  # chi-square(1) at 0.999
+    assert nb.update_height_one(X, P, 0.0, 4.5, 0.03, np.cos(np.radians(30)), gate, out) == nb.ACCEPTED
+    assert abs(X[2] - 4.5) < 0.01 and P[2, 2] < 0.03**2 * 1.01  # the reading's sigma, nearly all of it kept
+    Xt = X.copy()
+    Xt[6:10] = rot.rotvec_exp(np.array([np.radians(40), 0.0, 0.0]))  # past the 30 deg limit
+    Pt = P.copy()
+    assert nb.update_height_one(Xt, Pt, 0.0, 9.0, 0.03, np.cos(np.radians(30)), gate, out) == nb.REFUSED
+    assert np.array_equal(Pt, P) and Xt[2] == X[2]  # nothing changed

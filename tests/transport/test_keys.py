@@ -12,7 +12,9 @@ from hypothesis import strategies as st
 from swarm.errors import ConfigError
 from swarm.transport.keys import AGENT_KINDS, ID_PATTERN, Keys, check_id
 
-EXPECTED_AGENT_KINDS = ("imu", "uwb", "vision", "gnss", "estimate", "guidance", "command", "truth", "event")
+EXPECTED_AGENT_KINDS = (
+    "imu", "uwb", "vision", "gnss", "rangefinder", "estimate", "guidance", "command", "truth", "event",
+)  # fmt: skip
 
 
 @pytest.mark.parametrize("ns", ["tpods", "lab/swarm-2"])
@@ -25,6 +27,8 @@ def test_every_key_string_matches_the_protocol_table(ns):
     assert k.guidance("c_1") == f"{ns}/agent/c_1/guidance"
     assert k.command("c-2") == f"{ns}/agent/c-2/command"
     assert k.truth("A9") == f"{ns}/agent/A9/truth"
+    assert k.gnss("A9") == f"{ns}/agent/A9/gnss"
+    assert k.rangefinder("A9") == f"{ns}/agent/A9/rangefinder"
     assert k.event("chaser") == f"{ns}/agent/chaser/event"
     assert k.world_clock() == f"{ns}/world/clock"
     assert k.anchors() == f"{ns}/mothership/anchors"
@@ -41,7 +45,7 @@ def test_default_namespace_is_tpods():
     assert Keys().imu("a") == "tpods/agent/a/imu"
 
 
-def test_agent_kinds_are_the_nine_per_vehicle_topics():
+def test_agent_kinds_are_the_ten_per_vehicle_topics():
     assert AGENT_KINDS == EXPECTED_AGENT_KINDS
 
 

@@ -138,7 +138,9 @@ def test_swarm_sim_mcap_writes_what_the_launched_processes_published(launched, t
     # sensors, truth, commands, estimates, guidance, mode and summary events: the same bytes in the same
     # order on every key, from the processes over Zenoh and from the in-process run
     kinds = {k.rsplit("/", 1)[1] for k in a}
-    assert kinds == {"imu", "uwb", "gnss", "vision", "truth", "command", "estimate", "guidance", "event"}
+    assert kinds == {
+        "imu", "uwb", "gnss", "rangefinder", "vision", "truth", "command", "estimate", "guidance", "event",
+    }  # fmt: skip
     assert set(a) == set(b)
     for key in a:
         assert a[key] == b[key], key

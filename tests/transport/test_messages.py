@@ -43,6 +43,7 @@ from swarm.transport.messages import (
     Gnss,
     Guidance,
     Imu,
+    Rangefinder,
     RunControl,
     Truth,
     Uwb,
@@ -75,6 +76,7 @@ VALID = {
     RunControl: RunControl("reset", 7),
     Fault: Fault("nlos_burst", 5.0, 12.5, None, 0.3),
     Gnss: Gnss(9, 0.2, [1.0, -2.0, 8.0], np.diag([1.0, 1.0, 2.25])),
+    Rangefinder: Rangefinder(10, 0.1, 4.2, 0.03),
 }  # fmt: skip
 
 SILENT = logging.getLogger("tests.transport.silent")
@@ -190,6 +192,7 @@ STRATEGIES = {
     Clock: st.builds(Clock, ticks, times, st.sampled_from(msgs.CLOCK_STATES), ticks),
     Anchors: marked(3).map(lambda m: Anchors(m[1], m[0])),
     Gnss: st.builds(Gnss, ticks, times, vec(3), covs.map(lambda c: c[0:3, 0:3])),
+    Rangefinder: st.builds(Rangefinder, ticks, times, st.none() | nonneg, st.floats(1e-6, 1e3)),
     RunControl: st.builds(RunControl, st.sampled_from(msgs.RUN_COMMANDS), st.none() | ticks),
     Fault: st.one_of(
         st.builds(Fault, st.sampled_from(("uwb_dropout", "camera_loss")), st.floats(1e-3, 1e3),
@@ -308,6 +311,10 @@ for _ in range(8):
 
 # (class, field path, bad value, expected start of the error message); DELETE removes the key
 CASES = [
+    (Rangefinder, "range_m", -0.1, "range_m: must be >= 0"),
+    (Rangefinder, "range_m", NAN, "range_m: not finite"),
+    (Rangefinder, "sigma_m", 0.0, "sigma_m: must be > 0"),
+    (Rangefinder, "sigma_m", DELETE, "sigma_m: missing"),
     (Imu, "tick", -1, "tick: must be >= 0, got -1"),
     (Imu, "tick", 1.5, "tick: expected an integer"),
     (Imu, "tick", True, "tick: expected an integer"),

@@ -131,25 +131,33 @@ def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_
 
 
 def test_a_landing_swarms_world_also_sends_ranges_and_fixes_and_its_agents_read_their_own(material):
-    """Mission ``landing`` (``swarm launch landing-swarm --secure``): the landing world puts every UAV's imu,
-    uwb, gnss, vision and truth (it is its own radio network: there is no mothership) and reads the
-    commands; a landing agent reads its own sensors, gnss included, never another UAV's, and puts what a
-    docking agent puts; a docking world may put neither ranges nor fixes."""
+    """Mission ``landing`` (``swarm launch landing-swarm --secure``): the landing world puts every UAV's
+    imu, uwb, gnss, rangefinder, vision and truth (it is its own radio network: there is no mothership) and
+    reads the commands; a landing agent reads its own sensors, gnss included, never another UAV's, and puts
+    what a docking agent puts; a docking world may put neither ranges nor fixes."""
     from swarm.transport.security import access_control, identities, rights
 
     acl = access_control(K, identities(VEHICLES), "landing")
-    keys = sorted(set(ALL_KEYS) | {K.gnss(v) for v in VEHICLES})
+    keys = sorted(set(ALL_KEYS) | {K.gnss(v) for v in VEHICLES} | {K.rangefinder(v) for v in VEHICLES})
     world_puts = {key for key in keys if _may(acl, "world", "put", key)}
-    assert world_puts == {getattr(K, kind)(v) for kind in ("imu", "uwb", "gnss", "vision", "truth")
-                          for v in VEHICLES} | {K.world_clock(), K.world_event()}  # fmt: skip
+    sensors = ("imu", "uwb", "gnss", "rangefinder", "vision", "truth")
+    assert world_puts == {getattr(K, kind)(v) for kind in sensors for v in VEHICLES} | {
+        K.world_clock(),
+        K.world_event(),
+    }
     assert {key for key in keys if _may(acl, "world", "declare_subscriber", key)} == {
         K.command(v) for v in VEHICLES
     }
     reads = {key for key in keys if _may(acl, "agent-chaser", "declare_subscriber", key)}
-    assert reads == {K.imu("chaser"), K.uwb("chaser"), K.gnss("chaser"), K.vision("chaser"), K.world_event()}
+    own = (K.imu, K.uwb, K.gnss, K.rangefinder, K.vision)
+    assert reads == {key("chaser") for key in own} | {K.world_event()}
     assert {key for key in keys if _may(acl, "agent-chaser", "put", key)} == MAY_PUT["agent-chaser"]
     docking = access_control(K, identities(VEHICLES))
-    assert not any(_may(docking, "world", "put", key) for v in VEHICLES for key in (K.uwb(v), K.gnss(v)))
+    assert not any(
+        _may(docking, "world", "put", key)
+        for v in VEHICLES
+        for key in (K.uwb(v), K.gnss(v), K.rangefinder(v))
+    )
     with pytest.raises(ConfigError, match="mission must be one of docking, landing, got 'orbit'"):
         rights(K, "world", "orbit")
 
