@@ -84,21 +84,32 @@ def project_point(cam: np.ndarray, X: float, Y: float, Z: float) -> tuple[float,
 
 
 @njit(cache=True)
+def distortion_jacobian(cam, x, y):
+    """For normalised coordinates ``(x, y)``: the radial factor, its derivative with respect to ``r^2``, and
+    the Jacobian of the distorted ``(xd, yd)`` (:func:`project_point`): ``(radial, d radial / d r^2,
+    dxd/dx, dxd/dy (= dyd/dx), dyd/dy)``."""
+    r2 = x * x + y * y
+    k1, k2, k3 = cam[CAM_K1], cam[CAM_K2], cam[CAM_K3]
+    p1, p2 = cam[CAM_P1], cam[CAM_P2]
+    radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
+    d1 = k1 + 2.0 * k2 * r2 + 3.0 * k3 * r2 * r2
+    xd_x = radial + 2.0 * x * x * d1 + 2.0 * p1 * y + 6.0 * p2 * x
+    xd_y = 2.0 * x * y * d1 + 2.0 * p1 * x + 2.0 * p2 * y
+    yd_y = radial + 2.0 * y * y * d1 + 6.0 * p1 * y + 2.0 * p2 * x
+    return radial, d1, xd_x, xd_y, yd_y
+
+
+@njit(cache=True)
 def _project_jac(cam, X, Y, Z):
     """:func:`project_point` and its Jacobian: ``(u, v, du/dX, du/dY, du/dZ, dv/dX, dv/dY, dv/dZ)``."""
     iz = 1.0 / Z
     x = X * iz
     y = Y * iz
     r2 = x * x + y * y
-    k1, k2, k3 = cam[CAM_K1], cam[CAM_K2], cam[CAM_K3]
     p1, p2 = cam[CAM_P1], cam[CAM_P2]
-    radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
-    dradial = k1 + 2.0 * k2 * r2 + 3.0 * k3 * r2 * r2  # d radial / d r^2
+    radial, _, xd_x, xd_y, yd_y = distortion_jacobian(cam, x, y)
     xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
     yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    xd_x = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x
-    xd_y = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y  # = yd_x
-    yd_y = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x
     fx, fy = cam[CAM_FX], cam[CAM_FY]
     # x = X / Z: dx/dX = 1/Z, dx/dZ = -x/Z (and y alike)
     u_X = fx * xd_x * iz

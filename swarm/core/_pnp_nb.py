@@ -33,12 +33,12 @@ from numba import njit
 from swarm.core._pad_nb import (
     CAM_FX,
     CAM_FY,
-    CAM_K1,
     CAM_K2,
     CAM_K3,
     CAM_P1,
     CAM_P2,
     _project_jac,
+    distortion_jacobian,
     project_point,
     undistort_point,
 )
@@ -301,14 +301,10 @@ def _project_hess(cam, X, Y, Z, wu, wv):
     x = X * iz
     y = Y * iz
     r2 = x * x + y * y
-    k1, k2, k3 = cam[CAM_K1], cam[CAM_K2], cam[CAM_K3]
+    k2, k3 = cam[CAM_K2], cam[CAM_K3]
     p1, p2 = cam[CAM_P1], cam[CAM_P2]
-    radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
-    d1 = k1 + 2.0 * k2 * r2 + 3.0 * k3 * r2 * r2  # d radial / d r^2
+    _, d1, xd_x, xd_y, yd_y = distortion_jacobian(cam, x, y)  # d1 = d radial / d r^2
     d2 = 2.0 * k2 + 6.0 * k3 * r2  # its derivative
-    xd_x = radial + 2.0 * x * x * d1 + 2.0 * p1 * y + 6.0 * p2 * x
-    xd_y = 2.0 * x * y * d1 + 2.0 * p1 * x + 2.0 * p2 * y  # = yd_x
-    yd_y = radial + 2.0 * y * y * d1 + 6.0 * p1 * y + 2.0 * p2 * x
     xd_xx = 6.0 * x * d1 + 4.0 * x * x * x * d2 + 6.0 * p2
     xd_xy = 2.0 * y * d1 + 4.0 * x * x * y * d2 + 2.0 * p1  # = yd_xx
     xd_yy = 2.0 * x * d1 + 4.0 * x * y * y * d2 + 2.0 * p2  # = yd_xy
