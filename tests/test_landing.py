@@ -64,6 +64,11 @@ def test_summary_has_the_issue_keys_and_a_consistent_series(runs):
     assert len(s["t_s"]) == len(s["p_true_nav"]) == len(s["p_est_nav"]) == len(s["mode"])
     end = np.array(s["p_true_nav"][-1])
     assert abs(end[2] - 0.05) < 1e-9  # on the skids: the gear height above the pad
+    # the energy as hover time: a landing that flew ~16-19 s, part of it faster than a hover (a glide needs
+    # more thrust than hovering, the final descent less), costs about as many seconds of hover
+    hover_w = load_landing("landing").kinds.quadrotor.airframe.hover_power_w
+    assert r["hover_equivalent_s"] == pytest.approx(r["energy_j"] / hover_w, rel=1e-12)
+    assert 0.7 * r["landing_time_s"] < r["hover_equivalent_s"] < 1.5 * r["landing_time_s"]
     json.dumps(r)  # plain JSON
 
 

@@ -87,7 +87,10 @@ def print_landing(res: dict) -> None:
     print(f"  {status}")
     print(f"    landing error     {_fmt(res['landing_error_m'], ' cm', 100.0, 1)}")
     print(f"    landing time      {_fmt(res['landing_time_s'], ' s', digits=2)}")
-    print(f"    energy            {_fmt(res['energy_j'], ' J', digits=0)}")
+    print(
+        f"    energy            {_fmt(res['energy_j'], ' J', digits=0)} "
+        f"({_fmt(res['hover_equivalent_s'], ' s', digits=1)} of hover)"
+    )
     print(
         f"    deviation at      {_fmt(res['deviation_distance_m'], ' m', digits=2)} from the pad (horizontal)"
     )

@@ -612,6 +612,7 @@ def landing_summary(sc: LandingScenario, policy: str, seed: int, world_half: dic
         "landing_error_m": w["error_m"] if landed else None,
         "landing_time_s": a["landing_time_s"],
         "energy_j": w["energy_j"],
+        "hover_equivalent_s": w["energy_j"] / sc.kinds.quadrotor.airframe.hover_power_w,
         "deviation_distance_m": a["deviation_distance_m"],
         "retries": a["retries"],
         "start_m": w["start_m"],
