@@ -24,8 +24,8 @@ UAV's late ticks.
 ``--secure`` gives every process its own certificate and the router an access control list of what each
 may publish and subscribe (:mod:`swarm.transport.security`, mission ``landing``), as for a docking swarm.
 
-Not yet for a landing: restarts,
-run controls and faults from the dashboard.
+Run-time faults come from ``swarm fault`` (``camera_loss``, ``uwb_dropout``: :mod:`swarm.world.landing`).
+Not yet for a landing: restarts, run controls, the dashboard's Faults panel.
 """
 
 from __future__ import annotations

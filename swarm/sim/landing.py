@@ -42,6 +42,7 @@ def run_landing_fleet(
     only_first: bool = False,
     tap=None,
     compiled: bool = True,
+    faults=(),
 ) -> dict:
     """Fly every UAV of the scenario (module docstring): ``{"uavs": {id: summary}, ...}``, or the first
     UAV's summary alone with ``only_first``. ``tap`` (``swarm sim --mcap``) sees the run as the processes
@@ -50,9 +51,13 @@ def run_landing_fleet(
 
     With the corner-projection camera and no tap, each UAV flies in compiled code (:func:`fly_compiled`);
     otherwise, or with ``compiled=False``, tick by tick on the objects the processes run, with the same
-    result to the bit."""
+    result to the bit. ``faults``: ``(kind, start_s, duration_s, uav_ids)`` windows opened on the world before
+    the run (:meth:`~swarm.step.landing.LandingWorld.add_fault`), as a run-time ``swarm fault`` does in a
+    launched swarm."""
     policy = policy or sc.policy
     world = LandingWorld(sc, seed)
+    for kind, start_s, duration_s, uav_ids in faults:
+        world.add_fault(kind, start_s, duration_s, uav_ids)
     uavs = sc.uavs()[:1] if only_first else sc.uavs()
     if only_first:
         for extra in sc.uavs()[1:]:

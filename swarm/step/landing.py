@@ -195,6 +195,8 @@ class _Truth:
         self.WC[lnb.WC_PAD : lnb.WC_PAD + 3] = setup.pad
         self.WC[lnb.WC_UWB_RANGE] = setup.uwb_range_m
         self.WC[lnb.WC_R_NAV_PAD : lnb.WC_R_NAV_PAD + 9] = rot.quat_to_matrix(setup.q_nav_pad).ravel()
+        self.WC[lnb.WC_CAM_OFF : lnb.WC_CAM_OFF + 2] = np.nan
+        self.WC[lnb.WC_UWB_OFF : lnb.WC_UWB_OFF + 2] = np.nan
         self.noise = NoiseStream(setup.rng)
         self.render_rng = render_rng
         self.INP = np.zeros(lnb.INP_N)
@@ -331,6 +333,21 @@ class LandingWorld:
         mode = float(MODES.index(cmd.mode))
         lnb.world_hold(np.asarray(cmd.u, float), mode, cmd.k, u.x, u.s, u.held, self.kp,
                        u.WSC, u.WC, self.WP)  # fmt: skip
+
+    FAULTS = ("camera_loss", "uwb_dropout")
+    """The run-time faults a landing world models (``swarm fault``; ``docs/protocol.md``, Fault)."""
+
+    def add_fault(self, kind: str, start_s: float, duration_s: float, uav_ids) -> None:
+        """A run-time fault on UAVs ``uav_ids`` over ``[start_s, start_s + duration_s)``: ``camera_loss``
+        hides the pad from their cameras, ``uwb_dropout`` loses every UWB reply (the range is nil). A UAV
+        keeps one window of each kind: a new one replaces it. ValueError for another kind or UAV."""
+        if kind not in self.FAULTS:
+            raise ValueError(f"kind: a landing world models {' and '.join(self.FAULTS)}, not {kind!r}")
+        at = lnb.WC_CAM_OFF if kind == "camera_loss" else lnb.WC_UWB_OFF
+        for uid in uav_ids:
+            if uid not in self.uavs:
+                raise ValueError(f"vehicle: {uid!r} is not a UAV of this scenario")
+            self.uavs[uid].WC[at : at + 2] = (start_s, start_s + duration_s)
 
     def outcome(self, uav_id: str) -> dict:
         """The world's half of a UAV's summary: where and how it ended."""

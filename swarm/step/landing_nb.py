@@ -55,7 +55,9 @@ WC_BG = 3  # 3:6 gyro bias
 WC_PAD = 6  # 6:9 its pad (nav)
 WC_UWB_RANGE = 9  # the anchors' reach [m]
 WC_R_NAV_PAD = 10  # 10:19 the pad's attitude, row-major
-WC_N = 19
+WC_CAM_OFF = 19  # 19:21 a run-time camera loss: the pad hidden in [from, until) [s] (NaN: none)
+WC_UWB_OFF = 21  # 21:23 a run-time UWB dropout: every reply lost in [from, until) [s] (NaN: none)
+WC_N = 23
 
 # ---- one UAV's world state WSC ----------------------------------------------------------------------------
 WSC_NEXT_ANCHOR, WSC_ENERGY, WSC_FRAMES, WSC_LANDED_T, WSC_DONE, WSC_END_K = range(6)
@@ -171,10 +173,11 @@ def world_sample(k, x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, Z, zpos,
     if WP[WP_UWB_ON] != 0.0 and n_a > 0 and k % int(WP[WP_RATE_UWB]) == 0:
         a = int(WSC[WSC_NEXT_ANCHOR])
         WSC[WSC_NEXT_ANCHOR] = (a + 1) % n_a
+        dropout = WC[WC_UWB_OFF] <= t < WC[WC_UWB_OFF + 1]  # False with NaN
         tag = x[0:3] + qrotate(x[6:10], WP[WP_LEVER : WP_LEVER + 3])
         e0, e1, e2 = tag[0] - anchors[a, 0], tag[1] - anchors[a, 1], tag[2] - anchors[a, 2]
         true_r = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-        if true_r <= WC[WC_UWB_RANGE]:
+        if true_r <= WC[WC_UWB_RANGE] and not dropout:
             INP[INP_HAS_UWB], INP[INP_ANCHOR] = 1.0, a
             INP[INP_RANGE] = true_r + WP[WP_UWB_SIGMA] * Z[i]
             i += 1
@@ -197,6 +200,7 @@ def world_sample(k, x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, Z, zpos,
     if k % int(WP[WP_RATE_CAM]) == 0:
         hf = WP[WP_HIDDEN_FROM]
         hidden = WP[WP_HIDDEN_ALWAYS] != 0.0 or (not math.isnan(hf) and hf <= t < hf + WP[WP_HIDDEN_FOR])
+        hidden = hidden or WC[WC_CAM_OFF] <= t < WC[WC_CAM_OFF + 1]
         t_cam = INP[INP_T_CAM : INP_T_CAM + 3]
         R_cp = np.empty((3, 3))
         _camera_pose(x, WP, WC, t_cam, R_cp)

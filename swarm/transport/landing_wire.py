@@ -119,6 +119,11 @@ def agent_summary(keys: Keys, uid: str, agent) -> tuple[str, bytes]:
     return keys.event(uid), encode(Event(agent.landed_t or 0.0, "summary", out))
 
 
+def world_event(keys: Keys, kind: str, t_s: float, data: dict) -> tuple[str, bytes]:
+    """An event of the landing world on ``world/event`` (``fault``, ``fault_refused``)."""
+    return keys.world_event(), encode(Event(t_s, kind, data))
+
+
 def run_start(keys: Keys, sc, seed: int, policy: str, ids: list[str], clock: str) -> tuple[str, bytes]:
     data = {
         "scenario": sc.name,

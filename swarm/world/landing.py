@@ -10,6 +10,9 @@ marker: row ``4 m + c`` is corner ``c`` of marker ``m``; none when the pad is no
 one of the landing modes), holds it, and steps on. When every UAV is done (landed for a second, or hovering
 at the abort height) it publishes ``run_end`` on ``world/event`` with each UAV's outcome and a ``stopped``
 clock, and exits 0. It waits for every UAV's agent (liveliness ``alive/agent/<id>``) before the first tick.
+It takes run-time faults on ``control/fault`` (``swarm fault``): ``camera_loss`` (the pad hidden from a
+UAV's camera) and ``uwb_dropout`` (its UWB replies lost), for one UAV or all; other kinds are refused with a
+``fault_refused`` event.
 
 ``--clock lockstep`` (the default) steps as fast as the agents answer: the run is ``swarm sim``'s. With
 ``--pace`` a lockstep world also never runs ahead of the wall clock (at ``realtime`` or ``scaled:N``, to watch
@@ -56,7 +59,7 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     from swarm.step.landing import LandingCommand, LandingWorld
     from swarm.transport import landing_wire as wire
     from swarm.transport.keys import Keys
-    from swarm.transport.messages import LANDING_MODES, Command, DropCounter
+    from swarm.transport.messages import LANDING_MODES, Command, DropCounter, Fault
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import (
         declare_liveliness,
@@ -77,6 +80,32 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     cond = threading.Condition()
     commands: dict[tuple[str, int], Command] = {}
     alive: set[str] = set()
+    faults: list[Fault] = []  # run-time faults come, applied before the next tick's samples
+
+    def on_fault(_key: str, msg: Fault) -> None:
+        with cond:
+            faults.append(msg)
+
+    def apply_faults(k: int) -> None:
+        """Run-time faults (``swarm fault``): a window opens no earlier than tick ``k``, whose samples are
+        not out yet; ``fault`` on ``world/event`` when applied, ``fault_refused`` with the reason when
+        not."""
+        with cond:
+            pending = list(faults)
+            faults.clear()
+        for f in pending:
+            start = max(f.start_s if f.start_s is not None else k * dt, k * dt)
+            who = [f.vehicle] if f.vehicle is not None else list(ids)
+            try:
+                world.add_fault(f.kind, start, f.duration_s, who)
+            except ValueError as exc:
+                _LOG.warning("fault refused: %s: %s", f.kind, exc)
+                refused = {"kind": f.kind, "vehicle": f.vehicle, "reason": str(exc)}
+                put([wire.world_event(keys, "fault_refused", (k - 1) * dt, refused)])
+                continue
+            applied = {"kind": f.kind, "start_s": start, "duration_s": f.duration_s, "vehicles": who}
+            put([wire.world_event(keys, "fault", (k - 1) * dt, applied)])
+            _LOG.warning("fault applied: %s on %s from t = %.2f s", f.kind, who, start)
 
     def on_command(key: str, msg: Command) -> None:
         parsed = keys.parse(key)
@@ -105,6 +134,7 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
                 pub.put(payload)
 
         subscribe_decoded(session, keys.agent_all("command"), Command, on_command, drops)
+        subscribe_decoded(session, keys.fault(), Fault, on_fault, drops)
         watch_liveliness(session, keys, on_alive)
         _token = declare_liveliness(session, keys, "world", "world")
         print_ready("world", "landing")
@@ -128,6 +158,7 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
         held: dict[str, LandingCommand] = {}  # free-running: the command each UAV's rotors have
         late = dict.fromkeys(ids, 0)
         for k in range(1, n_ticks + 1):
+            apply_faults(k)
             inputs = world.step(k)
             if not inputs:
                 k -= 1

@@ -22,9 +22,14 @@ from swarm.errors import SwarmError
 from swarm.landing_scenario import load_landing
 from swarm.sim.landing import run_landing_fleet
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Command, Imu, Uwb, Vision, encode
+from swarm.transport.messages import Command, Fault, Imu, Uwb, Vision, encode
 from swarm.transport.session import ZenohArgs, open_session
 from tests.transport.procs import Procs, free_port, loopback
+
+FAULT = ("camera_loss", 9.0, 3.0, ["uav1"])
+"""A run-time fault sent to the launched swarm (as ``swarm fault`` does) as soon as its run starts: uav1's
+pad hidden from its camera during its descent (swarm sim: DESCEND at 8.2 s, FINAL at 11.0 s), 0.9 s of wall
+time later at the paced scaled:10 (a lockstep world is never ahead of it, so the fault is in first)."""
 
 
 @pytest.fixture(scope="module")
@@ -43,6 +48,7 @@ def launched(tmp_path_factory):
     endpoint = loopback(free_port())
     args[args.index("--listen") + 1] = endpoint
     injected = _garbage(Keys(ns), [u.id for u in sc.uavs()])
+    fault = Fault(FAULT[0], FAULT[2], FAULT[1], FAULT[3][0])
     with Procs() as procs:
         proc = procs.start(args)
         proc.wait_for_line(r"^swarm up:", 300.0)
@@ -50,6 +56,15 @@ def launched(tmp_path_factory):
         # protocol that a landing process cannot use; every one must be dropped and counted, none may crash
         # a process or change the run
         with open_session(ZenohArgs(mode="client", connect=(endpoint,))) as session:
+            started = threading.Event()  # the run's start (its event, or its first clock tick if missed)
+            subs = [session.declare_subscriber(key, lambda _s: started.set())
+                    for key in (Keys(ns).world_event(), Keys(ns).world_clock())]  # fmt: skip
+            assert started.wait(300.0), proc.output()
+            session.put(Keys(ns).fault(), encode(fault))  # the run-time fault
+            refused = Fault("gyro_bias_step", 1.0, 2.0, "uav2", None, [0.0, 0.0, 0.1])  # not for a landing
+            session.put(Keys(ns).fault(), encode(refused))
+            for sub in subs:
+                sub.undeclare()
             deadline = time.monotonic() + 3.0
             while time.monotonic() < deadline and proc.popen.poll() is None:
                 for key, payload in injected:
@@ -101,7 +116,11 @@ def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
     # two agent hosts of two UAVs each: the same run as one process per UAV (swarm sim's)
     assert "4 landing agents in 2 processes" in text
     assert len(re.findall(r"^agent uav\d ready$", text, re.M)) == 4
-    want = run_landing_fleet(sc, seed=0, record_series=False)
+    # the run-time fault: applied, and the refused one named with its reason
+    assert "fault applied: camera_loss on ['uav1'] from t = 9.00 s" in text, text
+    assert "fault refused: gyro_bias_step: kind: a landing world models camera_loss and uwb_dropout" in text
+    want = run_landing_fleet(sc, seed=0, record_series=False, faults=[FAULT])
+    assert want["uavs"]["uav1"]["retries"] == 1  # the pad lost for 1.5 s in the descent: it climbed, retried
     assert set(got["uavs"]) == set(want["uavs"]) == {"uav1", "uav2", "uav3", "uav4"}
     for uid, w in want["uavs"].items():
         g = got["uavs"][uid]
@@ -123,7 +142,7 @@ def test_swarm_sim_mcap_writes_what_the_launched_processes_published(launched, t
     code, text, _, sc, rec, ns, garbage = launched
     assert code == 0, text
     sim = tmp_path / "sim.mcap"
-    run_landing_fleet(sc, seed=0, record_series=False, tap=McapTap(sim, 0, ns))
+    run_landing_fleet(sc, seed=0, record_series=False, tap=McapTap(sim, 0, ns), faults=[FAULT])
     heard, _ = read_recording(rec)
     wrote, meta = read_recording(sim)
 

@@ -147,7 +147,7 @@ def test_a_landing_swarms_world_also_sends_ranges_and_fixes_and_its_agents_read_
     }
     assert {key for key in keys if _may(acl, "world", "declare_subscriber", key)} == {
         K.command(v) for v in VEHICLES
-    }
+    } | {K.fault()}  # and the run-time faults (swarm fault)
     reads = {key for key in keys if _may(acl, "agent-chaser", "declare_subscriber", key)}
     own = (K.imu, K.uwb, K.gnss, K.rangefinder, K.vision)
     assert reads == {key("chaser") for key in own} | {K.world_event()}
