@@ -1,13 +1,15 @@
 """``swarm fault KIND ...``: inject a fault into a running swarm (issue 7) over ``<ns>/control/fault``.
 
 The world applies camera and gyro faults, the mothership UWB ones, each from its next tick on (never to a
-sample already sent). Examples, against ``swarm launch ... --listen tcp/127.0.0.1:7447``::
+sample already sent); a landing swarm's world applies camera_loss and uwb_dropout to one UAV or all.
+Examples, against ``swarm launch ... --listen tcp/127.0.0.1:7447``::
 
     swarm fault uwb_dropout --for 5 --connect tcp/127.0.0.1:7447
     swarm fault nlos_burst --for 10 --probability 0.2 --connect tcp/127.0.0.1:7447
     swarm fault camera_loss --vehicle chaser --for 3 --connect tcp/127.0.0.1:7447
     swarm fault gyro_bias_step --vehicle chaser --rate-deg-s 0.5,0,0 --connect tcp/127.0.0.1:7447
     swarm fault sensor_delay --vehicle chaser --for 5 --delay 0.05 --connect ...   # realtime/scaled only
+    swarm fault camera_loss --vehicle uav1 --at 9 --for 3 --connect ...           # a landing swarm
 """
 
 from __future__ import annotations
@@ -43,7 +45,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--at", type=positive_float("--at"), default=None, metavar="S",
                    help="simulated time the window opens [s] (default: at once)")  # fmt: skip
     p.add_argument(
-        "--vehicle", default=None, help="camera_loss / gyro_bias_step: the vehicle (default: every chaser)"
+        "--vehicle",
+        default=None,
+        help="camera_loss / gyro_bias_step (a landing swarm: camera_loss / uwb_dropout): the vehicle "
+        "(default: every chaser, every UAV)",
     )
     p.add_argument(
         "--probability", type=float, default=None, help="nlos_burst: outlier probability in (0, 1]"
