@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarm.core import _landing_nb as nb
+from swarm.core.mdp import nan_to_none
 from swarm.errors import ConfigError
 
 
@@ -226,10 +227,6 @@ def reason_text(params: LandingGuidanceParams, policy: str, code: int, a: float,
     raise ValueError(f"unknown landing reason code {code!r}")
 
 
-def _opt(x: float) -> float | None:
-    return None if math.isnan(x) else float(x)
-
-
 class LandingGuidance:
     """The guidance of one quadrotor landing on one pad (module docstring): the arrays of the compiled
     guidance (:mod:`swarm.core._landing_nb`), its switches and passes as records. ``step`` once per control
@@ -315,7 +312,7 @@ class LandingGuidance:
                 LandingDecision(
                     float(row[nb.D_T]), str(MODES[int(row[nb.D_MODE])]),
                     float(row[nb.D_R]), float(row[nb.D_D]),
-                    float(row[nb.D_SIGMA]), *(_opt(x) for x in row[nb.D_RHO : nb.D_PI2 + 1]),
+                    float(row[nb.D_SIGMA]), *(nan_to_none(x) for x in row[nb.D_RHO : nb.D_PI2 + 1]),
                     r1_m=float(row[nb.D_R1]), r2_m=float(row[nb.D_R2]), switched=bool(row[nb.D_SWITCHED]),
                 )
             )  # fmt: skip

@@ -481,7 +481,8 @@ DECISION_STAGING = 64
 the switcher turns them into :class:`Decision` records when asked (a runner drains a full buffer)."""
 
 
-def _opt(x: float) -> float | None:
+def nan_to_none(x: float) -> float | None:
+    """A compiled kernel's absent value (NaN) as Python's (None)."""
     return None if math.isnan(x) else float(x)
 
 
@@ -533,7 +534,7 @@ class MdpSwitcher:
         p = self.params
         r = float(row[D_R])
         switched = {SWITCHED_R2: "r2", SWITCHED_R1: "r1"}.get(float(row[D_SWITCHED]))
-        a11, pi2 = _opt(row[D_A11]), _opt(row[D_PI2])
+        a11, pi2 = nan_to_none(row[D_A11]), nan_to_none(row[D_PI2])
         if row[D_BRANCH] == BRANCH_A11:
             branch = "A11"
             if switched == "r2":
@@ -551,8 +552,9 @@ class MdpSwitcher:
         return Decision(
             t_s=float(row[D_T]), r_m=r, d=float(row[D_D]), qe_vec_norm=float(row[D_QE]),
             sigma_pos_max_m=float(row[D_SIGMA]), sigma_uwb_m=float(p.sigma_uwb_m), r_t_m=float(p.r_t_m),
-            r_d_m=float(p.r_d_m), A11=a11, A22=_opt(row[D_A22]), A23=_opt(row[D_A23]), A32=_opt(row[D_A32]),
-            A33=_opt(row[D_A33]), pi1=_opt(row[D_PI1]), pi2=pi2, r1_m=float(row[D_R1]), r2_m=float(row[D_R2]),
+            r_d_m=float(p.r_d_m), A11=a11, A22=nan_to_none(row[D_A22]), A23=nan_to_none(row[D_A23]),
+            A32=nan_to_none(row[D_A32]), A33=nan_to_none(row[D_A33]), pi1=nan_to_none(row[D_PI1]), pi2=pi2,
+            r1_m=float(row[D_R1]), r2_m=float(row[D_R2]),
             branch=branch, switched=switched, reason=reason,
         )  # fmt: skip
 

@@ -104,10 +104,6 @@ def run_landing_fleet(
     }
 
 
-SERIES_EVERY = 10
-"""A series sample every this many ticks (:meth:`swarm.step.landing.LandingAgent.decide`'s)."""
-
-
 def fly_compiled(
     world: LandingWorld, agent: LandingAgent, uid: str, n_ticks: int, record_series: bool
 ) -> int:
@@ -118,7 +114,7 @@ def fly_compiled(
     wa, aa, ga = world.arrays(u), agent.arrays(), agent.guidance_arrays()
     ctl = (agent.cs, agent.cp, agent.u, agent.act)
     SER, SER_n = np.zeros((256, lnb.SER_N)), np.zeros(1, dtype=np.int64)
-    every = SERIES_EVERY if record_series else 0
+    every = lnb.SERIES_EVERY if record_series else 0
     k = 1
     while True:
         u.noise.ensure(world.draws)
@@ -126,13 +122,9 @@ def fly_compiled(
         code, k = lnb.run_landing_ticks(k, n_ticks + 1, wa, aa, ga, ctl, *noise, SER, SER_n, every)
         agent.guidance.drain()
         for row in SER[: SER_n[0]]:
-            agent.series.add(row[lnb.SER_T], row[lnb.SER_PTRUE : lnb.SER_PTRUE + 3],
-                             row[lnb.SER_PEST : lnb.SER_PEST + 3], row[lnb.SER_SIGMA], row[lnb.SER_MODE],
-                             bool(row[lnb.SER_SEEN]))  # fmt: skip
+            agent.series.add(row)
         SER_n[0] = 0
         if code == lnb.RUN_DONE:
-            if not u.done:
-                u.end_k = n_ticks
             return k
 
 

@@ -15,8 +15,9 @@ Per tick ``k`` (``t = k dt``), for each UAV not done:
 2. **agent** (:meth:`LandingAgent.tick`): the IMU-driven filter takes the IMU sample, the range, the fix, the
    rangefinder's distance and the pad's pose from PnP of the corners; the guidance (fixed deviation or
    Algorithm 1) and the quadrotor controller give the rotor speeds, or the idle command once landed.
-3. **world** (:meth:`LandingWorld.hold`): the rotors take the command; :func:`landing_done` says whether the
-   UAV's run is over (landed for a second, or hovering at the abort height after an abort).
+3. **world** (:meth:`LandingWorld.hold`): the rotors take the command; the UAV's run is over once it has
+   been landed for ``end_after_landed_s``, or hovers at the abort height after an abort
+   (:func:`swarm.step.landing_nb.world_hold`).
 
 :func:`landing_setup` is what the seed decides for one UAV; both sides call it, so an agent process that has
 no world starts from the same first estimate as the in-process agent.
@@ -33,6 +34,7 @@ from swarm.core import rotations as rot
 from swarm.core._pad_nb import camera_vector
 from swarm.core.imu_filter import ImuFilter, ImuFilterParams, chi2_gate
 from swarm.core.landing import MODES, LandingGuidance, LandingMode
+from swarm.core.mdp import nan_to_none
 from swarm.core.pad_vision import Renderer, detect, estimate_pose, make_detector
 from swarm.kinds.quadrotor import control as qc
 from swarm.kinds.quadrotor import control_row, truth_row
@@ -217,8 +219,7 @@ class _Truth:
 
     @property
     def landed_t(self) -> float | None:
-        t = self.WSC[lnb.WSC_LANDED_T]
-        return None if math.isnan(t) else float(t)
+        return nan_to_none(self.WSC[lnb.WSC_LANDED_T])
 
     @property
     def done(self) -> bool:
@@ -328,7 +329,7 @@ class LandingWorld:
         return inp
 
     def hold(self, uav_id: str, cmd: LandingCommand) -> None:
-        """Step 3: the rotors take the command; the UAV's run ends if :func:`landing_done` says so."""
+        """Step 3 (module docstring): the rotors take the command; the UAV's run may end."""
         u = self.uavs[uav_id]
         mode = float(MODES.index(cmd.mode))
         lnb.world_hold(np.asarray(cmd.u, float), mode, cmd.k, u.x, u.s, u.held, self.kp,
@@ -380,24 +381,6 @@ def inputs_of(INP: np.ndarray, CIDX: np.ndarray, CPX: np.ndarray, board) -> Land
     return inp
 
 
-def _opt_time(x: float) -> float | None:
-    return None if math.isnan(x) else float(x)
-
-
-def landing_done(sc: LandingScenario, pad, mode: LandingMode, landed_t: float | None, t: float, x) -> bool:
-    """A UAV's run is over: ``end_after_landed_s`` after its touchdown, or hovering (within
-    ``abort_hold_tolerance_m``, under ``abort_hold_speed_m_s``) at the abort height above its pad after an
-    abort."""
-    if landed_t is not None and t - landed_t >= sc.end_after_landed_s:
-        return True
-    climb_to = float(pad[2]) + sc.landing.abort_height_m
-    return bool(
-        mode == LandingMode.ABORT
-        and abs(x[2] - climb_to) < sc.abort_hold_tolerance_m
-        and np.linalg.norm(x[3:6]) < sc.abort_hold_speed_m_s
-    )
-
-
 @dataclass
 class _Series:
     t_s: list = field(default_factory=list)
@@ -407,14 +390,14 @@ class _Series:
     mode: list = field(default_factory=list)
     pad_seen: list = field(default_factory=list)
 
-    def add(self, t: float, p_true, p_est, sigma_h: float, mode: float, seen: bool) -> None:
-        """One sample (every tenth tick); ``seen``: the pad measured within the last ``SEEN_RECENT_S``."""
-        self.t_s.append(round(float(t), 4))
-        self.p_true_nav.append([float(v) for v in p_true])
-        self.p_est_nav.append([float(v) for v in p_est])
-        self.sigma_h_m.append(float(sigma_h))
-        self.mode.append(str(MODES[int(mode)]))
-        self.pad_seen.append(bool(seen))
+    def add(self, row: np.ndarray) -> None:
+        """One sample, a row of :func:`swarm.step.landing_nb.series_sample`."""
+        self.t_s.append(round(float(row[lnb.SER_T]), 4))
+        self.p_true_nav.append([float(v) for v in row[lnb.SER_PTRUE : lnb.SER_PTRUE + 3]])
+        self.p_est_nav.append([float(v) for v in row[lnb.SER_PEST : lnb.SER_PEST + 3]])
+        self.sigma_h_m.append(float(row[lnb.SER_SIGMA]))
+        self.mode.append(str(MODES[int(row[lnb.SER_MODE])]))
+        self.pad_seen.append(bool(row[lnb.SER_SEEN]))
 
 
 class LandingAgent:
@@ -497,15 +480,16 @@ class LandingAgent:
         self.OBJ, self.IMG, self.VAR = np.zeros((4 * m, 3)), np.zeros((4 * m, 2)), np.zeros(4 * m)
         self.T_OUT, self.R_OUT, self.COV_OUT = np.zeros(3), np.zeros((3, 3)), np.zeros((6, 6))
         self.series = _Series()
+        self._ser, self._ser_n = np.zeros((1, lnb.SER_N)), np.zeros(1, dtype=np.int64)
 
     # the agent's state, as the wire and the summary read it
     @property
     def pad_seen(self) -> float | None:
-        return _opt_time(self.AF[lnb.AF_PAD_SEEN])
+        return nan_to_none(self.AF[lnb.AF_PAD_SEEN])
 
     @property
     def landed_t(self) -> float | None:
-        return _opt_time(self.AF[lnb.AF_LANDED_T])
+        return nan_to_none(self.AF[lnb.AF_LANDED_T])
 
     @property
     def detections(self) -> int:
@@ -523,7 +507,7 @@ class LandingAgent:
     @property
     def last_d2(self) -> float | None:
         """The squared Mahalanobis distance of the latest range (None before the first)."""
-        return _opt_time(self.AF[lnb.AF_LAST_D2])
+        return nan_to_none(self.AF[lnb.AF_LAST_D2])
 
     def arrays(self) -> tuple:
         """The arrays of :func:`swarm.step.landing_nb.agent_fuse` after ``INP, CIDX, CPX``, in
@@ -579,8 +563,8 @@ class LandingAgent:
         camera's corners (PnP). A free-running agent that has fallen behind fuses the ticks it missed with
         this alone and decides only on the newest (:mod:`agents.landing`)."""
         self._load(inp)
-        lnb.agent_fuse(self.INP, self.CIDX, self.CPX, *self.arrays()[:14], self.corners, self.CAM,
-                       *self.arrays()[14:])  # fmt: skip
+        a = self.arrays()
+        lnb.agent_fuse(self.INP, self.CIDX, self.CPX, *a[:14], self.corners, self.CAM, *a[14:])
 
     def decide(self, inp: LandingInputs, truth_p=None) -> LandingCommand:
         """The guidance and control half of a tick, on the filter's estimate after :meth:`fuse`."""
@@ -590,9 +574,10 @@ class LandingAgent:
         mode = lnb.agent_decide(self.INP, f.X[0], f.P[0], self.AF, self.NIS, *self.guidance_arrays(), self.cs,
                                 self.cp, self.u, self.act)  # fmt: skip
         self.guidance.drain()
-        if truth_p is not None and inp.k % 10 == 0:
-            seen = self.pad_seen is not None and inp.t - self.pad_seen <= lnb.SEEN_RECENT_S
-            self.series.add(inp.t, truth_p, self.p_est, self.sigma_h, mode, seen)
+        if truth_p is not None and inp.k % lnb.SERIES_EVERY == 0:
+            lnb.series_sample(self._ser, self._ser_n, inp.t, np.asarray(truth_p, float), self.AF, mode)
+            self.series.add(self._ser[0])
+            self._ser_n[0] = 0
         return LandingCommand(inp.k, self.u.copy(), MODES[int(mode)])
 
     def outcome(self) -> dict:

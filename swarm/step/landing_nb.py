@@ -98,6 +98,9 @@ AF_N = 15
 SER_T, SER_PTRUE, SER_PEST, SER_SIGMA, SER_MODE, SER_SEEN = 0, 1, 4, 7, 8, 9
 SER_N = 10
 
+SERIES_EVERY = 10
+"""An in-process run samples its series every this many ticks (:func:`series_sample`)."""
+
 SEEN_RECENT_S = 0.2
 """A series sample marks the pad seen when its last measurement is at most this old [s]."""
 
@@ -222,7 +225,8 @@ def world_sample(k, x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, Z, zpos,
 def world_hold(u, mode, k, x, s, held, kp, WSC, WC, WP):
     """Step 3 for one UAV (:meth:`swarm.step.landing.LandingWorld.hold`): the rotors take the command ``u``
     of guidance mode ``mode``; the run ends (``WSC_DONE``) ``end_after_landed_s`` after the touchdown, or
-    hovering at the abort height after an abort (:func:`swarm.step.landing.landing_done`)."""
+    hovering (within ``abort_hold_tolerance_m``, under ``abort_hold_speed_m_s``) at the abort height after an
+    abort."""
     qd.quadrotor_hold(u, s, held, kp)
     t = k * WP[WP_DT]
     if mode == lnb.L_LANDED and math.isnan(WSC[WSC_LANDED_T]):
@@ -364,10 +368,14 @@ def agent_decide(INP, X, P, AF, NIS, G, GP, REF, EV, EV_n, DEC, DEC_n, cs, cp, u
 
 
 @njit(cache=True)
-def _series(SER, SER_n, t, x, AF, mode):
+def series_sample(SER, SER_n, t, p_true, AF, mode):
+    """A row of the series (``SER_*``) at time ``t``: the true position ``p_true[0:3]``, the estimate and
+    horizontal sigma of the last decision, its mode, whether the pad was measured within
+    :data:`SEEN_RECENT_S`; the compiled loop and :meth:`swarm.step.landing.LandingAgent.decide` both take
+    it."""
     i = SER_n[0]
     SER[i, SER_T] = t
-    SER[i, SER_PTRUE : SER_PTRUE + 3] = x[0:3]
+    SER[i, SER_PTRUE : SER_PTRUE + 3] = p_true[0:3]
     SER[i, SER_PEST : SER_PEST + 3] = AF[AF_P_EST : AF_P_EST + 3]
     SER[i, SER_SIGMA] = AF[AF_SIGMA_H]
     SER[i, SER_MODE] = mode
@@ -397,7 +405,7 @@ def run_landing_ticks(k, k1, world, agent, guid, ctl, Z, zpos, need, SER, SER_n,
                    AC, corners, CAM, OBJ, IMG, VAR, T_OUT, R_OUT, COV_OUT)  # fmt: skip
         mode = agent_decide(INP, X, P, AF, NIS, G, GP, REF, EV, EV_n, DEC, DEC_n, cs, cp, u, act)
         if series_every > 0 and k % series_every == 0:
-            _series(SER, SER_n, INP[INP_T], x, AF, mode)
+            series_sample(SER, SER_n, INP[INP_T], x, AF, mode)
         if world_hold(u, mode, k, x, s, held, kp, WSC, WC, WP):
             return RUN_DONE, k
         k += 1
