@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--id",
         required=True,
         help="the vehicle this agent flies (a vehicle id of the scenario); several, comma-separated, make "
-        "this process an agent host: their agents on one Zenoh session, each on its own thread, keys and "
+        "this process an agent host: their agents on one Zenoh session, stepped by one thread, keys and "
         "liveliness per vehicle",
     )
     p.add_argument(
@@ -32,6 +32,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
+    import logging
+
+    from agents.host import AgentHost
     from agents.process import AgentProcess
     from swarm.transport.process import keys_from, scenario_from, zenoh_args
     from swarm.transport.session import open_session
@@ -42,12 +45,17 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     stop = stop if stop is not None else threading.Event()
     with open_session(zenoh_args(args)) as session:
         keys, hosted = keys_from(args), len(ids)
+        # the vehicles' tick assemblers share a condition and a set of those with news: one thread steps all
+        cond, ready = threading.Condition(), set()
         procs = [AgentProcess(sc, vid, args.seed, policy, session, keys, args.clock, stop, rejoin=args.rejoin,
-                              hosted=hosted) for vid in ids]  # fmt: skip
-        if len(procs) == 1:
-            procs[0].run()
-            return 0
-        return run_host({p.id: p.run for p in procs}, stop)
+                              hosted=hosted, cond=cond, ready=ready) for vid in ids]  # fmt: skip
+        try:
+            AgentHost(procs, session, keys, stop).run()
+        except Exception as exc:  # logged with the vehicle; its supervisor restarts every hosted vehicle
+            logging.getLogger("agents").error("agent host of %s failed: %s", ",".join(ids), exc)
+            stop.set()
+            return 1
+        return 0
 
 
 def hosted_ids(text: str, noun: str) -> list[str]:
@@ -67,7 +75,8 @@ def hosted_ids(text: str, noun: str) -> list[str]:
 def run_host(runs: dict[str, Callable[[], None]], stop: threading.Event) -> int:
     """Run several agents in this process (an agent host), each ``runs[id]()`` on its own thread; the first
     that fails stops the others and the host exits 1 (its supervisor restarts all of its vehicles, which
-    rejoin the run). Docking agents (:mod:`agents.process`) and landing agents (:mod:`agents.landing`)."""
+    rejoin the run). The landing agents (:mod:`agents.landing`); the docking agents have their own host, one
+    thread for all (:class:`agents.host.AgentHost`)."""
     import logging
 
     failed: list[BaseException] = []

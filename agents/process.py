@@ -89,6 +89,8 @@ class AgentProcess:
         *,
         rejoin: bool = False,
         hosted: int = 1,
+        cond: threading.Condition | None = None,
+        ready: set | None = None,
     ) -> None:
         sc = scenario
         self.hosted = hosted  # vehicles in this process (an agent host): its CPU time is shared by them
@@ -108,7 +110,8 @@ class AgentProcess:
         self.drops = DropCounter()
         self.assembler = AgentTickAssembler(
             vehicle_id, self.chaser, self.target_id, sc.every(sc.uwb.rate_hz), self.vision_every,
-            start=None if rejoin else 0, wait_for_target=clock.lockstep,
+            start=None if rejoin else 0, wait_for_target=clock.lockstep, cond=cond,
+            ready=set() if ready is None else ready,
         )  # fmt: skip
         if rejoin:
             # who is alive is not known yet: wait for nobody until the liveliness history says (a mothership
@@ -134,6 +137,8 @@ class AgentProcess:
         self.ticks = 0
         self._last_tick: int | None = None
         self._cpu0: float | None = None
+        self._waited_since = time.monotonic()  # the last tick processed (or the start): for the end's drain
+        self._warned_at = 0.0
         self._command_lock = threading.Lock()  # the main loop sends commands, a Zenoh thread re-sends one
         self._last_command: tuple[int, bytes] | None = None  # (tick, payload) of the last command sent
         self.resent = 0  # commands sent again for a resumed world
@@ -148,10 +153,13 @@ class AgentProcess:
 
     def _on_clock(self, _key: str, msg: Clock) -> None:
         if msg.state in ("running", "paused"):
-            self._started.set()
+            if not self._started.is_set():
+                self._started.set()
+                self.assembler.wake()
         elif msg.state == "stopped" and self._started.is_set():
             self._end_tick = msg.tick
             self._ended.set()
+            self.assembler.wake()
 
     def _on_world_event(self, _key: str, msg: Event) -> None:
         """``world_resumed`` at tick ``k``: send ``command(k)`` again if it is the last one sent (the world
@@ -303,41 +311,6 @@ class AgentProcess:
     def _set_target(self, e: Estimate) -> None:
         self.agent.set_target_estimate(_target(e))
 
-    def _run_lockstep(self) -> None:
-        if not self.rejoin:
-            while not (self._started.wait(0.05) or self.stop.is_set()):
-                pass
-        waited_since = time.monotonic()
-        while not self.stop.is_set():
-            if self._ended.is_set() and (self._done_through(self._end_tick) or
-                                         time.monotonic() - waited_since >= END_DRAIN_S):  # fmt: skip
-                break  # the world stopped at tick k: every tick up to k processed (or none came for a while)
-            inp = self.assembler.next_tick(0.05)
-            if inp is None:
-                if time.monotonic() - waited_since > 5.0:
-                    _LOG.warning(
-                        "%s: tick %s still lacks %s",
-                        self.id,
-                        self.assembler.next_expected,
-                        self.assembler.waiting_for(),
-                    )
-                    waited_since = time.monotonic()
-                continue
-            waited_since = time.monotonic()
-            self._process(inp)
-
-    def _run_free(self) -> None:
-        """Realtime/scaled: the same in-order ticks, but a tick whose range or camera frame is late by more
-        than ``grace`` (half a tick of wall time, at least 2 ms) is processed without it, and the target's
-        estimate is the newest one at hand: the world does not wait for anybody."""
-        grace = max(0.002, 0.5 * self.dt / self.clock.factor)
-        while not self.stop.is_set() and not self._ended.is_set():
-            inp = self.assembler.next_tick(grace)
-            if inp is None:
-                inp = self.assembler.take_partial()
-            if inp is not None:
-                self._process(inp)
-
     def _warm_up(self) -> None:
         """Run every compiled kernel once on a throwaway agent, so that numba's compilation (or cache
         load) happens before this process says it is ready, not inside the first lockstep ticks."""
@@ -354,38 +327,83 @@ class AgentProcess:
             scratch.on_vision(dt, "features", points)
         scratch.control(0.0, self.control_every * dt)
 
-    def run(self) -> None:
+    # ------------------------------------------------------------------------------ driven by AgentHost
+
+    def open(self, shared: bool = True) -> None:
+        """Warm the kernels up, declare the publishers, subscribe this vehicle's inputs; ``shared`` also
+        subscribes the world's clock and events and liveliness (an agent host subscribes those once for
+        all of its vehicles and hands each message to every one)."""
         k = self.keys
         self._warm_up()
         self._declare()
-        subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops)
-        subscribe_decoded(self.session, k.uwb(self.id), Uwb, self._on_sensor, self.drops)
+        import os
+
+        d = os.environ.get("SWARM_DIRECT") == "1"
+        subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops, direct=d)
+        subscribe_decoded(self.session, k.uwb(self.id), Uwb, self._on_sensor, self.drops, direct=d)
         if self.chaser:
-            subscribe_decoded(self.session, k.vision(self.id), Vision, self._on_sensor, self.drops)
-            subscribe_decoded(self.session, k.estimate(self.target_id), Estimate, self._on_target, self.drops)
-        watch_liveliness(self.session, k, self._on_alive, history=self.rejoin)
-        subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
-        subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.drops)
+            subscribe_decoded(self.session, k.vision(self.id), Vision, self._on_sensor, self.drops, direct=d)
+            subscribe_decoded(
+                self.session, k.estimate(self.target_id), Estimate, self._on_target, self.drops, direct=d
+            )
+        if shared:
+            watch_liveliness(self.session, k, self._on_alive, history=self.rejoin)
+            subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
+            subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.drops)
+
+    def announce(self) -> None:
+        """Declare this vehicle's liveliness token (a rejoining agent once its commands have a subscriber)
+        and print its ready line."""
         if self.rejoin:
             self._await_world_subscriber()
-        self._token = declare_liveliness(self.session, k, "agent", self.id)
+        self._token = declare_liveliness(self.session, self.keys, "agent", self.id)
         print_ready("agent", self.id)
+
+    def ticking(self) -> bool:
+        """Whether ticks are processed: once the world announced the run (a rejoining agent at once)."""
+        return self.rejoin or self._started.is_set()
+
+    def process(self, inp: TickInputs) -> None:
+        """One tick, as the in-process run steps it (module docstring)."""
+        self._waited_since = time.monotonic()
+        self._process(inp)
+
+    def done(self, now: float) -> bool:
+        """Whether this vehicle's run is over: free-running, once the world's clock stopped; lockstep, once
+        every tick up to the stopped one is processed, or none came for :data:`END_DRAIN_S`. A lockstep
+        tick that stays incomplete for 5 s is logged with what it lacks."""
         if self.clock.lockstep:
-            self._run_lockstep()
-        else:
-            while not (self.rejoin or self._started.wait(0.05) or self.stop.is_set()):
-                pass
-            self._run_free()
-        if self._ended.is_set() and self.agent is not None:
-            a = self.agent
-            sw = a.switcher
-            data = {
-                "final_mode": a.mode.value, "counts": self._counts(), "ticks": self.ticks,
-                "r1_m": None if sw is None else sw.r1_m, "r2_m": None if sw is None else sw.r2_m,
-                "dropped": self.drops.total, "assembler": self.assembler.counts(), "resent": self.resent,
-                "cpu_s": (time.process_time() - (self._cpu0 or time.process_time())) / self.hosted,
-            }  # fmt: skip
-            self.pub_event.put(encode(Event(a.t_s, "summary", data)))
-            _LOG.info("%s: run ended in mode %s", self.id, a.mode.value)
-            self.stop.wait()  # stay up (liveliness, dashboard) until told to stop
-        self.drops.flush()
+            if self._ended.is_set() and (self._done_through(self._end_tick) or
+                                         now - self._waited_since >= END_DRAIN_S):  # fmt: skip
+                return True
+            if self.ticking() and now - self._waited_since > 5.0 and now - self._warned_at > 5.0:
+                _LOG.warning(
+                    "%s: tick %s still lacks %s",
+                    self.id, self.assembler.next_expected, self.assembler.waiting_for(),
+                )  # fmt: skip
+                self._warned_at = now
+            return False
+        return self._ended.is_set()
+
+    def finish(self) -> bool:
+        """After :meth:`done`: publish this vehicle's summary if its run ended (``True``), not if the
+        process was told to stop first."""
+        if not (self._ended.is_set() and self.agent is not None):
+            return False
+        a = self.agent
+        sw = a.switcher
+        data = {
+            "final_mode": a.mode.value, "counts": self._counts(), "ticks": self.ticks,
+            "r1_m": None if sw is None else sw.r1_m, "r2_m": None if sw is None else sw.r2_m,
+            "dropped": self.drops.total, "assembler": self.assembler.counts(), "resent": self.resent,
+            "cpu_s": (time.process_time() - (self._cpu0 or time.process_time())) / self.hosted,
+        }  # fmt: skip
+        self.pub_event.put(encode(Event(a.t_s, "summary", data)))
+        _LOG.info("%s: run ended in mode %s", self.id, a.mode.value)
+        return True
+
+    def run(self) -> None:
+        """This one vehicle in this process: an agent host of one (:class:`agents.host.AgentHost`)."""
+        from agents.host import AgentHost
+
+        AgentHost([self], self.session, self.keys, self.stop).run()

@@ -232,6 +232,8 @@ def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
                       chasers, end_reason=end.get("reason", "no run_end received"), cpu_s=cpu)  # fmt: skip
     if end.get("realtime_factor") is not None:
         out["realtime_factor"] = end["realtime_factor"]
+    if end.get("late_commands") is not None:  # free-running: [late, stepped] vehicle-ticks (world/process.py)
+        out["late_commands"] = end["late_commands"]
     return out
 
 

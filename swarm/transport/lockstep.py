@@ -80,12 +80,13 @@ class TickInputs:
 
 
 class _Frame:
-    __slots__ = ("imu", "uwb", "vision")
+    __slots__ = ("imu", "t_imu", "uwb", "vision")
 
     def __init__(self) -> None:
         self.imu: Imu | None = None
         self.uwb: Uwb | None = None
         self.vision: Vision | None = None
+        self.t_imu = 0.0  # when the imu arrived (time.monotonic): a free-running tick's grace starts then
 
 
 class AgentTickAssembler:
@@ -117,6 +118,8 @@ class AgentTickAssembler:
         start: int | None = 0,
         max_ahead: int = DEFAULT_MAX_AHEAD,
         wait_for_target: bool = True,
+        cond: threading.Condition | None = None,
+        ready: set | None = None,
     ) -> None:
         """``agent_id``: this vehicle; ``is_chaser``: whether ticks need the target's estimates;
         ``target_id``: the target's agent id (required for a chaser); ``uwb_every``: ticks between two UWB
@@ -124,14 +127,18 @@ class AgentTickAssembler:
         two camera frames of this vehicle (``None``: no camera); ``start``: the first tick (``None``: join
         at the first ``imu``); ``max_ahead``: ticks beyond the next expected one that are still buffered;
         ``wait_for_target``: ``False`` (a free-running clock) never waits for the target's estimate, each
-        tick carrying the newest one up to tick ``k - 1``."""
+        tick carrying the newest one up to tick ``k - 1``; ``cond``: the condition this assembler notifies
+        when a message is kept (default its own): an agent host shares one among its vehicles, so that one
+        thread waits for a tick of any of them (:meth:`poll`); ``ready``: a set, shared with them as well,
+        to which this assembler adds itself when it notifies, so that the host polls only those."""
         self.agent_id = check_id(agent_id)
         self.is_chaser = bool(is_chaser)
         self.target_id = check_id(target_id, "target id") if (is_chaser or target_id is not None) else None
         self.uwb_every = _check_int(uwb_every, "uwb_every", 1)
         self.vision_every = None if vision_every is None else _check_int(vision_every, "vision_every", 1)
         self.max_ahead = _check_int(max_ahead, "max_ahead", 0)
-        self._cond = threading.Condition()
+        self._cond = threading.Condition() if cond is None else cond
+        self._ready = ready
         self._next: int | None = None if start is None else _check_int(start, "start", 0)
         self._frames: dict[int, _Frame] = {}
         self._estimates: dict[int, Estimate] = {}  # by the estimate's own tick
@@ -157,9 +164,16 @@ class AgentTickAssembler:
             else:
                 self._counts["unexpected"] += 1
                 return False
-            if kept:
-                self._cond.notify_all()
+            # only news a consumer acts on wakes it: the next tick complete, or an imu (a free-running
+            # tick's grace starts, or a lost tick is skipped); not every message of a tick
+            if kept and (isinstance(msg, Imu) or not self._missing()):
+                self._notify()
             return kept
+
+    def _notify(self) -> None:
+        if self._ready is not None:
+            self._ready.add(self)
+        self._cond.notify_all()
 
     def _window(self, k: int) -> str | None:
         """Why a message of tick ``k`` cannot be kept (``"stale"``/``"future"``), else ``None``."""
@@ -224,6 +238,8 @@ class AgentTickAssembler:
             self._counts["duplicates"] += 1
             return False
         setattr(frame, slot, msg)
+        if slot == "imu":
+            frame.t_imu = time.monotonic()
         if slot == "uwb" and self._uwb_from < 0:  # the first range since the mothership came back
             self._uwb_from = k
         return True
@@ -287,6 +303,57 @@ class AgentTickAssembler:
         self._next = k + 1
         return TickInputs(tick=k, imu=frame.imu, vision=frame.vision, uwb=frame.uwb, target_estimate=est)
 
+    def poll(
+        self, grace_s: float | None = None, now: float | None = None
+    ) -> tuple[TickInputs | None, float | None]:
+        """Without blocking: ``(inputs, None)`` if a tick is ready (taken, as :meth:`next_tick` takes it),
+        else ``(None, due)``, ``due`` the monotonic time at which one will be (``None``: when a message
+        comes). The agent host's loop calls it for each of its vehicles under their shared condition.
+
+        ``grace_s=None`` is the lockstep rule: only a complete tick is ready. A number is a free-running
+        clock's: tick ``k`` is also ready, without what it lacks (counted ``incomplete``), ``grace_s``
+        after its ``imu`` arrived; and a tick whose ``imu`` never came is skipped (counted ``incomplete``)
+        as soon as a later ``imu`` is in (one publisher, reliable and in order: it is lost). The wait is
+        thus a deadline per tick, not a polling period."""
+        with self._cond:
+            if self._closed or self._next is None:
+                return None, None
+            if not self._missing():
+                return self._take(), None
+            if grace_s is None:
+                return None, None
+            k = self._next
+            frame = self._frames.get(k)
+            if k > 0 and (frame is None or frame.imu is None):
+                later = [t for t, f in self._frames.items() if t > k and f.imu is not None]
+                if not later:
+                    return None, None
+                self._counts["incomplete"] += 1  # tick k, without its imu, is skipped
+                self._next = min(later)
+                for t in [t for t in self._frames if t < self._next]:
+                    del self._frames[t]
+                if not self._missing():
+                    return self._take(), None
+                frame = self._frames[self._next]
+            due = (frame.t_imu if frame is not None else 0.0) + grace_s
+            if (time.monotonic() if now is None else now) >= due:
+                self._counts["incomplete"] += 1
+                return self._take(), None
+            return None, due
+
+    def wait(self, timeout_s: float) -> None:
+        """Block (``cond`` released) until a message is kept, :meth:`wake` or :meth:`close` is called, or
+        ``timeout_s`` [s] passed: the agent host's wait between two :meth:`poll` rounds."""
+        with self._cond:
+            if not self._closed:
+                self._cond.wait(max(0.0, timeout_s))
+
+    def wake(self) -> None:
+        """Wake a thread in :meth:`wait` or :meth:`next_tick` (something outside the assembler changed:
+        the run started or ended)."""
+        with self._cond:
+            self._notify()
+
     def take_partial(self) -> TickInputs | None:
         """A free-running clock's way out of a tick that does not complete in time: the next tick that has
         its ``imu``, with whatever else arrived (missing inputs counted as ``incomplete``, earlier ticks
@@ -313,7 +380,7 @@ class AgentTickAssembler:
             self._uwb_live = bool(live)
             if live:
                 self._uwb_from = -1  # set by the next uwb that arrives
-            self._cond.notify_all()
+            self._notify()
 
     def set_target_live(self, live: bool) -> None:
         """The target's agent was seen lost (``False``: ticks stop waiting for its estimates) or back
@@ -324,13 +391,13 @@ class AgentTickAssembler:
             self._target_live = bool(live)
             if live:
                 self._target_from = -1  # set by the next estimate that arrives
-            self._cond.notify_all()
+            self._notify()
 
     def close(self) -> None:
         """Wake every :meth:`next_tick` (they return ``None``), e.g. at shutdown."""
         with self._cond:
             self._closed = True
-            self._cond.notify_all()
+            self._notify()
 
     # ------------------------------------------------------------------------------ state
 

@@ -347,6 +347,7 @@ def subscribe_decoded(
     *,
     remote_only: bool = False,
     log_interval_s: float = 10.0,
+    direct: bool = False,
 ) -> zenoh.Subscriber:
     """Declare a callback subscriber on ``key`` (wildcards allowed) that hands valid messages to ``handler``.
 
@@ -362,6 +363,10 @@ def subscribe_decoded(
     wildcard subscriber such as ``keys.agent_topics(agent_id)``; a key outside the protocol is counted as
     a drop. ``remote_only`` ignores this session's own publications (``Locality.REMOTE``). DELETE samples
     carry no message and are ignored. Undeclared when the session closes (or by ``.undeclare()``).
+
+    ``direct`` runs the callback on Zenoh's receiving thread (``Callback(indirect=False)``) instead of a
+    Python thread of its own: for a process with many subscribers (an agent host) whose handlers are short
+    and never block. One subscriber's samples still arrive in order.
     """
     name = getattr(handler, "__qualname__", handler)
     errors = HandlerErrors(f"handler {name!s} on {key}", log_interval_s)
@@ -398,7 +403,8 @@ def subscribe_decoded(
             errors.record(exc)
 
     origin = zenoh.Locality.REMOTE if remote_only else None
-    return session.declare_subscriber(key, on_sample, allowed_origin=origin)
+    callback = zenoh.handlers.Callback(on_sample, indirect=False) if direct else on_sample
+    return session.declare_subscriber(key, callback, allowed_origin=origin)
 
 
 def declare_liveliness(

@@ -119,6 +119,11 @@ class WorldProcess:
         self._delay_rng = np.random.default_rng(np.random.SeedSequence(entropy=seed, spawn_key=(2**16,)))
         self.modes = dict.fromkeys(self.ids, "HOLD")  # each agent's mode, from its last command
         self.missing_ticks = 0  # lockstep ticks stepped without some live agent's command
+        # free-running: vehicle-ticks stepped (of vehicles whose agent has commanded), and those stepped
+        # without that tick's command (it came late, or not at all: the previous one was held)
+        self.commanded_ticks = 0
+        self.late_commands = 0
+        self._commanding: set[str] = set()
         self.state = "running"
         self.ckpt_path = None if checkpoint_dir is None else checkpoint.checkpoint_path(checkpoint_dir)
         if self.ckpt_path is not None:
@@ -396,6 +401,7 @@ class WorldProcess:
         if not self.clock.lockstep:
             with self._lock:
                 latest, self._latest = self._latest, {}
+            self._count_late(k, latest)
             self._apply(k, latest)
             return True
         deadline = time.monotonic() + self.step_timeout_s
@@ -422,6 +428,15 @@ class WorldProcess:
                 self._idle(vid)
         self._apply(k, commands)
         return True
+
+    def _count_late(self, k: int, latest: dict[str, Command]) -> None:
+        """Free-running: of the vehicles still flying whose agent has sent a command, count those that step
+        tick ``k`` without ``command(k)`` (it is late: the world holds the one before). This is the late
+        tick of ``swarm bench swarm``, judged where it matters, with no probe on the wire."""
+        self._commanding.update(latest)
+        flying = self._commanding - self.done
+        self.commanded_ticks += len(flying)
+        self.late_commands += sum(1 for vid in flying if vid not in latest or latest[vid].tick < k)
 
     def _await_lost(self) -> None:
         """Lockstep: while an agent is lost (its token gone, not back yet), do not step: simulated time
@@ -612,6 +627,7 @@ class WorldProcess:
             "effort": self.world.effort_by_vehicle, "done": sorted(self.done),
             "closest_approach_m": {c: self.referee.closest_approach(c) for c in self.chasers},
             "missing_ticks": self.missing_ticks,
+            "late_commands": None if self.clock.lockstep else [self.late_commands, self.commanded_ticks],
             "next_seed": self.next_seed,
             "dropped": self.drops.total, "resumed_at": self.resumed_at,
             "checkpoint_us": 1e6 * self.ckpt_s / self.ckpt_n if self.ckpt_n else None,

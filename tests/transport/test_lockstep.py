@@ -508,3 +508,68 @@ def test_barrier_concurrent_producers():
     assert all(sorted(cmds) == ids and all(c.tick == k for c in cmds.values()) for k, (cmds, _) in
                enumerate(results))  # fmt: skip
     assert bar.counts() == {"stale": 0, "duplicates": 0, "future": 0, "unknown": 0}
+
+
+# ------------------------------------------------------------------------------ poll (the agent host's loop)
+
+
+def test_poll_in_lockstep_takes_only_complete_ticks_and_never_blocks():
+    asm = plain(uwb_every=2)
+    assert asm.poll() == (None, None)  # nothing yet: wait for a message, no deadline
+    asm.add(imu(1))
+    got, due = asm.poll()
+    assert got.tick == 1 and due is None
+    asm.add(imu(2))  # uwb(2) missing: lockstep waits for it, however long
+    assert asm.poll(None, now=time.monotonic() + 1e6) == (None, None)
+    asm.add(uwb(2))
+    assert asm.poll()[0].tick == 2 and asm.incomplete == 0
+
+
+def test_poll_free_running_gives_a_late_tick_a_deadline_from_its_imu_then_takes_it_partially():
+    asm = chaser(uwb_every=2, wait_for_target=False)
+    asm.add(imu(1))
+    assert asm.poll(0.005)[0].tick == 1  # complete: no estimate is waited for when free-running
+    t0 = time.monotonic()
+    asm.add(imu(2))  # uwb(2) late
+    got, due = asm.poll(0.005)
+    assert got is None and t0 <= due - 0.005 <= time.monotonic()  # grace counted from the imu's arrival
+    assert asm.poll(0.005, now=due - 1e-6) == (None, due)  # not yet
+    got, again = asm.poll(0.005, now=due)
+    assert got.tick == 2 and got.uwb is None and again is None and asm.incomplete == 1
+    assert not asm.add(uwb(2))  # too late now: stale
+
+
+def test_poll_free_running_skips_a_tick_whose_imu_was_lost_as_soon_as_a_later_one_is_in():
+    asm = plain(uwb_every=2, wait_for_target=False)
+    asm.add(imu(1))
+    asm.poll(0.005)
+    asm.add(uwb(2))  # imu(2) lost
+    assert asm.poll(0.005) == (None, None)  # no later imu yet: nothing to skip to, no deadline
+    asm.add(imu(3))
+    got, due = asm.poll(0.005)
+    assert got.tick == 3 and due is None and asm.incomplete == 1  # tick 2 skipped, tick 3 complete
+
+
+def test_a_shared_condition_and_ready_set_wake_one_waiter_for_any_vehicle():
+    cond, ready = threading.Condition(), set()
+    a = plain(uwb_every=2, cond=cond, ready=ready)
+    b = AgentTickAssembler("chaser", True, "target", 2, start=1, cond=cond, ready=ready)
+    got = []
+
+    def host():  # the agent host's loop, reduced: wait, then poll the assemblers with news
+        with cond:
+            while not ready:
+                cond.wait(LONG)
+            got.extend(asm for asm in list(ready))
+            ready.clear()
+
+    t = threading.Thread(target=host)
+    t.start()
+    time.sleep(0.02)
+    b.add(uwb(2))  # not news: the next tick (1) lacks its imu and estimate
+    b.add(imu(1))  # an imu is news
+    t.join(LONG)
+    assert got == [b] and b.poll()[0] is None  # tick 1 still lacks the target's estimate(0)
+    b.add(estimate(0))  # completes tick 1: news
+    a.add(imu(1))  # the other vehicle's news goes to the same set
+    assert ready == {a, b} and b.poll()[0].tick == 1 and a.poll()[0].tick == 1

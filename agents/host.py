@@ -1,0 +1,147 @@
+"""The agent host: the agents of one or several vehicles in one process, on one Zenoh session and one thread.
+
+``swarm launch --vehicles-per-process N`` (``python -m agents --id a,b,...``) hosts several vehicles in one
+process, as a ROS 2 component container hosts several nodes; a process per vehicle is a host of one. Keys,
+liveliness tokens and supervision stay per vehicle (``docs/architecture.md``, "Agent hosts").
+
+What the host shares among its vehicles:
+
+- **one thread steps them all.** Their tick assemblers share one condition: a Zenoh callback that keeps a
+  message notifies it, and the host's loop polls each vehicle's assembler
+  (:meth:`~swarm.transport.lockstep.AgentTickAssembler.poll`) and processes every tick that is ready, vehicle
+  after vehicle. Before, each vehicle had its own thread waiting on its own condition (and, free-running,
+  waking every 2 ms to look for a late tick): 16 vehicles were 16 threads taking the GIL in turn. A
+  free-running tick now has a deadline (its grace after its ``imu`` arrived), so the loop sleeps until a
+  message comes or the nearest deadline;
+- **one subscriber each** for the world's clock and events and for liveliness, whose messages go to every
+  vehicle: the same for all of them, once per process instead of once per vehicle.
+
+Each vehicle keeps its own subscribers to its own sensors and its target's estimate (their keys are its own),
+its publishers and its token. An exception in one vehicle's step stops the host, which exits 1: its
+supervisor restarts every vehicle it hosted, and they rejoin the run.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Sequence
+
+from swarm.transport.keys import Keys
+from swarm.transport.messages import Clock, DropCounter, Event
+from swarm.transport.session import subscribe_decoded, watch_liveliness
+
+__all__ = ["IDLE_S", "AgentHost"]
+
+_LOG = logging.getLogger("swarm.agent")
+
+IDLE_S = 0.05
+"""The longest the host's loop sleeps without a message [s]: how soon it sees a run's end drain out or a
+vehicle's stalled lockstep tick."""
+
+
+class AgentHost:
+    """Runs :class:`agents.process.AgentProcess` objects that share ``session`` and one condition."""
+
+    def __init__(self, procs: Sequence, session, keys: Keys, stop: threading.Event) -> None:
+        if not procs:
+            raise ValueError("an agent host needs at least one vehicle")
+        self.procs = list(procs)
+        conds = {id(p.assembler._cond) for p in self.procs}
+        readies = {id(p.assembler._ready) for p in self.procs}
+        if len(conds) != 1 or len(readies) != 1 or self.procs[0].assembler._ready is None:
+            raise ValueError("the vehicles of one host share one condition and one ready set (cond=, ready=)")
+        self.cond, self.ready = self.procs[0].assembler._cond, self.procs[0].assembler._ready
+        self.session, self.keys, self.stop = session, keys, stop
+        clock = {p.clock for p in self.procs}
+        if len(clock) != 1:
+            raise ValueError(f"the vehicles of one host share its clock, got {sorted(map(str, clock))}")
+        self.clock = clock.pop()
+        dt = self.procs[0].dt
+        # a free-running tick waits this long after its imu for a late range or frame (half a tick of wall
+        # time, at least 2 ms); lockstep waits for complete ticks only
+        self.grace_s = None if self.clock.lockstep else max(0.002, 0.5 * dt / self.clock.factor)
+        self.shared_drops = DropCounter()
+
+    # ------------------------------------------------------------------------------ shared subscribers
+
+    def _on_clock(self, key: str, msg: Clock) -> None:
+        for p in self.procs:
+            p._on_clock(key, msg)
+
+    def _on_world_event(self, key: str, msg: Event) -> None:
+        for p in self.procs:
+            p._on_world_event(key, msg)
+
+    def _on_alive(self, role: str, pid: str, alive: bool) -> None:
+        for p in self.procs:
+            p._on_alive(role, pid, alive)
+
+    # ------------------------------------------------------------------------------ the loop
+
+    def run(self) -> None:
+        """Open every vehicle, subscribe the shared keys, announce the vehicles, step them until each one's
+        run is over (or ``stop``), publish their summaries, then stay up (liveliness, dashboard) until
+        ``stop``."""
+        for p in self.procs:
+            p.open(shared=False)
+        k = self.keys
+        watch_liveliness(self.session, k, self._on_alive, history=any(p.rejoin for p in self.procs))
+        subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.shared_drops)
+        subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.shared_drops)
+        for p in self.procs:
+            p.announce()
+        try:
+            ended = self._loop()
+            if ended:
+                self.stop.wait()  # stay up (liveliness, dashboard) until told to stop
+        finally:
+            self.shared_drops.flush()
+            for p in self.procs:
+                p.drops.flush()
+
+    def _loop(self) -> bool:
+        """Step the vehicles until every run is over or ``stop``; ``True`` if some run ended (a summary).
+
+        Each round polls only the vehicles whose assembler has news (the shared ``ready`` set) or whose
+        free-running tick is due, processes the ticks that are ready outside the lock, and sleeps when none
+        is, until a message, the nearest due time or :data:`IDLE_S`."""
+        live = list(self.procs)
+        by_asm = {p.assembler: p for p in live}
+        cond, ready = self.cond, self.ready
+        due: dict = {}  # proc -> monotonic time its pending free-running tick is taken without what it lacks
+        ready.update(by_asm)
+        ended = False
+        while live and not self.stop.is_set():
+            batch = []
+            with cond:
+                now = time.monotonic()
+                polled = {by_asm[a] for a in ready if a in by_asm} | {p for p, t in due.items() if t <= now}
+                ready.clear()
+                for p in live:  # in host order: the same order every round
+                    if p not in polled or not p.ticking():
+                        continue
+                    inp, when = p.assembler.poll(self.grace_s, now)
+                    if inp is not None:
+                        batch.append((p, inp))
+                        ready.add(p.assembler)  # it may have a further tick ready
+                        due.pop(p, None)
+                    elif when is not None:
+                        due[p] = when
+                    else:
+                        due.pop(p, None)
+                if not batch and not ready:
+                    cond.wait(max(0.0, min([now + IDLE_S, *due.values()]) - now))
+            for p, inp in batch:
+                try:
+                    p.process(inp)
+                except Exception:
+                    _LOG.exception("%s: agent failed at tick %d", p.id, inp.tick)
+                    raise
+            now = time.monotonic()
+            for p in [p for p in live if p.done(now)]:
+                ended = p.finish() or ended
+                live.remove(p)
+                due.pop(p, None)
+        return ended
