@@ -336,9 +336,10 @@ class AgentProcess:
         k = self.keys
         self._warm_up()
         self._declare()
-        import os
-
-        d = os.environ.get("SWARM_DIRECT") == "1"
+        # an agent host's sensor callbacks run on Zenoh's own receiving threads: 16 vehicles would otherwise
+        # be ~60 Python threads (one per subscriber) taking the GIL in turn (BENCHMARKS.md, "The swarm at
+        # scale"); a single vehicle gains nothing measurable from it, and keeps Zenoh's default
+        d = self.hosted > 1
         subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops, direct=d)
         subscribe_decoded(self.session, k.uwb(self.id), Uwb, self._on_sensor, self.drops, direct=d)
         if self.chaser:
