@@ -214,8 +214,9 @@ class AgentProcess:
 
     def _declare(self) -> None:
         k = self.keys
-        self.pub_estimate = declare_reliable(self.session, k.estimate(self.id))
-        self.pub_command = declare_reliable(self.session, k.command(self.id))
+        ex = self.hosted == 1  # an agent host's ticks are a burst: batched (docs/protocol.md, "QoS")
+        self.pub_estimate = declare_reliable(self.session, k.estimate(self.id), ex)
+        self.pub_command = declare_reliable(self.session, k.command(self.id), ex)
         self.pub_guidance = declare_reliable(self.session, k.guidance(self.id))
         self.pub_event = declare_reliable(self.session, k.event(self.id))
 

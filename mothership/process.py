@@ -113,7 +113,8 @@ class MothershipProcess:
         X = np.zeros((len(self.ids), 13))
         X[:, 9] = 1.0  # identity attitudes
         UwbNetwork(self.sc, self.seed).step(self.every, 0.0, X)  # compile (or load) the kernel before "ready"
-        self.pub_uwb = {v: declare_reliable(self.session, k.uwb(v)) for v in self.ids}
+        # a slot's ranges are a burst: batched beyond one pair (docs/protocol.md, "QoS")
+        self.pub_uwb = {v: declare_reliable(self.session, k.uwb(v), len(self.ids) <= 2) for v in self.ids}
         pub_anchors = declare_reliable(self.session, k.anchors(), express=False)
         self._queryable = self.session.declare_queryable(k.anchors(), self._on_query)
         subscribe_decoded(self.session, k.agent_all("truth"), Truth, self._on_truth, self.drops)
