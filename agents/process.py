@@ -154,6 +154,7 @@ class AgentProcess:
     def _on_clock(self, _key: str, msg: Clock) -> None:
         if msg.state in ("running", "paused"):
             if not self._started.is_set():
+                self._waited_since = time.monotonic()  # a stalled tick is timed from the run's start
                 self._started.set()
                 self.assembler.wake()
         elif msg.state == "stopped" and self._started.is_set():
