@@ -19,7 +19,7 @@ from swarm.transport.messages import (
     Uwb,
     Vision,
     encode,
-    estimate_message,
+    encode_estimate,
 )
 
 Sensors = list[tuple[str, str, bytes]]
@@ -94,10 +94,10 @@ def filter_counts(agent) -> dict[str, int]:
 def estimate_payload(agent, k: int) -> bytes:
     """An agent's ``estimate(k)``."""
     e = agent.est
-    return encode(estimate_message(
+    return encode_estimate(
         k, agent.t_s, e.p_nav[0], e.v_nav[0], e.q_nav_body[0], agent.published_cov(), agent.sigma_pos_max_m,
         agent.mahalanobis_d, agent.rejection_fraction, filter_counts(agent),
-    ))  # fmt: skip
+    )  # fmt: skip
 
 
 def mode_events(cmd) -> list[bytes]:

@@ -895,3 +895,73 @@ def test_the_fast_path_never_accepts_what_the_reference_refuses(case):
         assert fast is None
     else:
         assert fast is None or fast == reference
+
+
+# ------------------------------------------------------------------------------ encode_estimate
+
+
+def _estimate_args(rng):
+    a = rng.normal(size=(9, 9))
+    cov = a @ a.T
+    q = rng.normal(size=4)
+    counts = {"range_accepted": int(rng.integers(0, 99)), "features_refused": 0}
+    return [int(rng.integers(0, 10**6)), float(rng.uniform(0, 100)), rng.normal(size=3), rng.normal(size=3),
+            q / np.linalg.norm(q), cov, float(rng.uniform(0, 1)), float(rng.uniform(0, 5)),
+            float(rng.uniform(0, 1)), counts]  # fmt: skip
+
+
+def _same(args):
+    """encode_estimate's bytes, or the error it raises, against the message's own encode."""
+    from swarm.transport.messages import encode_estimate, estimate_message
+
+    try:
+        want = encode(estimate_message(*args))
+    except MessageError as exc:
+        with pytest.raises(MessageError) as got:
+            encode_estimate(*args)
+        assert str(got.value) == str(exc)
+        return None
+    assert encode_estimate(*args) == want
+    return want
+
+
+def test_encode_estimate_gives_the_bytes_and_the_errors_of_the_message_encode():
+    """Oracle: ``encode(estimate_message(...))``, the reference path it replaces on the agent's hot path."""
+    from swarm.transport.messages import _estimate_is_plain
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        args = _estimate_args(rng)
+        assert _estimate_is_plain(*args)  # the fast path, not the fallback, gives these bytes
+        assert _same(args) is not None
+    variants = {
+        "covariance off symmetry by rounding": lambda a: a.__setitem__(5, a[5] + np.triu(1e-12 * a[5], 1)),
+        "covariance not symmetric": lambda a: a.__setitem__(5, a[5] + np.triu(np.ones((9, 9)), 1)),
+        "negative variance": lambda a: a[5].__setitem__((2, 2), -1.0),
+        "NaN position": lambda a: a[2].__setitem__(1, np.nan),
+        "infinite covariance": lambda a: a[5].__setitem__((0, 1), np.inf),
+        "not a unit quaternion": lambda a: a.__setitem__(4, a[4] * 1.01),
+        "quaternion of 3": lambda a: a.__setitem__(4, a[4][:3]),
+        "float32 position": lambda a: a.__setitem__(2, a[2].astype(np.float32)),
+        "list velocity": lambda a: a.__setitem__(3, [0.0, 1.0, 2.0]),
+        "numpy tick": lambda a: a.__setitem__(0, np.int64(5)),
+        "negative tick": lambda a: a.__setitem__(0, -1),
+        "numpy sigma": lambda a: a.__setitem__(6, np.float64(0.25)),
+        "negative time": lambda a: a.__setitem__(1, -0.5),
+        "rejection fraction above 1": lambda a: a.__setitem__(8, 1.5),
+        "NaN distance": lambda a: a.__setitem__(7, float("nan")),
+        "bool sigma": lambda a: a.__setitem__(6, True),
+        "counter key with a slash": lambda a: a[9].__setitem__("a/b", 1),
+        "negative counter": lambda a: a[9].__setitem__("x", -2),
+        "float counter": lambda a: a[9].__setitem__("x", 2.0),
+    }  # fmt: skip
+    outcomes = {}
+    for name, change in variants.items():
+        args = _estimate_args(rng)
+        change(args)
+        outcomes[name] = _same(args) is not None
+    # the variants the message accepts, and those it refuses, each as the reference path decides (it
+    # publishes the symmetric part of any covariance that is not symmetric, estimate_message)
+    accepted = ("covariance off symmetry by rounding", "covariance not symmetric", "float32 position",
+                "list velocity", "numpy tick", "numpy sigma")  # fmt: skip
+    assert outcomes == {name: name in accepted for name in variants}
