@@ -48,11 +48,11 @@ class AgentHost:
         if not procs:
             raise ValueError("an agent host needs at least one vehicle")
         self.procs = list(procs)
-        conds = {id(p.assembler._cond) for p in self.procs}
-        readies = {id(p.assembler._ready) for p in self.procs}
-        if len(conds) != 1 or len(readies) != 1 or self.procs[0].assembler._ready is None:
+        conds = {id(p.assembler.cond) for p in self.procs}
+        readies = {id(p.assembler.ready) for p in self.procs}
+        if len(conds) != 1 or len(readies) != 1 or self.procs[0].assembler.ready is None:
             raise ValueError("the vehicles of one host share one condition and one ready set (cond=, ready=)")
-        self.cond, self.ready = self.procs[0].assembler._cond, self.procs[0].assembler._ready
+        self.cond, self.ready = self.procs[0].assembler.cond, self.procs[0].assembler.ready
         self.session, self.keys, self.stop = session, keys, stop
         clock = {p.clock for p in self.procs}
         if len(clock) != 1:

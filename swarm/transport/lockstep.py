@@ -402,6 +402,16 @@ class AgentTickAssembler:
     # ------------------------------------------------------------------------------ state
 
     @property
+    def cond(self) -> threading.Condition:
+        """The condition this assembler notifies (shared by an agent host's vehicles)."""
+        return self._cond
+
+    @property
+    def ready(self) -> set | None:
+        """The set it adds itself to when it notifies (shared by an agent host's vehicles), or ``None``."""
+        return self._ready
+
+    @property
     def next_expected(self) -> int | None:
         """The tick :meth:`next_tick` returns next (``None`` while joining, before the first ``imu``)."""
         with self._cond:
