@@ -21,6 +21,15 @@ Vec3 = tuple[float, float, float]
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 
 
+def _check_positive(obj, names: tuple[str, ...], prefix: str = "") -> None:
+    """ConfigError naming ``<prefix><name>`` and its value unless each of ``obj``'s fields ``names`` is a
+    finite number > 0."""
+    for name in names:
+        v = getattr(obj, name)
+        if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+            raise ConfigError(f"{prefix}{name} must be a finite number > 0, got {v!r}")
+
+
 @dataclass(frozen=True)
 class LandingVehicle:
     """``[vehicle]``: where the UAV starts."""
@@ -103,10 +112,8 @@ class LandingRangefinder:
     max_tilt_deg: float = 30.0
 
     def __post_init__(self) -> None:
-        for name in ("rate_hz", "sigma_m", "min_range_m", "max_range_m", "max_tilt_deg"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
-                raise ConfigError(f"rangefinder.{name} must be a finite number > 0, got {v!r}")
+        names = ("rate_hz", "sigma_m", "min_range_m", "max_range_m", "max_tilt_deg")
+        _check_positive(self, names, "rangefinder.")
         if not self.min_range_m < self.max_range_m:
             lo, hi = self.min_range_m, self.max_range_m
             raise ConfigError(f"rangefinder.min_range_m must be below max_range_m = {hi!r}, got {lo!r}")
@@ -236,10 +243,7 @@ class LandingScenario:
             raise ConfigError(f"policy must be 'fixed' or 'mdp', got {self.policy!r}")
         if not (math.isfinite(self.dt_s) and 0 < self.dt_s <= 0.02):
             raise ConfigError(f"dt_s must be in (0, 0.02], got {self.dt_s!r}")
-        for name in ("end_after_landed_s", "abort_hold_tolerance_m", "abort_hold_speed_m_s"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
-                raise ConfigError(f"{name} must be a finite number > 0, got {v!r}")
+        _check_positive(self, ("end_after_landed_s", "abort_hold_tolerance_m", "abort_hold_speed_m_s"))
 
 
 def _scenario_path(name_or_path) -> Path:

@@ -12,10 +12,12 @@
 - the world steps to ``k + 1`` once every live agent's ``command(k)`` has arrived, or a timeout has passed
   (:class:`CommandBarrier`).
 
-Both classes are pure logic (no Zenoh): Zenoh callbacks, each on its own thread, feed them decoded
-messages; the process's main loop blocks on :meth:`AgentTickAssembler.next_tick` or
-:meth:`CommandBarrier.wait`. Every method is thread-safe. Messages that do not fit (an old tick, a
-duplicate, a tick too far ahead) are dropped and counted, never raised into a callback.
+Both classes are pure logic (no Zenoh): Zenoh callbacks feed them decoded messages; the agent host's loop
+polls its vehicles' assemblers (:meth:`AgentTickAssembler.poll`, waiting on their shared condition), the
+world's loop waits on :meth:`CommandBarrier.wait`; :meth:`AgentTickAssembler.next_tick` and
+:meth:`~AgentTickAssembler.take_partial` are the same rules for a consumer of one assembler. Every method
+is thread-safe. Messages that do not fit (an old tick, a duplicate, a tick too far ahead) are dropped and
+counted, never raised into a callback.
 """
 
 from __future__ import annotations
@@ -329,9 +331,7 @@ class AgentTickAssembler:
                 if not later:
                     return None, None
                 self._counts["incomplete"] += 1  # tick k, without its imu, is skipped
-                self._next = min(later)
-                for t in [t for t in self._frames if t < self._next]:
-                    del self._frames[t]
+                self._skip_to(min(later))
                 if not self._missing():
                     return self._take(), None
                 frame = self._frames[self._next]
@@ -341,16 +341,9 @@ class AgentTickAssembler:
                 return self._take(), None
             return None, due
 
-    def wait(self, timeout_s: float) -> None:
-        """Block (``cond`` released) until a message is kept, :meth:`wake` or :meth:`close` is called, or
-        ``timeout_s`` [s] passed: the agent host's wait between two :meth:`poll` rounds."""
-        with self._cond:
-            if not self._closed:
-                self._cond.wait(max(0.0, timeout_s))
-
     def wake(self) -> None:
-        """Wake a thread in :meth:`wait` or :meth:`next_tick` (something outside the assembler changed:
-        the run started or ended)."""
+        """Wake a thread waiting on :attr:`cond` (the agent host's loop, or :meth:`next_tick`): something
+        outside the assembler changed, the run started or ended."""
         with self._cond:
             self._notify()
 
@@ -366,10 +359,14 @@ class AgentTickAssembler:
             if not ready:
                 return None
             self._counts["incomplete"] += 1
-            self._next = ready[0]
-            for t in [t for t in self._frames if t < self._next]:
-                del self._frames[t]
+            self._skip_to(ready[0])
             return self._take()
+
+    def _skip_to(self, k: int) -> None:
+        """Make tick ``k`` the next one, dropping the frames of the ticks before it (``_cond`` held)."""
+        self._next = k
+        for t in [t for t in self._frames if t < k]:
+            del self._frames[t]
 
     def set_uwb_live(self, live: bool) -> None:
         """The mothership (the ranges' source) was seen lost (``False``: ticks stop waiting for ``uwb``) or
