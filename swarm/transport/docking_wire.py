@@ -11,7 +11,6 @@ from swarm.core.estimator import MeasKind
 from swarm.transport.keys import Keys
 from swarm.transport.messages import (
     Clock,
-    Command,
     Event,
     Guidance,
     Imu,
@@ -19,6 +18,7 @@ from swarm.transport.messages import (
     Uwb,
     Vision,
     encode,
+    encode_command,
     encode_estimate,
 )
 
@@ -127,7 +127,7 @@ def guidance_payload(sc, policy: str, chaser: bool, agent, k: int, mode: str, cm
 
 def command_payload(k: int, dt: float, u, mode: str, force, torque) -> bytes:
     """An agent's ``command(k)``: the held actuator command and the mode it was decided in."""
-    return encode(Command(k, k * dt, u, mode, force, torque))
+    return encode_command(k, k * dt, u, mode, force, torque)
 
 
 def contact_event(t: float, mode: str, ct) -> bytes:

@@ -74,6 +74,7 @@ __all__ = [
     "Vision",
     "decode",
     "encode",
+    "encode_command",
     "encode_estimate",
     "estimate_message",
     "safe_decode",
@@ -760,6 +761,46 @@ class Command(Message):
             force_body_n=_array(self.force_body_n, "force_body_n", (3,), nullable=True),
             torque_body_nm=_array(self.torque_body_nm, "torque_body_nm", (3,), nullable=True),
         )  # fmt: skip
+
+
+def _command_is_plain(tick, t_s, actuators, mode, force, torque) -> bool:
+    """Whether :func:`encode_command`'s arguments are the common case it checks in a few operations."""
+    if not (type(tick) is int and 0 <= tick <= _U64_MAX and type(t_s) is float and t_s >= 0.0):
+        return False
+    if not (type(mode) is str and mode in MODES):
+        return False
+    a = actuators
+    if not (type(a) is np.ndarray and a.dtype == _F64 and a.ndim == 1 and a.shape[0] <= MAX_ITEMS):
+        return False
+    total = t_s + float(a.sum())
+    for v in (force, torque):
+        if v is not None:
+            if not (type(v) is np.ndarray and v.dtype == _F64 and v.shape == (3,)):
+                return False
+            total += float(v.sum())
+    # a sum is finite only if every entry is (a NaN or an infinity carries through; a finite sum too large
+    # to hold goes the reference way, which decides exactly)
+    return math.isfinite(total)
+
+
+def encode_command(
+    tick: int, t_s: float, actuators, mode: str, force_body_n=None, torque_body_nm=None
+) -> bytes:
+    """``encode(Command(...))``, the same bytes, without building the message: what an agent sends every
+    tick. The common case (a plain int tick, a float time, float64 arrays of the right shapes with finite
+    entries, a known mode) is checked here in a few operations; anything else goes through
+    :class:`Command`, which raises the MessageError naming the field."""
+    if not _command_is_plain(tick, t_s, actuators, mode, force_body_n, torque_body_nm):
+        return encode(Command(tick, t_s, actuators, mode, force_body_n, torque_body_nm))
+    out = {
+        "v": SCHEMA_VERSION, "type": "Command", "tick": tick, "t_s": t_s, "actuators": _wire(actuators),
+        "mode": mode, "force_body_n": None if force_body_n is None else _wire(force_body_n),
+        "torque_body_nm": None if torque_body_nm is None else _wire(torque_body_nm),
+    }  # fmt: skip
+    payload = msgpack.packb(out, use_bin_type=True)
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise MessageError(f"payload: {len(payload)} bytes, more than the {MAX_PAYLOAD_BYTES} allowed")
+    return payload
 
 
 @dataclass(frozen=True, eq=False)

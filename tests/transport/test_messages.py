@@ -965,3 +965,69 @@ def test_encode_estimate_gives_the_bytes_and_the_errors_of_the_message_encode():
     accepted = ("covariance off symmetry by rounding", "covariance not symmetric", "float32 position",
                 "list velocity", "numpy tick", "numpy sigma")  # fmt: skip
     assert outcomes == {name: name in accepted for name in variants}
+
+
+# ------------------------------------------------------------------------------ encode_command
+
+
+def _command_args(rng):
+    n = int(rng.integers(0, 12))
+    force, torque = (None, None) if rng.uniform() < 0.3 else (rng.normal(size=3), rng.normal(size=3))
+    mode = str(rng.choice(["HOLD", "APPROACH", "DOCK", "STATION"]))
+    return [int(rng.integers(0, 10**6)), float(rng.uniform(0, 100)), np.abs(rng.normal(size=n)), mode,
+            force, torque]  # fmt: skip
+
+
+def _same_command(args):
+    """encode_command's bytes, or the error it raises, against the message's own encode."""
+    from swarm.transport.messages import Command, encode_command
+
+    try:
+        want = encode(Command(*args))
+    except MessageError as exc:
+        with pytest.raises(MessageError) as got:
+            encode_command(*args)
+        assert str(got.value) == str(exc)
+        return None
+    assert encode_command(*args) == want
+    return want
+
+
+def test_encode_command_gives_the_bytes_and_the_errors_of_the_message_encode():
+    """Oracle: ``encode(Command(...))``, the reference path it replaces on the agent's hot path."""
+    from swarm.transport.messages import _command_is_plain
+
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        args = _command_args(rng)
+        assert _command_is_plain(*args)  # the fast path, not the fallback, gives these bytes
+        assert _same_command(args) is not None
+    variants = {
+        "NaN actuator": lambda a: a.__setitem__(2, np.append(a[2], np.nan)),
+        "infinite force": lambda a: a.__setitem__(4, np.array([np.inf, 0.0, 0.0])),
+        "NaN torque": lambda a: a.__setitem__(5, np.array([0.0, np.nan, 0.0])),
+        "force of 2": lambda a: a.__setitem__(4, np.zeros(2)),
+        "actuators of 2 x 2": lambda a: a.__setitem__(2, np.zeros((2, 2))),
+        "too many actuators": lambda a: a.__setitem__(2, np.zeros(msgs.MAX_ITEMS + 1)),
+        "unknown mode": lambda a: a.__setitem__(3, "WARP"),
+        "mode not a string": lambda a: a.__setitem__(3, 3),
+        "negative time": lambda a: a.__setitem__(1, -0.5),
+        "NaN time": lambda a: a.__setitem__(1, float("nan")),
+        "negative tick": lambda a: a.__setitem__(0, -1),
+        "bool tick": lambda a: a.__setitem__(0, True),
+        "float tick": lambda a: a.__setitem__(0, 2.0),
+        "numpy tick": lambda a: a.__setitem__(0, np.int64(5)),
+        "int time": lambda a: a.__setitem__(1, 3),
+        "float32 actuators": lambda a: a.__setitem__(2, np.ones(4, dtype=np.float32)),
+        "list actuators": lambda a: a.__setitem__(2, [1.0, 2.0]),
+        "integer force": lambda a: a.__setitem__(4, np.array([1, 2, 3])),
+        "strided actuators": lambda a: a.__setitem__(2, np.arange(8.0)[::2]),
+    }  # fmt: skip
+    outcomes = {}
+    for name, change in variants.items():
+        args = _command_args(rng)
+        change(args)
+        outcomes[name] = _same_command(args) is not None
+    accepted = ("numpy tick", "int time", "float32 actuators", "list actuators", "integer force",
+                "strided actuators")  # fmt: skip
+    assert outcomes == {name: name in accepted for name in variants}
