@@ -40,6 +40,7 @@ from swarm.step.initial import initial_estimate
 from swarm.step.world import initial_truth
 from swarm.transport.docking_wire import (
     command_payload,
+    estimate_args,
     estimate_payload,
     filter_counts,
     guidance_payload,
@@ -56,6 +57,7 @@ from swarm.transport.messages import (
     Uwb,
     Vision,
     encode,
+    estimate_and_payload,
 )
 from swarm.transport.process import ClockSpec, declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
@@ -142,6 +144,9 @@ class AgentProcess:
         self._command_lock = threading.Lock()  # the main loop sends commands, a Zenoh thread re-sends one
         self._last_command: tuple[int, bytes] | None = None  # (tick, payload) of the last command sent
         self.resent = 0  # commands sent again for a resumed world
+        # set by an agent host (agents.host.AgentHost) when the target and its chaser are both in it
+        self.local_chasers: list[AgentProcess] = []  # the chasers in this host that fly to this vehicle
+        self.target_local = False  # this chaser's target is in this host: no subscriber to its estimates
 
     # ------------------------------------------------------------------------------ Zenoh side
 
@@ -225,7 +230,14 @@ class AgentProcess:
         return filter_counts(self.agent)
 
     def _publish_estimate(self, k: int) -> None:
-        self.pub_estimate.put(estimate_payload(self.agent, k))
+        if not self.local_chasers:
+            self.pub_estimate.put(estimate_payload(self.agent, k))
+            return
+        # a chaser in this host takes the message itself, not the bytes back through Zenoh to decode them
+        msg, payload = estimate_and_payload(*estimate_args(self.agent, k))
+        self.pub_estimate.put(payload)
+        for chaser in self.local_chasers:
+            chaser.assembler.add(msg, self.id)
 
     def _publish_command(self, k: int) -> None:
         payload = command_payload(k, self.dt, self._u, self._mode, self._force, self._torque)
@@ -328,6 +340,7 @@ class AgentProcess:
             points = np.array([[0.01 * i, 0.01 * (i % 2), 0.3] for i in range(len(scratch.markers_target))])
             scratch.on_vision(dt, "features", points)
         scratch.control(0.0, self.control_every * dt)
+        estimate_payload(scratch, 1)  # and the estimate's compiled checks (swarm.transport._codec_nb)
 
     # ------------------------------------------------------------------------------ driven by AgentHost
 
@@ -346,9 +359,10 @@ class AgentProcess:
         subscribe_decoded(self.session, k.uwb(self.id), Uwb, self._on_sensor, self.drops, direct=d)
         if self.chaser:
             subscribe_decoded(self.session, k.vision(self.id), Vision, self._on_sensor, self.drops, direct=d)
-            subscribe_decoded(
-                self.session, k.estimate(self.target_id), Estimate, self._on_target, self.drops, direct=d
-            )
+            if not self.target_local:  # else the target's agent in this host hands its estimates over
+                subscribe_decoded(
+                    self.session, k.estimate(self.target_id), Estimate, self._on_target, self.drops, direct=d
+                )
         if shared:
             watch_liveliness(self.session, k, self._on_alive, history=self.rejoin)
             subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)

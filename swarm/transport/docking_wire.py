@@ -13,13 +13,13 @@ from swarm.transport.messages import (
     Clock,
     Event,
     Guidance,
-    Imu,
-    Truth,
     Uwb,
     Vision,
     encode,
     encode_command,
     encode_estimate,
+    encode_imu,
+    encode_truth,
 )
 
 Sensors = list[tuple[str, str, bytes]]
@@ -47,9 +47,9 @@ def world_sensors(world, ids: list[str], chasers: list[str], k: int, frames, tru
     lost, p_nlos = world.radio_env(t)
     for i, vid in enumerate(ids if k % truth_every == 0 else ()):
         x = world.X[i]
-        truth = Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], effort=float(world.effort[i]),
-                      uwb_lost=bool(lost), nlos_probability=float(p_nlos))  # fmt: skip
-        out.append(("truth", vid, encode(truth)))
+        truth = encode_truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], float(world.effort[i]), bool(lost),
+                             float(p_nlos))  # fmt: skip
+        out.append(("truth", vid, truth))
     for vid in ids:
         fr = frames[vid]
         if camera_tick and vid in chasers:
@@ -61,7 +61,7 @@ def world_sensors(world, ids: list[str], chasers: list[str], k: int, frames, tru
             else:
                 data, kind, mids = fr.vision, fr.vision_kind, tuple(range(len(fr.vision)))
             out.append(("vision", vid, encode(Vision(k, t, target, face, kind, data, mids))))
-        out.append(("imu", vid, encode(Imu(k, t, sc.dt_s, fr.gyro_body, fr.q_ahrs_nav_body))))
+        out.append(("imu", vid, encode_imu(k, t, sc.dt_s, fr.gyro_body, fr.q_ahrs_nav_body)))
     return out
 
 
@@ -91,13 +91,19 @@ def filter_counts(agent) -> dict[str, int]:
     }
 
 
-def estimate_payload(agent, k: int) -> bytes:
-    """An agent's ``estimate(k)``."""
+def estimate_args(agent, k: int) -> tuple:
+    """The fields of an agent's ``estimate(k)``, in the order of
+    :func:`~swarm.transport.messages.encode_estimate`."""
     e = agent.est
-    return encode_estimate(
+    return (
         k, agent.t_s, e.p_nav[0], e.v_nav[0], e.q_nav_body[0], agent.published_cov(), agent.sigma_pos_max_m,
         agent.mahalanobis_d, agent.rejection_fraction, filter_counts(agent),
     )  # fmt: skip
+
+
+def estimate_payload(agent, k: int) -> bytes:
+    """An agent's ``estimate(k)``."""
+    return encode_estimate(*estimate_args(agent, k))
 
 
 def mode_events(cmd) -> list[bytes]:

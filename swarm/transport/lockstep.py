@@ -493,7 +493,8 @@ class CommandBarrier:
                 self._counts["duplicates"] += 1
                 return False
             tick[agent_id] = cmd
-            self._cond.notify_all()
+            if self._live <= tick.keys():  # only a complete tick wakes the world (not each of 32 commands)
+                self._cond.notify_all()
             return True
 
     def set_live(self, ids) -> None:

@@ -573,3 +573,28 @@ def test_a_shared_condition_and_ready_set_wake_one_waiter_for_any_vehicle():
     b.add(estimate(0))  # completes tick 1: news
     a.add(imu(1))  # the other vehicle's news goes to the same set
     assert ready == {a, b} and b.poll()[0].tick == 1 and a.poll()[0].tick == 1
+
+
+def test_barrier_wakes_the_world_once_per_complete_tick():
+    """The world's loop waits on the barrier: 32 commands per tick must not wake it 32 times (each wake takes
+    the GIL from the callbacks still decoding commands), only the one that completes the tick."""
+    bar = CommandBarrier(["a", "b", "c"])
+    wakes = []
+
+    class Counting(type(bar._cond)):
+        def notify_all(self):
+            wakes.append(1)
+            super().notify_all()
+
+    bar._cond = Counting()
+    bar.add("a", command(0))
+    bar.add("b", command(0))
+    bar.add("a", command(1))  # a later tick, incomplete
+    assert wakes == []
+    bar.add("c", command(0))
+    assert len(wakes) == 1
+    cmds, missing = bar.wait(0, 0)
+    assert set(cmds) == {"a", "b", "c"} and missing == []
+    bar.add("b", command(1))
+    bar.set_live({"a", "b"})  # c is lost: tick 1 is complete without it, and the change wakes the world
+    assert len(wakes) == 2 and bar.poll(1, 0)

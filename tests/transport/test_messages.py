@@ -967,6 +967,38 @@ def test_encode_estimate_gives_the_bytes_and_the_errors_of_the_message_encode():
     assert outcomes == {name: name in accepted for name in variants}
 
 
+def test_estimate_and_payload_gives_what_a_receiver_decodes():
+    """An agent host hands a target's estimate to its chaser as ``estimate_and_payload``'s message instead of
+    decoding the bytes it sends: every field must be what decoding those bytes gives, and the arrays must be
+    copies the sender's filter cannot change afterwards."""
+    from swarm.transport.messages import estimate_and_payload
+
+    rng = np.random.default_rng(8)
+    cases = [_estimate_args(rng) for _ in range(100)]
+    skewed = _estimate_args(rng)
+    skewed[5] = skewed[5] + np.triu(1e-12 * skewed[5], 1)  # published as its symmetric part
+    cases += [
+        skewed,
+        [*_estimate_args(rng)[:3], [0.0, 1.0, 2.0], *_estimate_args(rng)[4:]],
+    ]  # a list: reference
+    for args in cases:
+        msg, payload = estimate_and_payload(*args)
+        assert payload == _same(args)
+        want = decode(payload, Estimate)
+        for f in dataclasses.fields(Estimate):
+            got, exp = getattr(msg, f.name), getattr(want, f.name)
+            if isinstance(exp, np.ndarray):
+                assert got.dtype == exp.dtype and got.shape == exp.shape and np.array_equal(got, exp), f.name
+            else:
+                assert type(got) is type(exp) and got == exp, f.name
+        for i in (2, 3, 4, 5):
+            if isinstance(args[i], np.ndarray):
+                args[i][...] = 9.0  # the sender's arrays move on; the message keeps what was sent
+        assert decode(payload, Estimate).p_nav.tolist() == msg.p_nav.tolist()
+    with pytest.raises(MessageError, match="p_nav"):
+        estimate_and_payload(*_estimate_args(rng)[:2], np.array([np.nan, 0.0, 0.0]), *_estimate_args(rng)[3:])
+
+
 # ------------------------------------------------------------------------------ encode_command
 
 
@@ -1031,3 +1063,88 @@ def test_encode_command_gives_the_bytes_and_the_errors_of_the_message_encode():
     accepted = ("numpy tick", "int time", "float32 actuators", "list actuators", "integer force",
                 "strided actuators")  # fmt: skip
     assert outcomes == {name: name in accepted for name in variants}
+
+
+# ------------------------------------------------------------------------------ encode_imu, encode_truth
+
+
+def _same_as(fast, reference, args):
+    """``fast(*args)``'s bytes, or the error it raises, against ``encode(reference(*args))``."""
+    try:
+        want = encode(reference(*args))
+    except MessageError as exc:
+        with pytest.raises(MessageError) as got:
+            fast(*args)
+        assert str(got.value) == str(exc)
+        return None
+    assert fast(*args) == want
+    return want
+
+
+def _unit(rng):
+    q = rng.normal(size=4)
+    return q / np.linalg.norm(q)
+
+
+def _imu_args(rng):
+    has_q, has_acc = rng.uniform() < 0.5, rng.uniform() < 0.3
+    q, acc = (_unit(rng) if has_q else None), (rng.normal(size=3) if has_acc else None)
+    return [int(rng.integers(0, 10**6)), float(rng.uniform(0, 100)), float(rng.uniform(1e-3, 0.1)),
+            rng.normal(size=3), q, acc]  # fmt: skip
+
+
+def _truth_args(rng):
+    return [int(rng.integers(0, 10**6)), float(rng.uniform(0, 100)), rng.normal(size=3), rng.normal(size=3),
+            _unit(rng), rng.normal(size=3), float(rng.uniform(0, 50)), bool(rng.uniform() < 0.2),
+            float(rng.uniform(0, 1))]  # fmt: skip
+
+
+def test_encode_imu_and_truth_give_the_bytes_and_the_errors_of_the_message_encode(monkeypatch):
+    """Oracle: ``encode(Imu(...))`` and ``encode(Truth(...))``, the reference paths they replace on the
+    world's hot path. Every seeded case goes through the fast path (the module's ``encode``, their fallback,
+    raises meanwhile); each variant is decided as the message decides."""
+    from swarm.transport.messages import encode_imu, encode_truth
+
+    rng = np.random.default_rng(12)
+    with monkeypatch.context() as m:
+        m.setattr(msgs, "encode", lambda msg: pytest.fail(f"{type(msg).__name__} took the reference path"))
+        for fast, ref, make in ((encode_imu, Imu, _imu_args), (encode_truth, Truth, _truth_args)):
+            for _ in range(200):
+                assert _same_as(fast, ref, make(rng)) is not None
+    q_edge = np.array([0.0, 0.0, 0.0, 1.0 + 0.9 * msgs.QUAT_NORM_TOL])  # the message's own check decides
+    imu_variants = {
+        "NaN gyro": (lambda a: a[3].__setitem__(1, np.nan), False),
+        "infinite time": (lambda a: a.__setitem__(1, math.inf), False),
+        "zero period": (lambda a: a.__setitem__(2, 0.0), False),
+        "negative time": (lambda a: a.__setitem__(1, -1.0), False),
+        "not a unit quaternion": (lambda a: a.__setitem__(4, np.array([0.0, 0.0, 0.0, 1.1])), False),
+        "quaternion near the tolerance": (lambda a: a.__setitem__(4, q_edge), True),
+        "NaN accelerometer": (lambda a: a.__setitem__(5, np.array([0.0, np.nan, 9.8])), False),
+        "gyro of 4": (lambda a: a.__setitem__(3, np.zeros(4)), False),
+        "bool tick": (lambda a: a.__setitem__(0, True), False),
+        "numpy tick": (lambda a: a.__setitem__(0, np.int64(3)), True),
+        "int period": (lambda a: a.__setitem__(2, 1), True),
+        "list gyro": (lambda a: a.__setitem__(3, [0.0, 0.1, 0.2]), True),
+        "float32 gyro": (lambda a: a.__setitem__(3, np.ones(3, dtype=np.float32)), True),
+    }
+    truth_variants = {
+        "NaN position": (lambda a: a[2].__setitem__(0, np.nan), False),
+        "infinite rate": (lambda a: a[5].__setitem__(2, -np.inf), False),
+        "not a unit quaternion": (lambda a: a.__setitem__(4, a[4] * 1.01), False),
+        "quaternion near the tolerance": (lambda a: a.__setitem__(4, q_edge), True),
+        "negative effort": (lambda a: a.__setitem__(6, -0.5), False),
+        "NLOS probability above 1": (lambda a: a.__setitem__(8, 1.5), False),
+        "uwb_lost not a bool": (lambda a: a.__setitem__(7, 1), False),
+        "numpy bool uwb_lost": (lambda a: a.__setitem__(7, np.bool_(True)), True),
+        "int effort": (lambda a: a.__setitem__(6, 2), True),
+        "velocity view of a state row": (lambda a: a.__setitem__(3, np.arange(13.0)[3:6]), True),
+    }
+    for fast, make, variants in (
+        (encode_imu, _imu_args, imu_variants),
+        (encode_truth, _truth_args, truth_variants),
+    ):
+        ref = Imu if fast is encode_imu else Truth
+        for name, (change, accepted) in variants.items():
+            args = make(rng)
+            change(args)
+            assert (_same_as(fast, ref, args) is not None) == accepted, name
