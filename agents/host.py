@@ -146,11 +146,17 @@ class AgentHost:
                         due.pop(p, None)
                 if not batch and not ready:
                     cond.wait(max(0.0, min([now + IDLE_S, *due.values()]) - now))
-            for p, inp in batch:
+            for p, inp in batch:  # the round's commands first: the world (lockstep) waits for them
                 try:
                     p.process(inp)
                 except Exception:
                     _LOG.exception("%s: agent failed at tick %d", p.id, inp.tick)
+                    raise
+            for p, inp in batch:  # then the estimates: a chaser uses its target's a tick later
+                try:
+                    p.flush()
+                except Exception:
+                    _LOG.exception("%s: agent failed publishing its estimate of tick %d", p.id, inp.tick)
                     raise
             now = time.monotonic()
             for p in [p for p in live if p.done(now)]:

@@ -144,6 +144,7 @@ class AgentProcess:
         self._command_lock = threading.Lock()  # the main loop sends commands, a Zenoh thread re-sends one
         self._last_command: tuple[int, bytes] | None = None  # (tick, payload) of the last command sent
         self.resent = 0  # commands sent again for a resumed world
+        self._estimate_due: int | None = None  # the tick whose estimate flush() publishes
         # set by an agent host (agents.host.AgentHost) when the target and its chaser are both in it
         self.local_chasers: list[AgentProcess] = []  # the chasers in this host that fly to this vehicle
         self.target_local = False  # this chaser's target is in this host: no subscriber to its estimates
@@ -299,8 +300,8 @@ class AgentProcess:
                 return
             if self.chaser and inp.target_estimate is not None:
                 self._set_target(inp.target_estimate)
-            self._publish_estimate(k)
             self._publish_command(k)
+            self._estimate_due = k
             return
         # a free-running agent that skipped ticks propagates over the whole gap
         gap = k - self._last_tick if self._last_tick is not None and k > self._last_tick else 1
@@ -313,10 +314,10 @@ class AgentProcess:
             None if vis is None or not vis.seen else (vis.kind, vis.data),
             None if te is None or not self.chaser else _target(te),
         ))  # fmt: skip
-        self._publish_estimate(k)
         if cmd is not None:
             self._commanded(k, cmd)
         self._publish_command(k)
+        self._estimate_due = k  # published by flush(), after the commands of the host's round
         self.ticks += 1
 
     def _done_through(self, k: int) -> bool:
@@ -381,9 +382,18 @@ class AgentProcess:
         return self.rejoin or self._started.is_set()
 
     def process(self, inp: TickInputs) -> None:
-        """One tick, as the in-process run steps it (module docstring)."""
+        """One tick, as the in-process run steps it (module docstring), up to its command; its estimate
+        goes out with :meth:`flush`."""
         self._waited_since = time.monotonic()
         self._process(inp)
+
+    def flush(self) -> None:
+        """Publish the estimate of the tick :meth:`process` stepped last (if it has not gone out yet). An
+        agent host calls it once every vehicle of its round has sent its command: the world waits for the
+        commands, while the estimates are wanted a tick later (by a chaser) or by a viewer."""
+        k, self._estimate_due = self._estimate_due, None
+        if k is not None:
+            self._publish_estimate(k)
 
     def done(self, now: float) -> bool:
         """Whether this vehicle's run is over: free-running, once the world's clock stopped; lockstep, once
