@@ -29,4 +29,6 @@ def test_bench_codec_writes_a_row_per_type(tmp_path):
             m.encode(next(x for x in codec.examples() if type(x).__name__ == row["type"]))
         )
         assert all(row[k] > 0 for k in ("build_us", "encode_us", "decode_us", "decode_reference_us"))
-    assert "reference" in r.stdout and "Estimate" in r.stdout
+        has_fast = row["type"] in codec.fast_encoders()
+        assert (row["fast_encode_us"] is not None and row["fast_encode_us"] > 0) == has_fast, row["type"]
+    assert "reference" in r.stdout and "Estimate" in r.stdout and "fast enc" in r.stdout

@@ -1,10 +1,12 @@
 """``swarm bench codec``: what one message of every tick costs to build, encode and decode (issue 13).
 
 For each message type of the hot path (``swarm/transport/messages.py``): building it in Python (its
-constructor's checks), :func:`~swarm.transport.messages.encode`, and decoding its payload by the msgspec
-fast path (what every receiver runs) and by the reference checks alone (what it ran before issue 13, and
-still runs for a payload the fast path leaves to it). Times are medians of repeated blocks, so a burst of
-load on a shared machine moves them less than a mean; the ratio of the two decodes is measured in one run.
+constructor's checks), :func:`~swarm.transport.messages.encode`, the sender's fast path where the world or
+an agent has one (``encode_imu``, ``encode_estimate``, ``encode_command``, ``encode_truth``), and decoding
+its payload by the msgspec fast path (what every receiver runs) and by the reference checks alone (what it
+ran before issue 13, and still runs for a payload the fast path leaves to it). Times are medians of
+repeated blocks, so a burst of load on a shared machine moves them less than a mean; the ratio of the two
+decodes is measured in one run.
 """
 
 from __future__ import annotations
@@ -38,6 +40,15 @@ def examples() -> list:
     ]
 
 
+def fast_encoders() -> dict:
+    """By message type, the sender fast path that the world or an agent runs every tick instead of
+    ``encode(Message(...))`` (the same bytes, without building the message)."""
+    from swarm.transport import messages as m
+
+    return {"Imu": m.encode_imu, "Estimate": m.encode_estimate, "Command": m.encode_command,
+            "Truth": m.encode_truth}  # fmt: skip
+
+
 def _us(fn, repeat: int, number: int) -> float:
     blocks = []
     for _ in range(repeat):
@@ -53,12 +64,17 @@ def run(preset: dict) -> dict:
 
     from swarm.transport import messages as m
 
+    encoders = fast_encoders()
     rows = []
     for msg in examples():
         cls, payload = type(msg), m.encode(msg)
         kwargs = {f.name: getattr(msg, f.name) for f in fields(msg)}
         assert m._decode_fast(payload, cls) == msg  # the fast path takes it: what is timed is what runs
         r, n = preset["repeat"], preset["number"]
+        fast = encoders.get(cls.__name__)
+        if fast is not None:
+            args = tuple(kwargs.values())
+            assert fast(*args) == payload  # the sender's fast path gives these bytes
         rows.append({
             "type": cls.__name__,
             "bytes": len(payload),
@@ -66,6 +82,8 @@ def run(preset: dict) -> dict:
             "encode_us": _us(lambda x=msg: m.encode(x), r, n),
             "decode_us": _us(lambda p=payload, c=cls: m.decode(p, c), r, n),
             "decode_reference_us": _us(lambda p=payload, c=cls: m._decode_reference(p, c), r, n),
+            # the sender's fast path (messages.encode_imu, ...): the same bytes without building the message
+            "fast_encode_us": None if fast is None else _us(lambda f=fast, a=args: f(*a), r, n),
         })  # fmt: skip
     return {"bench": "codec", **preset, "messages": rows}
 
@@ -73,12 +91,13 @@ def run(preset: dict) -> dict:
 def format_report(record: dict) -> str:
     lines = [
         "one message of each hot-path type: median of blocks [us]",
-        f"{'type':10s} {'bytes':>6s} {'build':>8s} {'encode':>8s} {'decode':>8s} {'reference':>10s}"
-        f" {'ratio':>6s}",
+        f"{'type':10s} {'bytes':>6s} {'build':>8s} {'encode':>8s} {'fast enc':>9s} {'decode':>8s}"
+        f" {'reference':>10s} {'ratio':>6s}",
     ]
     for r in record["messages"]:
+        fast = "-" if r.get("fast_encode_us") is None else f"{r['fast_encode_us']:.1f}"
         lines.append(
-            f"{r['type']:10s} {r['bytes']:6d} {r['build_us']:8.1f} {r['encode_us']:8.1f} "
+            f"{r['type']:10s} {r['bytes']:6d} {r['build_us']:8.1f} {r['encode_us']:8.1f} {fast:>9s} "
             f"{r['decode_us']:8.1f} {r['decode_reference_us']:10.1f}"
             f" {r['decode_reference_us'] / r['decode_us']:5.1f}x"
         )

@@ -471,7 +471,14 @@ def _is_f64(a: object, shape: tuple[int, ...]) -> bool:
 def _clearly_unit(q: np.ndarray) -> bool:
     """``q`` (finite) passes the messages' unit-norm test with a margin that no rounding of the norm can
     cross (at the margin's edge the message's own check decides)."""
-    return abs(math.sqrt(float(q @ q)) - 1.0) <= 0.5 * QUAT_NORM_TOL
+    return abs(math.hypot(*q.tolist()) - 1.0) <= 0.5 * QUAT_NORM_TOL
+
+
+def _total(a: np.ndarray) -> float:
+    """The sum of a small float64 array, in Python (a numpy reduction costs more than the sum on a few
+    entries): finite only if every entry is, unless the entries are too large for their sum to hold (the
+    message's own checks then decide)."""
+    return sum(a.ravel().tolist())
 
 
 def _is_time(t: object) -> bool:
@@ -528,9 +535,9 @@ def encode_imu(tick: int, t_s: float, dt_s: float, gyro_body, q_ahrs_nav_body=No
         and (q is None or _is_f64(q, (4,))) and (acc is None or _is_f64(acc, (3,)))
     )  # fmt: skip
     if plain:
-        total = t_s + dt_s + float(gyro_body.sum())
-        total += 0.0 if q is None else float(q.sum())
-        total += 0.0 if acc is None else float(acc.sum())
+        total = t_s + dt_s + _total(gyro_body)
+        total += 0.0 if q is None else _total(q)
+        total += 0.0 if acc is None else _total(acc)
         plain = math.isfinite(total) and (q is None or _clearly_unit(q))
     if not plain:
         return encode(Imu(tick, t_s, dt_s, gyro_body, q, acc))
@@ -877,12 +884,12 @@ def _command_is_plain(tick, t_s, actuators, mode, force, torque) -> bool:
     a = actuators
     if not (type(a) is np.ndarray and a.dtype == _F64 and a.ndim == 1 and a.shape[0] <= MAX_ITEMS):
         return False
-    total = t_s + float(a.sum())
+    total = t_s + _total(a)
     for v in (force, torque):
         if v is not None:
             if not _is_f64(v, (3,)):
                 return False
-            total += float(v.sum())
+            total += _total(v)
     # a sum is finite only if every entry is (a NaN or an infinity carries through; a finite sum too large
     # to hold goes the reference way, which decides exactly)
     return math.isfinite(total)
@@ -957,8 +964,8 @@ def encode_truth(
         and type(uwb_lost) is bool and type(nlos_probability) is float and 0.0 <= nlos_probability <= 1.0
     )  # fmt: skip
     if plain:
-        total = t_s + effort + float(p_nav.sum()) + float(v_nav.sum()) + float(q_nav_body.sum())
-        plain = math.isfinite(total + float(w_body.sum())) and _clearly_unit(q_nav_body)
+        total = t_s + effort + _total(p_nav) + _total(v_nav) + _total(q_nav_body)
+        plain = math.isfinite(total + _total(w_body)) and _clearly_unit(q_nav_body)
     if not plain:
         return encode(Truth(*args))
     return _pack("Truth", dict(zip(_TRUTH_FIELDS, args, strict=True)))
