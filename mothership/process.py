@@ -17,7 +17,6 @@
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 
@@ -54,7 +53,8 @@ class MothershipProcess:
         self.network = UwbNetwork(scenario, seed)
         self.every = self.network.every
         self.drops = DropCounter()
-        self._truth: queue.Queue[tuple[str, Truth]] = queue.Queue()
+        self._lock = threading.Lock()  # the truths' callback serves the slots (_take)
+        self._failure: Exception | None = None  # a slot's exception, raised by run()
         self.anchors_msg = Anchors(tuple(range(len(scenario.anchors_m))), np.asarray(scenario.anchors_m))
         self._pending: dict[int, dict[str, Truth]] = {}
         # tick 0 has no exchange: the first range is at the first slot >= 1; a restarted mothership (rejoin)
@@ -69,8 +69,35 @@ class MothershipProcess:
         if vid not in self.index:
             self.drops.drop(key, "truth: not a vehicle of this scenario")
             return
-        if msg.tick % self.every == 0 and msg.tick > 0:
-            self._truth.put((vid, msg))
+        if msg.tick % self.every == 0 and msg.tick > 0 and self._failure is None:
+            try:
+                with self._lock:
+                    self._take(vid, msg)
+            except Exception as exc:  # a bug in the radio step: the process fails, its supervisor restarts it
+                _LOG.exception("UWB slot failed")
+                self._failure = exc
+
+    def _take(self, vid: str, msg: Truth) -> None:
+        """One slot tick's truth, on the subscriber's thread (a hand-off per truth to the main thread cost
+        more than the slot itself, and sat on the lockstep's path); serves every slot it completes."""
+        k = self.keys
+        if self._next_slot is None:
+            self._next_slot = msg.tick + self.every
+            _LOG.info("mothership rejoins the run: ranges from tick %d on", self._next_slot)
+        if msg.tick < self._next_slot:
+            self.drops.drop(k.truth(vid), f"truth of tick {msg.tick}: its UWB slot was already served")
+            return
+        slot = self._pending.setdefault(msg.tick, {})
+        slot[vid] = msg
+        # slots complete in tick order (the world steps in order); serve every complete one
+        while len(self._pending.get(self._next_slot, ())) == len(self.ids):
+            self._slot(self._next_slot, self._pending.pop(self._next_slot))
+            self._next_slot += self.every
+        if len(self._pending) > 1000:  # a vehicle's truth never came: skip its slot, say so
+            oldest = min(self._pending)
+            _LOG.warning("UWB slot %d incomplete after 1000 newer slots: skipped", oldest)
+            del self._pending[oldest]
+            self._next_slot = min(self._pending)
 
     def _on_query(self, query: zenoh.Query) -> None:
         try:
@@ -125,32 +152,11 @@ class MothershipProcess:
         payload = encode(self.anchors_msg)
         pub_anchors.put(payload)
         last_anchors = time.monotonic()
-        while not self.stop.is_set():
-            try:
-                vid, msg = self._truth.get(timeout=0.1)
-            except queue.Empty:
-                vid = None
+        while not self.stop.wait(min(0.1, self.anchors_every_s)) and self._failure is None:
             now = time.monotonic()
             if now - last_anchors >= self.anchors_every_s:
                 pub_anchors.put(payload)
                 last_anchors = now
-            if vid is None:
-                continue
-            if self._next_slot is None:
-                self._next_slot = msg.tick + self.every
-                _LOG.info("mothership rejoins the run: ranges from tick %d on", self._next_slot)
-            if msg.tick < self._next_slot:
-                self.drops.drop(k.truth(vid), f"truth of tick {msg.tick}: its UWB slot was already served")
-                continue
-            slot = self._pending.setdefault(msg.tick, {})
-            slot[vid] = msg
-            # slots complete in tick order (the world steps in order); serve every complete one
-            while len(self._pending.get(self._next_slot, ())) == len(self.ids):
-                self._slot(self._next_slot, self._pending.pop(self._next_slot))
-                self._next_slot += self.every
-            if len(self._pending) > 1000:  # a vehicle's truth never came: skip its slot, say so
-                oldest = min(self._pending)
-                _LOG.warning("UWB slot %d incomplete after 1000 newer slots: skipped", oldest)
-                del self._pending[oldest]
-                self._next_slot = min(self._pending)
         self.drops.flush()
+        if self._failure is not None:
+            raise self._failure

@@ -46,7 +46,7 @@ def fast_encoders() -> dict:
     from swarm.transport import messages as m
 
     return {"Imu": m.encode_imu, "Estimate": m.encode_estimate, "Command": m.encode_command,
-            "Truth": m.encode_truth}  # fmt: skip
+            "Truth": m.encode_truth, "Uwb": m.encode_uwb}  # fmt: skip
 
 
 def _us(fn, repeat: int, number: int) -> float:

@@ -13,13 +13,13 @@ from swarm.transport.messages import (
     Clock,
     Event,
     Guidance,
-    Uwb,
     Vision,
     encode,
     encode_command,
     encode_estimate,
     encode_imu,
     encode_truth,
+    encode_uwb,
 )
 
 Sensors = list[tuple[str, str, bytes]]
@@ -68,15 +68,8 @@ def world_sensors(world, ids: list[str], chasers: list[str], k: int, frames, tru
 def uwb_slot(network, ids: list[str], k: int, t: float) -> list[tuple[str, bytes]]:
     """The mothership's ranges of slot tick ``k`` after ``network.step``: ``(vehicle, payload)``, one per
     vehicle (``range_m`` None where the reply was lost)."""
-    return [
-        (
-            vid,
-            encode(
-                Uwb(k, t, int(network.anchor_id[i]), None if network.lost[i] else float(network.range_m[i]))
-            ),
-        )
-        for i, vid in enumerate(ids)
-    ]
+    ranges = [None if lost else float(r) for lost, r in zip(network.lost, network.range_m, strict=True)]
+    return [(vid, encode_uwb(k, t, int(network.anchor_id[i]), ranges[i])) for i, vid in enumerate(ids)]
 
 
 def filter_counts(agent) -> dict[str, int]:

@@ -78,6 +78,7 @@ __all__ = [
     "encode_estimate",
     "encode_imu",
     "encode_truth",
+    "encode_uwb",
     "estimate_and_payload",
     "estimate_message",
     "safe_decode",
@@ -566,6 +567,18 @@ class Uwb(Message):
             anchor_id=_int(self.anchor_id, "anchor_id", 0, _MAX_ID),
             range_m=_float(self.range_m, "range_m", lo=0.0, nullable=True),
         )  # fmt: skip
+
+
+def encode_uwb(tick: int, t_s: float, anchor_id: int, range_m: float | None) -> bytes:
+    """``encode(Uwb(...))``, the same bytes, without building the message (the sender fast paths above)."""
+    plain = (
+        _is_tick(tick) and _is_time(t_s) and math.isfinite(t_s) and type(anchor_id) is int
+        and 0 <= anchor_id <= _MAX_ID
+        and (range_m is None or (type(range_m) is float and math.isfinite(range_m) and range_m >= 0.0))
+    )  # fmt: skip
+    if not plain:
+        return encode(Uwb(tick, t_s, anchor_id, range_m))
+    return _pack("Uwb", {"tick": tick, "t_s": t_s, "anchor_id": anchor_id, "range_m": range_m})
 
 
 @dataclass(frozen=True, eq=False)

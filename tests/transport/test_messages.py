@@ -1148,3 +1148,31 @@ def test_encode_imu_and_truth_give_the_bytes_and_the_errors_of_the_message_encod
             args = make(rng)
             change(args)
             assert (_same_as(fast, ref, args) is not None) == accepted, name
+
+
+def test_encode_uwb_gives_the_bytes_and_the_errors_of_the_message_encode(monkeypatch):
+    """Oracle: ``encode(Uwb(...))``, the mothership's reference path; seeded ranges (and lost ones) through
+    the fast path, variants decided as the message decides."""
+    from swarm.transport.messages import encode_uwb
+
+    rng = np.random.default_rng(13)
+
+    def args():
+        r = None if rng.uniform() < 0.2 else float(rng.uniform(0, 30))
+        return [int(rng.integers(0, 10**6)), float(rng.uniform(0, 100)), int(rng.integers(0, 8)), r]
+
+    with monkeypatch.context() as m:
+        m.setattr(msgs, "encode", lambda msg: pytest.fail(f"{type(msg).__name__} took the reference path"))
+        for _ in range(200):
+            assert _same_as(encode_uwb, Uwb, args()) is not None
+    variants = {
+        "negative range": (3, -0.1, False), "NaN range": (3, math.nan, False),
+        "infinite range": (3, math.inf, False), "negative anchor": (2, -1, False),
+        "huge anchor": (2, 2**40, False),
+        "bool anchor": (2, True, False), "infinite time": (1, math.inf, False), "int range": (3, 2, True),
+        "numpy range": (3, np.float64(2.5), True), "numpy anchor": (2, np.int64(1), True),
+    }  # fmt: skip
+    for name, (i, value, accepted) in variants.items():
+        a = args()
+        a[i] = value
+        assert (_same_as(encode_uwb, Uwb, a) is not None) == accepted, name
