@@ -910,19 +910,23 @@ def _estimate_args(rng):
             float(rng.uniform(0, 1)), counts]  # fmt: skip
 
 
-def _same(args):
-    """encode_estimate's bytes, or the error it raises, against the message's own encode."""
-    from swarm.transport.messages import encode_estimate, estimate_message
-
+def _same_as(fast, reference, args):
+    """``fast(*args)``'s bytes, or the error it raises, against ``encode(reference(*args))``: a sender fast
+    path (``encode_estimate``, ...) against the message's own checks and encoding."""
     try:
-        want = encode(estimate_message(*args))
+        want = encode(reference(*args))
     except MessageError as exc:
         with pytest.raises(MessageError) as got:
-            encode_estimate(*args)
+            fast(*args)
         assert str(got.value) == str(exc)
         return None
-    assert encode_estimate(*args) == want
+    assert fast(*args) == want
     return want
+
+
+def _same(args):
+    """encode_estimate against ``encode(estimate_message(...))``."""
+    return _same_as(msgs.encode_estimate, msgs.estimate_message, args)
 
 
 def test_encode_estimate_gives_the_bytes_and_the_errors_of_the_message_encode():
@@ -1011,18 +1015,8 @@ def _command_args(rng):
 
 
 def _same_command(args):
-    """encode_command's bytes, or the error it raises, against the message's own encode."""
-    from swarm.transport.messages import Command, encode_command
-
-    try:
-        want = encode(Command(*args))
-    except MessageError as exc:
-        with pytest.raises(MessageError) as got:
-            encode_command(*args)
-        assert str(got.value) == str(exc)
-        return None
-    assert encode_command(*args) == want
-    return want
+    """encode_command against ``encode(Command(...))``."""
+    return _same_as(msgs.encode_command, msgs.Command, args)
 
 
 def test_encode_command_gives_the_bytes_and_the_errors_of_the_message_encode():
@@ -1066,19 +1060,6 @@ def test_encode_command_gives_the_bytes_and_the_errors_of_the_message_encode():
 
 
 # ------------------------------------------------------------------------------ encode_imu, encode_truth
-
-
-def _same_as(fast, reference, args):
-    """``fast(*args)``'s bytes, or the error it raises, against ``encode(reference(*args))``."""
-    try:
-        want = encode(reference(*args))
-    except MessageError as exc:
-        with pytest.raises(MessageError) as got:
-            fast(*args)
-        assert str(got.value) == str(exc)
-        return None
-    assert fast(*args) == want
-    return want
 
 
 def _unit(rng):
