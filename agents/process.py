@@ -231,12 +231,18 @@ class AgentProcess:
         return filter_counts(self.agent)
 
     def _publish_estimate(self, k: int) -> None:
+        # an estimate no subscriber matches is not encoded (Zenoh would drop it unsent): in a headless swarm
+        # nobody but the chaser listens, and a chaser in this host takes the message itself, not the bytes
+        # back through Zenoh to decode them; a viewer or a recorder that subscribes gets every estimate
+        # from then on (its subscription reaches this publisher within a millisecond or so)
+        listened = self.pub_estimate.matching_status.matching
         if not self.local_chasers:
-            self.pub_estimate.put(estimate_payload(self.agent, k))
+            if listened:
+                self.pub_estimate.put(estimate_payload(self.agent, k))
             return
-        # a chaser in this host takes the message itself, not the bytes back through Zenoh to decode them
-        msg, payload = estimate_and_payload(*estimate_args(self.agent, k))
-        self.pub_estimate.put(payload)
+        msg, payload = estimate_and_payload(*estimate_args(self.agent, k), payload=listened)
+        if payload is not None:
+            self.pub_estimate.put(payload)
         for chaser in self.local_chasers:
             chaser.assembler.add(msg, self.id)
 

@@ -799,23 +799,24 @@ def encode_estimate(
 
 def estimate_and_payload(
     tick: int, t_s: float, p_nav, v_nav, q_nav_body, cov, sigma_pos_max_m: float, mahalanobis_d: float,
-    rejection_fraction: float, counts: dict[str, int],
-) -> tuple[Estimate, bytes]:  # fmt: skip
+    rejection_fraction: float, counts: dict[str, int], *, payload: bool = True,
+) -> tuple[Estimate, bytes | None]:  # fmt: skip
     """:func:`encode_estimate`'s bytes and the message a receiver decodes from them (its arrays copies), for
     a receiver in the same process: an agent host hands a target's estimate to its chaser without the
-    decoding (``agents.host``), which was ~20 us of the chaser's tick."""
+    decoding (``agents.host``), which was ~20 us of the chaser's tick. ``payload=False``: the message
+    alone (``None`` for the bytes), when no one else subscribes."""
     args = (tick, t_s, p_nav, v_nav, q_nav_body, cov, sigma_pos_max_m, mahalanobis_d, rejection_fraction,
             counts)  # fmt: skip
     f = _plain_estimate(args)
     if f is None:
         msg = estimate_message(*args)
-        return msg, encode(msg)
-    payload = _pack("Estimate", f)
+        return msg, encode(msg) if payload else None
+    data = _pack("Estimate", f) if payload else None
     for name in ("p_nav", "v_nav", "q_nav_body", "cov"):
         f[name] = np.array(f[name], dtype=np.float64)  # a copy, as decoding makes: the sender's move on
     msg = object.__new__(Estimate)
     msg.__dict__.update(f)  # checked above, as the fast decoding leaves it (no __post_init__ again)
-    return msg, payload
+    return msg, data
 
 
 @dataclass(frozen=True, eq=False)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 
+import numpy as np
 import pytest
 
 from agents.host import AgentHost
@@ -40,3 +41,43 @@ def test_a_host_refuses_vehicles_that_do_not_share_its_condition():
                           cond=threading.Condition(), ready=set()) for v in ("chaser", "target")]  # fmt: skip
     with pytest.raises(ValueError, match="share one condition"):
         AgentHost(procs, None, Keys("t"), stop)
+
+
+class _Publisher:
+    """A publisher's ``put`` and ``matching_status`` (whether any subscriber matches its key)."""
+
+    def __init__(self, matching: bool) -> None:
+        self.matching_status = type("Status", (), {"matching": matching})()
+        self.sent: list[bytes] = []
+
+    def put(self, payload: bytes) -> None:
+        self.sent.append(bytes(payload))
+
+
+@pytest.mark.parametrize("listened", [False, True])
+def test_an_estimate_is_encoded_only_for_a_subscriber_and_always_handed_to_a_hosted_chaser(listened):
+    """A headless swarm's estimates have no subscriber but the chaser's: they are not encoded (Zenoh would
+    drop them unsent). A subscriber (a viewer, a recorder) gets every one, the bytes of encode_estimate; a
+    chaser in the host gets its target's message either way."""
+    from swarm.step.agent import VehicleAgent
+    from swarm.step.world import initial_truth
+    from swarm.transport.docking_wire import estimate_payload
+    from swarm.transport.messages import Estimate, decode
+
+    sc = load_scenario("docking")
+    _, p = _host(["chaser", "target"], sc)
+    for v, proc in p.items():
+        x = initial_truth(sc, 0, v)
+        proc.agent = VehicleAgent(sc, v, x[0:3], x[3:6], x[6:10], np.full(9, 1e-4), "mdp")
+        proc.pub_estimate = _Publisher(listened)
+    got = []
+    p["chaser"].assembler.add = lambda msg, source: got.append((msg, source))
+    for v in ("chaser", "target"):
+        p[v]._publish_estimate(3)
+    for v in ("chaser", "target"):
+        sent = p[v].pub_estimate.sent
+        assert sent == ([estimate_payload(p[v].agent, 3)] if listened else [])
+    ((msg, source),) = got
+    assert source == "target" and msg.tick == 3
+    want = decode(estimate_payload(p["target"].agent, 3), Estimate)
+    assert np.array_equal(msg.p_nav, want.p_nav) and np.array_equal(msg.cov, want.cov)
