@@ -456,11 +456,11 @@ class Message:
     __hash__ = None  # type: ignore[assignment]  # holds arrays
 
 
-# ---- sender fast paths: encode_imu, encode_estimate, encode_command, encode_truth give the bytes of
-# encode(Message(...)) without building the message, for the messages sent every tick. Each checks the common
-# case in a few operations (plain Python numbers, float64 arrays of the right shapes, a finite sum, a
-# quaternion clearly of unit norm) and leaves anything else to the message's own checks, which raise the
-# MessageError naming the field (tests/transport/test_messages.py compares both, bytes and errors).
+# ---- sender fast paths: encode_imu, encode_uwb, encode_estimate, encode_command, encode_truth give the
+# bytes of encode(Message(...)) without building the message, for the messages sent every tick. Each checks
+# the common case in a few operations (plain Python numbers, float64 arrays of the right shapes, a finite
+# sum, a quaternion clearly of unit norm) and leaves anything else to the message's own checks, which raise
+# the MessageError naming the field (tests/transport/test_messages.py compares both, bytes and errors).
 
 _F64 = np.dtype(np.float64)
 
@@ -747,8 +747,7 @@ def _estimate_verdict(tick, t_s, p, v, q, cov, sigma, d, rf, counts) -> int | No
     """:func:`encode_estimate`'s common case: ``_PLAIN``, ``_SYMMETRIZE`` (the covariance is off symmetry by
     rounding only: send its symmetric part, as :func:`estimate_message` does), or ``None`` (the reference
     path decides)."""
-    if not all(type(a) is np.ndarray and a.dtype == _F64 and a.shape == shape
-               for a, shape in zip((p, v, q, cov), _ESTIMATE_SHAPES, strict=True)):  # fmt: skip
+    if not all(_is_f64(a, shape) for a, shape in zip((p, v, q, cov), _ESTIMATE_SHAPES, strict=True)):
         return None
     if not (_is_int(tick) and tick >= 0 and len(counts) <= MAX_ITEMS and _is_real(rf) and rf <= 1.0):
         return None
@@ -759,11 +758,6 @@ def _estimate_verdict(tick, t_s, p, v, q, cov, sigma, d, rf, counts) -> int | No
         return None
     verdict = _estimate_arrays(p, v, q, cov)
     return verdict if verdict in (_PLAIN, _SYMMETRIZE) else None
-
-
-def _estimate_is_plain(*args) -> bool:
-    """Whether :func:`encode_estimate`'s arguments are the common case it checks in a few operations."""
-    return _estimate_verdict(*args) is not None
 
 
 def _plain_estimate(args: tuple) -> dict[str, Any] | None:
@@ -1353,7 +1347,7 @@ def _arr(a: _Array | None, shape: tuple[int | None, ...]) -> Any:
     out = np.frombuffer(a.data, "<f8").reshape(a.shape).astype(np.float64)  # a writable copy
     # finite: a small array's sum in Python (a NaN or an infinity carries through; a finite sum too large
     # to hold defers to the reference, which decides exactly), a larger one's entries in numpy
-    if not (math.isfinite(sum(out.ravel().tolist())) if n <= 16 else np.isfinite(out).all()):
+    if not (math.isfinite(_total(out)) if n <= 16 else np.isfinite(out).all()):
         raise _Defer
     return out
 

@@ -929,15 +929,30 @@ def _same(args):
     return _same_as(msgs.encode_estimate, msgs.estimate_message, args)
 
 
-def test_encode_estimate_gives_the_bytes_and_the_errors_of_the_message_encode():
-    """Oracle: ``encode(estimate_message(...))``, the reference path it replaces on the agent's hot path."""
-    from swarm.transport.messages import _estimate_is_plain
+def _through_the_fast_path(monkeypatch, fast, reference, make, rng, n=200):
+    """``n`` seeded cases of ``make(rng)``, each given the message's bytes by ``fast`` with the module's
+    ``encode`` (every fast path's fallback) failing meanwhile: the fast path, not the fallback, gave them."""
+    with monkeypatch.context() as m:
+        m.setattr(msgs, "encode", lambda msg: pytest.fail(f"{type(msg).__name__} took the reference path"))
+        for _ in range(n):
+            assert _same_as(fast, reference, make(rng)) is not None
 
+
+def _decided_as_the_message(fast, reference, make, rng, variants, accepted):
+    """Each variant (a change to a fresh ``make(rng)``) gives the message's bytes or its error through
+    ``fast``; the message accepts exactly the variants named in ``accepted``."""
+    outcomes = {}
+    for name, change in variants.items():
+        args = make(rng)
+        change(args)
+        outcomes[name] = _same_as(fast, reference, args) is not None
+    assert outcomes == {name: name in accepted for name in variants}
+
+
+def test_encode_estimate_gives_the_bytes_and_the_errors_of_the_message_encode(monkeypatch):
+    """Oracle: ``encode(estimate_message(...))``, the reference path it replaces on the agent's hot path."""
     rng = np.random.default_rng(7)
-    for _ in range(200):
-        args = _estimate_args(rng)
-        assert _estimate_is_plain(*args)  # the fast path, not the fallback, gives these bytes
-        assert _same(args) is not None
+    _through_the_fast_path(monkeypatch, msgs.encode_estimate, msgs.estimate_message, _estimate_args, rng)
     variants = {
         "covariance off symmetry by rounding": lambda a: a.__setitem__(5, a[5] + np.triu(1e-12 * a[5], 1)),
         "covariance not symmetric": lambda a: a.__setitem__(5, a[5] + np.triu(np.ones((9, 9)), 1)),
@@ -959,16 +974,13 @@ def test_encode_estimate_gives_the_bytes_and_the_errors_of_the_message_encode():
         "negative counter": lambda a: a[9].__setitem__("x", -2),
         "float counter": lambda a: a[9].__setitem__("x", 2.0),
     }  # fmt: skip
-    outcomes = {}
-    for name, change in variants.items():
-        args = _estimate_args(rng)
-        change(args)
-        outcomes[name] = _same(args) is not None
     # the variants the message accepts, and those it refuses, each as the reference path decides (it
     # publishes the symmetric part of any covariance that is not symmetric, estimate_message)
     accepted = ("covariance off symmetry by rounding", "covariance not symmetric", "float32 position",
                 "list velocity", "numpy tick", "numpy sigma")  # fmt: skip
-    assert outcomes == {name: name in accepted for name in variants}
+    _decided_as_the_message(
+        msgs.encode_estimate, msgs.estimate_message, _estimate_args, rng, variants, accepted
+    )
 
 
 def test_estimate_and_payload_gives_what_a_receiver_decodes():
@@ -1014,20 +1026,10 @@ def _command_args(rng):
             force, torque]  # fmt: skip
 
 
-def _same_command(args):
-    """encode_command against ``encode(Command(...))``."""
-    return _same_as(msgs.encode_command, msgs.Command, args)
-
-
-def test_encode_command_gives_the_bytes_and_the_errors_of_the_message_encode():
+def test_encode_command_gives_the_bytes_and_the_errors_of_the_message_encode(monkeypatch):
     """Oracle: ``encode(Command(...))``, the reference path it replaces on the agent's hot path."""
-    from swarm.transport.messages import _command_is_plain
-
     rng = np.random.default_rng(11)
-    for _ in range(200):
-        args = _command_args(rng)
-        assert _command_is_plain(*args)  # the fast path, not the fallback, gives these bytes
-        assert _same_command(args) is not None
+    _through_the_fast_path(monkeypatch, msgs.encode_command, msgs.Command, _command_args, rng)
     variants = {
         "NaN actuator": lambda a: a.__setitem__(2, np.append(a[2], np.nan)),
         "infinite force": lambda a: a.__setitem__(4, np.array([np.inf, 0.0, 0.0])),
@@ -1049,14 +1051,9 @@ def test_encode_command_gives_the_bytes_and_the_errors_of_the_message_encode():
         "integer force": lambda a: a.__setitem__(4, np.array([1, 2, 3])),
         "strided actuators": lambda a: a.__setitem__(2, np.arange(8.0)[::2]),
     }  # fmt: skip
-    outcomes = {}
-    for name, change in variants.items():
-        args = _command_args(rng)
-        change(args)
-        outcomes[name] = _same_command(args) is not None
     accepted = ("numpy tick", "int time", "float32 actuators", "list actuators", "integer force",
                 "strided actuators")  # fmt: skip
-    assert outcomes == {name: name in accepted for name in variants}
+    _decided_as_the_message(msgs.encode_command, msgs.Command, _command_args, rng, variants, accepted)
 
 
 # ------------------------------------------------------------------------------ encode_imu, encode_truth
@@ -1087,11 +1084,8 @@ def test_encode_imu_and_truth_give_the_bytes_and_the_errors_of_the_message_encod
     from swarm.transport.messages import encode_imu, encode_truth
 
     rng = np.random.default_rng(12)
-    with monkeypatch.context() as m:
-        m.setattr(msgs, "encode", lambda msg: pytest.fail(f"{type(msg).__name__} took the reference path"))
-        for fast, ref, make in ((encode_imu, Imu, _imu_args), (encode_truth, Truth, _truth_args)):
-            for _ in range(200):
-                assert _same_as(fast, ref, make(rng)) is not None
+    for fast, ref, make in ((encode_imu, Imu, _imu_args), (encode_truth, Truth, _truth_args)):
+        _through_the_fast_path(monkeypatch, fast, ref, make, rng)
     q_edge = np.array([0.0, 0.0, 0.0, 1.0 + 0.9 * msgs.QUAT_NORM_TOL])  # the message's own check decides
     imu_variants = {
         "NaN gyro": (lambda a: a[3].__setitem__(1, np.nan), False),
@@ -1120,15 +1114,13 @@ def test_encode_imu_and_truth_give_the_bytes_and_the_errors_of_the_message_encod
         "int effort": (lambda a: a.__setitem__(6, 2), True),
         "velocity view of a state row": (lambda a: a.__setitem__(3, np.arange(13.0)[3:6]), True),
     }
-    for fast, make, variants in (
-        (encode_imu, _imu_args, imu_variants),
-        (encode_truth, _truth_args, truth_variants),
+    for fast, ref, make, variants in (
+        (encode_imu, Imu, _imu_args, imu_variants),
+        (encode_truth, Truth, _truth_args, truth_variants),
     ):
-        ref = Imu if fast is encode_imu else Truth
-        for name, (change, accepted) in variants.items():
-            args = make(rng)
-            change(args)
-            assert (_same_as(fast, ref, args) is not None) == accepted, name
+        changes = {name: change for name, (change, _) in variants.items()}
+        accepted = [name for name, (_, ok) in variants.items() if ok]
+        _decided_as_the_message(fast, ref, make, rng, changes, accepted)
 
 
 def test_encode_uwb_gives_the_bytes_and_the_errors_of_the_message_encode(monkeypatch):
@@ -1142,10 +1134,7 @@ def test_encode_uwb_gives_the_bytes_and_the_errors_of_the_message_encode(monkeyp
         r = None if rng.uniform() < 0.2 else float(rng.uniform(0, 30))
         return [int(rng.integers(0, 10**6)), float(rng.uniform(0, 100)), int(rng.integers(0, 8)), r]
 
-    with monkeypatch.context() as m:
-        m.setattr(msgs, "encode", lambda msg: pytest.fail(f"{type(msg).__name__} took the reference path"))
-        for _ in range(200):
-            assert _same_as(encode_uwb, Uwb, args()) is not None
+    _through_the_fast_path(monkeypatch, encode_uwb, Uwb, lambda _rng: args(), rng)
     variants = {
         "negative range": (3, -0.1, False), "NaN range": (3, math.nan, False),
         "infinite range": (3, math.inf, False), "negative anchor": (2, -1, False),
