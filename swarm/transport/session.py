@@ -29,6 +29,7 @@ import argparse
 import json
 import logging
 import math
+import os
 import re
 import threading
 import time
@@ -44,6 +45,7 @@ from swarm.transport.keys import Keys
 from swarm.transport.messages import MESSAGE_FOR_KIND, DropCounter, Message, safe_decode
 
 __all__ = [
+    "LEAN_RUNTIME",
     "MODES",
     "HandlerErrors",
     "ZenohArgs",
@@ -272,19 +274,43 @@ def free_loopback_endpoint() -> str:
         return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
+LEAN_RUNTIME = (
+    "(rx: (handover: app), acc: (handover: app), app: (worker_threads: 1), "
+    "tx: (worker_threads: 1), net: (worker_threads: 1))"
+)
+"""The ``ZENOH_RUNTIME`` every swarm process runs with unless its environment sets one: Zenoh's receiving
+and accepting tasks run on its application runtime, and each runtime has one worker thread. A message then
+crosses fewer threads between the socket and our callback. Measured here (BENCHMARKS.md, "Zenoh's runtime,
+one worker"): one pair in lockstep 8.3-8.4x -> 9.3-10.6x real time, sensor-to-estimate p99 1.9 -> 1.1-1.8
+ms. ``ZENOH_RUNTIME='()'`` gives Zenoh's own defaults. Handing ``tx`` or ``net`` over as well stalls a
+session (measured), so they keep their own thread."""
+
+
+def _zenoh_runtime() -> str:
+    """The ``ZENOH_RUNTIME`` of this process: the environment's, else :data:`LEAN_RUNTIME`, written into
+    the environment (before this process's first session, which reads it once; child processes inherit it)."""
+    return os.environ.setdefault("ZENOH_RUNTIME", LEAN_RUNTIME)
+
+
 def open_session(args: ZenohArgs) -> zenoh.Session:
     """A Zenoh session opened with :func:`make_config` ``(args)``. Use it as a context manager, which closes
     it (``with open_session(args) as session:``), or close it in a ``finally``.
 
-    ConfigError for a bad file or value; SwarmError naming the mode and endpoints when Zenoh cannot open
-    (a client that reaches no router, a listen port in use)."""
+    Zenoh's runtime is :func:`_zenoh_runtime`'s. ConfigError for a bad file or value, or a ``ZENOH_RUNTIME``
+    that Zenoh cannot parse; SwarmError naming the mode and endpoints when Zenoh cannot open (a client that
+    reaches no router, a listen port in use)."""
     config = make_config(args)
+    runtime = _zenoh_runtime()
     try:
         session = zenoh.open(config)
     except zenoh.ZError as exc:
         mode = json.loads(config.get_json("mode")) or "peer"
         where = f"connect {list(args.connect) or '-'}, listen {list(args.listen) or '-'}"
         raise SwarmError(f"cannot open a Zenoh {mode} session ({where}): {_zerror_text(exc)}") from None
+    except BaseException as exc:  # a bad ZENOH_RUNTIME: Zenoh panics (PanicException, a BaseException)
+        if type(exc).__name__ != "PanicException":
+            raise
+        raise ConfigError(f"Zenoh cannot open a session with ZENOH_RUNTIME={runtime!r}: {exc}") from None
     _LOG.debug("zenoh session %s open with %s", session.zid(), args)
     return session
 

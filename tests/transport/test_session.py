@@ -11,7 +11,10 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import queue
+import subprocess
+import sys
 import time
 import uuid
 
@@ -22,6 +25,7 @@ from swarm.errors import ConfigError, SwarmError
 from swarm.transport.keys import Keys
 from swarm.transport.messages import DropCounter, Imu, Uwb, encode
 from swarm.transport.session import (
+    LEAN_RUNTIME,
     ZenohArgs,
     add_zenoh_arguments,
     declare_liveliness,
@@ -245,6 +249,59 @@ def test_router_session_opens_without_the_scouting_delay() -> None:
     with open_session(ZenohArgs(mode="router", listen=(loopback(free_port()),))):
         elapsed = time.perf_counter() - t0
     assert elapsed < 0.3, f"router open took {elapsed:.3f} s"
+
+
+_THREADS_OF_A_SESSION = """
+import collections, json, os, sys
+from swarm.errors import ConfigError
+from swarm.transport.session import ZenohArgs, open_session
+try:
+    with open_session(ZenohArgs(mode="router", listen=(sys.argv[1],))) as a, open_session(
+        ZenohArgs(mode="client", connect=(sys.argv[1],))
+    ):
+        tasks = f"/proc/{os.getpid()}/task"
+        names = [open(f"{tasks}/{t}/comm").read().strip().rstrip("0123456789-") for t in os.listdir(tasks)]
+        print(json.dumps({"env": os.environ["ZENOH_RUNTIME"], "threads": collections.Counter(names)}))
+except ConfigError as exc:
+    print(json.dumps({"error": str(exc)}))
+"""
+
+
+def _session_in_a_fresh_process(zenoh_runtime: str | None) -> dict:
+    """What :data:`_THREADS_OF_A_SESSION` prints, run by a new interpreter (Zenoh reads ``ZENOH_RUNTIME``
+    once per process, at its first session) with ``ZENOH_RUNTIME`` set to ``zenoh_runtime`` or unset."""
+    env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
+    env["RUST_BACKTRACE"] = "0"
+    if zenoh_runtime is not None:
+        env["ZENOH_RUNTIME"] = zenoh_runtime
+    out = subprocess.run(
+        [sys.executable, "-c", _THREADS_OF_A_SESSION, loopback(free_port())],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_sessions_run_zenohs_runtime_lean_unless_the_environment_says_otherwise() -> None:
+    # The lean runtime hands Zenoh's receiving ("rx") and accepting ("acc") tasks to the application
+    # runtime: a router with a client connected has no thread of either. Zenoh's own defaults ('()') have
+    # both, which is what makes this test able to fail. (The number of "app" threads is no oracle: tokio
+    # gives its blocking pool's threads the runtime's name.)
+    lean = _session_in_a_fresh_process(None)
+    assert lean["env"] == LEAN_RUNTIME
+    assert "rx" not in lean["threads"] and "acc" not in lean["threads"], lean
+    default = _session_in_a_fresh_process("()")
+    assert default["env"] == "()"
+    assert default["threads"].get("rx", 0) >= 1 and default["threads"].get("acc", 0) >= 1, default
+
+
+@pytest.mark.parametrize("bad", ["(bogus: 1)", "(app: (worker_threads: 0))", "(rx: "])
+def test_a_bad_zenoh_runtime_gives_config_error_naming_it(bad) -> None:
+    got = _session_in_a_fresh_process(bad)
+    assert got.get("error", "").startswith(f"Zenoh cannot open a session with ZENOH_RUNTIME={bad!r}: "), got
 
 
 # ------------------------------------------------------------------------------------------ subscribe_decoded
