@@ -278,39 +278,49 @@ LEAN_RUNTIME = (
     "(rx: (handover: app), acc: (handover: app), app: (worker_threads: 1), "
     "tx: (worker_threads: 1), net: (worker_threads: 1))"
 )
-"""The ``ZENOH_RUNTIME`` every swarm process runs with unless its environment sets one: Zenoh's receiving
-and accepting tasks run on its application runtime, and each runtime has one worker thread. A message then
-crosses fewer threads between the socket and our callback. Measured here (BENCHMARKS.md, "Zenoh's runtime,
-one worker"): one pair in lockstep 8.3-8.4x -> 9.3-10.6x real time, sensor-to-estimate p99 1.9 -> 1.1-1.8
-ms. ``ZENOH_RUNTIME='()'`` gives Zenoh's own defaults. Handing ``tx`` or ``net`` over as well stalls a
-session (measured), so they keep their own thread."""
+"""The Zenoh runtime of every swarm process that is not a router, unless ``ZENOH_RUNTIME`` is set: Zenoh's
+receiving and accepting tasks run on its application runtime, and each runtime has one worker thread. A
+message then crosses fewer threads between the socket and our callback. Measured here (BENCHMARKS.md,
+"Zenoh's runtime, one worker"): one pair in lockstep 8.3-8.4x -> 9.3-10.6x real time, sensor-to-estimate
+p99 1.9 -> 1.1-1.8 ms. A router keeps Zenoh's defaults: with one worker it forwarded a replay at full speed
+slower than it came, so a recorder stopped at the replay's end missed a third of it. Handing ``tx`` or
+``net`` over as well stalls a session (measured), so they keep their own thread."""
 
 
-def _zenoh_runtime() -> str:
-    """The ``ZENOH_RUNTIME`` of this process: the environment's, else :data:`LEAN_RUNTIME`, written into
-    the environment (before this process's first session, which reads it once; child processes inherit it)."""
-    return os.environ.setdefault("ZENOH_RUNTIME", LEAN_RUNTIME)
+def _zenoh_runtime(mode: str) -> str | None:
+    """The ``ZENOH_RUNTIME`` for this process's first session in ``mode``: the environment's if set (the
+    user's choice, ``'()'`` for Zenoh's defaults), else :data:`LEAN_RUNTIME`, or ``None`` (Zenoh's defaults)
+    for a router."""
+    return os.environ.get("ZENOH_RUNTIME") or (None if mode == "router" else LEAN_RUNTIME)
 
 
 def open_session(args: ZenohArgs) -> zenoh.Session:
     """A Zenoh session opened with :func:`make_config` ``(args)``. Use it as a context manager, which closes
     it (``with open_session(args) as session:``), or close it in a ``finally``.
 
-    Zenoh's runtime is :func:`_zenoh_runtime`'s. ConfigError for a bad file or value, or a ``ZENOH_RUNTIME``
-    that Zenoh cannot parse; SwarmError naming the mode and endpoints when Zenoh cannot open (a client that
-    reaches no router, a listen port in use)."""
+    Zenoh reads ``ZENOH_RUNTIME`` once per process, at its first session: that one runs
+    :func:`_zenoh_runtime`'s, put in the environment only while Zenoh opens it, so that a child process
+    (an agent the launcher starts) chooses its own by its own mode. ConfigError for a bad file or value, or a
+    ``ZENOH_RUNTIME`` that Zenoh cannot parse; SwarmError naming the mode and endpoints when Zenoh cannot open
+    (a client that reaches no router, a listen port in use)."""
     config = make_config(args)
-    runtime = _zenoh_runtime()
+    mode = json.loads(config.get_json("mode")) or "peer"
+    runtime = _zenoh_runtime(mode)
+    ours = runtime is not None and "ZENOH_RUNTIME" not in os.environ
+    if ours:
+        os.environ["ZENOH_RUNTIME"] = runtime
     try:
         session = zenoh.open(config)
     except zenoh.ZError as exc:
-        mode = json.loads(config.get_json("mode")) or "peer"
         where = f"connect {list(args.connect) or '-'}, listen {list(args.listen) or '-'}"
         raise SwarmError(f"cannot open a Zenoh {mode} session ({where}): {_zerror_text(exc)}") from None
     except BaseException as exc:  # a bad ZENOH_RUNTIME: Zenoh panics (PanicException, a BaseException)
         if type(exc).__name__ != "PanicException":
             raise
         raise ConfigError(f"Zenoh cannot open a session with ZENOH_RUNTIME={runtime!r}: {exc}") from None
+    finally:
+        if ours:
+            del os.environ["ZENOH_RUNTIME"]
     _LOG.debug("zenoh session %s open with %s", session.zid(), args)
     return session
 

@@ -255,27 +255,30 @@ _THREADS_OF_A_SESSION = """
 import collections, json, os, sys
 from swarm.errors import ConfigError
 from swarm.transport.session import ZenohArgs, open_session
+first, endpoint = sys.argv[1], sys.argv[2]
+second = "client" if first == "router" else "peer"
 try:
-    with open_session(ZenohArgs(mode="router", listen=(sys.argv[1],))) as a, open_session(
-        ZenohArgs(mode="client", connect=(sys.argv[1],))
+    with open_session(ZenohArgs(mode=first, listen=(endpoint,))), open_session(
+        ZenohArgs(mode=second, connect=(endpoint,))
     ):
         tasks = f"/proc/{os.getpid()}/task"
         names = [open(f"{tasks}/{t}/comm").read().strip().rstrip("0123456789-") for t in os.listdir(tasks)]
-        print(json.dumps({"env": os.environ["ZENOH_RUNTIME"], "threads": collections.Counter(names)}))
+        print(json.dumps({"env": os.environ.get("ZENOH_RUNTIME"), "threads": collections.Counter(names)}))
 except ConfigError as exc:
     print(json.dumps({"error": str(exc)}))
 """
 
 
-def _session_in_a_fresh_process(zenoh_runtime: str | None) -> dict:
-    """What :data:`_THREADS_OF_A_SESSION` prints, run by a new interpreter (Zenoh reads ``ZENOH_RUNTIME``
-    once per process, at its first session) with ``ZENOH_RUNTIME`` set to ``zenoh_runtime`` or unset."""
+def _session_in_a_fresh_process(first_mode: str, zenoh_runtime: str | None) -> dict:
+    """What :data:`_THREADS_OF_A_SESSION` prints (a ``first_mode`` session listening on loopback, a second
+    one connected to it), run by a new interpreter (Zenoh reads ``ZENOH_RUNTIME`` once per process, at its
+    first session) with ``ZENOH_RUNTIME`` set to ``zenoh_runtime`` or unset."""
     env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
     env["RUST_BACKTRACE"] = "0"
     if zenoh_runtime is not None:
         env["ZENOH_RUNTIME"] = zenoh_runtime
     out = subprocess.run(
-        [sys.executable, "-c", _THREADS_OF_A_SESSION, loopback(free_port())],
+        [sys.executable, "-c", _THREADS_OF_A_SESSION, first_mode, loopback(free_port())],
         env=env,
         capture_output=True,
         text=True,
@@ -285,22 +288,36 @@ def _session_in_a_fresh_process(zenoh_runtime: str | None) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def test_sessions_run_zenohs_runtime_lean_unless_the_environment_says_otherwise() -> None:
-    # The lean runtime hands Zenoh's receiving ("rx") and accepting ("acc") tasks to the application
-    # runtime: a router with a client connected has no thread of either. Zenoh's own defaults ('()') have
-    # both, which is what makes this test able to fail. (The number of "app" threads is no oracle: tokio
-    # gives its blocking pool's threads the runtime's name.)
-    lean = _session_in_a_fresh_process(None)
-    assert lean["env"] == LEAN_RUNTIME
-    assert "rx" not in lean["threads"] and "acc" not in lean["threads"], lean
-    default = _session_in_a_fresh_process("()")
-    assert default["env"] == "()"
-    assert default["threads"].get("rx", 0) >= 1 and default["threads"].get("acc", 0) >= 1, default
+def _lean(threads: dict) -> bool:
+    """Whether a process with a listening session and a link runs the lean runtime: Zenoh's receiving
+    ("rx") and accepting ("acc") tasks handed to the application runtime leave no thread of either; with
+    Zenoh's defaults the listener has an "acc" thread ("rx" threads start only with some links, so they tell
+    nothing; nor does the number of "app" threads: tokio gives its blocking pool's threads that name)."""
+    return "rx" not in threads and "acc" not in threads
+
+
+def test_a_first_session_that_is_no_router_runs_zenoh_lean_and_leaves_children_their_choice() -> None:
+    got = _session_in_a_fresh_process("peer", None)
+    assert _lean(got["threads"]), got
+    assert got["env"] is None, got  # not left in the environment: a child process chooses by its own mode
+
+
+def test_a_router_keeps_zenohs_default_runtime() -> None:
+    got = _session_in_a_fresh_process("router", None)
+    assert not _lean(got["threads"]), got
+    assert got["env"] is None, got
+
+
+@pytest.mark.parametrize(("first", "value", "lean"), [("peer", "()", False), ("router", LEAN_RUNTIME, True)])
+def test_zenoh_runtime_set_in_the_environment_wins(first, value, lean) -> None:
+    got = _session_in_a_fresh_process(first, value)
+    assert _lean(got["threads"]) is lean, got
+    assert got["env"] == value, got
 
 
 @pytest.mark.parametrize("bad", ["(bogus: 1)", "(app: (worker_threads: 0))", "(rx: "])
 def test_a_bad_zenoh_runtime_gives_config_error_naming_it(bad) -> None:
-    got = _session_in_a_fresh_process(bad)
+    got = _session_in_a_fresh_process("peer", bad)
     assert got.get("error", "").startswith(f"Zenoh cannot open a session with ZENOH_RUNTIME={bad!r}: "), got
 
 
