@@ -292,7 +292,7 @@ def run(args: argparse.Namespace) -> int:
     runs = itertools.count()
     try:
         zargs = secure_router(args, keys, sc.vehicles, listen, zargs, "docking")
-        with open_session(zargs) as session:
+        with open_session(zargs, lean=True) as session:  # its own swarm's paced ticks
             print(
                 f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",
                 flush=True,

@@ -128,7 +128,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     args.secure_material = None
     try:
         zargs = secure_router(args, keys, ids, listen, zargs, "landing")
-        with open_session(zargs) as session:
+        with open_session(zargs, lean=True) as session:  # its own swarm's paced ticks
             print(
                 f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",
                 flush=True,

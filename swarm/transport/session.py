@@ -278,34 +278,38 @@ LEAN_RUNTIME = (
     "(rx: (handover: app), acc: (handover: app), app: (worker_threads: 1), "
     "tx: (worker_threads: 1), net: (worker_threads: 1))"
 )
-"""The Zenoh runtime of every swarm process that is not a router, unless ``ZENOH_RUNTIME`` is set: Zenoh's
+"""The Zenoh runtime of every swarm process but ``swarm router``, unless ``ZENOH_RUNTIME`` is set: Zenoh's
 receiving and accepting tasks run on its application runtime, and each runtime has one worker thread. A
 message then crosses fewer threads between the socket and our callback. Measured here (BENCHMARKS.md,
 "Zenoh's runtime, one worker"): one pair in lockstep 8.3-8.4x -> 9.3-10.6x real time, sensor-to-estimate
-p99 1.9 -> 1.1-1.8 ms. A router keeps Zenoh's defaults: with one worker it forwarded a replay at full speed
-slower than it came, so a recorder stopped at the replay's end missed a third of it. Handing ``tx`` or
-``net`` over as well stalls a session (measured), so they keep their own thread."""
+p99 1.9 -> 1.1-1.8 ms. A router in general keeps Zenoh's defaults: with one worker it forwarded a replay at
+full speed slower than it came, so a recorder stopped at the replay's end missed a third of it. The
+launcher's router carries the paced ticks of its own swarm, where lean measured faster, so it asks for it
+(``open_session(..., lean=True)``). Handing ``tx`` or ``net`` over as well stalls a session (measured), so
+they keep their own thread."""
 
 
-def _zenoh_runtime(mode: str) -> str | None:
+def _zenoh_runtime(mode: str, lean: bool | None = None) -> str | None:
     """The ``ZENOH_RUNTIME`` for this process's first session in ``mode``: the environment's if set (the
-    user's choice, ``'()'`` for Zenoh's defaults), else :data:`LEAN_RUNTIME`, or ``None`` (Zenoh's defaults)
-    for a router."""
-    return os.environ.get("ZENOH_RUNTIME") or (None if mode == "router" else LEAN_RUNTIME)
+    user's choice, ``'()'`` for Zenoh's defaults), else :data:`LEAN_RUNTIME` if ``lean`` (``None``: unless
+    ``mode`` is a router), else ``None`` (Zenoh's defaults)."""
+    if lean is None:
+        lean = mode != "router"
+    return os.environ.get("ZENOH_RUNTIME") or (LEAN_RUNTIME if lean else None)
 
 
-def open_session(args: ZenohArgs) -> zenoh.Session:
+def open_session(args: ZenohArgs, lean: bool | None = None) -> zenoh.Session:
     """A Zenoh session opened with :func:`make_config` ``(args)``. Use it as a context manager, which closes
     it (``with open_session(args) as session:``), or close it in a ``finally``.
 
     Zenoh reads ``ZENOH_RUNTIME`` once per process, at its first session: that one runs
-    :func:`_zenoh_runtime`'s, put in the environment only while Zenoh opens it, so that a child process
-    (an agent the launcher starts) chooses its own by its own mode. ConfigError for a bad file or value, or a
-    ``ZENOH_RUNTIME`` that Zenoh cannot parse; SwarmError naming the mode and endpoints when Zenoh cannot open
-    (a client that reaches no router, a listen port in use)."""
+    :func:`_zenoh_runtime` ``(mode, lean)``'s, put in the environment only while Zenoh opens it, so that a
+    child process (an agent the launcher starts) chooses its own by its own mode. ConfigError for a bad
+    file or value, or a ``ZENOH_RUNTIME`` that Zenoh cannot parse; SwarmError naming the mode and endpoints
+    when Zenoh cannot open (a client that reaches no router, a listen port in use)."""
     config = make_config(args)
     mode = json.loads(config.get_json("mode")) or "peer"
-    runtime = _zenoh_runtime(mode)
+    runtime = _zenoh_runtime(mode, lean)
     ours = runtime is not None and "ZENOH_RUNTIME" not in os.environ
     if ours:
         os.environ["ZENOH_RUNTIME"] = runtime

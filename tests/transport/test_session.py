@@ -255,10 +255,10 @@ _THREADS_OF_A_SESSION = """
 import collections, json, os, sys
 from swarm.errors import ConfigError
 from swarm.transport.session import ZenohArgs, open_session
-first, endpoint = sys.argv[1], sys.argv[2]
+first, endpoint, lean = sys.argv[1], sys.argv[2], {"lean": True, "-": None}[sys.argv[3]]
 second = "client" if first == "router" else "peer"
 try:
-    with open_session(ZenohArgs(mode=first, listen=(endpoint,))), open_session(
+    with open_session(ZenohArgs(mode=first, listen=(endpoint,)), lean=lean), open_session(
         ZenohArgs(mode=second, connect=(endpoint,))
     ):
         tasks = f"/proc/{os.getpid()}/task"
@@ -269,16 +269,18 @@ except ConfigError as exc:
 """
 
 
-def _session_in_a_fresh_process(first_mode: str, zenoh_runtime: str | None) -> dict:
-    """What :data:`_THREADS_OF_A_SESSION` prints (a ``first_mode`` session listening on loopback, a second
-    one connected to it), run by a new interpreter (Zenoh reads ``ZENOH_RUNTIME`` once per process, at its
-    first session) with ``ZENOH_RUNTIME`` set to ``zenoh_runtime`` or unset."""
+def _session_in_a_fresh_process(first_mode: str, zenoh_runtime: str | None, lean: bool = False) -> dict:
+    """What :data:`_THREADS_OF_A_SESSION` prints (a ``first_mode`` session listening on loopback, opened
+    with ``lean=True`` if ``lean``, a second one connected to it), run by a new interpreter (Zenoh reads
+    ``ZENOH_RUNTIME`` once per process, at its first session) with ``ZENOH_RUNTIME`` set to
+    ``zenoh_runtime`` or unset."""
     env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
     env["RUST_BACKTRACE"] = "0"
     if zenoh_runtime is not None:
         env["ZENOH_RUNTIME"] = zenoh_runtime
+    flag = "lean" if lean else "-"
     out = subprocess.run(
-        [sys.executable, "-c", _THREADS_OF_A_SESSION, first_mode, loopback(free_port())],
+        [sys.executable, "-c", _THREADS_OF_A_SESSION, first_mode, loopback(free_port()), flag],
         env=env,
         capture_output=True,
         text=True,
@@ -302,9 +304,12 @@ def test_a_first_session_that_is_no_router_runs_zenoh_lean_and_leaves_children_t
     assert got["env"] is None, got  # not left in the environment: a child process chooses by its own mode
 
 
-def test_a_router_keeps_zenohs_default_runtime() -> None:
+def test_a_router_keeps_zenohs_default_runtime_unless_it_asks_for_lean() -> None:
     got = _session_in_a_fresh_process("router", None)
     assert not _lean(got["threads"]), got
+    assert got["env"] is None, got
+    got = _session_in_a_fresh_process("router", None, lean=True)  # the launcher's router
+    assert _lean(got["threads"]), got
     assert got["env"] is None, got
 
 
