@@ -38,7 +38,8 @@ def _client(endpoint: str):
 
 
 def _router(endpoint: str):
-    return open_session(ZenohArgs(mode="router", listen=(endpoint,)))
+    # configured as the launcher's router (lean Zenoh runtime), so that the RTT is the floor of its ticks
+    return open_session(ZenohArgs(mode="router", listen=(endpoint,)), lean=True)
 
 
 def _pong(endpoint: str, ns: str) -> None:
