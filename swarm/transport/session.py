@@ -289,13 +289,17 @@ launcher's router carries the paced ticks of its own swarm, where lean measured 
 they keep their own thread."""
 
 
-def _zenoh_runtime(mode: str, lean: bool | None = None) -> str | None:
-    """The ``ZENOH_RUNTIME`` for this process's first session in ``mode``: the environment's if set (the
-    user's choice, ``'()'`` for Zenoh's defaults), else :data:`LEAN_RUNTIME` if ``lean`` (``None``: unless
-    ``mode`` is a router), else ``None`` (Zenoh's defaults)."""
+def _zenoh_runtime(mode: str, lean: bool | None = None) -> tuple[str | None, bool]:
+    """The ``ZENOH_RUNTIME`` for this process's first session in ``mode``, and whether it is ours to put in
+    the environment: the environment's if set (the user's choice, ``'()'`` for Zenoh's defaults; not ours),
+    else :data:`LEAN_RUNTIME` if ``lean`` (``None``: unless ``mode`` is a router; ours), else ``None``
+    (Zenoh's defaults)."""
+    user = os.environ.get("ZENOH_RUNTIME")
+    if user is not None:
+        return user, False
     if lean is None:
         lean = mode != "router"
-    return os.environ.get("ZENOH_RUNTIME") or (LEAN_RUNTIME if lean else None)
+    return (LEAN_RUNTIME, True) if lean else (None, False)
 
 
 def open_session(args: ZenohArgs, lean: bool | None = None) -> zenoh.Session:
@@ -309,8 +313,7 @@ def open_session(args: ZenohArgs, lean: bool | None = None) -> zenoh.Session:
     when Zenoh cannot open (a client that reaches no router, a listen port in use)."""
     config = make_config(args)
     mode = json.loads(config.get_json("mode")) or "peer"
-    runtime = _zenoh_runtime(mode, lean)
-    ours = runtime is not None and "ZENOH_RUNTIME" not in os.environ
+    runtime, ours = _zenoh_runtime(mode, lean)
     if ours:
         os.environ["ZENOH_RUNTIME"] = runtime
     try:
