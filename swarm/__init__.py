@@ -4,7 +4,54 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
+import time
 from pathlib import Path
+
+KERNEL_SOURCES: tuple[str, ...] = (
+    "__init__.py", "config.py", "errors.py", "core", "kinds", "step", "logs", "sim/__init__.py",
+    "sim/estimation.py", "transport/_codec_nb.py", "bench/__init__.py", "bench/estimator.py",
+    "bench/filterpy_mekf.py", "bench/replay.py",
+)  # fmt: skip
+"""The sources (files, or directories of ``*.py``, relative to this package) whose text the compiled
+kernels depend on: every module that defines a numba kernel and every module those import, directly or
+not (a kernel freezes the globals it reads, constants of another module included, into its machine code).
+``tests/test_numba_cache.py`` derives that set from the imports and fails naming a module left out. An edit
+elsewhere (the CLI, the transport, the world process, the dashboard) compiles nothing again."""
+
+CACHE_KEEP = 16
+"""Kernel caches kept, the one in use included: the most recently used (each is ~15 MB)."""
+_CACHE_GRACE_S = 3600.0  # a cache used within the hour is never removed (another checkout may be running)
+
+
+def _kernel_key(root: Path) -> str:
+    """A digest of the text of :data:`KERNEL_SOURCES` (their content, not their times: a ``git checkout``
+    or a fresh clone of the same sources finds the same cache; ~1.5 ms)."""
+    h = hashlib.sha1()
+    for name in KERNEL_SOURCES:
+        path = root / name
+        for f in sorted(path.rglob("*.py")) if path.is_dir() else [path]:
+            h.update(f"{f.relative_to(root)}\0".encode())
+            h.update(f.read_bytes())
+            h.update(b"\0")
+    return h.hexdigest()[:16]
+
+
+def prune_kernel_caches(base: Path, keep: int = CACHE_KEEP, grace_s: float = _CACHE_GRACE_S) -> list[Path]:
+    """Remove the kernel caches under ``base`` beyond the ``keep`` most recently used, those not used for
+    ``grace_s`` [s]; returns what it removed. A cache in use has its time set at every start
+    (:func:`_numba_cache_dir`). Never raises: a cache that cannot be removed stays."""
+    try:
+        dirs = [(d.stat().st_mtime, d) for d in base.iterdir() if d.is_dir() and not d.is_symlink()]
+    except OSError:
+        return []
+    dirs.sort(reverse=True)
+    now, removed = time.time(), []
+    for mtime, d in dirs[keep:]:
+        if now - mtime > grace_s:
+            shutil.rmtree(d, ignore_errors=True)
+            removed.append(d)
+    return removed
 
 
 def _numba_cache_dir() -> None:
@@ -12,18 +59,24 @@ def _numba_cache_dir() -> None:
 
     numba invalidates a cached function when *its own* file changes, not when a function it calls (and
     compiles in) changes in another file, so an edit of, say, ``_rot_nb.py`` would leave stale machine
-    code in the estimator's cache. Keying the cache directory by every source file of the package avoids
-    that. A ``NUMBA_CACHE_DIR`` set by the user wins. Must run before numba is imported.
+    code in the estimator's cache. Keying the cache directory by the text of every kernel source
+    (:data:`KERNEL_SOURCES`) avoids that. A new key (a kernel changed) removes the caches of older keys
+    beyond :data:`CACHE_KEEP` (:func:`prune_kernel_caches`): without it, every edit left ~15 MB behind.
+    A ``NUMBA_CACHE_DIR`` set by the user wins. Must run before numba is imported.
     """
     if "NUMBA_CACHE_DIR" in os.environ:
         return
-    root = Path(__file__).resolve().parent
-    h = hashlib.sha1()
-    for path in sorted(root.rglob("*.py")):
-        st = path.stat()
-        h.update(f"{path.relative_to(root)}:{st.st_size}:{st.st_mtime_ns}".encode())
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tpods-swarm" / "numba"
-    os.environ["NUMBA_CACHE_DIR"] = str(base / h.hexdigest()[:16])
+    cache = base / _kernel_key(Path(__file__).resolve().parent)
+    try:
+        if cache.is_dir():
+            os.utime(cache)  # used now: the pruning keeps the most recently used
+        else:
+            cache.mkdir(parents=True, exist_ok=True)
+            prune_kernel_caches(base)
+    except OSError:
+        pass  # a read-only home: numba says so itself when it cannot write its cache
+    os.environ["NUMBA_CACHE_DIR"] = str(cache)
 
 
 _numba_cache_dir()
