@@ -42,9 +42,12 @@ from swarm.transport.docking_wire import (
     command_payload,
     estimate_args,
     estimate_payload,
+    estimate_read,
+    estimate_reads,
     filter_counts,
     guidance_payload,
     mode_events,
+    target_reads,
 )
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import AgentTickAssembler, TickInputs
@@ -114,7 +117,9 @@ class AgentProcess:
             vehicle_id, self.chaser, self.target_id, sc.every(sc.uwb.rate_hz), self.vision_every,
             start=None if rejoin else 0, wait_for_target=clock.lockstep, cond=cond,
             ready=set() if ready is None else ready,
+            target_reads=target_reads(sc, vehicle_id) if self.chaser else None,
         )  # fmt: skip
+        self.estimate_reads = estimate_reads(sc, vehicle_id)  # the ticks whose estimate goes out
         if rejoin:
             # who is alive is not known yet: wait for nobody until the liveliness history says (a mothership
             # or target lost before this process subscribed would otherwise be waited for forever)
@@ -231,6 +236,10 @@ class AgentProcess:
         return filter_counts(self.agent)
 
     def _publish_estimate(self, k: int) -> None:
+        # a target's estimate goes out on the ticks before those its chasers read it (docs/protocol.md,
+        # "Rates"): a fifth of them with a 20 Hz camera and 10 Hz control; any other vehicle's, every tick
+        if not estimate_read(self.estimate_reads, k):
+            return
         # an estimate no subscriber matches is not encoded (Zenoh would drop it unsent): in a headless swarm
         # nobody but the chaser listens, and a chaser in this host takes the message itself, not the bytes
         # back through Zenoh to decode them; a viewer or a recorder that subscribes gets every estimate

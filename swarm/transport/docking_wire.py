@@ -65,6 +65,39 @@ def world_sensors(world, ids: list[str], chasers: list[str], k: int, frames, tru
     return out
 
 
+def target_reads(sc, chaser_id: str) -> tuple[int, ...] | None:
+    """The tick periods at which chaser ``chaser_id`` reads its target's estimate: tick ``k`` uses the
+    target's ``estimate(k - 1)`` only when ``k`` is a multiple of one of them, its camera ticks (the vision
+    update is relative to the target) and its control ticks (guidance flies to the target). Between them the
+    target's estimate is not read, provided the chaser latches it while vision lasts
+    (``agent.latch_target_with_vision``): the navigation that is relative to the target starts after a
+    camera or control tick, whose estimate it then holds. Without the latch, ``None``: every tick (the
+    published covariance reads it on each). docs/protocol.md, "Rates"."""
+    if not sc.agent.latch_target_with_vision:
+        return None
+    return tuple(sorted({sc.every(sc.camera.rate_hz), sc.control_every(chaser_id)}))
+
+
+def estimate_reads(sc, vehicle_id: str) -> tuple[int, ...] | None:
+    """The tick periods of the estimates of ``vehicle_id`` its chasers read (:func:`target_reads`, all of
+    them); ``None`` (every tick) for a vehicle that no chaser flies to, or one that a chaser without the
+    latch does."""
+    periods: set[int] = set()
+    chasers = [c for c in sc.chasers if sc.vehicles[c].target == vehicle_id]
+    for c in chasers:
+        reads = target_reads(sc, c)
+        if reads is None:
+            return None
+        periods.update(reads)
+    return tuple(sorted(periods)) if chasers else None
+
+
+def estimate_read(reads: tuple[int, ...] | None, k: int) -> bool:
+    """Whether ``estimate(k)`` is read by a chaser whose reads are ``reads`` (:func:`estimate_reads`): at
+    tick ``k + 1``, and ``estimate(0)``, the initial one, by tick 0 (a control tick)."""
+    return reads is None or k == 0 or any((k + 1) % e == 0 for e in reads)
+
+
 def uwb_slot(network, ids: list[str], k: int, t: float) -> list[tuple[str, bytes]]:
     """The mothership's ranges of slot tick ``k`` after ``network.step``: ``(vehicle, payload)``, one per
     vehicle (``range_m`` None where the reply was lost)."""
@@ -168,6 +201,7 @@ class DockingTap:
         """Tick 0: ``run_start`` and the clock."""
         sc = sim.sc
         self._ids, self._chasers = list(sc.vehicles), list(sc.chasers)
+        self._reads = {vid: estimate_reads(sc, vid) for vid in self._ids}  # as an agent publishes them
         self._truth_every = sc.every(sc.uwb.rate_hz)  # as the world process: truth on UWB slot ticks
         ids = self._ids
         data = {"seed": self.seed, "vehicles": ids, "clock": "lockstep", "scenario": sc.name}
@@ -194,10 +228,12 @@ class DockingTap:
             self._write(self.keys.uwb(vid), payload)
 
     def agent(self, sim, vid: str, k: int, cmd) -> None:
-        """Agent ``vid``'s answer to tick ``k``: ``estimate``, then on a control tick its mode events and
+        """Agent ``vid``'s answer to tick ``k``: ``estimate`` (a target's on the ticks its chasers read),
+        then on a control tick its mode events and
         ``guidance``, then the held ``command``."""
         a, sc = sim.agents[vid], sim.sc
-        self._write(self.keys.estimate(vid), estimate_payload(a, k))
+        if estimate_read(self._reads[vid], k):
+            self._write(self.keys.estimate(vid), estimate_payload(a, k))
         if cmd is not None:
             mode = a.mode.value
             self._held[vid] = (cmd.u, mode, cmd.force_body_n, cmd.torque_body_nm)

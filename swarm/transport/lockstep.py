@@ -122,6 +122,7 @@ class AgentTickAssembler:
         wait_for_target: bool = True,
         cond: threading.Condition | None = None,
         ready: set | None = None,
+        target_reads: tuple[int, ...] | None = None,
     ) -> None:
         """``agent_id``: this vehicle; ``is_chaser``: whether ticks need the target's estimates;
         ``target_id``: the target's agent id (required for a chaser); ``uwb_every``: ticks between two UWB
@@ -132,13 +133,18 @@ class AgentTickAssembler:
         tick carrying the newest one up to tick ``k - 1``; ``cond``: the condition this assembler notifies
         when a message is kept (default its own): an agent host shares one among its vehicles, so that one
         thread waits for a tick of any of them (:meth:`poll`); ``ready``: a set, shared with them as well,
-        to which this assembler adds itself when it notifies, so that the host polls only those."""
+        to which this assembler adds itself when it notifies, so that the host polls only those;
+        ``target_reads``: a chaser's ticks that read the target's estimate, the multiples of these periods
+        (:func:`~swarm.transport.docking_wire.target_reads`; ``None``: every tick): only those wait for it."""
         self.agent_id = check_id(agent_id)
         self.is_chaser = bool(is_chaser)
         self.target_id = check_id(target_id, "target id") if (is_chaser or target_id is not None) else None
         self.uwb_every = _check_int(uwb_every, "uwb_every", 1)
         self.vision_every = None if vision_every is None else _check_int(vision_every, "vision_every", 1)
         self.max_ahead = _check_int(max_ahead, "max_ahead", 0)
+        self.target_reads = (
+            None if target_reads is None else tuple(_check_int(e, "target_reads", 1) for e in target_reads)
+        )
         self._cond = threading.Condition() if cond is None else cond
         self._ready = ready
         self._next: int | None = None if start is None else _check_int(start, "start", 0)
@@ -252,6 +258,8 @@ class AgentTickAssembler:
         """The tick of the target estimate tick ``k`` waits for, or ``None`` if it waits for none."""
         if not self.is_chaser or not self._target_live or self._target_from < 0:
             return None
+        if self.target_reads is not None and all(k % e for e in self.target_reads):
+            return None  # a tick that does not read the target's estimate (its target sends none for it)
         need = max(k - 1, 0)
         return need if need >= self._target_from else None
 

@@ -57,14 +57,17 @@ class _Publisher:
 @pytest.mark.parametrize("listened", [False, True])
 def test_an_estimate_is_encoded_only_for_a_subscriber_and_always_handed_to_a_hosted_chaser(listened):
     """A headless swarm's estimates have no subscriber but the chaser's: they are not encoded (Zenoh would
-    drop them unsent). A subscriber (a viewer, a recorder) gets every one, the bytes of encode_estimate; a
-    chaser in the host gets its target's message either way."""
+    drop them unsent). A subscriber (a viewer, a recorder) gets every one of a chaser, the bytes of
+    encode_estimate; a chaser in the host gets its target's message either way. A target's estimate goes out
+    only on the ticks before those its chaser reads it (camera every 5 ticks, control every 10 here):
+    estimate(4) does, estimate(3) does not, to a subscriber or to the chaser."""
     from swarm.step.agent import VehicleAgent
     from swarm.step.world import initial_truth
     from swarm.transport.docking_wire import estimate_payload
     from swarm.transport.messages import Estimate, decode
 
     sc = load_scenario("docking")
+    assert sc.every(sc.camera.rate_hz) == 5 and sc.control_every("chaser") == 10
     _, p = _host(["chaser", "target"], sc)
     for v, proc in p.items():
         x = initial_truth(sc, 0, v)
@@ -72,12 +75,15 @@ def test_an_estimate_is_encoded_only_for_a_subscriber_and_always_handed_to_a_hos
         proc.pub_estimate = _Publisher(listened)
     got = []
     p["chaser"].assembler.add = lambda msg, source: got.append((msg, source))
-    for v in ("chaser", "target"):
-        p[v]._publish_estimate(3)
-    for v in ("chaser", "target"):
-        sent = p[v].pub_estimate.sent
-        assert sent == ([estimate_payload(p[v].agent, 3)] if listened else [])
+    payloads = {}
+    for k in (3, 4):
+        payloads[k] = {v: estimate_payload(p[v].agent, k) for v in ("chaser", "target")}
+        for v in ("chaser", "target"):
+            p[v]._publish_estimate(k)
+    chaser_sent = [payloads[3]["chaser"], payloads[4]["chaser"]]
+    assert p["chaser"].pub_estimate.sent == (chaser_sent if listened else [])
+    assert p["target"].pub_estimate.sent == ([payloads[4]["target"]] if listened else [])
     ((msg, source),) = got
-    assert source == "target" and msg.tick == 3
-    want = decode(estimate_payload(p["target"].agent, 3), Estimate)
+    assert source == "target" and msg.tick == 4
+    want = decode(payloads[4]["target"], Estimate)
     assert np.array_equal(msg.p_nav, want.p_nav) and np.array_equal(msg.cov, want.cov)

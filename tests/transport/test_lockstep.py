@@ -87,6 +87,52 @@ def test_tick_zero_needs_no_sensor_and_a_chaser_waits_for_the_targets_initial_es
     assert got.tick == 1 and got.target_estimate.tick == 0
 
 
+def test_a_chaser_waits_for_its_targets_estimate_only_on_the_ticks_that_read_it():
+    """With ``target_reads`` (camera every 5 ticks, control every 10), ticks 1-4 complete on their sensors
+    and carry the estimate held since tick 0; tick 5 waits for estimate(4), and tick 10 for estimate(9)."""
+    asm = chaser(uwb_every=100, start=0, target_reads=(5, 10))
+    asm.add(estimate(0, x=1.0), "target")
+    assert asm.next_tick(0).target_estimate.tick == 0
+    for k in range(1, 5):
+        asm.add(imu(k))
+        got = asm.next_tick(0)
+        assert got.tick == k and got.target_estimate.tick == 0
+    asm.add(imu(5))
+    assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["estimate"]
+    asm.add(estimate(4, x=2.0), "target")
+    got = asm.next_tick(0)
+    assert got.tick == 5 and got.target_estimate.p_nav[0] == 2.0
+    for k in range(6, 10):
+        asm.add(imu(k))
+        assert asm.next_tick(0).target_estimate.tick == 4
+    asm.add(imu(10))
+    assert asm.next_tick(SHORT) is None
+    asm.add(estimate(9), "target")
+    assert asm.next_tick(0).target_estimate.tick == 9
+    assert asm.counts() == ALL_ZERO
+    with pytest.raises(ConfigError, match="target_reads"):
+        chaser(target_reads=(5, 0))
+
+
+def test_a_target_sends_the_estimates_its_chasers_read():
+    """docking_wire.target_reads / estimate_reads / estimate_read against the scenario's rates: the target
+    of the docking scenario sends estimate(0) and those of the ticks before a camera or control tick; a
+    chaser (no one's target) every one; without the latch every one (its published covariance reads it)."""
+    from swarm.scenario import load_scenario
+    from swarm.transport.docking_wire import estimate_read, estimate_reads, target_reads
+
+    sc = load_scenario("docking")
+    cam, ctl = sc.every(sc.camera.rate_hz), sc.control_every("chaser")
+    assert target_reads(sc, "chaser") == tuple(sorted({cam, ctl})) == (5, 10)
+    reads = estimate_reads(sc, "target")
+    assert reads == (5, 10) and estimate_reads(sc, "chaser") is None
+    sent = [k for k in range(31) if estimate_read(reads, k)]
+    assert sent == [0, 4, 9, 14, 19, 24, 29]
+    assert all(estimate_read(None, k) for k in range(31))
+    off = load_scenario("docking", {"agent.latch_target_with_vision": False})
+    assert target_reads(off, "chaser") is None and estimate_reads(off, "target") is None
+
+
 def test_non_uwb_tick_completes_on_imu_alone():
     asm = plain(uwb_every=2)
     asm.add(imu(1))
