@@ -26,9 +26,24 @@ def test_bench_swarm_measures_a_launched_swarm(tmp_path):
     assert case["cpu_us_per_vehicle_tick"] > 0 and case["world_cpu_us_per_tick"] > 0
     assert case["late_tick_share"] is None  # lockstep: no tick is late by construction
     assert case["realtime_factor"] > 0
-    assert case["samples"] > 200  # both vehicles' estimates matched to their imu over most of 300 ticks
+    # the chaser's estimates (and the fifth of the target's it sends) matched to their imu, over 300 ticks
+    assert case["samples"] > 200
     assert 0 < case["latency_p50_us"] <= case["latency_p99_us"]
     assert "CPU us/vehicle/tick" in r.stdout
+
+
+def test_late_share_counts_a_swarm_that_never_commanded_as_all_late():
+    from swarm.bench.swarm import format_report, late_share
+
+    assert late_share("lockstep", None) == (None, None)
+    assert late_share("realtime", [3, 400]) == (3 / 400, 400)
+    assert late_share("realtime", [0, 0]) == (1.0, 0)  # no vehicle commanded in the span
+    assert late_share("scaled:2", None) == (None, None)  # a world that did not say
+    case = {"vehicles": 128, "per_process": 16, "clock": "realtime", "cpu_us_per_vehicle_tick": 80.0,
+            "world_cpu_us_per_tick": 6000.0, "late_tick_share": 1.0, "commanded_vehicle_ticks": 0,
+            "realtime_factor": 0.99, "latency_p50_us": 1.0, "latency_p99_us": 2.0}  # fmt: skip
+    report = format_report({"span_s": 10, "cores": 2, "load_1min": 1.0, "cases": [case]})
+    assert "no command" in report and "100.0 %" not in report
 
 
 @pytest.mark.parametrize(

@@ -9,10 +9,13 @@ first pair's ``imu(k)`` and ``estimate(k)`` on one clock (it decodes only the ti
 - **late ticks** (free-running clocks): the share of vehicle-ticks that the world stepped without that
   tick's command (it came after the world's tick period, ``dt / factor`` of wall time, had passed; the world
   then holds the previous command): ``late_commands`` of the world's ``run_end``, counted by the world for
-  every vehicle whose agent has commanded; in lockstep no tick is late by construction;
+  every vehicle whose agent has commanded (a swarm in which none did in the whole span: 100 %, shown as
+  ``no command``); in lockstep no tick is late by construction;
 - **real-time factor**: simulated over wall time of the run (``run_end``);
 - **sensor-to-estimate latency** p50/p99: ``estimate(k)`` minus ``imu(k)`` arrival, for the first pair's
-  two vehicles: the agent's receive, filter and publish time plus one router hop each way.
+  two vehicles: the agent's receive, filter and publish time plus one router hop each way. Since 4df9a3d
+  the target sends only the estimates its chaser reads (a fifth), so its ticks are a sixth of the samples,
+  not a half.
 
 The probe is kept to one pair on purpose. Until 2026-11-26 it took every vehicle's ``imu``, ``estimate``
 and ``command``, and judged late ticks by the commands' arrival: at 32 vehicles that was 9600 Python
@@ -152,8 +155,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, factor
     cpu = res.get("cpu_s") or {}
     agents = [v for k, v in cpu.items() if k != "world" and v is not None]
     lat = np.asarray(probe.latency) * 1e6
-    late_n, stepped = res.get("late_commands") or (0, 0)
-    late = late_n / stepped if clock != "lockstep" and stepped else None
+    late, stepped = late_share(clock, res.get("late_commands"))
     return {
         "vehicles": vehicles,
         "per_process": per_process,
@@ -161,12 +163,23 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, factor
         "cpu_us_per_vehicle_tick": 1e6 * float(np.sum(agents)) / (len(agents) * ticks) if agents else None,
         "world_cpu_us_per_tick": 1e6 * cpu["world"] / ticks if cpu.get("world") is not None else None,
         "late_tick_share": late,
+        "commanded_vehicle_ticks": stepped,  # the late share's denominator (None: lockstep)
         "realtime_factor": res.get("realtime_factor"),
         "latency_p50_us": float(np.percentile(lat, 50)) if lat.size else None,
         "latency_p99_us": float(np.percentile(lat, 99)) if lat.size else None,
         "samples": int(lat.size),
         "ticks": ticks,
     }
+
+
+def late_share(clock: str, late_commands: list[int] | None) -> tuple[float | None, int | None]:
+    """The share of late vehicle-ticks and its denominator from the world's ``late_commands`` ``[late,
+    commanded]`` (``None`` for lockstep, or a world that did not report it). A free-running swarm in which
+    no vehicle ever commanded (an overloaded one) had every tick without a command: 1.0, not undefined."""
+    if clock == "lockstep" or late_commands is None:
+        return None, None
+    late_n, stepped = late_commands
+    return (late_n / stepped if stepped else 1.0), stepped
 
 
 def run(preset: dict) -> dict:
@@ -193,6 +206,8 @@ def format_report(r: dict) -> str:
     ]
     for c in r["cases"]:
         late = "-" if c["late_tick_share"] is None else f"{100 * c['late_tick_share']:.1f} %"
+        if c.get("commanded_vehicle_ticks") == 0:
+            late = "no command"
         lines.append(
             f"{c['vehicles']:>8}  {c['per_process']:>8}  {c['clock']:<9}  "
             f"{_fmt(c['cpu_us_per_vehicle_tick'], '19.0f')}  "
