@@ -189,3 +189,23 @@ def test_a_world_snapshot_does_not_copy_the_noise_blocks(sc):
     restored.restore(snap)
     np.testing.assert_array_equal(restored.gyro_noise, w.gyro_noise)
     np.testing.assert_array_equal(restored.ahrs_noise, w.ahrs_noise)
+
+
+def test_a_snapshot_has_every_streams_state_as_it_is_now():
+    """The snapshot keeps the streams' states from the last one and refreshes those drawn from since (the
+    noise blocks' refills, the camera's pixels): at every tick they equal the streams' own states. PnP
+    camera (it draws from the camera stream every frame), the chaser in front of the markers, across a
+    refill of the gyro noise."""
+    sc = load_scenario("docking", {"camera.model": "pnp"})
+    w = World(sc, SEED)
+    xt, xc = w.x["target"], w.x["chaser"]
+    n_nav, p_docked, q_dock = docking_geometry(sc.guidance, xt[0:3], xt[6:10])
+    xc[0:3], xc[6:10] = p_docked + 0.3 * n_nav, q_dock
+    camera0 = w.rng["chaser", "camera"].bit_generator.state
+    gyro0 = w.rng["chaser", "gyro"].bit_generator.state
+    for k in range(NOISE_BLOCK + 20):
+        w.step(build_frames=True)
+        if k % 7 == 0 or k >= NOISE_BLOCK - 5:
+            assert w.snapshot()["rng"] == {key: g.bit_generator.state for key, g in w.rng.items()}, k
+    assert w.rng["chaser", "camera"].bit_generator.state != camera0  # the pixels drew noise
+    assert w.rng["chaser", "gyro"].bit_generator.state != gyro0  # a refill drew the next block
