@@ -25,9 +25,12 @@ _CACHE_GRACE_S = 3600.0  # a cache used within the hour is never removed (anothe
 
 
 def _kernel_key(root: Path) -> str:
-    """A digest of the text of :data:`KERNEL_SOURCES` (their content, not their times: a ``git checkout``
-    or a fresh clone of the same sources finds the same cache; ~1.5 ms)."""
-    h = hashlib.sha1()
+    """A digest of the package's path and the text of :data:`KERNEL_SOURCES` (their content, not their
+    times: a ``git checkout`` of the same sources finds the same cache; ~1.5 ms). The path is in it because
+    numba keeps each source directory's functions apart by its full path anyway: a clone elsewhere compiles
+    its own, and under a key of its own the pruning bounds them (one key per checkout, not one directory
+    growing by ~15 MB with every fresh clone)."""
+    h = hashlib.sha1(f"{root}\0".encode())
     for name in KERNEL_SOURCES:
         path = root / name
         for f in sorted(path.rglob("*.py")) if path.is_dir() else [path]:
@@ -60,8 +63,9 @@ def _numba_cache_dir() -> None:
     numba invalidates a cached function when *its own* file changes, not when a function it calls (and
     compiles in) changes in another file, so an edit of, say, ``_rot_nb.py`` would leave stale machine
     code in the estimator's cache. Keying the cache directory by the text of every kernel source
-    (:data:`KERNEL_SOURCES`) avoids that. A new key (a kernel changed) removes the caches of older keys
-    beyond :data:`CACHE_KEEP` (:func:`prune_kernel_caches`): without it, every edit left ~15 MB behind.
+    (:data:`KERNEL_SOURCES`, and the package's path: :func:`_kernel_key`) avoids that. A new key (a kernel
+    changed, another checkout) removes the caches of older keys beyond :data:`CACHE_KEEP`
+    (:func:`prune_kernel_caches`): without it, every edit left ~15 MB behind.
     A ``NUMBA_CACHE_DIR`` set by the user wins. Must run before numba is imported.
     """
     if "NUMBA_CACHE_DIR" in os.environ:

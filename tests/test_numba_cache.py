@@ -100,7 +100,13 @@ def test_the_key_follows_the_kernel_sources_text_only(tmp_path, monkeypatch):
     key2 = _kernel_key(root)
     assert key2 != key
     (root / "config.py").write_text("# changed\n")
-    assert _kernel_key(root) not in (key, key2)
+    key3 = _kernel_key(root)
+    assert key3 not in (key, key2)
+    # the same text in another checkout: a key of its own (numba keeps its functions apart by path)
+    other = root.rename(tmp_path / "clone")
+    assert _kernel_key(other) != key3
+    other.rename(root)
+    assert _kernel_key(root) == key3
 
 
 def test_prune_keeps_the_most_recently_used_and_the_fresh(tmp_path):
