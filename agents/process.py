@@ -242,8 +242,8 @@ class AgentProcess:
             return
         # an estimate no subscriber matches is not encoded (Zenoh would drop it unsent): in a headless swarm
         # nobody but the chaser listens, and a chaser in this host takes the message itself, not the bytes
-        # back through Zenoh to decode them; a viewer or a recorder that subscribes gets every estimate
-        # from then on (its subscription reaches this publisher within a millisecond or so)
+        # back through Zenoh to decode them; a viewer or a recorder that subscribes gets every estimate this
+        # vehicle sends from then on (its subscription reaches this publisher within a millisecond or so)
         listened = self.pub_estimate.matching_status.matching
         if not self.local_chasers:
             if listened:

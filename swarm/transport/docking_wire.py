@@ -9,6 +9,7 @@ import numpy as np
 
 from swarm.core.estimator import MeasKind
 from swarm.transport.keys import Keys
+from swarm.transport.lockstep import reads_target
 from swarm.transport.messages import (
     Clock,
     Event,
@@ -94,8 +95,9 @@ def estimate_reads(sc, vehicle_id: str) -> tuple[int, ...] | None:
 
 def estimate_read(reads: tuple[int, ...] | None, k: int) -> bool:
     """Whether ``estimate(k)`` is read by a chaser whose reads are ``reads`` (:func:`estimate_reads`): at
-    tick ``k + 1``, and ``estimate(0)``, the initial one, by tick 0 (a control tick)."""
-    return reads is None or k == 0 or any((k + 1) % e == 0 for e in reads)
+    tick ``k + 1`` (:func:`~swarm.transport.lockstep.reads_target`, the chaser's side of the rule), and
+    ``estimate(0)``, the initial one, by tick 0 as well."""
+    return k == 0 or reads_target(reads, k + 1)
 
 
 def uwb_slot(network, ids: list[str], k: int, t: float) -> list[tuple[str, bytes]]:
@@ -229,8 +231,7 @@ class DockingTap:
 
     def agent(self, sim, vid: str, k: int, cmd) -> None:
         """Agent ``vid``'s answer to tick ``k``: ``estimate`` (a target's on the ticks its chasers read),
-        then on a control tick its mode events and
-        ``guidance``, then the held ``command``."""
+        then on a control tick its mode events and ``guidance``, then the held ``command``."""
         a, sc = sim.agents[vid], sim.sc
         if estimate_read(self._reads[vid], k):
             self._write(self.keys.estimate(vid), estimate_payload(a, k))

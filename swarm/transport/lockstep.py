@@ -51,6 +51,14 @@ def _check_int(value: object, name: str, lo: int) -> int:
     return value
 
 
+def reads_target(reads: tuple[int, ...] | None, k: int) -> bool:
+    """Whether a chaser's tick ``k`` reads its target's estimate (``estimate(k - 1)``; tick 0 the initial
+    one): every tick if ``reads`` is ``None``, else the multiples of its periods (tick 0 among them).
+    ``reads`` is :func:`~swarm.transport.docking_wire.target_reads`'s; the target sends by the same rule
+    (:func:`~swarm.transport.docking_wire.estimate_read`)."""
+    return reads is None or any(k % e == 0 for e in reads)
+
+
 def _wait(cond: threading.Condition, ready, timeout_s: float | None) -> bool:
     """``cond.wait_for(ready, timeout_s)`` (``cond`` held), on the monotonic clock."""
     if timeout_s is None:
@@ -258,7 +266,7 @@ class AgentTickAssembler:
         """The tick of the target estimate tick ``k`` waits for, or ``None`` if it waits for none."""
         if not self.is_chaser or not self._target_live or self._target_from < 0:
             return None
-        if self.target_reads is not None and all(k % e for e in self.target_reads):
+        if not reads_target(self.target_reads, k):
             return None  # a tick that does not read the target's estimate (its target sends none for it)
         need = max(k - 1, 0)
         return need if need >= self._target_from else None
