@@ -3,21 +3,21 @@
 A thin adapter around the agent step, :class:`swarm.step.agent.VehicleAgent`, the object the in-process
 simulation steps.
 It subscribes only to its own sensors (``imu``, ``uwb``, ``vision`` for a chaser), its target's
-``estimate`` (a chaser), ``world/clock`` and liveliness; it publishes ``estimate`` (every tick),
-``guidance`` (every control tick), ``command`` (every tick: thrusts change at the control rate and are held
-in between) and ``event`` (mode transitions; a ``summary`` when the run ends).
+``estimate`` (a chaser), ``world/clock`` and liveliness; it publishes ``estimate`` (every tick; a target's
+on the ticks before its chasers read it), ``guidance`` and ``command`` (every control tick: the world holds
+the command in between) and ``event`` (mode transitions; a ``summary`` when the run ends).
 
 Lockstep (``--clock lockstep``): ticks come from :class:`swarm.transport.lockstep.AgentTickAssembler`,
 complete and in order, and each goes through :meth:`~swarm.step.agent.VehicleAgent.tick` as in the
 in-process run: the target's estimate of tick ``k - 1``, then gyro (+ AHRS), range, vision of tick ``k``;
-guidance and the kind's controller on control ticks; then ``estimate(k)`` and ``command(k)``. Tick 0 (no
+guidance, the kind's controller and ``command(k)`` on control ticks; then ``estimate(k)``. Tick 0 (no
 sensor yet) starts when the world announces the run.
 Realtime or scaled: every message is processed as it arrives.
 
 A restarted world (``world/event`` ``world_resumed`` at tick ``k``) publishes tick ``k``'s samples again:
 the assembler drops those the agent already has (counted ``stale`` or ``duplicates``), and an agent whose
-last command is of tick ``k`` sends it again, since the new world never received it. While the world is
-gone (its liveliness token went) the agent says so and waits: no sample, no tick.
+last command is of tick ``k`` (a control tick) sends it again, since the new world never received it.
+While the world is gone (its liveliness token went) the agent says so and waits: no sample, no tick.
 
 A restarted agent (``--rejoin``) joins the run in progress: it publishes zero-thrust HOLD commands while it
 re-initialises from its own sensors (the AHRS attitude, and its position by least squares on one range to
@@ -256,6 +256,10 @@ class AgentProcess:
             chaser.assembler.add(msg, self.id)
 
     def _publish_command(self, k: int) -> None:
+        """``command(k)`` on the vehicle's control ticks only: the world holds it until the next one, and
+        a lockstep world waits for it on those ticks only (docs/protocol.md, "Rates")."""
+        if k % self.control_every:
+            return
         payload = command_payload(k, self.dt, self._u, self._mode, self._force, self._torque)
         with self._command_lock:
             self.pub_command.put(payload)
@@ -311,7 +315,7 @@ class AgentProcess:
         if self.agent is None:
             self._collect_init(inp.imu, inp.uwb)
             if self.agent is None:
-                self._publish_command(k)  # zero thrust, HOLD: in the lockstep while re-initialising
+                self._publish_command(k)  # zero thrust, HOLD (on control ticks) while re-initialising
                 return
             if self.chaser and inp.target_estimate is not None:
                 self._set_target(inp.target_estimate)

@@ -44,6 +44,10 @@ def test_late_share_counts_a_swarm_that_never_commanded_as_all_late():
             "realtime_factor": 0.99, "latency_p50_us": 1.0, "latency_p99_us": 2.0}  # fmt: skip
     report = format_report({"span_s": 10, "cores": 2, "load_1min": 1.0, "cases": [case]})
     assert "no command" in report and "100.0 %" not in report
+    # the late ticks and the stricter late commands (of the control ticks' commands), both shown
+    ok = {**case, "late_tick_share": 0.012, "late_command_share": 0.105, "commanded_vehicle_ticks": 64000}
+    report = format_report({"span_s": 10, "cores": 2, "load_1min": 1.0, "cases": [ok]})
+    assert "1.2 % / 10.5 %" in report
 
 
 @pytest.mark.parametrize(

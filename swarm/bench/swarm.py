@@ -6,11 +6,15 @@ first pair's ``imu(k)`` and ``estimate(k)`` on one clock (it decodes only the ti
 
 - **CPU per vehicle per tick**: the agents' own CPU time (each agent process reports it at the end of the
   run, ``cpu_s`` in the launch summary) over vehicles x ticks; the world's per tick beside it;
-- **late ticks** (free-running clocks): the share of vehicle-ticks that the world stepped without that
-  tick's command (it came after the world's tick period, ``dt / factor`` of wall time, had passed; the world
-  then holds the previous command): ``late_commands`` of the world's ``run_end``, counted by the world for
-  every vehicle whose agent has commanded (a swarm in which none did in the whole span: 100 %, shown as
-  ``no command``); in lockstep no tick is late by construction;
+- **late ticks** (free-running clocks): the share of vehicle-ticks that the world stepped with an
+  out-of-date command: the command of the vehicle's last control tick had not come by then (an agent
+  commands on its control ticks and the world holds it in between; a command later than its tick's period,
+  ``dt / factor`` of wall time, leaves the one before in force): ``late_commands`` of the world's
+  ``run_end``, counted by the world for every vehicle whose agent has commanded (a swarm in which none did
+  in the whole span: 100 %, shown as ``no command``); in lockstep no tick is late by construction;
+- **late commands** (free-running): the share of the control ticks' commands that were not in by their
+  tick (``late_control_commands``), the stricter figure: a command one tick late makes one late tick of
+  ten, but one late command of one;
 - **real-time factor**: simulated over wall time of the run (``run_end``);
 - **sensor-to-estimate latency** p50/p99: ``estimate(k)`` minus ``imu(k)`` arrival, for the first pair's
   two vehicles: the agent's receive, filter and publish time plus one router hop each way. Since 4df9a3d
@@ -156,6 +160,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, factor
     agents = [v for k, v in cpu.items() if k != "world" and v is not None]
     lat = np.asarray(probe.latency) * 1e6
     late, stepped = late_share(clock, res.get("late_commands"))
+    late_cmd, _ = late_share(clock, res.get("late_control_commands"))
     return {
         "vehicles": vehicles,
         "per_process": per_process,
@@ -163,6 +168,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, factor
         "cpu_us_per_vehicle_tick": 1e6 * float(np.sum(agents)) / (len(agents) * ticks) if agents else None,
         "world_cpu_us_per_tick": 1e6 * cpu["world"] / ticks if cpu.get("world") is not None else None,
         "late_tick_share": late,
+        "late_command_share": late_cmd,  # of the control ticks' commands (None: lockstep)
         "commanded_vehicle_ticks": stepped,  # the late share's denominator (None: lockstep)
         "realtime_factor": res.get("realtime_factor"),
         "latency_p50_us": float(np.percentile(lat, 50)) if lat.size else None,
@@ -201,17 +207,19 @@ def format_report(r: dict) -> str:
     lines = [
         f"swarm launch docking, {r['span_s']:.0f} s simulated per case "
         f"({r['cores']} cores, 1-min load {r['load_1min']:.2f} at the end)",
-        "vehicles  per proc  clock      CPU us/vehicle/tick  world us/tick  late ticks  real-time  "
-        "latency p50/p99 us",
+        "vehicles  per proc  clock      CPU us/vehicle/tick  world us/tick  late ticks / commands  "
+        "real-time  latency p50/p99 us",
     ]
     for c in r["cases"]:
         late = "-" if c["late_tick_share"] is None else f"{100 * c['late_tick_share']:.1f} %"
+        if c.get("late_command_share") is not None:
+            late += f" / {100 * c['late_command_share']:.1f} %"
         if c.get("commanded_vehicle_ticks") == 0:
             late = "no command"
         lines.append(
             f"{c['vehicles']:>8}  {c['per_process']:>8}  {c['clock']:<9}  "
             f"{_fmt(c['cpu_us_per_vehicle_tick'], '19.0f')}  "
-            f"{_fmt(c['world_cpu_us_per_tick'], '13.0f')}  {late:>10}  "
+            f"{_fmt(c['world_cpu_us_per_tick'], '13.0f')}  {late:>21}  "
             f"{_fmt(c['realtime_factor'], '8.2f')}x  "
             f"{_fmt(c['latency_p50_us'], '.0f')}/{_fmt(c['latency_p99_us'], '.0f')}"
         )

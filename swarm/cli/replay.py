@@ -45,7 +45,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--lockstep",
         default=None,
         metavar="ID",
-        help="FILE.mcap: pace the replay by agent ID's commands (tick k once it has sent command(k-1))",
+        help="FILE.mcap: pace the replay by agent ID's commands (tick k once it has sent the command of its "
+        "last control tick before k, as the recording has them)",
     )
     p.add_argument(
         "--only",
@@ -224,7 +225,7 @@ def _publish_recording(args: argparse.Namespace) -> int:
     import threading
 
     from swarm.transport.keys import Keys, check_id
-    from swarm.transport.recording import LockstepAck, read_recording, replay_recording
+    from swarm.transport.recording import LockstepAck, read_recording, recorded_ticks, replay_recording
     from swarm.transport.session import open_session, zenoh_args_from
 
     messages, _meta = read_recording(args.log)
@@ -235,7 +236,9 @@ def _publish_recording(args: argparse.Namespace) -> int:
         ack = None
         if args.lockstep is not None:
             check_id(args.lockstep, "--lockstep")
-            ack = LockstepAck(session, Keys(args.namespace).command(args.lockstep))
+            key = Keys(args.namespace).command(args.lockstep)
+            # the agent commands on its control ticks: those its recorded commands name
+            ack = LockstepAck(session, key, ticks=recorded_ticks(messages, key) or None)
         try:
             sent = replay_recording(messages, session, args.speed, stop, only, ack)
         except KeyboardInterrupt:

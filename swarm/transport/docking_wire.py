@@ -205,6 +205,7 @@ class DockingTap:
         self._ids, self._chasers = list(sc.vehicles), list(sc.chasers)
         self._reads = {vid: estimate_reads(sc, vid) for vid in self._ids}  # as an agent publishes them
         self._truth_every = sc.every(sc.uwb.rate_hz)  # as the world process: truth on UWB slot ticks
+        self._command_every = {vid: sc.control_every(vid) for vid in self._ids}  # as an agent: control ticks
         ids = self._ids
         data = {"seed": self.seed, "vehicles": ids, "clock": "lockstep", "scenario": sc.name}
         self._write(self.keys.world_event(), encode(Event(0.0, "run_start", data)))
@@ -231,7 +232,8 @@ class DockingTap:
 
     def agent(self, sim, vid: str, k: int, cmd) -> None:
         """Agent ``vid``'s answer to tick ``k``: ``estimate`` (a target's on the ticks its chasers read),
-        then on a control tick its mode events and ``guidance``, then the held ``command``."""
+        then on a control tick its mode events, ``guidance`` and ``command`` (held by the world until the
+        next)."""
         a, sc = sim.agents[vid], sim.sc
         if estimate_read(self._reads[vid], k):
             self._write(self.keys.estimate(vid), estimate_payload(a, k))
@@ -243,8 +245,9 @@ class DockingTap:
             self._write(
                 self.keys.guidance(vid), guidance_payload(sc, sim.policy, vid in sc.chasers, a, k, mode, cmd)
             )
-        u, mode, force, torque = self._held[vid]
-        self._write(self.keys.command(vid), command_payload(k, sc.dt_s, u, mode, force, torque))
+        if k % self._command_every[vid] == 0:
+            u, mode, force, torque = self._held[vid]
+            self._write(self.keys.command(vid), command_payload(k, sc.dt_s, u, mode, force, torque))
 
     def keepout(self, cid: str, t: float, mode: str, range_m: float) -> None:
         """The referee's keep-out verdict on the chaser's event key."""

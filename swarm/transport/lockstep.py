@@ -468,23 +468,38 @@ class AgentTickAssembler:
 
 
 class CommandBarrier:
-    """The world's side of the lockstep: waits for every live agent's ``command(k)`` before stepping.
+    """The world's side of the lockstep: waits for every live agent's ``command(k)`` before stepping, on
+    the ticks that agent commands.
+
+    An agent commands on its control ticks only, ``k % every[agent] == 0`` (its kind's controller rate),
+    and the world holds that command until the next: on the ticks in between nobody has anything new to
+    say, so the world does not wait for anyone (docs/protocol.md, "Rates"). The world then steps up to a
+    control period ahead of the agents, which work through the buffered ticks while it steps: the two
+    overlap instead of taking turns.
 
     :meth:`add` (from the Zenoh callbacks) records commands; :meth:`wait` (the world's loop) returns when
-    every live agent's command of tick ``k`` is in or the timeout passed, listing the missing agents (the
-    world logs them and holds their previous command). Counters: ``stale`` (a tick already released),
-    ``duplicates`` (the first command of an agent and tick is kept), ``future`` (more than ``max_ahead``
-    ticks ahead), ``unknown`` (an agent id not given at construction).
+    every live agent due at tick ``k`` has its command of tick ``k`` in, or the timeout passed, listing the
+    missing agents (the world logs them and idles their actuators). Counters: ``stale`` (a tick already
+    released), ``duplicates`` (the first command of an agent and tick is kept), ``future`` (more than
+    ``max_ahead`` ticks ahead), ``unknown`` (an agent id not given at construction).
     """
 
-    def __init__(self, agent_ids, max_ahead: int = DEFAULT_MAX_AHEAD) -> None:
+    def __init__(self, agent_ids, max_ahead: int = DEFAULT_MAX_AHEAD, every: dict | None = None) -> None:
         """``agent_ids``: every agent that may send commands, all live at first; ``max_ahead``: ticks
-        beyond the next one waited for that are still buffered."""
+        beyond the next one waited for that are still buffered; ``every``: each agent's command period
+        [ticks] (``None``, or an agent not in it: every tick)."""
         ids = tuple(check_id(a) for a in agent_ids)
         if len(set(ids)) != len(ids):
             raise ConfigError(f"lockstep.agent_ids must be distinct, got {ids!r}")
         self.agent_ids = ids
         self.max_ahead = _check_int(max_ahead, "max_ahead", 0)
+        every = dict(every or {})
+        unknown = sorted(set(every) - set(ids))
+        if unknown:
+            raise ConfigError(f"lockstep.every names agents not among {ids}: {unknown}")
+        self.every = {a: _check_int(every.get(a, 1), f"lockstep.every[{a}]", 1) for a in ids}
+        self._period = math.lcm(*self.every.values()) if ids else 1  # the pattern of due agents repeats
+        self._due_cache: dict[tuple[frozenset, int], frozenset] = {}
         self._cond = threading.Condition()
         self._live = frozenset(ids)
         self._floor = 0  # commands of ticks below it were released (or skipped)
@@ -509,9 +524,23 @@ class CommandBarrier:
                 self._counts["duplicates"] += 1
                 return False
             tick[agent_id] = cmd
-            if self._live <= tick.keys():  # only a complete tick wakes the world (not each of 32 commands)
+            if self._due(k) <= tick.keys():  # only a complete tick wakes the world (not each of 32 commands)
                 self._cond.notify_all()
             return True
+
+    def _due(self, k: int) -> frozenset[str]:
+        """The live agents that command at tick ``k`` (``_cond`` held)."""
+        key = (self._live, k % self._period)
+        due = self._due_cache.get(key)
+        if due is None:
+            due = self._due_cache[key] = frozenset(a for a in self._live if k % self.every[a] == 0)
+        return due
+
+    def due(self, k: int) -> frozenset[str]:
+        """The live agents whose ``command(k)`` the world waits for: those for which ``k`` is a control
+        tick."""
+        with self._cond:
+            return self._due(k)
 
     def set_live(self, ids) -> None:
         """The agents whose commands :meth:`wait` waits for (after a liveliness change): a subset of
@@ -531,10 +560,10 @@ class CommandBarrier:
             return self._live
 
     def wait(self, k: int, timeout_s: float | None = None) -> tuple[dict[str, Command], list[str]]:
-        """Block until every live agent's ``command(k)`` arrived or ``timeout_s`` [s] passed (``None``:
-        forever). Returns ``(commands, missing)``: the commands of tick ``k`` by agent id (live or not),
-        and the live agents without one, in ``agent_ids`` order. Releases tick ``k``: later commands of
-        ticks ``<= k`` are stale."""
+        """Block until every live agent due at ``k`` (:meth:`due`) has its ``command(k)`` in, or
+        ``timeout_s`` [s] passed (``None``: forever). Returns ``(commands, missing)``: the commands of tick
+        ``k`` by agent id (live or not, due or not), and the due agents without one, in ``agent_ids``
+        order. Releases tick ``k``: later commands of ticks ``<= k`` are stale."""
         k = _check_int(k, "tick", 0)
         timeout_s = _check_timeout(timeout_s)
         with self._cond:
@@ -542,21 +571,22 @@ class CommandBarrier:
                 raise ConfigError(f"lockstep.tick {k} was already released (next is {self._floor})")
 
             def complete() -> bool:
-                return self._live <= self._commands.get(k, {}).keys()
+                return self._due(k) <= self._commands.get(k, {}).keys()
 
             _wait(self._cond, complete, timeout_s)
             commands = self._commands.pop(k, {})
-            missing = [a for a in self.agent_ids if a in self._live and a not in commands]
+            due = self._due(k)
+            missing = [a for a in self.agent_ids if a in due and a not in commands]
             self._floor = k + 1
             self._commands = {t: c for t, c in self._commands.items() if t > k}
             return commands, missing
 
     def poll(self, k: int, timeout_s: float | None = None) -> bool:
-        """Whether every live agent's ``command(k)`` is in, waiting up to ``timeout_s`` [s] for it; unlike
+        """Whether every due live agent's ``command(k)`` is in, waiting up to ``timeout_s`` [s] for it; unlike
         :meth:`wait` it releases nothing (a world loop polls in slices to stay responsive)."""
         timeout_s = _check_timeout(timeout_s)
         with self._cond:
-            return _wait(self._cond, lambda: self._live <= self._commands.get(k, {}).keys(), timeout_s)
+            return _wait(self._cond, lambda: self._due(k) <= self._commands.get(k, {}).keys(), timeout_s)
 
     @property
     def next_tick(self) -> int:

@@ -21,6 +21,7 @@ as possible), optionally only some keys.
 
 from __future__ import annotations
 
+import bisect
 import fnmatch
 import logging
 import math
@@ -240,13 +241,22 @@ def _tick(payload: bytes) -> int | None:
     return t if isinstance(t, int) and not isinstance(t, bool) and t >= 0 else None
 
 
+def recorded_ticks(messages, key: str) -> list[int]:
+    """The ticks of the recorded messages on ``key`` (e.g. an agent's commands: its control ticks)."""
+    return [t for t in (_tick(m.payload) for m in messages if m.key == key) if t is not None]
+
+
 class LockstepAck:
     """The lockstep barrier of a replay into one agent: the agent's ``command(k)`` says it has processed tick
-    ``k`` (as the world's barrier, docs/protocol.md, "Clocks and lockstep")."""
+    ``k`` (as the world's barrier, docs/protocol.md, "Clocks and lockstep"). An agent commands on its control
+    ticks only: given the ticks of the recorded commands (``ticks``), the replay waits, before a message of
+    tick ``k``, for the agent's command of the last of them before ``k`` (:meth:`due`), as the world does,
+    and sends the ticks in between meanwhile; without ``ticks``, for ``command(k - 1)``."""
 
-    def __init__(self, session, command_key: str, timeout_s: float = 30.0) -> None:
+    def __init__(self, session, command_key: str, timeout_s: float = 30.0, ticks=None) -> None:
         self.done = -1
         self.timeout_s = timeout_s
+        self.ticks = None if ticks is None else sorted(set(ticks))
         self._cond = threading.Condition()
         self._sub = session.declare_subscriber(command_key, self._on)
 
@@ -257,6 +267,14 @@ class LockstepAck:
                 if k > self.done:
                     self.done = k
                     self._cond.notify_all()
+
+    def due(self, k: int) -> int | None:
+        """The tick whose command says the agent is through tick ``k``: ``k`` itself, or with recorded
+        command ticks the last of them ``<= k`` (``None``: no command to wait for)."""
+        if self.ticks is None:
+            return k
+        i = bisect.bisect_right(self.ticks, k)
+        return self.ticks[i - 1] if i else None
 
     def wait(self, k: int, stop: threading.Event) -> None:
         """Until tick ``k`` is processed; LogError after ``timeout_s`` without it."""
@@ -280,8 +298,9 @@ def replay_recording(
 ) -> dict[str, int]:
     """Publish ``messages`` on their keys (module docstring); ``only``: key patterns (``fnmatch``, e.g.
     ``tpods/agent/chaser/imu`` or ``*/imu``) to keep. With ``ack`` (a lockstep replay into one agent), a
-    message of tick ``k`` leaves only once the agent has processed tick ``k - 1``: nothing is sent faster
-    than the agent takes it. Returns the count sent per key."""
+    message of tick ``k`` leaves only once the agent has sent the command of its last control tick before
+    ``k`` (:meth:`LockstepAck.due`): nothing is sent faster than the agent takes it. Returns the count
+    sent per key."""
     from swarm.transport.process import declare_reliable
 
     pubs: dict[str, object] = {}
@@ -301,8 +320,9 @@ def replay_recording(
                 stop.wait(delay)
         if ack is not None:
             k = _tick(m.payload)
-            if k is not None and k > 0:
-                ack.wait(k - 1, stop)
+            due = ack.due(k - 1) if k is not None and k > 0 else None
+            if due is not None:
+                ack.wait(due, stop)
         pub = pubs.get(m.key)
         if pub is None:
             pub = pubs[m.key] = declare_reliable(session, m.key)

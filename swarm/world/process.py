@@ -6,8 +6,9 @@ the in-process run:
 
 1. wait until every agent of the scenario and the mothership are alive (liveliness), then announce the
    run (``world/event`` ``run_start``, ``world/clock`` tick 0 ``running``);
-2. tick ``k``: take every live agent's ``command(k)`` (lockstep: wait for them, or a timeout; realtime:
-   the latest of each) into the world, whose fault schedule opens the windows the chasers' modes trigger,
+2. tick ``k``: take the live agents' ``command(k)`` (an agent commands on its control ticks and the world
+   holds it in between; lockstep: wait for those whose control tick ``k`` is, or a timeout; realtime: the
+   latest of each) into the world, whose fault schedule opens the windows the chasers' modes trigger,
    judge each chaser on the truth (keep-out, contact: ``agent/<id>/event``), then step to ``k + 1`` and
    publish, per vehicle, ``truth(k+1)`` (with its tag's radio environment, which the mothership's radios
    apply), its camera frame ``vision(k+1)`` on camera ticks (chasers; zero markers when the target is not
@@ -22,7 +23,7 @@ With a checkpoint directory (``--checkpoint-dir``) the world writes its complete
 (:mod:`swarm.world.checkpoint`) *before* it publishes that tick's sensors, so no process ever saw a sample
 of a tick later than the checkpoint. A world restarted with ``--resume`` continues from it: it announces
 ``world/event`` ``world_resumed`` and its clock, re-publishes tick ``k``'s samples (an agent drops those it
-already has) and waits for the commands of tick ``k`` (an agent that already sent its command re-sends it
+already has) and waits for the commands due at tick ``k`` (an agent that already sent its command re-sends it
 on ``world_resumed``). A lockstep run with a world killed and resumed is the uninterrupted run, bit for bit.
 """
 
@@ -102,7 +103,10 @@ class WorldProcess:
         self.chasers = sc.chasers
         self._truth_every = sc.every(sc.uwb.rate_hz)  # the UWB slot period [ticks]
         self.drops = DropCounter()
-        self.barrier = CommandBarrier(self.ids)
+        # each agent commands on its control ticks and the world holds the command in between (the in-process
+        # run's World.take_commands takes the vehicles that decided one): the lockstep waits on those ticks
+        self.command_every = {v: sc.control_every(v) for v in self.ids}
+        self.barrier = CommandBarrier(self.ids, every=self.command_every)
         self._lock = threading.Lock()
         self._alive: set[str] = set()
         self._mothership = False
@@ -120,10 +124,14 @@ class WorldProcess:
         self.modes = dict.fromkeys(self.ids, "HOLD")  # each agent's mode, from its last command
         self.missing_ticks = 0  # lockstep ticks stepped without some live agent's command
         # free-running: vehicle-ticks stepped (of vehicles whose agent has commanded), and those stepped
-        # without that tick's command (it came late, or not at all: the previous one was held)
+        # with an out-of-date command (the one of the vehicle's last control tick had not come: the one
+        # before was held); and the control ticks' commands due, and those that came after their tick
         self.commanded_ticks = 0
         self.late_commands = 0
+        self.due_commands = 0
+        self.late_due_commands = 0
         self._commanding: set[str] = set()
+        self._last_command_tick: dict[str, int] = {}  # free-running: the newest command's tick per agent
         self.state = "running"
         self.ckpt_path = None if checkpoint_dir is None else checkpoint.checkpoint_path(checkpoint_dir)
         if self.ckpt_path is not None:
@@ -434,12 +442,24 @@ class WorldProcess:
 
     def _count_late(self, k: int, latest: dict[str, Command]) -> None:
         """Free-running: of the vehicles still flying whose agent has sent a command, count those that step
-        tick ``k`` without ``command(k)`` (it is late: the world holds the one before). This is the late
-        tick of ``swarm bench swarm``, judged where it matters, with no probe on the wire."""
+        tick ``k`` with an out-of-date command: the command of their last control tick ``<= k`` has not
+        come (it is late: the world holds the one before). And on their control ticks, the commands due
+        and those not in by the tick. These are the late ticks and late commands of ``swarm bench swarm``,
+        judged where they matter, with no probe on the wire."""
+        last = self._last_command_tick
+        for vid, cmd in latest.items():
+            last[vid] = max(cmd.tick, last.get(vid, -1))
         self._commanding.update(latest)
         flying = self._commanding - self.done
         self.commanded_ticks += len(flying)
-        self.late_commands += sum(1 for vid in flying if vid not in latest or latest[vid].tick < k)
+        every = self.command_every
+        for vid in flying:
+            phase = k % every[vid]
+            stale = last[vid] < k - phase
+            self.late_commands += stale
+            if phase == 0:
+                self.due_commands += 1
+                self.late_due_commands += stale
 
     def _await_lost(self) -> None:
         """Lockstep: while an agent is lost (its token gone, not back yet), do not step: simulated time
@@ -631,6 +651,8 @@ class WorldProcess:
             "closest_approach_m": {c: self.referee.closest_approach(c) for c in self.chasers},
             "missing_ticks": self.missing_ticks,
             "late_commands": None if self.clock.lockstep else [self.late_commands, self.commanded_ticks],
+            "late_control_commands": None if self.clock.lockstep else [self.late_due_commands,
+                                                                       self.due_commands],
             "next_seed": self.next_seed,
             "dropped": self.drops.total, "resumed_at": self.resumed_at,
             "checkpoint_us": 1e6 * self.ckpt_s / self.ckpt_n if self.ckpt_n else None,

@@ -532,6 +532,39 @@ def test_barrier_keeps_commands_of_later_ticks():
     assert cmds["a"].tick == 2 and missing == []
 
 
+def test_barrier_waits_for_each_agent_on_its_control_ticks_only():
+    """An agent commands on its control ticks (every 10 ticks for a, 4 for b, every tick for c) and the world
+    holds the command in between: tick k waits for the agents with k % every == 0, nobody else. Oracle: the
+    rule per tick; a missing due agent is listed after the timeout, a missing agent that is not due is not."""
+    bar = CommandBarrier(["a", "b", "c"], every={"a": 10, "b": 4})
+    assert bar.every == {"a": 10, "b": 4, "c": 1}
+    for k in range(41):
+        want = {x for x, e in (("a", 10), ("b", 4), ("c", 1)) if k % e == 0}
+        assert bar.due(k) == want, k
+    bar.add("c", command(0))
+    bar.add("b", command(0))
+    assert not bar.poll(0, 0)  # a is due at 0
+    bar.add("a", command(0))
+    assert bar.poll(0, 0) and bar.wait(0, 0)[1] == []
+    for k in range(1, 4):  # only c is due: a and b are held
+        bar.add("c", command(k))
+        cmds, missing = bar.wait(k, 0)
+        assert set(cmds) == {"c"} and missing == []
+    bar.add("c", command(4))
+    cmds, missing = bar.wait(4, SHORT)  # b's command(4) never came
+    assert set(cmds) == {"c"} and missing == ["b"]
+    bar.set_live({"a", "b"})  # c lost: ticks 5..7 wait for nobody
+    assert bar.due(5) == set() and bar.wait(5, 0) == ({}, [])
+    assert bar.due(20) == {"a", "b"}
+
+
+def test_barrier_refuses_a_period_for_an_unknown_agent_or_below_one():
+    with pytest.raises(ConfigError, match="not among"):
+        CommandBarrier(["a"], every={"z": 2})
+    with pytest.raises(ConfigError, match="every"):
+        CommandBarrier(["a"], every={"a": 0})
+
+
 def test_barrier_concurrent_producers():
     ids = [f"agent{i}" for i in range(8)]
     n = 50

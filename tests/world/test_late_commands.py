@@ -1,8 +1,11 @@
-"""A free-running world counts the vehicle-ticks it steps without that tick's command (late commands,
-``run_end``'s ``late_commands``, the late ticks of ``swarm bench swarm``).
+"""A free-running world counts the vehicle-ticks it steps with an out-of-date command (late ticks,
+``run_end``'s ``late_commands``) and the control ticks' commands that were not in by their tick (late
+commands, ``late_control_commands``): the two late shares of ``swarm bench swarm``.
 
-Oracle: the rule written out per case: a vehicle counts once its agent has commanded, until its run is
-done; its tick ``k`` is late unless the newest command the world holds for it at that step is ``command(k)``.
+Oracle: the rule written out per case. An agent commands on its control ticks (``k % 10 == 0`` in the
+docking scenario) and the world holds the command in between. A vehicle counts once its agent has
+commanded, until its run is done; its tick ``k`` is late unless the newest command the world holds for it
+is of its last control tick ``<= k``; on a control tick, its command is due, and late if not in.
 """
 
 from __future__ import annotations
@@ -23,17 +26,30 @@ def _cmd(k: int) -> Command:
                    torque_body_nm=np.zeros(3), mode="HOLD")  # fmt: skip
 
 
-def test_late_commands_are_the_vehicle_ticks_stepped_without_their_command(tmp_path):
+def _counts(wp) -> tuple[int, int, int, int]:
+    return wp.late_commands, wp.commanded_ticks, wp.late_due_commands, wp.due_commands
+
+
+def test_late_ticks_and_late_commands_follow_the_control_ticks(tmp_path):
     sc, free = load_scenario("docking"), ClockSpec("realtime")
+    assert sc.control_every("chaser") == sc.control_every("target") == 10  # the oracle's control ticks
     wp = WorldProcess(sc, 0, None, Keys("late"), free, threading.Event(), checkpoint_dir=tmp_path)
     wp._count_late(0, {})  # nobody has commanded yet: nothing counted
-    assert (wp.late_commands, wp.commanded_ticks) == (0, 0)
-    wp._count_late(1, {"chaser": _cmd(1)})  # the chaser on time; the target not commanding yet
-    assert (wp.late_commands, wp.commanded_ticks) == (0, 1)
-    wp._count_late(2, {"chaser": _cmd(1), "target": _cmd(2)})  # the chaser's command(2) came too late
-    assert (wp.late_commands, wp.commanded_ticks) == (1, 3)
-    wp._count_late(3, {"target": _cmd(3)})  # nothing from the chaser: it holds command(1), late
-    assert (wp.late_commands, wp.commanded_ticks) == (2, 5)
+    assert _counts(wp) == (0, 0, 0, 0)
+    wp._count_late(0, {"chaser": _cmd(0)})  # the chaser on time; the target not commanding yet
+    assert _counts(wp) == (0, 1, 0, 1)
+    for k in range(1, 10):  # ticks between control ticks: the chaser's command(0) holds, none is due
+        wp._count_late(k, {})
+    assert _counts(wp) == (0, 10, 0, 1)
+    wp._count_late(10, {"target": _cmd(10)})  # the chaser's command(10) is not in: late, and due
+    assert _counts(wp) == (1, 12, 1, 3)  # the target: on time, due
+    wp._count_late(11, {"chaser": _cmd(10)})  # it came one tick late: tick 11 has it
+    assert _counts(wp) == (1, 14, 1, 3)
+    wp._count_late(12, {"chaser": _cmd(9)})  # an older command than the one held changes nothing
+    assert _counts(wp) == (1, 16, 1, 3)
+    for k in range(13, 21):  # the target's command(20) never comes: ticks 20.. of the target are late
+        wp._count_late(k, {"chaser": _cmd(20)} if k == 20 else {})
+    assert _counts(wp) == (2, 32, 2, 5)
     wp.referee.done[list(wp.referee.chasers).index("chaser")] = True  # docked: not stepped on commands
-    wp._count_late(4, {})
-    assert (wp.late_commands, wp.commanded_ticks) == (3, 6)  # the target only
+    wp._count_late(21, {})
+    assert _counts(wp) == (3, 33, 2, 5)  # the target only
