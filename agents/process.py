@@ -12,7 +12,9 @@ complete and in order, and each goes through :meth:`~swarm.step.agent.VehicleAge
 in-process run: the target's estimate of tick ``k - 1``, then gyro (+ AHRS), range, vision of tick ``k``;
 guidance, the kind's controller and ``command(k)`` on control ticks; then ``estimate(k)``. Tick 0 (no
 sensor yet) starts when the world announces the run.
-Realtime or scaled: every message is processed as it arrives.
+Realtime or scaled: every message is processed as it arrives, and ``estimate(k)`` goes out as soon as the
+filter has tick ``k``'s samples, before guidance and control run (an autopilot's estimator publishes before
+its controllers run): the sensor-to-estimate latency does not include a control tick's work.
 
 A restarted world (``world/event`` ``world_resumed`` at tick ``k``) publishes tick ``k``'s samples again:
 the assembler drops those the agent already has (counted ``stale`` or ``duplicates``), and an agent whose
@@ -326,17 +328,26 @@ class AgentProcess:
         gap = k - self._last_tick if self._last_tick is not None and k > self._last_tick else 1
         self._last_tick = k
         imu, uwb, vis, te = inp.imu, inp.uwb, inp.vision, inp.target_estimate
+        # free-running: the estimate leaves as soon as the filter has the tick's samples, before guidance and
+        # control (as an autopilot's estimator publishes before its controllers run); lockstep: after the
+        # command, which the world waits for (the host's commands of a round, then their estimates)
+        early = not self.clock.lockstep
         cmd = self.agent.tick(AgentInputs(
             k, t, gap * self.dt,
             None if imu is None else imu.gyro_body, None if imu is None else imu.q_ahrs_nav_body,
             None if uwb is None or uwb.range_m is None else (uwb.anchor_id, uwb.range_m),
             None if vis is None or not vis.seen else (vis.kind, vis.data),
-            None if te is None or not self.chaser else _target(te),
+            None if te is None or not self.chaser else _target(te), control=not early,
         ))  # fmt: skip
+        if early:
+            self._publish_estimate(k)
+            if k % self.control_every == 0:
+                cmd = self.agent.control(t, self.agent.control_dt)
         if cmd is not None:
             self._commanded(k, cmd)
         self._publish_command(k)
-        self._estimate_due = k  # published by flush(), after the commands of the host's round
+        if not early:
+            self._estimate_due = k  # published by flush(), after the commands of the host's round
         self.ticks += 1
 
     def _done_through(self, k: int) -> bool:

@@ -232,8 +232,9 @@ def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
                       chasers, end_reason=end.get("reason", "no run_end received"), cpu_s=cpu)  # fmt: skip
     if end.get("realtime_factor") is not None:
         out["realtime_factor"] = end["realtime_factor"]
-    if end.get("late_commands") is not None:  # free-running: [late, stepped] vehicle-ticks (world/process.py)
-        out["late_commands"] = end["late_commands"]
+    for key in ("late_commands", "late_control_commands"):  # free-running: [late, of] (world/process.py)
+        if end.get(key) is not None:
+            out[key] = end[key]
     return out
 
 
