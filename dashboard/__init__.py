@@ -7,3 +7,5 @@ plot data), :mod:`dashboard.state` (thread-safe store, bounded trails and series
 :mod:`dashboard.link` (Zenoh side), :mod:`dashboard.playback` (a recording instead), :mod:`dashboard.app`
 (Viser scene, GUI, render thread) and :mod:`dashboard.cli` (command line).
 """
+
+import swarm  # noqa: F401  (first: it pins numpy's BLAS kernels, swarm._pin_blas_kernels)

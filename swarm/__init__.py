@@ -57,6 +57,40 @@ def prune_kernel_caches(base: Path, keep: int = CACHE_KEEP, grace_s: float = _CA
     return removed
 
 
+BLAS_CORETYPE = "Haswell"
+"""The OpenBLAS kernels pinned on every x86-64 CPU with AVX2 and FMA (:func:`_pin_blas_kernels`)."""
+
+
+def _cpu_flags() -> set[str]:
+    """The CPU's feature flags as Linux lists them (empty elsewhere, or if unreadable)."""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("flags"):
+                    return set(line.partition(":")[2].split())
+    except OSError:
+        pass
+    return set()
+
+
+def _pin_blas_kernels() -> None:
+    """Make numpy's linear algebra give the same bits on every x86-64 machine with AVX2 and FMA.
+
+    The OpenBLAS inside numpy and scipy picks its kernels by the CPU it finds (``DYNAMIC_ARCH``): on a CPU
+    with AVX-512 it takes its SkylakeX kernels, elsewhere Haswell's, and the two round differently in the
+    last bit. A run's numbers then depended on the machine: the committed campaign's closest approach came
+    out 0.24174180619520322 m instead of 0.24174180619520144 m on an AVX-512 EPYC. ``OPENBLAS_CORETYPE``
+    pins the kernels when it is set before OpenBLAS loads, at numpy's import: hence here, before anything
+    of this package imports numpy (``tests/test_reproducible.py`` checks that every entry point imports this
+    package first). A CPU without AVX2 and FMA (Haswell's kernels would not run on it) keeps OpenBLAS's own
+    choice, as does a value the user set. Our matrices are 3x3 to 15x15: the kernels' speed does not show.
+    """
+    if "OPENBLAS_CORETYPE" in os.environ:
+        return
+    if {"avx2", "fma"} <= _cpu_flags():
+        os.environ["OPENBLAS_CORETYPE"] = BLAS_CORETYPE
+
+
 def _numba_cache_dir() -> None:
     """Point numba's on-disk cache at a directory keyed by the kernels' sources.
 
@@ -83,4 +117,5 @@ def _numba_cache_dir() -> None:
     os.environ["NUMBA_CACHE_DIR"] = str(cache)
 
 
+_pin_blas_kernels()
 _numba_cache_dir()

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import pytest
 
+import swarm  # noqa: F401  (first: it pins numpy's BLAS kernels before any test module imports numpy)
+
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--runslow", action="store_true", default=False, help="run tests marked slow")
