@@ -90,6 +90,9 @@ class SwarmLink:
         self.state = state
         self.drops = drops
         self._stop = threading.Event()
+        # before the first subscription: a callback may run as soon as its subscriber is declared (a restarted
+        # dashboard met the mothership's periodic anchors there: AttributeError in _on_anchors, logged)
+        self._have_anchors = threading.Event()
         self._rings: list[tuple[str, str, type[Message], zenoh.Subscriber]] = []
         self._clock = session.declare_subscriber(keys.world_clock(), zenoh.handlers.RingChannel(1))
         self._add_vehicles(state.take_new_agents())
@@ -100,7 +103,6 @@ class SwarmLink:
         self._run_pub = _control_publisher(session, keys.run_control())
         self._fault_pub = _control_publisher(session, keys.fault())
         self._token = declare_liveliness(session, keys, "dashboard", process_id)
-        self._have_anchors = threading.Event()
         self._anchors_thread = threading.Thread(
             target=self._fetch_anchors, args=(anchors_retry_s,), name="dashboard-anchors", daemon=True
         )
