@@ -341,8 +341,7 @@ class AgentProcess:
         ))  # fmt: skip
         if early:
             self._publish_estimate(k)
-            if k % self.control_every == 0:
-                cmd = self.agent.control(t, self.agent.control_dt)
+            cmd = self.agent.decide(k, t)
         if cmd is not None:
             self._commanded(k, cmd)
         self._publish_command(k)

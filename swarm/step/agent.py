@@ -170,8 +170,14 @@ class VehicleAgent:
             self.on_uwb(*inp.uwb)
         if inp.vision is not None:
             self.on_vision(inp.t_s, *inp.vision)
-        if inp.control and inp.tick % self.control_every == 0:
-            return self.control(inp.t_s, self.control_dt)
+        return self.decide(inp.tick, inp.t_s) if inp.control else None
+
+    def decide(self, tick: int, t_s: float) -> Command | None:
+        """Guidance and control on tick ``tick`` if it is a control tick (its new command), else ``None``:
+        the second half of :meth:`tick`, for a runner that publishes the estimate between the two (a
+        free-running agent process)."""
+        if tick % self.control_every == 0:
+            return self.control(t_s, self.control_dt)
         return None
 
     # ---- sensor inputs ------------------------------------------------------------------------------

@@ -105,8 +105,7 @@ class WorldProcess:
         self.drops = DropCounter()
         # each agent commands on its control ticks and the world holds the command in between (the in-process
         # run's World.take_commands takes the vehicles that decided one): the lockstep waits on those ticks
-        self.command_every = {v: sc.control_every(v) for v in self.ids}
-        self.barrier = CommandBarrier(self.ids, every=self.command_every)
+        self.barrier = CommandBarrier(self.ids, every={v: sc.control_every(v) for v in self.ids})
         self._lock = threading.Lock()
         self._alive: set[str] = set()
         self._mothership = False
@@ -452,7 +451,7 @@ class WorldProcess:
         self._commanding.update(latest)
         flying = self._commanding - self.done
         self.commanded_ticks += len(flying)
-        every = self.command_every
+        every = self.barrier.every  # each agent's command period [ticks]
         for vid in flying:
             phase = k % every[vid]
             stale = last[vid] < k - phase
