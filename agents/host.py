@@ -11,8 +11,8 @@ What the host shares among its vehicles:
   (:meth:`~swarm.transport.lockstep.AgentTickAssembler.poll`) and processes every tick that is ready, vehicle
   after vehicle. Before, each vehicle had its own thread waiting on its own condition (and, free-running,
   waking every 2 ms to look for a late tick): 16 vehicles were 16 threads taking the GIL in turn. A
-  free-running tick now has a deadline (its grace after its ``imu`` arrived), so the loop sleeps until a
-  message comes or the nearest deadline;
+  free-running tick is ready once its ``imu`` is in, and a range or frame that comes after it is handed to
+  the vehicle before its next tick (late fusion), so the loop sleeps until a message comes;
 - **one subscriber each** for the world's clock and events and for liveliness, whose messages go to every
   vehicle: the same for all of them, once per process instead of once per vehicle.
 
@@ -64,10 +64,10 @@ class AgentHost:
         if len(clock) != 1:
             raise ValueError(f"the vehicles of one host share its clock, got {sorted(map(str, clock))}")
         self.clock = clock.pop()
-        dt = self.procs[0].dt
-        # a free-running tick waits this long after its imu for a late range or frame (half a tick of wall
-        # time, at least 2 ms); lockstep waits for complete ticks only
-        self.grace_s = None if self.clock.lockstep else max(0.002, 0.5 * dt / self.clock.factor)
+        # lockstep waits for complete ticks only; free-running, a tick goes as soon as its imu is in, and
+        # the range or frame that comes after it is fused before the next tick (late fusion)
+        self.grace_s = None if self.clock.lockstep else 0.0
+        self.late = not self.clock.lockstep
         # a chaser whose target is hosted here takes its estimates from the target's agent, not from Zenoh
         by_id = {p.id: p for p in self.procs}
         for p in self.procs:
@@ -135,9 +135,12 @@ class AgentHost:
                 for p in live:  # in host order: the same order every round
                     if p not in polled or not p.ticking():
                         continue
+                    late = p.assembler.take_late() if self.late else ()
                     inp, when = p.assembler.poll(self.grace_s, now)
+                    if late:
+                        batch.append((p, late, None))
                     if inp is not None:
-                        batch.append((p, inp))
+                        batch.append((p, (), inp))
                         ready.add(p.assembler)  # it may have a further tick ready
                         due.pop(p, None)
                     elif when is not None:
@@ -146,13 +149,18 @@ class AgentHost:
                         due.pop(p, None)
                 if not batch and not ready:
                     cond.wait(max(0.0, min([now + IDLE_S, *due.values()]) - now))
-            for p, inp in batch:  # the round's commands first: the world (lockstep) waits for them
+            for p, late, inp in batch:  # the round's commands first: the world (lockstep) waits for them
                 try:
-                    p.process(inp)
+                    if inp is None:
+                        p.fuse_late(late)  # free-running: before the tick that follows theirs
+                    else:
+                        p.process(inp)
                 except Exception:
-                    _LOG.exception("%s: agent failed at tick %d", p.id, inp.tick)
+                    _LOG.exception("%s: agent failed at tick %s", p.id, "late" if inp is None else inp.tick)
                     raise
-            for p, inp in batch:  # then the estimates: a chaser uses its target's a tick later
+            for p, _late, inp in batch:  # then the estimates: a chaser uses its target's a tick later
+                if inp is None:
+                    continue
                 try:
                     p.flush()
                 except Exception:

@@ -12,9 +12,12 @@ complete and in order, and each goes through :meth:`~swarm.step.agent.VehicleAge
 in-process run: the target's estimate of tick ``k - 1``, then gyro (+ AHRS), range, vision of tick ``k``;
 guidance, the kind's controller and ``command(k)`` on control ticks; then ``estimate(k)``. Tick 0 (no
 sensor yet) starts when the world announces the run.
-Realtime or scaled: every message is processed as it arrives, and ``estimate(k)`` goes out as soon as the
-filter has tick ``k``'s samples, before guidance and control run (an autopilot's estimator publishes before
-its controllers run): the sensor-to-estimate latency does not include a control tick's work.
+Realtime or scaled: tick ``k`` is processed as soon as ``imu(k)`` is in, with whatever else of it has come,
+and ``estimate(k)`` goes out before guidance and control run (an autopilot's estimator publishes before its
+controllers run): the sensor-to-estimate latency includes neither a control tick's work nor the range's
+route through the mothership. A range or frame that comes after its tick is fused before the next one
+(:meth:`AgentProcess.fuse_late`, "late fusion", ``agent.late_fusion_s``), as PX4's EKF2 fuses its slower
+sensors when they come.
 
 A restarted world (``world/event`` ``world_resumed`` at tick ``k``) publishes tick ``k``'s samples again:
 the assembler drops those the agent already has (counted ``stale`` or ``duplicates``), and an agent whose
@@ -120,6 +123,7 @@ class AgentProcess:
             start=None if rejoin else 0, wait_for_target=clock.lockstep, cond=cond,
             ready=set() if ready is None else ready,
             target_reads=target_reads(sc, vehicle_id) if self.chaser else None,
+            late_ticks=None if clock.lockstep else round(sc.agent.late_fusion_s / sc.dt_s),
         )  # fmt: skip
         self.estimate_reads = estimate_reads(sc, vehicle_id)  # the ticks whose estimate goes out
         if rejoin:
@@ -348,6 +352,19 @@ class AgentProcess:
         if not early:
             self._estimate_due = k  # published by flush(), after the commands of the host's round
         self.ticks += 1
+
+    def fuse_late(self, late) -> None:
+        """Free-running: the ranges and frames that came after their tick's estimate went out
+        (:meth:`~swarm.transport.lockstep.AgentTickAssembler.take_late`), fused now, before the next tick
+        (a re-initialising agent takes the ranges it lacks)."""
+        for m in late:
+            if isinstance(m, Uwb):
+                if self.agent is None:
+                    self._collect_init(None, m)
+                elif m.range_m is not None:
+                    self.agent.on_uwb(m.anchor_id, m.range_m)
+            elif self.agent is not None and self.chaser and m.seen:
+                self.agent.on_vision(m.tick * self.dt, m.kind, m.data)
 
     def _done_through(self, k: int) -> bool:
         return self._last_tick is not None and self._last_tick >= k

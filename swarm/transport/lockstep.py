@@ -131,6 +131,7 @@ class AgentTickAssembler:
         cond: threading.Condition | None = None,
         ready: set | None = None,
         target_reads: tuple[int, ...] | None = None,
+        late_ticks: int | None = None,
     ) -> None:
         """``agent_id``: this vehicle; ``is_chaser``: whether ticks need the target's estimates;
         ``target_id``: the target's agent id (required for a chaser); ``uwb_every``: ticks between two UWB
@@ -143,7 +144,11 @@ class AgentTickAssembler:
         thread waits for a tick of any of them (:meth:`poll`); ``ready``: a set, shared with them as well,
         to which this assembler adds itself when it notifies, so that the host polls only those;
         ``target_reads``: a chaser's ticks that read the target's estimate, the multiples of these periods
-        (:func:`~swarm.transport.docking_wire.target_reads`; ``None``: every tick): only those wait for it."""
+        (:func:`~swarm.transport.docking_wire.target_reads`; ``None``: every tick): only those wait for it;
+        ``late_ticks``: a free-running agent's late fusion (``None``: off, the lockstep rule). With it, a tick
+        is ready for :meth:`poll` as soon as its ``imu`` is in (the estimator does not wait for a range or a
+        frame), and a ``uwb``/``vision`` of a tick already taken, at most ``late_ticks`` ticks before the
+        next one, is kept for :meth:`take_late` (counted ``late``) instead of dropped as stale."""
         self.agent_id = check_id(agent_id)
         self.is_chaser = bool(is_chaser)
         self.target_id = check_id(target_id, "target id") if (is_chaser or target_id is not None) else None
@@ -163,8 +168,11 @@ class AgentTickAssembler:
         self._uwb_live = True
         self._uwb_from = 0  # uwb of ticks >= this are required (while the mothership is live)
         self._target_from = 0  # estimates of ticks >= this are required (while the target is live)
+        self.late_ticks = None if late_ticks is None else _check_int(late_ticks, "late_ticks", 0)
+        self._late: list[Uwb | Vision] = []  # measurements of ticks already taken, for take_late
+        self._taken: dict[int, set[str]] = {}  # late fusion: the recent ticks taken, and the slots they had
         self._closed = False
-        self._counts = dict.fromkeys(("stale", "duplicates", "future", "unexpected", "incomplete"), 0)
+        self._counts = dict.fromkeys(("stale", "duplicates", "future", "unexpected", "incomplete", "late"), 0)
 
     # ------------------------------------------------------------------------------ producers
 
@@ -182,7 +190,7 @@ class AgentTickAssembler:
                 return False
             # only news a consumer acts on wakes it: the next tick complete, or an imu (a free-running
             # tick's grace starts, or a lost tick is skipped); not every message of a tick
-            if kept and (isinstance(msg, Imu) or not self._missing()):
+            if kept and (isinstance(msg, Imu) or self._late or not self._missing()):
                 self._notify()
             return kept
 
@@ -234,6 +242,8 @@ class AgentTickAssembler:
             self._counts["unexpected"] += 1
             return False
         why = self._window(k)
+        if why == "stale" and k in self._taken and not isinstance(msg, Imu):
+            return self._add_late(msg)
         if why is not None:
             self._counts[why] += 1
             return False
@@ -258,6 +268,18 @@ class AgentTickAssembler:
             frame.t_imu = time.monotonic()
         if slot == "uwb" and self._uwb_from < 0:  # the first range since the mothership came back
             self._uwb_from = k
+        return True
+
+    def _add_late(self, msg: Uwb | Vision) -> bool:
+        """A range or frame of tick ``k``, taken already without it (late fusion, ``_cond`` held)."""
+        had = self._taken[msg.tick]
+        slot = "uwb" if isinstance(msg, Uwb) else "vision"
+        if slot in had:
+            self._counts["duplicates"] += 1
+            return False
+        had.add(slot)
+        self._late.append(msg)
+        self._counts["late"] += 1
         return True
 
     # ------------------------------------------------------------------------------ consumer
@@ -319,6 +341,10 @@ class AgentTickAssembler:
                     del self._estimates[t]
             est = self._held
         self._next = k + 1
+        if self.late_ticks is not None:  # late fusion: remember what the recent ticks had
+            self._taken[k] = {s for s in ("uwb", "vision") if getattr(frame, s) is not None}
+            for t in [t for t in self._taken if t < self._next - self.late_ticks]:
+                del self._taken[t]
         return TickInputs(tick=k, imu=frame.imu, vision=frame.vision, uwb=frame.uwb, target_estimate=est)
 
     def poll(
@@ -332,7 +358,8 @@ class AgentTickAssembler:
         clock's: tick ``k`` is also ready, without what it lacks (counted ``incomplete``), ``grace_s``
         after its ``imu`` arrived; and a tick whose ``imu`` never came is skipped (counted ``incomplete``)
         as soon as a later ``imu`` is in (one publisher, reliable and in order: it is lost). The wait is
-        thus a deadline per tick, not a polling period."""
+        thus a deadline per tick, not a polling period. With late fusion (``late_ticks``) there is no
+        wait: a tick is ready once its ``imu`` is in, and what comes after it goes to :meth:`take_late`."""
         with self._cond:
             if self._closed or self._next is None:
                 return None, None
@@ -351,11 +378,20 @@ class AgentTickAssembler:
                 if not self._missing():
                     return self._take(), None
                 frame = self._frames[self._next]
+            if self.late_ticks is not None:
+                return self._take(), None  # late fusion: its imu is in; what it lacks is fused when it comes
             due = (frame.t_imu if frame is not None else 0.0) + grace_s
             if (time.monotonic() if now is None else now) >= due:
                 self._counts["incomplete"] += 1
                 return self._take(), None
             return None, due
+
+    def take_late(self) -> list[Uwb | Vision]:
+        """Late fusion (``late_ticks``): the ranges and frames that came after their tick was taken, in
+        order of arrival, each once; the consumer fuses them before the next tick it takes."""
+        with self._cond:
+            late, self._late = self._late, []
+            return late
 
     def wake(self) -> None:
         """Wake a thread waiting on :attr:`cond` (the agent host's loop, or :meth:`next_tick`): something
@@ -463,8 +499,13 @@ class AgentTickAssembler:
 
     @property
     def incomplete(self) -> int:
-        """Ticks taken without all their inputs (:meth:`take_partial`)."""
+        """Ticks taken without all their inputs (:meth:`take_partial`), or skipped without their ``imu``."""
         return self.counts()["incomplete"]
+
+    @property
+    def late(self) -> int:
+        """Late fusion: ranges and frames kept for :meth:`take_late` after their tick was taken."""
+        return self.counts()["late"]
 
 
 class CommandBarrier:

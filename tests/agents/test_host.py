@@ -87,3 +87,47 @@ def test_an_estimate_is_encoded_only_for_a_subscriber_and_always_handed_to_a_hos
     assert source == "target" and msg.tick == 4
     want = decode(payloads[4]["target"], Estimate)
     assert np.array_equal(msg.p_nav, want.p_nav) and np.array_equal(msg.cov, want.cov)
+
+
+def test_a_free_running_agent_fuses_a_late_range_and_frame_as_the_tick_would_have():
+    """Late fusion (free-running): the range and the camera frame of tick k that came after its estimate
+    went out are fused before tick k + 1, with the values the tick would have fused; a re-initialising
+    agent (rejoin) takes a late range into its initial fix. Lockstep agents have no late fusion."""
+    from swarm.step.agent import VehicleAgent
+    from swarm.step.world import initial_truth
+    from swarm.transport.docking_wire import filter_counts
+    from swarm.transport.messages import Uwb, Vision
+
+    sc = load_scenario("docking")
+    host, p = _host(["chaser", "target"], sc, clock="realtime")
+    assert host.late and host.grace_s == 0.0
+    assert p["chaser"].assembler.late_ticks == round(sc.agent.late_fusion_s / sc.dt_s) > 0
+    assert _host(["chaser", "target"], sc)[1]["chaser"].assembler.late_ticks is None  # lockstep
+    x = initial_truth(sc, 0, "chaser")
+    proc = p["chaser"]
+    twins = [VehicleAgent(sc, "chaser", x[0:3], x[3:6], x[6:10], np.full(9, 1e-4), "mdp") for _ in range(2)]
+    proc.agent, ref = twins
+    tgt = initial_truth(sc, 0, "target")
+    from swarm.step.agent import TargetEstimate
+
+    for a in twins:
+        a.set_target_estimate(TargetEstimate(0.0, tgt[0:3], tgt[6:10], np.eye(3) * 1e-6))
+        a.on_imu(0.05, 0.01, np.zeros(3), x[6:10])
+    r = float(np.linalg.norm(np.asarray(sc.anchors_m[1]) - x[0:3])) + 0.01
+    pts = np.array([[0.01 * i, 0.01 * (i % 2), 0.3] for i in range(len(ref.markers_target))])
+    vis = Vision(tick=5, t_s=0.05, target_id="target", face="+x", kind="features", data=pts,
+                 marker_ids=tuple(range(len(pts))))  # fmt: skip
+    proc.fuse_late([Uwb(tick=4, t_s=0.04, anchor_id=1, range_m=r), Uwb(tick=6, t_s=0.06, anchor_id=2,
+                                                                        range_m=None), vis])  # fmt: skip
+    ref.on_uwb(1, r)
+    ref.on_vision(0.05, "features", pts)
+    assert filter_counts(proc.agent) == filter_counts(ref)
+    counts = filter_counts(ref)  # one range and one frame reached the filter (whatever its gate said)
+    fused = [sum(v for n, v in counts.items() if n.startswith(kind)) for kind in ("range", "features")]
+    assert fused == [1, 1]
+    np.testing.assert_array_equal(proc.agent.est.X, ref.est.X)
+    np.testing.assert_array_equal(proc.agent.est.P, ref.est.P)
+    rejoining = p["target"]
+    rejoining.agent = None
+    rejoining.fuse_late([Uwb(tick=2, t_s=0.02, anchor_id=0, range_m=1.0)])
+    assert rejoining._init_ranges == {0: 1.0}

@@ -343,6 +343,7 @@ def test_a_free_running_swarm_takes_delayed_samples_and_a_killed_world_and_ends_
     print(f"world restart (scaled:2): {delays}; docked {c['docked']}, final mode {c['final_mode']}; "
           f"tick assembly {c['tick_assembly']}")  # fmt: skip
     assert c["tick_assembly"]["incomplete"] + c["tick_assembly"]["stale"] > 0  # late samples were seen
+    assert c["tick_assembly"]["late"] > 0  # ranges (through the mothership) come after the imu: fused late
     late, stepped = res["late_commands"]  # free-running: ticks stepped with an out-of-date command
     assert 0 <= late < stepped and stepped >= 2 * 500  # two vehicles, at least the first 5 s, each counted
     late_due, due = res["late_control_commands"]  # the control ticks' commands (10 Hz): a tenth of the ticks

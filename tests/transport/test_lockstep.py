@@ -69,7 +69,7 @@ def camera(uwb_every: int = 3, vision_every: int = 2, **kw) -> AgentTickAssemble
     return plain(uwb_every, vision_every=vision_every, **kw)
 
 
-ALL_ZERO = dict.fromkeys(("stale", "duplicates", "future", "unexpected", "incomplete"), 0)
+ALL_ZERO = dict.fromkeys(("stale", "duplicates", "future", "unexpected", "incomplete", "late"), 0)
 
 
 # ------------------------------------------------------------------------------ completion rules
@@ -627,6 +627,41 @@ def test_poll_free_running_skips_a_tick_whose_imu_was_lost_as_soon_as_a_later_on
     asm.add(imu(3))
     got, due = asm.poll(0.005)
     assert got.tick == 3 and due is None and asm.incomplete == 1  # tick 2 skipped, tick 3 complete
+
+
+def test_late_fusion_takes_a_tick_at_its_imu_and_hands_its_late_range_and_frame_over_once():
+    """Free-running with late fusion: no grace, the tick goes with its imu; its range and frame that come
+    after are kept for take_late (counted late, each once), within the window; older ones are stale."""
+    cond, ready = threading.Condition(), set()
+    asm = camera(uwb_every=2, vision_every=2, wait_for_target=False, late_ticks=2, cond=cond, ready=ready)
+    assert asm.add(imu(1)) and asm.poll(0.0)[0].tick == 1
+    assert asm.add(imu(2))
+    got, due = asm.poll(0.0)  # uwb(2) and vision(2) not in: taken now, nothing counted incomplete
+    assert got.tick == 2 and got.uwb is None and got.vision is None and due is None
+    assert asm.take_late() == []
+    ready.clear()
+    assert asm.add(uwb(2, 1.5)) and asm in ready  # the consumer is woken for it
+    assert not asm.add(uwb(2, 1.6))  # a second range of tick 2: a duplicate, not fused twice
+    assert asm.add(vision(2))
+    late = asm.take_late()
+    assert [type(m).__name__ for m in late] == ["Uwb", "Vision"] and late[0].range_m == 1.5
+    assert asm.take_late() == []  # handed over once
+    assert asm.counts() == {**ALL_ZERO, "late": 2, "duplicates": 1}
+    for k in (3, 4, 5):
+        asm.add(imu(k))
+        assert asm.poll(0.0)[0].tick == k
+    assert asm.add(uwb(4))  # two ticks before the next one (6): still within late_ticks
+    assert not asm.add(vision(2)) and not asm.add(uwb(2))  # four ticks old: beyond the window, stale
+    assert asm.counts() == {**ALL_ZERO, "late": 3, "duplicates": 1, "stale": 2}
+
+
+def test_without_late_fusion_a_range_after_its_tick_is_stale_and_nothing_is_handed_over():
+    asm = plain(uwb_every=2, wait_for_target=False)
+    asm.add(imu(1))
+    asm.poll(0.0)
+    asm.add(imu(2))
+    assert asm.poll(0.0)[0].tick == 2 and asm.incomplete == 1  # grace 0: taken at once, counted
+    assert not asm.add(uwb(2)) and asm.take_late() == [] and asm.stale == 1
 
 
 def test_a_shared_condition_and_ready_set_wake_one_waiter_for_any_vehicle():
