@@ -116,6 +116,7 @@ class AgentProcess:
         self.target_id = spec.target
         self.dt = sc.dt_s
         self.control_every = sc.control_every(vehicle_id)
+        self.control_phase = sc.control_phase(vehicle_id)
         self.vision_every = sc.every(sc.camera.rate_hz) if self.chaser else None
         self.drops = DropCounter()
         self.assembler = AgentTickAssembler(
@@ -264,7 +265,7 @@ class AgentProcess:
     def _publish_command(self, k: int) -> None:
         """``command(k)`` on the vehicle's control ticks only: the world holds it until the next one, and
         a lockstep world waits for it on those ticks only (docs/protocol.md, "Rates")."""
-        if k % self.control_every:
+        if (k - self.control_phase) % self.control_every:
             return
         payload = command_payload(k, self.dt, self._u, self._mode, self._force, self._torque)
         with self._command_lock:

@@ -54,11 +54,20 @@ class VehicleSpec:
     uwb_address: int | None = None
     """The UWB tag's address, which picks its TDMA slot (``uwb.tdma``): ``address % frame``; default the
     vehicle's index in ``[vehicles]``. Two tags whose addresses share a slot collide."""
+    control_phase: int = 0
+    """The tick of the vehicle's first control step: it controls on ticks ``k`` with ``(k - control_phase)
+    % control period == 0`` (below the period; 0: on tick 0 and every period after). Independent vehicles'
+    controller clocks are not in phase; an agent host of many vehicles spreads their control steps over the
+    period instead of running them all on one tick (``swarm.stagger_control``). Until its first control
+    step a vehicle's actuators are idle."""
 
     def __post_init__(self) -> None:
         a = self.uwb_address
         if a is not None and (isinstance(a, bool) or not isinstance(a, int) or not 0 <= a < 2**16):
             raise ConfigError(f"uwb_address must be an integer in 0..65535, got {a!r}")
+        ph = self.control_phase
+        if isinstance(ph, bool) or not isinstance(ph, int) or ph < 0:
+            raise ConfigError(f"control_phase must be an integer >= 0, got {ph!r}")
 
 
 @dataclass(frozen=True)
@@ -151,6 +160,11 @@ class SwarmParams:
     grid_axes: tuple[Vec3, Vec3] = ((0.70710678, -0.70710678, 0.0), (0.40824829, 0.40824829, -0.81649658))
     """The two axes of the square grid of copies, frame nav (unit, orthogonal): by default the plane
     perpendicular to the paper's line of approach (1, 1, 1), so copies sit beside each other's paths."""
+    stagger_control: bool = False
+    """Spread the copies' control steps over the control period: vehicle ``m`` of the copies (in order,
+    chaser0, target0, chaser1, ...) gets ``control_phase = m % its control period``. Off: every vehicle
+    controls on the ticks of the original. Independent vehicles' controllers are not in phase; in one
+    agent host, 16 vehicles controlling on one tick need that tick's CPU 16 times over."""
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.pair_spacing_m) and self.pair_spacing_m > 0):
@@ -253,6 +267,7 @@ class Scenario:
                     )
         kinds = {name: KINDS[name](getattr(self.kinds, name), self) for name in self.kinds_used}
         object.__setattr__(self, "_kinds", kinds)  # bound kind objects (not fields: no repr, no equality)
+
         rates = [("uwb.rate_hz", self.uwb.rate_hz), ("camera.rate_hz", self.camera.rate_hz),
                  ("ahrs.rate_hz", self.ahrs.rate_hz)]  # fmt: skip
         rates += [(k.control_rate_field, k.control_rate_hz) for k in kinds.values()]
@@ -261,6 +276,12 @@ class Scenario:
             if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
                 raise ConfigError(
                     f"{name} must divide sim.imu_rate_hz ({self.sim.imu_rate_hz} Hz) evenly, got {rate!r}"
+                )
+        for vid, v in self.vehicles.items():
+            if v.control_phase >= self.control_every(vid):
+                raise ConfigError(
+                    f"vehicles.{vid}.control_phase must be below its control period "
+                    f"({self.control_every(vid)} ticks), got {v.control_phase!r}"
                 )
         cube = kinds.get("cubesat")
         d = self.dispersions
@@ -329,6 +350,10 @@ class Scenario:
         """Ticks between two control steps of ``vehicle_id`` (its kind's controller rate)."""
         return self.every(self.kind(vehicle_id).control_rate_hz)
 
+    def control_phase(self, vehicle_id: str) -> int:
+        """The tick of the first control step of ``vehicle_id`` (``vehicles.<id>.control_phase``)."""
+        return self.vehicles[vehicle_id].control_phase
+
     def estimator_for(self, vehicle_id: str) -> EstimatorParams:
         """The filter parameters of ``vehicle_id``: ``[estimator]`` with its kind's mounts as the model of
         the tag lever arm and the camera mounting."""
@@ -376,7 +401,10 @@ class Scenario:
             for vid, v in self.vehicles.items():
                 pos = tuple(float(x) for x in np.asarray(v.position_m) + offset)
                 target = None if v.target is None else f"{v.target}{i}"
-                vehicles[f"{vid}{i}"] = replace(v, position_m=pos, target=target)
+                phase = (
+                    len(vehicles) % self.control_every(vid) if self.swarm.stagger_control else v.control_phase
+                )
+                vehicles[f"{vid}{i}"] = replace(v, position_m=pos, target=target, control_phase=phase)
         return replace(self, vehicles=vehicles)
 
     def q0(self, vehicle_id: str) -> np.ndarray:

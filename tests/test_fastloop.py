@@ -26,6 +26,12 @@ FAULTS = {
 }  # fmt: skip
 CASES = {
     "cubesat": ("docking", {}),
+    # staggered controller clocks (swarm.stagger_control): the chaser controls on ticks 3, 13, ..., the
+    # target on 7, 17, ...; both idle until then
+    "cubesat staggered": (
+        "docking",
+        {"vehicles.chaser.control_phase": 3, "vehicles.target.control_phase": 7},
+    ),
     "cubesat dispersed, faults": (
         "docking",
         {
@@ -63,7 +69,7 @@ CASES = {
 # each kind plain and with every input of the step on, both policies and every camera model among them (a
 # per-tick docking costs ~10 s of Python here: five cases, not every combination)
 @pytest.mark.parametrize(("case", "policy", "seed"), [
-    ("cubesat", "fixed", 4), ("cubesat dispersed, faults", "mdp", 6),
+    ("cubesat", "fixed", 4), ("cubesat dispersed, faults", "mdp", 6), ("cubesat staggered", "mdp", 1),
     ("ground", "mdp", 5), ("ground pnp", "mdp", 2), ("ground dispersed, faults", "fixed", 6),
 ])  # fmt: skip
 def test_compiled_inner_loop_gives_the_per_tick_run_bit_for_bit(case, policy, seed):

@@ -410,6 +410,30 @@ def test_with_pairs_copies_every_vehicle_on_a_grid_of_the_configured_spacing():
     assert np.allclose(np.mean(offsets, axis=0), 0.0)  # centred on the original pair
     with pytest.raises(ConfigError, match=r"--agents must be an integer in 1\.\.64, got 0"):
         sc.with_pairs(0)
+    assert {s4.control_phase(v) for v in s4.vehicles} == {0}  # not staggered: every copy as the original
+
+
+def test_staggered_copies_spread_their_control_ticks_and_an_agent_controls_on_its_own():
+    """swarm.stagger_control: vehicle m of the copies controls first on tick m % 10 (docking's 10 Hz
+    control at 100 Hz), so 16 vehicles put at most 2 control steps on any tick; an agent's decide() follows
+    its phase. A phase at or beyond the period is refused, naming the field."""
+    from swarm.step.agent import VehicleAgent
+
+    sc = load_scenario("docking", {"swarm.stagger_control": True})
+    s8 = sc.with_pairs(8)
+    every = sc.control_every("chaser")
+    phases = [s8.control_phase(v) for v in s8.vehicles]
+    assert phases == [m % every for m in range(16)]
+    per_tick = [sum((k - p) % every == 0 for p in phases) for k in range(every)]
+    assert max(per_tick) == 2 and sum(per_tick) == 16
+    x = np.array(s8.vehicles["target1"].position_m)
+    a = VehicleAgent(s8, "target1", x, np.zeros(3), s8.q0("target1"), np.full(9, 1e-4), "mdp")
+    assert s8.control_phase("target1") == 3
+    assert [k for k in range(25) if a.decide(k, k * s8.dt_s) is not None] == [3, 13, 23]
+    with pytest.raises(ConfigError, match=r"vehicles\.chaser\.control_phase must be below its control"):
+        load_scenario("docking", {"vehicles.chaser.control_phase": every})
+    with pytest.raises(ConfigError, match="control_phase must be an integer >= 0"):
+        load_scenario("docking", {"vehicles.chaser.control_phase": -1})
 
 
 def test_thrust_dispersions_with_the_nominal_acceleration_psd_warn():

@@ -153,6 +153,7 @@ class DockingSim:
         ids = list(self.agents)
         self.role = np.array([a.role_code for a in agents], dtype=np.int64)
         self.every = np.array([a.control_every for a in agents], dtype=np.int64)
+        self.phase = np.array([a.control_phase for a in agents], dtype=np.int64)
         self.vdone = np.zeros(n, dtype=np.bool_)
         self.tidx = np.array([ids.index(a.target_id) if a.target_id else -1 for a in agents], dtype=np.int64)
         self.TGT = np.stack([a.TGT for a in agents])
@@ -285,7 +286,8 @@ class DockingSim:
                 for cid, est in targets.items():
                     self.agents[cid].set_target_estimate(est)
                 for vid, agent in self.agents.items():
-                    commands[vid] = agent.control(t, agent.control_dt)
+                    if agent.is_control_tick(0):  # a vehicle whose control_phase is later idles until then
+                        commands[vid] = agent.control(t, agent.control_dt)
             if tap is not None:
                 for vid in self.agents:
                     tap.agent(self, vid, k, commands.get(vid))

@@ -101,6 +101,7 @@ class VehicleAgent:
         self.kind = sc.kind(vehicle_id)
         self.mass_kg = float(self.kind.mass_kg)
         self.control_every = sc.control_every(vehicle_id)
+        self.control_phase = sc.control_phase(vehicle_id)
         self.control_dt = self.control_every * sc.dt_s
         est_params = sc.estimator_for(vehicle_id)
         self.est = PoseEstimator.create(est_params, p0_nav, v0_nav, q0_nav_body, cov0)
@@ -176,9 +177,14 @@ class VehicleAgent:
         """Guidance and control on tick ``tick`` if it is a control tick (its new command), else ``None``:
         the second half of :meth:`tick`, for a runner that publishes the estimate between the two (a
         free-running agent process)."""
-        if tick % self.control_every == 0:
+        if self.is_control_tick(tick):
             return self.control(t_s, self.control_dt)
         return None
+
+    def is_control_tick(self, tick: int) -> bool:
+        """Whether this vehicle controls on tick ``tick``: every control period from its
+        ``control_phase`` on (:class:`swarm.scenario.VehicleSpec`)."""
+        return (tick - self.control_phase) % self.control_every == 0
 
     # ---- sensor inputs ------------------------------------------------------------------------------
     def on_imu(self, t_s: float, dt_s: float, gyro_body, q_ahrs_nav_body=None) -> int:

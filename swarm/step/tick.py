@@ -87,8 +87,9 @@ def agent_arrays(a) -> tuple:
     """Every agent's filter, health and control arrays, stacked (n, ...), of the in-process runner ``a``
     (:class:`swarm.sim.docking.DockingSim`)."""
     return (a.AX, a.AP, a.AC, a.AB, a.PRMS, a.Fb, a.Wb, a.mass, a.plane, a.Hok, a.Hd2, a.Hmeta, a.last_vision,
-            a.MP, a.t_agent, a.role, a.every, a.vdone, a.tidx, a.TGT, a.G, a.GP, a.SW, a.DEC, a.DEC_n,
-            a.EV, a.EV_n, a.ST, a.SP, a.CS, a.CP, a.REF, a.UC, a.ACT, a.SAT, a.ctl, a.MR, a.MQ)  # fmt: skip
+            a.MP, a.t_agent, a.role, a.every, a.phase, a.vdone, a.tidx, a.TGT, a.G, a.GP, a.SW, a.DEC,
+            a.DEC_n, a.EV, a.EV_n, a.ST, a.SP, a.CS, a.CP, a.REF, a.UC, a.ACT, a.SAT, a.ctl, a.MR,
+            a.MQ)  # fmt: skip
 
 
 def referee_arrays(r) -> tuple:
@@ -193,7 +194,7 @@ def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
     (lever, anchors, drift, uprm, next_anchor, unoise, ui, env_lost, env_p, lost, anchor_id, range_m,
      outlier, tdma_slot, tdma_prm, idle, collided, collisions) = R  # fmt: skip
     (AX, AP, AC, AB, PRMS, f_body, w_body, mass, plane, Hok, Hd2, Hmeta, last_vision, MP, t_agent,
-     role, every, vdone, tidx, TGT, G, GP, SW, DEC, DEC_n, EV, EV_n, ST, SP, CS, CP, REF, UC, ACT, SAT,
+     role, every, phase, vdone, tidx, TGT, G, GP, SW, DEC, DEC_n, EV, EV_n, ST, SP, CS, CP, REF, UC, ACT, SAT,
      ctl, MR, MQ) = A  # fmt: skip
     (pairs, done, docking, n_target, q_tc, half, keepout_r, corridor_cos, contact_d, ko_flag, ko_t, ko_r,
      closest) = F  # fmt: skip
@@ -206,7 +207,7 @@ def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
         t = j * dt
         any_ctl = False
         for v in range(n):
-            ctl[v] = j % every[v] == 0 and not vdone[v]
+            ctl[v] = (j - phase[v]) % every[v] == 0 and not vdone[v]
             any_ctl = any_ctl or ctl[v]
             if ctl[v] and role[v] == ROLE_CHASER and DEC_n[v] >= DEC.shape[1]:
                 return j, STAGING_FULL

@@ -9,7 +9,7 @@ import numpy as np
 
 from swarm.core.estimator import MeasKind
 from swarm.transport.keys import Keys
-from swarm.transport.lockstep import reads_target
+from swarm.transport.lockstep import period_phase, reads_target
 from swarm.transport.messages import (
     Clock,
     Event,
@@ -66,31 +66,34 @@ def world_sensors(world, ids: list[str], chasers: list[str], k: int, frames, tru
     return out
 
 
-def target_reads(sc, chaser_id: str) -> tuple[int, ...] | None:
+def target_reads(sc, chaser_id: str) -> tuple | None:
     """The tick periods at which chaser ``chaser_id`` reads its target's estimate: tick ``k`` uses the
     target's ``estimate(k - 1)`` only when ``k`` is a multiple of one of them, its camera ticks (the vision
-    update is relative to the target) and its control ticks (guidance flies to the target). Between them the
-    target's estimate is not read, provided the chaser latches it while vision lasts
+    update is relative to the target) and its control ticks (guidance flies to the target; a pair
+    ``(period, phase)`` when its control clock is staggered, ``vehicles.<id>.control_phase``). Between them
+    the target's estimate is not read, provided the chaser latches it while vision lasts
     (``agent.latch_target_with_vision``): the navigation that is relative to the target starts after a
     camera or control tick, whose estimate it then holds. Without the latch, ``None``: every tick (the
     published covariance reads it on each). docs/protocol.md, "Rates"."""
     if not sc.agent.latch_target_with_vision:
         return None
-    return tuple(sorted({sc.every(sc.camera.rate_hz), sc.control_every(chaser_id)}))
+    phase = sc.control_phase(chaser_id)
+    control = (sc.control_every(chaser_id), phase) if phase else sc.control_every(chaser_id)
+    return tuple(sorted({sc.every(sc.camera.rate_hz), control}, key=period_phase))
 
 
 def estimate_reads(sc, vehicle_id: str) -> tuple[int, ...] | None:
     """The tick periods of the estimates of ``vehicle_id`` its chasers read (:func:`target_reads`, all of
     them); ``None`` (every tick) for a vehicle that no chaser flies to, or one that a chaser without the
     latch does."""
-    periods: set[int] = set()
+    periods: set = set()
     chasers = [c for c in sc.chasers if sc.vehicles[c].target == vehicle_id]
     for c in chasers:
         reads = target_reads(sc, c)
         if reads is None:
             return None
         periods.update(reads)
-    return tuple(sorted(periods)) if chasers else None
+    return tuple(sorted(periods, key=period_phase)) if chasers else None
 
 
 def estimate_read(reads: tuple[int, ...] | None, k: int) -> bool:
@@ -205,7 +208,8 @@ class DockingTap:
         self._ids, self._chasers = list(sc.vehicles), list(sc.chasers)
         self._reads = {vid: estimate_reads(sc, vid) for vid in self._ids}  # as an agent publishes them
         self._truth_every = sc.every(sc.uwb.rate_hz)  # as the world process: truth on UWB slot ticks
-        self._command_every = {vid: sc.control_every(vid) for vid in self._ids}  # as an agent: control ticks
+        # as an agent: on its control ticks
+        self._command_every = {vid: (sc.control_every(vid), sc.control_phase(vid)) for vid in self._ids}
         ids = self._ids
         data = {"seed": self.seed, "vehicles": ids, "clock": "lockstep", "scenario": sc.name}
         self._write(self.keys.world_event(), encode(Event(0.0, "run_start", data)))
@@ -245,7 +249,8 @@ class DockingTap:
             self._write(
                 self.keys.guidance(vid), guidance_payload(sc, sim.policy, vid in sc.chasers, a, k, mode, cmd)
             )
-        if k % self._command_every[vid] == 0:
+        every, phase = self._command_every[vid]
+        if (k - phase) % every == 0:
             u, mode, force, torque = self._held[vid]
             self._write(self.keys.command(vid), command_payload(k, sc.dt_s, u, mode, force, torque))
 

@@ -51,12 +51,30 @@ def _check_int(value: object, name: str, lo: int) -> int:
     return value
 
 
-def reads_target(reads: tuple[int, ...] | None, k: int) -> bool:
+def period_phase(read) -> tuple[int, int]:
+    """``(period, phase)`` of one element of a ``reads`` tuple: a period ``e`` (the ticks ``k % e == 0``)
+    or a pair ``(e, phase)`` (the ticks ``(k - phase) % e == 0``, a staggered control clock)."""
+    return (read, 0) if isinstance(read, int) else (read[0], read[1])
+
+
+def reads_target(reads: tuple | None, k: int) -> bool:
     """Whether a chaser's tick ``k`` reads its target's estimate (``estimate(k - 1)``; tick 0 the initial
-    one): every tick if ``reads`` is ``None``, else the multiples of its periods (tick 0 among them).
+    one): every tick if ``reads`` is ``None``, else the ticks of its periods (:func:`period_phase`; tick 0
+    among them).
     ``reads`` is :func:`~swarm.transport.docking_wire.target_reads`'s; the target sends by the same rule
     (:func:`~swarm.transport.docking_wire.estimate_read`)."""
-    return reads is None or any(k % e == 0 for e in reads)
+    return reads is None or k == 0 or any((k - ph) % e == 0 for e, ph in map(period_phase, reads))
+
+
+def _check_read(read: object) -> int | tuple[int, int]:
+    """One element of ``target_reads``: a period >= 1, or ``(period, phase)`` with ``0 <= phase < period``."""
+    if isinstance(read, tuple | list) and len(read) == 2:
+        e = _check_int(read[0], "target_reads period", 1)
+        ph = _check_int(read[1], "target_reads phase", 0)
+        if ph >= e:
+            raise ConfigError(f"lockstep.target_reads phase must be below its period, got {tuple(read)!r}")
+        return (e, ph)
+    return _check_int(read, "target_reads", 1)
 
 
 def _wait(cond: threading.Condition, ready, timeout_s: float | None) -> bool:
@@ -155,9 +173,7 @@ class AgentTickAssembler:
         self.uwb_every = _check_int(uwb_every, "uwb_every", 1)
         self.vision_every = None if vision_every is None else _check_int(vision_every, "vision_every", 1)
         self.max_ahead = _check_int(max_ahead, "max_ahead", 0)
-        self.target_reads = (
-            None if target_reads is None else tuple(_check_int(e, "target_reads", 1) for e in target_reads)
-        )
+        self.target_reads = None if target_reads is None else tuple(_check_read(r) for r in target_reads)
         self._cond = threading.Condition() if cond is None else cond
         self._ready = ready
         self._next: int | None = None if start is None else _check_int(start, "start", 0)
@@ -512,7 +528,8 @@ class CommandBarrier:
     """The world's side of the lockstep: waits for every live agent's ``command(k)`` before stepping, on
     the ticks that agent commands.
 
-    An agent commands on its control ticks only, ``k % every[agent] == 0`` (its kind's controller rate),
+    An agent commands on its control ticks only, ``(k - phase[agent]) % every[agent] == 0`` (its kind's
+    controller rate, from its ``control_phase``),
     and the world holds that command until the next: on the ticks in between nobody has anything new to
     say, so the world does not wait for anyone (docs/protocol.md, "Rates"). The world then steps up to a
     control period ahead of the agents, which work through the buffered ticks while it steps: the two
@@ -525,10 +542,17 @@ class CommandBarrier:
     ``max_ahead`` ticks ahead), ``unknown`` (an agent id not given at construction).
     """
 
-    def __init__(self, agent_ids, max_ahead: int = DEFAULT_MAX_AHEAD, every: dict | None = None) -> None:
+    def __init__(
+        self,
+        agent_ids,
+        max_ahead: int = DEFAULT_MAX_AHEAD,
+        every: dict | None = None,
+        phase: dict | None = None,
+    ) -> None:
         """``agent_ids``: every agent that may send commands, all live at first; ``max_ahead``: ticks
         beyond the next one waited for that are still buffered; ``every``: each agent's command period
-        [ticks] (``None``, or an agent not in it: every tick)."""
+        [ticks] (``None``, or an agent not in it: every tick); ``phase``: each agent's first command tick
+        (its ``control_phase``, below its period; default 0): it commands on ``(k - phase) % every == 0``."""
         ids = tuple(check_id(a) for a in agent_ids)
         if len(set(ids)) != len(ids):
             raise ConfigError(f"lockstep.agent_ids must be distinct, got {ids!r}")
@@ -539,6 +563,14 @@ class CommandBarrier:
         if unknown:
             raise ConfigError(f"lockstep.every names agents not among {ids}: {unknown}")
         self.every = {a: _check_int(every.get(a, 1), f"lockstep.every[{a}]", 1) for a in ids}
+        phase = dict(phase or {})
+        unknown = sorted(set(phase) - set(ids))
+        if unknown:
+            raise ConfigError(f"lockstep.phase names agents not among {ids}: {unknown}")
+        self.phase = {a: _check_int(phase.get(a, 0), f"lockstep.phase[{a}]", 0) for a in ids}
+        late = sorted(a for a in ids if self.phase[a] >= self.every[a])
+        if late:
+            raise ConfigError(f"lockstep.phase must be below each agent's period, got it not for {late}")
         self._period = math.lcm(*self.every.values()) if ids else 1  # the pattern of due agents repeats
         self._due_cache: dict[tuple[frozenset, int], frozenset] = {}
         self._cond = threading.Condition()
@@ -574,7 +606,9 @@ class CommandBarrier:
         key = (self._live, k % self._period)
         due = self._due_cache.get(key)
         if due is None:
-            due = self._due_cache[key] = frozenset(a for a in self._live if k % self.every[a] == 0)
+            due = self._due_cache[key] = frozenset(
+                a for a in self._live if (k - self.phase[a]) % self.every[a] == 0
+            )
         return due
 
     def due(self, k: int) -> frozenset[str]:

@@ -105,7 +105,10 @@ class WorldProcess:
         self.drops = DropCounter()
         # each agent commands on its control ticks and the world holds the command in between (the in-process
         # run's World.take_commands takes the vehicles that decided one): the lockstep waits on those ticks
-        self.barrier = CommandBarrier(self.ids, every={v: sc.control_every(v) for v in self.ids})
+        self.barrier = CommandBarrier(
+            self.ids, every={v: sc.control_every(v) for v in self.ids},
+            phase={v: sc.control_phase(v) for v in self.ids},
+        )  # fmt: skip
         self._lock = threading.Lock()
         self._alive: set[str] = set()
         self._mothership = False
@@ -451,9 +454,9 @@ class WorldProcess:
         self._commanding.update(latest)
         flying = self._commanding - self.done
         self.commanded_ticks += len(flying)
-        every = self.barrier.every  # each agent's command period [ticks]
+        every, first = self.barrier.every, self.barrier.phase  # each agent's command period and phase [ticks]
         for vid in flying:
-            phase = k % every[vid]
+            phase = (k - first[vid]) % every[vid]
             stale = last[vid] < k - phase
             self.late_commands += stale
             if phase == 0:

@@ -33,10 +33,13 @@ CASES = {
                         "vehicles.chaser.euler_deg=[0.0, 0.0, 90.0]",
                         "kinds.ground.dispersions.wheel_slip_sigma_frac=0.05"], 1, 1),
     # issue 13: four pairs sharing one UWB channel (TDMA, 8 tags: 29.8 ranges/s each instead of 50), their
-    # agents in two agent hosts of four vehicles each (--vehicles-per-process 4), the first 30 s of the run
-    # (the whole docking takes ~80 s of wall time with ten processes on two cores)
-    "docking 4 pairs TDMA, agent hosts": ("docking", 2, "fixed", ["uwb.tdma=true", "sim.max_duration_s=30.0"],
-                                          4, 4),
+    # agents in two agent hosts of four vehicles each (--vehicles-per-process 4), their controller clocks
+    # staggered (vehicle m controls on ticks m, m + 10, ...), the first 30 s of the run (the whole docking
+    # takes ~80 s of wall time with ten processes on two cores)
+    "docking 4 pairs TDMA, agent hosts, staggered": (
+        "docking", 2, "fixed",
+        ["uwb.tdma=true", "sim.max_duration_s=30.0", "swarm.stagger_control=true"], 4, 4,
+    ),
 }  # fmt: skip
 FIELDS = ("docked", "docking_time_s", "effort", "position_error_m", "attitude_error_rad", "r1_m", "r2_m",
           "keepout_violated", "closest_approach_m", "final_mode", "modes", "estimator")  # fmt: skip

@@ -131,6 +131,16 @@ def test_a_target_sends_the_estimates_its_chasers_read():
     assert all(estimate_read(None, k) for k in range(31))
     off = load_scenario("docking", {"agent.latch_target_with_vision": False})
     assert target_reads(off, "chaser") is None and estimate_reads(off, "target") is None
+    # a chaser whose controller clock is staggered (control_phase 3) reads on its camera ticks and on
+    # ticks 3, 13, 23, ...: the target sends the estimates of the ticks before those
+    late = load_scenario("docking", {"vehicles.chaser.control_phase": 3})
+    assert target_reads(late, "chaser") == (5, (10, 3)) == estimate_reads(late, "target")
+    sent = [k for k in range(31) if estimate_read(estimate_reads(late, "target"), k)]
+    assert sent == [0, 2, 4, 9, 12, 14, 19, 22, 24, 29]
+    asm = chaser(uwb_every=100, start=0, target_reads=target_reads(late, "chaser"))
+    assert [k for k in range(1, 25) if asm._needed_estimate(k) is not None] == [3, 5, 10, 13, 15, 20, 23]
+    with pytest.raises(ConfigError, match="phase must be below"):
+        chaser(target_reads=(5, (10, 10)))
 
 
 def test_non_uwb_tick_completes_on_imu_alone():
@@ -558,11 +568,28 @@ def test_barrier_waits_for_each_agent_on_its_control_ticks_only():
     assert bar.due(20) == {"a", "b"}
 
 
+def test_barrier_waits_for_staggered_agents_on_their_own_phase():
+    """Staggered controller clocks (control_phase): a every 10 ticks from tick 3, b every 4 from tick 1,
+    c every 10 from 0. Oracle: (k - phase) % every == 0 per tick; before its phase an agent is not due."""
+    bar = CommandBarrier(["a", "b", "c"], every={"a": 10, "b": 4, "c": 10}, phase={"a": 3, "b": 1})
+    assert bar.phase == {"a": 3, "b": 1, "c": 0}
+    for k in range(61):
+        want = {x for x, e, p in (("a", 10, 3), ("b", 4, 1), ("c", 10, 0)) if k >= p and (k - p) % e == 0}
+        assert bar.due(k) == want, k
+    assert bar.due(0) == {"c"} and bar.wait(0, SHORT) == ({}, ["c"])
+    bar.add("a", command(3))
+    assert bar.wait(3, 0) == ({"a": command(3)}, [])
+
+
 def test_barrier_refuses_a_period_for_an_unknown_agent_or_below_one():
     with pytest.raises(ConfigError, match="not among"):
         CommandBarrier(["a"], every={"z": 2})
     with pytest.raises(ConfigError, match="every"):
         CommandBarrier(["a"], every={"a": 0})
+    with pytest.raises(ConfigError, match="phase must be below"):
+        CommandBarrier(["a"], every={"a": 10}, phase={"a": 10})
+    with pytest.raises(ConfigError, match="not among"):
+        CommandBarrier(["a"], phase={"z": 1})
 
 
 def test_barrier_concurrent_producers():
