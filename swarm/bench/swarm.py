@@ -16,6 +16,9 @@ first pair's ``imu(k)`` and ``estimate(k)`` on one clock (it decodes only the ti
   tick (``late_control_commands``), the stricter figure: a command one tick late makes one late tick of
   ten, but one late command of one;
 - **real-time factor**: simulated over wall time of the run (``run_end``);
+- **staggered** (``--stagger``): the vehicles' controller clocks spread over the control period
+  (``swarm.stagger_control``: vehicle ``m`` controls on ticks ``m % period``), instead of every vehicle
+  controlling on the same tick;
 - **sensor-to-estimate latency** p50/p99: ``estimate(k)`` minus ``imu(k)`` arrival, for the first pair's
   two vehicles: the agent's receive, filter and publish time plus one router hop each way. Since 4df9a3d
   the target sends only the estimates its chaser reads (a fifth), so its ticks are a sixth of the samples,
@@ -117,7 +120,7 @@ class _Probe:
         return handler
 
 
-def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, factor: float = 1.0) -> dict:
+def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagger: bool = False) -> dict:
     pairs = vehicles // 2
     ns = f"benchswarm{os.getpid()}v{vehicles}p{per_process}{clock}"
     endpoint = free_loopback_endpoint()
@@ -127,6 +130,8 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, factor
                "--agents", str(pairs), "--clock", clock, "--set", f"sim.max_duration_s={span_s}",
                "--json", str(out), "--namespace", ns, "--listen", endpoint,
                "--vehicles-per-process", str(per_process)]  # fmt: skip
+        if stagger:
+            cmd += ["--set", "swarm.stagger_control=true"]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         probe = _Probe()
         up = threading.Event()
@@ -165,6 +170,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, factor
         "vehicles": vehicles,
         "per_process": per_process,
         "clock": clock,
+        "staggered": stagger,
         "cpu_us_per_vehicle_tick": 1e6 * float(np.sum(agents)) / (len(agents) * ticks) if agents else None,
         "world_cpu_us_per_tick": 1e6 * cpu["world"] / ticks if cpu.get("world") is not None else None,
         "late_tick_share": late,
@@ -189,8 +195,9 @@ def late_share(clock: str, late_commands: list[int] | None) -> tuple[float | Non
 
 
 def run(preset: dict) -> dict:
-    cases = [_case(v, c, preset["span_s"], n) for c in preset["clocks"] for n in preset["per_process"]
-             for v in preset["vehicles"] if n <= v]  # fmt: skip
+    stagger = bool(preset.get("stagger", False))
+    cases = [_case(v, c, preset["span_s"], n, stagger) for c in preset["clocks"]
+             for n in preset["per_process"] for v in preset["vehicles"] if n <= v]  # fmt: skip
     return {
         "cases": cases,
         "span_s": preset["span_s"],
@@ -206,7 +213,8 @@ def _fmt(x, spec: str) -> str:
 def format_report(r: dict) -> str:
     lines = [
         f"swarm launch docking, {r['span_s']:.0f} s simulated per case "
-        f"({r['cores']} cores, 1-min load {r['load_1min']:.2f} at the end)",
+        f"({r['cores']} cores, 1-min load {r['load_1min']:.2f} at the end)"
+        + ("; controller clocks staggered" if any(c.get("staggered") for c in r["cases"]) else ""),
         "vehicles  per proc  clock      CPU us/vehicle/tick  world us/tick  late ticks / commands  "
         "real-time  latency p50/p99 us",
     ]

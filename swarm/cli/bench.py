@@ -96,6 +96,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                             help="agent hosts of N vehicles (default 1: a process per vehicle)")  # fmt: skip
             bp.add_argument("--span", type=float, default=None, metavar="S",
                             help="simulated seconds per case (default 20, 5 with --quick)")  # fmt: skip
+            bp.add_argument("--stagger", action="store_true", default=None,
+                            help="stagger the vehicles' controller clocks (swarm.stagger_control): vehicle "
+                                 "m controls on ticks m %% period, not all on one tick")  # fmt: skip
 
 
 def _add_flags(p: argparse.ArgumentParser, default) -> None:
@@ -138,6 +141,8 @@ def _swarm(args: argparse.Namespace) -> tuple[dict, str]:
         if not (math.isfinite(args.span) and 1.0 <= args.span <= 3600.0):
             raise ConfigError(f"--span must be a number of seconds in 1..3600, got {args.span}")
         preset["span_s"] = args.span
+    if getattr(args, "stagger", None):
+        preset["stagger"] = True
     record = bench.run(preset)
     return record, bench.format_report(record)
 
