@@ -73,6 +73,7 @@ def test_an_estimate_is_encoded_only_for_a_subscriber_and_always_handed_to_a_hos
         x = initial_truth(sc, 0, v)
         proc.agent = VehicleAgent(sc, v, x[0:3], x[3:6], x[6:10], np.full(9, 1e-4), "mdp")
         proc.pub_estimate = _Publisher(listened)
+        proc._estimate_listened = listened  # as Zenoh's matching listener keeps it
     got = []
     p["chaser"].assembler.add = lambda msg, source: got.append((msg, source))
     payloads = {}
