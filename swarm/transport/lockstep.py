@@ -63,7 +63,12 @@ def reads_target(reads: tuple | None, k: int) -> bool:
     among them).
     ``reads`` is :func:`~swarm.transport.docking_wire.target_reads`'s; the target sends by the same rule
     (:func:`~swarm.transport.docking_wire.estimate_read`)."""
-    return reads is None or k == 0 or any((k - ph) % e == 0 for e, ph in map(period_phase, reads))
+    if reads is None or k == 0:
+        return True
+    for r in reads:  # a loop, not any() over a generator: a chaser asks every tick
+        if (k % r == 0) if type(r) is int else ((k - r[1]) % r[0] == 0):
+            return True
+    return False
 
 
 def _check_read(read: object) -> int | tuple[int, int]:
