@@ -170,7 +170,7 @@ def test_the_recording_plays_back_as_a_landing_and_the_uavs_move(browser, run: L
         context = browser.new_context(viewport={"width": WIDTH, "height": HEIGHT})
         try:
             pg = context.new_page()
-            pg.goto(url)
+            pg.goto(f"{url}?fixedDpr=1")  # one resolution for both shots (test_browser_playback.py)
             pg.get_by_text("Connected").first.wait_for(timeout=UI_TIMEOUT_MS)
             pg.get_by_text("energy [kJ]").first.wait_for(timeout=UI_TIMEOUT_MS)
             shots, modes = {}, {}

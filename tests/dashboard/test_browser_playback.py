@@ -52,7 +52,10 @@ def dashboard_url(recording: Path) -> Iterator[str]:
 def page(browser, dashboard_url: str) -> Iterator[object]:
     context = browser.new_context(viewport={"width": WIDTH, "height": HEIGHT})
     pg = context.new_page()
-    pg.goto(dashboard_url)
+    # a fixed resolution: Viser lowers it while frames are slow (its adaptive DPR), and on a loaded machine a
+    # shot at one resolution against one at another differed everywhere (grid lines, anchors: 8-11 grey
+    # levels where 2 is allowed); the two shots must differ only by what moved
+    pg.goto(f"{dashboard_url}?fixedDpr=1")
     pg.get_by_text("Connected").first.wait_for(timeout=UI_TIMEOUT_MS)
     pg.get_by_text("agent process").first.wait_for(timeout=UI_TIMEOUT_MS)  # the agents table header
     yield pg
@@ -80,6 +83,10 @@ def _seek(pg, t_s: float) -> None:
                 raise
 
 
+_CANVASES = "() => Array.from(document.querySelectorAll('canvas')).map(c => [c.width, c.clientWidth])"
+"""Each canvas's drawing-buffer width and its width on the page [px]."""
+
+
 def _steady_screenshot(pg, path: Path) -> np.ndarray:
     """A grey-level screenshot once the (paused) view stops changing and is not blank: software WebGL fades
     the view in after the page loads, and the trails follow the poses at their own rate."""
@@ -87,6 +94,10 @@ def _steady_screenshot(pg, path: Path) -> np.ndarray:
     before = None
     while True:
         png = pg.screenshot(path=str(path))
+        drawn = max(w for w, _ in pg.evaluate(_CANVASES))  # the scene's canvas, the widest
+        assert drawn == WIDTH, (
+            f"the scene is drawn {drawn} px wide on a {WIDTH} px page: its resolution moved"
+        )
         img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_GRAYSCALE).astype(np.float64)
         steady = before is not None and np.array_equal(img, before)
         if steady and img[SCENE_REGION].var() > MIN_SCENE_VARIANCE:
