@@ -163,8 +163,9 @@ class SwarmParams:
     stagger_control: bool = False
     """Spread the copies' control steps over the control period: vehicle ``m`` of the copies (in order,
     chaser0, target0, chaser1, ...) gets ``control_phase = m % its control period``. Off: every vehicle
-    controls on the ticks of the original. ``--agents 1`` makes no copies: the scenario's own phases hold. Independent vehicles' controllers are not in phase; in one
-    agent host, 16 vehicles controlling on one tick need that tick's CPU 16 times over."""
+    controls on the ticks of the original. ``--agents 1`` makes no copies: the scenario's own phases hold.
+    Independent vehicles' controllers are not in phase; in one agent host, 16 vehicles controlling on one
+    tick need that tick's CPU 16 times over."""
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.pair_spacing_m) and self.pair_spacing_m > 0):
