@@ -162,7 +162,7 @@ class WorldProcess:
     def _state(self, wall_s: float, cpu_s: float) -> dict:
         now = time.monotonic()
         return {
-            "run": self._run_id(), "tick": self.world.k, "world": self.world.snapshot(),
+            "run": self._run_id(), "tick": self.world.k, "world": self.world.snapshot(pickled_streams=True),
             "sensors": self._sensors, "modes": dict(self.modes), "referee": self.referee.snapshot(),
             "missing_ticks": self.missing_ticks, "state": self.state,
             "delays": {v: list(w) for v, w in self._delays.items()},
