@@ -67,7 +67,6 @@ class AgentHost:
         # lockstep waits for complete ticks only; free-running, a tick goes as soon as its imu is in, and
         # the range or frame that comes after it is fused before the next tick (late fusion)
         self.grace_s = None if self.clock.lockstep else 0.0
-        self.late = not self.clock.lockstep
         # a chaser whose target is hosted here takes its estimates from the target's agent, not from Zenoh
         by_id = {p.id: p for p in self.procs}
         for p in self.procs:
@@ -117,43 +116,36 @@ class AgentHost:
     def _loop(self) -> bool:
         """Step the vehicles until every run is over or ``stop``; ``True`` if some run ended (a summary).
 
-        Each round polls only the vehicles whose assembler has news (the shared ``ready`` set) or whose
-        free-running tick is due, processes the ticks that are ready outside the lock, and sleeps when none
-        is, until a message, the nearest due time or :data:`IDLE_S`."""
+        Each round polls only the vehicles whose assembler has news (the shared ``ready`` set), processes
+        what is ready outside the lock (a free-running vehicle's late ranges and frames, then its tick), and
+        sleeps when nothing is, until a message or :data:`IDLE_S`. No tick has a deadline: lockstep takes
+        complete ticks, free-running a tick once its ``imu`` is in (late fusion)."""
         live = list(self.procs)
         by_asm = {p.assembler: p for p in live}
         cond, ready = self.cond, self.ready
-        due: dict = {}  # proc -> monotonic time its pending free-running tick is taken without what it lacks
         ready.update(by_asm)
         ended = False
         while live and not self.stop.is_set():
             batch = []
             with cond:
-                now = time.monotonic()
-                polled = {by_asm[a] for a in ready if a in by_asm} | {p for p, t in due.items() if t <= now}
+                polled = {by_asm[a] for a in ready if a in by_asm}
                 ready.clear()
                 for p in live:  # in host order: the same order every round
                     if p not in polled or not p.ticking():
                         continue
-                    late = p.assembler.take_late() if self.late else ()
-                    inp, when = p.assembler.poll(self.grace_s, now)
-                    if late:
-                        batch.append((p, late, None))
+                    late = p.assembler.take_late()  # always none in lockstep
+                    inp, _ = p.assembler.poll(self.grace_s)
                     if inp is not None:
-                        batch.append((p, (), inp))
                         ready.add(p.assembler)  # it may have a further tick ready
-                        due.pop(p, None)
-                    elif when is not None:
-                        due[p] = when
-                    else:
-                        due.pop(p, None)
+                    if late or inp is not None:
+                        batch.append((p, late, inp))
                 if not batch and not ready:
-                    cond.wait(max(0.0, min([now + IDLE_S, *due.values()]) - now))
+                    cond.wait(IDLE_S)
             for p, late, inp in batch:  # the round's commands first: the world (lockstep) waits for them
                 try:
-                    if inp is None:
+                    if late:
                         p.fuse_late(late)  # free-running: before the tick that follows theirs
-                    else:
+                    if inp is not None:
                         p.process(inp)
                 except Exception:
                     _LOG.exception("%s: agent failed at tick %s", p.id, "late" if inp is None else inp.tick)
@@ -170,5 +162,4 @@ class AgentHost:
             for p in [p for p in live if p.done(now)]:
                 ended = p.finish() or ended
                 live.remove(p)
-                due.pop(p, None)
         return ended
