@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 PYTEST_ARGS ?=
 
-.PHONY: demo test lint bench clean chromium
+.PHONY: demo test lint bench clean chromium compile
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -15,8 +15,14 @@ $(STAMP): pyproject.toml
 
 # The swarm as processes with its dashboard (http://localhost:8080), at twice real time (a docking takes about
 # a minute), a new seed after each docking, until Ctrl-C. `swarm demo` is the in-process tour (no browser).
-demo: $(STAMP)
+demo: compile
 	$(VENV)/bin/swarm launch docking --clock scaled:2 --repeat
+
+# numba's kernels compiled into its cache before the first run, the independent chains in parallel processes
+# (swarm/cli/compile.py): ~2 min on two cores for a fresh checkout instead of ~4 min paid inside the first
+# tests and processes; a few seconds when cached
+compile: $(STAMP)
+	$(VENV)/bin/swarm compile
 
 # ruff, then the import layers of docs/architecture.md (.importlinter)
 lint: $(STAMP)
@@ -36,7 +42,7 @@ chromium:
 	    || echo "make: could not install chromium: browser tests will skip" >&2; }
 
 # pytest exits 5 when it collects nothing: that is a failure of the suite, say so instead of passing.
-test: lint chromium
+test: lint chromium compile
 	$(PY) -m pytest $(PYTEST_ARGS); rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests" >&2; exit 1; fi; exit $$rc
 

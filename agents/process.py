@@ -40,6 +40,7 @@ import numpy as np
 from swarm.core import rotations as rot
 from swarm.core.ranging import position_from_ranges
 from swarm.errors import ConfigError
+from swarm.scenario import Scenario
 from swarm.step.agent import AgentInputs, TargetEstimate, VehicleAgent
 from swarm.step.initial import initial_estimate
 from swarm.step.world import initial_truth
@@ -383,21 +384,9 @@ class AgentProcess:
         self.agent.set_target_estimate(_target(e))
 
     def _warm_up(self) -> None:
-        """Run every compiled kernel once on a throwaway agent, so that numba's compilation (or cache
-        load) happens before this process says it is ready, not inside the first lockstep ticks."""
-        sc, dt = self.sc, self.dt
-        x = initial_truth(sc, self.seed, self.id)
-        scratch = VehicleAgent(sc, self.id, x[0:3], x[3:6], x[6:10], np.full(9, 1e-4), self.policy)
-        scratch.on_imu(dt, dt, np.zeros(3), x[6:10])
-        scratch.on_uwb(0, float(np.linalg.norm(np.asarray(sc.anchors_m[0]) - x[0:3])))
-        if self.chaser:
-            scratch.set_target_estimate(
-                TargetEstimate(0.0, x[0:3] + np.array([0.0, 0.0, 0.3]), x[6:10], np.eye(3) * 1e-4)
-            )
-            points = np.array([[0.01 * i, 0.01 * (i % 2), 0.3] for i in range(len(scratch.markers_target))])
-            scratch.on_vision(dt, "features", points)
-        scratch.control(0.0, self.control_every * dt)
-        estimate_payload(scratch, 1)  # and the estimate's compiled checks (swarm.transport._codec_nb)
+        """Every compiled kernel of an agent's tick run once (:func:`warm_up`) before this process says it is
+        ready, not inside the first lockstep ticks."""
+        warm_up(self.sc, self.seed, self.id, self.policy)
 
     # ------------------------------------------------------------------------------ driven by AgentHost
 
@@ -490,3 +479,22 @@ class AgentProcess:
         from agents.host import AgentHost
 
         AgentHost([self], self.session, self.keys, self.stop).run()
+
+
+def warm_up(sc: Scenario, seed: int, vid: str, policy: str) -> None:
+    """Run every compiled kernel of vehicle ``vid``'s agent once on a throwaway agent (propagation, a range,
+    for a chaser a camera frame, the control step, the estimate's compiled checks), so that numba's
+    compilation or cache load happens before an agent process says it is ready. ``swarm compile`` calls it."""
+    dt = sc.dt_s
+    x = initial_truth(sc, seed, vid)
+    scratch = VehicleAgent(sc, vid, x[0:3], x[3:6], x[6:10], np.full(9, 1e-4), policy)
+    scratch.on_imu(dt, dt, np.zeros(3), x[6:10])
+    scratch.on_uwb(0, float(np.linalg.norm(np.asarray(sc.anchors_m[0]) - x[0:3])))
+    if sc.vehicles[vid].role == "chaser":
+        scratch.set_target_estimate(
+            TargetEstimate(0.0, x[0:3] + np.array([0.0, 0.0, 0.3]), x[6:10], np.eye(3) * 1e-4)
+        )
+        points = np.array([[0.01 * i, 0.01 * (i % 2), 0.3] for i in range(len(scratch.markers_target))])
+        scratch.on_vision(dt, "features", points)
+    scratch.control(0.0, sc.control_every(vid) * dt)
+    estimate_payload(scratch, 1)  # and the estimate's compiled checks (swarm.transport._codec_nb)

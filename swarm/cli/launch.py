@@ -100,8 +100,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     g.add_argument(
         "--pace", type=clock_arg, default=None, metavar="realtime|scaled:N",
-        help="a landing scenario: a lockstep run (every command waited for, so it equals swarm sim) never "
-        "ahead of this wall clock, to watch it; --clock realtime or scaled:N alone is free-running",
+        help="a lockstep run (every command waited for, so it still equals swarm sim) never ahead of this "
+        "wall clock, to watch it or to leave the cores to others; --clock realtime or scaled:N alone is "
+        "free-running",
     )  # fmt: skip
     add_world_timeouts(g)
     p.set_defaults(func=run)
@@ -249,11 +250,9 @@ def run(args: argparse.Namespace) -> int:
         from swarm.cli.launch_landing import run_landing_launch
 
         return run_landing_launch(args)
-    if args.pace is not None:
-        raise ConfigError(
-            "--pace: a landing scenario's lockstep pacing; a docking swarm runs --clock lockstep as fast as "
-            "it can, or free-running at --clock realtime or scaled:N"
-        )
+    from swarm.transport.process import check_pace
+
+    check_pace(args.clock, args.pace)
 
     from swarm.cli.sim import print_summary
     from swarm.cli.supervisor import Child, Supervisor
@@ -334,7 +333,8 @@ def run(args: argparse.Namespace) -> int:
                         result = None
                         break
                     n_proc = len(sup.children)
-                    print(f"swarm up: {n_proc} processes, seed {seed}, clock {args.clock}", flush=True)
+                    paced = "" if args.pace is None else f" paced at {args.pace}"
+                    print(f"swarm up: {n_proc} processes, seed {seed}, clock {args.clock}{paced}", flush=True)
                     outcome = _supervise(args, sc, sup, alive_changes, log, stop, wall0, announce)
                     if outcome == "ended":
                         _wait_summaries(sc, log, sup, child_of=_child_of(args, sc))
@@ -409,6 +409,8 @@ def _start_run(args, sc, seed, endpoint, sup, Child):
     world = ["swarm.world", "--clock", str(args.clock), "--step-timeout", str(args.step_timeout),
              "--start-timeout", str(args.start_timeout),
              "--checkpoint-dir", str(args.checkpoint_dir)]  # fmt: skip
+    if args.pace is not None:
+        world += ["--pace", str(args.pace)]
     world += [*common, *config_args(args, "world")]
     sup.start(Child("world", world, restartable=True, rejoin_args=["--resume"]))
     if not args.headless and not (sup.children.get("dashboard") and sup.children["dashboard"].running):

@@ -16,6 +16,7 @@ def build_parser() -> argparse.ArgumentParser:
     from swarm.cli import (
         analyze,
         bench,
+        compile,
         dashboard,
         demo,
         fault,
@@ -45,6 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
         record,
         foxglove_bridge,
         bench,
+        compile,
         launch,
         router,
         fault,

@@ -16,10 +16,15 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from swarm.args import add_world_timeouts
-    from swarm.transport.process import add_process_arguments
+    from swarm.transport.process import add_process_arguments, clock_arg
 
     add_process_arguments(p)
     add_world_timeouts(p)
+    p.add_argument(
+        "--pace", type=clock_arg, default=None, metavar="realtime|scaled:N",
+        help="a lockstep world paced to this clock: every command waited for (the run is the unpaced one), "
+        "never ahead of the wall clock, to watch it or to leave a machine's cores to others",
+    )  # fmt: skip
     p.add_argument(
         "--clock-every", type=int, default=10, metavar="TICKS",
         help="publish world/clock every this many ticks (default 10)",
@@ -37,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
-    from swarm.transport.process import keys_from, scenario_from, zenoh_args
+    from swarm.transport.process import check_pace, keys_from, scenario_from, zenoh_args
     from swarm.transport.session import open_session
     from swarm.world import checkpoint
     from swarm.world.process import WorldProcess
@@ -46,6 +51,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
         raise ConfigError(f"--clock-every must be an integer >= 1, got {args.clock_every!r}")
     if args.resume and args.checkpoint_dir is None:
         raise ConfigError("--resume needs --checkpoint-dir (the directory of the checkpoint to resume)")
+    check_pace(args.clock, args.pace)
     sc = scenario_from(args)
     stop = stop if stop is not None else threading.Event()
     resume = None
@@ -56,7 +62,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
             proc = WorldProcess(
                 sc, args.seed, session, keys_from(args), args.clock, stop, step_timeout_s=args.step_timeout,
                 start_timeout_s=args.start_timeout, clock_every=args.clock_every,
-                checkpoint_dir=args.checkpoint_dir, resume=resume,
+                checkpoint_dir=args.checkpoint_dir, resume=resume, pace=args.pace,
             )  # fmt: skip
             end = proc.run()
     except checkpoint.CheckpointError as exc:

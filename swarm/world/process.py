@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from swarm.scenario import Scenario
 from swarm.step.referee import Referee
 from swarm.step.world import World
 from swarm.transport.docking_wire import contact_event, keepout_event, world_sensors
@@ -80,10 +81,13 @@ class WorldProcess:
         process_id: str = "world",
         checkpoint_dir: str | Path | None = None,
         resume: dict | None = None,
+        pace: ClockSpec | None = None,
     ) -> None:
-        """``checkpoint_dir``: write the state there every tick (``None``: never); ``resume``: a state
-        :func:`swarm.world.checkpoint.load` read, to continue from (:class:`CheckpointError` if it is not a
-        state of this run: another scenario, seed or vehicle set)."""
+        """``pace``: a lockstep world that also never runs ahead of this wall clock (realtime or scaled:N;
+        every command is still waited for, so the run is the unpaced one); ``checkpoint_dir``: write the
+        state there every tick (``None``: never); ``resume``: a state :func:`swarm.world.checkpoint.load`
+        read, to continue from (:class:`CheckpointError` if it is not a state of this run: another scenario,
+        seed or vehicle set)."""
         sc = scenario
         self.sc, self.seed, self.session, self.keys, self.clock, self.stop = (
             sc,
@@ -93,6 +97,7 @@ class WorldProcess:
             clock,
             stop,
         )
+        self.pace = clock if not clock.lockstep else pace  # the wall clock the ticks keep to, if any
         self.step_timeout_s = step_timeout_s
         self.start_timeout_s = start_timeout_s
         self.clock_every = max(1, int(clock_every))
@@ -554,19 +559,8 @@ class WorldProcess:
         self.world.set_command(vid, np.zeros(self.world.command_size(vid)))
 
     def _warm_up(self) -> None:
-        """Run every compiled kernel of a tick once on a scratch world (dynamics, sensors, the camera's
-        visibility and feature model, the referee), so that numba's compilation or cache load happens
-        before this process says it is ready, not inside the run (nor in its timing)."""
-        w = World(self.sc, self.seed)
-        w.step(build_frames=False)
-        w.k = w.vision_every  # a camera tick: every chaser's visibility test runs
-        w.frames()
-        w.radio_env(0.0)
-        ref = Referee(self.sc)
-        X = w.X.copy()
-        for c, t in ref.pairs:  # every chaser next to its target: the whole referee runs
-            X[c, 0:3] = X[t, 0:3] + 0.5 * ref.g.keepout_radius_m
-        ref.judge(X, 0.0, dict.fromkeys(self.chasers, "APPROACH"))
+        """Every compiled kernel of a tick run once (:func:`warm_up`) before this process says it is ready."""
+        warm_up(self.sc, self.seed)
 
     def run(self) -> dict:
         """Serve one run; returns the ``run_end`` data once stopped (a world whose run ended stays up,
@@ -599,6 +593,8 @@ class WorldProcess:
         if self.resumed_at is None:
             start = {"seed": self.seed, "vehicles": self.ids, "clock": str(self.clock),
                      "scenario": self.sc.name}  # fmt: skip
+            if self.clock.lockstep and self.pace is not None:
+                start["pace"] = str(self.pace)
             self._world_event("run_start", 0.0, start)
             self._publish_clock(0)
         else:
@@ -637,8 +633,8 @@ class WorldProcess:
             self._publish_tick(tick, self._sensors)
             if tick % self.clock_every == 0:
                 self._publish_clock(tick)
-            if not self.clock.lockstep:
-                due = pace0 + (tick - pace_k) * dt / self.clock.factor
+            if self.pace is not None:  # free-running, or a paced lockstep (never ahead of the wall clock)
+                due = pace0 + (tick - pace_k) * dt / self.pace.factor
                 left = due - time.monotonic()
                 if left > 0:
                     self.stop.wait(left)
@@ -668,3 +664,19 @@ class WorldProcess:
         self.drops.flush()
         self.stop.wait()
         return end
+
+
+def warm_up(sc: Scenario, seed: int = 0) -> None:
+    """Run every compiled kernel of a world tick once on a scratch world (dynamics, sensors, the camera's
+    visibility and feature model, the referee), so that numba's compilation or cache load happens before a
+    world process says it is ready, not inside the run (nor in its timing). ``swarm compile`` calls it too."""
+    w = World(sc, seed)
+    w.step(build_frames=False)
+    w.k = w.vision_every  # a camera tick: every chaser's visibility test runs
+    w.frames()
+    w.radio_env(0.0)
+    ref = Referee(sc)
+    X = w.X.copy()
+    for c, t in ref.pairs:  # every chaser next to its target: the whole referee runs
+        X[c, 0:3] = X[t, 0:3] + 0.5 * ref.g.keepout_radius_m
+    ref.judge(X, 0.0, dict.fromkeys(sc.chasers, "APPROACH"))

@@ -2,10 +2,10 @@
 loopback Zenoh, watching the world's clock from the test, and a headless Chromium.
 
 :func:`launch_swarm` is the one place that starts "a launched swarm with its dashboard": ``swarm launch
-docking --clock lockstep --dashboard-port 0 ...``, the real world, mothership and agent processes. Other
-dashboard tests drive the dashboard with :mod:`tests.dashboard.fake_swarm`, a scripted swarm whose every
-message a test controls. :func:`recording` is an MCAP recording of that scripted swarm for the playback
-tests (:mod:`tests.dashboard.recorded`).
+docking --clock lockstep --pace realtime --dashboard-port 0 ...``, the real world, mothership and agent
+processes. Other dashboard tests drive the dashboard with :mod:`tests.dashboard.fake_swarm`, a scripted
+swarm whose every message a test controls. :func:`recording` is an MCAP recording of that scripted swarm
+for the playback tests (:mod:`tests.dashboard.recorded`).
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from __future__ import annotations
 import shutil
 import sys
 import threading
+import time
 import uuid
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -27,6 +28,7 @@ from swarm.transport.messages import Clock, DropCounter, Event, Fault, Uwb
 from swarm.transport.session import ZenohArgs, open_session, subscribe_decoded
 from tests.transport.procs import REPO, Proc, Procs, free_port, loopback, wait_until
 
+PACE = "realtime"  # the launched swarm's pace (launch_swarm): lockstep, never ahead of real time
 START_TIMEOUT_S = 20.0  # a Python start with numpy, zenoh and viser (~1-2 s here) on a loaded 2-core machine
 ARTIFACTS = REPO / "artifacts"
 CHROMIUM_FLAGS = [
@@ -95,17 +97,20 @@ def launch_swarm(
     timeout_s: float | None = None,
     scenario: str = "docking",
 ) -> LaunchedSwarm:
-    """``swarm launch SCENARIO --agents PAIRS`` (lockstep) with its dashboard on a free port (module
-    docstring). The chasers approach at a tenth of the docking scenario's speed so that the run lasts longer
-    than the browser tests (a lockstep docking otherwise ends within ~30 s of wall time here), and the run
-    may last 1000 simulated seconds. ``secure``: ``--secure`` (mutual TLS and Zenoh's ACL, certificates made
-    by the launcher; its router listens on a free TLS port); ``timeout_s``: the launcher's ``--timeout``."""
+    """``swarm launch SCENARIO --agents PAIRS`` (lockstep, paced at real time) with its dashboard on a
+    free port (module docstring). The pace leaves the cores to the browser: a lockstep swarm stepping as
+    fast as it can takes both, and the page then takes seconds to draw each frame. The chasers approach at
+    a tenth of the docking scenario's speed so that the run lasts longer than the browser tests, and the
+    run may last 1000 simulated seconds. ``secure``: ``--secure`` (mutual TLS and Zenoh's ACL, certificates
+    made by the launcher; its router listens on a free TLS port); ``timeout_s``: the launcher's
+    ``--timeout``."""
     namespace = new_namespace("dash")
     listen = [] if secure else ["--listen", loopback(free_port())]
     extra = (["--secure"] if secure else []) + ([] if timeout_s is None else ["--timeout", str(timeout_s)])
     proc = procs.start(
         [sys.executable, "-m", "swarm.cli.main", "launch", scenario, "--agents", str(pairs),
-         "--clock", "lockstep", "--dashboard-port", "0", "--namespace", namespace, *listen, *extra,
+         "--clock", "lockstep", "--pace", PACE, "--dashboard-port", "0", "--namespace", namespace, *listen,
+         *extra,
          "--set", "guidance.approach_speed_m_s=0.002", "--set", "sim.max_duration_s=1000"]
     )  # fmt: skip
     config = None
@@ -126,6 +131,7 @@ class ClockWatch:
     def __init__(self, endpoint: str, namespace: str, zenoh_config: str | None = None) -> None:
         self._cond = threading.Condition()
         self.clocks: list[Clock] = []
+        self.arrived: list[float] = []  # time.monotonic() at each of clocks' arrivals
         self.drops = DropCounter()
         mode = None if zenoh_config is None else "client"
         self._session = open_session(ZenohArgs(mode=mode, connect=(endpoint,), config_file=zenoh_config))
@@ -138,7 +144,8 @@ class ClockWatch:
     def _on_clock(self, _key: str, msg: Clock) -> None:
         with self._cond:
             self.clocks.append(msg)
-            del self.clocks[:-1000]
+            self.arrived.append(time.monotonic())
+            del self.clocks[:-1000], self.arrived[:-1000]
             self._cond.notify_all()
 
     @property

@@ -108,9 +108,17 @@ def test_pause_click_stops_the_world_clock_and_resume_restarts_it(page, swarm: L
         page.get_by_text("paused").first.wait_for(timeout=UI_TIMEOUT_MS)  # the dashboard shows it too
 
         page.get_by_role("button", name="Resume").click()
-        running = lambda c: c.state == "running" and c.tick > paused.tick + 10  # noqa: E731
+        running = lambda c: c.state == "running" and c.tick > paused.tick + 150  # noqa: E731
         resumed = watch.wait_for(running, CLOCK_TIMEOUT_S, "the world to resume")
         assert resumed.seed == paused.seed  # resume continues the same run
+        # --pace realtime: the lockstep never runs ahead of the wall clock (unpaced it runs 2-3x here). From
+        # the first running clock after the pause to the last: simulated time <= wall time, with 0.1 s for
+        # the delivery jitter of the two clocks (they come every 0.1 s of simulated time)
+        with watch._cond:
+            stretch = [(w, c) for w, c in zip(watch.arrived, watch.clocks, strict=True)
+                       if c.tick > paused.tick and c.state == "running"]  # fmt: skip
+        (w0, c0), (w1, c1) = stretch[0], stretch[-1]
+        assert c1.t_s - c0.t_s >= 1.0 and c1.t_s - c0.t_s <= (w1 - w0) + 0.1, (c1.t_s - c0.t_s, w1 - w0)
         page.screenshot(path=str(ARTIFACTS / "dashboard-after-resume.png"))
     finally:
         watch.close()

@@ -442,6 +442,8 @@ BAD_FLAGS = [
     ([VPP, "2", "--secure"], f"{VPP} > 1 and --secure: an agent host would need every hosted vehicle's"),
     (["--record", "run.txt"], "--record: the recording's name must end in .mcap, got 'run.txt'"),
     (["--record", "/nowhere/run.mcap"], "--record: no such directory '/nowhere'"),
+    (["--pace", "lockstep"], "--pace must be realtime or scaled:N"),
+    (["--clock", "scaled:2", "--pace", "realtime"], "--clock scaled:2 is free-running already"),
 ]
 
 
