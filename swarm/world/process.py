@@ -680,3 +680,5 @@ def warm_up(sc: Scenario, seed: int = 0) -> None:
     for c, t in ref.pairs:  # every chaser next to its target: the whole referee runs
         X[c, 0:3] = X[t, 0:3] + 0.5 * ref.g.keepout_radius_m
     ref.judge(X, 0.0, dict.fromkeys(sc.chasers, "APPROACH"))
+    for c in range(len(ref.pairs)):  # and the contact's report (the docked pose's quaternion product)
+        ref.contact(X, c, 0.0)
