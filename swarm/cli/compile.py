@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import multiprocessing
 import os
-import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -139,8 +138,3 @@ def run(args: argparse.Namespace) -> int:
     print(f"compiled in {time.perf_counter() - t0:.1f} s", flush=True)
     return 0
 
-
-if __name__ == "__main__":
-    from swarm.cli.main import main
-
-    sys.exit(main(["compile", *sys.argv[1:]]))
