@@ -3,7 +3,9 @@
 Three measurements in one run, all between separate processes on loopback, in the launcher's topology
 (every process a Zenoh client of one router, so each message crosses the router):
 
-1. raw Zenoh ping-pong round trip of a 64-byte payload between two client processes (the floor);
+1. raw Zenoh ping-pong round trip of a 64-byte payload between two client processes (the floor), and the
+   echoing process's CPU per message received and published again, from Zenoh's callback thread and
+   handed to a main thread as the swarm's processes do (the per-message floor of a Python process);
 2. the lockstep tick period of ``swarm launch docking --agents N`` for N = 1, 4, 16 pairs: wall time per
    world tick over a fixed simulated span (``run_end``'s ``wall_s`` / ticks), and the real-time factor;
 3. sensor-to-estimate latency in ``realtime`` mode: a probe client stamps the arrival of the chaser's
@@ -42,15 +44,40 @@ def _router(endpoint: str):
     return open_session(ZenohArgs(mode="router", listen=(endpoint,)), lean=True)
 
 
-def _pong(endpoint: str, ns: str) -> None:
+def _pong(endpoint: str, ns: str, style: str = "direct") -> None:
+    """Echo every ping. ``direct``: published from Zenoh's callback thread; ``handoff``: the callback hands
+    the message to the main thread through a condition, which publishes it: the pattern of the swarm's
+    processes (a callback only queues, the main loop steps and publishes). On stdin's end it prints its CPU
+    time per echo [us] (every thread of the process, Zenoh's own included) over the pings it answered."""
     import zenoh
 
+    first, n = [None], [0]
     with _client(endpoint) as s:
         pub = s.declare_publisher(f"{ns}/pong", express=True, reliability=zenoh.Reliability.RELIABLE)
-        s.declare_subscriber(f"{ns}/ping", lambda sample: pub.put(sample.payload))
-        s.liveliness().declare_token(f"{ns}/pong-up")
+        cond, queue, eof = threading.Condition(), [], threading.Event()
+
+        def on_ping(sample) -> None:
+            if first[0] is None:
+                first[0] = time.process_time()
+            n[0] += 1
+            if style == "direct":
+                pub.put(sample.payload)
+                return
+            with cond:
+                queue.append(sample.payload)
+                cond.notify()
+
+        s.declare_subscriber(f"{ns}/ping", on_ping)
         print("pong ready", flush=True)
-        sys.stdin.read()  # until the parent closes our stdin
+        threading.Thread(target=lambda: (sys.stdin.read(), eof.set()), daemon=True).start()
+        while not eof.is_set():  # the main loop (handoff) or a wait for stdin's end (direct)
+            with cond:
+                cond.wait_for(lambda: queue or eof.is_set(), 0.1)
+                items, queue[:] = queue[:], []
+            for payload in items:
+                pub.put(payload)
+        cpu = time.process_time() - first[0] if first[0] is not None else float("nan")
+        print(json.dumps({"cpu_us_per_echo": 1e6 * cpu / max(n[0], 1), "echoes": n[0]}), flush=True)
 
 
 def _ping(endpoint: str, ns: str, n: int) -> None:
@@ -60,6 +87,9 @@ def _ping(endpoint: str, ns: str, n: int) -> None:
     with _client(endpoint) as s:
         pub = s.declare_publisher(f"{ns}/ping", express=True, reliability=zenoh.Reliability.RELIABLE)
         s.declare_subscriber(f"{ns}/pong", lambda _s: got.set())
+        deadline = time.monotonic() + 10  # until the router routes our pings to the pong's subscriber
+        while not pub.matching_status.matching and time.monotonic() < deadline:
+            time.sleep(0.005)
         payload = b"x" * 64
         rtts = []
         for i in range(n + 50):
@@ -73,23 +103,24 @@ def _ping(endpoint: str, ns: str, n: int) -> None:
         print(json.dumps(rtts), flush=True)
 
 
-def _rtt(n: int) -> dict:
+def _rtt(n: int, style: str = "direct") -> dict:
+    """Ping-pong between two client processes through a router: the round trip [us] and the pong's CPU per
+    echo [us] (:func:`_pong`'s ``style``)."""
     endpoint, ns = free_loopback_endpoint(), f"bench{os.getpid()}"
-    with _router(endpoint) as router:
-        pong = subprocess.Popen([sys.executable, "-m", "swarm.bench.transport", "pong", endpoint, ns],
+    with _router(endpoint):
+        pong = subprocess.Popen([sys.executable, "-m", "swarm.bench.transport", "pong", endpoint, ns, style],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
         try:
             assert pong.stdout.readline().strip() == "pong ready"
-            deadline = time.monotonic() + 10
-            while not list(router.liveliness().get(f"{ns}/pong-up")) and time.monotonic() < deadline:
-                time.sleep(0.01)
             ping = [sys.executable, "-m", "swarm.bench.transport", "ping", endpoint, ns, str(n)]
             out = subprocess.run(ping, capture_output=True, text=True, timeout=300)
             rtts = np.array(json.loads(out.stdout.strip().splitlines()[-1])) * 1e6
         finally:
             pong.stdin.close()
+            echo = json.loads(pong.stdout.readline() or "{}")
             pong.wait(10)
-    return {"median": float(np.median(rtts)), "p99": float(np.percentile(rtts, 99)), "n": len(rtts)}
+    return {"median": float(np.median(rtts)), "p99": float(np.percentile(rtts, 99)), "n": len(rtts),
+            "pong_cpu_us_per_echo": echo.get("cpu_us_per_echo")}  # fmt: skip
 
 
 def _lockstep(pairs: int, span_s: float) -> dict:
@@ -151,11 +182,13 @@ def _latency(duration_s: float) -> dict:
 
 def run(preset: dict) -> dict:
     rtt = _rtt(preset["rtt_samples"])
+    handoff = _rtt(preset["rtt_samples"], "handoff")
     lock = {str(n): _lockstep(n, preset["span_s"]) for n in preset["pairs"]}
     latency = _latency(preset["latency_s"])
     one = lock["1"]["tick_us"]
     return {
         "zenoh_rtt_us": rtt,
+        "handoff_rtt_us": handoff,
         "lockstep_tick_us": {n: v["tick_us"] for n, v in lock.items()},
         "lockstep_realtime_factor": {n: v["realtime_factor"] for n, v in lock.items()},
         "lockstep_cpu_us_per_tick": {
@@ -175,10 +208,14 @@ def run(preset: dict) -> dict:
 
 
 def format_report(r: dict) -> str:
-    rtt = r["zenoh_rtt_us"]
+    rtt, hand = r["zenoh_rtt_us"], r["handoff_rtt_us"]
     lines = [
         f"Zenoh ping-pong RTT (64 B, two clients via the router): median {rtt['median']:.0f} us, "
         f"p99 {rtt['p99']:.0f} us",
+        f"  CPU per message received and sent again by the echoing process: "
+        f"{rtt['pong_cpu_us_per_echo']:.0f} us from Zenoh's callback thread, "
+        f"{hand['pong_cpu_us_per_echo']:.0f} us handed to a main thread as the swarm's processes do "
+        f"(RTT median {hand['median']:.0f} us)",
         "lockstep tick period (swarm launch --agents N):",
     ]
     for n, t in r["lockstep_tick_us"].items():
@@ -202,6 +239,6 @@ def format_report(r: dict) -> str:
 
 if __name__ == "__main__":
     if sys.argv[1] == "pong":
-        _pong(sys.argv[2], sys.argv[3])
+        _pong(sys.argv[2], sys.argv[3], sys.argv[4] if len(sys.argv) > 4 else "direct")
     elif sys.argv[1] == "ping":
         _ping(sys.argv[2], sys.argv[3], int(sys.argv[4]))
