@@ -34,6 +34,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -154,7 +155,7 @@ class AgentProcess:
         self._cpu0: float | None = None
         self._waited_since = time.monotonic()  # the last tick processed (or the start): for the end's drain
         self._warned_at = 0.0
-        self._command_lock = threading.Lock()  # the main loop sends commands, a Zenoh thread re-sends one
+        self._command_lock = threading.Lock()  # a round sends commands, a Zenoh thread re-sends one
         self._last_command: tuple[int, bytes] | None = None  # (tick, payload) of the last command sent
         self.resent = 0  # commands sent again for a resumed world
         self._estimate_due: int | None = None  # the tick whose estimate flush() publishes
@@ -162,14 +163,18 @@ class AgentProcess:
         # set by an agent host (agents.host.AgentHost) when the target and its chaser are both in it
         self.local_chasers: list[AgentProcess] = []  # the chasers in this host that fly to this vehicle
         self.target_local = False  # this chaser's target is in this host: no subscriber to its estimates
+        # set by a host of this vehicle alone: called after a kept message, on the subscriber's thread
+        self.on_news: Callable[[], None] | None = None
 
     # ------------------------------------------------------------------------------ Zenoh side
 
     def _on_sensor(self, key: str, msg) -> None:
-        self.assembler.add(msg, self.id)
+        if self.assembler.add(msg, self.id) and self.on_news is not None:
+            self.on_news()
 
     def _on_target(self, key: str, msg: Estimate) -> None:
-        self.assembler.add(msg, self.target_id)
+        if self.assembler.add(msg, self.target_id) and self.on_news is not None:
+            self.on_news()
 
     def _on_clock(self, _key: str, msg: Clock) -> None:
         if msg.state in ("running", "paused"):

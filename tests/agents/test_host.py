@@ -132,3 +132,81 @@ def test_a_free_running_agent_fuses_a_late_range_and_frame_as_the_tick_would_hav
     rejoining.agent = None
     rejoining.fuse_late([Uwb(tick=2, t_s=0.02, anchor_id=0, range_m=1.0)])
     assert rejoining._init_ranges == {0: 1.0}
+
+
+def _recording_host(process):
+    """A host of the target alone whose vehicle's steps are recorded (``process(inp)``), its run started."""
+    sc = load_scenario("docking")
+    host, p = _host(["target"], sc)
+    proc = p["target"]
+    proc._started.set()  # the world announced the run
+    finished = threading.Event()
+    proc.process, proc.flush = process, lambda: None
+    proc.done, proc.finish = (lambda now: finished.is_set()), (lambda: True)
+    return host, proc, finished
+
+
+def _imu(k: int):
+    from swarm.transport.messages import Imu
+
+    return Imu(tick=k, t_s=0.01 * k, dt_s=0.01, gyro_body=np.zeros(3))
+
+
+def test_a_host_of_one_steps_a_tick_on_the_thread_whose_message_made_it_ready():
+    """A host of one vehicle (a process each) runs the round on the subscriber's thread that completed the
+    tick, not on its loop's thread (one thread hand-off less per tick); its loop still ends the run. A host
+    of several keeps one thread: its callbacks run on Zenoh's receiving threads."""
+    seen = []
+    host, proc, finished = _recording_host(lambda inp: seen.append((inp.tick, threading.get_ident())))
+    assert host.inline and proc.on_news == host.on_news
+    ended = []
+    loop = threading.Thread(target=lambda: ended.append(host._loop()))
+    loop.start()
+    try:
+        deadline = threading.Event()
+        while not seen and not deadline.wait(0.01):  # tick 0 (no samples) goes on the first round
+            pass
+        subscriber = threading.Thread(target=proc._on_sensor, args=("t/agent/target/imu", _imu(1)))
+        subscriber.start()
+        subscriber.join(5.0)
+        assert [k for k, _ in seen] == [0, 1]
+        assert seen[1][1] == subscriber.ident != loop.ident  # stepped by the message's own thread
+        assert seen[0][1] == loop.ident
+    finally:
+        finished.set()
+        loop.join(5.0)
+    assert ended == [True] and not loop.is_alive()
+    assert not _host(["chaser", "target"], load_scenario("docking"))[0].inline
+
+
+def test_a_failure_on_a_subscribers_thread_is_raised_by_the_hosts_loop():
+    """A vehicle's step that raises on the subscriber's thread does not vanish into Zenoh's callback: the
+    host's loop raises it (the process exits 1 and its supervisor restarts it), and no round runs after."""
+
+    stepped = []
+
+    def process(inp):
+        stepped.append(inp.tick)
+        if inp.tick == 1:
+            raise RuntimeError("tick 1 failed")
+
+    host, proc, finished = _recording_host(process)
+    raised = []
+
+    def loop():
+        try:
+            host._loop()
+        except RuntimeError as exc:
+            raised.append(exc)
+
+    t = threading.Thread(target=loop)
+    t.start()
+    try:
+        proc._on_sensor("t/agent/target/imu", _imu(1))  # this thread: the subscriber's; it returns
+        t.join(5.0)
+        assert [str(e) for e in raised] == ["tick 1 failed"] and not t.is_alive()
+        proc._on_sensor("t/agent/target/imu", _imu(2))
+        assert stepped == [0, 1]  # the failure is kept: nothing more is stepped
+    finally:
+        finished.set()
+        t.join(5.0)
