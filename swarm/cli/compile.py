@@ -137,4 +137,3 @@ def run(args: argparse.Namespace) -> int:
                     print(f"  {pending.pop(f)}: {f.result():.1f} s", flush=True)
     print(f"compiled in {time.perf_counter() - t0:.1f} s", flush=True)
     return 0
-
