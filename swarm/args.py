@@ -26,6 +26,21 @@ def positive_float(flag: str) -> Callable[[str], float]:
     return parse
 
 
+def positive_int(flag: str) -> Callable[[str], int]:
+    """An argparse type: an integer > 0 (``--jobs 2``, ``--runs 50``)."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} must be an integer > 0, got {text!r}") from None
+        if v <= 0:
+            raise argparse.ArgumentTypeError(f"{flag} must be an integer > 0, got {text!r}")
+        return v
+
+    return parse
+
+
 def count(flag: str) -> Callable[[str], int]:
     """An argparse type: an integer >= 0 (``--max-restarts 3``)."""
 

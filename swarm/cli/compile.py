@@ -87,28 +87,20 @@ def _run_chain(name: str) -> float:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from swarm.args import positive_int
+
     p = sub.add_parser(
         "compile",
         help="compile the numba kernels into the cache before the first run (parallel)",
         description=__doc__.split("\n\n")[1],
     )
     p.add_argument(
-        "--jobs", type=_jobs, default=min(os.cpu_count() or 1, len(CHAINS)),
+        "--jobs", type=positive_int("--jobs"), default=min(os.cpu_count() or 1, len(CHAINS)),
         help=f"processes compiling at once (default: the cores, at most {len(CHAINS)}: one per chain)",
     )  # fmt: skip
     p.add_argument("--only", type=_chains, default=tuple(CHAINS), metavar="CHAIN,CHAIN",
                    help=f"compile only these chains (of {', '.join(CHAINS)})")  # fmt: skip
     p.set_defaults(func=run)
-
-
-def _jobs(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--jobs: expected a positive integer, got {text!r}") from None
-    if n <= 0:
-        raise argparse.ArgumentTypeError(f"--jobs: expected a positive integer, got {text!r}")
-    return n
 
 
 def _chains(text: str) -> tuple[str, ...]:

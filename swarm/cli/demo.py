@@ -13,26 +13,18 @@ import time
 import numpy as np
 from scipy.stats import chi2
 
-from swarm.args import seed
+from swarm.args import positive_int, seed
 from swarm.core.estimator import EstimatorParams, Structure
 from swarm.sim.estimation import EstimationScenario, run_estimation
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="run the main demonstration on embedded defaults")
-    p.add_argument("--runs", type=_positive_int, default=50, help="estimator Monte Carlo runs (default 50)")
+    p.add_argument(
+        "--runs", type=positive_int("--runs"), default=50, help="estimator Monte Carlo runs (default 50)"
+    )
     p.add_argument("--seed", type=seed, default=0, help="root seed (default 0)")
     p.set_defaults(func=run)
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
 
 
 def run(args: argparse.Namespace) -> int:

@@ -32,8 +32,8 @@ def test_one_job_and_a_subset_run_in_this_process(capsys):
 @pytest.mark.parametrize(
     "argv, named",
     [
-        (["--jobs", "0"], "--jobs: expected a positive integer, got '0'"),
-        (["--jobs", "two"], "--jobs: expected a positive integer, got 'two'"),
+        (["--jobs", "0"], "--jobs must be an integer > 0, got '0'"),
+        (["--jobs", "two"], "--jobs must be an integer > 0, got 'two'"),
         (["--only", "docking,nope"], "--only: chains are docking, landing, filters; got 'docking,nope'"),
         (["--only", ","], "got ','"),
     ],
