@@ -12,9 +12,9 @@ What the host shares among its vehicles:
   after vehicle. Before, each vehicle had its own thread waiting on its own condition (and, free-running,
   waking every 2 ms to look for a late tick): 16 vehicles were 16 threads taking the GIL in turn. A
   free-running tick is ready once its ``imu`` is in, and a range or frame that comes after it is handed to
-  the vehicle before its next tick (late fusion), so the loop sleeps until a message comes;
-  A host of one vehicle (a process each) runs that round on the thread of the subscriber whose message
-  made the tick ready instead (:meth:`AgentHost.on_news`): one thread hand-off less per tick;
+  the vehicle before its next tick (late fusion), so the loop sleeps until a message comes. A host of one
+  vehicle (a process each) runs that round on the thread of the subscriber whose message made the tick
+  ready instead (:meth:`AgentHost.on_news`): one thread hand-off less per tick;
 - **one subscriber each** for the world's clock and events and for liveliness, whose messages go to every
   vehicle: the same for all of them, once per process instead of once per vehicle.
 
@@ -92,9 +92,14 @@ class AgentHost:
 
     # ------------------------------------------------------------------------------ shared subscribers
 
+    # a host of one (inline) steps what these made ready (the run's start, a lost mothership's ranges no
+    # longer awaited) on their thread too, as a sensor's callback does, instead of at the loop's next look
+
     def _on_clock(self, key: str, msg: Clock) -> None:
         for p in self.procs:
             p._on_clock(key, msg)
+        if self.inline:
+            self.on_news()
 
     def _on_world_event(self, key: str, msg: Event) -> None:
         for p in self.procs:
@@ -103,6 +108,8 @@ class AgentHost:
     def _on_alive(self, role: str, pid: str, alive: bool) -> None:
         for p in self.procs:
             p._on_alive(role, pid, alive)
+        if self.inline:
+            self.on_news()
 
     # ------------------------------------------------------------------------------ the loop
 

@@ -210,3 +210,21 @@ def test_a_failure_on_a_subscribers_thread_is_raised_by_the_hosts_loop():
     finally:
         finished.set()
         t.join(5.0)
+
+
+def test_a_host_of_one_steps_what_the_runs_start_made_ready_on_the_clocks_thread():
+    """Tick 0 waits for the world's run to start; the clock that starts it (a shared subscriber's callback)
+    steps it at once on its own thread, not at the loop's next look (IDLE_S later). No loop thread runs
+    here: whatever is stepped is stepped inside the calls."""
+    from swarm.transport.messages import Clock
+
+    seen = []
+    host, proc, finished = _recording_host(lambda inp: seen.append(inp.tick))
+    proc._started.clear()  # the world has not announced the run yet
+    host._live = [proc]
+    host.ready.update(host._by_asm)
+    proc._on_sensor("t/agent/target/imu", _imu(1))
+    assert seen == []  # not ticking before the run starts
+    host._on_clock("t/world/clock", Clock(tick=0, t_s=0.0, state="running", seed=0))
+    assert seen == [0, 1]  # the run's start made ticks 0 and 1 ready, stepped on this thread
+    finished.set()
