@@ -7,7 +7,8 @@ seconds for the rest. Without this command the first ``swarm sim``, test or laun
 launch's processes compile the same kernels side by side. ``swarm compile`` runs the same code paths on
 scratch objects, the independent chains in ``--jobs`` processes at once (longest first), so the cache is
 full when the work starts; with a full cache it only loads it (a few seconds). ``make test`` and
-``make demo`` run it first.
+``make demo`` run it first. A chain that fails is named on stderr, the others still compile, and the exit
+status is 1.
 
 Each chain runs the entry points a run calls, with the argument types a run passes (numba caches one
 machine code per type signature): the in-process run, then the processes' per-tick paths.
@@ -18,6 +19,7 @@ from __future__ import annotations
 import argparse
 import multiprocessing
 import os
+import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -116,9 +118,19 @@ def run(args: argparse.Namespace) -> int:
     names = [n for n in CHAINS if n in args.only]
     print(f"compiling {len(names)} kernel chains into {os.environ.get('NUMBA_CACHE_DIR')} "
           f"({min(args.jobs, len(names))} at once)", flush=True)  # fmt: skip
+    failed = []
+
+    def report(name: str, result: Callable[[], float]) -> None:
+        try:
+            print(f"  {name}: {result():.1f} s", flush=True)
+        except Exception as exc:  # one chain's failure (a bug, a killed worker) leaves the others' caches
+            failed.append(name)
+            print(f"swarm compile: chain {name!r} failed: {type(exc).__name__}: {exc}", file=sys.stderr,
+                  flush=True)  # fmt: skip
+
     if args.jobs == 1:
         for n in names:
-            print(f"  {n}: {_run_chain(n):.1f} s", flush=True)
+            report(n, lambda n=n: _run_chain(n))
     else:
         ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: nothing inherited half-compiled
         with ProcessPoolExecutor(max_workers=min(args.jobs, len(names)), mp_context=ctx) as pool:
@@ -126,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
             while pending:
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)
                 for f in done:
-                    print(f"  {pending.pop(f)}: {f.result():.1f} s", flush=True)
-    print(f"compiled in {time.perf_counter() - t0:.1f} s", flush=True)
-    return 0
+                    report(pending.pop(f), f.result)
+    print(f"compiled in {time.perf_counter() - t0:.1f} s"
+          + (f"; failed: {', '.join(failed)}" if failed else ""), flush=True)  # fmt: skip
+    return 1 if failed else 0

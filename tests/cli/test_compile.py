@@ -29,6 +29,19 @@ def test_one_job_and_a_subset_run_in_this_process(capsys):
     assert "  filters: " in out and "  docking: " not in out and "(1 at once)" in out
 
 
+def test_a_failing_chain_is_named_the_others_still_compile_and_the_exit_status_is_1(monkeypatch, capsys):
+    from swarm.cli import compile as cc
+
+    def broken() -> None:
+        raise RuntimeError("scenario missing")
+
+    monkeypatch.setitem(cc.CHAINS, "docking", (broken, "broken on purpose"))
+    assert main(["compile", "--jobs", "1", "--only", "docking,filters"]) == 1
+    out, err = capsys.readouterr()
+    assert "chain 'docking' failed: RuntimeError: scenario missing" in err
+    assert "  filters: " in out and "failed: docking" in out
+
+
 @pytest.mark.parametrize(
     "argv, named",
     [
