@@ -11,49 +11,35 @@ import math
 from collections.abc import Callable
 
 
-def positive_float(flag: str) -> Callable[[str], float]:
-    """An argparse type: a finite number > 0 (``--timeout 2.5``)."""
+def _checked(flag: str, convert: Callable[[str], float], ok: Callable[[float], bool], what: str):
+    """An argparse type: ``convert(text)`` if it parses and ``ok`` holds, else an error naming ``flag``,
+    ``what`` it must be and the text given."""
 
-    def parse(text: str) -> float:
+    def parse(text: str):
         try:
-            v = float(text)
+            v = convert(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag} must be a finite number > 0, got {text!r}") from None
-        if not (math.isfinite(v) and v > 0):
-            raise argparse.ArgumentTypeError(f"{flag} must be a finite number > 0, got {text!r}")
+            raise argparse.ArgumentTypeError(f"{flag} must be {what}, got {text!r}") from None
+        if not ok(v):
+            raise argparse.ArgumentTypeError(f"{flag} must be {what}, got {text!r}")
         return v
 
     return parse
+
+
+def positive_float(flag: str) -> Callable[[str], float]:
+    """An argparse type: a finite number > 0 (``--timeout 2.5``)."""
+    return _checked(flag, float, lambda v: math.isfinite(v) and v > 0, "a finite number > 0")
 
 
 def positive_int(flag: str) -> Callable[[str], int]:
     """An argparse type: an integer > 0 (``--jobs 2``, ``--runs 50``)."""
-
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag} must be an integer > 0, got {text!r}") from None
-        if v <= 0:
-            raise argparse.ArgumentTypeError(f"{flag} must be an integer > 0, got {text!r}")
-        return v
-
-    return parse
+    return _checked(flag, int, lambda v: v > 0, "an integer > 0")
 
 
 def count(flag: str) -> Callable[[str], int]:
     """An argparse type: an integer >= 0 (``--max-restarts 3``)."""
-
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag} must be an integer >= 0, got {text!r}") from None
-        if v < 0:
-            raise argparse.ArgumentTypeError(f"{flag} must be an integer >= 0, got {text!r}")
-        return v
-
-    return parse
+    return _checked(flag, int, lambda v: v >= 0, "an integer >= 0")
 
 
 SEED_LIMIT = 2**63
@@ -65,13 +51,10 @@ run)."""
 
 def seed(text: str) -> int:
     """An argparse type for ``--seed``: an integer in ``0 .. 2**63 - 1`` (:data:`SEED_LIMIT`)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--seed must be an integer in 0..2**63-1, got {text!r}") from None
-    if not 0 <= value < SEED_LIMIT:
-        raise argparse.ArgumentTypeError(f"--seed must be an integer in 0..2**63-1, got {text!r}")
-    return value
+    return _SEED(text)
+
+
+_SEED = _checked("--seed", int, lambda v: 0 <= v < SEED_LIMIT, "an integer in 0..2**63-1")
 
 
 def add_world_timeouts(p) -> None:
@@ -88,13 +71,10 @@ def add_world_timeouts(p) -> None:
 
 def agents(text: str) -> int:
     """An argparse type for ``--agents``: copies of the scenario's pairs, an integer in ``1..64``."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--agents must be an integer in 1..64, got {text!r}") from None
-    if not 1 <= value <= 64:
-        raise argparse.ArgumentTypeError(f"--agents must be an integer in 1..64, got {text!r}")
-    return value
+    return _AGENTS(text)
+
+
+_AGENTS = _checked("--agents", int, lambda v: 1 <= v <= 64, "an integer in 1..64")
 
 
 def add_scenario_args(p: argparse.ArgumentParser) -> None:
