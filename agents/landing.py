@@ -57,7 +57,7 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
         if uid not in uavs:
             raise ConfigError(f"--id: no UAV {uid!r} in the scenario; it has {', '.join(uavs)}")
     policy = args.policy or sc.policy
-    _warm_up(sc, args.seed, uavs[ids[0]].index, policy)
+    warm_up(sc, args.seed, uavs[ids[0]].index, policy)
     keys = Keys(args.namespace)
     with open_session(zenoh_args_from(args)) as session:
         free = not args.clock.lockstep
@@ -187,7 +187,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
     token.undeclare()
 
 
-def _warm_up(sc, seed: int, index: int, policy: str) -> None:
+def warm_up(sc, seed: int, index: int, policy: str) -> None:
     """Compile (or load from numba's cache) every kernel a tick may call, on a scratch world and agent, before
     the agent says it is up: a first compilation inside the run would outlast the world's step timeout. One
     tick of each sensor's rate compiles them all (numba compiles a kernel whole, every branch)."""

@@ -388,11 +388,6 @@ class AgentProcess:
     def _set_target(self, e: Estimate) -> None:
         self.agent.set_target_estimate(_target(e))
 
-    def _warm_up(self) -> None:
-        """Every compiled kernel of an agent's tick run once (:func:`warm_up`) before this process says it is
-        ready, not inside the first lockstep ticks."""
-        warm_up(self.sc, self.seed, self.id, self.policy)
-
     # ------------------------------------------------------------------------------ driven by AgentHost
 
     def open(self, shared: bool = True) -> None:
@@ -400,7 +395,7 @@ class AgentProcess:
         subscribes the world's clock and events and liveliness (an agent host subscribes those once for
         all of its vehicles and hands each message to every one)."""
         k = self.keys
-        self._warm_up()
+        warm_up(self.sc, self.seed, self.id, self.policy)  # not inside the first lockstep ticks
         self._declare()
         # an agent host's sensor callbacks run on Zenoh's own receiving threads: 16 vehicles would otherwise
         # be ~60 Python threads (one per subscriber) taking the GIL in turn (BENCHMARKS.md, "The swarm at

@@ -42,12 +42,12 @@ def _docking() -> None:
 
 def _landing() -> None:
     """The landing compiled whole (``swarm sim landing``), then the landing agent process's tick."""
-    from agents.landing import _warm_up
+    from agents.landing import warm_up
     from swarm.sim.landing import load_landing, run_landing
 
     sc = load_landing("landing")
     run_landing(sc, sc.policy, 0)
-    _warm_up(sc, 0, 0, sc.policy)
+    warm_up(sc, 0, 0, sc.policy)
 
 
 def _filters() -> None:

@@ -558,15 +558,11 @@ class WorldProcess:
         """The vehicle's actuators off from now on (nozzles closed, wheels stopped)."""
         self.world.set_command(vid, np.zeros(self.world.command_size(vid)))
 
-    def _warm_up(self) -> None:
-        """Every compiled kernel of a tick run once (:func:`warm_up`) before this process says it is ready."""
-        warm_up(self.sc, self.seed)
-
     def run(self) -> dict:
         """Serve one run; returns the ``run_end`` data once stopped (a world whose run ended stays up,
         its clock ``stopped``, until a stop signal: the dashboard keeps showing the final state)."""
         k = self.keys
-        self._warm_up()
+        warm_up(self.sc, self.seed)  # compiled (or loaded) before this process says it is ready
         self._declare()
         subscribe_decoded(self.session, k.agent_all("command"), Command, self._on_command, self.drops)
         subscribe_decoded(self.session, k.run_control(), RunControl, self._on_control, self.drops)

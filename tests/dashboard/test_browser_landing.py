@@ -54,10 +54,10 @@ class LandingRun:
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LandingRun]:
-    from agents.landing import _warm_up
+    from agents.landing import warm_up
 
     sc = load_landing("landing-swarm")
-    _warm_up(sc, 0, 0, sc.policy)
+    warm_up(sc, 0, 0, sc.policy)
     rec = tmp_path_factory.mktemp("landing") / "run.mcap"
     ns = new_namespace("land")
     with Procs() as procs:

@@ -34,10 +34,10 @@ time later at the paced scaled:10 (a lockstep world is never ahead of it, so the
 
 @pytest.fixture(scope="module")
 def launched(tmp_path_factory):
-    from agents.landing import _warm_up
+    from agents.landing import warm_up
 
     sc = load_landing("landing-swarm")
-    _warm_up(sc, 0, 0, sc.policy)  # numba's cache filled once here, not by five processes at once
+    warm_up(sc, 0, 0, sc.policy)  # numba's cache filled once here, not by five processes at once
     d = tmp_path_factory.mktemp("landing")
     out, rec = d / "launch.json", d / "launch.mcap"
     ns = f"land-{free_port()}"
@@ -171,10 +171,10 @@ def test_a_free_running_landing_world_keeps_the_wall_clock_and_a_stalled_agent_c
     agent is stopped (SIGSTOP) for a second of wall time: the world goes on at its pace, that UAV flies its
     last command meanwhile and its late ticks count the stall, the others' do not; once resumed, the agent
     fuses the ticks it missed and decides on the newest, and its UAV flies again."""
-    from agents.landing import _warm_up
+    from agents.landing import warm_up
 
     sc = load_landing("landing-swarm")
-    _warm_up(sc, 0, 0, sc.policy)
+    warm_up(sc, 0, 0, sc.policy)
     ns, out = f"free-{free_port()}", tmp_path / "free.json"
     # real time: a tick's 10 ms leave each agent time to answer on a loaded two-core machine (at scaled:4 the
     # four agents, the world and the router were late on 60-70 % of the ticks while a test suite ran beside)
@@ -225,10 +225,10 @@ def test_a_secure_landing_swarm_lands_as_swarm_sim_with_every_process_on_its_own
     every UAV's sensors, each landing agent its own command, estimate, guidance and events); the lockstep
     run still equals ``swarm sim`` (a right missing would stall it), a client without the swarm's
     certificate cannot connect, and the certificates are gone after the run."""
-    from agents.landing import _warm_up
+    from agents.landing import warm_up
 
     sc = load_landing("landing-swarm")
-    _warm_up(sc, 0, 0, sc.policy)
+    warm_up(sc, 0, 0, sc.policy)
     ns, out = f"secland-{free_port()}", tmp_path / "secure.json"
     args = [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--headless", "--secure",
             "--seed", "0", "--namespace", ns, "--json", str(out), "--timeout", "400"]  # fmt: skip
