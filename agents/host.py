@@ -16,7 +16,8 @@ What the host shares among its vehicles:
   vehicle (a process each) runs that round on the thread of the subscriber whose message made the tick
   ready instead (:meth:`AgentHost.on_news`): one thread hand-off less per tick;
 - **one subscriber each** for the world's clock and events and for liveliness, whose messages go to every
-  vehicle: the same for all of them, once per process instead of once per vehicle.
+  vehicle: the same for all of them, once per process instead of once per vehicle; and for the world's
+  ``world/imu`` batch (beyond one pair), whose rows go to the vehicles they are for.
 
 - **a target's estimate, handed over.** A chaser whose target is in the same host does not subscribe to the
   target's estimates: the target's agent hands it the message it publishes
@@ -37,7 +38,7 @@ import time
 from collections.abc import Sequence
 
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Clock, DropCounter, Event
+from swarm.transport.messages import Clock, DropCounter, Event, ImuBatch
 from swarm.transport.session import subscribe_decoded, watch_liveliness
 
 __all__ = ["IDLE_S", "AgentHost"]
@@ -101,6 +102,15 @@ class AgentHost:
         if self.inline:
             self.on_news()
 
+    def _on_imu_batch(self, key: str, msg: ImuBatch) -> None:
+        """The world's imu of every vehicle (beyond one pair): each hosted vehicle's row, as its own
+        ``imu`` key would have brought it (a host of one steps it here, :meth:`AgentProcess._on_sensor`)."""
+        row = msg.index()
+        for p in self.procs:
+            i = row.get(p.id)
+            if i is not None:
+                p._on_sensor(key, msg.sample(p.id, i))
+
     def _on_world_event(self, key: str, msg: Event) -> None:
         for p in self.procs:
             p._on_world_event(key, msg)
@@ -122,6 +132,9 @@ class AgentHost:
         k = self.keys
         watch_liveliness(self.session, k, self._on_alive, history=any(p.rejoin for p in self.procs))
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.shared_drops)
+        direct = not self.inline  # as the vehicles' own sensor subscribers (AgentProcess.open)
+        subscribe_decoded(self.session, k.world_imu(), ImuBatch, self._on_imu_batch, self.shared_drops,
+                          direct=direct)  # fmt: skip
         subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.shared_drops)
         for p in self.procs:
             p.announce()

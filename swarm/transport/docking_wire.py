@@ -11,6 +11,7 @@ from swarm.core.estimator import MeasKind
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import period_phase, reads_target
 from swarm.transport.messages import (
+    MAX_BATCH,
     Clock,
     Event,
     Guidance,
@@ -19,12 +20,36 @@ from swarm.transport.messages import (
     encode_command,
     encode_estimate,
     encode_imu,
+    encode_imu_batch,
     encode_truth,
     encode_uwb,
 )
 
 Sensors = list[tuple[str, str, bytes]]
-"""``(kind, vehicle, payload)`` in publishing order; ``kind`` is ``truth``, ``vision`` or ``imu``."""
+"""``(kind, vehicle, payload)`` in publishing order; ``kind`` is ``truth``, ``vision``, ``imu`` or
+``imu_batch`` (vehicle ``""``: the ``world/imu`` key, :func:`imu_batched`)."""
+
+
+def imu_batched(ids) -> bool:
+    """Whether the world sends its vehicles' ``imu`` as one :class:`~swarm.transport.messages.ImuBatch` on
+    ``world/imu`` per tick instead of one message per vehicle: beyond one pair (docs/protocol.md, "Rates").
+    A single pair keeps its two messages: a batch would gain it nothing."""
+    return len(ids) > 2
+
+
+def batch_sample(sensors: Sensors, vid: str) -> bytes | None:
+    """Vehicle ``vid``'s ``imu`` payload taken out of the tick's batches in ``sensors`` (re-encoded as one
+    :class:`~swarm.transport.messages.Imu`), ``None`` when no batch holds it: what a world sends to an
+    agent that alone needs the tick again (a rejoined agent)."""
+    from swarm.transport.messages import ImuBatch, decode
+
+    for kind, _vid, payload in sensors:
+        if kind == "imu_batch":
+            imu = decode(payload, ImuBatch).sample(vid)
+            if imu is not None:
+                return encode(imu)
+    return None
+
 
 FILTER_KINDS = {
     "range": MeasKind.RANGE,
@@ -36,10 +61,16 @@ FILTER_KINDS = {
 FILTER_OUTCOMES = ("accepted", "rejected", "refused")
 
 
-def world_sensors(world, ids: list[str], chasers: list[str], k: int, frames, truth_every: int) -> Sensors:
+def world_sensors(
+    world, ids: list[str], chasers: list[str], k: int, frames, truth_every: int, batch: bool = False,
+    solo=frozenset(),
+) -> Sensors:  # fmt: skip
     """The world's samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle (on UWB
     slot ticks: the mothership's radios need no other, and a viewer draws at 50 Hz as well as at 100;
-    docs/protocol.md, "Rates"), then per vehicle vision(k) (camera ticks, chasers) and imu(k)."""
+    docs/protocol.md, "Rates"), then per vehicle vision(k) (camera ticks, chasers) and imu(k). With
+    ``batch`` (:func:`imu_batched`) the imu of every vehicle not in ``solo`` goes last, in one
+    :class:`~swarm.transport.messages.ImuBatch` per :data:`~swarm.transport.messages.MAX_BATCH` vehicles;
+    ``solo`` (vehicles whose samples a ``sensor_delay`` fault holds back) keep their own."""
     sc = world.sc
     t = k * sc.dt_s
     camera_tick = k % world.vision_every == 0
@@ -62,7 +93,16 @@ def world_sensors(world, ids: list[str], chasers: list[str], k: int, frames, tru
             else:
                 data, kind, mids = fr.vision, fr.vision_kind, tuple(range(len(fr.vision)))
             out.append(("vision", vid, encode(Vision(k, t, target, face, kind, data, mids))))
+        if batch and vid not in solo:
+            continue
         out.append(("imu", vid, encode_imu(k, t, sc.dt_s, fr.gyro_body, fr.q_ahrs_nav_body)))
+    rows = [vid for vid in ids if vid not in solo] if batch else []
+    for a in range(0, len(rows), MAX_BATCH):
+        chunk = rows[a : a + MAX_BATCH]
+        gyro = np.array([frames[vid].gyro_body for vid in chunk], dtype=np.float64)
+        ahrs = [vid for vid in chunk if frames[vid].q_ahrs_nav_body is not None]
+        q = np.array([frames[vid].q_ahrs_nav_body for vid in ahrs], dtype=np.float64).reshape(len(ahrs), 4)
+        out.append(("imu_batch", "", encode_imu_batch(k, t, sc.dt_s, chunk, gyro, ahrs, q)))
     return out
 
 
@@ -220,10 +260,12 @@ class DockingTap:
 
     def world(self, sim, k: int, frames) -> None:
         """The world's samples of tick ``k`` (and the clock on its ticks)."""
+        batch = imu_batched(self._ids)  # as the world process
         for kind, vid, payload in world_sensors(
-            sim.world, self._ids, self._chasers, k, frames, self._truth_every
+            sim.world, self._ids, self._chasers, k, frames, self._truth_every, batch
         ):
-            self._write(getattr(self.keys, kind)(vid), payload)
+            key = self.keys.world_imu() if kind == "imu_batch" else getattr(self.keys, kind)(vid)
+            self._write(key, payload)
         if k % self.clock_every == 0:
             self._clock(k, k * sim.sc.dt_s, "running")
 

@@ -1,7 +1,7 @@
 """Every Zenoh key expression of the swarm, built in one place under a configurable namespace.
 
 DESIGN.md section 4: one namespace per swarm (default ``tpods``) so that two swarms can share a router.
-Per-vehicle topics are ``<ns>/agent/<id>/<kind>``; the rest are ``<ns>/world/clock``,
+Per-vehicle topics are ``<ns>/agent/<id>/<kind>``; the rest are ``<ns>/world/clock``, ``<ns>/world/imu``,
 ``<ns>/mothership/anchors``, ``<ns>/control/run``, ``<ns>/control/fault`` and the
 liveliness tokens ``<ns>/alive/<role>/<id>``.
 Agent ids and roles are single key chunks of ``[A-Za-z0-9_-]`` (1 to 64 characters), so that no id can
@@ -32,6 +32,7 @@ _FORBIDDEN_NS_CHARS = frozenset("*$?#")  # wildcards and characters Zenoh reserv
 _FIXED = {
     ("world", "clock"): "world_clock",
     ("world", "event"): "world_event",
+    ("world", "imu"): "world_imu",
     ("mothership", "anchors"): "anchors",
     ("control", "run"): "run_control",
     ("control", "fault"): "fault",
@@ -129,6 +130,11 @@ class Keys:
         """Tick, time, run state and seed: world -> everyone."""
         return f"{self.namespace}/world/clock"
 
+    def world_imu(self) -> str:
+        """Every vehicle's gyro (+ AHRS) samples of one tick in one message (``ImuBatch``): a simulated world
+        beyond one pair -> agents (each takes its own row)."""
+        return f"{self.namespace}/world/imu"
+
     def world_event(self) -> str:
         """Run start and end (with each vehicle's total impulse), lockstep timeouts: world -> launcher,
         dashboard."""
@@ -171,7 +177,7 @@ class Keys:
 
     def parse(self, key: object) -> tuple[str, str | None] | None:
         """Inverse of the builders: ``(kind, agent_id)`` for ``<ns>/agent/<id>/<kind>``; ``("world_clock",
-        None)``, ``("world_event", None)``, ``("anchors", None)``,
+        None)``, ``("world_event", None)``, ``("world_imu", None)``, ``("anchors", None)``,
         ``("run_control", None)``, ``("fault", None)`` for the swarm-wide keys; ``("alive", process_id)`` for
         a liveliness token (its role: :meth:`parse_alive`). ``None`` for a key outside this namespace, a
         wildcard or anything this protocol does not define. ``key`` may be a ``str`` or any object whose

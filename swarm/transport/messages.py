@@ -47,6 +47,7 @@ __all__ = [
     "FACES",
     "FAULT_KINDS",
     "LANDING_MODES",
+    "MAX_BATCH",
     "MAX_ITEMS",
     "MAX_PAYLOAD_BYTES",
     "MESSAGE_FOR_KIND",
@@ -66,6 +67,7 @@ __all__ = [
     "Gnss",
     "Guidance",
     "Imu",
+    "ImuBatch",
     "Message",
     "Rangefinder",
     "RunControl",
@@ -77,6 +79,7 @@ __all__ = [
     "encode_command",
     "encode_estimate",
     "encode_imu",
+    "encode_imu_batch",
     "encode_truth",
     "encode_uwb",
     "estimate_and_payload",
@@ -93,6 +96,8 @@ MAX_PAYLOAD_BYTES = 65536
 """Largest accepted payload [bytes]; larger ones are refused before unpacking."""
 MAX_ITEMS = 64
 """Largest number of markers, nozzles, anchors, counters per message."""
+MAX_BATCH = 256
+"""Most vehicles in one batch message (:class:`ImuBatch`); a larger swarm's world sends several."""
 QUAT_NORM_TOL = 1e-3
 """A quaternion's norm must be within this of 1."""
 COV_SYMMETRY_RTOL = 1e-9
@@ -273,9 +278,12 @@ def _nested_numbers(value: list | tuple, name: str, ndim: int) -> np.ndarray:
         raise MessageError(f"{name}: ragged or out-of-range nested arrays ({exc})") from None
 
 
-def _array(value: object, name: str, shape: tuple[int | None, ...], nullable: bool = False) -> Any:
-    """A finite float64 array of ``shape`` (``None``: any length up to :data:`MAX_ITEMS`), a writable copy.
-    Accepts an ndarray, nested lists/tuples or the wire map; ``None`` too when ``nullable``."""
+def _array(
+    value: object, name: str, shape: tuple[int | None, ...], nullable: bool = False, max_rows: int = MAX_ITEMS
+) -> Any:
+    """A finite float64 array of ``shape`` (``None``: any length up to ``max_rows``, :data:`MAX_ITEMS`
+    unless given), a writable copy. Accepts an ndarray, nested lists/tuples or the wire map; ``None`` too
+    when ``nullable``."""
     if value is None and nullable:
         return None
     if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == shape:
@@ -303,8 +311,8 @@ def _array(value: object, name: str, shape: tuple[int | None, ...], nullable: bo
         spec = ", ".join("N" if e is None else str(e) for e in shape) + ("," if len(shape) == 1 else "")
         raise MessageError(f"{name}: expected shape ({spec}), got {tuple(arr.shape)}")
     for a, e in zip(arr.shape, shape, strict=True):
-        if e is None and a > MAX_ITEMS:
-            raise MessageError(f"{name}: {a} rows, more than the {MAX_ITEMS} allowed")
+        if e is None and a > max_rows:
+            raise MessageError(f"{name}: {a} rows, more than the {max_rows} allowed")
     out = np.array(arr, dtype=np.float64)  # a copy: writable, and never a view of the payload
     if not np.isfinite(out).all():
         raise MessageError(f"{name}: not finite")
@@ -545,6 +553,123 @@ def encode_imu(tick: int, t_s: float, dt_s: float, gyro_body, q_ahrs_nav_body=No
     wire = {"tick": tick, "t_s": t_s, "dt_s": dt_s, "gyro_body": gyro_body, "q_ahrs_nav_body": q,
             "acc_body": acc}  # fmt: skip
     return _pack("Imu", wire)
+
+
+_UNIT_LO, _UNIT_HI = (1.0 - QUAT_NORM_TOL) ** 2, (1.0 + QUAT_NORM_TOL) ** 2
+
+
+def _units(q: np.ndarray, name: str) -> np.ndarray:
+    """Rows of ``q`` (finite, ``(M, 4)``), each a unit quaternion within :data:`QUAT_NORM_TOL`."""
+    n2 = (q * q).sum(axis=1)
+    if ((n2 >= _UNIT_LO) & (n2 <= _UNIT_HI)).all():
+        return q
+    norms = np.sqrt(n2)
+    i = int(np.flatnonzero(np.abs(norms - 1.0) > QUAT_NORM_TOL)[0])
+    raise MessageError(
+        f"{name}[{i}]: norm {norms[i]:.6g} is not within {QUAT_NORM_TOL:g} of 1 (unit quaternion x, y, z, w)"
+    )
+
+
+_KNOWN_IDS: dict[tuple, None] = {}  # id lists already checked (a swarm's batches repeat one or a few)
+
+
+def _vehicle_ids(value: object, name: str, min_len: int) -> tuple[str, ...]:
+    """Distinct vehicle ids (:data:`~swarm.transport.keys.ID_PATTERN`), ``min_len`` to :data:`MAX_BATCH`."""
+    if not isinstance(value, list | tuple):
+        raise MessageError(f"{name}: expected an array of vehicle ids, got {_show(value)}")
+    ids = tuple(value)
+    if not min_len <= len(ids) <= MAX_BATCH:
+        raise MessageError(f"{name}: {len(ids)} entries, expected {min_len} to {MAX_BATCH}")
+    if all(type(v) is str for v in ids) and ids in _KNOWN_IDS:
+        return ids
+    ids = tuple(_str(v, f"{name}[{i}]", pattern=ID_PATTERN) for i, v in enumerate(ids))
+    if len(set(ids)) != len(ids):
+        raise MessageError(f"{name}: duplicate ids in {_show(ids)}")
+    if len(_KNOWN_IDS) >= 64:
+        _KNOWN_IDS.clear()
+    _KNOWN_IDS[ids] = None
+    return ids
+
+
+@dataclass(frozen=True, eq=False)
+class ImuBatch(Message):
+    """The :class:`Imu` samples of many vehicles at one tick, in one message: ``<ns>/world/imu``, sent by a
+    simulated world beyond one pair instead of one ``agent/<id>/imu`` per vehicle (docs/protocol.md,
+    "Rates": one message per tick where there were N, for the world, the router and an agent host alike).
+    Row ``i`` of the arrays is vehicle ``ids[i]``'s; :meth:`sample` gives one vehicle's :class:`Imu`."""
+
+    tick: int
+    """Tick ``k`` of the swarm clock (>= 0), every row's."""
+    t_s: float
+    """Sample time [s] (>= 0), every row's."""
+    dt_s: float
+    """Integration interval [s] (> 0), every row's."""
+    ids: tuple[str, ...]
+    """The vehicles, distinct, 1 to :data:`MAX_BATCH`: row ``i`` of ``gyro_body`` (and ``acc_body``)."""
+    gyro_body: np.ndarray
+    """Measured angular rates (N, 3) [rad/s], each vehicle's body frame (:attr:`Imu.gyro_body`)."""
+    ahrs_ids: tuple[str, ...] = ()
+    """The vehicles among ``ids`` with an AHRS output this tick, distinct: row ``j`` of
+    ``q_ahrs_nav_body``."""
+    q_ahrs_nav_body: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    """AHRS attitudes (M, 4), unit quaternions (x, y, z, w), of ``ahrs_ids`` (:attr:`Imu.q_ahrs_nav_body`)."""
+    acc_body: np.ndarray | None = None
+    """Measured specific forces (N, 3) [m/s^2] of every row, or ``None`` (gyro-only sensors)."""
+
+    def __post_init__(self) -> None:
+        ids = _vehicle_ids(self.ids, "ids", 1)
+        ahrs = _vehicle_ids(self.ahrs_ids, "ahrs_ids", 0)
+        gyro = _array(self.gyro_body, "gyro_body", (None, 3), max_rows=MAX_BATCH)
+        q = _units(_array(self.q_ahrs_nav_body, "q_ahrs_nav_body", (None, 4), max_rows=MAX_BATCH),
+                   "q_ahrs_nav_body")  # fmt: skip
+        acc = _array(self.acc_body, "acc_body", (None, 3), nullable=True, max_rows=MAX_BATCH)
+        _batch_rows(ids, ahrs, gyro, q, acc)
+        _set(self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+             dt_s=_float(self.dt_s, "dt_s", positive=True), ids=ids, gyro_body=gyro, ahrs_ids=ahrs,
+             q_ahrs_nav_body=q, acc_body=acc)  # fmt: skip
+
+    def index(self) -> dict[str, int]:
+        """Each vehicle's row."""
+        return {vid: i for i, vid in enumerate(self.ids)}
+
+    def sample(self, vid: str, row: int | None = None) -> Imu | None:
+        """Vehicle ``vid``'s :class:`Imu` (``row`` its row when known, :meth:`index`), ``None`` when the
+        batch has none. Its arrays are copies of the batch's checked rows (not checked again)."""
+        if row is None:
+            if vid not in self.ids:
+                return None
+            row = self.ids.index(vid)
+        q = None
+        if vid in self.ahrs_ids:
+            q = self.q_ahrs_nav_body[self.ahrs_ids.index(vid)].copy()
+        msg = object.__new__(Imu)
+        msg.__dict__.update(
+            tick=self.tick, t_s=self.t_s, dt_s=self.dt_s, gyro_body=self.gyro_body[row].copy(),
+            q_ahrs_nav_body=q, acc_body=None if self.acc_body is None else self.acc_body[row].copy(),
+        )  # fmt: skip
+        return msg
+
+
+def _batch_rows(ids: tuple, ahrs: tuple, gyro: np.ndarray, q: np.ndarray, acc: np.ndarray | None) -> None:
+    """The checks of an :class:`ImuBatch` across its fields (rows against ids)."""
+    if gyro.shape[0] != len(ids):
+        raise MessageError(f"gyro_body: {gyro.shape[0]} rows for {len(ids)} ids")
+    if acc is not None and acc.shape[0] != len(ids):
+        raise MessageError(f"acc_body: {acc.shape[0]} rows for {len(ids)} ids")
+    if q.shape[0] != len(ahrs):
+        raise MessageError(f"q_ahrs_nav_body: {q.shape[0]} rows for {len(ahrs)} ahrs_ids")
+    if ahrs and not set(ahrs) <= set(ids):
+        stray = sorted(set(ahrs) - set(ids))
+        raise MessageError(f"ahrs_ids: {_show(stray)} not among ids")
+
+
+def encode_imu_batch(
+    tick: int, t_s: float, dt_s: float, ids: tuple[str, ...], gyro_body, ahrs_ids: tuple[str, ...] = (),
+    q_ahrs_nav_body=None, acc_body=None,
+) -> bytes:  # fmt: skip
+    """``encode(ImuBatch(...))`` (``q_ahrs_nav_body`` ``None``: no rows)."""
+    q = np.zeros((0, 4)) if q_ahrs_nav_body is None else q_ahrs_nav_body
+    return encode(ImuBatch(tick, t_s, dt_s, tuple(ids), gyro_body, tuple(ahrs_ids), q, acc_body))
 
 
 @dataclass(frozen=True, eq=False)
@@ -1106,6 +1231,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.__name__: cls
     for cls in (
         Imu,
+        ImuBatch,
         Uwb,
         Vision,
         Gnss,
@@ -1127,7 +1253,8 @@ MESSAGE_FOR_KIND: dict[str, type[Message]] = {
     "imu": Imu, "uwb": Uwb, "vision": Vision, "gnss": Gnss, "rangefinder": Rangefinder, "estimate": Estimate,
     "guidance": Guidance,
     "command": Command,
-    "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "anchors": Anchors,
+    "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "world_imu": ImuBatch,
+    "anchors": Anchors,
     "run_control": RunControl, "fault": Fault,
 }  # fmt: skip
 """The message carried by each key kind of :meth:`swarm.transport.keys.Keys.parse`."""
@@ -1256,6 +1383,17 @@ class _ImuWire(_Wire):
     acc_body: _Array | None = None
 
 
+class _ImuBatchWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    dt_s: Annotated[float, msgspec.Meta(gt=0.0)]
+    ids: list[str]  # checked by _vehicle_ids, which remembers the lists it passed (a pattern each: ~30 us)
+    gyro_body: _Array
+    ahrs_ids: list[str] = []
+    q_ahrs_nav_body: _Array | None = None
+    acc_body: _Array | None = None
+
+
 class _UwbWire(_Wire):
     tick: _Nat
     t_s: _Time
@@ -1363,6 +1501,19 @@ def _imu(w: _ImuWire) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def _imu_batch(w: _ImuBatchWire) -> dict[str, Any]:
+    if w.q_ahrs_nav_body is None:
+        raise _Defer
+    ids, ahrs = _vehicle_ids(w.ids, "ids", 1), _vehicle_ids(w.ahrs_ids, "ahrs_ids", 0)
+    gyro, acc = _arr(w.gyro_body, (len(ids), 3)), _arr(w.acc_body, (len(ids), 3))
+    q = _units(_arr(w.q_ahrs_nav_body, (len(ahrs), 4)), "q_ahrs_nav_body")
+    _batch_rows(ids, ahrs, gyro, q, acc)
+    return {
+        "tick": w.tick, "t_s": _fin(w.t_s), "dt_s": _fin(w.dt_s), "ids": ids, "gyro_body": gyro,
+        "ahrs_ids": ahrs, "q_ahrs_nav_body": q, "acc_body": acc,
+    }  # fmt: skip
+
+
 def _uwb(w: _UwbWire) -> dict[str, Any]:
     return {"tick": w.tick, "t_s": _fin(w.t_s), "anchor_id": w.anchor_id, "range_m": _fin(w.range_m)}
 
@@ -1417,6 +1568,7 @@ _FAST: dict[type[Message], tuple[msgspec.msgpack.Decoder, Callable[[Any], dict[s
     cls: (msgspec.msgpack.Decoder(wire), convert)
     for cls, wire, convert in (
         (Imu, _ImuWire, _imu),
+        (ImuBatch, _ImuBatchWire, _imu_batch),
         (Uwb, _UwbWire, _uwb),
         (Vision, _VisionWire, _vision),
         (Estimate, _EstimateWire, _estimate),

@@ -6,7 +6,8 @@ without such a certificate, and its ``access_control`` section (Zenoh's ACL, ecl
 each link to an identity by the common name (CN) of the certificate it presented
 (``subjects[].cert_common_names``), then lets through only the messages that identity may send:
 
-- ``world``: sensors (``agent/*/imu``, ``agent/*/vision``), ``agent/*/truth``, ``world/clock``,
+- ``world``: sensors (``agent/*/imu``, ``agent/*/vision``, and ``world/imu``: every vehicle's imu of a tick
+  in one message beyond one pair), ``agent/*/truth``, ``world/clock``,
   ``world/event``, and ``agent/*/event`` (contact, collision and keep-out events on the chaser's key);
 - ``mothership``: ``agent/*/uwb`` and ``mothership/anchors`` (a publication, a queryable, its replies);
 - ``agent-<id>``: ``agent/<id>/estimate|guidance|command|event`` only;
@@ -128,7 +129,7 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
     if name == "world":
         return {
             "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/vision", "agent/*/truth",
-                                                "agent/*/event", "world/clock", "world/event")),
+                                                "agent/*/event", "world/imu", "world/clock", "world/event")),
             "declare_subscriber": (keys.agent_all("command"), keys.run_control(), keys.fault()),
             "liveliness_token": (f"{ns}/alive/world/*",),
             **watch,
@@ -163,7 +164,7 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         return {
             "put": (keys.estimate(vid), keys.guidance(vid), keys.command(vid), keys.event(vid)),
             "declare_subscriber": (keys.imu(vid), keys.uwb(vid), keys.vision(vid), keys.agent_all("estimate"),
-                                   keys.world_clock(), keys.world_event()),  # world_resumed
+                                   keys.world_imu(), keys.world_clock(), keys.world_event()),  # world_resumed
             "liveliness_token": (keys.alive("agent", vid),),
             **watch,
         }  # fmt: skip

@@ -43,7 +43,13 @@ import numpy as np
 from swarm.scenario import Scenario
 from swarm.step.referee import Referee
 from swarm.step.world import World
-from swarm.transport.docking_wire import contact_event, keepout_event, world_sensors
+from swarm.transport.docking_wire import (
+    batch_sample,
+    contact_event,
+    imu_batched,
+    keepout_event,
+    world_sensors,
+)
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import CommandBarrier
 from swarm.transport.messages import (
@@ -333,6 +339,9 @@ class WorldProcess:
         self.pub_imu = {v: declare_reliable(self.session, k.imu(v), ex) for v in self.ids}
         self.pub_vision = {v: declare_reliable(self.session, k.vision(v), ex) for v in self.chasers}
         self._pubs = {"truth": self.pub_truth, "vision": self.pub_vision, "imu": self.pub_imu}  # by kind
+        # beyond one pair every vehicle's imu of a tick leaves in one message (docs/protocol.md, "Rates")
+        self.batch_imu = imu_batched(self.ids)
+        self.pub_imu_batch = declare_reliable(self.session, k.world_imu(), ex) if self.batch_imu else None
         self.pub_event = {v: declare_reliable(self.session, k.event(v)) for v in self.chasers}
         self.pub_clock = declare_reliable(self.session, k.world_clock())
         self.pub_world_event = declare_reliable(self.session, k.world_event())
@@ -346,10 +355,14 @@ class WorldProcess:
     def _encode_tick(self, k: int, frames) -> list[tuple[str, str, bytes]]:
         """The samples of tick ``k``, encoded, in publishing order (:func:`~swarm.transport.docking_wire.
         world_sensors`): ``(kind, vehicle, payload)``."""
-        return world_sensors(self.world, self.ids, self.chasers, k, frames, self._truth_every)
+        t = k * self.sc.dt_s
+        # a vehicle whose samples a sensor_delay window holds back keeps its own imu key (held in _send)
+        solo = {v for v, windows in self._delays.items() if any(a <= t < b for a, b, _ in windows)}
+        return world_sensors(self.world, self.ids, self.chasers, k, frames, self._truth_every, self.batch_imu,
+                             solo)  # fmt: skip
 
     def _pub(self, kind: str, vid: str):
-        return self._pubs[kind][vid]
+        return self.pub_imu_batch if kind == "imu_batch" else self._pubs[kind][vid]
 
     def _publish_tick(self, k: int, sensors: list[tuple[str, str, bytes]]) -> None:
         """Publish tick ``k``'s samples (:meth:`_encode_tick`); imu and vision through :meth:`_send`."""
@@ -357,6 +370,8 @@ class WorldProcess:
         for kind, vid, payload in sensors:
             if kind == "truth":
                 self.pub_truth[vid].put(payload)
+            elif kind == "imu_batch":  # its vehicles have no delay window (_encode_tick)
+                self.pub_imu_batch.put(payload)
             else:
                 self._send(vid, t, kind, payload)
         self._release()
@@ -505,6 +520,9 @@ class WorldProcess:
             self._joining.extend(returned)
         for vid in returned:
             samples = [(kind, payload) for kind, v, payload in self._sensors if v == vid and kind != "truth"]
+            imu = batch_sample(self._sensors, vid)  # its row of the batch, on its own key: to it alone
+            if imu is not None:
+                samples.append(("imu", imu))
             for kind, payload in samples:
                 self._pub(kind, vid).put(payload)
             _LOG.info("agent %s back: in the lockstep from the next tick (%d samples of this one sent again)",

@@ -228,3 +228,21 @@ def test_a_host_of_one_steps_what_the_runs_start_made_ready_on_the_clocks_thread
     host._on_clock("t/world/clock", Clock(tick=0, t_s=0.0, state="running", seed=0))
     assert seen == [0, 1]  # the run's start made ticks 0 and 1 ready, stepped on this thread
     finished.set()
+
+
+def test_the_worlds_batch_gives_each_hosted_vehicle_its_own_row_and_no_other():
+    """The world's ``world/imu`` batch (beyond one pair) reaches each vehicle of a host as the ``imu`` of its
+    own key would have: its row, as an :class:`Imu`; a row for a vehicle hosted elsewhere is nobody's here."""
+    from swarm.transport.messages import Imu, ImuBatch
+
+    sc = load_scenario("docking").with_pairs(2)
+    host, p = _host(["chaser0", "target0"], sc)
+    got = {vid: [] for vid in p}
+    for vid, proc in p.items():
+        proc._on_sensor = lambda key, msg, vid=vid: got[vid].append((key, msg))
+    gyro = np.arange(12.0).reshape(4, 3)
+    q = np.array([[0.0, 0.0, 0.0, 1.0]])
+    batch = ImuBatch(5, 0.05, 0.01, ("chaser1", "target0", "chaser0", "target1"), gyro, ("chaser0",), q)
+    host._on_imu_batch("t/world/imu", batch)
+    assert got["chaser0"] == [("t/world/imu", Imu(5, 0.05, 0.01, gyro[2], q[0]))]
+    assert got["target0"] == [("t/world/imu", Imu(5, 0.05, 0.01, gyro[1]))]

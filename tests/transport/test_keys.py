@@ -31,6 +31,7 @@ def test_every_key_string_matches_the_protocol_table(ns):
     assert k.rangefinder("A9") == f"{ns}/agent/A9/rangefinder"
     assert k.event("chaser") == f"{ns}/agent/chaser/event"
     assert k.world_clock() == f"{ns}/world/clock"
+    assert k.world_imu() == f"{ns}/world/imu"
     assert k.anchors() == f"{ns}/mothership/anchors"
     assert k.run_control() == f"{ns}/control/run"
     assert k.alive("agent", "chaser") == f"{ns}/alive/agent/chaser"
@@ -56,7 +57,9 @@ def test_parse_inverts_every_per_vehicle_key(ns, kind):
     assert k.parse(getattr(k, kind)("chaser_1")) == (kind, "chaser_1")
 
 
-@pytest.mark.parametrize("method", ["world_clock", "world_event", "anchors", "run_control", "fault"])
+@pytest.mark.parametrize(
+    "method", ["world_clock", "world_event", "world_imu", "anchors", "run_control", "fault"]
+)
 def test_parse_names_swarm_wide_keys_by_their_builder(method):
     k = Keys("lab/swarm-2")
     assert k.parse(getattr(k, method)()) == (method, None)

@@ -43,6 +43,7 @@ from swarm.transport.messages import (
     Gnss,
     Guidance,
     Imu,
+    ImuBatch,
     Rangefinder,
     RunControl,
     Truth,
@@ -61,6 +62,9 @@ ANCHORS_MS = [[1.0, -0.2, 0.5], [1.0, 0.2, -0.5], [-1.0, 0.2, -0.5], [-1.0, -0.2
 
 VALID = {
     Imu: Imu(1, 0.01, 0.01, [0.1, 0.2, 0.3], Q),
+    ImuBatch: ImuBatch(
+        1, 0.01, 0.01, ("chaser0", "target0", "chaser1"), [[0.1, 0.2, 0.3]] * 3, ("target0",), [Q]
+    ),
     Uwb: Uwb(2, 0.02, 1, 1.5),
     Vision: Vision(3, 0.05, "target", "+x", "features", np.full((6, 3), 0.1), (0, 1, 2, 3, 4, 5)),
     Estimate: Estimate(
@@ -170,8 +174,20 @@ def visions(draw):
     return Vision(draw(ticks), draw(times), draw(ids), face, kind, data, marker_ids)
 
 
+@st.composite
+def imu_batches(draw):
+    vids = tuple(draw(st.lists(ids, min_size=1, max_size=8, unique=True)))
+    n = len(vids)
+    ahrs = tuple(v for v in vids if draw(st.booleans()))
+    q = np.array([draw(quats) for _ in ahrs]).reshape(len(ahrs), 4)
+    acc = draw(st.none() | arrays(np.float64, (n, 3), elements=finite))
+    gyro = draw(arrays(np.float64, (n, 3), elements=finite))
+    return ImuBatch(draw(ticks), draw(times), draw(st.floats(1e-6, 10.0)), vids, gyro, ahrs, q, acc)
+
+
 STRATEGIES = {
     Imu: st.builds(Imu, ticks, times, st.floats(1e-6, 10.0), vec(3), st.none() | quats, st.none() | vec(3)),
+    ImuBatch: imu_batches(),
     Uwb: st.builds(Uwb, ticks, times, st.integers(0, 2**31 - 1), st.none() | nonneg),
     Vision: visions(),
     Estimate: st.builds(
@@ -405,6 +421,21 @@ CASES = [
     (Event, "data", {"a": {"b": [1.0, INF]}}, "data.a.b[1]: not finite"),
     (Event, "data", {"b": b"raw"}, "data.b: unsupported value"),
     (Event, "data", TOO_DEEP, "data.x.x.x.x.x.x.x.x: nested deeper than 8"),
+    (ImuBatch, "ids", [], "ids: 0 entries, expected 1 to 256"),
+    (ImuBatch, "ids", ["chaser0", "target0", "chaser0"], "ids: duplicate ids"),
+    (ImuBatch, "ids", ["chaser0", "target/0", "chaser1"], "ids[1]: must match"),
+    (ImuBatch, "ids", ["chaser0", 7, "chaser1"], "ids[1]: expected a string"),
+    (ImuBatch, "ids", "chaser0", "ids: expected an array of vehicle ids"),
+    (ImuBatch, "ids", ["chaser0", "target0"], "gyro_body: 3 rows for 2 ids"),
+    (ImuBatch, "ids", [f"v{i}" for i in range(257)], "ids: 257 entries, expected 1 to 256"),
+    (ImuBatch, "gyro_body", [[0.1, NAN, 0.3]] * 3, "gyro_body: not finite"),
+    (ImuBatch, "gyro_body", [[0.1, 0.2]] * 3, "gyro_body: expected shape (N, 3), got (3, 2)"),
+    (ImuBatch, "ahrs_ids", ["ghost"], "ahrs_ids: ['ghost'] not among ids"),
+    (ImuBatch, "ahrs_ids", [], "q_ahrs_nav_body: 1 rows for 0 ahrs_ids"),
+    (ImuBatch, "q_ahrs_nav_body", [[0.0, 0.0, 0.0, 2.0]], "q_ahrs_nav_body[0]: norm 2 is not within 0.001"),
+    (ImuBatch, "q_ahrs_nav_body", [[0.0, 0.0, INF, 1.0]], "q_ahrs_nav_body: not finite"),
+    (ImuBatch, "acc_body", [[0.0, 0.0, 9.8]] * 2, "acc_body: 2 rows for 3 ids"),
+    (ImuBatch, "dt_s", 0.0, "dt_s: must be > 0"),
     (Clock, "state", "flying", "state: expected one of ('running', 'paused', 'stopped')"),
     (Clock, "seed", -1, "seed: must be >= 0"),
     (Clock, "seed", 1.0, "seed: expected an integer"),
@@ -722,6 +753,7 @@ def test_every_key_kind_maps_to_a_message():
         *AGENT_KINDS,
         "world_clock",
         "world_event",
+        "world_imu",
         "anchors",
         "run_control",
         "fault",
@@ -823,7 +855,7 @@ FAST = [cls for cls in ALL if cls in msgs._FAST]
 
 
 def test_the_fast_path_covers_the_messages_of_every_tick():
-    assert set(FAST) == {Imu, Uwb, Vision, Estimate, Guidance, Command, Truth, Clock}
+    assert set(FAST) == {Imu, ImuBatch, Uwb, Vision, Estimate, Guidance, Command, Truth, Clock}
 
 
 @pytest.mark.parametrize("cls", FAST, ids=lambda c: c.__name__)
