@@ -12,7 +12,8 @@ import pytest
 
 def test_bench_swarm_measures_a_launched_swarm(tmp_path):
     out = tmp_path / "swarm.json"
-    args = [sys.executable, "-m", "swarm.cli.main", "bench", "swarm", "--vehicles", "2", "--clock",
+    # two pairs: the world sends the imu as one world/imu batch, which the latency probe must read
+    args = [sys.executable, "-m", "swarm.cli.main", "bench", "swarm", "--vehicles", "4", "--clock",
             "lockstep", "--span", "3", "--vehicles-per-process", "2", "--json", str(out)]  # fmt: skip
     r = subprocess.run(args, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
@@ -21,12 +22,12 @@ def test_bench_swarm_measures_a_launched_swarm(tmp_path):
     keys = {"vehicles", "per_process", "clock", "cpu_us_per_vehicle_tick", "late_tick_share",
             "realtime_factor", "latency_p99_us"}  # fmt: skip
     assert keys <= set(case)
-    assert (case["vehicles"], case["per_process"], case["clock"]) == (2, 2, "lockstep")  # one agent host
+    assert (case["vehicles"], case["per_process"], case["clock"]) == (4, 2, "lockstep")  # two agent hosts
     assert case["ticks"] == 300  # the 3 s span, whole
     assert case["cpu_us_per_vehicle_tick"] > 0 and case["world_cpu_us_per_tick"] > 0
     assert case["late_tick_share"] is None  # lockstep: no tick is late by construction
     assert case["realtime_factor"] > 0
-    # the chaser's estimates (and the fifth of the target's it sends) matched to their imu, over 300 ticks
+    # chaser0's estimates (and the fifth of target0's it sends) matched to their imu, over 300 ticks
     assert case["samples"] > 200
     assert 0 < case["latency_p50_us"] <= case["latency_p99_us"]
     assert "CPU us/vehicle/tick" in r.stdout

@@ -2,7 +2,8 @@
 
 For each case (number of vehicles, clock), ``swarm launch docking --agents V/2`` (one process per vehicle)
 runs for a fixed simulated span while a probe client, on the launcher's router, stamps the arrival of the
-first pair's ``imu(k)`` and ``estimate(k)`` on one clock (it decodes only the tick number):
+first pair's ``imu(k)`` (beyond one pair: of the ``world/imu`` batch that holds it) and ``estimate(k)`` on
+one clock (it decodes only the tick number, and a batch's ids):
 
 - **CPU per vehicle per tick**: the agents' own CPU time (each agent process reports it at the end of the
   run, ``cpu_s`` in the launch summary) over vehicles x ticks; the world's per tick beside it;
@@ -106,6 +107,23 @@ class _Probe:
             with self.lock:
                 self.imu[key] = now
 
+    def on_imu_batch(self, probed: tuple[str, ...]):
+        """The world's ``world/imu`` (beyond one pair): one arrival for every probed vehicle in it."""
+
+        def handler(sample) -> None:
+            now = time.perf_counter()
+            try:
+                obj = msgpack.unpackb(bytes(sample.payload))
+                k, ids = int(obj["tick"]), set(obj["ids"])
+            except Exception:  # a payload of someone else's making: not ours to measure
+                return
+            with self.lock:
+                for vid in probed:
+                    if vid in ids:
+                        self.imu[(vid, k)] = now
+
+        return handler
+
     def on_later(self, into: str):
         def handler(sample) -> None:
             now = time.perf_counter()
@@ -147,9 +165,12 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
             up.wait(300)
             session = open_session(ZenohArgs(mode="client", connect=(endpoint,)))
             try:
-                for vid in ("chaser", "target") if pairs == 1 else ("chaser0", "target0"):
+                probed = ("chaser", "target") if pairs == 1 else ("chaser0", "target0")
+                for vid in probed:
                     session.declare_subscriber(f"{ns}/agent/{vid}/imu", probe.on_imu)
                     session.declare_subscriber(f"{ns}/agent/{vid}/estimate", probe.on_later("latency"))
+                # beyond one pair the world sends every vehicle's imu in one batch (docs/protocol.md, "Rates")
+                session.declare_subscriber(f"{ns}/world/imu", probe.on_imu_batch(probed))
                 rc = proc.wait(timeout=1800)
             finally:
                 session.close()
