@@ -17,7 +17,7 @@ What the host shares among its vehicles:
   ready instead (:meth:`AgentHost.on_news`): one thread hand-off less per tick;
 - **one subscriber each** for the world's clock and events and for liveliness, whose messages go to every
   vehicle: the same for all of them, once per process instead of once per vehicle; and for the world's
-  ``world/imu`` batch (beyond one pair), whose rows go to the vehicles they are for.
+  ``world/imu`` batch (the world sends one for agent hosts), whose rows go to the vehicles they are for.
 
 - **a target's estimate, handed over.** A chaser whose target is in the same host does not subscribe to the
   target's estimates: the target's agent hands it the message it publishes
@@ -103,7 +103,7 @@ class AgentHost:
             self.on_news()
 
     def _on_imu_batch(self, key: str, msg: ImuBatch) -> None:
-        """The world's imu of every vehicle (beyond one pair): each hosted vehicle's row, as its own
+        """The world's imu of every vehicle (``--batch-imu``): each hosted vehicle's row, as its own
         ``imu`` key would have brought it (a host of one steps it here, :meth:`AgentProcess._on_sensor`)."""
         row = msg.index()
         for p in self.procs:

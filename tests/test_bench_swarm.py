@@ -12,7 +12,7 @@ import pytest
 
 def test_bench_swarm_measures_a_launched_swarm(tmp_path):
     out = tmp_path / "swarm.json"
-    # two pairs: the world sends the imu as one world/imu batch, which the latency probe must read
+    # agent hosts: the world sends the imu as one world/imu batch, which the latency probe must read
     args = [sys.executable, "-m", "swarm.cli.main", "bench", "swarm", "--vehicles", "4", "--clock",
             "lockstep", "--span", "3", "--vehicles-per-process", "2", "--json", str(out)]  # fmt: skip
     r = subprocess.run(args, capture_output=True, text=True, timeout=600)

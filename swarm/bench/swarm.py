@@ -2,7 +2,7 @@
 
 For each case (number of vehicles, clock), ``swarm launch docking --agents V/2`` (one process per vehicle)
 runs for a fixed simulated span while a probe client, on the launcher's router, stamps the arrival of the
-first pair's ``imu(k)`` (beyond one pair: of the ``world/imu`` batch that holds it) and ``estimate(k)`` on
+first pair's ``imu(k)`` (with agent hosts: of the ``world/imu`` batch that holds it) and ``estimate(k)`` on
 one clock (it decodes only the tick number, and a batch's ids):
 
 - **CPU per vehicle per tick**: the agents' own CPU time (each agent process reports it at the end of the
@@ -108,7 +108,7 @@ class _Probe:
                 self.imu[key] = now
 
     def on_imu_batch(self, probed: tuple[str, ...]):
-        """The world's ``world/imu`` (beyond one pair): one arrival for every probed vehicle in it."""
+        """The world's ``world/imu`` (agent hosts): one arrival for every probed vehicle in it."""
 
         def handler(sample) -> None:
             now = time.perf_counter()
@@ -169,7 +169,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
                 for vid in probed:
                     session.declare_subscriber(f"{ns}/agent/{vid}/imu", probe.on_imu)
                     session.declare_subscriber(f"{ns}/agent/{vid}/estimate", probe.on_later("latency"))
-                # beyond one pair the world sends every vehicle's imu in one batch (docs/protocol.md, "Rates")
+                # for agent hosts the world sends every vehicle's imu in one batch (docs/protocol.md, "Rates")
                 session.declare_subscriber(f"{ns}/world/imu", probe.on_imu_batch(probed))
                 rc = proc.wait(timeout=1800)
             finally:

@@ -108,6 +108,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def world_args(args: argparse.Namespace) -> list[str]:
+    """The world process's own flags (the common ones and its Zenoh config aside)."""
+    world = ["swarm.world", "--clock", str(args.clock), "--step-timeout", str(args.step_timeout),
+             "--start-timeout", str(args.start_timeout),
+             "--checkpoint-dir", str(args.checkpoint_dir)]  # fmt: skip
+    if args.pace is not None:
+        world += ["--pace", str(args.pace)]
+    if getattr(args, "vehicles_per_process", 1) > 1:  # a host takes one message for its vehicles' imu
+        world += ["--batch-imu"]
+    return world
+
+
 def _hosts(args: argparse.Namespace, sc) -> dict[str, list[str]]:
     """The agent processes to start, ``{child name: [vehicle ids]}``: ``agent/<id>`` with one vehicle each
     (the default), or ``agents/<i>`` hosting ``--vehicles-per-process`` vehicles in scenario order."""
@@ -406,12 +418,7 @@ def _start_run(args, sc, seed, endpoint, sup, Child):
         agent = ["agents", "--id", ",".join(vids), "--clock", str(args.clock), *common,
                  *config_args(args, agent_name(vids[0]))]  # fmt: skip
         sup.start(Child(name, agent, restartable=True, rejoin_args=["--rejoin"]))
-    world = ["swarm.world", "--clock", str(args.clock), "--step-timeout", str(args.step_timeout),
-             "--start-timeout", str(args.start_timeout),
-             "--checkpoint-dir", str(args.checkpoint_dir)]  # fmt: skip
-    if args.pace is not None:
-        world += ["--pace", str(args.pace)]
-    world += [*common, *config_args(args, "world")]
+    world = [*world_args(args), *common, *config_args(args, "world")]
     sup.start(Child("world", world, restartable=True, rejoin_args=["--resume"]))
     if not args.headless and not (sup.children.get("dashboard") and sup.children["dashboard"].running):
         dash = [str(args.scenario), "--agents", str(args.agents), "--namespace", args.namespace,

@@ -27,14 +27,7 @@ from swarm.transport.messages import (
 
 Sensors = list[tuple[str, str, bytes]]
 """``(kind, vehicle, payload)`` in publishing order; ``kind`` is ``truth``, ``vision``, ``imu`` or
-``imu_batch`` (vehicle ``""``: the ``world/imu`` key, :func:`imu_batched`)."""
-
-
-def imu_batched(ids) -> bool:
-    """Whether the world sends its vehicles' ``imu`` as one :class:`~swarm.transport.messages.ImuBatch` on
-    ``world/imu`` per tick instead of one message per vehicle: beyond one pair (docs/protocol.md, "Rates").
-    A single pair keeps its two messages: a batch would gain it nothing."""
-    return len(ids) > 2
+``imu_batch`` (vehicle ``""``: the ``world/imu`` key, a world that serves agent hosts)."""
 
 
 def batch_sample(sensors: Sensors, vid: str) -> bytes | None:
@@ -68,7 +61,7 @@ def world_sensors(
     """The world's samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle (on UWB
     slot ticks: the mothership's radios need no other, and a viewer draws at 50 Hz as well as at 100;
     docs/protocol.md, "Rates"), then per vehicle vision(k) (camera ticks, chasers) and imu(k). With
-    ``batch`` (:func:`imu_batched`) the imu of every vehicle not in ``solo`` goes last, in one
+    ``batch`` (a world serving agent hosts) the imu of every vehicle not in ``solo`` goes last, in one
     :class:`~swarm.transport.messages.ImuBatch` per :data:`~swarm.transport.messages.MAX_BATCH` vehicles;
     ``solo`` (vehicles whose samples a ``sensor_delay`` fault holds back) keep their own."""
     sc = world.sc
@@ -260,9 +253,9 @@ class DockingTap:
 
     def world(self, sim, k: int, frames) -> None:
         """The world's samples of tick ``k`` (and the clock on its ticks)."""
-        batch = imu_batched(self._ids)  # as the world process
+        # as the world of a default launch (a process per vehicle): one imu message per vehicle
         for kind, vid, payload in world_sensors(
-            sim.world, self._ids, self._chasers, k, frames, self._truth_every, batch
+            sim.world, self._ids, self._chasers, k, frames, self._truth_every
         ):
             key = self.keys.world_imu() if kind == "imu_batch" else getattr(self.keys, kind)(vid)
             self._write(key, payload)

@@ -132,7 +132,7 @@ class Keys:
 
     def world_imu(self) -> str:
         """Every vehicle's gyro (+ AHRS) samples of one tick in one message (``ImuBatch``): a simulated world
-        beyond one pair -> agents (each takes its own row)."""
+        serving agent hosts -> agents (each takes its own row)."""
         return f"{self.namespace}/world/imu"
 
     def world_event(self) -> str:

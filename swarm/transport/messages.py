@@ -594,8 +594,8 @@ def _vehicle_ids(value: object, name: str, min_len: int) -> tuple[str, ...]:
 @dataclass(frozen=True, eq=False)
 class ImuBatch(Message):
     """The :class:`Imu` samples of many vehicles at one tick, in one message: ``<ns>/world/imu``, sent by a
-    simulated world beyond one pair instead of one ``agent/<id>/imu`` per vehicle (docs/protocol.md,
-    "Rates": one message per tick where there were N, for the world, the router and an agent host alike).
+    simulated world that serves agent hosts instead of one ``agent/<id>/imu`` per vehicle (docs/protocol.md,
+    "Rates": one message per tick where there were N, for the world, the router and a host alike).
     Row ``i`` of the arrays is vehicle ``ids[i]``'s; :meth:`sample` gives one vehicle's :class:`Imu`."""
 
     tick: int

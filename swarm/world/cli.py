@@ -26,6 +26,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "never ahead of the wall clock, to watch it or to leave a machine's cores to others",
     )  # fmt: skip
     p.add_argument(
+        "--batch-imu", action="store_true",
+        help="send every vehicle's imu of a tick as one ImuBatch on world/imu instead of one message per "
+        "vehicle: for agent hosts, which take a row each (swarm launch passes it with "
+        "--vehicles-per-process > 1)",
+    )  # fmt: skip
+    p.add_argument(
         "--clock-every", type=int, default=10, metavar="TICKS",
         help="publish world/clock every this many ticks (default 10)",
     )  # fmt: skip
@@ -62,7 +68,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
             proc = WorldProcess(
                 sc, args.seed, session, keys_from(args), args.clock, stop, step_timeout_s=args.step_timeout,
                 start_timeout_s=args.start_timeout, clock_every=args.clock_every,
-                checkpoint_dir=args.checkpoint_dir, resume=resume, pace=args.pace,
+                checkpoint_dir=args.checkpoint_dir, resume=resume, pace=args.pace, batch_imu=args.batch_imu,
             )  # fmt: skip
             end = proc.run()
     except checkpoint.CheckpointError as exc:

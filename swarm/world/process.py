@@ -43,13 +43,7 @@ import numpy as np
 from swarm.scenario import Scenario
 from swarm.step.referee import Referee
 from swarm.step.world import World
-from swarm.transport.docking_wire import (
-    batch_sample,
-    contact_event,
-    imu_batched,
-    keepout_event,
-    world_sensors,
-)
+from swarm.transport.docking_wire import batch_sample, contact_event, keepout_event, world_sensors
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import CommandBarrier
 from swarm.transport.messages import (
@@ -88,9 +82,12 @@ class WorldProcess:
         checkpoint_dir: str | Path | None = None,
         resume: dict | None = None,
         pace: ClockSpec | None = None,
+        batch_imu: bool = False,
     ) -> None:
         """``pace``: a lockstep world that also never runs ahead of this wall clock (realtime or scaled:N;
-        every command is still waited for, so the run is the unpaced one); ``checkpoint_dir``: write the
+        every command is still waited for, so the run is the unpaced one); ``batch_imu``: every vehicle's
+        imu of a tick in one ``world/imu`` message (agent hosts, docs/protocol.md "Rates"), not one per
+        vehicle; ``checkpoint_dir``: write the
         state there every tick (``None``: never); ``resume``: a state :func:`swarm.world.checkpoint.load`
         read, to continue from (:class:`CheckpointError` if it is not a state of this run: another scenario,
         seed or vehicle set)."""
@@ -108,6 +105,7 @@ class WorldProcess:
         self.start_timeout_s = start_timeout_s
         self.clock_every = max(1, int(clock_every))
         self.process_id = process_id
+        self.batch_imu = batch_imu
         self.world = World(sc, seed)  # with the run's dispersions and its fault schedule
         self.referee = Referee(sc)
         self.ids = list(sc.vehicles)
@@ -339,9 +337,9 @@ class WorldProcess:
         self.pub_imu = {v: declare_reliable(self.session, k.imu(v), ex) for v in self.ids}
         self.pub_vision = {v: declare_reliable(self.session, k.vision(v), ex) for v in self.chasers}
         self._pubs = {"truth": self.pub_truth, "vision": self.pub_vision, "imu": self.pub_imu}  # by kind
-        # beyond one pair every vehicle's imu of a tick leaves in one message (docs/protocol.md, "Rates")
-        self.batch_imu = imu_batched(self.ids)
-        self.pub_imu_batch = declare_reliable(self.session, k.world_imu(), ex) if self.batch_imu else None
+        # for agent hosts every vehicle's imu of a tick leaves in one message (docs/protocol.md, "Rates");
+        # declared either way: a checkpoint's tick, published again on resume, may hold a batch
+        self.pub_imu_batch = declare_reliable(self.session, k.world_imu(), ex)
         self.pub_event = {v: declare_reliable(self.session, k.event(v)) for v in self.chasers}
         self.pub_clock = declare_reliable(self.session, k.world_clock())
         self.pub_world_event = declare_reliable(self.session, k.world_event())

@@ -231,7 +231,7 @@ def test_a_host_of_one_steps_what_the_runs_start_made_ready_on_the_clocks_thread
 
 
 def test_the_worlds_batch_gives_each_hosted_vehicle_its_own_row_and_no_other():
-    """The world's ``world/imu`` batch (beyond one pair) reaches each vehicle of a host as the ``imu`` of its
+    """The world's ``world/imu`` batch (agent hosts) reaches each vehicle of a host as the ``imu`` of its
     own key would have: its row, as an :class:`Imu`; a row for a vehicle hosted elsewhere is nobody's here."""
     from swarm.transport.messages import Imu, ImuBatch
 
