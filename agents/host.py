@@ -17,7 +17,8 @@ What the host shares among its vehicles:
   ready instead (:meth:`AgentHost.on_news`): one thread hand-off less per tick;
 - **one subscriber each** for the world's clock and events and for liveliness, whose messages go to every
   vehicle: the same for all of them, once per process instead of once per vehicle; and for the world's
-  ``world/imu`` batch (the world sends one for agent hosts), whose rows go to the vehicles they are for.
+  ``world/imu`` batch and the mothership's ``mothership/uwb`` batch (sent for agent hosts), whose rows go to
+  the vehicles they are for.
 
 - **a target's estimate, handed over.** A chaser whose target is in the same host does not subscribe to the
   target's estimates: the target's agent hands it the message it publishes
@@ -38,7 +39,7 @@ import time
 from collections.abc import Sequence
 
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Clock, DropCounter, Event, ImuBatch
+from swarm.transport.messages import Clock, DropCounter, Event, ImuBatch, UwbBatch
 from swarm.transport.session import subscribe_decoded, watch_liveliness
 
 __all__ = ["IDLE_S", "AgentHost"]
@@ -111,6 +112,15 @@ class AgentHost:
             if i is not None:
                 p._on_sensor(key, msg.sample(p.id, i))
 
+    def _on_uwb_batch(self, key: str, msg: UwbBatch) -> None:
+        """The mothership's ranges of a slot for every vehicle (``--batch-uwb``): each hosted vehicle's
+        entry, as its own ``uwb`` key would have brought it."""
+        row = msg.index()
+        for p in self.procs:
+            i = row.get(p.id)
+            if i is not None:
+                p._on_sensor(key, msg.sample(p.id, i))
+
     def _on_world_event(self, key: str, msg: Event) -> None:
         for p in self.procs:
             p._on_world_event(key, msg)
@@ -134,6 +144,8 @@ class AgentHost:
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.shared_drops)
         direct = not self.inline  # as the vehicles' own sensor subscribers (AgentProcess.open)
         subscribe_decoded(self.session, k.world_imu(), ImuBatch, self._on_imu_batch, self.shared_drops,
+                          direct=direct)  # fmt: skip
+        subscribe_decoded(self.session, k.mothership_uwb(), UwbBatch, self._on_uwb_batch, self.shared_drops,
                           direct=direct)  # fmt: skip
         subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.shared_drops)
         for p in self.procs:

@@ -21,6 +21,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="join a run in progress (a restarted mothership)",
     )
+    p.add_argument(
+        "--batch-uwb", action="store_true",
+        help="send every vehicle's range of a UWB slot as one UwbBatch on mothership/uwb instead of one "
+        "message per vehicle: for agent hosts, which take an entry each (swarm launch passes it with "
+        "--vehicles-per-process > 1)",
+    )  # fmt: skip
 
 
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
@@ -31,7 +37,9 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     sc = scenario_from(args)
     stop = stop if stop is not None else threading.Event()
     with open_session(zenoh_args(args)) as session:
-        MothershipProcess(sc, args.seed, session, keys_from(args), stop, rejoin=args.rejoin).run()
+        MothershipProcess(
+            sc, args.seed, session, keys_from(args), stop, rejoin=args.rejoin, batch_uwb=args.batch_uwb
+        ).run()
     return 0
 
 

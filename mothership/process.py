@@ -5,7 +5,8 @@
 - Radio network: the radio step, :class:`swarm.step.radio.UwbNetwork` (one round-robin radio per vehicle,
   the sensor model of :mod:`swarm.core.sensors`). From the world's ``truth`` of every vehicle at a UWB
   slot tick ``k`` it publishes one ``uwb(k)`` per vehicle, with ``range_m`` nil when the reply was lost, so
-  a lockstep agent knows not to wait. Slots are processed in tick order: the radios' random streams are
+  a lockstep agent knows not to wait (for agent hosts, ``--batch-uwb``: all of them in one ``UwbBatch`` on
+  ``mothership/uwb``). Slots are processed in tick order: the radios' random streams are
   consumed exactly as in the in-process simulation (same seed, same ranges). A truth of a slot already
   served (a resumed world publishes its checkpointed tick again) is dropped: a slot is served once.
 - Faults: none of its own. Each truth carries its tag's radio environment at that tick (``uwb_lost``,
@@ -24,7 +25,7 @@ import numpy as np
 import zenoh
 
 from swarm.step.radio import UwbNetwork
-from swarm.transport.docking_wire import uwb_slot
+from swarm.transport.docking_wire import uwb_slot, uwb_slot_batch
 from swarm.transport.keys import Keys
 from swarm.transport.messages import Anchors, Clock, DropCounter, Truth, encode
 from swarm.transport.process import declare_reliable, print_ready
@@ -45,8 +46,12 @@ class MothershipProcess:
         stop: threading.Event,
         anchors_every_s: float = 1.0,
         rejoin: bool = False,
+        batch_uwb: bool = False,
     ) -> None:
+        """``batch_uwb``: every vehicle's range of a slot in one ``mothership/uwb`` message (agent hosts,
+        docs/protocol.md "Rates"), not one per vehicle."""
         self.sc, self.seed, self.session, self.keys, self.stop = scenario, seed, session, keys, stop
+        self.batch_uwb = batch_uwb
         self.anchors_every_s = anchors_every_s
         self.ids = list(scenario.vehicles)
         self.index = {v: i for i, v in enumerate(self.ids)}
@@ -131,8 +136,11 @@ class MothershipProcess:
             lost[i], p_nlos[i] = m.uwb_lost, m.nlos_probability
         t = k * self.sc.dt_s
         self.network.step(k, t, X, lost, p_nlos)
-        for vid, payload in uwb_slot(self.network, self.ids, k, t):
-            self.pub_uwb[vid].put(payload)
+        if self.batch_uwb:
+            self.pub_uwb_batch.put(uwb_slot_batch(self.network, self.ids, k, t))
+        else:
+            for vid, payload in uwb_slot(self.network, self.ids, k, t):
+                self.pub_uwb[vid].put(payload)
         self.slots += 1
 
     def run(self) -> None:
@@ -142,6 +150,7 @@ class MothershipProcess:
         UwbNetwork(self.sc, self.seed).step(self.every, 0.0, X)  # compile (or load) the kernel before "ready"
         # a slot's ranges are a burst: batched beyond one pair (docs/protocol.md, "QoS")
         self.pub_uwb = {v: declare_reliable(self.session, k.uwb(v), len(self.ids) <= 2) for v in self.ids}
+        self.pub_uwb_batch = declare_reliable(self.session, k.mothership_uwb(), len(self.ids) <= 2)
         pub_anchors = declare_reliable(self.session, k.anchors(), express=False)
         self._queryable = self.session.declare_queryable(k.anchors(), self._on_query)
         subscribe_decoded(self.session, k.agent_all("truth"), Truth, self._on_truth, self.drops)

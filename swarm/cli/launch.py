@@ -120,6 +120,12 @@ def world_args(args: argparse.Namespace) -> list[str]:
     return world
 
 
+def mothership_args(args: argparse.Namespace) -> list[str]:
+    """The mothership process's own flags (the common ones and its Zenoh config aside)."""
+    hosted = getattr(args, "vehicles_per_process", 1) > 1  # a host takes one message for its vehicles' ranges
+    return ["mothership", *(["--batch-uwb"] if hosted else [])]
+
+
 def _hosts(args: argparse.Namespace, sc) -> dict[str, list[str]]:
     """The agent processes to start, ``{child name: [vehicle ids]}``: ``agent/<id>`` with one vehicle each
     (the default), or ``agents/<i>`` hosting ``--vehicles-per-process`` vehicles in scenario order."""
@@ -412,7 +418,7 @@ def _start_run(args, sc, seed, endpoint, sup, Child):
     common = child_args(args, endpoint, seed)
     from swarm.transport.security import agent_name
 
-    mothership = ["mothership", *common, *config_args(args, "mothership")]
+    mothership = [*mothership_args(args), *common, *config_args(args, "mothership")]
     sup.start(Child("mothership", mothership, restartable=True, rejoin_args=["--rejoin"]))
     for name, vids in _hosts(args, sc).items():
         agent = ["agents", "--id", ",".join(vids), "--clock", str(args.clock), *common,

@@ -15,6 +15,7 @@ from swarm.transport.messages import (
     Clock,
     Event,
     Guidance,
+    UwbBatch,
     Vision,
     encode,
     encode_command,
@@ -141,6 +142,13 @@ def uwb_slot(network, ids: list[str], k: int, t: float) -> list[tuple[str, bytes
     vehicle (``range_m`` None where the reply was lost)."""
     ranges = [None if lost else float(r) for lost, r in zip(network.lost, network.range_m, strict=True)]
     return [(vid, encode_uwb(k, t, int(network.anchor_id[i]), ranges[i])) for i, vid in enumerate(ids)]
+
+
+def uwb_slot_batch(network, ids: list[str], k: int, t: float) -> bytes:
+    """:func:`uwb_slot`'s ranges in one :class:`~swarm.transport.messages.UwbBatch` (agent hosts)."""
+    ranges = tuple(None if lost else float(r) for lost, r in zip(network.lost, network.range_m, strict=True))
+    anchors = tuple(int(a) for a in network.anchor_id)
+    return encode(UwbBatch(k, t, tuple(ids), anchors, ranges))
 
 
 def filter_counts(agent) -> dict[str, int]:

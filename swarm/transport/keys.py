@@ -2,7 +2,7 @@
 
 DESIGN.md section 4: one namespace per swarm (default ``tpods``) so that two swarms can share a router.
 Per-vehicle topics are ``<ns>/agent/<id>/<kind>``; the rest are ``<ns>/world/clock``, ``<ns>/world/imu``,
-``<ns>/mothership/anchors``, ``<ns>/control/run``, ``<ns>/control/fault`` and the
+``<ns>/mothership/uwb``, ``<ns>/mothership/anchors``, ``<ns>/control/run``, ``<ns>/control/fault`` and the
 liveliness tokens ``<ns>/alive/<role>/<id>``.
 Agent ids and roles are single key chunks of ``[A-Za-z0-9_-]`` (1 to 64 characters), so that no id can
 smuggle a ``/`` or a wildcard into a key. ``docs/protocol.md`` lists every key with its publisher,
@@ -34,6 +34,7 @@ _FIXED = {
     ("world", "event"): "world_event",
     ("world", "imu"): "world_imu",
     ("mothership", "anchors"): "anchors",
+    ("mothership", "uwb"): "mothership_uwb",
     ("control", "run"): "run_control",
     ("control", "fault"): "fault",
 }
@@ -140,6 +141,11 @@ class Keys:
         dashboard."""
         return f"{self.namespace}/world/event"
 
+    def mothership_uwb(self) -> str:
+        """Every vehicle's range of one UWB slot in one message (``UwbBatch``): a simulated radio network
+        serving agent hosts -> agents (each takes its own entry)."""
+        return f"{self.namespace}/mothership/uwb"
+
     def anchors(self) -> str:
         """Anchor ids and positions: mothership (publisher and queryable) -> agents, dashboard."""
         return f"{self.namespace}/mothership/anchors"
@@ -178,10 +184,10 @@ class Keys:
     def parse(self, key: object) -> tuple[str, str | None] | None:
         """Inverse of the builders: ``(kind, agent_id)`` for ``<ns>/agent/<id>/<kind>``; ``("world_clock",
         None)``, ``("world_event", None)``, ``("world_imu", None)``, ``("anchors", None)``,
-        ``("run_control", None)``, ``("fault", None)`` for the swarm-wide keys; ``("alive", process_id)`` for
-        a liveliness token (its role: :meth:`parse_alive`). ``None`` for a key outside this namespace, a
-        wildcard or anything this protocol does not define. ``key`` may be a ``str`` or any object whose
-        ``str()`` is the key (a Zenoh ``KeyExpr``)."""
+        ``("mothership_uwb", None)``, ``("run_control", None)``, ``("fault", None)`` for the swarm-wide
+        keys; ``("alive", process_id)`` for a liveliness token (its role: :meth:`parse_alive`). ``None``
+        for a key outside this namespace, a wildcard or anything this protocol does not define. ``key`` may
+        be a ``str`` or any object whose ``str()`` is the key (a Zenoh ``KeyExpr``)."""
         rest = self._rest(key)
         if rest is None:
             return None

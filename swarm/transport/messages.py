@@ -73,6 +73,7 @@ __all__ = [
     "RunControl",
     "Truth",
     "Uwb",
+    "UwbBatch",
     "Vision",
     "decode",
     "encode",
@@ -707,6 +708,58 @@ def encode_uwb(tick: int, t_s: float, anchor_id: int, range_m: float | None) -> 
 
 
 @dataclass(frozen=True, eq=False)
+class UwbBatch(Message):
+    """The :class:`Uwb` exchanges of many vehicles in one UWB slot, in one message: ``<ns>/mothership/uwb``,
+    sent by a simulated radio network that serves agent hosts instead of one ``agent/<id>/uwb`` per vehicle
+    (docs/protocol.md, "Rates"). Entry ``i`` of each list is vehicle ``ids[i]``'s; :meth:`sample` gives one
+    vehicle's :class:`Uwb`."""
+
+    tick: int
+    """Tick ``k`` of the slot (>= 0), every exchange's."""
+    t_s: float
+    """Time of the slot [s] (>= 0), every exchange's."""
+    ids: tuple[str, ...]
+    """The vehicles, distinct, 1 to :data:`MAX_BATCH`."""
+    anchor_ids: tuple[int, ...]
+    """The anchor each vehicle ranged to (:attr:`Uwb.anchor_id`), one per id."""
+    range_m: tuple[float | None, ...]
+    """Each vehicle's measured distance [m] (>= 0), ``None`` where the reply was lost (``Uwb.range_m``)."""
+
+    def __post_init__(self) -> None:
+        ids = _vehicle_ids(self.ids, "ids", 1)
+        anchors, ranges = _per_id(self.anchor_ids, "anchor_ids", ids), _per_id(self.range_m, "range_m", ids)
+        _set(self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0), ids=ids,
+             anchor_ids=tuple(_int(a, f"anchor_ids[{i}]", 0, _MAX_ID) for i, a in enumerate(anchors)),
+             range_m=tuple(_float(r, f"range_m[{i}]", lo=0.0, nullable=True) for i, r in enumerate(ranges)),
+             )  # fmt: skip
+
+    def index(self) -> dict[str, int]:
+        """Each vehicle's entry."""
+        return {vid: i for i, vid in enumerate(self.ids)}
+
+    def sample(self, vid: str, row: int | None = None) -> Uwb | None:
+        """Vehicle ``vid``'s :class:`Uwb` (``row`` its entry when known, :meth:`index`), ``None`` when the
+        batch has none (its values are the batch's checked ones, not checked again)."""
+        if row is None:
+            if vid not in self.ids:
+                return None
+            row = self.ids.index(vid)
+        msg = object.__new__(Uwb)
+        msg.__dict__.update(
+            tick=self.tick, t_s=self.t_s, anchor_id=self.anchor_ids[row], range_m=self.range_m[row]
+        )
+        return msg
+
+
+def _per_id(value: object, name: str, ids: tuple) -> list | tuple:
+    if not isinstance(value, list | tuple):
+        raise MessageError(f"{name}: expected an array, got {_show(value)}")
+    if len(value) != len(ids):
+        raise MessageError(f"{name}: {len(value)} entries for {len(ids)} ids")
+    return value
+
+
+@dataclass(frozen=True, eq=False)
 class Gnss(Message):
     """A satellite receiver's position fix of one vehicle: ``<ns>/agent/<id>/gnss`` (the landing's UAVs)."""
 
@@ -1233,6 +1286,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         Imu,
         ImuBatch,
         Uwb,
+        UwbBatch,
         Vision,
         Gnss,
         Rangefinder,
@@ -1254,7 +1308,7 @@ MESSAGE_FOR_KIND: dict[str, type[Message]] = {
     "guidance": Guidance,
     "command": Command,
     "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "world_imu": ImuBatch,
-    "anchors": Anchors,
+    "anchors": Anchors, "mothership_uwb": UwbBatch,
     "run_control": RunControl, "fault": Fault,
 }  # fmt: skip
 """The message carried by each key kind of :meth:`swarm.transport.keys.Keys.parse`."""
@@ -1401,6 +1455,14 @@ class _UwbWire(_Wire):
     range_m: _NonNeg | None = None
 
 
+class _UwbBatchWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    ids: list[str]  # checked by _vehicle_ids (see _ImuBatchWire)
+    anchor_ids: list[Annotated[int, msgspec.Meta(ge=0, le=_MAX_ID)]]
+    range_m: list[_NonNeg | None]
+
+
 class _VisionWire(_Wire):
     tick: _Nat
     t_s: _Time
@@ -1518,6 +1580,22 @@ def _uwb(w: _UwbWire) -> dict[str, Any]:
     return {"tick": w.tick, "t_s": _fin(w.t_s), "anchor_id": w.anchor_id, "range_m": _fin(w.range_m)}
 
 
+def _uwb_batch(w: _UwbBatchWire) -> dict[str, Any]:
+    ids = _vehicle_ids(w.ids, "ids", 1)
+    if len(w.anchor_ids) != len(ids) or len(w.range_m) != len(ids):
+        raise _Defer
+    ranges = tuple(w.range_m)
+    if not math.isfinite(sum(r for r in ranges if r is not None)):
+        raise _Defer
+    return {
+        "tick": w.tick,
+        "t_s": _fin(w.t_s),
+        "ids": ids,
+        "anchor_ids": tuple(w.anchor_ids),
+        "range_m": ranges,
+    }
+
+
 def _vision(w: _VisionWire) -> dict[str, Any]:
     data = _arr(w.data, (None, {"features": 3, "pixels": 2, "pose": POSE_LEN}[w.kind]))
     ids = _ids(w.marker_ids, "marker_ids", min_len=0)
@@ -1570,6 +1648,7 @@ _FAST: dict[type[Message], tuple[msgspec.msgpack.Decoder, Callable[[Any], dict[s
         (Imu, _ImuWire, _imu),
         (ImuBatch, _ImuBatchWire, _imu_batch),
         (Uwb, _UwbWire, _uwb),
+        (UwbBatch, _UwbBatchWire, _uwb_batch),
         (Vision, _VisionWire, _vision),
         (Estimate, _EstimateWire, _estimate),
         (Guidance, _GuidanceWire, _guidance),

@@ -9,7 +9,8 @@ each link to an identity by the common name (CN) of the certificate it presented
 - ``world``: sensors (``agent/*/imu``, ``agent/*/vision``, and ``world/imu``: every vehicle's imu of a tick
   in one message beyond one pair), ``agent/*/truth``, ``world/clock``,
   ``world/event``, and ``agent/*/event`` (contact, collision and keep-out events on the chaser's key);
-- ``mothership``: ``agent/*/uwb`` and ``mothership/anchors`` (a publication, a queryable, its replies);
+- ``mothership``: ``agent/*/uwb`` (and ``mothership/uwb``, a slot's ranges in one message for agent hosts)
+  and ``mothership/anchors`` (a publication, a queryable, its replies);
 - ``agent-<id>``: ``agent/<id>/estimate|guidance|command|event`` only;
 - ``dashboard``: the operator's controls only, ``control/run`` (pause, resume, reset, new seed) and
   ``control/fault`` (its Faults panel injects the faults ``swarm fault`` does: an operator's console may
@@ -136,7 +137,7 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         }  # fmt: skip
     if name == "mothership":
         return {
-            "put": (keys.agent_all("uwb"), keys.anchors()),
+            "put": (keys.agent_all("uwb"), keys.mothership_uwb(), keys.anchors()),
             "declare_queryable": (keys.anchors(),),
             "reply": (keys.anchors(),),
             "declare_subscriber": (keys.agent_all("truth"), keys.world_clock()),
@@ -164,7 +165,8 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         return {
             "put": (keys.estimate(vid), keys.guidance(vid), keys.command(vid), keys.event(vid)),
             "declare_subscriber": (keys.imu(vid), keys.uwb(vid), keys.vision(vid), keys.agent_all("estimate"),
-                                   keys.world_imu(), keys.world_clock(), keys.world_event()),  # world_resumed
+                                   keys.world_imu(), keys.mothership_uwb(), keys.world_clock(),
+                                   keys.world_event()),  # world_resumed
             "liveliness_token": (keys.alive("agent", vid),),
             **watch,
         }  # fmt: skip

@@ -246,3 +246,19 @@ def test_the_worlds_batch_gives_each_hosted_vehicle_its_own_row_and_no_other():
     host._on_imu_batch("t/world/imu", batch)
     assert got["chaser0"] == [("t/world/imu", Imu(5, 0.05, 0.01, gyro[2], q[0]))]
     assert got["target0"] == [("t/world/imu", Imu(5, 0.05, 0.01, gyro[1]))]
+
+
+def test_the_motherships_batch_gives_each_hosted_vehicle_its_own_range_and_no_other():
+    """The mothership's ``mothership/uwb`` batch (agent hosts) reaches each hosted vehicle as the ``uwb`` of
+    its own key would have, a lost reply (nil) included; another host's vehicle's entry is nobody's here."""
+    from swarm.transport.messages import Uwb, UwbBatch
+
+    sc = load_scenario("docking").with_pairs(2)
+    host, p = _host(["chaser0", "target0"], sc)
+    got = {vid: [] for vid in p}
+    for vid, proc in p.items():
+        proc._on_sensor = lambda key, msg, vid=vid: got[vid].append((key, msg))
+    batch = UwbBatch(4, 0.04, ("target1", "chaser0", "target0"), (2, 0, 3), (1.25, None, 0.75))
+    host._on_uwb_batch("t/mothership/uwb", batch)
+    assert got == {"chaser0": [("t/mothership/uwb", Uwb(4, 0.04, 0, None))],
+                   "target0": [("t/mothership/uwb", Uwb(4, 0.04, 3, 0.75))]}  # fmt: skip

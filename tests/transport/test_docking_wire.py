@@ -6,12 +6,14 @@ each vehicle's row of the batch must be that message, field for field."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from swarm.scenario import load_scenario
+from swarm.step.radio import UwbNetwork
 from swarm.step.world import World
-from swarm.transport.docking_wire import batch_sample, world_sensors
-from swarm.transport.messages import MAX_BATCH, Imu, ImuBatch, decode
+from swarm.transport.docking_wire import batch_sample, uwb_slot, uwb_slot_batch, world_sensors
+from swarm.transport.messages import MAX_BATCH, Imu, ImuBatch, Uwb, UwbBatch, decode
 
 
 def _tick(pairs: int, k_ahrs: bool):
@@ -57,14 +59,36 @@ def test_a_vehicle_held_back_by_a_delay_keeps_its_own_imu_and_a_big_swarm_severa
     assert MAX_BATCH >= 128  # the real cap: the 128-vehicle swarm's imu are one message
 
 
+def test_each_vehicles_entry_of_a_slots_batch_is_the_range_it_would_have_had_alone():
+    """The mothership's slot for agent hosts (``--batch-uwb``): one UwbBatch, whose entry for each vehicle
+    is the Uwb of its own key, lost replies (nil ranges) included."""
+    sc = load_scenario("docking").with_pairs(3)
+    ids = list(sc.vehicles)
+    net = UwbNetwork(sc, 5)
+    X = np.zeros((len(ids), 13))
+    X[:, 0:3] = np.random.default_rng(1).uniform(-1.0, 1.0, (len(ids), 3))
+    X[:, 9] = 1.0
+    lost = np.zeros(len(ids), dtype=np.bool_)
+    lost[1] = True  # the radio environment loses vehicle 1's reply
+    net.step(net.every, net.every * sc.dt_s, X, lost)
+    k, t = net.every, net.every * sc.dt_s
+    batch = decode(uwb_slot_batch(net, ids, k, t), UwbBatch)
+    alone = {vid: decode(p, Uwb) for vid, p in uwb_slot(net, ids, k, t)}
+    assert batch.ids == tuple(ids) and batch.range_m[1] is None
+    assert {vid: batch.sample(vid) for vid in ids} == alone
+    assert batch.sample("ghost") is None
+
+
 @pytest.mark.parametrize("per_process", [1, 2, 16])
-def test_the_launcher_asks_the_world_for_batches_only_for_agent_hosts(per_process):
-    """A host takes one world/imu for all its vehicles; a process of one vehicle would take every vehicle's
-    row to use one (measured: 10-15 % more agent CPU at 4 pairs, BENCHMARKS.md), so it keeps its own key."""
+def test_the_launcher_asks_world_and_mothership_for_batches_only_for_agent_hosts(per_process):
+    """A host takes one world/imu and one mothership/uwb for all its vehicles; a process of one vehicle
+    would take every vehicle's entry to use one (measured: 10-15 % more agent CPU at 4 pairs with the imu
+    batch, BENCHMARKS.md), so it keeps its own keys."""
     import argparse
 
-    from swarm.cli.launch import world_args
+    from swarm.cli.launch import mothership_args, world_args
 
     args = argparse.Namespace(clock="lockstep", step_timeout=5.0, start_timeout=180.0, checkpoint_dir="/x",
                               pace=None, vehicles_per_process=per_process)  # fmt: skip
     assert ("--batch-imu" in world_args(args)) == (per_process > 1)
+    assert mothership_args(args) == ["mothership", *(["--batch-uwb"] if per_process > 1 else [])]

@@ -34,6 +34,7 @@ from swarm.transport.messages import (
     RunControl,
     Truth,
     Uwb,
+    UwbBatch,
     decode,
     encode,
 )
@@ -58,6 +59,7 @@ _VALID = {
     "truth": Truth(7, 0.07, np.zeros(3), np.zeros(3), _Q, np.zeros(3)),
     "estimate": Estimate(7, 0.07, np.zeros(3), np.zeros(3), _Q, np.eye(9), 0.1, 0.0, 0.0, {}),
     "world_clock": Clock(7, 0.07, "running", 0),
+    "mothership_uwb": UwbBatch(8, 0.08, ("chaser", "target"), (1, 2), (1.5, None)),
     "world_imu": ImuBatch(7, 0.07, 0.01, ("chaser", "target"), np.zeros((2, 3)), ("chaser",), _Q[None, :]),
     "run_control": RunControl("pause"),
     "fault": Fault("camera_loss", duration_s=1.0, vehicle="chaser"),
@@ -68,7 +70,8 @@ def _keys(ns: str) -> list[tuple[str, str]]:
     k = Keys(ns)
     out = [(kind, getattr(k, kind)(vid)) for kind in AGENT_KINDS for vid in ("chaser", "target")]
     fixed = [("world_clock", k.world_clock()), ("world_event", k.world_event()), ("world_imu", k.world_imu()),
-             ("anchors", k.anchors()), ("run_control", k.run_control()), ("fault", k.fault())]  # fmt: skip
+             ("mothership_uwb", k.mothership_uwb()), ("anchors", k.anchors()),
+             ("run_control", k.run_control()), ("fault", k.fault())]  # fmt: skip
     return [*out, *fixed]
 
 

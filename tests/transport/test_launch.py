@@ -321,17 +321,18 @@ def test_a_free_running_swarm_takes_delayed_samples_and_a_killed_world_and_ends_
 
     - ``sensor_delay``: for 5 s the chaser's imu and vision samples leave the world up to 30 ms late, so
       they arrive late and out of order; the agent processes ticks in order, taking late ones partially
-      (counted);
+      (counted). Both vehicles are in one agent host, so the world sends the imu as ``world/imu`` batches:
+      the delayed chaser's leave on its own key meanwhile, the target's in the batch;
     - then the world SIGKILLed: the restarted world resumes at the simulated time of its checkpoint (the
-      vehicles did not move meanwhile); the agents saw a gap of wall time and no samples, and fly on from
-      the samples that follow.
+      vehicles did not move meanwhile; the checkpointed tick's batch is published again); the agents saw a
+      gap of wall time and no samples, and fly on from the samples that follow.
 
     The run ends docked or in a safe hold, without a keep-out violation and with no crash."""
     ns = _ns()
     with Procs() as procs:
         out = tmp_path / "launch.json"
         proc, endpoint = _launch(procs, ns, "--until-docked", "--clock", "scaled:2", "--set", NEAR,
-                                 json_path=out)  # fmt: skip
+                                 "--vehicles-per-process", "2", json_path=out)  # fmt: skip
         proc.wait_for_line(r"^swarm up:", 120.0)
         cmd = [sys.executable, "-m", "swarm.cli.main", "fault", "sensor_delay", "--vehicle", "chaser",
                "--for", "5", "--delay", "0.03", "--namespace", ns,

@@ -48,6 +48,7 @@ from swarm.transport.messages import (
     RunControl,
     Truth,
     Uwb,
+    UwbBatch,
     Vision,
     decode,
     encode,
@@ -66,6 +67,7 @@ VALID = {
         1, 0.01, 0.01, ("chaser0", "target0", "chaser1"), [[0.1, 0.2, 0.3]] * 3, ("target0",), [Q]
     ),
     Uwb: Uwb(2, 0.02, 1, 1.5),
+    UwbBatch: UwbBatch(2, 0.02, ("chaser0", "target0", "chaser1"), (1, 0, 3), (1.5, None, 2.25)),
     Vision: Vision(3, 0.05, "target", "+x", "features", np.full((6, 3), 0.1), (0, 1, 2, 3, 4, 5)),
     Estimate: Estimate(
         4, 0.04, [1.0, 2.0, 3.0], [0.0, 0.0, 0.0], Q, np.eye(9) * 1e-4, 0.01, 0.5, 0.0,
@@ -189,6 +191,13 @@ STRATEGIES = {
     Imu: st.builds(Imu, ticks, times, st.floats(1e-6, 10.0), vec(3), st.none() | quats, st.none() | vec(3)),
     ImuBatch: imu_batches(),
     Uwb: st.builds(Uwb, ticks, times, st.integers(0, 2**31 - 1), st.none() | nonneg),
+    UwbBatch: st.lists(ids, min_size=1, max_size=8, unique=True).flatmap(
+        lambda vids: st.builds(
+            UwbBatch, ticks, times, st.just(tuple(vids)),
+            st.lists(st.integers(0, 2**31 - 1), min_size=len(vids), max_size=len(vids)).map(tuple),
+            st.lists(st.none() | nonneg, min_size=len(vids), max_size=len(vids)).map(tuple),
+        )
+    ),
     Vision: visions(),
     Estimate: st.builds(
         Estimate, ticks, times, vec(3), vec(3), quats, covs, nonneg, nonneg, st.floats(0.0, 1.0), counts
@@ -436,6 +445,17 @@ CASES = [
     (ImuBatch, "q_ahrs_nav_body", [[0.0, 0.0, INF, 1.0]], "q_ahrs_nav_body: not finite"),
     (ImuBatch, "acc_body", [[0.0, 0.0, 9.8]] * 2, "acc_body: 2 rows for 3 ids"),
     (ImuBatch, "dt_s", 0.0, "dt_s: must be > 0"),
+    (UwbBatch, "ids", [], "ids: 0 entries, expected 1 to 256"),
+    (UwbBatch, "ids", ["chaser0", "chaser0", "chaser1"], "ids: duplicate ids"),
+    (UwbBatch, "anchor_ids", [1, 0], "anchor_ids: 2 entries for 3 ids"),
+    (UwbBatch, "anchor_ids", [1, -1, 3], "anchor_ids[1]: must be >= 0"),
+    (UwbBatch, "anchor_ids", [1, True, 3], "anchor_ids[1]: expected an integer"),
+    (UwbBatch, "anchor_ids", 7, "anchor_ids: expected an array"),
+    (UwbBatch, "range_m", [1.5, None], "range_m: 2 entries for 3 ids"),
+    (UwbBatch, "range_m", [1.5, NAN, 2.0], "range_m[1]: not finite"),
+    (UwbBatch, "range_m", [1.5, None, INF], "range_m[2]: not finite"),
+    (UwbBatch, "range_m", [1.5, -0.1, 2.0], "range_m[1]: must be >= 0"),
+    (UwbBatch, "range_m", [1.5, "2", 2.0], "range_m[1]: expected a number"),
     (Clock, "state", "flying", "state: expected one of ('running', 'paused', 'stopped')"),
     (Clock, "seed", -1, "seed: must be >= 0"),
     (Clock, "seed", 1.0, "seed: expected an integer"),
@@ -755,6 +775,7 @@ def test_every_key_kind_maps_to_a_message():
         "world_event",
         "world_imu",
         "anchors",
+        "mothership_uwb",
         "run_control",
         "fault",
     }
@@ -855,7 +876,7 @@ FAST = [cls for cls in ALL if cls in msgs._FAST]
 
 
 def test_the_fast_path_covers_the_messages_of_every_tick():
-    assert set(FAST) == {Imu, ImuBatch, Uwb, Vision, Estimate, Guidance, Command, Truth, Clock}
+    assert set(FAST) == {Imu, ImuBatch, Uwb, UwbBatch, Vision, Estimate, Guidance, Command, Truth, Clock}
 
 
 @pytest.mark.parametrize("cls", FAST, ids=lambda c: c.__name__)
