@@ -20,7 +20,8 @@ QUICK = {"repeat": 3, "number": 300}
 
 
 def examples() -> list:
-    """One realistic message of each hot-path type (the docking chaser's sizes)."""
+    """One realistic message of each hot-path type (the docking chaser's sizes; the batches of agent hosts
+    for a swarm of 32 vehicles, an AHRS tick's)."""
     from swarm.core.decision_keys import DECISION_KEYS
     from swarm.transport import messages as m
 
@@ -28,9 +29,12 @@ def examples() -> list:
     a = rng.normal(size=(9, 9))
     q = np.array([0.0, 0.0, 0.0, 1.0])
     counts = {"range_accepted": 5, "range_rejected": 1, "features_accepted": 2}
+    ids = tuple(f"{kind}{i}" for i in range(16) for kind in ("chaser", "target"))
     return [
         m.Imu(5, 0.05, 0.01, np.full(3, 0.01), q),
+        m.ImuBatch(5, 0.05, 0.01, ids, rng.normal(size=(32, 3)), ids, np.tile(q, (32, 1))),
         m.Uwb(5, 0.05, 3, 2.5),
+        m.UwbBatch(5, 0.05, ids, tuple(i % 4 for i in range(32)), tuple(1.0 + 0.1 * i for i in range(32))),
         m.Vision(5, 0.05, "target", "+x", "features", rng.normal(size=(4, 3)), (0, 1, 2, 3)),
         m.Estimate(5, 0.05, np.ones(3), np.ones(3), q, a @ a.T, 0.1, 1.0, 0.1, counts),
         m.Guidance(5, 0.05, "APPROACH", 1.0, 0.5, 1.0, 2.0, dict.fromkeys(DECISION_KEYS, 0.5), "x" * 60),
