@@ -104,8 +104,9 @@ class AgentHost:
             self.on_news()
 
     def _on_imu_batch(self, key: str, msg: ImuBatch) -> None:
-        """The world's imu of every vehicle (``--batch-imu``): each hosted vehicle's row, as its own
-        ``imu`` key would have brought it (a host of one steps it here, :meth:`AgentProcess._on_sensor`)."""
+        """The world's imu of every vehicle (a world run with ``--batch``): each hosted vehicle's row, as
+        its own ``imu`` key would have brought it (a host of one steps it here,
+        :meth:`AgentProcess._on_sensor`)."""
         row = msg.index()
         for p in self.procs:
             i = row.get(p.id)
@@ -113,8 +114,8 @@ class AgentHost:
                 p._on_sensor(key, msg.sample(p.id, i))
 
     def _on_uwb_batch(self, key: str, msg: UwbBatch) -> None:
-        """The mothership's ranges of a slot for every vehicle (``--batch-uwb``): each hosted vehicle's
-        entry, as its own ``uwb`` key would have brought it."""
+        """The mothership's ranges of a slot for every vehicle (a mothership run with ``--batch``): each
+        hosted vehicle's entry, as its own ``uwb`` key would have brought it."""
         row = msg.index()
         for p in self.procs:
             i = row.get(p.id)

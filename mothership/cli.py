@@ -22,10 +22,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="join a run in progress (a restarted mothership)",
     )
     p.add_argument(
-        "--batch-uwb", action="store_true",
-        help="send every vehicle's range of a UWB slot as one UwbBatch on mothership/uwb instead of one "
-        "message per vehicle: for agent hosts, which take an entry each (swarm launch passes it with "
-        "--vehicles-per-process > 1)",
+        "--batch", action="store_true",
+        help="for agent hosts (swarm launch passes it with --vehicles-per-process > 1): take the world's "
+        "truth as TruthBatch messages on world/truth (a world run with --batch), and send every vehicle's "
+        "range of a UWB slot as one UwbBatch on mothership/uwb, which the hosts split",
     )  # fmt: skip
 
 
@@ -38,7 +38,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     stop = stop if stop is not None else threading.Event()
     with open_session(zenoh_args(args)) as session:
         MothershipProcess(
-            sc, args.seed, session, keys_from(args), stop, rejoin=args.rejoin, batch_uwb=args.batch_uwb
+            sc, args.seed, session, keys_from(args), stop, rejoin=args.rejoin, batch=args.batch
         ).run()
     return 0
 

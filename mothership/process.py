@@ -5,10 +5,11 @@
 - Radio network: the radio step, :class:`swarm.step.radio.UwbNetwork` (one round-robin radio per vehicle,
   the sensor model of :mod:`swarm.core.sensors`). From the world's ``truth`` of every vehicle at a UWB
   slot tick ``k`` it publishes one ``uwb(k)`` per vehicle, with ``range_m`` nil when the reply was lost, so
-  a lockstep agent knows not to wait (for agent hosts, ``--batch-uwb``: all of them in one ``UwbBatch`` on
-  ``mothership/uwb``). Slots are processed in tick order: the radios' random streams are
-  consumed exactly as in the in-process simulation (same seed, same ranges). A truth of a slot already
-  served (a resumed world publishes its checkpointed tick again) is dropped: a slot is served once.
+  a lockstep agent knows not to wait. For agent hosts (``--batch``) it takes the truths of a tick as one
+  ``TruthBatch`` on ``world/truth`` and sends a slot's ranges as one ``UwbBatch`` on ``mothership/uwb``.
+  Slots are processed in tick order: the radios' random streams are consumed exactly as in the in-process
+  simulation (same seed, same ranges). A truth of a slot already served (a resumed world publishes its
+  checkpointed tick again) is dropped: a slot is served once.
 - Faults: none of its own. Each truth carries its tag's radio environment at that tick (``uwb_lost``,
   ``nlos_probability``: the world's fault schedule, fixed, mode-triggered and run-time windows alike),
   and the radios apply it, as the in-process radio step does.
@@ -27,7 +28,7 @@ import zenoh
 from swarm.step.radio import UwbNetwork
 from swarm.transport.docking_wire import uwb_slot, uwb_slot_batch
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Anchors, Clock, DropCounter, Truth, encode
+from swarm.transport.messages import Anchors, Clock, DropCounter, Truth, TruthBatch, encode
 from swarm.transport.process import declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
 
@@ -46,12 +47,13 @@ class MothershipProcess:
         stop: threading.Event,
         anchors_every_s: float = 1.0,
         rejoin: bool = False,
-        batch_uwb: bool = False,
+        batch: bool = False,
     ) -> None:
-        """``batch_uwb``: every vehicle's range of a slot in one ``mothership/uwb`` message (agent hosts,
-        docs/protocol.md "Rates"), not one per vehicle."""
+        """``batch``: the world's truths taken as ``world/truth`` batches and every vehicle's range of a
+        slot sent in one ``mothership/uwb`` message (agent hosts, docs/protocol.md "Rates"), not one per
+        vehicle either way."""
         self.sc, self.seed, self.session, self.keys, self.stop = scenario, seed, session, keys, stop
-        self.batch_uwb = batch_uwb
+        self.batch = batch
         self.anchors_every_s = anchors_every_s
         self.ids = list(scenario.vehicles)
         self.index = {v: i for i, v in enumerate(self.ids)}
@@ -81,6 +83,22 @@ class MothershipProcess:
             except Exception as exc:  # a bug in the radio step: the process fails, its supervisor restarts it
                 _LOG.exception("UWB slot failed")
                 self._failure = exc
+
+    def _on_truth_batch(self, key: str, msg: TruthBatch) -> None:
+        """A tick's truths of every vehicle (``batch``): each vehicle's, as its own key would have brought
+        it (a vehicle not of this scenario counted and dropped)."""
+        if msg.tick % self.every or msg.tick == 0 or self._failure is not None:
+            return
+        try:
+            with self._lock:
+                for i, vid in enumerate(msg.ids):
+                    if vid not in self.index:
+                        self.drops.drop(key, f"truth: {vid!r} is not a vehicle of this scenario")
+                        continue
+                    self._take(vid, msg.sample(vid, i))
+        except Exception as exc:  # a bug in the radio step: the process fails, its supervisor restarts it
+            _LOG.exception("UWB slot failed")
+            self._failure = exc
 
     def _take(self, vid: str, msg: Truth) -> None:
         """One slot tick's truth, on the subscriber's thread (a hand-off per truth to the main thread cost
@@ -136,7 +154,7 @@ class MothershipProcess:
             lost[i], p_nlos[i] = m.uwb_lost, m.nlos_probability
         t = k * self.sc.dt_s
         self.network.step(k, t, X, lost, p_nlos)
-        if self.batch_uwb:
+        if self.batch:
             self.pub_uwb_batch.put(uwb_slot_batch(self.network, self.ids, k, t))
         else:
             for vid, payload in uwb_slot(self.network, self.ids, k, t):
@@ -153,7 +171,10 @@ class MothershipProcess:
         self.pub_uwb_batch = declare_reliable(self.session, k.mothership_uwb(), len(self.ids) <= 2)
         pub_anchors = declare_reliable(self.session, k.anchors(), express=False)
         self._queryable = self.session.declare_queryable(k.anchors(), self._on_query)
-        subscribe_decoded(self.session, k.agent_all("truth"), Truth, self._on_truth, self.drops)
+        if self.batch:  # not agent/*/truth too: the world sends those to a viewer only, while one matches
+            subscribe_decoded(self.session, k.world_truth(), TruthBatch, self._on_truth_batch, self.drops)
+        else:
+            subscribe_decoded(self.session, k.agent_all("truth"), Truth, self._on_truth, self.drops)
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
         watch_liveliness(self.session, k, self._on_alive, history=False)
         self._token = declare_liveliness(self.session, k, "mothership", "mothership")

@@ -40,6 +40,18 @@ def examples() -> list:
         m.Guidance(5, 0.05, "APPROACH", 1.0, 0.5, 1.0, 2.0, dict.fromkeys(DECISION_KEYS, 0.5), "x" * 60),
         m.Command(5, 0.05, np.ones(10), "APPROACH", np.ones(3), np.ones(3)),
         m.Truth(5, 0.05, np.ones(3), np.ones(3), q, np.ones(3)),
+        m.TruthBatch(
+            5,
+            0.05,
+            ids,
+            np.ones((32, 3)),
+            np.ones((32, 3)),
+            np.tile(q, (32, 1)),
+            np.ones((32, 3)),
+            np.ones(32),
+            (False,) * 32,
+            np.zeros(32),
+        ),
         m.Clock(5, 0.05, "running", 3),
     ]
 

@@ -23,12 +23,14 @@ from swarm.transport.messages import (
     encode_imu,
     encode_imu_batch,
     encode_truth,
+    encode_truth_batch,
     encode_uwb,
 )
 
 Sensors = list[tuple[str, str, bytes]]
-"""``(kind, vehicle, payload)`` in publishing order; ``kind`` is ``truth``, ``vision``, ``imu`` or
-``imu_batch`` (vehicle ``""``: the ``world/imu`` key, a world that serves agent hosts)."""
+"""``(kind, vehicle, payload)`` in publishing order; ``kind`` is ``truth``, ``vision``, ``imu``, or
+``truth_batch`` and ``imu_batch`` (vehicle ``""``: the ``world/truth`` and ``world/imu`` keys of a world
+that serves agent hosts)."""
 
 
 def batch_sample(sensors: Sensors, vid: str) -> bytes | None:
@@ -57,21 +59,28 @@ FILTER_OUTCOMES = ("accepted", "rejected", "refused")
 
 def world_sensors(
     world, ids: list[str], chasers: list[str], k: int, frames, truth_every: int, batch: bool = False,
-    solo=frozenset(),
+    solo=frozenset(), viewed=None,
 ) -> Sensors:  # fmt: skip
     """The world's samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle (on UWB
     slot ticks: the mothership's radios need no other, and a viewer draws at 50 Hz as well as at 100;
     docs/protocol.md, "Rates"), then per vehicle vision(k) (camera ticks, chasers) and imu(k). With
     ``batch`` (a world serving agent hosts) the imu of every vehicle not in ``solo`` goes last, in one
     :class:`~swarm.transport.messages.ImuBatch` per :data:`~swarm.transport.messages.MAX_BATCH` vehicles;
-    ``solo`` (vehicles whose samples a ``sensor_delay`` fault holds back) keep their own."""
+    ``solo`` (vehicles whose samples a ``sensor_delay`` fault holds back) keep their own. With ``batch`` the
+    truths go first as :class:`~swarm.transport.messages.TruthBatch` messages (the mothership's), then one
+    per vehicle in ``viewed`` (those a viewer subscribes to; ``None``: every vehicle)."""
     sc = world.sc
     t = k * sc.dt_s
     camera_tick = k % world.vision_every == 0
     face = sc.guidance.docking_face
     out: Sensors = []
     lost, p_nlos = world.radio_env(t)
-    for i, vid in enumerate(ids if k % truth_every == 0 else ()):
+    truth_tick = k % truth_every == 0
+    if batch and truth_tick:
+        out.extend(_truth_batches(world, ids, k, t, bool(lost), float(p_nlos)))
+    for i, vid in enumerate(ids if truth_tick else ()):
+        if viewed is not None and vid not in viewed:
+            continue
         x = world.X[i]
         truth = encode_truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], float(world.effort[i]), bool(lost),
                              float(p_nlos))  # fmt: skip
@@ -97,6 +106,21 @@ def world_sensors(
         ahrs = [vid for vid in chunk if frames[vid].q_ahrs_nav_body is not None]
         q = np.array([frames[vid].q_ahrs_nav_body for vid in ahrs], dtype=np.float64).reshape(len(ahrs), 4)
         out.append(("imu_batch", "", encode_imu_batch(k, t, sc.dt_s, chunk, gyro, ahrs, q)))
+    return out
+
+
+def _truth_batches(world, ids: list[str], k: int, t: float, lost: bool, p_nlos: float) -> Sensors:
+    """Every vehicle's truth of tick ``k`` in :class:`~swarm.transport.messages.TruthBatch` messages of at
+    most :data:`~swarm.transport.messages.MAX_BATCH` vehicles each (``world.X`` rows in ``ids`` order)."""
+    out: Sensors = []
+    X, effort = world.X, np.asarray(world.effort, dtype=np.float64)
+    for a in range(0, len(ids), MAX_BATCH):
+        b = min(a + MAX_BATCH, len(ids))
+        n = b - a
+        x = np.ascontiguousarray(X[a:b], dtype=np.float64)
+        payload = encode_truth_batch(k, t, ids[a:b], x[:, 0:3], x[:, 3:6], x[:, 6:10], x[:, 10:13],
+                                     effort[a:b], (lost,) * n, np.full(n, p_nlos))  # fmt: skip
+        out.append(("truth_batch", "", payload))
     return out
 
 

@@ -2,8 +2,8 @@
 
 DESIGN.md section 4: one namespace per swarm (default ``tpods``) so that two swarms can share a router.
 Per-vehicle topics are ``<ns>/agent/<id>/<kind>``; the rest are ``<ns>/world/clock``, ``<ns>/world/imu``,
-``<ns>/mothership/uwb``, ``<ns>/mothership/anchors``, ``<ns>/control/run``, ``<ns>/control/fault`` and the
-liveliness tokens ``<ns>/alive/<role>/<id>``.
+``<ns>/world/truth``, ``<ns>/mothership/uwb``, ``<ns>/mothership/anchors``, ``<ns>/control/run``,
+``<ns>/control/fault`` and the liveliness tokens ``<ns>/alive/<role>/<id>``.
 Agent ids and roles are single key chunks of ``[A-Za-z0-9_-]`` (1 to 64 characters), so that no id can
 smuggle a ``/`` or a wildcard into a key. ``docs/protocol.md`` lists every key with its publisher,
 subscribers, rate and QoS.
@@ -33,6 +33,7 @@ _FIXED = {
     ("world", "clock"): "world_clock",
     ("world", "event"): "world_event",
     ("world", "imu"): "world_imu",
+    ("world", "truth"): "world_truth",
     ("mothership", "anchors"): "anchors",
     ("mothership", "uwb"): "mothership_uwb",
     ("control", "run"): "run_control",
@@ -136,6 +137,11 @@ class Keys:
         serving agent hosts -> agents (each takes its own row)."""
         return f"{self.namespace}/world/imu"
 
+    def world_truth(self) -> str:
+        """Every vehicle's true state of one tick in one message (``TruthBatch``): a simulated world serving
+        agent hosts -> its mothership (never an agent)."""
+        return f"{self.namespace}/world/truth"
+
     def world_event(self) -> str:
         """Run start and end (with each vehicle's total impulse), lockstep timeouts: world -> launcher,
         dashboard."""
@@ -182,12 +188,12 @@ class Keys:
         return text[len(prefix) :].split("/")
 
     def parse(self, key: object) -> tuple[str, str | None] | None:
-        """Inverse of the builders: ``(kind, agent_id)`` for ``<ns>/agent/<id>/<kind>``; ``("world_clock",
-        None)``, ``("world_event", None)``, ``("world_imu", None)``, ``("anchors", None)``,
-        ``("mothership_uwb", None)``, ``("run_control", None)``, ``("fault", None)`` for the swarm-wide
-        keys; ``("alive", process_id)`` for a liveliness token (its role: :meth:`parse_alive`). ``None``
-        for a key outside this namespace, a wildcard or anything this protocol does not define. ``key`` may
-        be a ``str`` or any object whose ``str()`` is the key (a Zenoh ``KeyExpr``)."""
+        """Inverse of the builders: ``(kind, agent_id)`` for ``<ns>/agent/<id>/<kind>``; ``(name, None)``
+        for a swarm-wide key, named by its builder (``world_clock``, ``world_event``, ``world_imu``,
+        ``world_truth``, ``anchors``, ``mothership_uwb``, ``run_control``, ``fault``); ``("alive",
+        process_id)`` for a liveliness token (its role: :meth:`parse_alive`). ``None`` for a key outside
+        this namespace, a wildcard or anything this protocol does not define. ``key`` may be a ``str`` or
+        any object whose ``str()`` is the key (a Zenoh ``KeyExpr``)."""
         rest = self._rest(key)
         if rest is None:
             return None

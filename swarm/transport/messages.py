@@ -72,6 +72,7 @@ __all__ = [
     "Rangefinder",
     "RunControl",
     "Truth",
+    "TruthBatch",
     "Uwb",
     "UwbBatch",
     "Vision",
@@ -82,6 +83,7 @@ __all__ = [
     "encode_imu",
     "encode_imu_batch",
     "encode_truth",
+    "encode_truth_batch",
     "encode_uwb",
     "estimate_and_payload",
     "estimate_message",
@@ -1158,6 +1160,86 @@ def encode_truth(
 
 
 @dataclass(frozen=True, eq=False)
+class TruthBatch(Message):
+    """The :class:`Truth` of many vehicles at one tick, in one message: ``<ns>/world/truth``, what a world
+    serving agent hosts sends its mothership instead of one ``agent/<id>/truth`` each (docs/protocol.md,
+    "Rates"; the per-vehicle truths then go to a viewer only, while one subscribes). Row ``i`` of every
+    array is vehicle ``ids[i]``'s; :meth:`sample` gives one vehicle's :class:`Truth`."""
+
+    tick: int
+    """Tick ``k`` (>= 0), every row's."""
+    t_s: float
+    """Time [s] (>= 0), every row's."""
+    ids: tuple[str, ...]
+    """The vehicles, distinct, 1 to :data:`MAX_BATCH`."""
+    p_nav: np.ndarray
+    """Positions (N, 3) [m], frame nav (:attr:`Truth.p_nav`)."""
+    v_nav: np.ndarray
+    """Velocities (N, 3) [m/s], frame nav."""
+    q_nav_body: np.ndarray
+    """Attitudes (N, 4), unit quaternions (x, y, z, w), body into nav."""
+    w_body: np.ndarray
+    """Angular rates (N, 3) [rad/s], body frames."""
+    effort: np.ndarray
+    """Efforts (N,) since the run began (>= 0), each in its kind's measure (:attr:`Truth.effort`)."""
+    uwb_lost: tuple[bool, ...]
+    """Each tag's radio environment: every reply lost (:attr:`Truth.uwb_lost`)."""
+    nlos_probability: np.ndarray
+    """Each tag's NLOS outlier probability in a burst window (N,), in [0, 1]."""
+
+    def __post_init__(self) -> None:
+        ids = _vehicle_ids(self.ids, "ids", 1)
+        n, rows = len(ids), MAX_BATCH
+        p, v = _array(self.p_nav, "p_nav", (n, 3)), _array(self.v_nav, "v_nav", (n, 3))
+        q = _units(_array(self.q_nav_body, "q_nav_body", (n, 4)), "q_nav_body")
+        w, effort = _array(self.w_body, "w_body", (n, 3)), _array(self.effort, "effort", (n,), max_rows=rows)
+        nlos = _array(self.nlos_probability, "nlos_probability", (n,), max_rows=rows)
+        lost = _per_id(self.uwb_lost, "uwb_lost", ids)
+        _truth_rows(effort, nlos)
+        _set(self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0), ids=ids, p_nav=p,
+             v_nav=v, q_nav_body=q, w_body=w, effort=effort, nlos_probability=nlos,
+             uwb_lost=tuple(_bool(x, f"uwb_lost[{i}]") for i, x in enumerate(lost)))  # fmt: skip
+
+    def index(self) -> dict[str, int]:
+        """Each vehicle's row."""
+        return {vid: i for i, vid in enumerate(self.ids)}
+
+    def sample(self, vid: str, row: int | None = None) -> Truth | None:
+        """Vehicle ``vid``'s :class:`Truth` (``row`` its row when known, :meth:`index`), ``None`` when the
+        batch has none. Its arrays are copies of the batch's checked rows (not checked again)."""
+        if row is None:
+            if vid not in self.ids:
+                return None
+            row = self.ids.index(vid)
+        msg = object.__new__(Truth)
+        msg.__dict__.update(
+            tick=self.tick, t_s=self.t_s, p_nav=self.p_nav[row].copy(), v_nav=self.v_nav[row].copy(),
+            q_nav_body=self.q_nav_body[row].copy(), w_body=self.w_body[row].copy(),
+            effort=float(self.effort[row]), uwb_lost=self.uwb_lost[row],
+            nlos_probability=float(self.nlos_probability[row]),
+        )  # fmt: skip
+        return msg
+
+
+def _truth_rows(effort: np.ndarray, nlos: np.ndarray) -> None:
+    """The ranges of a :class:`TruthBatch`'s per-row numbers."""
+    if (effort < 0.0).any():
+        i = int(np.flatnonzero(effort < 0.0)[0])
+        raise MessageError(f"effort[{i}]: must be >= 0, got {effort[i]}")
+    bad = (nlos < 0.0) | (nlos > 1.0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise MessageError(f"nlos_probability[{i}]: must be in [0, 1], got {nlos[i]}")
+
+
+def encode_truth_batch(tick: int, t_s: float, ids, p_nav, v_nav, q_nav_body, w_body, effort, uwb_lost,
+                       nlos_probability) -> bytes:  # fmt: skip
+    """``encode(TruthBatch(...))``."""
+    return encode(TruthBatch(tick, t_s, tuple(ids), p_nav, v_nav, q_nav_body, w_body, effort, tuple(uwb_lost),
+                             nlos_probability))  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
 class Event(Message):
     """Something that happened to one vehicle, ``<ns>/agent/<id>/event`` (published by its agent, and by the
     world for what only the truth shows: ``contact``, ``collision``, ``keepout_violation``), or to the
@@ -1294,6 +1376,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         Guidance,
         Command,
         Truth,
+        TruthBatch,
         Event,
         Clock,
         Anchors,
@@ -1308,7 +1391,7 @@ MESSAGE_FOR_KIND: dict[str, type[Message]] = {
     "guidance": Guidance,
     "command": Command,
     "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "world_imu": ImuBatch,
-    "anchors": Anchors, "mothership_uwb": UwbBatch,
+    "anchors": Anchors, "mothership_uwb": UwbBatch, "world_truth": TruthBatch,
     "run_control": RunControl, "fault": Fault,
 }  # fmt: skip
 """The message carried by each key kind of :meth:`swarm.transport.keys.Keys.parse`."""
@@ -1519,6 +1602,19 @@ class _TruthWire(_Wire):
     nlos_probability: _Share = 0.0
 
 
+class _TruthBatchWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    ids: list[str]  # checked by _vehicle_ids (see _ImuBatchWire)
+    p_nav: _Array
+    v_nav: _Array
+    q_nav_body: _Array
+    w_body: _Array
+    effort: _Array
+    uwb_lost: list[bool]
+    nlos_probability: _Array
+
+
 class _ClockWire(_Wire):
     tick: _Nat
     t_s: _Time
@@ -1638,6 +1734,21 @@ def _truth(w: _TruthWire) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def _truth_batch(w: _TruthBatchWire) -> dict[str, Any]:
+    ids = _vehicle_ids(w.ids, "ids", 1)
+    n = len(ids)
+    if len(w.uwb_lost) != n:
+        raise _Defer
+    effort, nlos = _arr(w.effort, (n,)), _arr(w.nlos_probability, (n,))
+    _truth_rows(effort, nlos)
+    return {
+        "tick": w.tick, "t_s": _fin(w.t_s), "ids": ids, "p_nav": _arr(w.p_nav, (n, 3)),
+        "v_nav": _arr(w.v_nav, (n, 3)), "q_nav_body": _units(_arr(w.q_nav_body, (n, 4)), "q_nav_body"),
+        "w_body": _arr(w.w_body, (n, 3)), "effort": effort, "uwb_lost": tuple(w.uwb_lost),
+        "nlos_probability": nlos,
+    }  # fmt: skip
+
+
 def _clock(w: _ClockWire) -> dict[str, Any]:
     return {"tick": w.tick, "t_s": _fin(w.t_s), "state": w.state, "seed": w.seed}
 
@@ -1654,6 +1765,7 @@ _FAST: dict[type[Message], tuple[msgspec.msgpack.Decoder, Callable[[Any], dict[s
         (Guidance, _GuidanceWire, _guidance),
         (Command, _CommandWire, _command),
         (Truth, _TruthWire, _truth),
+        (TruthBatch, _TruthBatchWire, _truth_batch),
         (Clock, _ClockWire, _clock),
     )
 }

@@ -7,7 +7,8 @@ each link to an identity by the common name (CN) of the certificate it presented
 (``subjects[].cert_common_names``), then lets through only the messages that identity may send:
 
 - ``world``: sensors (``agent/*/imu``, ``agent/*/vision``, and ``world/imu``: every vehicle's imu of a tick
-  in one message beyond one pair), ``agent/*/truth``, ``world/clock``,
+  in one message for agent hosts), ``agent/*/truth`` (and ``world/truth``, the mothership's batch),
+  ``world/clock``,
   ``world/event``, and ``agent/*/event`` (contact, collision and keep-out events on the chaser's key);
 - ``mothership``: ``agent/*/uwb`` (and ``mothership/uwb``, a slot's ranges in one message for agent hosts)
   and ``mothership/anchors`` (a publication, a queryable, its replies);
@@ -130,7 +131,8 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
     if name == "world":
         return {
             "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/vision", "agent/*/truth",
-                                                "agent/*/event", "world/imu", "world/clock", "world/event")),
+                                                "agent/*/event", "world/imu", "world/truth", "world/clock",
+                                                "world/event")),
             "declare_subscriber": (keys.agent_all("command"), keys.run_control(), keys.fault()),
             "liveliness_token": (f"{ns}/alive/world/*",),
             **watch,
@@ -140,7 +142,7 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
             "put": (keys.agent_all("uwb"), keys.mothership_uwb(), keys.anchors()),
             "declare_queryable": (keys.anchors(),),
             "reply": (keys.anchors(),),
-            "declare_subscriber": (keys.agent_all("truth"), keys.world_clock()),
+            "declare_subscriber": (keys.agent_all("truth"), keys.world_truth(), keys.world_clock()),
             "liveliness_token": (f"{ns}/alive/mothership/*",),
             **watch,  # to say when the world is lost
         }

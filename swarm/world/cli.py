@@ -26,10 +26,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "never ahead of the wall clock, to watch it or to leave a machine's cores to others",
     )  # fmt: skip
     p.add_argument(
-        "--batch-imu", action="store_true",
-        help="send every vehicle's imu of a tick as one ImuBatch on world/imu instead of one message per "
-        "vehicle: for agent hosts, which take a row each (swarm launch passes it with "
-        "--vehicles-per-process > 1)",
+        "--batch", action="store_true",
+        help="for agent hosts (swarm launch passes it with --vehicles-per-process > 1): every vehicle's imu "
+        "of a tick as one ImuBatch on world/imu, which the hosts split, and its truth as one TruthBatch on "
+        "world/truth for the mothership (the per-vehicle truths only while a viewer subscribes)",
     )  # fmt: skip
     p.add_argument(
         "--clock-every", type=int, default=10, metavar="TICKS",
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
             proc = WorldProcess(
                 sc, args.seed, session, keys_from(args), args.clock, stop, step_timeout_s=args.step_timeout,
                 start_timeout_s=args.start_timeout, clock_every=args.clock_every,
-                checkpoint_dir=args.checkpoint_dir, resume=resume, pace=args.pace, batch_imu=args.batch_imu,
+                checkpoint_dir=args.checkpoint_dir, resume=resume, pace=args.pace, batch=args.batch,
             )  # fmt: skip
             end = proc.run()
     except checkpoint.CheckpointError as exc:

@@ -82,15 +82,15 @@ class WorldProcess:
         checkpoint_dir: str | Path | None = None,
         resume: dict | None = None,
         pace: ClockSpec | None = None,
-        batch_imu: bool = False,
+        batch: bool = False,
     ) -> None:
         """``pace``: a lockstep world that also never runs ahead of this wall clock (realtime or scaled:N;
-        every command is still waited for, so the run is the unpaced one); ``batch_imu``: every vehicle's
-        imu of a tick in one ``world/imu`` message (agent hosts, docs/protocol.md "Rates"), not one per
-        vehicle; ``checkpoint_dir``: write the
-        state there every tick (``None``: never); ``resume``: a state :func:`swarm.world.checkpoint.load`
-        read, to continue from (:class:`CheckpointError` if it is not a state of this run: another scenario,
-        seed or vehicle set)."""
+        every command is still waited for, so the run is the unpaced one); ``batch``: every vehicle's
+        imu of a tick in one ``world/imu`` message and its truth in one ``world/truth`` (agent hosts,
+        docs/protocol.md "Rates"), the per-vehicle truths only while a viewer subscribes;
+        ``checkpoint_dir``: write the state there every tick (``None``: never); ``resume``: a state
+        :func:`swarm.world.checkpoint.load` read, to continue from (:class:`CheckpointError` if it is not a
+        state of this run: another scenario, seed or vehicle set)."""
         sc = scenario
         self.sc, self.seed, self.session, self.keys, self.clock, self.stop = (
             sc,
@@ -105,7 +105,8 @@ class WorldProcess:
         self.start_timeout_s = start_timeout_s
         self.clock_every = max(1, int(clock_every))
         self.process_id = process_id
-        self.batch_imu = batch_imu
+        self.batch = batch
+        self._viewed: set[str] = set()  # batch: the vehicles whose per-vehicle truth a subscriber matches
         self.world = World(sc, seed)  # with the run's dispersions and its fault schedule
         self.referee = Referee(sc)
         self.ids = list(sc.vehicles)
@@ -340,9 +341,24 @@ class WorldProcess:
         # for agent hosts every vehicle's imu of a tick leaves in one message (docs/protocol.md, "Rates");
         # declared either way: a checkpoint's tick, published again on resume, may hold a batch
         self.pub_imu_batch = declare_reliable(self.session, k.world_imu(), ex)
+        self.pub_truth_batch = declare_reliable(self.session, k.world_truth(), ex)
+        if self.batch:  # the per-vehicle truths for a viewer only: kept by Zenoh's matching listeners
+            self._truth_matching = [
+                pub.declare_matching_listener(lambda status, vid=vid: self._on_truth_matching(vid, status))
+                for vid, pub in self.pub_truth.items()
+            ]
+            for vid, pub in self.pub_truth.items():
+                if pub.matching_status.matching:
+                    self._viewed.add(vid)
         self.pub_event = {v: declare_reliable(self.session, k.event(v)) for v in self.chasers}
         self.pub_clock = declare_reliable(self.session, k.world_clock())
         self.pub_world_event = declare_reliable(self.session, k.world_event())
+
+    def _on_truth_matching(self, vid: str, status) -> None:
+        if status.matching:
+            self._viewed.add(vid)
+        else:
+            self._viewed.discard(vid)
 
     def _publish_clock(self, k: int) -> None:
         self.pub_clock.put(encode(Clock(k, k * self.sc.dt_s, self.state, self.seed)))
@@ -356,11 +372,14 @@ class WorldProcess:
         t = k * self.sc.dt_s
         # a vehicle whose samples a sensor_delay window holds back keeps its own imu key (held in _send)
         solo = {v for v, windows in self._delays.items() if any(a <= t < b for a, b, _ in windows)}
-        return world_sensors(self.world, self.ids, self.chasers, k, frames, self._truth_every, self.batch_imu,
-                             solo)  # fmt: skip
+        viewed = set(self._viewed) if self.batch else None
+        return world_sensors(self.world, self.ids, self.chasers, k, frames, self._truth_every, self.batch,
+                             solo, viewed)  # fmt: skip
 
     def _pub(self, kind: str, vid: str):
-        return self.pub_imu_batch if kind == "imu_batch" else self._pubs[kind][vid]
+        if kind == "imu_batch":
+            return self.pub_imu_batch
+        return self.pub_truth_batch if kind == "truth_batch" else self._pubs[kind][vid]
 
     def _publish_tick(self, k: int, sensors: list[tuple[str, str, bytes]]) -> None:
         """Publish tick ``k``'s samples (:meth:`_encode_tick`); imu and vision through :meth:`_send`."""
@@ -370,6 +389,8 @@ class WorldProcess:
                 self.pub_truth[vid].put(payload)
             elif kind == "imu_batch":  # its vehicles have no delay window (_encode_tick)
                 self.pub_imu_batch.put(payload)
+            elif kind == "truth_batch":
+                self.pub_truth_batch.put(payload)
             else:
                 self._send(vid, t, kind, payload)
         self._release()

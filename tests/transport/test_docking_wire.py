@@ -13,7 +13,7 @@ from swarm.scenario import load_scenario
 from swarm.step.radio import UwbNetwork
 from swarm.step.world import World
 from swarm.transport.docking_wire import batch_sample, uwb_slot, uwb_slot_batch, world_sensors
-from swarm.transport.messages import MAX_BATCH, Imu, ImuBatch, Uwb, UwbBatch, decode
+from swarm.transport.messages import MAX_BATCH, Imu, ImuBatch, Truth, TruthBatch, Uwb, UwbBatch, decode
 
 
 def _tick(pairs: int, k_ahrs: bool):
@@ -33,12 +33,24 @@ def test_each_vehicles_row_of_the_batch_is_the_imu_it_would_have_had_alone(k_ahr
     k = w.k
     alone = world_sensors(w, ids, chasers, k, frames, 1)
     batched = world_sensors(w, ids, chasers, k, frames, 1, batch=True)
-    # the truths and frames are the same, in the same order; the imu leave the per-vehicle keys for one batch
-    assert [s for s in batched if s[0] != "imu_batch"] == [s for s in alone if s[0] != "imu"]
+    # the per-vehicle truths and frames are the same, in the same order; the imu leave their keys for a batch
+    assert [s for s in batched if s[0] not in ("imu_batch", "truth_batch")] == [
+        s for s in alone if s[0] != "imu"
+    ]
     ((_kind, vid, payload),) = [s for s in batched if s[0] == "imu_batch"]
     assert batched[-1][0] == "imu_batch" and vid == ""  # after every frame of the tick
     batch = decode(payload, ImuBatch)
     assert batch.ids == tuple(ids) and batch.tick == k
+    # every tick here is a truth tick (truth_every 1): the truths lead, in a batch for the mothership, and
+    # each vehicle's own only for a viewer (viewed); every row of the batch is that vehicle's own truth
+    (truths,) = [decode(p, TruthBatch) for kd, _, p in batched if kd == "truth_batch"]
+    assert batched[0][0] == "truth_batch" and truths.ids == tuple(ids)
+    for vid in ids:
+        own = decode(next(p for kd, v, p in alone if kd == "truth" and v == vid), Truth)
+        assert truths.sample(vid) == own
+    seen = world_sensors(w, ids, chasers, k, frames, 1, batch=True, viewed={"target1"})
+    assert [v for kd, v, _ in seen if kd == "truth"] == ["target1"]
+    assert [s for s in seen if s[0] != "truth"] == [s for s in batched if s[0] != "truth"]
     assert (len(batch.ahrs_ids) > 0) == k_ahrs
     for vid, row in batch.index().items():
         own = decode(next(p for kd, v, p in alone if kd == "imu" and v == vid), Imu)
@@ -60,7 +72,7 @@ def test_a_vehicle_held_back_by_a_delay_keeps_its_own_imu_and_a_big_swarm_severa
 
 
 def test_each_vehicles_entry_of_a_slots_batch_is_the_range_it_would_have_had_alone():
-    """The mothership's slot for agent hosts (``--batch-uwb``): one UwbBatch, whose entry for each vehicle
+    """The mothership's slot for agent hosts (``--batch``): one UwbBatch, whose entry for each vehicle
     is the Uwb of its own key, lost replies (nil ranges) included."""
     sc = load_scenario("docking").with_pairs(3)
     ids = list(sc.vehicles)
@@ -81,7 +93,8 @@ def test_each_vehicles_entry_of_a_slots_batch_is_the_range_it_would_have_had_alo
 
 @pytest.mark.parametrize("per_process", [1, 2, 16])
 def test_the_launcher_asks_world_and_mothership_for_batches_only_for_agent_hosts(per_process):
-    """A host takes one world/imu and one mothership/uwb for all its vehicles; a process of one vehicle
+    """A host takes one world/imu and one mothership/uwb for all its vehicles (and the mothership one
+    world/truth for all of them); a process of one vehicle
     would take every vehicle's entry to use one (measured: 10-15 % more agent CPU at 4 pairs with the imu
     batch, BENCHMARKS.md), so it keeps its own keys."""
     import argparse
@@ -90,5 +103,5 @@ def test_the_launcher_asks_world_and_mothership_for_batches_only_for_agent_hosts
 
     args = argparse.Namespace(clock="lockstep", step_timeout=5.0, start_timeout=180.0, checkpoint_dir="/x",
                               pace=None, vehicles_per_process=per_process)  # fmt: skip
-    assert ("--batch-imu" in world_args(args)) == (per_process > 1)
-    assert mothership_args(args) == ["mothership", *(["--batch-uwb"] if per_process > 1 else [])]
+    assert ("--batch" in world_args(args)) == (per_process > 1)
+    assert mothership_args(args) == ["mothership", *(["--batch"] if per_process > 1 else [])]

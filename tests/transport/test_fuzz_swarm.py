@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 
 import msgpack
 import numpy as np
@@ -33,6 +34,7 @@ from swarm.transport.messages import (
     MessageError,
     RunControl,
     Truth,
+    TruthBatch,
     Uwb,
     UwbBatch,
     decode,
@@ -59,6 +61,18 @@ _VALID = {
     "truth": Truth(7, 0.07, np.zeros(3), np.zeros(3), _Q, np.zeros(3)),
     "estimate": Estimate(7, 0.07, np.zeros(3), np.zeros(3), _Q, np.eye(9), 0.1, 0.0, 0.0, {}),
     "world_clock": Clock(7, 0.07, "running", 0),
+    "world_truth": TruthBatch(
+        7,
+        0.07,
+        ("chaser", "target"),
+        np.zeros((2, 3)),
+        np.zeros((2, 3)),
+        np.tile(_Q, (2, 1)),
+        np.zeros((2, 3)),
+        np.zeros(2),
+        (False, False),
+        np.zeros(2),
+    ),
     "mothership_uwb": UwbBatch(8, 0.08, ("chaser", "target"), (1, 2), (1.5, None)),
     "world_imu": ImuBatch(7, 0.07, 0.01, ("chaser", "target"), np.zeros((2, 3)), ("chaser",), _Q[None, :]),
     "run_control": RunControl("pause"),
@@ -70,7 +84,8 @@ def _keys(ns: str) -> list[tuple[str, str]]:
     k = Keys(ns)
     out = [(kind, getattr(k, kind)(vid)) for kind in AGENT_KINDS for vid in ("chaser", "target")]
     fixed = [("world_clock", k.world_clock()), ("world_event", k.world_event()), ("world_imu", k.world_imu()),
-             ("mothership_uwb", k.mothership_uwb()), ("anchors", k.anchors()),
+             ("world_truth", k.world_truth()), ("mothership_uwb", k.mothership_uwb()),
+             ("anchors", k.anchors()),
              ("run_control", k.run_control()), ("fault", k.fault())]  # fmt: skip
     return [*out, *fixed]
 
@@ -119,7 +134,29 @@ def swarm(request, tmp_path_factory):
                             "--json", str(out), "--vehicles-per-process", str(request.param)])  # fmt: skip
         proc.wait_for_line(r"^swarm up:", 180.0)
         with open_session(ZenohArgs(mode="client", connect=(endpoint,))) as session:
-            yield {"proc": proc, "session": session, "keys": _keys(ns), "out": out, "sent": [0]}
+            yield {"proc": proc, "session": session, "keys": _keys(ns), "ns": ns, "out": out, "sent": [0]}
+
+
+def test_a_viewer_that_subscribes_to_the_truths_gets_them(swarm):
+    """With agent hosts the world sends its mothership one world/truth batch per UWB slot and a vehicle's own
+    truth only while a viewer subscribes to it (a Zenoh matching listener): this viewer, subscribing in the
+    middle of the run, gets both vehicles' truths from then on."""
+    session, ns = swarm["session"], swarm["ns"]
+    got: dict[str, list[int]] = {"chaser": [], "target": []}
+
+    def on_truth(sample) -> None:
+        vid = str(sample.key_expr).split("/")[-2]
+        got[vid].append(decode(sample.payload.to_bytes(), Truth).tick)
+
+    sub = session.declare_subscriber(f"{ns}/agent/*/truth", on_truth)
+    try:
+        deadline = time.monotonic() + 30.0
+        while min(len(v) for v in got.values()) < 20 and time.monotonic() < deadline:
+            time.sleep(0.05)
+    finally:
+        sub.undeclare()
+    assert min(len(v) for v in got.values()) >= 20, {v: len(t) for v, t in got.items()}
+    assert all(t == sorted(t) for t in got.values())  # in tick order, one per UWB slot
 
 
 def test_thousands_of_refused_payloads_on_every_key_and_query(swarm):

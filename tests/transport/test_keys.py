@@ -33,6 +33,7 @@ def test_every_key_string_matches_the_protocol_table(ns):
     assert k.world_clock() == f"{ns}/world/clock"
     assert k.world_imu() == f"{ns}/world/imu"
     assert k.mothership_uwb() == f"{ns}/mothership/uwb"
+    assert k.world_truth() == f"{ns}/world/truth"
     assert k.anchors() == f"{ns}/mothership/anchors"
     assert k.run_control() == f"{ns}/control/run"
     assert k.alive("agent", "chaser") == f"{ns}/alive/agent/chaser"
@@ -59,7 +60,17 @@ def test_parse_inverts_every_per_vehicle_key(ns, kind):
 
 
 @pytest.mark.parametrize(
-    "method", ["world_clock", "world_event", "world_imu", "anchors", "mothership_uwb", "run_control", "fault"]
+    "method",
+    [
+        "world_clock",
+        "world_event",
+        "world_imu",
+        "world_truth",
+        "anchors",
+        "mothership_uwb",
+        "run_control",
+        "fault",
+    ],
 )
 def test_parse_names_swarm_wide_keys_by_their_builder(method):
     k = Keys("lab/swarm-2")

@@ -47,6 +47,7 @@ from swarm.transport.messages import (
     Rangefinder,
     RunControl,
     Truth,
+    TruthBatch,
     Uwb,
     UwbBatch,
     Vision,
@@ -76,6 +77,10 @@ VALID = {
     Guidance: Guidance(5, 0.05, "REORIENT", 0.25, 0.1, 0.3, 1.0, DECISION, "A22=0.5 > 0.4"),
     Command: Command(6, 0.06, np.zeros(10), "APPROACH", [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
     Truth: Truth(7, 0.07, [1.0, 2.0, 1.0], [0.0, 0.0, 0.0], Q, [0.0, 0.0, 0.0]),
+    TruthBatch: TruthBatch(
+        7, 0.07, ("chaser0", "target0"), [[1.0, 2.0, 1.0], [0.0, 0.0, 0.0]], np.zeros((2, 3)), [Q, Q],
+        np.zeros((2, 3)), [0.5, 0.0], (False, True), [0.0, 0.25],
+    ),
     Event: Event(0.08, "mode", {"from": "HOLD", "to": "APPROACH", "range_m": 1.0}),
     Clock: Clock(8, 0.08, "running", 42),
     Anchors: Anchors((0, 1, 2, 3), ANCHORS_MS),
@@ -212,6 +217,17 @@ STRATEGIES = {
     ),
     Truth: st.builds(
         Truth, ticks, times, vec(3), vec(3), quats, vec(3), nonneg, st.booleans(), st.floats(0.0, 1.0)
+    ),
+    TruthBatch: st.lists(ids, min_size=1, max_size=8, unique=True).flatmap(
+        lambda vids: st.builds(
+            TruthBatch, ticks, times, st.just(tuple(vids)),
+            *[arrays(np.float64, (len(vids), 3), elements=finite) for _ in range(2)],
+            st.lists(quats, min_size=len(vids), max_size=len(vids)).map(np.array),
+            arrays(np.float64, (len(vids), 3), elements=finite),
+            arrays(np.float64, len(vids), elements=nonneg),
+            st.lists(st.booleans(), min_size=len(vids), max_size=len(vids)).map(tuple),
+            arrays(np.float64, len(vids), elements=st.floats(0.0, 1.0)),
+        )
     ),
     Event: st.builds(Event, times, st.from_regex(r"[a-z][a-z0-9_]{0,20}", fullmatch=True), event_data),
     Clock: st.builds(Clock, ticks, times, st.sampled_from(msgs.CLOCK_STATES), ticks),
@@ -445,6 +461,15 @@ CASES = [
     (ImuBatch, "q_ahrs_nav_body", [[0.0, 0.0, INF, 1.0]], "q_ahrs_nav_body: not finite"),
     (ImuBatch, "acc_body", [[0.0, 0.0, 9.8]] * 2, "acc_body: 2 rows for 3 ids"),
     (ImuBatch, "dt_s", 0.0, "dt_s: must be > 0"),
+    (TruthBatch, "ids", ["chaser0"], "p_nav: expected shape (1, 3), got (2, 3)"),
+    (TruthBatch, "ids", ["chaser0", "chaser0"], "ids: duplicate ids"),
+    (TruthBatch, "q_nav_body", [Q, [0.0, 0.0, 0.0, 2.0]], "q_nav_body[1]: norm 2 is not within 0.001"),
+    (TruthBatch, "p_nav", [[1.0, NAN, 1.0], [0.0, 0.0, 0.0]], "p_nav: not finite"),
+    (TruthBatch, "effort", [0.5, -1.0], "effort[1]: must be >= 0"),
+    (TruthBatch, "effort", [0.5], "effort: expected shape (2,), got (1,)"),
+    (TruthBatch, "nlos_probability", [0.0, 1.5], "nlos_probability[1]: must be in [0, 1]"),
+    (TruthBatch, "uwb_lost", [False], "uwb_lost: 1 entries for 2 ids"),
+    (TruthBatch, "uwb_lost", [False, 1], "uwb_lost[1]: expected true or false, got 1"),
     (UwbBatch, "ids", [], "ids: 0 entries, expected 1 to 256"),
     (UwbBatch, "ids", ["chaser0", "chaser0", "chaser1"], "ids: duplicate ids"),
     (UwbBatch, "anchor_ids", [1, 0], "anchor_ids: 2 entries for 3 ids"),
@@ -776,6 +801,7 @@ def test_every_key_kind_maps_to_a_message():
         "world_imu",
         "anchors",
         "mothership_uwb",
+        "world_truth",
         "run_control",
         "fault",
     }
@@ -876,7 +902,9 @@ FAST = [cls for cls in ALL if cls in msgs._FAST]
 
 
 def test_the_fast_path_covers_the_messages_of_every_tick():
-    assert set(FAST) == {Imu, ImuBatch, Uwb, UwbBatch, Vision, Estimate, Guidance, Command, Truth, Clock}
+    assert set(FAST) == {
+        Imu, ImuBatch, Uwb, UwbBatch, Vision, Estimate, Guidance, Command, Truth, TruthBatch, Clock
+    }  # fmt: skip
 
 
 @pytest.mark.parametrize("cls", FAST, ids=lambda c: c.__name__)
