@@ -103,19 +103,10 @@ class AgentHost:
         if self.inline:
             self.on_news()
 
-    def _on_imu_batch(self, key: str, msg: ImuBatch) -> None:
-        """The world's imu of every vehicle (a world run with ``--batch``): each hosted vehicle's row, as
-        its own ``imu`` key would have brought it (a host of one steps it here,
-        :meth:`AgentProcess._on_sensor`)."""
-        row = msg.index()
-        for p in self.procs:
-            i = row.get(p.id)
-            if i is not None:
-                p._on_sensor(key, msg.sample(p.id, i))
-
-    def _on_uwb_batch(self, key: str, msg: UwbBatch) -> None:
-        """The mothership's ranges of a slot for every vehicle (a mothership run with ``--batch``): each
-        hosted vehicle's entry, as its own ``uwb`` key would have brought it."""
+    def _on_batch(self, key: str, msg: ImuBatch | UwbBatch) -> None:
+        """The world's imu (``world/imu``) or the mothership's ranges (``mothership/uwb``) of every vehicle,
+        sent for agent hosts (``--batch``): each hosted vehicle's row, as its own key would have brought it
+        (a host of one steps it here, :meth:`AgentProcess._on_sensor`)."""
         row = msg.index()
         for p in self.procs:
             i = row.get(p.id)
@@ -144,9 +135,9 @@ class AgentHost:
         watch_liveliness(self.session, k, self._on_alive, history=any(p.rejoin for p in self.procs))
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.shared_drops)
         direct = not self.inline  # as the vehicles' own sensor subscribers (AgentProcess.open)
-        subscribe_decoded(self.session, k.world_imu(), ImuBatch, self._on_imu_batch, self.shared_drops,
+        subscribe_decoded(self.session, k.world_imu(), ImuBatch, self._on_batch, self.shared_drops,
                           direct=direct)  # fmt: skip
-        subscribe_decoded(self.session, k.mothership_uwb(), UwbBatch, self._on_uwb_batch, self.shared_drops,
+        subscribe_decoded(self.session, k.mothership_uwb(), UwbBatch, self._on_batch, self.shared_drops,
                           direct=direct)  # fmt: skip
         subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.shared_drops)
         for p in self.procs:

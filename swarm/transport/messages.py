@@ -594,8 +594,24 @@ def _vehicle_ids(value: object, name: str, min_len: int) -> tuple[str, ...]:
     return ids
 
 
+class _Batch(Message):
+    """Base of the batches (:class:`ImuBatch`, :class:`UwbBatch`, :class:`TruthBatch`): the samples of many
+    vehicles in one message, row ``i`` vehicle ``ids[i]``'s; ``sample(vid)`` is one vehicle's message."""
+
+    ids: tuple[str, ...]
+
+    def index(self) -> dict[str, int]:
+        """Each vehicle's row."""
+        return {vid: i for i, vid in enumerate(self.ids)}
+
+    def _row(self, vid: str, row: int | None) -> int | None:
+        if row is not None:
+            return row
+        return self.ids.index(vid) if vid in self.ids else None
+
+
 @dataclass(frozen=True, eq=False)
-class ImuBatch(Message):
+class ImuBatch(_Batch):
     """The :class:`Imu` samples of many vehicles at one tick, in one message: ``<ns>/world/imu``, sent by a
     simulated world that serves agent hosts instead of one ``agent/<id>/imu`` per vehicle (docs/protocol.md,
     "Rates": one message per tick where there were N, for the world, the router and a host alike).
@@ -631,17 +647,12 @@ class ImuBatch(Message):
              dt_s=_float(self.dt_s, "dt_s", positive=True), ids=ids, gyro_body=gyro, ahrs_ids=ahrs,
              q_ahrs_nav_body=q, acc_body=acc)  # fmt: skip
 
-    def index(self) -> dict[str, int]:
-        """Each vehicle's row."""
-        return {vid: i for i, vid in enumerate(self.ids)}
-
     def sample(self, vid: str, row: int | None = None) -> Imu | None:
         """Vehicle ``vid``'s :class:`Imu` (``row`` its row when known, :meth:`index`), ``None`` when the
         batch has none. Its arrays are copies of the batch's checked rows (not checked again)."""
+        row = self._row(vid, row)
         if row is None:
-            if vid not in self.ids:
-                return None
-            row = self.ids.index(vid)
+            return None
         q = None
         if vid in self.ahrs_ids:
             q = self.q_ahrs_nav_body[self.ahrs_ids.index(vid)].copy()
@@ -710,7 +721,7 @@ def encode_uwb(tick: int, t_s: float, anchor_id: int, range_m: float | None) -> 
 
 
 @dataclass(frozen=True, eq=False)
-class UwbBatch(Message):
+class UwbBatch(_Batch):
     """The :class:`Uwb` exchanges of many vehicles in one UWB slot, in one message: ``<ns>/mothership/uwb``,
     sent by a simulated radio network that serves agent hosts instead of one ``agent/<id>/uwb`` per vehicle
     (docs/protocol.md, "Rates"). Entry ``i`` of each list is vehicle ``ids[i]``'s; :meth:`sample` gives one
@@ -735,17 +746,12 @@ class UwbBatch(Message):
              range_m=tuple(_float(r, f"range_m[{i}]", lo=0.0, nullable=True) for i, r in enumerate(ranges)),
              )  # fmt: skip
 
-    def index(self) -> dict[str, int]:
-        """Each vehicle's entry."""
-        return {vid: i for i, vid in enumerate(self.ids)}
-
     def sample(self, vid: str, row: int | None = None) -> Uwb | None:
         """Vehicle ``vid``'s :class:`Uwb` (``row`` its entry when known, :meth:`index`), ``None`` when the
         batch has none (its values are the batch's checked ones, not checked again)."""
+        row = self._row(vid, row)
         if row is None:
-            if vid not in self.ids:
-                return None
-            row = self.ids.index(vid)
+            return None
         msg = object.__new__(Uwb)
         msg.__dict__.update(
             tick=self.tick, t_s=self.t_s, anchor_id=self.anchor_ids[row], range_m=self.range_m[row]
@@ -1160,7 +1166,7 @@ def encode_truth(
 
 
 @dataclass(frozen=True, eq=False)
-class TruthBatch(Message):
+class TruthBatch(_Batch):
     """The :class:`Truth` of many vehicles at one tick, in one message: ``<ns>/world/truth``, what a world
     serving agent hosts sends its mothership instead of one ``agent/<id>/truth`` each (docs/protocol.md,
     "Rates"; the per-vehicle truths then go to a viewer only, while one subscribes). Row ``i`` of every
@@ -1200,17 +1206,12 @@ class TruthBatch(Message):
              v_nav=v, q_nav_body=q, w_body=w, effort=effort, nlos_probability=nlos,
              uwb_lost=tuple(_bool(x, f"uwb_lost[{i}]") for i, x in enumerate(lost)))  # fmt: skip
 
-    def index(self) -> dict[str, int]:
-        """Each vehicle's row."""
-        return {vid: i for i, vid in enumerate(self.ids)}
-
     def sample(self, vid: str, row: int | None = None) -> Truth | None:
         """Vehicle ``vid``'s :class:`Truth` (``row`` its row when known, :meth:`index`), ``None`` when the
         batch has none. Its arrays are copies of the batch's checked rows (not checked again)."""
+        row = self._row(vid, row)
         if row is None:
-            if vid not in self.ids:
-                return None
-            row = self.ids.index(vid)
+            return None
         msg = object.__new__(Truth)
         msg.__dict__.update(
             tick=self.tick, t_s=self.t_s, p_nav=self.p_nav[row].copy(), v_nav=self.v_nav[row].copy(),

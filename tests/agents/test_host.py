@@ -243,7 +243,7 @@ def test_the_worlds_batch_gives_each_hosted_vehicle_its_own_row_and_no_other():
     gyro = np.arange(12.0).reshape(4, 3)
     q = np.array([[0.0, 0.0, 0.0, 1.0]])
     batch = ImuBatch(5, 0.05, 0.01, ("chaser1", "target0", "chaser0", "target1"), gyro, ("chaser0",), q)
-    host._on_imu_batch("t/world/imu", batch)
+    host._on_batch("t/world/imu", batch)
     assert got["chaser0"] == [("t/world/imu", Imu(5, 0.05, 0.01, gyro[2], q[0]))]
     assert got["target0"] == [("t/world/imu", Imu(5, 0.05, 0.01, gyro[1]))]
 
@@ -259,6 +259,6 @@ def test_the_motherships_batch_gives_each_hosted_vehicle_its_own_range_and_no_ot
     for vid, proc in p.items():
         proc._on_sensor = lambda key, msg, vid=vid: got[vid].append((key, msg))
     batch = UwbBatch(4, 0.04, ("target1", "chaser0", "target0"), (2, 0, 3), (1.25, None, 0.75))
-    host._on_uwb_batch("t/mothership/uwb", batch)
+    host._on_batch("t/mothership/uwb", batch)
     assert got == {"chaser0": [("t/mothership/uwb", Uwb(4, 0.04, 0, None))],
                    "target0": [("t/mothership/uwb", Uwb(4, 0.04, 3, 0.75))]}  # fmt: skip
