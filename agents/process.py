@@ -160,6 +160,7 @@ class AgentProcess:
         self.resent = 0  # commands sent again for a resumed world
         self._estimate_due: int | None = None  # the tick whose estimate flush() publishes
         self._estimate_listened = False  # a subscriber matches this vehicle's estimates (_declare)
+        self._guidance_listened = False  # ... and its guidance (the launcher its chasers', a viewer any)
         # set by an agent host (agents.host.AgentHost) when the target and its chaser are both in it
         self.local_chasers: list[AgentProcess] = []  # the chasers in this host that fly to this vehicle
         self.target_local = False  # this chaser's target is in this host: no subscriber to its estimates
@@ -249,10 +250,16 @@ class AgentProcess:
         self._estimate_listened = bool(self.pub_estimate.matching_status.matching)
         self.pub_command = declare_reliable(self.session, k.command(self.id), ex)
         self.pub_guidance = declare_reliable(self.session, k.guidance(self.id))
+        # guidance likewise: the launcher reads its chasers' only, so a headless swarm's targets send none
+        self._guidance_matching = self.pub_guidance.declare_matching_listener(self._on_guidance_matching)
+        self._guidance_listened = bool(self.pub_guidance.matching_status.matching)
         self.pub_event = declare_reliable(self.session, k.event(self.id))
 
     def _on_estimate_matching(self, status) -> None:
         self._estimate_listened = bool(status.matching)
+
+    def _on_guidance_matching(self, status) -> None:
+        self._guidance_listened = bool(status.matching)
 
     def _counts(self) -> dict[str, int]:
         return filter_counts(self.agent)
@@ -294,7 +301,8 @@ class AgentProcess:
         self._mode = a.mode.value
         for payload in mode_events(cmd):
             self.pub_event.put(payload)
-        self.pub_guidance.put(guidance_payload(self.sc, self.policy, self.chaser, a, k, self._mode, cmd))
+        if self._guidance_listened:  # not encoded for no one (Zenoh would drop it unsent): "Rates"
+            self.pub_guidance.put(guidance_payload(self.sc, self.policy, self.chaser, a, k, self._mode, cmd))
 
     # ------------------------------------------------------------------------------ re-initialisation
 

@@ -324,13 +324,10 @@ def run(args: argparse.Namespace) -> int:
             subscribe_decoded(
                 session, keys.agent_all("event"), Event, lambda k, m: box[0].on_event(k, m, keys), drops
             )
-            subscribe_decoded(
-                session,
-                keys.agent_all("guidance"),
-                Guidance,
-                lambda k, m: box[0].on_guidance(k, m, keys),
-                drops,
-            )
+            for cid in sc.chasers:  # its chasers' only: a target's guidance is then sent to a viewer alone
+                subscribe_decoded(
+                    session, keys.guidance(cid), Guidance, lambda k, m: box[0].on_guidance(k, m, keys), drops
+                )
             watch_liveliness(session, keys, lambda r, p, a: alive_changes.put((r, p, a, time.monotonic())))
             _token = session.liveliness().declare_token(keys.alive("launcher", "launcher"))
 

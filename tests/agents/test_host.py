@@ -262,3 +262,27 @@ def test_the_motherships_batch_gives_each_hosted_vehicle_its_own_range_and_no_ot
     host._on_batch("t/mothership/uwb", batch)
     assert got == {"chaser0": [("t/mothership/uwb", Uwb(4, 0.04, 0, None))],
                    "target0": [("t/mothership/uwb", Uwb(4, 0.04, 3, 0.75))]}  # fmt: skip
+
+
+@pytest.mark.parametrize("listened", [False, True])
+def test_guidance_is_encoded_only_for_a_subscriber(listened):
+    """A control tick's guidance goes to whoever subscribes to it (the launcher to its chasers', a viewer
+    to any vehicle's) and is not encoded for no one: a headless swarm's targets send none. The mode events
+    and the command go out either way."""
+    from swarm.step.agent import VehicleAgent
+    from swarm.step.world import initial_truth
+    from swarm.transport.messages import Guidance, decode
+
+    sc = load_scenario("docking")
+    _, p = _host(["chaser", "target"], sc)
+    proc = p["target"]
+    x = initial_truth(sc, 0, "target")
+    proc.agent = VehicleAgent(sc, "target", x[0:3], x[3:6], x[6:10], np.full(9, 1e-4), "mdp")
+    proc.pub_guidance, proc.pub_event = _Publisher(listened), _Publisher(listened)
+    proc._guidance_listened = listened  # as Zenoh's matching listener keeps it
+    cmd = proc.agent.control(0.0, proc.agent.control_dt)
+    proc._commanded(0, cmd)
+    sent = proc.pub_guidance.sent
+    assert len(sent) == (1 if listened else 0)
+    if listened:
+        assert decode(sent[0], Guidance).mode == "STATION"
