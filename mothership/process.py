@@ -76,26 +76,30 @@ class MothershipProcess:
         if vid not in self.index:
             self.drops.drop(key, "truth: not a vehicle of this scenario")
             return
-        if msg.tick % self.every == 0 and msg.tick > 0 and self._failure is None:
-            try:
-                with self._lock:
-                    self._take(vid, msg)
-            except Exception as exc:  # a bug in the radio step: the process fails, its supervisor restarts it
-                _LOG.exception("UWB slot failed")
-                self._failure = exc
+        self._serve(msg.tick, [(vid, msg)])
 
     def _on_truth_batch(self, key: str, msg: TruthBatch) -> None:
         """A tick's truths of every vehicle (``batch``): each vehicle's, as its own key would have brought
         it (a vehicle not of this scenario counted and dropped)."""
-        if msg.tick % self.every or msg.tick == 0 or self._failure is not None:
+
+        def rows():
+            for i, vid in enumerate(msg.ids):
+                if vid in self.index:
+                    yield vid, msg.sample(vid, i)
+                else:
+                    self.drops.drop(key, f"truth: {vid!r} is not a vehicle of this scenario")
+
+        self._serve(msg.tick, rows())
+
+    def _serve(self, tick: int, truths) -> None:
+        """Tick ``tick``'s ``(vehicle, truth)`` pairs (an iterable, taken only on a UWB slot tick) into the
+        slots (:meth:`_take`), under the lock; a failure is kept for :meth:`run` to raise."""
+        if tick % self.every or tick == 0 or self._failure is not None:
             return
         try:
             with self._lock:
-                for i, vid in enumerate(msg.ids):
-                    if vid not in self.index:
-                        self.drops.drop(key, f"truth: {vid!r} is not a vehicle of this scenario")
-                        continue
-                    self._take(vid, msg.sample(vid, i))
+                for vid, truth in truths:
+                    self._take(vid, truth)
         except Exception as exc:  # a bug in the radio step: the process fails, its supervisor restarts it
             _LOG.exception("UWB slot failed")
             self._failure = exc

@@ -115,15 +115,20 @@ def world_args(args: argparse.Namespace) -> list[str]:
              "--checkpoint-dir", str(args.checkpoint_dir)]  # fmt: skip
     if args.pace is not None:
         world += ["--pace", str(args.pace)]
-    if getattr(args, "vehicles_per_process", 1) > 1:  # one message for many vehicles' imu, one for truths
+    if _hosted(args):  # one message for many vehicles' imu, one for their truths
         world += ["--batch"]
     return world
 
 
 def mothership_args(args: argparse.Namespace) -> list[str]:
     """The mothership process's own flags (the common ones and its Zenoh config aside)."""
-    hosted = getattr(args, "vehicles_per_process", 1) > 1  # a host takes one message for its vehicles' ranges
-    return ["mothership", *(["--batch"] if hosted else [])]
+    return ["mothership", *(["--batch"] if _hosted(args) else [])]  # one message for many vehicles' ranges
+
+
+def _hosted(args: argparse.Namespace) -> bool:
+    """Whether the agents run in hosts of several vehicles, which take the world's and the mothership's
+    batches (docs/protocol.md, "Rates")."""
+    return getattr(args, "vehicles_per_process", 1) > 1
 
 
 def _hosts(args: argparse.Namespace, sc) -> dict[str, list[str]]:

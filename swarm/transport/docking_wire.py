@@ -15,15 +15,16 @@ from swarm.transport.messages import (
     Clock,
     Event,
     Guidance,
+    ImuBatch,
+    TruthBatch,
     UwbBatch,
     Vision,
+    decode,
     encode,
     encode_command,
     encode_estimate,
     encode_imu,
-    encode_imu_batch,
     encode_truth,
-    encode_truth_batch,
     encode_uwb,
 )
 
@@ -37,8 +38,6 @@ def batch_sample(sensors: Sensors, vid: str) -> bytes | None:
     """Vehicle ``vid``'s ``imu`` payload taken out of the tick's batches in ``sensors`` (re-encoded as one
     :class:`~swarm.transport.messages.Imu`), ``None`` when no batch holds it: what a world sends to an
     agent that alone needs the tick again (a rejoined agent)."""
-    from swarm.transport.messages import ImuBatch, decode
-
     for kind, _vid, payload in sensors:
         if kind == "imu_batch":
             imu = decode(payload, ImuBatch).sample(vid)
@@ -105,7 +104,7 @@ def world_sensors(
         gyro = np.array([frames[vid].gyro_body for vid in chunk], dtype=np.float64)
         ahrs = [vid for vid in chunk if frames[vid].q_ahrs_nav_body is not None]
         q = np.array([frames[vid].q_ahrs_nav_body for vid in ahrs], dtype=np.float64).reshape(len(ahrs), 4)
-        out.append(("imu_batch", "", encode_imu_batch(k, t, sc.dt_s, chunk, gyro, ahrs, q)))
+        out.append(("imu_batch", "", encode(ImuBatch(k, t, sc.dt_s, tuple(chunk), gyro, tuple(ahrs), q))))
     return out
 
 
@@ -118,8 +117,8 @@ def _truth_batches(world, ids: list[str], k: int, t: float, lost: bool, p_nlos: 
         b = min(a + MAX_BATCH, len(ids))
         n = b - a
         x = np.ascontiguousarray(X[a:b], dtype=np.float64)
-        payload = encode_truth_batch(k, t, ids[a:b], x[:, 0:3], x[:, 3:6], x[:, 6:10], x[:, 10:13],
-                                     effort[a:b], (lost,) * n, np.full(n, p_nlos))  # fmt: skip
+        payload = encode(TruthBatch(k, t, tuple(ids[a:b]), x[:, 0:3], x[:, 3:6], x[:, 6:10], x[:, 10:13],
+                                    effort[a:b], (lost,) * n, np.full(n, p_nlos)))  # fmt: skip
         out.append(("truth_batch", "", payload))
     return out
 
@@ -164,15 +163,19 @@ def estimate_read(reads: tuple[int, ...] | None, k: int) -> bool:
 def uwb_slot(network, ids: list[str], k: int, t: float) -> list[tuple[str, bytes]]:
     """The mothership's ranges of slot tick ``k`` after ``network.step``: ``(vehicle, payload)``, one per
     vehicle (``range_m`` None where the reply was lost)."""
-    ranges = [None if lost else float(r) for lost, r in zip(network.lost, network.range_m, strict=True)]
+    ranges = _ranges(network)
     return [(vid, encode_uwb(k, t, int(network.anchor_id[i]), ranges[i])) for i, vid in enumerate(ids)]
+
+
+def _ranges(network) -> tuple[float | None, ...]:
+    """Each vehicle's range of the slot just stepped, ``None`` where the reply was lost."""
+    return tuple(None if lost else float(r) for lost, r in zip(network.lost, network.range_m, strict=True))
 
 
 def uwb_slot_batch(network, ids: list[str], k: int, t: float) -> bytes:
     """:func:`uwb_slot`'s ranges in one :class:`~swarm.transport.messages.UwbBatch` (agent hosts)."""
-    ranges = tuple(None if lost else float(r) for lost, r in zip(network.lost, network.range_m, strict=True))
     anchors = tuple(int(a) for a in network.anchor_id)
-    return encode(UwbBatch(k, t, tuple(ids), anchors, ranges))
+    return encode(UwbBatch(k, t, tuple(ids), anchors, _ranges(network)))
 
 
 def filter_counts(agent) -> dict[str, int]:
@@ -289,8 +292,7 @@ class DockingTap:
         for kind, vid, payload in world_sensors(
             sim.world, self._ids, self._chasers, k, frames, self._truth_every
         ):
-            key = self.keys.world_imu() if kind == "imu_batch" else getattr(self.keys, kind)(vid)
-            self._write(key, payload)
+            self._write(getattr(self.keys, kind)(vid), payload)
         if k % self.clock_every == 0:
             self._clock(k, k * sim.sc.dt_s, "running")
 

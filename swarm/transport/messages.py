@@ -81,9 +81,7 @@ __all__ = [
     "encode_command",
     "encode_estimate",
     "encode_imu",
-    "encode_imu_batch",
     "encode_truth",
-    "encode_truth_batch",
     "encode_uwb",
     "estimate_and_payload",
     "estimate_message",
@@ -446,6 +444,14 @@ def _set(msg: object, **values: object) -> None:
         object.__setattr__(msg, k, v)
 
 
+def _checked(cls: type[M], values: dict[str, Any]) -> M:
+    """A ``cls`` message of field ``values`` checked already (by the fast decoding, a sender's fast path or
+    a batch's checks): the frozen dataclass's ``__post_init__`` would only check them again."""
+    msg = object.__new__(cls)
+    msg.__dict__.update(values)
+    return msg
+
+
 # ------------------------------------------------------------------------------------------ messages
 
 
@@ -656,12 +662,10 @@ class ImuBatch(_Batch):
         q = None
         if vid in self.ahrs_ids:
             q = self.q_ahrs_nav_body[self.ahrs_ids.index(vid)].copy()
-        msg = object.__new__(Imu)
-        msg.__dict__.update(
-            tick=self.tick, t_s=self.t_s, dt_s=self.dt_s, gyro_body=self.gyro_body[row].copy(),
-            q_ahrs_nav_body=q, acc_body=None if self.acc_body is None else self.acc_body[row].copy(),
-        )  # fmt: skip
-        return msg
+        return _checked(Imu, {
+            "tick": self.tick, "t_s": self.t_s, "dt_s": self.dt_s, "gyro_body": self.gyro_body[row].copy(),
+            "q_ahrs_nav_body": q, "acc_body": None if self.acc_body is None else self.acc_body[row].copy(),
+        })  # fmt: skip
 
 
 def _batch_rows(ids: tuple, ahrs: tuple, gyro: np.ndarray, q: np.ndarray, acc: np.ndarray | None) -> None:
@@ -675,15 +679,6 @@ def _batch_rows(ids: tuple, ahrs: tuple, gyro: np.ndarray, q: np.ndarray, acc: n
     if ahrs and not set(ahrs) <= set(ids):
         stray = sorted(set(ahrs) - set(ids))
         raise MessageError(f"ahrs_ids: {_show(stray)} not among ids")
-
-
-def encode_imu_batch(
-    tick: int, t_s: float, dt_s: float, ids: tuple[str, ...], gyro_body, ahrs_ids: tuple[str, ...] = (),
-    q_ahrs_nav_body=None, acc_body=None,
-) -> bytes:  # fmt: skip
-    """``encode(ImuBatch(...))`` (``q_ahrs_nav_body`` ``None``: no rows)."""
-    q = np.zeros((0, 4)) if q_ahrs_nav_body is None else q_ahrs_nav_body
-    return encode(ImuBatch(tick, t_s, dt_s, tuple(ids), gyro_body, tuple(ahrs_ids), q, acc_body))
 
 
 @dataclass(frozen=True, eq=False)
@@ -752,11 +747,9 @@ class UwbBatch(_Batch):
         row = self._row(vid, row)
         if row is None:
             return None
-        msg = object.__new__(Uwb)
-        msg.__dict__.update(
-            tick=self.tick, t_s=self.t_s, anchor_id=self.anchor_ids[row], range_m=self.range_m[row]
-        )
-        return msg
+        values = {"tick": self.tick, "t_s": self.t_s, "anchor_id": self.anchor_ids[row],
+                  "range_m": self.range_m[row]}  # fmt: skip
+        return _checked(Uwb, values)
 
 
 def _per_id(value: object, name: str, ids: tuple) -> list | tuple:
@@ -994,9 +987,7 @@ def estimate_and_payload(
     data = _pack("Estimate", f) if payload else None
     for name in ("p_nav", "v_nav", "q_nav_body", "cov"):
         f[name] = np.array(f[name], dtype=np.float64)  # a copy, as decoding makes: the sender's move on
-    msg = object.__new__(Estimate)
-    msg.__dict__.update(f)  # checked above, as the fast decoding leaves it (no __post_init__ again)
-    return msg, data
+    return _checked(Estimate, f), data  # checked above, as the fast decoding leaves it
 
 
 @dataclass(frozen=True, eq=False)
@@ -1212,14 +1203,13 @@ class TruthBatch(_Batch):
         row = self._row(vid, row)
         if row is None:
             return None
-        msg = object.__new__(Truth)
-        msg.__dict__.update(
-            tick=self.tick, t_s=self.t_s, p_nav=self.p_nav[row].copy(), v_nav=self.v_nav[row].copy(),
-            q_nav_body=self.q_nav_body[row].copy(), w_body=self.w_body[row].copy(),
-            effort=float(self.effort[row]), uwb_lost=self.uwb_lost[row],
-            nlos_probability=float(self.nlos_probability[row]),
-        )  # fmt: skip
-        return msg
+        return _checked(Truth, {
+            "tick": self.tick, "t_s": self.t_s, "p_nav": self.p_nav[row].copy(),
+            "v_nav": self.v_nav[row].copy(), "q_nav_body": self.q_nav_body[row].copy(),
+            "w_body": self.w_body[row].copy(),
+            "effort": float(self.effort[row]), "uwb_lost": self.uwb_lost[row],
+            "nlos_probability": float(self.nlos_probability[row]),
+        })  # fmt: skip
 
 
 def _truth_rows(effort: np.ndarray, nlos: np.ndarray) -> None:
@@ -1231,13 +1221,6 @@ def _truth_rows(effort: np.ndarray, nlos: np.ndarray) -> None:
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise MessageError(f"nlos_probability[{i}]: must be in [0, 1], got {nlos[i]}")
-
-
-def encode_truth_batch(tick: int, t_s: float, ids, p_nav, v_nav, q_nav_body, w_body, effort, uwb_lost,
-                       nlos_probability) -> bytes:  # fmt: skip
-    """``encode(TruthBatch(...))``."""
-    return encode(TruthBatch(tick, t_s, tuple(ids), p_nav, v_nav, q_nav_body, w_body, effort, tuple(uwb_lost),
-                             nlos_probability))  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
@@ -1785,9 +1768,7 @@ def _decode_fast(data: bytes | bytearray, expected: type[M]) -> M | None:
         values = convert(wire)
     except (msgspec.MsgspecError, MessageError, _Defer):
         return None
-    msg = object.__new__(expected)
-    msg.__dict__.update(values)  # checked above: the frozen dataclass's __post_init__ would check again
-    return msg
+    return _checked(expected, values)
 
 
 # --------------------------------------------------------------------------------------- bad messages

@@ -337,11 +337,15 @@ class WorldProcess:
         self.pub_truth = {v: declare_reliable(self.session, k.truth(v), ex) for v in self.ids}
         self.pub_imu = {v: declare_reliable(self.session, k.imu(v), ex) for v in self.ids}
         self.pub_vision = {v: declare_reliable(self.session, k.vision(v), ex) for v in self.chasers}
-        self._pubs = {"truth": self.pub_truth, "vision": self.pub_vision, "imu": self.pub_imu}  # by kind
-        # for agent hosts every vehicle's imu of a tick leaves in one message (docs/protocol.md, "Rates");
-        # declared either way: a checkpoint's tick, published again on resume, may hold a batch
-        self.pub_imu_batch = declare_reliable(self.session, k.world_imu(), ex)
-        self.pub_truth_batch = declare_reliable(self.session, k.world_truth(), ex)
+        # for agent hosts every vehicle's imu and truth of a tick leave in one message each (docs/protocol.md,
+        # "Rates"); declared either way: a checkpoint's tick, published again on resume, may hold a batch
+        batches = {"imu_batch": k.world_imu(), "truth_batch": k.world_truth()}
+        self._pubs = {  # by kind, then vehicle (a batch's is "", as world_sensors names it)
+            "truth": self.pub_truth,
+            "vision": self.pub_vision,
+            "imu": self.pub_imu,
+            **{kind: {"": declare_reliable(self.session, key, ex)} for kind, key in batches.items()},
+        }
         if self.batch:  # the per-vehicle truths for a viewer only: kept by Zenoh's matching listeners
             self._truth_matching = [
                 pub.declare_matching_listener(lambda status, vid=vid: self._on_truth_matching(vid, status))
@@ -371,40 +375,38 @@ class WorldProcess:
         world_sensors`): ``(kind, vehicle, payload)``."""
         t = k * self.sc.dt_s
         # a vehicle whose samples a sensor_delay window holds back keeps its own imu key (held in _send)
-        solo = {v for v, windows in self._delays.items() if any(a <= t < b for a, b, _ in windows)}
+        solo = {v for v in self._delays if self._delay_s(v, t) is not None}
         viewed = set(self._viewed) if self.batch else None
         return world_sensors(self.world, self.ids, self.chasers, k, frames, self._truth_every, self.batch,
                              solo, viewed)  # fmt: skip
 
     def _pub(self, kind: str, vid: str):
-        if kind == "imu_batch":
-            return self.pub_imu_batch
-        return self.pub_truth_batch if kind == "truth_batch" else self._pubs[kind][vid]
+        return self._pubs[kind][vid]
 
     def _publish_tick(self, k: int, sensors: list[tuple[str, str, bytes]]) -> None:
         """Publish tick ``k``'s samples (:meth:`_encode_tick`); imu and vision through :meth:`_send`."""
         t = k * self.sc.dt_s
         for kind, vid, payload in sensors:
-            if kind == "truth":
-                self.pub_truth[vid].put(payload)
-            elif kind == "imu_batch":  # its vehicles have no delay window (_encode_tick)
-                self.pub_imu_batch.put(payload)
-            elif kind == "truth_batch":
-                self.pub_truth_batch.put(payload)
-            else:
+            if kind in ("imu", "vision"):
                 self._send(vid, t, kind, payload)
+            else:  # truths, and the batches (whose vehicles have no delay window: _encode_tick)
+                self._pub(kind, vid).put(payload)
         self._release()
 
     def _send(self, vid: str, t: float, kind: str, payload: bytes) -> None:
         """Publish now, or (a ``sensor_delay`` fault window) hold for a random delay: samples leave late and
         out of order."""
-        for a, b, delay in self._delays.get(vid, ()):
-            if a <= t < b:
-                wall = self._delay_rng.uniform(0.0, delay) / self.clock.factor
-                item = (time.monotonic() + wall, next(self._held_seq), kind, vid, payload)
-                heapq.heappush(self._held, item)
-                return
-        self._pub(kind, vid).put(payload)
+        delay = self._delay_s(vid, t)
+        if delay is None:
+            self._pub(kind, vid).put(payload)
+            return
+        wall = self._delay_rng.uniform(0.0, delay) / self.clock.factor
+        heapq.heappush(self._held, (time.monotonic() + wall, next(self._held_seq), kind, vid, payload))
+
+    def _delay_s(self, vid: str, t: float) -> float | None:
+        """The delay bound [s] of the first ``sensor_delay`` window of vehicle ``vid`` open at time ``t``,
+        ``None`` outside every window (its samples then leave at once)."""
+        return next((delay for a, b, delay in self._delays.get(vid, ()) if a <= t < b), None)
 
     def _release(self) -> None:
         now = time.monotonic()
