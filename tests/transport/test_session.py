@@ -252,7 +252,7 @@ def test_router_session_opens_without_the_scouting_delay() -> None:
 
 
 _THREADS_OF_A_SESSION = """
-import collections, json, os, sys
+import collections, json, os, sys, time
 from swarm.errors import ConfigError
 from swarm.transport.session import ZenohArgs, open_session
 first, endpoint, lean = sys.argv[1], sys.argv[2], {"lean": True, "-": None}[sys.argv[3]]
@@ -262,7 +262,13 @@ try:
         ZenohArgs(mode=second, connect=(endpoint,))
     ):
         tasks = f"/proc/{os.getpid()}/task"
-        names = [open(f"{tasks}/{t}/comm").read().strip().rstrip("0123456789-") for t in os.listdir(tasks)]
+        deadline = time.monotonic() + 2.0  # Zenoh's runtimes start their threads as their first task comes
+        while True:
+            names = [open(f"{tasks}/{t}/comm").read().strip().rstrip("0123456789-")
+                     for t in os.listdir(tasks)]
+            if "acc" in names or "rx" in names or time.monotonic() > deadline:
+                break
+            time.sleep(0.05)
         print(json.dumps({"env": os.environ.get("ZENOH_RUNTIME"), "threads": collections.Counter(names)}))
 except ConfigError as exc:
     print(json.dumps({"error": str(exc)}))
