@@ -42,13 +42,18 @@ from swarm.transport.keys import Keys
 from swarm.transport.messages import Clock, DropCounter, Event, ImuBatch, UwbBatch
 from swarm.transport.session import subscribe_decoded, watch_liveliness
 
-__all__ = ["IDLE_S", "AgentHost"]
+__all__ = ["IDLE_S", "SCAN_S", "AgentHost"]
 
 _LOG = logging.getLogger("swarm.agent")
 
 IDLE_S = 0.05
 """The longest the host's loop sleeps without a message [s]: how soon it sees a run's end drain out or a
 vehicle's stalled lockstep tick."""
+
+SCAN_S = 0.25
+"""How often the host asks each vehicle whether its run is over while the world's clock runs [s] (a run
+ends with the clock's ``stopped``, after which it asks every round; in between only a lockstep tick that
+stalls for 5 s has something to say, :meth:`agents.process.AgentProcess.done`)."""
 
 
 class AgentHost:
@@ -87,6 +92,8 @@ class AgentHost:
         self._kick = threading.Event()  # inline: wakes the loop's thread (a round failed)
         self._by_asm = {p.assembler: p for p in self.procs}
         self._live: list = []
+        self._ending = False  # the world's clock stopped: every round asks which runs are over
+        self._scan_at = 0.0  # ... and before that, every SCAN_S from here
         self._ended = False
         self._failure: BaseException | None = None
         if self.inline:
@@ -100,6 +107,8 @@ class AgentHost:
     def _on_clock(self, key: str, msg: Clock) -> None:
         for p in self.procs:
             p._on_clock(key, msg)
+        if msg.state == "stopped":
+            self._ending = True
         if self.inline:
             self.on_news()
 
@@ -211,20 +220,25 @@ class AgentHost:
                     return
 
     def _round(self) -> bool:
-        """One pass over the vehicles with news, under :attr:`_round_lock`; ``True`` if it processed any."""
-        live, by_asm = self._live, self._by_asm
-        cond, ready = self.cond, self.ready
+        """One pass over the vehicles with news, under :attr:`_round_lock`; ``True`` if it processed any.
+
+        The shared condition is taken once for the whole look (each assembler's
+        :meth:`~swarm.transport.lockstep.AgentTickAssembler.poll_round`), and a vehicle is looked at again
+        in the next round only if a further tick of it may be ready already. Which vehicles' runs are over
+        is asked after the world's clock stopped (:meth:`_on_clock`), and otherwise every
+        :data:`SCAN_S` (a lockstep tick that stalls is logged from there)."""
+        live, cond, ready, grace = self._live, self.cond, self.ready, self.grace_s
         batch = []
         with cond:
-            polled = {by_asm[a] for a in ready if a in by_asm}
+            news = set(ready)
             ready.clear()
             for p in live:  # in host order: the same order every round
-                if p not in polled or not p.ticking():
+                a = p.assembler
+                if a not in news or not p.ticking():
                     continue
-                late = p.assembler.take_late()  # always none in lockstep
-                inp, _ = p.assembler.poll(self.grace_s)
-                if inp is not None:
-                    ready.add(p.assembler)  # it may have a further tick ready
+                late, inp, more = a.poll_round(grace)  # late: always none in lockstep
+                if more:
+                    ready.add(a)  # a further tick is ready already: the next round takes it
                 if late or inp is not None:
                     batch.append((p, late, inp))
         for p, late, inp in batch:  # the round's commands first: the world (lockstep) waits for them
@@ -245,7 +259,9 @@ class AgentHost:
                 _LOG.exception("%s: agent failed publishing its estimate of tick %d", p.id, inp.tick)
                 raise
         now = time.monotonic()
-        for p in [p for p in live if p.done(now)]:
-            self._ended = p.finish() or self._ended
-            live.remove(p)
+        if self._ending or now >= self._scan_at:
+            self._scan_at = now + SCAN_S
+            for p in [p for p in live if p.done(now)]:
+                self._ended = p.finish() or self._ended
+                live.remove(p)
         return bool(batch)

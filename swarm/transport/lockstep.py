@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from swarm.errors import ConfigError
@@ -373,7 +374,7 @@ class AgentTickAssembler:
     ) -> tuple[TickInputs | None, float | None]:
         """Without blocking: ``(inputs, None)`` if a tick is ready (taken, as :meth:`next_tick` takes it),
         else ``(None, due)``, ``due`` the monotonic time at which one will be (``None``: when a message
-        comes). The agent host's loop calls it for each of its vehicles under their shared condition.
+        comes).
 
         ``grace_s=None`` is the lockstep rule: only a complete tick is ready. A number is a free-running
         clock's: tick ``k`` is also ready, without what it lacks (counted ``incomplete``), ``grace_s``
@@ -382,30 +383,63 @@ class AgentTickAssembler:
         thus a deadline per tick, not a polling period. With late fusion (``late_ticks``) there is no
         wait: a tick is ready once its ``imu`` is in, and what comes after it goes to :meth:`take_late`."""
         with self._cond:
-            if self._closed or self._next is None:
+            return self._poll(grace_s, now)
+
+    def poll_round(
+        self, grace_s: float | None = None
+    ) -> tuple[Sequence[Uwb | Vision], TickInputs | None, bool]:
+        """The agent host's look at this vehicle in one of its rounds, with :attr:`cond` **held by the
+        caller** (the host takes it once for all of its vehicles): ``(late, inputs, more)``, the late ranges
+        and frames (:meth:`take_late`), the tick ready now as :meth:`poll` takes it (``None``: none), and
+        whether a further tick may be ready already (the host looks again in its next round; ``False``
+        means :meth:`poll` would return no tick until a message comes)."""
+        late: Sequence[Uwb | Vision] = self._late
+        if late:
+            self._late = []
+        else:
+            late = ()  # not the list itself: a message kept meanwhile must not reach this round's caller
+        inputs = self._poll(grace_s, None)[0]
+        return late, inputs, inputs is not None and self._ready_now(grace_s)
+
+    def _ready_now(self, grace_s: float | None) -> bool:
+        """Whether :meth:`poll` with ``grace_s`` may take a tick now (``_cond`` held): the next tick is
+        complete, or, free-running, an ``imu`` of it or of a later tick is in (a tick within its grace
+        answers ``True`` too; :meth:`poll` then says when it is due)."""
+        if self._closed or self._next is None:
+            return False
+        if not self._missing():
+            return True
+        if grace_s is None:
+            return False
+        nxt = self._next
+        return any(f.imu is not None for t, f in self._frames.items() if t >= nxt)
+
+    def _poll(self, grace_s: float | None, now: float | None) -> tuple[TickInputs | None, float | None]:
+        """:meth:`poll` with ``_cond`` held."""
+        if self._closed or self._next is None:
+            return None, None
+        if not self._missing():
+            return self._take(), None
+        if grace_s is None:
+            return None, None
+        k = self._next
+        frame = self._frames.get(k)
+        if k > 0 and (frame is None or frame.imu is None):
+            later = [t for t, f in self._frames.items() if t > k and f.imu is not None]
+            if not later:
                 return None, None
+            self._counts["incomplete"] += 1  # tick k, without its imu, is skipped
+            self._skip_to(min(later))
             if not self._missing():
                 return self._take(), None
-            if grace_s is None:
-                return None, None
-            k = self._next
-            frame = self._frames.get(k)
-            if k > 0 and (frame is None or frame.imu is None):
-                later = [t for t, f in self._frames.items() if t > k and f.imu is not None]
-                if not later:
-                    return None, None
-                self._counts["incomplete"] += 1  # tick k, without its imu, is skipped
-                self._skip_to(min(later))
-                if not self._missing():
-                    return self._take(), None
-                frame = self._frames[self._next]
-            if self.late_ticks is not None:
-                return self._take(), None  # late fusion: its imu is in; what it lacks is fused when it comes
-            due = (frame.t_imu if frame is not None else 0.0) + grace_s
-            if (time.monotonic() if now is None else now) >= due:
-                self._counts["incomplete"] += 1
-                return self._take(), None
-            return None, due
+            frame = self._frames[self._next]
+        if self.late_ticks is not None:
+            return self._take(), None  # late fusion: its imu is in; what it lacks is fused when it comes
+        due = (frame.t_imu if frame is not None else 0.0) + grace_s
+        if (time.monotonic() if now is None else now) >= due:
+            self._counts["incomplete"] += 1
+            return self._take(), None
+        return None, due
 
     def take_late(self) -> list[Uwb | Vision]:
         """Late fusion (``late_ticks``): the ranges and frames that came after their tick was taken, in

@@ -691,6 +691,74 @@ def test_without_late_fusion_a_range_after_its_tick_is_stale_and_nothing_is_hand
     assert not asm.add(uwb(2)) and asm.take_late() == [] and asm.stale == 1
 
 
+@pytest.mark.parametrize("seed", range(20))
+@pytest.mark.parametrize(("grace", "late_ticks"), [(None, None), (0.0, None), (0.0, 3)])
+def test_poll_round_takes_what_take_late_and_poll_take_and_says_when_a_further_tick_is_ready(
+    seed, grace, late_ticks
+):
+    """The agent host's ``poll_round`` (one look per round, the condition held by the host) against
+    ``take_late`` + ``poll`` on a twin fed the same messages: the same late messages and ticks, and
+    whenever it answers ``more=False``, ``poll`` finds no further tick (a round it skips would have
+    taken nothing). Messages of a chaser's ticks in a seeded shuffled order (free-running, some lost), the
+    consumer looking after each message."""
+    rng = random.Random(seed)
+    kept = 1.0 if grace is None else 0.9  # lockstep waits for every message: none is lost there
+    msgs = []
+    for k in range(1, 40):
+        if rng.random() < kept:
+            msgs.append(imu(k))
+        if k % 2 == 0 and rng.random() < kept:
+            msgs.append(uwb(k))
+        if k % 4 == 0 and rng.random() < kept:
+            msgs.append(vision(k))
+        msgs.append(estimate(k - 1))
+    for i in range(len(msgs) - 1):  # local shuffles: messages a few places from their publishing order
+        if rng.random() < 0.3:
+            msgs[i], msgs[i + 1] = msgs[i + 1], msgs[i]
+    kw = dict(vision_every=4, wait_for_target=grace is None, late_ticks=late_ticks, max_ahead=8)
+    twin, mine = chaser(**kw), chaser(**kw)
+    taken_twin, taken_mine, late_twin, late_mine = [], [], [], []
+    for m in msgs:
+        src = "target" if isinstance(m, Estimate) else "chaser"
+        assert twin.add(m, src) == mine.add(m, src)
+        while True:  # the twin: take_late and poll until no tick comes
+            late_twin.extend(twin.take_late())
+            got = twin.poll(grace, now=1e9)[0]
+            if got is None:
+                break
+            taken_twin.append(got.tick)
+        more = True
+        while more:  # mine: poll_round while it says a further tick may be ready
+            with mine.cond:
+                late, got, more = mine.poll_round(grace)
+            late_mine.extend(late)
+            if got is not None:
+                taken_mine.append(got.tick)
+            else:
+                assert not more
+        with mine.cond:
+            assert mine.poll(grace, now=1e9)[0] is None  # more=False: nothing was left behind
+    assert taken_mine == taken_twin and len(taken_mine) > 10
+    assert [(type(m), m.tick) for m in late_mine] == [(type(m), m.tick) for m in late_twin]
+    assert mine.counts() == twin.counts()
+
+
+def test_poll_round_hands_over_late_messages_in_a_list_of_their_own():
+    """A range kept after a round took the late ones must not appear in what that round already has."""
+    asm = plain(uwb_every=2, wait_for_target=False, late_ticks=2)
+    asm.add(imu(1))
+    asm.add(imu(2))
+    with asm.cond:
+        assert asm.poll_round(0.0)[1].tick == 1
+        late, got, more = asm.poll_round(0.0)
+    assert got.tick == 2 and not more and list(late) == []
+    asm.add(uwb(2))  # late: after its tick was taken
+    assert list(late) == []  # the round's own (empty) list is not the assembler's
+    with asm.cond:
+        late, got, more = asm.poll_round(0.0)
+    assert [m.tick for m in late] == [2] and got is None and not more
+
+
 def test_a_shared_condition_and_ready_set_wake_one_waiter_for_any_vehicle():
     cond, ready = threading.Condition(), set()
     a = plain(uwb_every=2, cond=cond, ready=ready)
