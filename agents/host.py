@@ -17,8 +17,8 @@ What the host shares among its vehicles:
   ready instead (:meth:`AgentHost.on_news`): one thread hand-off less per tick;
 - **one subscriber each** for the world's clock and events and for liveliness, whose messages go to every
   vehicle: the same for all of them, once per process instead of once per vehicle; and for the world's
-  ``world/imu`` batch and the mothership's ``mothership/uwb`` batch (sent for agent hosts), whose rows go to
-  the vehicles they are for.
+  ``world/imu`` and ``world/vision`` batches and the mothership's ``mothership/uwb`` batch (sent for agent
+  hosts), whose rows go to the vehicles they are for.
 
 - **a target's estimate, handed over.** A chaser whose target is in the same host does not subscribe to the
   target's estimates: the target's agent hands it the message it publishes
@@ -39,7 +39,7 @@ import time
 from collections.abc import Sequence
 
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Clock, DropCounter, Event, ImuBatch, UwbBatch
+from swarm.transport.messages import Clock, DropCounter, Event, ImuBatch, UwbBatch, VisionBatch, vision_rows
 from swarm.transport.session import subscribe_decoded, watch_liveliness
 
 __all__ = ["IDLE_S", "SCAN_S", "AgentHost"]
@@ -91,6 +91,7 @@ class AgentHost:
         self._round_lock = threading.Lock()  # one round at a time, whichever thread runs it
         self._kick = threading.Event()  # inline: wakes the loop's thread (a round failed)
         self._by_asm = {p.assembler: p for p in self.procs}
+        self._by_id = by_id
         self._live: list = []
         self._ending = False  # the world's clock stopped: every round asks which runs are over
         self._scan_at = 0.0  # ... and before that, every SCAN_S from here
@@ -122,6 +123,13 @@ class AgentHost:
             if i is not None:
                 p._on_sensor(key, msg.sample(p.id, i))
 
+    def _on_vision_batch(self, key: str, msg: VisionBatch) -> None:
+        """The world's camera frames of a tick (``world/vision``, sent for agent hosts): each hosted
+        vehicle's entry, decoded, as its own ``vision`` key would have brought it; an entry that does not
+        decode is counted (:attr:`shared_drops`) and loses no other vehicle's frame."""
+        for vid, frame in vision_rows(msg, key, self.shared_drops, self._by_id):
+            self._by_id[vid]._on_sensor(key, frame)
+
     def _on_world_event(self, key: str, msg: Event) -> None:
         for p in self.procs:
             p._on_world_event(key, msg)
@@ -148,6 +156,8 @@ class AgentHost:
                           direct=direct)  # fmt: skip
         subscribe_decoded(self.session, k.mothership_uwb(), UwbBatch, self._on_batch, self.shared_drops,
                           direct=direct)  # fmt: skip
+        subscribe_decoded(self.session, k.world_vision(), VisionBatch, self._on_vision_batch,
+                          self.shared_drops, direct=direct)  # fmt: skip
         subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.shared_drops)
         for p in self.procs:
             p.announce()

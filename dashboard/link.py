@@ -3,7 +3,8 @@ controls on ``control/run``, faults on ``control/fault``); it never runs estimat
 
 The world publishes each vehicle's truth every tick, and agents their estimate and guidance every tick:
 in lockstep that is thousands of samples per second, far more than a browser can show. Those
-latest-value topics (truth, estimate, guidance, vision of each vehicle, and the world clock) are
+latest-value topics (truth, estimate, guidance, vision of each vehicle, the world clock, and the world's
+``world/vision`` batches of a swarm of agent hosts) are
 subscribed with a Zenoh ``RingChannel(1)``: Zenoh keeps only the newest sample of each key, in Rust, and
 calls no Python per sample; the render loop takes it with :meth:`SwarmLink.poll` once per frame and
 decodes only that one (DESIGN.md section 9: ``RingChannel(1)`` suits latest-value topics). So the
@@ -37,8 +38,10 @@ from swarm.transport.messages import (
     RunControl,
     Truth,
     Vision,
+    VisionBatch,
     encode,
     safe_decode,
+    vision_rows,
 )
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
 
@@ -53,6 +56,11 @@ LATEST_KINDS: dict[str, type[Message]] = {
     "vision": Vision,
 }
 """Per-vehicle topics of which only the newest sample matters to the dashboard."""
+
+VISION_BATCHES = 4
+"""The ``world/vision`` batches (of an agent hosts' swarm) the dashboard keeps between two frames: the
+newest; one batch holds a tick's frames of up to 134 chasers (225 with marker features rather than
+poses; ``swarm.transport.docking_wire``)."""
 
 
 def _control_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
@@ -95,6 +103,11 @@ class SwarmLink:
         self._have_anchors = threading.Event()
         self._rings: list[tuple[str, str, type[Message], zenoh.Subscriber]] = []
         self._clock = session.declare_subscriber(keys.world_clock(), zenoh.handlers.RingChannel(1))
+        # a swarm of agent hosts sends the chasers' frames of a tick in world/vision batches (one, or a few
+        # for a large swarm): the newest few are kept, so a tick's every batch is there when the frame looks
+        self._vision = session.declare_subscriber(
+            keys.world_vision(), zenoh.handlers.RingChannel(VISION_BATCHES)
+        )
         self._add_vehicles(state.take_new_agents())
         subscribe_decoded(session, keys.agent_all("event"), Event, self._on_event, drops)
         subscribe_decoded(session, keys.world_event(), Event, self._on_world_event, drops)
@@ -130,6 +143,17 @@ class SwarmLink:
                 n += 1
                 if self.state.on_message("world_clock", None, clock):
                     _LOG.info("new run: seed %d (tick %d)", clock.seed, clock.tick)
+        for _ in range(VISION_BATCHES):
+            sample = self._vision.try_recv()
+            if sample is None:
+                break
+            if sample.kind != zenoh.SampleKind.PUT:
+                continue
+            key = str(sample.key_expr)
+            batch = safe_decode(sample.payload, VisionBatch, key, self.drops)
+            for agent_id, frame in [] if batch is None else vision_rows(batch, key, self.drops):
+                n += 1
+                self.state.on_message("vision", agent_id, frame)
         for agent_id, kind, cls, sub in self._rings:
             sample = sub.try_recv()
             if sample is None or sample.kind != zenoh.SampleKind.PUT:

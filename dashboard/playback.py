@@ -43,7 +43,14 @@ from pathlib import Path
 from dashboard.state import SwarmState
 from swarm.errors import ConfigError, LogError
 from swarm.transport.keys import Keys
-from swarm.transport.messages import MESSAGE_FOR_KIND, DropCounter, Message, safe_decode
+from swarm.transport.messages import (
+    MESSAGE_FOR_KIND,
+    DropCounter,
+    Message,
+    VisionBatch,
+    safe_decode,
+    vision_rows,
+)
 
 __all__ = [
     "DASHBOARD_KINDS",
@@ -59,10 +66,21 @@ __all__ = [
 _LOG = logging.getLogger("dashboard.playback")
 
 DASHBOARD_KINDS = frozenset(
-    {"truth", "estimate", "guidance", "vision", "event", "world_event", "world_clock", "anchors"}
+    {
+        "truth",
+        "estimate",
+        "guidance",
+        "vision",
+        "world_vision",
+        "event",
+        "world_event",
+        "world_clock",
+        "anchors",
+    }
 )
 """The key kinds (:meth:`swarm.transport.keys.Keys.parse`) the dashboard draws; the others (imu, uwb,
-command, controls) are skipped."""
+command, controls) are skipped. A ``world_vision`` batch (a swarm of agent hosts) is read as its frames,
+each a ``vision`` of its vehicle, as the live dashboard reads it."""
 
 SPEEDS: dict[str, float] = {"0.5x": 0.5, "1x": 1.0, "2x": 2.0, "5x": 5.0, "10x": 10.0, "50x": 50.0}
 """The playback speeds offered, as shown -> seconds of swarm time per second of wall time."""
@@ -138,9 +156,15 @@ def load_recording(path: str | Path, default_namespace: str = "tpods") -> Record
             continue
         kind, agent_id = kind_id
         msg = safe_decode(m.payload, MESSAGE_FOR_KIND[kind], m.key, drops)
-        if msg is not None:
-            items.append((kind, agent_id, msg))
-            times.append(m.log_time_ns)
+        if msg is None:
+            continue
+        if isinstance(msg, VisionBatch):
+            for vid, frame in vision_rows(msg, m.key, drops):
+                items.append(("vision", vid, frame))
+                times.append(m.log_time_ns)
+            continue
+        items.append((kind, agent_id, msg))
+        times.append(m.log_time_ns)
     drops.flush()
     if not items:
         raise LogError(

@@ -21,7 +21,7 @@ QUICK = {"repeat": 3, "number": 300}
 
 def examples() -> list:
     """One realistic message of each hot-path type (the docking chaser's sizes; the batches of agent hosts
-    for a swarm of 32 vehicles, an AHRS tick's)."""
+    for a swarm of 32 vehicles, an AHRS tick's, its 16 chasers' frames each of six markers)."""
     from swarm.core.decision_keys import DECISION_KEYS
     from swarm.transport import messages as m
 
@@ -36,6 +36,19 @@ def examples() -> list:
         m.Uwb(5, 0.05, 3, 2.5),
         m.UwbBatch(5, 0.05, ids, tuple(i % 4 for i in range(32)), tuple(1.0 + 0.1 * i for i in range(32))),
         m.Vision(5, 0.05, "target", "+x", "features", rng.normal(size=(4, 3)), (0, 1, 2, 3)),
+        m.VisionBatch(
+            5,
+            0.05,
+            ids[::2],
+            tuple(
+                m.encode(
+                    m.Vision(
+                        5, 0.05, f"target{i}", "+x", "features", rng.normal(size=(6, 3)), tuple(range(6))
+                    )
+                )
+                for i in range(16)
+            ),
+        ),
         m.Estimate(5, 0.05, np.ones(3), np.ones(3), q, a @ a.T, 0.1, 1.0, 0.1, counts),
         m.Guidance(5, 0.05, "APPROACH", 1.0, 0.5, 1.0, 2.0, dict.fromkeys(DECISION_KEYS, 0.5), "x" * 60),
         m.Command(5, 0.05, np.ones(10), "APPROACH", np.ones(3), np.ones(3)),

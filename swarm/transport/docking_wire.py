@@ -12,6 +12,7 @@ from swarm.transport.keys import Keys
 from swarm.transport.lockstep import period_phase, reads_target
 from swarm.transport.messages import (
     MAX_BATCH,
+    MAX_PAYLOAD_BYTES,
     Clock,
     Event,
     Guidance,
@@ -19,6 +20,7 @@ from swarm.transport.messages import (
     TruthBatch,
     UwbBatch,
     Vision,
+    VisionBatch,
     decode,
     encode,
     encode_command,
@@ -30,20 +32,27 @@ from swarm.transport.messages import (
 
 Sensors = list[tuple[str, str, bytes]]
 """``(kind, vehicle, payload)`` in publishing order; ``kind`` is ``truth``, ``vision``, ``imu``, or
-``truth_batch`` and ``imu_batch`` (vehicle ``""``: the ``world/truth`` and ``world/imu`` keys of a world
-that serves agent hosts)."""
+``truth_batch``, ``vision_batch`` and ``imu_batch`` (vehicle ``""``: the ``world/truth``, ``world/vision``
+and ``world/imu`` keys of a world that serves agent hosts)."""
 
 
-def batch_sample(sensors: Sensors, vid: str) -> bytes | None:
-    """Vehicle ``vid``'s ``imu`` payload taken out of the tick's batches in ``sensors`` (re-encoded as one
-    :class:`~swarm.transport.messages.Imu`), ``None`` when no batch holds it: what a world sends to an
-    agent that alone needs the tick again (a rejoined agent)."""
+def batch_samples(sensors: Sensors, vid: str) -> list[tuple[str, bytes]]:
+    """Vehicle ``vid``'s samples taken out of the tick's batches in ``sensors``, as ``(kind, payload)`` on
+    its own keys: its ``imu`` (re-encoded as one :class:`~swarm.transport.messages.Imu`) and its ``vision``
+    (the frame's own bytes); empty when no batch holds it. What a world sends to an agent that alone needs
+    the tick again (a rejoined agent)."""
+    out = []
     for kind, _vid, payload in sensors:
         if kind == "imu_batch":
             imu = decode(payload, ImuBatch).sample(vid)
             if imu is not None:
-                return encode(imu)
-    return None
+                out.append(("imu", encode(imu)))
+        elif kind == "vision_batch":
+            batch = decode(payload, VisionBatch)
+            row = batch.index().get(vid)
+            if row is not None:
+                out.append(("vision", batch.frames[row]))
+    return out
 
 
 FILTER_KINDS = {
@@ -63,11 +72,14 @@ def world_sensors(
     """The world's samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle (on UWB
     slot ticks: the mothership's radios need no other, and a viewer draws at 50 Hz as well as at 100;
     docs/protocol.md, "Rates"), then per vehicle vision(k) (camera ticks, chasers) and imu(k). With
-    ``batch`` (a world serving agent hosts) the imu of every vehicle not in ``solo`` goes last, in one
-    :class:`~swarm.transport.messages.ImuBatch` per :data:`~swarm.transport.messages.MAX_BATCH` vehicles;
-    ``solo`` (vehicles whose samples a ``sensor_delay`` fault holds back) keep their own. With ``batch`` the
-    truths go first as :class:`~swarm.transport.messages.TruthBatch` messages (the mothership's), then one
-    per vehicle in ``viewed`` (those a viewer subscribes to; ``None``: every vehicle)."""
+    ``batch`` (a world serving agent hosts) the frames and the imu of every vehicle not in ``solo`` go
+    last, each kind in as few messages as fit: :class:`~swarm.transport.messages.VisionBatch` (within
+    :data:`~swarm.transport.messages.MAX_PAYLOAD_BYTES`), then :class:`~swarm.transport.messages.ImuBatch`
+    (:data:`~swarm.transport.messages.MAX_BATCH` vehicles each), the imu last as in every tick (a host's
+    tick is ready on its imu); ``solo`` (vehicles whose samples a ``sensor_delay`` fault holds back) keep
+    their own keys. With ``batch`` the truths go first as :class:`~swarm.transport.messages.TruthBatch`
+    messages (the mothership's), then one per vehicle in ``viewed`` (those a viewer subscribes to; ``None``:
+    every vehicle)."""
     sc = world.sc
     t = k * sc.dt_s
     camera_tick = k % world.vision_every == 0
@@ -84,8 +96,10 @@ def world_sensors(
         truth = encode_truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], float(world.effort[i]), bool(lost),
                              float(p_nlos))  # fmt: skip
         out.append(("truth", vid, truth))
+    seen: list[tuple[str, bytes]] = []  # batch: the frames of the vehicles not in solo
     for vid in ids:
         fr = frames[vid]
+        alone = not batch or vid in solo
         if camera_tick and vid in chasers:
             target = sc.vehicles[vid].target
             if fr.vision is None:
@@ -94,10 +108,14 @@ def world_sensors(
                 data, kind, mids = fr.vision.reshape(1, -1), "pose", tuple(range(len(world.markers_target)))
             else:
                 data, kind, mids = fr.vision, fr.vision_kind, tuple(range(len(fr.vision)))
-            out.append(("vision", vid, encode(Vision(k, t, target, face, kind, data, mids))))
-        if batch and vid not in solo:
-            continue
-        out.append(("imu", vid, encode_imu(k, t, sc.dt_s, fr.gyro_body, fr.q_ahrs_nav_body)))
+            payload = encode(Vision(k, t, target, face, kind, data, mids))
+            if alone:
+                out.append(("vision", vid, payload))
+            else:
+                seen.append((vid, payload))
+        if alone:
+            out.append(("imu", vid, encode_imu(k, t, sc.dt_s, fr.gyro_body, fr.q_ahrs_nav_body)))
+    out.extend(("vision_batch", "", p) for p in _vision_batches(k, t, seen))
     rows = [vid for vid in ids if vid not in solo] if batch else []
     for a in range(0, len(rows), MAX_BATCH):
         chunk = rows[a : a + MAX_BATCH]
@@ -105,6 +123,29 @@ def world_sensors(
         ahrs = [vid for vid in chunk if frames[vid].q_ahrs_nav_body is not None]
         q = np.array([frames[vid].q_ahrs_nav_body for vid in ahrs], dtype=np.float64).reshape(len(ahrs), 4)
         out.append(("imu_batch", "", encode(ImuBatch(k, t, sc.dt_s, tuple(chunk), gyro, tuple(ahrs), q))))
+    return out
+
+
+_BATCH_ENVELOPE = 96
+"""A :class:`~swarm.transport.messages.VisionBatch`'s bytes besides its entries, at most: the map's keys,
+the type's name, tick, time and the two lists' headers (~60) [bytes]."""
+
+
+def _vision_batches(k: int, t: float, seen: list[tuple[str, bytes]]) -> list[bytes]:
+    """The frames ``seen`` (``(vehicle, encoded Vision)``) in as few
+    :class:`~swarm.transport.messages.VisionBatch` messages as keep each within
+    :data:`~swarm.transport.messages.MAX_PAYLOAD_BYTES` (and :data:`~swarm.transport.messages.MAX_BATCH`
+    vehicles), in order."""
+    out, chunk, size = [], [], _BATCH_ENVELOPE
+    for vid, payload in seen:
+        row = len(payload) + len(vid) + 8  # the bin and str headers of the entry and its id
+        if chunk and (size + row > MAX_PAYLOAD_BYTES or len(chunk) == MAX_BATCH):
+            out.append(encode(VisionBatch(k, t, tuple(v for v, _ in chunk), tuple(p for _, p in chunk))))
+            chunk, size = [], _BATCH_ENVELOPE
+        chunk.append((vid, payload))
+        size += row
+    if chunk:
+        out.append(encode(VisionBatch(k, t, tuple(v for v, _ in chunk), tuple(p for _, p in chunk))))
     return out
 
 

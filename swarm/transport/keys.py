@@ -33,6 +33,7 @@ _FIXED = {
     ("world", "clock"): "world_clock",
     ("world", "event"): "world_event",
     ("world", "imu"): "world_imu",
+    ("world", "vision"): "world_vision",
     ("world", "truth"): "world_truth",
     ("mothership", "anchors"): "anchors",
     ("mothership", "uwb"): "mothership_uwb",
@@ -137,6 +138,11 @@ class Keys:
         serving agent hosts -> agents (each takes its own row)."""
         return f"{self.namespace}/world/imu"
 
+    def world_vision(self) -> str:
+        """Every chaser's camera frame of one camera tick in one message (``VisionBatch``): a simulated world
+        serving agent hosts -> agents (each decodes its own entry), and viewers."""
+        return f"{self.namespace}/world/vision"
+
     def world_truth(self) -> str:
         """Every vehicle's true state of one tick in one message (``TruthBatch``): a simulated world serving
         agent hosts -> its mothership (never an agent)."""
@@ -190,10 +196,10 @@ class Keys:
     def parse(self, key: object) -> tuple[str, str | None] | None:
         """Inverse of the builders: ``(kind, agent_id)`` for ``<ns>/agent/<id>/<kind>``; ``(name, None)``
         for a swarm-wide key, named by its builder (``world_clock``, ``world_event``, ``world_imu``,
-        ``world_truth``, ``anchors``, ``mothership_uwb``, ``run_control``, ``fault``); ``("alive",
-        process_id)`` for a liveliness token (its role: :meth:`parse_alive`). ``None`` for a key outside
-        this namespace, a wildcard or anything this protocol does not define. ``key`` may be a ``str`` or
-        any object whose ``str()`` is the key (a Zenoh ``KeyExpr``)."""
+        ``world_vision``, ``world_truth``, ``anchors``, ``mothership_uwb``, ``run_control``, ``fault``);
+        ``("alive", process_id)`` for a liveliness token (its role: :meth:`parse_alive`). ``None`` for a
+        key outside this namespace, a wildcard or anything this protocol does not define. ``key`` may be a
+        ``str`` or any object whose ``str()`` is the key (a Zenoh ``KeyExpr``)."""
         rest = self._rest(key)
         if rest is None:
             return None

@@ -28,7 +28,7 @@ import math
 import re
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Container
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Annotated, Any, Literal, TypeVar
 
@@ -76,6 +76,7 @@ __all__ = [
     "Uwb",
     "UwbBatch",
     "Vision",
+    "VisionBatch",
     "decode",
     "encode",
     "encode_command",
@@ -86,6 +87,7 @@ __all__ = [
     "estimate_and_payload",
     "estimate_message",
     "safe_decode",
+    "vision_rows",
 ]
 
 _LOG = logging.getLogger(__name__)
@@ -601,8 +603,9 @@ def _vehicle_ids(value: object, name: str, min_len: int) -> tuple[str, ...]:
 
 
 class _Batch(Message):
-    """Base of the batches (:class:`ImuBatch`, :class:`UwbBatch`, :class:`TruthBatch`): the samples of many
-    vehicles in one message, row ``i`` vehicle ``ids[i]``'s; ``sample(vid)`` is one vehicle's message."""
+    """Base of the batches (:class:`ImuBatch`, :class:`UwbBatch`, :class:`VisionBatch`,
+    :class:`TruthBatch`): the samples of many vehicles in one message, row ``i`` vehicle ``ids[i]``'s;
+    ``sample(vid)`` is one vehicle's message."""
 
     ids: tuple[str, ...]
 
@@ -849,6 +852,71 @@ class Vision(Message):
             target_id=_str(self.target_id, "target_id", pattern=ID_PATTERN),
             face=_str(self.face, "face", choices=FACES), kind=kind, data=data, marker_ids=ids,
         )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class VisionBatch(_Batch):
+    """The camera frames of many vehicles at one tick, in one message: ``<ns>/world/vision``, sent by a
+    simulated world that serves agent hosts instead of one ``agent/<id>/vision`` per chaser (docs/protocol.md,
+    "Rates"). A frame's size depends on its kind and on what its camera saw, so each entry is the frame
+    as its own key would carry it: the msgpack bytes of a :class:`Vision` (a map, the same fields and checks),
+    and a receiver decodes only the entries of its vehicles (:meth:`sample`)."""
+
+    tick: int
+    """Tick ``k`` of the camera slot (>= 0), every frame's."""
+    t_s: float
+    """Exposure time [s] (>= 0), every frame's."""
+    ids: tuple[str, ...]
+    """The vehicles, distinct, 1 to :data:`MAX_BATCH`: entry ``i`` of ``frames`` is ``ids[i]``'s."""
+    frames: tuple[bytes, ...]
+    """Each vehicle's frame, an encoded :class:`Vision` (msgpack bin), one per id; the whole message stays
+    within :data:`MAX_PAYLOAD_BYTES`."""
+
+    def __post_init__(self) -> None:
+        ids = _vehicle_ids(self.ids, "ids", 1)
+        frames = _frame_blobs(_per_id(self.frames, "frames", ids))
+        _set(self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0), ids=ids, frames=frames)
+
+    def sample(self, vid: str, row: int | None = None) -> Vision | None:
+        """Vehicle ``vid``'s :class:`Vision` (``row`` its entry when known, :meth:`index`), decoded and
+        checked as its own key's would be, ``None`` when the batch has none. MessageError naming the entry
+        (``frames[3]: ...``) for a frame that does not decode, or whose tick or time is not the batch's."""
+        row = self._row(vid, row)
+        if row is None:
+            return None
+        try:
+            frame = decode(self.frames[row], Vision)
+        except MessageError as exc:
+            raise MessageError(f"frames[{row}]: {exc}") from None
+        if frame.tick != self.tick or frame.t_s != self.t_s:
+            raise MessageError(f"frames[{row}]: tick {frame.tick} at {frame.t_s} s in the batch of tick "
+                               f"{self.tick} at {self.t_s} s")  # fmt: skip
+        return frame
+
+
+def vision_rows(
+    batch: VisionBatch, key: str, drops: DropCounter, ids: Container[str] | None = None
+) -> list[tuple[str, Vision]]:
+    """The frames of ``batch`` (of the vehicles in ``ids``; ``None``: every one), decoded, as ``(vehicle,
+    Vision)``: an entry that does not decode is dropped and counted in ``drops`` under ``key`` (naming the
+    entry), and the others are kept: one vehicle's bad frame loses no other vehicle's."""
+    out = []
+    for row, vid in enumerate(batch.ids):
+        if ids is not None and vid not in ids:
+            continue
+        try:
+            out.append((vid, batch.sample(vid, row)))
+        except MessageError as exc:
+            drops.drop(key, f"{vid}: {exc}")
+    return out
+
+
+def _frame_blobs(frames: list | tuple) -> tuple[bytes, ...]:
+    """A :class:`VisionBatch`'s entries: bytes each (not decoded here: :meth:`VisionBatch.sample` does)."""
+    for i, f in enumerate(frames):
+        if type(f) is not bytes:
+            raise MessageError(f"frames[{i}]: expected the bytes of a Vision message, got {_show(f)}")
+    return tuple(frames)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1354,6 +1422,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         Uwb,
         UwbBatch,
         Vision,
+        VisionBatch,
         Gnss,
         Rangefinder,
         Estimate,
@@ -1375,7 +1444,7 @@ MESSAGE_FOR_KIND: dict[str, type[Message]] = {
     "guidance": Guidance,
     "command": Command,
     "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "world_imu": ImuBatch,
-    "anchors": Anchors, "mothership_uwb": UwbBatch, "world_truth": TruthBatch,
+    "world_vision": VisionBatch, "anchors": Anchors, "mothership_uwb": UwbBatch, "world_truth": TruthBatch,
     "run_control": RunControl, "fault": Fault,
 }  # fmt: skip
 """The message carried by each key kind of :meth:`swarm.transport.keys.Keys.parse`."""
@@ -1540,6 +1609,13 @@ class _VisionWire(_Wire):
     marker_ids: list[Any]
 
 
+class _VisionBatchWire(_Wire):
+    tick: _Nat
+    t_s: _Time
+    ids: list[str]  # checked by _vehicle_ids (see _ImuBatchWire)
+    frames: list[bytes]
+
+
 class _EstimateWire(_Wire):
     tick: _Nat
     t_s: _Time
@@ -1686,6 +1762,13 @@ def _vision(w: _VisionWire) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def _vision_batch(w: _VisionBatchWire) -> dict[str, Any]:
+    ids = _vehicle_ids(w.ids, "ids", 1)
+    if len(w.frames) != len(ids):
+        raise _Defer
+    return {"tick": w.tick, "t_s": _fin(w.t_s), "ids": ids, "frames": tuple(w.frames)}
+
+
 def _estimate(w: _EstimateWire) -> dict[str, Any]:
     return {
         "tick": w.tick, "t_s": _fin(w.t_s), "p_nav": _arr(w.p_nav, (3,)), "v_nav": _arr(w.v_nav, (3,)),
@@ -1745,6 +1828,7 @@ _FAST: dict[type[Message], tuple[msgspec.msgpack.Decoder, Callable[[Any], dict[s
         (Uwb, _UwbWire, _uwb),
         (UwbBatch, _UwbBatchWire, _uwb_batch),
         (Vision, _VisionWire, _vision),
+        (VisionBatch, _VisionBatchWire, _vision_batch),
         (Estimate, _EstimateWire, _estimate),
         (Guidance, _GuidanceWire, _guidance),
         (Command, _CommandWire, _command),

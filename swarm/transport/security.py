@@ -131,8 +131,8 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
     if name == "world":
         return {
             "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/vision", "agent/*/truth",
-                                                "agent/*/event", "world/imu", "world/truth", "world/clock",
-                                                "world/event")),
+                                                "agent/*/event", "world/imu", "world/vision", "world/truth",
+                                                "world/clock", "world/event")),
             "declare_subscriber": (keys.agent_all("command"), keys.run_control(), keys.fault()),
             "liveliness_token": (f"{ns}/alive/world/*",),
             **watch,
@@ -167,8 +167,8 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         return {
             "put": (keys.estimate(vid), keys.guidance(vid), keys.command(vid), keys.event(vid)),
             "declare_subscriber": (keys.imu(vid), keys.uwb(vid), keys.vision(vid), keys.agent_all("estimate"),
-                                   keys.world_imu(), keys.mothership_uwb(), keys.world_clock(),
-                                   keys.world_event()),  # world_resumed
+                                   keys.world_imu(), keys.world_vision(), keys.mothership_uwb(),
+                                   keys.world_clock(), keys.world_event()),  # world_resumed
             "liveliness_token": (keys.alive("agent", vid),),
             **watch,
         }  # fmt: skip

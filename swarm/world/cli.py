@@ -28,8 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--batch", action="store_true",
         help="for agent hosts (swarm launch passes it with --vehicles-per-process > 1): every vehicle's imu "
-        "of a tick as one ImuBatch on world/imu, which the hosts split, and its truth as one TruthBatch on "
-        "world/truth for the mothership (the per-vehicle truths only while a viewer subscribes)",
+        "of a tick as one ImuBatch on world/imu and the chasers' camera frames as one VisionBatch on "
+        "world/vision, which the hosts split, and its truth as one TruthBatch on world/truth for the "
+        "mothership (the per-vehicle truths only while a viewer subscribes)",
     )  # fmt: skip
     p.add_argument(
         "--clock-every", type=int, default=10, metavar="TICKS",

@@ -43,7 +43,7 @@ import numpy as np
 from swarm.scenario import Scenario
 from swarm.step.referee import Referee
 from swarm.step.world import World
-from swarm.transport.docking_wire import batch_sample, contact_event, keepout_event, world_sensors
+from swarm.transport.docking_wire import batch_samples, contact_event, keepout_event, world_sensors
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import CommandBarrier
 from swarm.transport.messages import (
@@ -86,8 +86,9 @@ class WorldProcess:
     ) -> None:
         """``pace``: a lockstep world that also never runs ahead of this wall clock (realtime or scaled:N;
         every command is still waited for, so the run is the unpaced one); ``batch``: every vehicle's
-        imu of a tick in one ``world/imu`` message and its truth in one ``world/truth`` (agent hosts,
-        docs/protocol.md "Rates"), the per-vehicle truths only while a viewer subscribes;
+        imu of a tick in one ``world/imu`` message, the chasers' camera frames in one ``world/vision`` and
+        the truths in one ``world/truth`` (agent hosts, docs/protocol.md "Rates"), the per-vehicle truths
+        only while a viewer subscribes;
         ``checkpoint_dir``: write the state there every tick (``None``: never); ``resume``: a state
         :func:`swarm.world.checkpoint.load` read, to continue from (:class:`CheckpointError` if it is not a
         state of this run: another scenario, seed or vehicle set)."""
@@ -339,7 +340,11 @@ class WorldProcess:
         self.pub_vision = {v: declare_reliable(self.session, k.vision(v), ex) for v in self.chasers}
         # for agent hosts every vehicle's imu and truth of a tick leave in one message each (docs/protocol.md,
         # "Rates"); declared either way: a checkpoint's tick, published again on resume, may hold a batch
-        batches = {"imu_batch": k.world_imu(), "truth_batch": k.world_truth()}
+        batches = {
+            "imu_batch": k.world_imu(),
+            "vision_batch": k.world_vision(),
+            "truth_batch": k.world_truth(),
+        }
         self._pubs = {  # by kind, then vehicle (a batch's is "", as world_sensors names it)
             "truth": self.pub_truth,
             "vision": self.pub_vision,
@@ -541,9 +546,9 @@ class WorldProcess:
             self._joining.extend(returned)
         for vid in returned:
             samples = [(kind, payload) for kind, v, payload in self._sensors if v == vid and kind != "truth"]
-            imu = batch_sample(self._sensors, vid)  # its row of the batch, on its own key: to it alone
-            if imu is not None:
-                samples.append(("imu", imu))
+            samples += batch_samples(
+                self._sensors, vid
+            )  # its rows of the batches, on its own keys: to it alone
             for kind, payload in samples:
                 self._pub(kind, vid).put(payload)
             _LOG.info("agent %s back: in the lockstep from the next tick (%d samples of this one sent again)",

@@ -264,6 +264,25 @@ def test_the_motherships_batch_gives_each_hosted_vehicle_its_own_range_and_no_ot
                    "target0": [("t/mothership/uwb", Uwb(4, 0.04, 3, 0.75))]}  # fmt: skip
 
 
+def test_the_worlds_vision_batch_gives_each_hosted_chaser_its_own_frame_and_drops_a_bad_one_alone():
+    """The world's ``world/vision`` batch (agent hosts) reaches each hosted chaser as the ``vision`` of its
+    own key would have; another host's chaser's entry is nobody's here, and an entry that does not decode
+    is counted in the host's drops, naming the vehicle, without losing the other frames."""
+    from swarm.transport.messages import Vision, VisionBatch, encode
+
+    sc = load_scenario("docking").with_pairs(3)
+    host, p = _host(["chaser0", "target0", "chaser2"], sc)
+    got = {vid: [] for vid in p}
+    for vid, proc in p.items():
+        proc._on_sensor = lambda key, msg, vid=vid: got[vid].append((key, msg))
+    frame = Vision(10, 0.1, "target0", "+x", "features", np.full((6, 3), 0.25), (0, 1, 2, 3, 4, 5))
+    other = Vision(10, 0.1, "target1", "+x", "features", np.zeros((0, 3)), ())
+    batch = VisionBatch(10, 0.1, ("chaser1", "chaser0", "chaser2"), (encode(other), encode(frame), b"junk"))
+    host._on_vision_batch("t/world/vision", batch)
+    assert got == {"chaser0": [("t/world/vision", frame)], "target0": [], "chaser2": []}
+    assert host.shared_drops.count("t/world/vision") == 1
+
+
 @pytest.mark.parametrize("listened", [False, True])
 def test_guidance_is_encoded_only_for_a_subscriber(listened):
     """A control tick's guidance goes to whoever subscribes to it (the launcher to its chasers', a viewer

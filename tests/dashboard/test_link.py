@@ -7,6 +7,7 @@ arrive deterministically at that moment: the session hands them to the callback 
 from __future__ import annotations
 
 import logging
+import time
 
 import numpy as np
 import zenoh
@@ -57,3 +58,39 @@ def test_anchors_arriving_while_the_link_is_built_are_taken_without_an_error(cap
     assert not [r for r in caplog.records if "raised" in r.getMessage()], caplog.text
     snap = state.snapshot()
     assert snap.anchors_version == 1 and np.array_equal(snap.anchors[1], anchors.positions_nav)
+
+
+def test_the_frames_of_a_world_vision_batch_reach_each_vehicle_and_a_bad_one_is_counted():
+    """A swarm of agent hosts sends the chasers' frames in world/vision batches (docs/protocol.md): the
+    dashboard draws each vehicle's frame from its entry, as from its own vision key, and an entry that does
+    not decode is counted and loses no other frame. Two real sessions on loopback."""
+    from swarm.transport.messages import Vision, VisionBatch
+
+    keys = Keys(f"link{free_port()}")
+    state = SwarmState({"chaser": ("chaser", "target"), "chaser2": ("chaser", "target2")}, np.zeros((0, 3)))
+    endpoint = loopback(free_port())
+    frame = Vision(10, 0.1, "target", "+x", "features", np.full((6, 3), 0.2), (0, 1, 2, 3, 4, 5))
+    batch = VisionBatch(10, 0.1, ("chaser", "chaser2"), (encode(frame), b"\x81\xa1v\x02"))
+    drops = DropCounter()
+    with open_session(ZenohArgs(mode="peer", listen=(endpoint,))) as session:
+        link = SwarmLink(session, keys, state, drops, anchors_retry_s=0.05)
+        try:
+            with open_session(ZenohArgs(mode="peer", connect=(endpoint,))) as other:
+                pub = other.declare_publisher(keys.world_vision())
+                deadline = time.monotonic() + 10.0
+                while not pub.matching_status.matching and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                pub.put(encode(batch))
+                while (
+                    state.snapshot().agents.get("chaser") is None
+                    or state.snapshot().agents["chaser"].vision_rows is None
+                ):
+                    assert time.monotonic() < deadline, "the batch's frame never reached the dashboard"
+                    link.poll()
+                    time.sleep(0.01)
+        finally:
+            link.close()
+    snap = state.snapshot().agents
+    assert snap["chaser"].vision_rows == 6 and snap["chaser"].vision_t_s == 0.1
+    assert snap.get("chaser2") is None or snap["chaser2"].vision_rows is None
+    assert drops.count(keys.world_vision()) == 1

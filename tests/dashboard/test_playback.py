@@ -109,6 +109,25 @@ def test_a_recording_is_read_with_its_namespace_scenario_and_vehicles(recording:
     assert sc.name == "docking" and set(sc.vehicles) == {"chaser", "target"}
 
 
+def test_a_recorded_vision_batch_plays_as_each_vehicles_frame(tmp_path: Path) -> None:
+    """A recording of a swarm of agent hosts holds the chasers' frames in world/vision batches: playback
+    reads each entry as that vehicle's vision, at the batch's time, as the live dashboard does; an entry that
+    does not decode is counted in the recording's drops, and the other frames stay."""
+    from swarm.transport.messages import Vision, VisionBatch, encode
+    from swarm.transport.recording import McapSink
+
+    keys = Keys(NAMESPACE)
+    frame = Vision(10, 0.1, "target", "+x", "features", np.full((6, 3), 0.2), (0, 1, 2, 3, 4, 5))
+    path = tmp_path / "hosted.mcap"
+    sink = McapSink(path, keys)
+    sink.write(
+        keys.world_vision(), encode(VisionBatch(10, 0.1, ("chaser", "chaser2"), (encode(frame), b"x")))
+    )
+    sink.close()
+    rec = load_recording(path)
+    assert rec.items == (("vision", "chaser", frame),) and rec.times_ns == (100_000_000,) and rec.dropped == 1
+
+
 def test_the_store_at_t_holds_the_recorded_poses_and_mode_at_t(recording: Path) -> None:
     rec = load_recording(recording)
     state = _make_state()

@@ -1,8 +1,9 @@
 """The world's samples of a tick as the processes publish them (swarm.transport.docking_wire.world_sensors):
-for agent hosts, every vehicle's imu in one ImuBatch on world/imu.
+for agent hosts, every vehicle's imu in one ImuBatch on world/imu, and every chaser's camera frame in one
+VisionBatch on world/vision.
 
-Oracle: the same tick encoded one message per vehicle (a process each, decoded by the Imu codec):
-each vehicle's row of the batch must be that message, field for field."""
+Oracle: the same tick encoded one message per vehicle (a process each, decoded by the Imu and Vision
+codecs): each vehicle's row of a batch must be that message, field for field (a frame: byte for byte)."""
 
 from __future__ import annotations
 
@@ -12,16 +13,34 @@ import pytest
 from swarm.scenario import load_scenario
 from swarm.step.radio import UwbNetwork
 from swarm.step.world import World
-from swarm.transport.docking_wire import batch_sample, uwb_slot, uwb_slot_batch, world_sensors
-from swarm.transport.messages import MAX_BATCH, Imu, ImuBatch, Truth, TruthBatch, Uwb, UwbBatch, decode
+from swarm.transport.docking_wire import batch_samples, uwb_slot, uwb_slot_batch, world_sensors
+from swarm.transport.messages import (
+    MAX_BATCH,
+    MAX_PAYLOAD_BYTES,
+    DropCounter,
+    Imu,
+    ImuBatch,
+    Truth,
+    TruthBatch,
+    Uwb,
+    UwbBatch,
+    Vision,
+    VisionBatch,
+    decode,
+    encode,
+    vision_rows,
+)
 
 
-def _tick(pairs: int, k_ahrs: bool):
+def _tick(pairs: int, k_ahrs: bool, camera: bool = False):
     sc = load_scenario("docking").with_pairs(pairs)
     w = World(sc, 3)
     frames = w.step()
     if k_ahrs:  # step on to a tick with an AHRS output (10 Hz of the 100 Hz), so the batch carries attitudes
         while all(f.q_ahrs_nav_body is None for f in frames.values()):
+            frames = w.step()
+    if camera:  # ... or to a camera tick (20 Hz), so the chasers' frames are in the tick
+        while w.k % w.vision_every:
             frames = w.step()
     return sc, w, frames
 
@@ -33,9 +52,9 @@ def test_each_vehicles_row_of_the_batch_is_the_imu_it_would_have_had_alone(k_ahr
     k = w.k
     alone = world_sensors(w, ids, chasers, k, frames, 1)
     batched = world_sensors(w, ids, chasers, k, frames, 1, batch=True)
-    # the per-vehicle truths and frames are the same, in the same order; the imu leave their keys for a batch
-    assert [s for s in batched if s[0] not in ("imu_batch", "truth_batch")] == [
-        s for s in alone if s[0] != "imu"
+    # the per-vehicle truths are the same, in the same order; the imu and frames leave their keys for batches
+    assert [s for s in batched if s[0] not in ("imu_batch", "truth_batch", "vision_batch")] == [
+        s for s in alone if s[0] not in ("imu", "vision")
     ]
     ((_kind, vid, payload),) = [s for s in batched if s[0] == "imu_batch"]
     assert batched[-1][0] == "imu_batch" and vid == ""  # after every frame of the tick
@@ -55,8 +74,72 @@ def test_each_vehicles_row_of_the_batch_is_the_imu_it_would_have_had_alone(k_ahr
     for vid, row in batch.index().items():
         own = decode(next(p for kd, v, p in alone if kd == "imu" and v == vid), Imu)
         assert batch.sample(vid, row) == own == batch.sample(vid)
-        assert decode(batch_sample(batched, vid), Imu) == own  # what a rejoined agent is sent
-    assert batch.sample("ghost") is None and batch_sample(batched, "ghost") is None
+        sent = dict(batch_samples(batched, vid))  # what a rejoined agent is sent
+        assert decode(sent["imu"], Imu) == own
+    assert batch.sample("ghost") is None and batch_samples(batched, "ghost") == []
+
+
+def test_each_chasers_entry_of_the_vision_batch_is_the_frame_it_would_have_had_alone(monkeypatch):
+    """A camera tick for agent hosts: the chasers' frames leave their keys for one VisionBatch, after the
+    truths and before the imu batch (a host's tick is ready on its imu); each entry is the vehicle's own
+    frame byte for byte, and a rejoined chaser is sent its frame and its imu on its own keys. A delayed
+    chaser keeps its own key; a tick whose frames do not fit one message is split, none lost."""
+    sc, w, frames = _tick(3, False, camera=True)
+    ids, chasers = list(sc.vehicles), list(sc.chasers)
+    k = w.k
+    alone = world_sensors(w, ids, chasers, k, frames, 1)
+    batched = world_sensors(w, ids, chasers, k, frames, 1, batch=True)
+    own = {v: p for kd, v, p in alone if kd == "vision"}
+    assert sorted(own) == sorted(chasers) and not [s for s in batched if s[0] in ("vision", "imu")]
+    assert [kd for kd, _, _ in batched] == ["truth_batch", *["truth"] * len(ids), "vision_batch", "imu_batch"]
+    batch = decode(next(p for kd, _, p in batched if kd == "vision_batch"), VisionBatch)
+    assert batch.ids == tuple(chasers) and batch.tick == k and batch.t_s == k * sc.dt_s
+    for vid in chasers:
+        assert batch.frames[batch.index()[vid]] == own[vid]
+        assert batch.sample(vid) == decode(own[vid], Vision)
+        assert [kd for kd, _ in batch_samples(batched, vid)] == ["vision", "imu"]
+        assert batch_samples(batched, vid)[0][1] == own[vid]
+    assert [kd for kd, _ in batch_samples(batched, "target0")] == ["imu"]
+    assert vision_rows(batch, "k", DropCounter(), {"chaser1"}) == [
+        ("chaser1", decode(own["chaser1"], Vision))
+    ]
+
+    held = world_sensors(w, ids, chasers, k, frames, 1, batch=True, solo={"chaser1"})
+    assert [(kd, v) for kd, v, _ in held if kd in ("vision", "imu")] == [
+        ("vision", "chaser1"),
+        ("imu", "chaser1"),
+    ]
+    solo_batch = decode(next(p for kd, _, p in held if kd == "vision_batch"), VisionBatch)
+    assert solo_batch.ids == ("chaser0", "chaser2")
+
+    limit = len(encode(batch)) - 1  # one byte short of the whole batch: two messages
+    monkeypatch.setattr("swarm.transport.docking_wire.MAX_PAYLOAD_BYTES", limit)
+    split = [
+        p for kd, _, p in world_sensors(w, ids, chasers, k, frames, 1, batch=True) if kd == "vision_batch"
+    ]
+    assert len(split) == 2 and all(len(p) <= limit for p in split)
+    parts = [decode(p, VisionBatch) for p in split]
+    assert sum((b.ids for b in parts), ()) == tuple(chasers)
+    assert sum((b.frames for b in parts), ()) == tuple(own[v] for v in chasers)
+    assert (
+        MAX_PAYLOAD_BYTES // len(own["chaser0"]) >= 128
+    )  # the real cap: 128 chasers' frames are one message
+
+
+def test_a_bad_frame_in_a_vision_batch_is_dropped_alone_and_named():
+    """A receiver decodes the entries it takes: one that does not decode, or is of another tick, is dropped
+    and counted under the batch's key naming the vehicle and the entry; the other vehicles' frames stay."""
+    sc, w, _ = _tick(2, False, camera=True)
+    good = encode(Vision(w.k, w.k * sc.dt_s, "target0", "+x", "features", np.zeros((0, 3)), ()))
+    stale = encode(Vision(w.k - 1, (w.k - 1) * sc.dt_s, "target0", "+x", "features", np.zeros((0, 3)), ()))
+    batch = VisionBatch(w.k, w.k * sc.dt_s, ("a", "b", "c"), (good, b"\x81\xa1v\x02", stale))
+    drops = DropCounter()
+    assert [v for v, _ in vision_rows(batch, "ns/world/vision", drops)] == ["a"]
+    assert drops.count("ns/world/vision") == 2
+    with pytest.raises(Exception, match=r"frames\[1\]: type: expected 'Vision'"):
+        batch.sample("b")
+    with pytest.raises(Exception, match=r"frames\[2\]: tick .* in the batch of tick"):
+        batch.sample("c")
 
 
 def test_a_vehicle_held_back_by_a_delay_keeps_its_own_imu_and_a_big_swarm_several_batches(monkeypatch):

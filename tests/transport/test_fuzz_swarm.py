@@ -37,6 +37,8 @@ from swarm.transport.messages import (
     TruthBatch,
     Uwb,
     UwbBatch,
+    Vision,
+    VisionBatch,
     decode,
     encode,
 )
@@ -75,6 +77,9 @@ _VALID = {
     ),
     "mothership_uwb": UwbBatch(8, 0.08, ("chaser", "target"), (1, 2), (1.5, None)),
     "world_imu": ImuBatch(7, 0.07, 0.01, ("chaser", "target"), np.zeros((2, 3)), ("chaser",), _Q[None, :]),
+    "world_vision": VisionBatch(
+        10, 0.1, ("chaser",), (encode(Vision(10, 0.1, "target", "+x", "features", np.zeros((0, 3)), ())),)
+    ),
     "run_control": RunControl("pause"),
     "fault": Fault("camera_loss", duration_s=1.0, vehicle="chaser"),
 }
@@ -84,8 +89,8 @@ def _keys(ns: str) -> list[tuple[str, str]]:
     k = Keys(ns)
     out = [(kind, getattr(k, kind)(vid)) for kind in AGENT_KINDS for vid in ("chaser", "target")]
     fixed = [("world_clock", k.world_clock()), ("world_event", k.world_event()), ("world_imu", k.world_imu()),
-             ("world_truth", k.world_truth()), ("mothership_uwb", k.mothership_uwb()),
-             ("anchors", k.anchors()),
+             ("world_vision", k.world_vision()), ("world_truth", k.world_truth()),
+             ("mothership_uwb", k.mothership_uwb()), ("anchors", k.anchors()),
              ("run_control", k.run_control()), ("fault", k.fault())]  # fmt: skip
     return [*out, *fixed]
 
@@ -102,10 +107,20 @@ def _mutated(draw, kind: str) -> bytes:
 
 def _refused(kind: str, payload: bytes) -> bool:
     try:
-        decode(payload, MESSAGE_FOR_KIND[kind])
+        msg = decode(payload, MESSAGE_FOR_KIND[kind])
     except MessageError:
         return True
+    if isinstance(msg, VisionBatch):  # its entries are decoded by whoever takes them: refused if none decodes
+        return not any(_frame_ok(msg, vid) for vid in msg.ids)
     return False  # a valid message: not this test's business (see the module docstring)
+
+
+def _frame_ok(batch: VisionBatch, vid: str) -> bool:
+    try:
+        batch.sample(vid)
+    except MessageError:
+        return False
+    return True
 
 
 @st.composite

@@ -32,6 +32,7 @@ def test_every_key_string_matches_the_protocol_table(ns):
     assert k.event("chaser") == f"{ns}/agent/chaser/event"
     assert k.world_clock() == f"{ns}/world/clock"
     assert k.world_imu() == f"{ns}/world/imu"
+    assert k.world_vision() == f"{ns}/world/vision"
     assert k.mothership_uwb() == f"{ns}/mothership/uwb"
     assert k.world_truth() == f"{ns}/world/truth"
     assert k.anchors() == f"{ns}/mothership/anchors"
@@ -65,6 +66,7 @@ def test_parse_inverts_every_per_vehicle_key(ns, kind):
         "world_clock",
         "world_event",
         "world_imu",
+        "world_vision",
         "world_truth",
         "anchors",
         "mothership_uwb",

@@ -51,6 +51,7 @@ from swarm.transport.messages import (
     Uwb,
     UwbBatch,
     Vision,
+    VisionBatch,
     decode,
     encode,
     safe_decode,
@@ -70,6 +71,10 @@ VALID = {
     Uwb: Uwb(2, 0.02, 1, 1.5),
     UwbBatch: UwbBatch(2, 0.02, ("chaser0", "target0", "chaser1"), (1, 0, 3), (1.5, None, 2.25)),
     Vision: Vision(3, 0.05, "target", "+x", "features", np.full((6, 3), 0.1), (0, 1, 2, 3, 4, 5)),
+    VisionBatch: VisionBatch(5, 0.05, ("chaser0", "chaser1"), (
+        encode(Vision(5, 0.05, "target0", "+x", "features", np.full((6, 3), 0.1), (0, 1, 2, 3, 4, 5))),
+        encode(Vision(5, 0.05, "target1", "+x", "features", np.zeros((0, 3)), ())),
+    )),
     Estimate: Estimate(
         4, 0.04, [1.0, 2.0, 3.0], [0.0, 0.0, 0.0], Q, np.eye(9) * 1e-4, 0.01, 0.5, 0.0,
         {"range_accepted": 3, "range_rejected": 1},
@@ -192,6 +197,14 @@ def imu_batches(draw):
     return ImuBatch(draw(ticks), draw(times), draw(st.floats(1e-6, 10.0)), vids, gyro, ahrs, q, acc)
 
 
+@st.composite
+def vision_batches(draw):
+    vids = tuple(draw(st.lists(ids, min_size=1, max_size=4, unique=True)))
+    k, t = draw(ticks), draw(times)
+    frames = tuple(encode(dataclasses.replace(draw(visions()), tick=k, t_s=t)) for _ in vids)
+    return VisionBatch(k, t, vids, frames)
+
+
 STRATEGIES = {
     Imu: st.builds(Imu, ticks, times, st.floats(1e-6, 10.0), vec(3), st.none() | quats, st.none() | vec(3)),
     ImuBatch: imu_batches(),
@@ -204,6 +217,7 @@ STRATEGIES = {
         )
     ),
     Vision: visions(),
+    VisionBatch: vision_batches(),
     Estimate: st.builds(
         Estimate, ticks, times, vec(3), vec(3), quats, covs, nonneg, nonneg, st.floats(0.0, 1.0), counts
     ),
@@ -461,6 +475,14 @@ CASES = [
     (ImuBatch, "q_ahrs_nav_body", [[0.0, 0.0, INF, 1.0]], "q_ahrs_nav_body: not finite"),
     (ImuBatch, "acc_body", [[0.0, 0.0, 9.8]] * 2, "acc_body: 2 rows for 3 ids"),
     (ImuBatch, "dt_s", 0.0, "dt_s: must be > 0"),
+    (VisionBatch, "ids", [], "ids: 0 entries, expected 1 to 256"),
+    (VisionBatch, "ids", ["chaser0", "chaser0"], "ids: duplicate ids"),
+    (VisionBatch, "ids", ["chaser0"], "frames: 2 entries for 1 ids"),
+    (VisionBatch, "frames", "raw", "frames: expected an array"),
+    (VisionBatch, "frames", [b"\x80", "text"], "frames[1]: expected the bytes of a Vision message"),
+    (VisionBatch, "frames", [b"\x80", None], "frames[1]: expected the bytes of a Vision message"),
+    (VisionBatch, "tick", -1, "tick: must be >= 0"),
+    (VisionBatch, "t_s", NAN, "t_s: not finite"),
     (TruthBatch, "ids", ["chaser0"], "p_nav: expected shape (1, 3), got (2, 3)"),
     (TruthBatch, "ids", ["chaser0", "chaser0"], "ids: duplicate ids"),
     (TruthBatch, "q_nav_body", [Q, [0.0, 0.0, 0.0, 2.0]], "q_nav_body[1]: norm 2 is not within 0.001"),
@@ -798,6 +820,7 @@ def test_every_key_kind_maps_to_a_message():
         *AGENT_KINDS,
         "world_clock",
         "world_event",
+        "world_vision",
         "world_imu",
         "anchors",
         "mothership_uwb",
@@ -903,7 +926,8 @@ FAST = [cls for cls in ALL if cls in msgs._FAST]
 
 def test_the_fast_path_covers_the_messages_of_every_tick():
     assert set(FAST) == {
-        Imu, ImuBatch, Uwb, UwbBatch, Vision, Estimate, Guidance, Command, Truth, TruthBatch, Clock
+        Imu, ImuBatch, Uwb, UwbBatch, Vision, VisionBatch, Estimate, Guidance, Command, Truth, TruthBatch,
+        Clock,
     }  # fmt: skip
 
 

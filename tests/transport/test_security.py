@@ -49,7 +49,8 @@ K = Keys(NS)
 # What each identity may publish, from issue 7 and docs/protocol.md ("Access control"): (identity, key).
 MAY_PUT = {
     "world": {K.imu(v) for v in VEHICLES} | {K.vision(v) for v in VEHICLES} | {K.truth(v) for v in VEHICLES}
-    | {K.event(v) for v in VEHICLES} | {K.world_imu(), K.world_truth(), K.world_clock(), K.world_event()},
+    | {K.event(v) for v in VEHICLES}
+    | {K.world_imu(), K.world_vision(), K.world_truth(), K.world_clock(), K.world_event()},
     "mothership": {K.uwb(v) for v in VEHICLES} | {K.mothership_uwb(), K.anchors()},
     "agent-chaser": {K.estimate("chaser"), K.guidance("chaser"), K.command("chaser"), K.event("chaser")},
     "agent-target": {K.estimate("target"), K.guidance("target"), K.command("target"), K.event("target")},
@@ -57,8 +58,8 @@ MAY_PUT = {
     "launcher": {K.event(v) for v in VEHICLES} | {K.run_control(), K.fault()},
 }  # fmt: skip
 ALL_KEYS = sorted({getattr(K, kind)(v) for kind in AGENT_KINDS for v in VEHICLES}
-                  | {K.world_clock(), K.world_event(), K.world_imu(), K.world_truth(), K.anchors(),
-                     K.mothership_uwb(), K.run_control(), K.fault()})  # fmt: skip
+                  | {K.world_clock(), K.world_event(), K.world_imu(), K.world_vision(), K.world_truth(),
+                     K.anchors(), K.mothership_uwb(), K.run_control(), K.fault()})  # fmt: skip
 
 
 def _may(acl: dict, name: str, message: str, key: str, flow: str = "ingress") -> bool:
@@ -117,7 +118,8 @@ def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_
         "world": {K.command(v) for v in VEHICLES} | {K.run_control(), K.fault()},
         "mothership": {K.truth(v) for v in VEHICLES} | {K.world_truth(), K.world_clock()},
         "agent-chaser": {K.imu("chaser"), K.uwb("chaser"), K.vision("chaser"), K.world_clock()}
-        | {K.estimate(v) for v in VEHICLES} | {K.world_imu(), K.mothership_uwb(), K.world_event()},
+        | {K.estimate(v) for v in VEHICLES}
+        | {K.world_imu(), K.world_vision(), K.mothership_uwb(), K.world_event()},
         "dashboard": set(ALL_KEYS),
         "launcher": {K.world_event(), K.world_clock()} | {K.event(v) for v in VEHICLES}
         | {K.guidance(v) for v in VEHICLES},
