@@ -251,6 +251,10 @@ class AgentHost:
                     ready.add(a)  # a further tick is ready already: the next round takes it
                 if late or inp is not None:
                     batch.append((p, late, inp))
+        if (
+            len(batch) > 1
+        ):  # the vehicles that command on their tick first (host order otherwise, sort is stable)
+            batch.sort(key=_commands_last)
         for p, late, inp in batch:  # the round's commands first: the world (lockstep) waits for them
             try:
                 if late:
@@ -275,3 +279,14 @@ class AgentHost:
                 self._ended = p.finish() or self._ended
                 live.remove(p)
         return bool(batch)
+
+
+def _commands_last(entry: tuple) -> bool:
+    """Sort key of a round's ``(vehicle, late, inputs)``: ``False`` (first) for a tick on which the vehicle
+    sends a command. A host of many vehicles steps them one after the other (~4 ms for 64); the world
+    waits for the commands (lockstep) or flies the newest come by the next tick (free-running), while the
+    other vehicles' ticks only publish estimates. So with staggered controllers a host of 64 sends its
+    tick's few commands within a fraction of a millisecond, not after up to 63 other vehicles' steps.
+    Each vehicle's tick is the same in any order: its inputs were taken before the round steps any."""
+    p, _late, inp = entry
+    return inp is None or not p.commands_at(inp.tick)

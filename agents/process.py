@@ -284,10 +284,14 @@ class AgentProcess:
         for chaser in self.local_chasers:
             chaser.assembler.add(msg, self.id)
 
+    def commands_at(self, k: int) -> bool:
+        """Whether tick ``k`` is one of this vehicle's control ticks, on which it sends a command."""
+        return (k - self.control_phase) % self.control_every == 0
+
     def _publish_command(self, k: int) -> None:
         """``command(k)`` on the vehicle's control ticks only: the world holds it until the next one, and
         a lockstep world waits for it on those ticks only (docs/protocol.md, "Rates")."""
-        if (k - self.control_phase) % self.control_every:
+        if not self.commands_at(k):
             return
         payload = command_payload(k, self.dt, self._u, self._mode, self._force, self._torque)
         with self._command_lock:

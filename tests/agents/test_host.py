@@ -283,6 +283,32 @@ def test_the_worlds_vision_batch_gives_each_hosted_chaser_its_own_frame_and_drop
     assert host.shared_drops.count("t/world/vision") == 1
 
 
+@pytest.mark.parametrize("clock", ["lockstep", "realtime"])
+def test_a_round_steps_the_vehicles_that_command_on_their_tick_first(clock):
+    """Staggered controllers (``swarm.stagger_control``): of a round's ticks, those on which a vehicle sends
+    a command are stepped first, the others after them in host order; the estimates (lockstep: after every
+    command of the round) follow the same order."""
+    from swarm.transport.lockstep import TickInputs
+
+    sc = load_scenario("docking", {"swarm": {"stagger_control": True}}).with_pairs(3)
+    ids = list(sc.vehicles)
+    host, p = _host(ids, sc, clock)
+    k = 12
+    commanding = [v for v in ids if p[v].commands_at(k)]
+    assert 0 < len(commanding) < len(ids)  # the stagger spreads the six vehicles over the control period
+    steps = []
+    for vid, proc in p.items():
+        proc._started.set()
+        proc.assembler.poll_round = lambda grace, vid=vid: ((), TickInputs(tick=k), False)
+        proc.process = lambda inp, vid=vid: steps.append(("process", vid))
+        proc.flush = lambda vid=vid: steps.append(("flush", vid))
+    host._live = list(host.procs)
+    host.ready.update(host._by_asm)
+    assert host._round()
+    order = commanding + [v for v in ids if v not in commanding]
+    assert steps == [("process", v) for v in order] + [("flush", v) for v in order]
+
+
 @pytest.mark.parametrize("listened", [False, True])
 def test_guidance_is_encoded_only_for_a_subscriber(listened):
     """A control tick's guidance goes to whoever subscribes to it (the launcher to its chasers', a viewer
