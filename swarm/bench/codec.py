@@ -2,8 +2,8 @@
 
 For each message type of the hot path (``swarm/transport/messages.py``): building it in Python (its
 constructor's checks), :func:`~swarm.transport.messages.encode`, the sender's fast path where the world, the
-mothership or an agent has one (``encode_imu``, ``encode_uwb``, ``encode_estimate``, ``encode_command``,
-``encode_truth``), and decoding its payload by the msgspec fast path (what every receiver runs) and by the
+mothership or an agent has one (``encode_imu``, ``encode_uwb``, ``encode_vision``, ``encode_estimate``,
+``encode_command``, ``encode_truth``), and decoding its payload by the msgspec fast path (what every receiver runs) and by the
 reference checks alone (what it ran before issue 13, and still runs for a payload the fast path leaves to
 it). Times are medians of repeated blocks, so a burst of load on a shared machine moves them less than a
 mean; the ratio of the two decodes is measured in one run.
@@ -75,7 +75,7 @@ def fast_encoders() -> dict:
     from swarm.transport import messages as m
 
     return {"Imu": m.encode_imu, "Estimate": m.encode_estimate, "Command": m.encode_command,
-            "Truth": m.encode_truth, "Uwb": m.encode_uwb}  # fmt: skip
+            "Truth": m.encode_truth, "Uwb": m.encode_uwb, "Vision": m.encode_vision}  # fmt: skip
 
 
 def _us(fn, repeat: int, number: int) -> float:

@@ -153,6 +153,8 @@ class World:
         self.vision_every = sc.every(sc.camera.rate_hz)
         self.ahrs_every = sc.every(sc.ahrs.rate_hz)
         self.cameras = {c: sc.camera_for(c) for c in sc.chasers}
+        self._chasers = list(sc.chasers)  # (a Scenario builds the list on each call: twice per camera tick)
+        self._targets = [sc.vehicles[c].target for c in self._chasers]
         # faults (swarm.core.faults): the gyro bias step per vehicle (time inf: none) and the schedule of
         # windows (fixed ones from the scenario, mode-triggered ones from the commands, run-time ones)
         self.gyro_step_t = np.full(n, np.inf)
@@ -410,15 +412,15 @@ class World:
             for i, vid in enumerate(self.ids)
         }
         if k1 % self.vision_every == 0:
-            for vid in self.sc.chasers:
-                self._vision(vid, self.sc.vehicles[vid].target, frames[vid])
+            for c, vid in enumerate(self._chasers):
+                self._vision(c, vid, self._targets[c], frames[vid])
         return frames
 
-    def _vision(self, chaser: str, target: str, frame: SensorFrame) -> None:
+    def _vision(self, c: int, chaser: str, target: str, frame: SensorFrame) -> None:
+        """Chaser ``chaser``'s (the ``c``-th) camera frame of its target ``target`` into ``frame``."""
         cam = self.cameras[chaser]
         if cam.model != CameraModel.PNP:  # compiled: the loop's own frames
             out = np.empty(self.frame_width)
-            c = self.sc.chasers.index(chaser)
             if camera_frame(c, self.k, self.dt, self.X, *self.cam_arrays, out):
                 frame.vision_kind = str(cam.model)
                 n = self.cam_arrays[4].shape[0]

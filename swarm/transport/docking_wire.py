@@ -19,7 +19,6 @@ from swarm.transport.messages import (
     ImuBatch,
     TruthBatch,
     UwbBatch,
-    Vision,
     VisionBatch,
     decode,
     encode,
@@ -28,6 +27,7 @@ from swarm.transport.messages import (
     encode_imu,
     encode_truth,
     encode_uwb,
+    encode_vision,
 )
 
 Sensors = list[tuple[str, str, bytes]]
@@ -97,10 +97,11 @@ def world_sensors(
                              float(p_nlos))  # fmt: skip
         out.append(("truth", vid, truth))
     seen: list[tuple[str, bytes]] = []  # batch: the frames of the vehicles not in solo
+    chasers = frozenset(chasers) if camera_tick else frozenset()
     for vid in ids:
         fr = frames[vid]
         alone = not batch or vid in solo
-        if camera_tick and vid in chasers:
+        if vid in chasers:
             target = sc.vehicles[vid].target
             if fr.vision is None:
                 data, kind, mids = np.zeros((0, 3)), "features", ()
@@ -108,7 +109,7 @@ def world_sensors(
                 data, kind, mids = fr.vision.reshape(1, -1), "pose", tuple(range(len(world.markers_target)))
             else:
                 data, kind, mids = fr.vision, fr.vision_kind, tuple(range(len(fr.vision)))
-            payload = encode(Vision(k, t, target, face, kind, data, mids))
+            payload = encode_vision(k, t, target, face, kind, data, mids)
             if alone:
                 out.append(("vision", vid, payload))
             else:

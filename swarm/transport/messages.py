@@ -84,6 +84,7 @@ __all__ = [
     "encode_imu",
     "encode_truth",
     "encode_uwb",
+    "encode_vision",
     "estimate_and_payload",
     "estimate_message",
     "safe_decode",
@@ -852,6 +853,31 @@ class Vision(Message):
             target_id=_str(self.target_id, "target_id", pattern=ID_PATTERN),
             face=_str(self.face, "face", choices=FACES), kind=kind, data=data, marker_ids=ids,
         )  # fmt: skip
+
+
+_VISION_WIDTH = {"features": 3, "pixels": 2}  # the kinds with a row per marker (a pose: the message decides)
+
+
+def encode_vision(tick: int, t_s: float, target_id: str, face: str, kind: str, data, marker_ids) -> bytes:
+    """``encode(Vision(...))``, the same bytes, without building the message: the world's camera frames,
+    64 per camera tick at 128 vehicles (the sender fast paths above). The common case, marker features or
+    pixels as a finite float64 array of a row per id, ids distinct plain ints, is checked here in a few
+    operations; anything else (a pose, whose covariance the message checks) goes through the message."""
+    width = _VISION_WIDTH.get(kind) if type(kind) is str else None
+    plain = (
+        width is not None and _is_tick(tick) and _is_time(t_s) and type(data) is np.ndarray
+        and data.dtype == _F64 and data.ndim == 2 and data.shape[1] == width and data.shape[0] <= MAX_ITEMS
+        and type(marker_ids) is tuple and len(marker_ids) == data.shape[0] and type(face) is str
+        and face in FACES and type(target_id) is str and len(target_id) <= _MAX_NAME
+        and ID_PATTERN.fullmatch(target_id) is not None
+        and all(type(i) is int and 0 <= i <= _MAX_ID for i in marker_ids)
+        and len(set(marker_ids)) == len(marker_ids) and math.isfinite(t_s + _total(data))
+    )  # fmt: skip
+    if not plain:
+        return encode(Vision(tick, t_s, target_id, face, kind, data, marker_ids))
+    wire = {"tick": tick, "t_s": t_s, "target_id": target_id, "face": face, "kind": kind, "data": data,
+            "marker_ids": marker_ids}  # fmt: skip
+    return _pack("Vision", wire)
 
 
 @dataclass(frozen=True, eq=False)

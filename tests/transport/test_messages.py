@@ -1228,6 +1228,59 @@ def test_encode_imu_and_truth_give_the_bytes_and_the_errors_of_the_message_encod
         _decided_as_the_message(fast, ref, make, rng, changes, accepted)
 
 
+def test_encode_vision_gives_the_bytes_and_the_errors_of_the_message_encode(monkeypatch):
+    """Oracle: ``encode(Vision(...))``, the world's reference path for a camera frame; seeded frames of
+    marker features and pixels (none to six markers) through the fast path, variants decided as the message
+    decides (a pose always takes the message's checks)."""
+    from swarm.transport.messages import encode_vision
+
+    rng = np.random.default_rng(14)
+
+    def args():
+        kind = "features" if rng.uniform() < 0.7 else "pixels"
+        n = int(rng.integers(0, 7))
+        ids = tuple(int(i) for i in rng.permutation(8)[:n])
+        face = str(rng.choice(msgs.FACES))
+        data = rng.normal(size=(n, 3 if kind == "features" else 2))
+        return [int(rng.integers(0, 10**6)), float(rng.uniform(0, 100)), "target3", face, kind, data, ids]
+
+    _through_the_fast_path(monkeypatch, encode_vision, Vision, lambda _rng: args(), rng)
+    pose = np.zeros((1, msgs.POSE_LEN))
+    pose[0, 6], pose[0, 7:] = 1.0, np.eye(6).ravel()
+
+    def six(a, value=None, i=None):  # six markers' features, then one field changed
+        a[4], a[5], a[6] = "features", rng.normal(size=(6, 3)), (0, 1, 2, 3, 4, 5)
+        if i is not None:
+            a[i] = value
+
+    variants = {
+        "six markers": (six, True),
+        "NaN marker": (lambda a: (six(a), a[5].__setitem__((2, 1), np.nan)), False),
+        "infinite time": (lambda a: a.__setitem__(1, math.inf), False),
+        "negative time": (lambda a: a.__setitem__(1, -0.5), False),
+        "rows and ids apart": (lambda a: six(a, (0, 1, 2), 6), False),
+        "duplicate ids": (lambda a: six(a, (0, 1, 2, 3, 4, 4), 6), False),
+        "negative id": (lambda a: six(a, (0, 1, 2, 3, 4, -5), 6), False),
+        "bool id": (lambda a: six(a, (0, 1, 2, 3, 4, True), 6), False),
+        "numpy id": (lambda a: six(a, (0, 1, 2, 3, 4, np.int64(5)), 6), True),
+        "ids as a list": (lambda a: six(a, [0, 1, 2, 3, 4, 5], 6), True),
+        "pixels of 3 columns": (lambda a: six(a, "pixels", 4), False),
+        "unknown kind": (lambda a: six(a, "lidar", 4), False),
+        "unknown face": (lambda a: a.__setitem__(3, "+w"), False),
+        "target id with a slash": (lambda a: a.__setitem__(2, "target/3"), False),
+        "float32 markers": (lambda a: six(a, np.ones((6, 3), dtype=np.float32), 5), True),
+        "a pose": (
+            lambda a: (a.__setitem__(4, "pose"), a.__setitem__(5, pose), a.__setitem__(6, (0, 1))),
+            True,
+        ),
+        "65 markers": (lambda a: (six(a, np.ones((65, 3)), 5), a.__setitem__(6, tuple(range(65)))), False),
+        "numpy tick": (lambda a: a.__setitem__(0, np.int64(3)), True),
+    }
+    changes = {name: change for name, (change, _) in variants.items()}
+    accepted = [name for name, (_, ok) in variants.items() if ok]
+    _decided_as_the_message(encode_vision, Vision, lambda _rng: args(), rng, changes, accepted)
+
+
 def test_encode_uwb_gives_the_bytes_and_the_errors_of_the_message_encode(monkeypatch):
     """Oracle: ``encode(Uwb(...))``, the mothership's reference path; seeded ranges (and lost ones) through
     the fast path, variants decided as the message decides."""
