@@ -3,10 +3,10 @@
 For each message type of the hot path (``swarm/transport/messages.py``): building it in Python (its
 constructor's checks), :func:`~swarm.transport.messages.encode`, the sender's fast path where the world, the
 mothership or an agent has one (``encode_imu``, ``encode_uwb``, ``encode_vision``, ``encode_estimate``,
-``encode_command``, ``encode_truth``), and decoding its payload by the msgspec fast path (what every receiver runs) and by the
-reference checks alone (what it ran before issue 13, and still runs for a payload the fast path leaves to
-it). Times are medians of repeated blocks, so a burst of load on a shared machine moves them less than a
-mean; the ratio of the two decodes is measured in one run.
+``encode_command``, ``encode_truth``), and decoding its payload by the msgspec fast path (what every
+receiver runs) and by the reference checks alone (what it ran before issue 13, and still runs for a payload
+the fast path leaves to it). Times are medians of repeated blocks, so a burst of load on a shared machine
+moves them less than a mean; the ratio of the two decodes is measured in one run.
 """
 
 from __future__ import annotations
