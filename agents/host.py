@@ -7,10 +7,11 @@ liveliness tokens and supervision stay per vehicle (``docs/architecture.md``, "A
 What the host shares among its vehicles:
 
 - **one thread steps them all.** Their tick assemblers share one condition: a Zenoh callback that keeps a
-  message notifies it, and the host's loop polls each vehicle's assembler
-  (:meth:`~swarm.transport.lockstep.AgentTickAssembler.poll`) and processes every tick that is ready, vehicle
-  after vehicle. Before, each vehicle had its own thread waiting on its own condition (and, free-running,
-  waking every 2 ms to look for a late tick): 16 vehicles were 16 threads taking the GIL in turn. A
+  message notifies it, and the host's loop looks at each vehicle's assembler with news, under one hold of
+  the condition (:meth:`~swarm.transport.lockstep.AgentTickAssembler.poll_round`), and processes every tick
+  that is ready, vehicle after vehicle: those that command on their tick first. Before, each vehicle had
+  its own thread waiting on its own condition (and, free-running, waking every 2 ms to look for a late
+  tick): 16 vehicles were 16 threads taking the GIL in turn. A
   free-running tick is ready once its ``imu`` is in, and a range or frame that comes after it is handed to
   the vehicle before its next tick (late fusion), so the loop sleeps until a message comes. A host of one
   vehicle (a process each) runs that round on the thread of the subscriber whose message made the tick
