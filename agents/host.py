@@ -40,7 +40,20 @@ import time
 from collections.abc import Sequence
 
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Clock, DropCounter, Event, ImuBatch, UwbBatch, VisionBatch, vision_rows
+from swarm.transport.messages import (
+    MAX_BATCH,
+    MAX_PAYLOAD_BYTES,
+    Clock,
+    CommandBatch,
+    DropCounter,
+    Event,
+    ImuBatch,
+    UwbBatch,
+    VisionBatch,
+    encode,
+    vision_rows,
+)
+from swarm.transport.process import declare_reliable
 from swarm.transport.session import subscribe_decoded, watch_liveliness
 
 __all__ = ["IDLE_S", "SCAN_S", "AgentHost"]
@@ -100,6 +113,16 @@ class AgentHost:
         self._failure: BaseException | None = None
         if self.inline:
             self.procs[0].on_news = self.on_news
+        # a free-running host of several sends the commands of a round in one CommandBatch (docs/protocol.md,
+        # "Rates"): the world takes them at its next tick, and saves a fifth of its CPU at 128 vehicles. In
+        # lockstep the world decodes each command while the host steps the next vehicle, and waits for the
+        # last: batched, the two no longer overlap (32 vehicles in hosts of 16: 3.6x against 4.3-5.0x)
+        self._commands: list[tuple[str, bytes]] = []
+        self._pub_commands = None
+        self.batch_commands = not self.inline and not self.clock.lockstep
+        if self.batch_commands:
+            for p in self.procs:
+                p.command_sink = self._commands
 
     # ------------------------------------------------------------------------------ shared subscribers
 
@@ -131,6 +154,13 @@ class AgentHost:
         for vid, frame in vision_rows(msg, key, self.shared_drops, self._by_id):
             self._by_id[vid]._on_sensor(key, frame)
 
+    def _send_commands(self) -> None:
+        """The commands the round's vehicles decided so far, to the world in one message (or a few)."""
+        entries = self._commands[:]
+        del self._commands[:]  # the list the vehicles append to: emptied, not replaced
+        for payload in _command_batches(entries):
+            self._pub_commands.put(payload)
+
     def _on_world_event(self, key: str, msg: Event) -> None:
         for p in self.procs:
             p._on_world_event(key, msg)
@@ -150,6 +180,8 @@ class AgentHost:
         for p in self.procs:
             p.open(shared=False)
         k = self.keys
+        if self.batch_commands:  # batched, as the world's samples are: one message to the world per round
+            self._pub_commands = declare_reliable(self.session, k.commands(self.procs[0].id), express=False)
         watch_liveliness(self.session, k, self._on_alive, history=any(p.rejoin for p in self.procs))
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.shared_drops)
         direct = not self.inline  # as the vehicles' own sensor subscribers (AgentProcess.open)
@@ -256,7 +288,7 @@ class AgentHost:
             len(batch) > 1
         ):  # the vehicles that command on their tick first (host order otherwise, sort is stable)
             batch.sort(key=_commands_last)
-        for p, late, inp in batch:  # the round's commands first: the world (lockstep) waits for them
+        for i, (p, late, inp) in enumerate(batch):  # the round's commands first: the world waits for them
             try:
                 if late:
                     p.fuse_late(late)  # free-running: before the tick that follows theirs
@@ -265,6 +297,8 @@ class AgentHost:
             except Exception:
                 _LOG.exception("%s: agent failed at tick %s", p.id, "late" if inp is None else inp.tick)
                 raise
+            if self._commands and (i + 1 == len(batch) or _commands_last(batch[i + 1])):
+                self._send_commands()  # the last vehicle that commands on its tick is stepped
         for p, _late, inp in batch:  # then the estimates: a chaser uses its target's a tick later
             if inp is None:
                 continue
@@ -280,6 +314,28 @@ class AgentHost:
                 self._ended = p.finish() or self._ended
                 live.remove(p)
         return bool(batch)
+
+
+def _command_batches(entries: list[tuple[str, bytes]]) -> list[bytes]:
+    """``(vehicle, encoded Command)`` entries in as few :class:`~swarm.transport.messages.CommandBatch`
+    messages as keep each within :data:`~swarm.transport.messages.MAX_PAYLOAD_BYTES` and
+    :data:`~swarm.transport.messages.MAX_BATCH` vehicles; a vehicle's second command of a round (a host
+    that caught up on two of its ticks) goes in the next message, after its first."""
+    out, ids, blobs, size = [], [], [], _ENVELOPE
+    for vid, payload in entries:
+        row = len(payload) + len(vid) + 8  # the bin and str headers of the entry and its id
+        if ids and (size + row > MAX_PAYLOAD_BYTES or len(ids) == MAX_BATCH or vid in ids):
+            out.append(encode(CommandBatch(tuple(ids), tuple(blobs))))
+            ids, blobs, size = [], [], _ENVELOPE
+        ids.append(vid)
+        blobs.append(payload)
+        size += row
+    if ids:
+        out.append(encode(CommandBatch(tuple(ids), tuple(blobs))))
+    return out
+
+
+_ENVELOPE = 64  # a CommandBatch's bytes besides its entries: the map's keys, its type, the lists' headers
 
 
 def _commands_last(entry: tuple) -> bool:

@@ -164,6 +164,7 @@ class AgentProcess:
         # set by an agent host (agents.host.AgentHost) when the target and its chaser are both in it
         self.local_chasers: list[AgentProcess] = []  # the chasers in this host that fly to this vehicle
         self.target_local = False  # this chaser's target is in this host: no subscriber to its estimates
+        self.command_sink: list[tuple[str, bytes]] | None = None  # a host of several: its round's commands
         # set by a host of this vehicle alone: called after a kept message, on the subscriber's thread
         self.on_news: Callable[[], None] | None = None
 
@@ -295,7 +296,10 @@ class AgentProcess:
             return
         payload = command_payload(k, self.dt, self._u, self._mode, self._force, self._torque)
         with self._command_lock:
-            self.pub_command.put(payload)
+            if self.command_sink is None:
+                self.pub_command.put(payload)
+            else:  # a host of several: the round's commands leave in one message (AgentHost)
+                self.command_sink.append((self.id, payload))
             self._last_command = (k, payload)
 
     def _commanded(self, k: int, cmd) -> None:

@@ -21,7 +21,8 @@ QUICK = {"repeat": 3, "number": 300}
 
 def examples() -> list:
     """One realistic message of each hot-path type (the docking chaser's sizes; the batches of agent hosts
-    for a swarm of 32 vehicles, an AHRS tick's, its 16 chasers' frames each of six markers)."""
+    for a swarm of 32 vehicles, an AHRS tick's, its 16 chasers' frames each of six markers; a host of 16's
+    commands of a round)."""
     from swarm.core.decision_keys import DECISION_KEYS
     from swarm.transport import messages as m
 
@@ -52,6 +53,13 @@ def examples() -> list:
         m.Estimate(5, 0.05, np.ones(3), np.ones(3), q, a @ a.T, 0.1, 1.0, 0.1, counts),
         m.Guidance(5, 0.05, "APPROACH", 1.0, 0.5, 1.0, 2.0, dict.fromkeys(DECISION_KEYS, 0.5), "x" * 60),
         m.Command(5, 0.05, np.ones(10), "APPROACH", np.ones(3), np.ones(3)),
+        m.CommandBatch(
+            ids[:16],
+            tuple(
+                m.encode(m.Command(5, 0.05, np.ones(10), "APPROACH", np.ones(3), np.ones(3)))
+                for _ in range(16)
+            ),
+        ),
         m.Truth(5, 0.05, np.ones(3), np.ones(3), q, np.ones(3)),
         m.TruthBatch(
             5,

@@ -22,7 +22,8 @@ ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")
 """An agent id, a role or any other single key chunk chosen by a user (``fullmatch``)."""
 
 AGENT_KINDS: tuple[str, ...] = (
-    "imu", "uwb", "vision", "gnss", "rangefinder", "estimate", "guidance", "command", "truth", "event",
+    "imu", "uwb", "vision", "gnss", "rangefinder", "estimate", "guidance", "command", "commands", "truth",
+    "event",
 )  # fmt: skip
 """The per-vehicle topics ``<ns>/agent/<id>/<kind>``."""
 
@@ -107,6 +108,11 @@ class Keys:
     def command(self, agent_id: str) -> str:
         """Nozzle thrusts of one control step: agent -> world (or actuator driver)."""
         return self._agent(agent_id, "command")
+
+    def commands(self, agent_id: str) -> str:
+        """The commands of one round of an agent host, in one message (``CommandBatch``): the host of
+        vehicle ``agent_id`` (its first) -> world."""
+        return self._agent(agent_id, "commands")
 
     def truth(self, agent_id: str) -> str:
         """True state of one vehicle: world -> dashboard, metrics (never an agent)."""

@@ -60,6 +60,7 @@ __all__ = [
     "Anchors",
     "Clock",
     "Command",
+    "CommandBatch",
     "DropCounter",
     "Estimate",
     "Event",
@@ -937,12 +938,43 @@ def vision_rows(
     return out
 
 
-def _frame_blobs(frames: list | tuple) -> tuple[bytes, ...]:
-    """A :class:`VisionBatch`'s entries: bytes each (not decoded here: :meth:`VisionBatch.sample` does)."""
+def _frame_blobs(frames: list | tuple, name: str = "frames", what: str = "Vision") -> tuple[bytes, ...]:
+    """A batch's entries: bytes each (not decoded here: the batch's ``sample`` does)."""
     for i, f in enumerate(frames):
         if type(f) is not bytes:
-            raise MessageError(f"frames[{i}]: expected the bytes of a Vision message, got {_show(f)}")
+            raise MessageError(f"{name}[{i}]: expected the bytes of a {what} message, got {_show(f)}")
     return tuple(frames)
+
+
+@dataclass(frozen=True, eq=False)
+class CommandBatch(_Batch):
+    """The commands an agent host's vehicles decided in one of its rounds, in one message:
+    ``<ns>/agent/<id>/commands`` (``<id>`` the host's first vehicle), what a free-running host of several
+    vehicles sends the world instead of one ``agent/<id>/command`` each (docs/protocol.md, "Rates"). Entry
+    ``i`` is vehicle ``ids[i]``'s command as its own key would carry it, the msgpack bytes of a
+    :class:`Command` (a vehicle's kind fixes its actuators' count, and the entries of one round may be of
+    different ticks)."""
+
+    ids: tuple[str, ...]
+    """The vehicles, distinct, 1 to :data:`MAX_BATCH`: entry ``i`` of ``commands`` is ``ids[i]``'s."""
+    commands: tuple[bytes, ...]
+    """Each vehicle's command, an encoded :class:`Command` (msgpack bin), one per id."""
+
+    def __post_init__(self) -> None:
+        ids = _vehicle_ids(self.ids, "ids", 1)
+        commands = _frame_blobs(_per_id(self.commands, "commands", ids), "commands", "Command")
+        _set(self, ids=ids, commands=commands)
+
+    def sample(self, vid: str, row: int | None = None) -> Command | None:
+        """Vehicle ``vid``'s :class:`Command`, decoded and checked as its own key's would be, ``None`` when
+        the batch has none; MessageError naming the entry (``commands[3]: ...``) if it does not decode."""
+        row = self._row(vid, row)
+        if row is None:
+            return None
+        try:
+            return decode(self.commands[row], Command)
+        except MessageError as exc:
+            raise MessageError(f"commands[{row}]: {exc}") from None
 
 
 @dataclass(frozen=True, eq=False)
@@ -1454,6 +1486,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         Estimate,
         Guidance,
         Command,
+        CommandBatch,
         Truth,
         TruthBatch,
         Event,
@@ -1469,6 +1502,7 @@ MESSAGE_FOR_KIND: dict[str, type[Message]] = {
     "imu": Imu, "uwb": Uwb, "vision": Vision, "gnss": Gnss, "rangefinder": Rangefinder, "estimate": Estimate,
     "guidance": Guidance,
     "command": Command,
+    "commands": CommandBatch,
     "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "world_imu": ImuBatch,
     "world_vision": VisionBatch, "anchors": Anchors, "mothership_uwb": UwbBatch, "world_truth": TruthBatch,
     "run_control": RunControl, "fault": Fault,
@@ -1676,6 +1710,11 @@ class _CommandWire(_Wire):
     torque_body_nm: _Array | None = None
 
 
+class _CommandBatchWire(_Wire):
+    ids: list[str]  # checked by _vehicle_ids (see _ImuBatchWire)
+    commands: list[bytes]
+
+
 class _TruthWire(_Wire):
     tick: _Nat
     t_s: _Time
@@ -1819,6 +1858,13 @@ def _command(w: _CommandWire) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def _command_batch(w: _CommandBatchWire) -> dict[str, Any]:
+    ids = _vehicle_ids(w.ids, "ids", 1)
+    if len(w.commands) != len(ids):
+        raise _Defer
+    return {"ids": ids, "commands": tuple(w.commands)}
+
+
 def _truth(w: _TruthWire) -> dict[str, Any]:
     return {
         "tick": w.tick, "t_s": _fin(w.t_s), "p_nav": _arr(w.p_nav, (3,)), "v_nav": _arr(w.v_nav, (3,)),
@@ -1858,6 +1904,7 @@ _FAST: dict[type[Message], tuple[msgspec.msgpack.Decoder, Callable[[Any], dict[s
         (Estimate, _EstimateWire, _estimate),
         (Guidance, _GuidanceWire, _guidance),
         (Command, _CommandWire, _command),
+        (CommandBatch, _CommandBatchWire, _command_batch),
         (Truth, _TruthWire, _truth),
         (TruthBatch, _TruthBatchWire, _truth_batch),
         (Clock, _ClockWire, _clock),

@@ -133,7 +133,8 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
             "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/vision", "agent/*/truth",
                                                 "agent/*/event", "world/imu", "world/vision", "world/truth",
                                                 "world/clock", "world/event")),
-            "declare_subscriber": (keys.agent_all("command"), keys.run_control(), keys.fault()),
+            "declare_subscriber": (keys.agent_all("command"), keys.agent_all("commands"), keys.run_control(),
+                                   keys.fault()),
             "liveliness_token": (f"{ns}/alive/world/*",),
             **watch,
         }  # fmt: skip
@@ -165,7 +166,8 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
     if name.startswith("agent-") and len(name) > len("agent-"):
         vid = check_id(name[len("agent-") :], "agent id of identity")
         return {
-            "put": (keys.estimate(vid), keys.guidance(vid), keys.command(vid), keys.event(vid)),
+            "put": (keys.estimate(vid), keys.guidance(vid), keys.command(vid), keys.commands(vid),
+                    keys.event(vid)),
             "declare_subscriber": (keys.imu(vid), keys.uwb(vid), keys.vision(vid), keys.agent_all("estimate"),
                                    keys.world_imu(), keys.world_vision(), keys.mothership_uwb(),
                                    keys.world_clock(), keys.world_event()),  # world_resumed

@@ -49,9 +49,11 @@ from swarm.transport.lockstep import CommandBarrier
 from swarm.transport.messages import (
     Clock,
     Command,
+    CommandBatch,
     DropCounter,
     Event,
     Fault,
+    MessageError,
     RunControl,
     encode,
 )
@@ -235,7 +237,22 @@ class WorldProcess:
 
     def _on_command(self, key: str, cmd: Command) -> None:
         parsed = self.keys.parse(key)
-        vid = parsed[1] if parsed else None
+        self._take_command(key, parsed[1] if parsed else None, cmd)
+
+    def _on_command_batch(self, key: str, msg: CommandBatch) -> None:
+        """An agent host's round of commands (``agent/<id>/commands``): each entry taken as the command of
+        its vehicle's own key; an entry that does not decode is dropped and counted, naming the vehicle,
+        and loses no other vehicle's command."""
+        for row, vid in enumerate(msg.ids):
+            try:
+                cmd = msg.sample(vid, row)
+            except MessageError as exc:
+                self.drops.drop(key, f"{vid}: {exc}")
+                continue
+            self._take_command(key, vid, cmd)
+
+    def _take_command(self, key: str, vid: str | None, cmd: Command) -> None:
+        """Vehicle ``vid``'s command (from ``key``): held (free-running) or into the barrier (lockstep)."""
         if vid not in self.world.index:
             self.drops.drop(key, "command: not a vehicle of this scenario")
             return
@@ -609,6 +626,9 @@ class WorldProcess:
         warm_up(self.sc, self.seed)  # compiled (or loaded) before this process says it is ready
         self._declare()
         subscribe_decoded(self.session, k.agent_all("command"), Command, self._on_command, self.drops)
+        subscribe_decoded(
+            self.session, k.agent_all("commands"), CommandBatch, self._on_command_batch, self.drops
+        )
         subscribe_decoded(self.session, k.run_control(), RunControl, self._on_control, self.drops)
         subscribe_decoded(self.session, k.fault(), Fault, self._on_fault, self.drops)
         watch_liveliness(self.session, k, self._on_alive)

@@ -309,6 +309,56 @@ def test_a_round_steps_the_vehicles_that_command_on_their_tick_first(clock):
     assert steps == [("process", v) for v in order] + [("flush", v) for v in order]
 
 
+def test_a_host_of_several_sends_a_rounds_commands_in_one_batch_before_stepping_the_others():
+    """A free-running host of several vehicles sends the commands its vehicles decided in a round as one
+    CommandBatch (``agent/<first id>/commands``), as soon as the last vehicle that commands on the tick is
+    stepped: the world gets them before the other vehicles' steps; each entry is the vehicle's own command
+    payload. A host of one, and a lockstep host, keep each vehicle's own key."""
+    from swarm.transport.lockstep import TickInputs
+    from swarm.transport.messages import Command, CommandBatch, decode, encode
+
+    sc = load_scenario("docking", {"swarm": {"stagger_control": True}}).with_pairs(3)
+    ids = list(sc.vehicles)
+    host, p = _host(ids, sc, "realtime")
+    k = 12
+    commanding = [v for v in ids if p[v].commands_at(k)]
+    steps, sent = [], []
+
+    class Pub:
+        def put(self, payload):
+            sent.append(len(steps))
+            steps.append(("sent", decode(payload, CommandBatch)))
+
+    host._pub_commands = Pub()
+    payloads = {v: encode(Command(k, k * 0.01, np.zeros(3), "HOLD", np.zeros(3), np.zeros(3))) for v in ids}
+    for vid, proc in p.items():
+        proc._started.set()
+        proc.assembler.poll_round = lambda grace, vid=vid: ((), TickInputs(tick=k), False)
+
+        def process(inp, vid=vid, proc=proc):
+            steps.append(("process", vid))
+            if proc.commands_at(inp.tick):
+                proc.command_sink.append((vid, payloads[vid]))
+
+        proc.process, proc.flush = process, lambda: None
+    host._live = list(host.procs)
+    host.ready.update(host._by_asm)
+    assert host._round()
+    assert [s[1] for s in steps if s[0] == "process"] == commanding + [v for v in ids if v not in commanding]
+    (at,) = sent  # one message, right after the commanding vehicles' steps
+    assert at == len(commanding)
+    batch = steps[at][1]
+    assert batch.ids == tuple(commanding) and batch.commands == tuple(payloads[v] for v in commanding)
+    assert (
+        host._commands == []
+    )  # the round's list is emptied, not replaced: the vehicles keep appending to it
+    assert all(proc.command_sink is host._commands for proc in p.values())
+    _, q = _host(["chaser0"], sc, "realtime")
+    assert q["chaser0"].command_sink is None  # a host of one: the vehicle's own command key
+    _, q = _host(ids, sc, "lockstep")
+    assert all(proc.command_sink is None for proc in q.values())  # lockstep: each vehicle's own key
+
+
 @pytest.mark.parametrize("listened", [False, True])
 def test_guidance_is_encoded_only_for_a_subscriber(listened):
     """A control tick's guidance goes to whoever subscribes to it (the launcher to its chasers', a viewer

@@ -27,6 +27,7 @@ from swarm.transport.messages import (
     MESSAGE_FOR_KIND,
     Clock,
     Command,
+    CommandBatch,
     Estimate,
     Fault,
     Imu,
@@ -60,6 +61,9 @@ _VALID = {
     "imu": Imu(7, 0.07, 0.01, np.zeros(3), _Q),
     "uwb": Uwb(8, 0.08, 1, 1.5),
     "command": Command(7, 0.07, np.zeros(10), "HOLD", np.zeros(3), np.zeros(3)),
+    "commands": CommandBatch(
+        ("chaser",), (encode(Command(7, 0.07, np.zeros(10), "HOLD", np.zeros(3), np.zeros(3))),)
+    ),
     "truth": Truth(7, 0.07, np.zeros(3), np.zeros(3), _Q, np.zeros(3)),
     "estimate": Estimate(7, 0.07, np.zeros(3), np.zeros(3), _Q, np.eye(9), 0.1, 0.0, 0.0, {}),
     "world_clock": Clock(7, 0.07, "running", 0),
@@ -110,12 +114,12 @@ def _refused(kind: str, payload: bytes) -> bool:
         msg = decode(payload, MESSAGE_FOR_KIND[kind])
     except MessageError:
         return True
-    if isinstance(msg, VisionBatch):  # its entries are decoded by whoever takes them: refused if none decodes
-        return not any(_frame_ok(msg, vid) for vid in msg.ids)
+    if isinstance(msg, VisionBatch | CommandBatch):  # its entries are decoded by whoever takes them: refused
+        return not any(_frame_ok(msg, vid) for vid in msg.ids)  # if none decodes
     return False  # a valid message: not this test's business (see the module docstring)
 
 
-def _frame_ok(batch: VisionBatch, vid: str) -> bool:
+def _frame_ok(batch: VisionBatch | CommandBatch, vid: str) -> bool:
     try:
         batch.sample(vid)
     except MessageError:

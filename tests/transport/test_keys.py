@@ -13,7 +13,8 @@ from swarm.errors import ConfigError
 from swarm.transport.keys import AGENT_KINDS, ID_PATTERN, Keys, check_id
 
 EXPECTED_AGENT_KINDS = (
-    "imu", "uwb", "vision", "gnss", "rangefinder", "estimate", "guidance", "command", "truth", "event",
+    "imu", "uwb", "vision", "gnss", "rangefinder", "estimate", "guidance", "command", "commands", "truth",
+    "event",
 )  # fmt: skip
 
 

@@ -36,6 +36,7 @@ from swarm.transport.messages import (
     Anchors,
     Clock,
     Command,
+    CommandBatch,
     DropCounter,
     Estimate,
     Event,
@@ -81,6 +82,10 @@ VALID = {
     ),
     Guidance: Guidance(5, 0.05, "REORIENT", 0.25, 0.1, 0.3, 1.0, DECISION, "A22=0.5 > 0.4"),
     Command: Command(6, 0.06, np.zeros(10), "APPROACH", [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
+    CommandBatch: CommandBatch(("chaser0", "target0"), (
+        encode(Command(6, 0.06, np.zeros(10), "APPROACH", [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])),
+        encode(Command(7, 0.07, np.zeros(10), "STATION", [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])),
+    )),
     Truth: Truth(7, 0.07, [1.0, 2.0, 1.0], [0.0, 0.0, 0.0], Q, [0.0, 0.0, 0.0]),
     TruthBatch: TruthBatch(
         7, 0.07, ("chaser0", "target0"), [[1.0, 2.0, 1.0], [0.0, 0.0, 0.0]], np.zeros((2, 3)), [Q, Q],
@@ -205,6 +210,16 @@ def vision_batches(draw):
     return VisionBatch(k, t, vids, frames)
 
 
+STRATEGIES_COMMAND = st.builds(
+    Command,
+    ticks,
+    times,
+    arrays(np.float64, st.integers(0, MAX_ITEMS), elements=finite),
+    st.sampled_from(msgs.MODES),
+    st.none() | vec(3),
+    st.none() | vec(3),
+)
+
 STRATEGIES = {
     Imu: st.builds(Imu, ticks, times, st.floats(1e-6, 10.0), vec(3), st.none() | quats, st.none() | vec(3)),
     ImuBatch: imu_batches(),
@@ -218,6 +233,12 @@ STRATEGIES = {
     ),
     Vision: visions(),
     VisionBatch: vision_batches(),
+    CommandBatch: st.lists(ids, min_size=1, max_size=4, unique=True).flatmap(
+        lambda vids: st.builds(
+            CommandBatch, st.just(tuple(vids)),
+            st.lists(STRATEGIES_COMMAND.map(encode), min_size=len(vids), max_size=len(vids)).map(tuple),
+        )
+    ),
     Estimate: st.builds(
         Estimate, ticks, times, vec(3), vec(3), quats, covs, nonneg, nonneg, st.floats(0.0, 1.0), counts
     ),
@@ -225,10 +246,7 @@ STRATEGIES = {
         Guidance, ticks, times, st.sampled_from(msgs.MODES), st.none() | nonneg, st.none() | nonneg,
         st.none() | nonneg, st.none() | nonneg, st.none() | decisions, st.text(max_size=40),
     ),
-    Command: st.builds(
-        Command, ticks, times, arrays(np.float64, st.integers(0, MAX_ITEMS), elements=finite),
-        st.sampled_from(msgs.MODES), st.none() | vec(3), st.none() | vec(3),
-    ),
+    Command: STRATEGIES_COMMAND,
     Truth: st.builds(
         Truth, ticks, times, vec(3), vec(3), quats, vec(3), nonneg, st.booleans(), st.floats(0.0, 1.0)
     ),
@@ -475,6 +493,10 @@ CASES = [
     (ImuBatch, "q_ahrs_nav_body", [[0.0, 0.0, INF, 1.0]], "q_ahrs_nav_body: not finite"),
     (ImuBatch, "acc_body", [[0.0, 0.0, 9.8]] * 2, "acc_body: 2 rows for 3 ids"),
     (ImuBatch, "dt_s", 0.0, "dt_s: must be > 0"),
+    (CommandBatch, "ids", [], "ids: 0 entries, expected 1 to 256"),
+    (CommandBatch, "ids", ["chaser0", "chaser0"], "ids: duplicate ids"),
+    (CommandBatch, "ids", ["chaser0"], "commands: 2 entries for 1 ids"),
+    (CommandBatch, "commands", [b"\x80", 7], "commands[1]: expected the bytes of a Command message"),
     (VisionBatch, "ids", [], "ids: 0 entries, expected 1 to 256"),
     (VisionBatch, "ids", ["chaser0", "chaser0"], "ids: duplicate ids"),
     (VisionBatch, "ids", ["chaser0"], "frames: 2 entries for 1 ids"),
@@ -926,8 +948,8 @@ FAST = [cls for cls in ALL if cls in msgs._FAST]
 
 def test_the_fast_path_covers_the_messages_of_every_tick():
     assert set(FAST) == {
-        Imu, ImuBatch, Uwb, UwbBatch, Vision, VisionBatch, Estimate, Guidance, Command, Truth, TruthBatch,
-        Clock,
+        Imu, ImuBatch, Uwb, UwbBatch, Vision, VisionBatch, Estimate, Guidance, Command, CommandBatch, Truth,
+        TruthBatch, Clock,
     }  # fmt: skip
 
 

@@ -52,8 +52,10 @@ MAY_PUT = {
     | {K.event(v) for v in VEHICLES}
     | {K.world_imu(), K.world_vision(), K.world_truth(), K.world_clock(), K.world_event()},
     "mothership": {K.uwb(v) for v in VEHICLES} | {K.mothership_uwb(), K.anchors()},
-    "agent-chaser": {K.estimate("chaser"), K.guidance("chaser"), K.command("chaser"), K.event("chaser")},
-    "agent-target": {K.estimate("target"), K.guidance("target"), K.command("target"), K.event("target")},
+    "agent-chaser": {K.estimate("chaser"), K.guidance("chaser"), K.command("chaser"), K.commands("chaser"),
+                     K.event("chaser")},
+    "agent-target": {K.estimate("target"), K.guidance("target"), K.command("target"), K.commands("target"),
+                     K.event("target")},
     "dashboard": {K.run_control(), K.fault()},  # the operator's console: run controls and faults
     "launcher": {K.event(v) for v in VEHICLES} | {K.run_control(), K.fault()},
 }  # fmt: skip
@@ -115,7 +117,8 @@ def test_no_identity_may_delete_and_only_the_mothership_answers_queries(acl):
 
 def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_to_truth(acl):
     want = {
-        "world": {K.command(v) for v in VEHICLES} | {K.run_control(), K.fault()},
+        "world": {K.command(v) for v in VEHICLES} | {K.commands(v) for v in VEHICLES}
+        | {K.run_control(), K.fault()},
         "mothership": {K.truth(v) for v in VEHICLES} | {K.world_truth(), K.world_clock()},
         "agent-chaser": {K.imu("chaser"), K.uwb("chaser"), K.vision("chaser"), K.world_clock()}
         | {K.estimate(v) for v in VEHICLES}
@@ -153,7 +156,9 @@ def test_a_landing_swarms_world_also_sends_ranges_and_fixes_and_its_agents_read_
     reads = {key for key in keys if _may(acl, "agent-chaser", "declare_subscriber", key)}
     own = (K.imu, K.uwb, K.gnss, K.rangefinder, K.vision)
     assert reads == {key("chaser") for key in own} | {K.world_event()}
-    assert {key for key in keys if _may(acl, "agent-chaser", "put", key)} == MAY_PUT["agent-chaser"]
+    # what a docking agent puts, but the commands batch (a landing host sends each UAV's on its own key)
+    landing_puts = MAY_PUT["agent-chaser"] - {K.commands("chaser")}
+    assert {key for key in keys if _may(acl, "agent-chaser", "put", key)} == landing_puts
     docking = access_control(K, identities(VEHICLES))
     assert not any(
         _may(docking, "world", "put", key)
