@@ -41,8 +41,6 @@ from collections.abc import Sequence
 
 from swarm.transport.keys import Keys
 from swarm.transport.messages import (
-    MAX_BATCH,
-    MAX_PAYLOAD_BYTES,
     Clock,
     CommandBatch,
     DropCounter,
@@ -50,7 +48,7 @@ from swarm.transport.messages import (
     ImuBatch,
     UwbBatch,
     VisionBatch,
-    encode,
+    pack_entries,
     vision_rows,
 )
 from swarm.transport.process import declare_reliable
@@ -158,7 +156,7 @@ class AgentHost:
         """The commands the round's vehicles decided so far, to the world in one message (or a few)."""
         entries = self._commands[:]
         del self._commands[:]  # the list the vehicles append to: emptied, not replaced
-        for payload in _command_batches(entries):
+        for payload in pack_entries(entries, CommandBatch):
             self._pub_commands.put(payload)
 
     def _on_world_event(self, key: str, msg: Event) -> None:
@@ -314,28 +312,6 @@ class AgentHost:
                 self._ended = p.finish() or self._ended
                 live.remove(p)
         return bool(batch)
-
-
-def _command_batches(entries: list[tuple[str, bytes]]) -> list[bytes]:
-    """``(vehicle, encoded Command)`` entries in as few :class:`~swarm.transport.messages.CommandBatch`
-    messages as keep each within :data:`~swarm.transport.messages.MAX_PAYLOAD_BYTES` and
-    :data:`~swarm.transport.messages.MAX_BATCH` vehicles; a vehicle's second command of a round (a host
-    that caught up on two of its ticks) goes in the next message, after its first."""
-    out, ids, blobs, size = [], [], [], _ENVELOPE
-    for vid, payload in entries:
-        row = len(payload) + len(vid) + 8  # the bin and str headers of the entry and its id
-        if ids and (size + row > MAX_PAYLOAD_BYTES or len(ids) == MAX_BATCH or vid in ids):
-            out.append(encode(CommandBatch(tuple(ids), tuple(blobs))))
-            ids, blobs, size = [], [], _ENVELOPE
-        ids.append(vid)
-        blobs.append(payload)
-        size += row
-    if ids:
-        out.append(encode(CommandBatch(tuple(ids), tuple(blobs))))
-    return out
-
-
-_ENVELOPE = 64  # a CommandBatch's bytes besides its entries: the map's keys, its type, the lists' headers
 
 
 def _commands_last(entry: tuple) -> bool:

@@ -12,7 +12,6 @@ from swarm.transport.keys import Keys
 from swarm.transport.lockstep import period_phase, reads_target
 from swarm.transport.messages import (
     MAX_BATCH,
-    MAX_PAYLOAD_BYTES,
     Clock,
     Event,
     Guidance,
@@ -28,6 +27,7 @@ from swarm.transport.messages import (
     encode_truth,
     encode_uwb,
     encode_vision,
+    pack_entries,
 )
 
 Sensors = list[tuple[str, str, bytes]]
@@ -116,7 +116,8 @@ def world_sensors(
                 seen.append((vid, payload))
         if alone:
             out.append(("imu", vid, encode_imu(k, t, sc.dt_s, fr.gyro_body, fr.q_ahrs_nav_body)))
-    out.extend(("vision_batch", "", p) for p in _vision_batches(k, t, seen))
+    vision = pack_entries(seen, lambda vids, blobs: VisionBatch(k, t, vids, blobs))
+    out.extend(("vision_batch", "", p) for p in vision)
     rows = [vid for vid in ids if vid not in solo] if batch else []
     for a in range(0, len(rows), MAX_BATCH):
         chunk = rows[a : a + MAX_BATCH]
@@ -124,29 +125,6 @@ def world_sensors(
         ahrs = [vid for vid in chunk if frames[vid].q_ahrs_nav_body is not None]
         q = np.array([frames[vid].q_ahrs_nav_body for vid in ahrs], dtype=np.float64).reshape(len(ahrs), 4)
         out.append(("imu_batch", "", encode(ImuBatch(k, t, sc.dt_s, tuple(chunk), gyro, tuple(ahrs), q))))
-    return out
-
-
-_BATCH_ENVELOPE = 96
-"""A :class:`~swarm.transport.messages.VisionBatch`'s bytes besides its entries, at most: the map's keys,
-the type's name, tick, time and the two lists' headers (~60) [bytes]."""
-
-
-def _vision_batches(k: int, t: float, seen: list[tuple[str, bytes]]) -> list[bytes]:
-    """The frames ``seen`` (``(vehicle, encoded Vision)``) in as few
-    :class:`~swarm.transport.messages.VisionBatch` messages as keep each within
-    :data:`~swarm.transport.messages.MAX_PAYLOAD_BYTES` (and :data:`~swarm.transport.messages.MAX_BATCH`
-    vehicles), in order."""
-    out, chunk, size = [], [], _BATCH_ENVELOPE
-    for vid, payload in seen:
-        row = len(payload) + len(vid) + 8  # the bin and str headers of the entry and its id
-        if chunk and (size + row > MAX_PAYLOAD_BYTES or len(chunk) == MAX_BATCH):
-            out.append(encode(VisionBatch(k, t, tuple(v for v, _ in chunk), tuple(p for _, p in chunk))))
-            chunk, size = [], _BATCH_ENVELOPE
-        chunk.append((vid, payload))
-        size += row
-    if chunk:
-        out.append(encode(VisionBatch(k, t, tuple(v for v, _ in chunk), tuple(p for _, p in chunk))))
     return out
 
 

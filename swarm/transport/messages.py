@@ -41,6 +41,7 @@ from swarm.errors import ConfigError, MessageError
 from swarm.transport.keys import ID_PATTERN
 
 __all__ = [
+    "BATCH_ENVELOPE",
     "CLOCK_STATES",
     "DOCKING_MODES",
     "EVENT_KINDS",
@@ -88,6 +89,7 @@ __all__ = [
     "encode_vision",
     "estimate_and_payload",
     "estimate_message",
+    "pack_entries",
     "safe_decode",
     "vision_rows",
 ]
@@ -935,6 +937,33 @@ def vision_rows(
             out.append((vid, batch.sample(vid, row)))
         except MessageError as exc:
             drops.drop(key, f"{vid}: {exc}")
+    return out
+
+
+BATCH_ENVELOPE = 96
+"""A :class:`VisionBatch`'s or :class:`CommandBatch`'s bytes besides its entries, at most: the map's keys,
+the type's name, a tick and a time, the two lists' headers (~60) [bytes]."""
+
+
+def pack_entries(entries: list[tuple[str, bytes]], make: Callable[[tuple, tuple], Message]) -> list[bytes]:
+    """``(vehicle, encoded message)`` entries, in order, in as few batch messages (``make(ids, payloads)``:
+    a :class:`VisionBatch` or :class:`CommandBatch`) as keep each within :data:`MAX_PAYLOAD_BYTES` and
+    :data:`MAX_BATCH` vehicles, a vehicle at most once per message (a host that caught up on two of its
+    ticks in one round sends the second command in the next message, after the first)."""
+    out: list[bytes] = []
+    ids: list[str] = []
+    blobs: list[bytes] = []
+    size = BATCH_ENVELOPE
+    for vid, payload in entries:
+        row = len(payload) + len(vid) + 8  # the bin and str headers of the entry and its id
+        if ids and (size + row > MAX_PAYLOAD_BYTES or len(ids) == MAX_BATCH or vid in ids):
+            out.append(encode(make(tuple(ids), tuple(blobs))))
+            ids, blobs, size = [], [], BATCH_ENVELOPE
+        ids.append(vid)
+        blobs.append(payload)
+        size += row
+    if ids:
+        out.append(encode(make(tuple(ids), tuple(blobs))))
     return out
 
 

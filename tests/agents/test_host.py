@@ -381,3 +381,16 @@ def test_guidance_is_encoded_only_for_a_subscriber(listened):
     assert len(sent) == (1 if listened else 0)
     if listened:
         assert decode(sent[0], Guidance).mode == "STATION"
+
+
+def test_a_rounds_commands_are_packed_with_each_vehicle_once_per_message_in_order():
+    """A host that caught up on two ticks of a vehicle in one round sends its second command in the next
+    message, after the first; a round whose commands would pass the payload limit is split, none lost."""
+    from swarm.transport.messages import MAX_PAYLOAD_BYTES, CommandBatch, decode, pack_entries
+
+    entries = [("a", b"1"), ("b", b"2"), ("a", b"3"), ("c", b"4")]
+    got = [decode(p, CommandBatch) for p in pack_entries(entries, CommandBatch)]
+    assert [(b.ids, b.commands) for b in got] == [(("a", "b"), (b"1", b"2")), (("a", "c"), (b"3", b"4"))]
+    big = [(f"v{i}", bytes(MAX_PAYLOAD_BYTES // 3)) for i in range(4)]
+    got = [decode(p, CommandBatch) for p in pack_entries(big, CommandBatch)]
+    assert [b.ids for b in got] == [("v0", "v1"), ("v2", "v3")]

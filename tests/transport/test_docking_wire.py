@@ -28,6 +28,7 @@ from swarm.transport.messages import (
     VisionBatch,
     decode,
     encode,
+    pack_entries,
     vision_rows,
 )
 
@@ -113,10 +114,9 @@ def test_each_chasers_entry_of_the_vision_batch_is_the_frame_it_would_have_had_a
     assert solo_batch.ids == ("chaser0", "chaser2")
 
     limit = len(encode(batch)) - 1  # one byte short of the whole batch: two messages
-    monkeypatch.setattr("swarm.transport.docking_wire.MAX_PAYLOAD_BYTES", limit)
-    split = [
-        p for kd, _, p in world_sensors(w, ids, chasers, k, frames, 1, batch=True) if kd == "vision_batch"
-    ]
+    monkeypatch.setattr("swarm.transport.messages.MAX_PAYLOAD_BYTES", limit)
+    seen = [(v, own[v]) for v in chasers]  # what world_sensors packs (its imu batch would not fit the limit)
+    split = pack_entries(seen, lambda vids, blobs: VisionBatch(k, k * sc.dt_s, vids, blobs))
     assert len(split) == 2 and all(len(p) <= limit for p in split)
     parts = [decode(p, VisionBatch) for p in split]
     assert sum((b.ids for b in parts), ()) == tuple(chasers)
