@@ -60,7 +60,7 @@ LATEST_KINDS: dict[str, type[Message]] = {
 VISION_BATCHES = 4
 """The ``world/vision`` batches (of an agent hosts' swarm) the dashboard keeps between two frames: the
 newest; one batch holds a tick's frames of up to 134 chasers (225 with marker features rather than
-poses; ``swarm.transport.docking_wire``)."""
+poses; ``swarm.transport.messages.pack_entries``)."""
 
 
 def _control_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
