@@ -48,8 +48,8 @@ from swarm.transport.messages import (
     ImuBatch,
     UwbBatch,
     VisionBatch,
+    batch_rows,
     pack_entries,
-    vision_rows,
 )
 from swarm.transport.process import declare_reliable
 from swarm.transport.session import subscribe_decoded, watch_liveliness
@@ -135,22 +135,14 @@ class AgentHost:
         if self.inline:
             self.on_news()
 
-    def _on_batch(self, key: str, msg: ImuBatch | UwbBatch) -> None:
-        """The world's imu (``world/imu``) or the mothership's ranges (``mothership/uwb``) of every vehicle,
-        sent for agent hosts (``--batch``): each hosted vehicle's row, as its own key would have brought it
-        (a host of one steps it here, :meth:`AgentProcess._on_sensor`)."""
-        row = msg.index()
-        for p in self.procs:
-            i = row.get(p.id)
-            if i is not None:
-                p._on_sensor(key, msg.sample(p.id, i))
-
-    def _on_vision_batch(self, key: str, msg: VisionBatch) -> None:
-        """The world's camera frames of a tick (``world/vision``, sent for agent hosts): each hosted
-        vehicle's entry, decoded, as its own ``vision`` key would have brought it; an entry that does not
-        decode is counted (:attr:`shared_drops`) and loses no other vehicle's frame."""
-        for vid, frame in vision_rows(msg, key, self.shared_drops, self._by_id):
-            self._by_id[vid]._on_sensor(key, frame)
+    def _on_batch(self, key: str, msg: ImuBatch | UwbBatch | VisionBatch) -> None:
+        """The world's imu (``world/imu``) or camera frames (``world/vision``), or the mothership's ranges
+        (``mothership/uwb``), of every vehicle, sent for agent hosts (``--batch``): each hosted vehicle's
+        row, as its own key would have brought it (a host of one steps it here,
+        :meth:`AgentProcess._on_sensor`); a frame that does not decode is counted (:attr:`shared_drops`) and
+        loses no other vehicle's."""
+        for vid, sample in batch_rows(msg, key, self.shared_drops, self._by_id):
+            self._by_id[vid]._on_sensor(key, sample)
 
     def _send_commands(self) -> None:
         """The commands the round's vehicles decided so far, to the world in one message (or a few)."""
@@ -187,8 +179,8 @@ class AgentHost:
                           direct=direct)  # fmt: skip
         subscribe_decoded(self.session, k.mothership_uwb(), UwbBatch, self._on_batch, self.shared_drops,
                           direct=direct)  # fmt: skip
-        subscribe_decoded(self.session, k.world_vision(), VisionBatch, self._on_vision_batch,
-                          self.shared_drops, direct=direct)  # fmt: skip
+        subscribe_decoded(self.session, k.world_vision(), VisionBatch, self._on_batch, self.shared_drops,
+                          direct=direct)  # fmt: skip
         subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.shared_drops)
         for p in self.procs:
             p.announce()
@@ -282,10 +274,8 @@ class AgentHost:
                     ready.add(a)  # a further tick is ready already: the next round takes it
                 if late or inp is not None:
                     batch.append((p, late, inp))
-        if (
-            len(batch) > 1
-        ):  # the vehicles that command on their tick first (host order otherwise, sort is stable)
-            batch.sort(key=_commands_last)
+        # the vehicles that command on their tick first (host order otherwise: the sort is stable)
+        batch.sort(key=_commands_last)
         for i, (p, late, inp) in enumerate(batch):  # the round's commands first: the world waits for them
             try:
                 if late:

@@ -39,9 +39,9 @@ from swarm.transport.messages import (
     Truth,
     Vision,
     VisionBatch,
+    batch_rows,
     encode,
     safe_decode,
-    vision_rows,
 )
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
 
@@ -151,7 +151,7 @@ class SwarmLink:
                 continue
             key = str(sample.key_expr)
             batch = safe_decode(sample.payload, VisionBatch, key, self.drops)
-            for agent_id, frame in [] if batch is None else vision_rows(batch, key, self.drops):
+            for agent_id, frame in [] if batch is None else batch_rows(batch, key, self.drops):
                 n += 1
                 self.state.on_message("vision", agent_id, frame)
         for agent_id, kind, cls, sub in self._rings:

@@ -48,8 +48,8 @@ from swarm.transport.messages import (
     DropCounter,
     Message,
     VisionBatch,
+    batch_rows,
     safe_decode,
-    vision_rows,
 )
 
 __all__ = [
@@ -159,7 +159,7 @@ def load_recording(path: str | Path, default_namespace: str = "tpods") -> Record
         if msg is None:
             continue
         if isinstance(msg, VisionBatch):
-            for vid, frame in vision_rows(msg, m.key, drops):
+            for vid, frame in batch_rows(msg, m.key, drops):
                 items.append(("vision", vid, frame))
                 times.append(m.log_time_ns)
             continue

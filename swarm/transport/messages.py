@@ -41,7 +41,6 @@ from swarm.errors import ConfigError, MessageError
 from swarm.transport.keys import ID_PATTERN
 
 __all__ = [
-    "BATCH_ENVELOPE",
     "CLOCK_STATES",
     "DOCKING_MODES",
     "EVENT_KINDS",
@@ -79,6 +78,7 @@ __all__ = [
     "UwbBatch",
     "Vision",
     "VisionBatch",
+    "batch_rows",
     "decode",
     "encode",
     "encode_command",
@@ -91,7 +91,6 @@ __all__ = [
     "estimate_message",
     "pack_entries",
     "safe_decode",
-    "vision_rows",
 ]
 
 _LOG = logging.getLogger(__name__)
@@ -903,7 +902,7 @@ class VisionBatch(_Batch):
 
     def __post_init__(self) -> None:
         ids = _vehicle_ids(self.ids, "ids", 1)
-        frames = _frame_blobs(_per_id(self.frames, "frames", ids))
+        frames = _blobs(_per_id(self.frames, "frames", ids), "frames", "Vision")
         _set(self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0), ids=ids, frames=frames)
 
     def sample(self, vid: str, row: int | None = None) -> Vision | None:
@@ -913,22 +912,21 @@ class VisionBatch(_Batch):
         row = self._row(vid, row)
         if row is None:
             return None
-        try:
-            frame = decode(self.frames[row], Vision)
-        except MessageError as exc:
-            raise MessageError(f"frames[{row}]: {exc}") from None
+        frame = _entry(self.frames, "frames", row, Vision)
         if frame.tick != self.tick or frame.t_s != self.t_s:
             raise MessageError(f"frames[{row}]: tick {frame.tick} at {frame.t_s} s in the batch of tick "
                                f"{self.tick} at {self.t_s} s")  # fmt: skip
         return frame
 
 
-def vision_rows(
-    batch: VisionBatch, key: str, drops: DropCounter, ids: Container[str] | None = None
-) -> list[tuple[str, Vision]]:
-    """The frames of ``batch`` (of the vehicles in ``ids``; ``None``: every one), decoded, as ``(vehicle,
-    Vision)``: an entry that does not decode is dropped and counted in ``drops`` under ``key`` (naming the
-    entry), and the others are kept: one vehicle's bad frame loses no other vehicle's."""
+def batch_rows(
+    batch: _Batch, key: str, drops: DropCounter, ids: Container[str] | None = None
+) -> list[tuple[str, Message]]:
+    """Each vehicle's message of ``batch`` (of the vehicles in ``ids``; ``None``: every one), as ``(vehicle,
+    message)`` in the batch's order: an entry that does not decode (a :class:`VisionBatch`'s or
+    :class:`CommandBatch`'s, whose entries are decoded here) is dropped and counted in ``drops`` under
+    ``key``, naming the vehicle and the entry, and the others are kept: one vehicle's bad entry loses no
+    other vehicle's."""
     out = []
     for row, vid in enumerate(batch.ids):
         if ids is not None and vid not in ids:
@@ -940,7 +938,7 @@ def vision_rows(
     return out
 
 
-BATCH_ENVELOPE = 96
+_BATCH_ENVELOPE = 96
 """A :class:`VisionBatch`'s or :class:`CommandBatch`'s bytes besides its entries, at most: the map's keys,
 the type's name, a tick and a time, the two lists' headers (~60) [bytes]."""
 
@@ -953,12 +951,12 @@ def pack_entries(entries: list[tuple[str, bytes]], make: Callable[[tuple, tuple]
     out: list[bytes] = []
     ids: list[str] = []
     blobs: list[bytes] = []
-    size = BATCH_ENVELOPE
+    size = _BATCH_ENVELOPE
     for vid, payload in entries:
         row = len(payload) + len(vid) + 8  # the bin and str headers of the entry and its id
         if ids and (size + row > MAX_PAYLOAD_BYTES or len(ids) == MAX_BATCH or vid in ids):
             out.append(encode(make(tuple(ids), tuple(blobs))))
-            ids, blobs, size = [], [], BATCH_ENVELOPE
+            ids, blobs, size = [], [], _BATCH_ENVELOPE
         ids.append(vid)
         blobs.append(payload)
         size += row
@@ -967,12 +965,21 @@ def pack_entries(entries: list[tuple[str, bytes]], make: Callable[[tuple, tuple]
     return out
 
 
-def _frame_blobs(frames: list | tuple, name: str = "frames", what: str = "Vision") -> tuple[bytes, ...]:
-    """A batch's entries: bytes each (not decoded here: the batch's ``sample`` does)."""
-    for i, f in enumerate(frames):
+def _blobs(entries: list | tuple, name: str, what: str) -> tuple[bytes, ...]:
+    """A batch's entries ``name``: the bytes of a ``what`` message each (decoded by :func:`_entry`)."""
+    for i, f in enumerate(entries):
         if type(f) is not bytes:
             raise MessageError(f"{name}[{i}]: expected the bytes of a {what} message, got {_show(f)}")
-    return tuple(frames)
+    return tuple(entries)
+
+
+def _entry(blobs: tuple[bytes, ...], name: str, row: int, cls: type[M]) -> M:
+    """Entry ``row`` of a batch's ``name``, decoded and checked as a ``cls`` message of its own key;
+    MessageError naming the entry (``frames[3]: ...``)."""
+    try:
+        return decode(blobs[row], cls)
+    except MessageError as exc:
+        raise MessageError(f"{name}[{row}]: {exc}") from None
 
 
 @dataclass(frozen=True, eq=False)
@@ -991,19 +998,14 @@ class CommandBatch(_Batch):
 
     def __post_init__(self) -> None:
         ids = _vehicle_ids(self.ids, "ids", 1)
-        commands = _frame_blobs(_per_id(self.commands, "commands", ids), "commands", "Command")
+        commands = _blobs(_per_id(self.commands, "commands", ids), "commands", "Command")
         _set(self, ids=ids, commands=commands)
 
     def sample(self, vid: str, row: int | None = None) -> Command | None:
         """Vehicle ``vid``'s :class:`Command`, decoded and checked as its own key's would be, ``None`` when
         the batch has none; MessageError naming the entry (``commands[3]: ...``) if it does not decode."""
         row = self._row(vid, row)
-        if row is None:
-            return None
-        try:
-            return decode(self.commands[row], Command)
-        except MessageError as exc:
-            raise MessageError(f"commands[{row}]: {exc}") from None
+        return None if row is None else _entry(self.commands, "commands", row, Command)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1857,10 +1859,16 @@ def _vision(w: _VisionWire) -> dict[str, Any]:
 
 
 def _vision_batch(w: _VisionBatchWire) -> dict[str, Any]:
-    ids = _vehicle_ids(w.ids, "ids", 1)
-    if len(w.frames) != len(ids):
+    ids, frames = _entries(w.ids, w.frames)
+    return {"tick": w.tick, "t_s": _fin(w.t_s), "ids": ids, "frames": frames}
+
+
+def _entries(ids: list[str], blobs: list[bytes]) -> tuple[tuple[str, ...], tuple[bytes, ...]]:
+    """A batch of encoded entries' ids, checked, and its entries, one per id (else the reference decides)."""
+    checked = _vehicle_ids(ids, "ids", 1)
+    if len(blobs) != len(checked):
         raise _Defer
-    return {"tick": w.tick, "t_s": _fin(w.t_s), "ids": ids, "frames": tuple(w.frames)}
+    return checked, tuple(blobs)
 
 
 def _estimate(w: _EstimateWire) -> dict[str, Any]:
@@ -1888,10 +1896,8 @@ def _command(w: _CommandWire) -> dict[str, Any]:
 
 
 def _command_batch(w: _CommandBatchWire) -> dict[str, Any]:
-    ids = _vehicle_ids(w.ids, "ids", 1)
-    if len(w.commands) != len(ids):
-        raise _Defer
-    return {"ids": ids, "commands": tuple(w.commands)}
+    ids, commands = _entries(w.ids, w.commands)
+    return {"ids": ids, "commands": commands}
 
 
 def _truth(w: _TruthWire) -> dict[str, Any]:

@@ -53,8 +53,8 @@ from swarm.transport.messages import (
     DropCounter,
     Event,
     Fault,
-    MessageError,
     RunControl,
+    batch_rows,
     encode,
 )
 from swarm.transport.process import ClockSpec, declare_reliable
@@ -243,12 +243,7 @@ class WorldProcess:
         """An agent host's round of commands (``agent/<id>/commands``): each entry taken as the command of
         its vehicle's own key; an entry that does not decode is dropped and counted, naming the vehicle,
         and loses no other vehicle's command."""
-        for row, vid in enumerate(msg.ids):
-            try:
-                cmd = msg.sample(vid, row)
-            except MessageError as exc:
-                self.drops.drop(key, f"{vid}: {exc}")
-                continue
+        for vid, cmd in batch_rows(msg, key, self.drops):
             self._take_command(key, vid, cmd)
 
     def _take_command(self, key: str, vid: str | None, cmd: Command) -> None:
@@ -563,9 +558,8 @@ class WorldProcess:
             self._joining.extend(returned)
         for vid in returned:
             samples = [(kind, payload) for kind, v, payload in self._sensors if v == vid and kind != "truth"]
-            samples += batch_samples(
-                self._sensors, vid
-            )  # its rows of the batches, on its own keys: to it alone
+            # and its rows of the tick's batches, on its own keys: to it alone
+            samples += batch_samples(self._sensors, vid)
             for kind, payload in samples:
                 self._pub(kind, vid).put(payload)
             _LOG.info("agent %s back: in the lockstep from the next tick (%d samples of this one sent again)",

@@ -278,7 +278,7 @@ def test_the_worlds_vision_batch_gives_each_hosted_chaser_its_own_frame_and_drop
     frame = Vision(10, 0.1, "target0", "+x", "features", np.full((6, 3), 0.25), (0, 1, 2, 3, 4, 5))
     other = Vision(10, 0.1, "target1", "+x", "features", np.zeros((0, 3)), ())
     batch = VisionBatch(10, 0.1, ("chaser1", "chaser0", "chaser2"), (encode(other), encode(frame), b"junk"))
-    host._on_vision_batch("t/world/vision", batch)
+    host._on_batch("t/world/vision", batch)
     assert got == {"chaser0": [("t/world/vision", frame)], "target0": [], "chaser2": []}
     assert host.shared_drops.count("t/world/vision") == 1
 

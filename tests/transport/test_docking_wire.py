@@ -26,10 +26,10 @@ from swarm.transport.messages import (
     UwbBatch,
     Vision,
     VisionBatch,
+    batch_rows,
     decode,
     encode,
     pack_entries,
-    vision_rows,
 )
 
 
@@ -101,9 +101,7 @@ def test_each_chasers_entry_of_the_vision_batch_is_the_frame_it_would_have_had_a
         assert [kd for kd, _ in batch_samples(batched, vid)] == ["vision", "imu"]
         assert batch_samples(batched, vid)[0][1] == own[vid]
     assert [kd for kd, _ in batch_samples(batched, "target0")] == ["imu"]
-    assert vision_rows(batch, "k", DropCounter(), {"chaser1"}) == [
-        ("chaser1", decode(own["chaser1"], Vision))
-    ]
+    assert batch_rows(batch, "k", DropCounter(), {"chaser1"}) == [("chaser1", decode(own["chaser1"], Vision))]
 
     held = world_sensors(w, ids, chasers, k, frames, 1, batch=True, solo={"chaser1"})
     assert [(kd, v) for kd, v, _ in held if kd in ("vision", "imu")] == [
@@ -134,7 +132,7 @@ def test_a_bad_frame_in_a_vision_batch_is_dropped_alone_and_named():
     stale = encode(Vision(w.k - 1, (w.k - 1) * sc.dt_s, "target0", "+x", "features", np.zeros((0, 3)), ()))
     batch = VisionBatch(w.k, w.k * sc.dt_s, ("a", "b", "c"), (good, b"\x81\xa1v\x02", stale))
     drops = DropCounter()
-    assert [v for v, _ in vision_rows(batch, "ns/world/vision", drops)] == ["a"]
+    assert [v for v, _ in batch_rows(batch, "ns/world/vision", drops)] == ["a"]
     assert drops.count("ns/world/vision") == 2
     with pytest.raises(Exception, match=r"frames\[1\]: type: expected 'Vision'"):
         batch.sample("b")
