@@ -10,7 +10,8 @@ the command in between) and ``event`` (mode transitions; a ``summary`` when the 
 Lockstep (``--clock lockstep``): ticks come from :class:`swarm.transport.lockstep.AgentTickAssembler`,
 complete and in order, and each goes through :meth:`~swarm.step.agent.VehicleAgent.tick` as in the
 in-process run: the target's estimate of tick ``k - 1``, then gyro (+ AHRS), range, vision of tick ``k``;
-guidance, the kind's controller and ``command(k)`` on control ticks; then ``estimate(k)``. Tick 0 (no
+guidance, the kind's controller and ``command(k)`` on control ticks; then ``estimate(k)`` and the control
+tick's ``guidance(k)`` (:meth:`AgentProcess.flush`, once the host's round has sent its commands). Tick 0 (no
 sensor yet) starts when the world announces the run.
 Realtime or scaled: tick ``k`` is processed as soon as ``imu(k)`` is in, with whatever else of it has come,
 and ``estimate(k)`` goes out before guidance and control run (an autopilot's estimator publishes before its
@@ -159,6 +160,7 @@ class AgentProcess:
         self._last_command: tuple[int, bytes] | None = None  # (tick, payload) of the last command sent
         self.resent = 0  # commands sent again for a resumed world
         self._estimate_due: int | None = None  # the tick whose estimate flush() publishes
+        self._guidance_due: tuple | None = None  # (tick, mode, command) whose guidance flush() publishes
         self._estimate_listened = False  # a subscriber matches this vehicle's estimates (_declare)
         self._guidance_listened = False  # ... and its guidance (the launcher its chasers', a viewer any)
         # set by an agent host (agents.host.AgentHost) when the target and its chaser are both in it
@@ -250,7 +252,7 @@ class AgentProcess:
         self._estimate_matching = self.pub_estimate.declare_matching_listener(self._on_estimate_matching)
         self._estimate_listened = bool(self.pub_estimate.matching_status.matching)
         self.pub_command = declare_reliable(self.session, k.command(self.id), ex)
-        self.pub_guidance = declare_reliable(self.session, k.guidance(self.id))
+        self.pub_guidance = declare_reliable(self.session, k.guidance(self.id), ex)
         # guidance likewise: the launcher reads its chasers' only, so a headless swarm's targets send none
         self._guidance_matching = self.pub_guidance.declare_matching_listener(self._on_guidance_matching)
         self._guidance_listened = bool(self.pub_guidance.matching_status.matching)
@@ -303,14 +305,24 @@ class AgentProcess:
             self._last_command = (k, payload)
 
     def _commanded(self, k: int, cmd) -> None:
-        """A control tick's command: held and published from now on; its events and guidance out."""
-        a = self.agent
+        """A control tick's command: held and published from now on; its events out, its guidance due
+        (:meth:`flush`)."""
         self._u, self._force, self._torque = cmd.u, cmd.force_body_n, cmd.torque_body_nm
-        self._mode = a.mode.value
+        self._mode = self.agent.mode.value
         for payload in mode_events(cmd):
             self.pub_event.put(payload)
-        if self._guidance_listened:  # not encoded for no one (Zenoh would drop it unsent): "Rates"
-            self.pub_guidance.put(guidance_payload(self.sc, self.policy, self.chaser, a, k, self._mode, cmd))
+        self._guidance_due = (k, self._mode, cmd)
+
+    def _publish_guidance(self) -> None:
+        """The guidance of the last control tick, after the round's commands: building and sending it took
+        a chaser ~45 us at the median and up to ~2 ms (the put waits for the GIL while the host's Zenoh
+        threads hand out a batch), which put a free-running host of 64 vehicles' commands after the
+        world's next tick (BENCHMARKS.md). Not encoded for no one (Zenoh would drop it unsent): "Rates"."""
+        due, self._guidance_due = self._guidance_due, None
+        if due is not None and self._guidance_listened:
+            k, mode, cmd = due
+            payload = guidance_payload(self.sc, self.policy, self.chaser, self.agent, k, mode, cmd)
+            self.pub_guidance.put(payload)
 
     # ------------------------------------------------------------------------------ re-initialisation
 
@@ -449,12 +461,14 @@ class AgentProcess:
         self._process(inp)
 
     def flush(self) -> None:
-        """Publish the estimate of the tick :meth:`process` stepped last (if it has not gone out yet). An
-        agent host calls it once every vehicle of its round has sent its command: the world waits for the
-        commands, while the estimates are wanted a tick later (by a chaser) or by a viewer."""
+        """Publish the estimate of the tick :meth:`process` stepped last (if it has not gone out yet) and
+        the guidance of its command. An agent host calls it once every vehicle of its round has sent its
+        command: the world waits for the commands, while the estimates are wanted a tick later (by a
+        chaser) or by a viewer, and the guidance by the launcher or a viewer."""
         k, self._estimate_due = self._estimate_due, None
         if k is not None:
             self._publish_estimate(k)
+        self._publish_guidance()
 
     def done(self, now: float) -> bool:
         """Whether this vehicle's run is over: free-running, once the world's clock stopped; lockstep, once

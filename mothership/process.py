@@ -29,7 +29,7 @@ from swarm.step.radio import UwbNetwork
 from swarm.transport.docking_wire import uwb_slot, uwb_slot_batch
 from swarm.transport.keys import Keys
 from swarm.transport.messages import Anchors, Clock, DropCounter, Truth, TruthBatch, encode
-from swarm.transport.process import declare_reliable, print_ready
+from swarm.transport.process import PROCESS_NOISE_BLOCK, declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
 
 _LOG = logging.getLogger("swarm.mothership")
@@ -58,6 +58,7 @@ class MothershipProcess:
         self.ids = list(scenario.vehicles)
         self.index = {v: i for i, v in enumerate(self.ids)}
         self.network = UwbNetwork(scenario, seed)
+        self.network.noise_block = PROCESS_NOISE_BLOCK
         self.every = self.network.every
         self.drops = DropCounter()
         self._lock = threading.Lock()  # the truths' callback serves the slots (_take)
@@ -170,6 +171,7 @@ class MothershipProcess:
         X = np.zeros((len(self.ids), 13))
         X[:, 9] = 1.0  # identity attitudes
         UwbNetwork(self.sc, self.seed).step(self.every, 0.0, X)  # compile (or load) the kernel before "ready"
+        self.network.reserve_noise(1)  # and the first slot's noise drawn (the same samples as at its step)
         # a slot's ranges are a burst: batched beyond one pair (docs/protocol.md, "QoS")
         self.pub_uwb = {v: declare_reliable(self.session, k.uwb(v), len(self.ids) <= 2) for v in self.ids}
         self.pub_uwb_batch = declare_reliable(self.session, k.mothership_uwb(), len(self.ids) <= 2)

@@ -21,6 +21,8 @@ from swarm.core.sensors import UwbRadio, UwbSample, uwb_exchange
 from swarm.step.streams import stream
 
 NOISE_BLOCK = 1024
+"""Exchanges of pre-drawn normals per radio; the ranges are the same for any block size
+(:attr:`UwbNetwork.noise_block`)."""
 
 
 @numba.njit(cache=True)
@@ -43,6 +45,10 @@ def radio_env(t_s, drop_w, nlos_w):
 
 class UwbNetwork:
     """The mothership's simulated radio network (module docstring)."""
+
+    noise_block = NOISE_BLOCK
+    """Exchanges per radio of a refill of the pre-drawn noise (:meth:`reserve_noise`); a mothership process
+    draws smaller blocks, more often, so that no tick of its ranges stalls."""
 
     def __init__(self, scenario, seed: int) -> None:
         self.sc = scenario
@@ -78,7 +84,7 @@ class UwbNetwork:
         used = int(self.ui[0])
         if used + exchanges <= self.noise.shape[1]:
             return
-        rows = max(NOISE_BLOCK, exchanges)
+        rows = max(self.noise_block, exchanges)
         new = np.empty((self.noise.shape[0], rows, 4))
         left = self.noise.shape[1] - used
         for i, vid in enumerate(self.ids):

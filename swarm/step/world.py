@@ -44,7 +44,8 @@ from swarm.step.streams import STREAMS, stream  # noqa: F401 (re-exported)
 
 NOISE_BLOCK = 1024
 """Rows of pre-drawn standard normals per sensor stream; drawn in blocks from the stream's Generator,
-which gives the very sequence of one draw per sample (numpy fills arrays in order)."""
+which gives the very sequence of one draw per sample (numpy fills arrays in order), whatever the block's
+size (:attr:`World.noise_block`)."""
 
 # world parameter vector (``World.prm``): the sensors' (each vehicle's dynamics are its kind's ``kp`` row)
 W_DT, W_SW, W_PHI, W_SB, W_AHRS_SIGMA = range(5)
@@ -92,6 +93,11 @@ class SensorFrame:
 
 class World:
     """Truth of every vehicle of a scenario and their on-board sensors (module docstring)."""
+
+    noise_block = NOISE_BLOCK
+    """Rows per vehicle of a refill of the pre-drawn noise (:meth:`reserve_noise`). The samples are the same
+    for any size; a world process draws smaller blocks, more often, so that no tick stalls (1024 rows of 128
+    vehicles' two streams take ~16 ms: a tick and a half of real time)."""
 
     def __init__(self, scenario, seed: int) -> None:
         sc = scenario
@@ -283,7 +289,7 @@ class World:
             return buf, used
         carried = buf[:, used:].copy()
         states = [self.rng[vid, name].bit_generator.state for vid in self.ids]
-        rows = max(NOISE_BLOCK, need)
+        rows = max(self.noise_block, need)
         self._blocks[name] = (states, carried.shape[1], carried.tobytes(), rows)
         self._blocks_blob = None
         return self._draw_block(name, carried, rows), 0

@@ -32,6 +32,7 @@ from swarm.transport.keys import Keys
 from swarm.transport.session import add_zenoh_arguments, zenoh_args_from
 
 __all__ = [
+    "PROCESS_NOISE_BLOCK",
     "ClockSpec",
     "add_process_arguments",
     "declare_reliable",
@@ -44,6 +45,13 @@ __all__ = [
 ]
 
 _LOG = logging.getLogger(__name__)
+
+PROCESS_NOISE_BLOCK = 64
+"""Rows per vehicle of a refill of a world or mothership process's pre-drawn noise (``World.noise_block``,
+``UwbNetwork.noise_block``): the in-process run draws 1024 at a time, the same samples, but in a
+process of 128 vehicles that is a ~16 ms stall once every 1024 ticks, which made every vehicle's next
+commands late; 64 rows take ~0.6 ms once every 64 ticks. The first block is drawn before the process says
+it is ready."""
 
 
 @dataclass(frozen=True)

@@ -57,7 +57,7 @@ from swarm.transport.messages import (
     batch_rows,
     encode,
 )
-from swarm.transport.process import ClockSpec, declare_reliable
+from swarm.transport.process import PROCESS_NOISE_BLOCK, ClockSpec, declare_reliable
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
 from swarm.world import checkpoint
 from swarm.world.checkpoint import CheckpointError
@@ -111,6 +111,7 @@ class WorldProcess:
         self.batch = batch
         self._viewed: set[str] = set()  # batch: the vehicles whose per-vehicle truth a subscriber matches
         self.world = World(sc, seed)  # with the run's dispersions and its fault schedule
+        self.world.noise_block = PROCESS_NOISE_BLOCK
         self.referee = Referee(sc)
         self.ids = list(sc.vehicles)
         self.chasers = sc.chasers
@@ -618,6 +619,7 @@ class WorldProcess:
         its clock ``stopped``, until a stop signal: the dashboard keeps showing the final state)."""
         k = self.keys
         warm_up(self.sc, self.seed)  # compiled (or loaded) before this process says it is ready
+        self.world.reserve_noise(1)  # and the first tick's noise drawn (the same samples as at its step)
         self._declare()
         subscribe_decoded(self.session, k.agent_all("command"), Command, self._on_command, self.drops)
         subscribe_decoded(

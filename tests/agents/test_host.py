@@ -362,8 +362,9 @@ def test_a_host_of_several_sends_a_rounds_commands_in_one_batch_before_stepping_
 @pytest.mark.parametrize("listened", [False, True])
 def test_guidance_is_encoded_only_for_a_subscriber(listened):
     """A control tick's guidance goes to whoever subscribes to it (the launcher to its chasers', a viewer
-    to any vehicle's) and is not encoded for no one: a headless swarm's targets send none. The mode events
-    and the command go out either way."""
+    to any vehicle's) and is not encoded for no one: a headless swarm's targets send none. It goes out with
+    the estimate (flush), after the host's round has sent its commands. The mode events and the command go
+    out either way."""
     from swarm.step.agent import VehicleAgent
     from swarm.step.world import initial_truth
     from swarm.transport.messages import Guidance, decode
@@ -378,6 +379,10 @@ def test_guidance_is_encoded_only_for_a_subscriber(listened):
     cmd = proc.agent.control(0.0, proc.agent.control_dt)
     proc._commanded(0, cmd)
     sent = proc.pub_guidance.sent
+    assert sent == []  # after the round's commands (flush): it kept a host's commands waiting
+    proc.flush()
+    assert len(sent) == (1 if listened else 0)
+    proc.flush()  # once
     assert len(sent) == (1 if listened else 0)
     if listened:
         assert decode(sent[0], Guidance).mode == "STATION"

@@ -239,3 +239,33 @@ def test_pickled_streams_are_pickled_again_only_when_they_change_and_restore_ali
         np.testing.assert_array_equal(a.gyro_out, w.gyro_out)
         np.testing.assert_array_equal(b.gyro_out, w.gyro_out)
     np.testing.assert_array_equal(a.X, w.X)
+
+
+def test_a_process_draws_smaller_noise_blocks_of_the_same_samples(sc, tmp_path):
+    """A world process refills its pre-drawn noise PROCESS_NOISE_BLOCK rows at a time (a 1024-row refill of
+    128 vehicles stalled a tick by ~16 ms), and a mothership its radios' likewise: the samples are those of
+    the in-process run's 1024-row blocks, tick for tick, across several refills of each stream."""
+    from mothership.process import MothershipProcess
+    from swarm.step.radio import NOISE_BLOCK as RADIO_BLOCK
+    from swarm.step.radio import UwbNetwork
+    from swarm.transport.process import PROCESS_NOISE_BLOCK
+
+    wp = _world(sc, tmp_path)
+    ms = MothershipProcess(sc, SEED, None, Keys("ckpt"), threading.Event())
+    assert wp.world.noise_block == ms.network.noise_block == PROCESS_NOISE_BLOCK < min(NOISE_BLOCK, RADIO_BLOCK)
+    small, big = World(sc, SEED), World(sc, SEED)
+    small.noise_block = PROCESS_NOISE_BLOCK
+    net_small, net_big = UwbNetwork(sc, SEED), UwbNetwork(sc, SEED)
+    net_small.noise_block = PROCESS_NOISE_BLOCK
+    ahrs_every = small.ahrs_every
+    ticks = (PROCESS_NOISE_BLOCK + 3) * ahrs_every  # the AHRS stream refills too
+    for _ in range(ticks):
+        for w in (small, big):
+            w.step(build_frames=False)
+        np.testing.assert_array_equal(small.gyro_out, big.gyro_out)
+        np.testing.assert_array_equal(small.ahrs_out, big.ahrs_out)
+        got = net_small.step(small.k, small.k * sc.dt_s, small.X)
+        want = net_big.step(big.k, big.k * sc.dt_s, big.X)
+        assert got == want, small.k
+    assert small.gyro_noise.shape[1] == PROCESS_NOISE_BLOCK < big.gyro_noise.shape[1]
+    assert net_small.noise.shape[1] == PROCESS_NOISE_BLOCK < net_big.noise.shape[1]
