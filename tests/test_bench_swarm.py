@@ -57,10 +57,42 @@ def test_late_share_counts_a_swarm_that_never_commanded_as_all_late():
      (["--vehicles", "two"], "--vehicles must be even integers separated by commas, got 'two'"),
      (["--clock", "scaled:2"], "--clock must be realtime, lockstep or both"),
      (["--span", "0"], "--span must be a number of seconds in 1..3600, got 0.0"),
-     (["--vehicles-per-process", "0"], "--vehicles-per-process must be integers in 1..64")],
+     (["--vehicles-per-process", "0"], "--vehicles-per-process must be integers in 1..64"),
+     (["--repeat", "0"], "--repeat must be an integer in 1..20, got 0")],
 )  # fmt: skip
 def test_bad_bench_swarm_flags_give_one_clear_error(flags, expect):
     r = subprocess.run([sys.executable, "-m", "swarm.cli.main", "bench", "swarm", *flags],
                        capture_output=True, text=True, timeout=60)  # fmt: skip
     assert r.returncode == 2, r.stderr
     assert expect in r.stderr and "Traceback" not in r.stderr
+
+
+def test_repeated_runs_of_a_case_are_summarised_by_their_median_and_spread():
+    """``--repeat N``: a case's figures are the medians of its runs (those that have the figure), its late
+    ticks, late commands, real-time factor and latency p99 with their [min, max]; the runs are kept; the
+    report gives the count and the late ticks' spread. One run stays as it was."""
+    from swarm.bench.swarm import format_report, summarise
+
+    def one(late, rtf, p99, cpu):
+        return {"vehicles": 128, "per_process": 64, "clock": "realtime", "staggered": True,
+                "cpu_us_per_vehicle_tick": cpu, "world_cpu_us_per_tick": 2000.0, "late_tick_share": late,
+                "late_command_share": None if late is None else 10 * late, "commanded_vehicle_ticks": 64000,
+                "realtime_factor": rtf, "latency_p50_us": 2500.0, "latency_p99_us": p99, "samples": 1200,
+                "ticks": 1000}  # fmt: skip
+
+    runs = [one(0.033, 1.0, 9000.0, 60.0), one(0.005, 0.99, 7000.0, 50.0), one(0.013, 1.0, None, 55.0)]
+    c = summarise(runs)
+    assert c["late_tick_share"] == 0.013 and c["late_tick_share_range"] == [0.005, 0.033]
+    assert c["late_command_share"] == 0.13 and c["late_command_share_range"] == [0.05, 0.33]
+    assert c["realtime_factor"] == 1.0 and c["realtime_factor_range"] == [0.99, 1.0]
+    assert c["latency_p99_us"] == 8000.0 and c["latency_p99_us_range"] == [7000.0, 9000.0]  # the two with one
+    assert c["cpu_us_per_vehicle_tick"] == 55.0 and "cpu_us_per_vehicle_tick_range" not in c
+    assert (c["vehicles"], c["ticks"], c["staggered"], c["repeat"], c["runs"]) == (128, 1000, True, 3, runs)
+    report = format_report({"span_s": 10, "cores": 2, "load_1min": 1.0, "cases": [c]})
+    assert "1.3 % / 13.0 %" in report and "3 runs, late ticks [0.5-3.3 %]" in report
+    assert summarise(runs[:1]) is runs[0]
+    lock = summarise([one(None, 5.0, 1.0, 1.0), one(None, 6.0, 1.0, 1.0)])
+    assert lock["late_tick_share"] is None and "late_tick_share_range" not in lock
+    assert "2 runs, real-time [5.00-6.00x]" in format_report(
+        {"span_s": 10, "cores": 2, "load_1min": 1.0, "cases": [{**lock, "clock": "lockstep"}]}
+    )

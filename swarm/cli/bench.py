@@ -96,6 +96,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                             help="agent hosts of N vehicles (default 1: a process per vehicle)")  # fmt: skip
             bp.add_argument("--span", type=float, default=None, metavar="S",
                             help="simulated seconds per case (default 20, 5 with --quick)")  # fmt: skip
+            bp.add_argument("--repeat", type=int, default=None, metavar="N",
+                            help="run each case N times, round by round, and report the medians and the "
+                                 "spread (default 1)")  # fmt: skip
             bp.add_argument("--stagger", action="store_true", default=None,
                             help="stagger the vehicles' controller clocks (swarm.stagger_control): vehicle "
                                  "m controls on ticks m %% period, not all on one tick")  # fmt: skip
@@ -143,6 +146,8 @@ def _swarm(args: argparse.Namespace) -> tuple[dict, str]:
         preset["span_s"] = args.span
     if getattr(args, "stagger", None):
         preset["stagger"] = True
+    if getattr(args, "repeat", None) is not None:
+        preset["repeat"] = bench.parse_repeat(args.repeat)
     record = bench.run(preset)
     return record, bench.format_report(record)
 
