@@ -96,3 +96,20 @@ def test_repeated_runs_of_a_case_are_summarised_by_their_median_and_spread():
     assert "2 runs, real-time [5.00-6.00x]" in format_report(
         {"span_s": 10, "cores": 2, "load_1min": 1.0, "cases": [{**lock, "clock": "lockstep"}]}
     )
+
+
+def test_a_launch_that_fails_is_reported_with_what_it_said(tmp_path, monkeypatch):
+    """A case whose launcher ends without a result (here before its router listens) raises with the
+    launcher's exit status and the last lines of its stderr (its children's too), not only "failed"."""
+    from swarm.bench import swarm as bench
+
+    fake = tmp_path / "launch.py"
+    said = ["warming up", "swarm launch: error: scenario: the reason, named"]
+    lines = "".join(f"print({s!r}, file=sys.stderr)\n" for s in said)
+    fake.write_text(f"import sys\n{lines}sys.exit(2)\n")
+    monkeypatch.setattr(bench, "LAUNCH", [sys.executable, str(fake)])
+    with pytest.raises(RuntimeError) as err:
+        bench._case(4, "realtime", 1.0, 2)
+    msg = str(err.value)
+    assert "swarm launch --agents 2 --clock realtime failed (2)" in msg
+    assert "warming up" in msg and "scenario: the reason, named" in msg

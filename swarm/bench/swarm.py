@@ -56,6 +56,8 @@ from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_sess
 QUICK = {"vehicles": (2, 8), "clocks": ("lockstep", "realtime"), "span_s": 5.0, "per_process": (1,)}
 FULL = {"vehicles": (2, 8, 32), "clocks": ("lockstep", "realtime"), "span_s": 20.0, "per_process": (1,)}
 DT_S = 0.01  # the docking scenario's tick
+LAUNCH = [sys.executable, "-m", "swarm.cli.main", "launch"]
+"""The launcher each case runs (its arguments follow)."""
 
 
 def parse_vehicles(text: str) -> tuple[int, ...]:
@@ -147,27 +149,31 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
     pairs = vehicles // 2
     ns = f"benchswarm{os.getpid()}v{vehicles}p{per_process}{clock}"
     endpoint = free_loopback_endpoint()
-    with tempfile.TemporaryDirectory() as tmp:
+    # the launcher's stderr (its children's too) into a file: its last lines say why a launch failed
+    with tempfile.TemporaryDirectory() as tmp, open(Path(tmp) / "launch.log", "w+") as log:
         out = Path(tmp) / "run.json"
-        cmd = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--until-docked",
+        cmd = [*LAUNCH, "docking", "--headless", "--until-docked",
                "--agents", str(pairs), "--clock", clock, "--set", f"sim.max_duration_s={span_s}",
                "--json", str(out), "--namespace", ns, "--listen", endpoint,
                "--vehicles-per-process", str(per_process)]  # fmt: skip
         if stagger:
             cmd += ["--set", "swarm.stagger_control=true"]
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
         probe = _Probe()
-        up = threading.Event()
+        up, listening = threading.Event(), threading.Event()
 
         def drain() -> None:  # the launcher's stdout: wait for "swarm up", then keep the pipe empty
             for line in proc.stdout:
                 if line.startswith("swarm listening on"):
+                    listening.set()
                     up.set()
             up.set()
 
         threading.Thread(target=drain, daemon=True).start()
         try:
             up.wait(300)
+            if not listening.is_set():  # it ended (or hangs) before its router listened: nothing to probe
+                raise _LaunchFailed
             session = open_session(ZenohArgs(mode="client", connect=(endpoint,)))
             try:
                 probed = ("chaser", "target") if pairs == 1 else ("chaser0", "target0")
@@ -176,15 +182,20 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
                     session.declare_subscriber(f"{ns}/agent/{vid}/estimate", probe.on_later("latency"))
                 # for agent hosts the world sends every vehicle's imu in one batch (docs/protocol.md, "Rates")
                 session.declare_subscriber(f"{ns}/world/imu", probe.on_imu_batch(probed))
-                rc = proc.wait(timeout=1800)
+                proc.wait(timeout=1800)
             finally:
                 session.close()
+        except _LaunchFailed:
+            pass
         finally:
             if proc.poll() is None:
                 proc.send_signal(2)
                 proc.wait(60)
+        rc = proc.returncode
         if not out.exists():
-            raise RuntimeError(f"swarm launch --agents {pairs} --clock {clock} failed ({rc})")
+            log.seek(0)
+            tail = "\n".join(log.read().splitlines()[-20:])
+            raise RuntimeError(f"swarm launch --agents {pairs} --clock {clock} failed ({rc}):\n{tail}")
         res = json.loads(out.read_text())
     ticks = max(1, round(res["sim_time_s"] / DT_S))
     cpu = res.get("cpu_s") or {}
@@ -208,6 +219,10 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         "samples": int(lat.size),
         "ticks": ticks,
     }
+
+
+class _LaunchFailed(Exception):
+    """The launcher ended before its router listened."""
 
 
 def late_share(clock: str, late_commands: list[int] | None) -> tuple[float | None, int | None]:

@@ -252,7 +252,8 @@ def test_a_process_draws_smaller_noise_blocks_of_the_same_samples(sc, tmp_path):
 
     wp = _world(sc, tmp_path)
     ms = MothershipProcess(sc, SEED, None, Keys("ckpt"), threading.Event())
-    assert wp.world.noise_block == ms.network.noise_block == PROCESS_NOISE_BLOCK < min(NOISE_BLOCK, RADIO_BLOCK)
+    assert wp.world.noise_block == ms.network.noise_block == PROCESS_NOISE_BLOCK
+    assert PROCESS_NOISE_BLOCK < min(NOISE_BLOCK, RADIO_BLOCK)
     small, big = World(sc, SEED), World(sc, SEED)
     small.noise_block = PROCESS_NOISE_BLOCK
     net_small, net_big = UwbNetwork(sc, SEED), UwbNetwork(sc, SEED)
