@@ -160,7 +160,7 @@ class AgentProcess:
         self._last_command: tuple[int, bytes] | None = None  # (tick, payload) of the last command sent
         self.resent = 0  # commands sent again for a resumed world
         self._estimate_due: int | None = None  # the tick whose estimate flush() publishes
-        self._guidance_due: tuple | None = None  # (tick, mode, command) whose guidance flush() publishes
+        self._guidance_due: tuple | None = None  # (tick, command) whose guidance flush() publishes
         self._estimate_listened = False  # a subscriber matches this vehicle's estimates (_declare)
         self._guidance_listened = False  # ... and its guidance (the launcher its chasers', a viewer any)
         # set by an agent host (agents.host.AgentHost) when the target and its chaser are both in it
@@ -311,7 +311,7 @@ class AgentProcess:
         self._mode = self.agent.mode.value
         for payload in mode_events(cmd):
             self.pub_event.put(payload)
-        self._guidance_due = (k, self._mode, cmd)
+        self._guidance_due = (k, cmd)
 
     def _publish_guidance(self) -> None:
         """The guidance of the last control tick, after the round's commands: building and sending it took
@@ -320,8 +320,8 @@ class AgentProcess:
         world's next tick (BENCHMARKS.md). Not encoded for no one (Zenoh would drop it unsent): "Rates"."""
         due, self._guidance_due = self._guidance_due, None
         if due is not None and self._guidance_listened:
-            k, mode, cmd = due
-            payload = guidance_payload(self.sc, self.policy, self.chaser, self.agent, k, mode, cmd)
+            k, cmd = due  # in the mode it was decided in (_mode changes with the next command only)
+            payload = guidance_payload(self.sc, self.policy, self.chaser, self.agent, k, self._mode, cmd)
             self.pub_guidance.put(payload)
 
     # ------------------------------------------------------------------------------ re-initialisation

@@ -172,21 +172,8 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         threading.Thread(target=drain, daemon=True).start()
         try:
             up.wait(300)
-            if not listening.is_set():  # it ended (or hangs) before its router listened: nothing to probe
-                raise _LaunchFailed
-            session = open_session(ZenohArgs(mode="client", connect=(endpoint,)))
-            try:
-                probed = ("chaser", "target") if pairs == 1 else ("chaser0", "target0")
-                for vid in probed:
-                    session.declare_subscriber(f"{ns}/agent/{vid}/imu", probe.on_imu)
-                    session.declare_subscriber(f"{ns}/agent/{vid}/estimate", probe.on_later("latency"))
-                # for agent hosts the world sends every vehicle's imu in one batch (docs/protocol.md, "Rates")
-                session.declare_subscriber(f"{ns}/world/imu", probe.on_imu_batch(probed))
-                proc.wait(timeout=1800)
-            finally:
-                session.close()
-        except _LaunchFailed:
-            pass
+            if listening.is_set():  # else it ended (or hangs) before its router listened: nothing to probe
+                _probe_run(proc, endpoint, ns, pairs, probe)
         finally:
             if proc.poll() is None:
                 proc.send_signal(2)
@@ -221,8 +208,20 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
     }
 
 
-class _LaunchFailed(Exception):
-    """The launcher ended before its router listened."""
+def _probe_run(proc: subprocess.Popen, endpoint: str, ns: str, pairs: int, probe: _Probe) -> None:
+    """Stamp the first pair's ``imu`` and ``estimate`` arrivals (:class:`_Probe`) on a client of the
+    launcher's router at ``endpoint`` until the launcher ``proc`` exits."""
+    session = open_session(ZenohArgs(mode="client", connect=(endpoint,)))
+    try:
+        probed = ("chaser", "target") if pairs == 1 else ("chaser0", "target0")
+        for vid in probed:
+            session.declare_subscriber(f"{ns}/agent/{vid}/imu", probe.on_imu)
+            session.declare_subscriber(f"{ns}/agent/{vid}/estimate", probe.on_later("latency"))
+        # for agent hosts the world sends every vehicle's imu in one batch (docs/protocol.md, "Rates")
+        session.declare_subscriber(f"{ns}/world/imu", probe.on_imu_batch(probed))
+        proc.wait(timeout=1800)
+    finally:
+        session.close()
 
 
 def late_share(clock: str, late_commands: list[int] | None) -> tuple[float | None, int | None]:
