@@ -561,9 +561,10 @@ def test_secure_launch_docks_as_the_simulation_while_intruders_are_denied_by_zen
                         "root_ca_certificate": str(d / "ca.pem")}}}}, endpoint)):  # fmt: skip
                     with pytest.raises(zenoh.ZError, match="Unable to connect"):
                         zenoh.open(_client(conf, where)).close()
-                while proc.popen.poll() is None and not stop.wait(0.5):
+                deadline = time.monotonic() + RUN_S  # a launch that never ends fails here with its output
+                while proc.popen.poll() is None and not stop.wait(0.5) and time.monotonic() < deadline:
                     matched.append(pubs[0][0].matching_status.matching or pubs[0][1].matching_status.matching)
-                rc = proc.wait(RUN_S)
+                rc = proc.wait(5.0)
             finally:
                 stop.set()
                 hostile.join(5.0)
