@@ -13,7 +13,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 
 SLOW_TIMEOUT_S = 3600.0
-"""A ``slow`` test's hang limit under ``--runslow`` (the default's 600 s, ``pyproject.toml``, is for the
+"""A ``slow`` test's hang limit under ``--runslow`` (the default's 300 s, ``pyproject.toml``, is for the
 default suite: a full statistical run may take longer than that and is not hung)."""
 
 
