@@ -22,6 +22,7 @@ import threading
 from pathlib import Path
 
 from swarm.errors import SwarmError
+from swarm.stacks import enable_stack_dumps
 
 __all__ = ["DEFAULT_PORT", "READY_PREFIX", "add_arguments", "main", "run"]
 
@@ -211,6 +212,7 @@ def _serve(args: argparse.Namespace, stop: threading.Event | None, make) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m dashboard``: the same as ``swarm dashboard``."""
+    enable_stack_dumps()  # kill -USR1: every thread's stack on stderr (swarm/stacks.py)
     parser = argparse.ArgumentParser(prog="python -m dashboard", description=DESCRIPTION)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     add_arguments(parser)

@@ -49,6 +49,9 @@ from swarm.step.outcome import chaser_summary, run_summary
 from swarm.world.checkpoint import EXIT_BAD_CHECKPOINT
 
 _LOG = logging.getLogger("swarm.launch")
+STALL_S = 30.0
+"""``--stall-s``'s default [s]: far beyond a tick's wait for a missing command (``--step-timeout``, 5 s) or
+an agent's restart (a few seconds), so that only a hung process (or a stopped one) reaches it."""
 
 VISION_COUNTS = ("features_accepted", "pose_accepted")
 
@@ -104,6 +107,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "wall clock, to watch it or to leave the cores to others; --clock realtime or scaled:N alone is "
         "free-running",
     )  # fmt: skip
+    g.add_argument(
+        "--stall-s", type=positive_float("--stall-s"), default=STALL_S, metavar="S",
+        help=f"when the world's clock stands still this long in a running docking run, say so with every "
+        f"process's stacks (default {STALL_S:g}; kill -USR1 <launcher pid> asks for them at any time)",
+    )  # fmt: skip
     add_world_timeouts(g)
     p.set_defaults(func=run)
 
@@ -153,9 +161,12 @@ def _child_of(args: argparse.Namespace, sc) -> dict[str, str]:
 
 class RunLog:
     """What the launcher hears of a run (thread-safe): the world's events, each agent's mode events,
-    guidance and summary."""
+    guidance and summary, and whether the world's clock stands still (:class:`StallWatch`)."""
 
-    def __init__(self) -> None:
+    def __init__(self, stall_s: float = STALL_S) -> None:
+        from swarm.cli.supervisor import StallWatch
+
+        self.stall = StallWatch(stall_s)
         self.lock = threading.Lock()
         self.run_end: dict | None = None
         self.run_start: dict | None = None
@@ -168,6 +179,7 @@ class RunLog:
 
     def on_clock(self, _key: str, msg) -> None:
         self.t_s = msg.t_s
+        self.stall.on_clock(msg.tick, msg.state, time.monotonic())
 
     def on_world_event(self, _key: str, msg) -> None:
         with self.lock:
@@ -278,7 +290,7 @@ def run(args: argparse.Namespace) -> int:
     check_pace(args.clock, args.pace)
 
     from swarm.cli.sim import print_summary
-    from swarm.cli.supervisor import Child, Supervisor
+    from swarm.cli.supervisor import Child, Supervisor, forward_stacks_signal
     from swarm.transport.keys import Keys
     from swarm.transport.messages import Clock, DropCounter, Event, Guidance, encode
     from swarm.transport.process import scenario_from
@@ -307,6 +319,7 @@ def run(args: argparse.Namespace) -> int:
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     sup = Supervisor(max_restarts=args.max_restarts)
+    restore_stacks = forward_stacks_signal(sup)  # kill -USR1 <launcher>: every process's stacks
     alive_changes: queue.Queue = queue.Queue()
     seed = args.seed
     result: dict | None = None
@@ -321,7 +334,7 @@ def run(args: argparse.Namespace) -> int:
                 flush=True,
             )
             drops = DropCounter()
-            box = [RunLog()]  # the current run's log: the callbacks always feed the current one
+            box = [RunLog(args.stall_s)]  # the current run's log: the callbacks always feed the current one
             subscribe_decoded(
                 session, keys.world_event(), Event, lambda k, m: box[0].on_world_event(k, m), drops
             )
@@ -380,7 +393,7 @@ def run(args: argparse.Namespace) -> int:
                             if not asked:
                                 stop.wait(3.0)  # a moment to look at the docked pair
                             sup.stop_all(keep=("dashboard",))
-                            box[0] = RunLog()
+                            box[0] = RunLog(args.stall_s)
                             continue
                         if not args.until_docked:
                             _hold(args, stop, wall0)
@@ -398,6 +411,7 @@ def run(args: argparse.Namespace) -> int:
             args.secure_material.close()
         for s, h in previous.items():
             signal.signal(s, h)  # type: ignore[arg-type]
+        restore_stacks()
     if interrupted.is_set() and result is None:
         return 130
     if result is None:
@@ -481,7 +495,12 @@ def _supervise(
             return "ended"
         if args.timeout is not None and time.monotonic() - wall0 > args.timeout:
             _LOG.error("--timeout %.0f s reached", args.timeout)
+            sup.dump_all(f"--timeout {args.timeout:g} s reached before the run ended")
             return "failed"
+        stood = log.stall.check(time.monotonic())
+        if stood is not None:
+            why = f"the world's clock has stood at tick {stood[0]} for {stood[1]:.1f} s in a running run"
+            threading.Thread(target=sup.dump_all, args=(why,), daemon=True).start()
         try:
             role, pid, alive, t_seen = changes.get(timeout=0.05)
         except queue.Empty:

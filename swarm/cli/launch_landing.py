@@ -100,7 +100,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         start_recorder,
     )
     from swarm.cli.sim import print_landing
-    from swarm.cli.supervisor import Child, Supervisor
+    from swarm.cli.supervisor import Child, Supervisor, forward_stacks_signal
     from swarm.config import parse_override
     from swarm.landing_scenario import load_landing
     from swarm.step.landing import landing_summary
@@ -123,6 +123,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     cond = threading.Condition()
     got: dict = {"run_end": None, "summaries": {}}
     sup = Supervisor(max_restarts=0)
+    restore_stacks = forward_stacks_signal(sup)  # kill -USR1 <launcher>: every process's stacks
     wall0 = time.monotonic()
     result = None
     args.secure_material = None
@@ -180,6 +181,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                             break
                         if deadline is not None and time.monotonic() > deadline:
                             _LOG.error("--timeout: %.0f s passed before the run ended", args.timeout)
+                            sup.dump_all(f"--timeout {args.timeout:g} s reached before the run ended")
                             break
                         dead = sup.exited()
                         for c in [c for c in dead if c.name == "dashboard"]:  # the run does not need it
@@ -248,6 +250,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
             args.secure_material.close()
         for s, h in previous.items():
             signal.signal(s, h)  # type: ignore[arg-type]
+        restore_stacks()
     if result is None:
         return 130 if stop.is_set() else 1
     ok = result["run_end_reason"] == "done" and all(

@@ -7,6 +7,7 @@ import logging
 import sys
 
 from swarm.errors import SwarmError
+from swarm.stacks import enable_stack_dumps
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -60,6 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    enable_stack_dumps()  # kill -USR1: every thread's stack on stderr (swarm/stacks.py)
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(

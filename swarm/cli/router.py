@@ -20,6 +20,7 @@ import sys
 import threading
 
 from swarm.errors import SwarmError
+from swarm.stacks import enable_stack_dumps
 from swarm.transport.session import (
     add_zenoh_arguments,
     listen_endpoints,
@@ -90,6 +91,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m swarm.cli.router``: the same as ``swarm router``."""
+    enable_stack_dumps()  # kill -USR1: every thread's stack on stderr (swarm/stacks.py)
     parser = argparse.ArgumentParser(prog="swarm router", description=_DESCRIPTION)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     _add_arguments(parser)

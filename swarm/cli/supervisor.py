@@ -22,6 +22,9 @@ from dataclasses import dataclass, field
 _LOG = logging.getLogger("swarm.launch")
 
 _PR_SET_PDEATHSIG = 1
+STACKS_GAP_S = 0.1
+"""Seconds between two children's stack dumps: each writes its dump in well under that (a few hundred
+lines), so that they follow each other on the launcher's stderr instead of interleaving."""
 
 
 def _die_with_parent() -> None:  # runs in the child between fork and exec
@@ -48,6 +51,9 @@ class Child:
     """Monotonic time of a pending restart."""
     on_line: Callable[[str], None] | None = None
     """Called with each line the child prints on stdout (on a reader thread)."""
+    spoke: bool = False
+    """Whether the current process has printed a line on stdout (its ready line): by then it answers
+    :data:`~swarm.stacks.STACKS_SIGNAL`, which would have ended it while it was still importing."""
 
     @property
     def running(self) -> bool:
@@ -64,6 +70,17 @@ class Supervisor:
         self.backoff_s = backoff_s
         self.grace_s = grace_s
 
+    def dump_all(self, why: str) -> None:
+        """The launcher's own stacks, then every child's (:meth:`dump_stacks`), on stderr, announced by a
+        line that says ``why`` and which process dumps in which order."""
+        from swarm.stacks import dump_stacks
+
+        names = [f"{c.name} (pid {c.popen.pid})" for c in self.children.values() if c.running and c.spoke]
+        _LOG.warning("%s: the stacks of the launcher (pid %d), then of %s follow", why, os.getpid(),
+                     ", ".join(names) or "no child")  # fmt: skip
+        dump_stacks()
+        self.dump_stacks()
+
     def start(self, child: Child, rejoin: bool = False) -> None:
         args = [sys.executable, "-m", *child.args, *(child.rejoin_args if rejoin else [])]
         child.popen = subprocess.Popen(
@@ -78,18 +95,40 @@ class Supervisor:
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )
         child.next_start_s = None
+        child.spoke = False
         self.children[child.name] = child
         threading.Thread(target=self._pump, args=(child, child.popen), daemon=True).start()
         _LOG.debug("started %s (pid %d): %s", child.name, child.popen.pid, " ".join(args))
 
     def _pump(self, child: Child, popen: subprocess.Popen) -> None:
         for line in popen.stdout:
+            if child.popen is popen:
+                child.spoke = True
             try:
                 sys.stderr.write(line)
                 if child.on_line is not None:
                     child.on_line(line.rstrip("\n"))
             except Exception:  # a closed stderr or a bad callback must not kill the pump
                 pass
+
+    def dump_stacks(self, gap_s: float = STACKS_GAP_S) -> list[str]:
+        """Ask every running child that has spoken for its threads' stacks (:mod:`swarm.stacks`), one after
+        the other ``gap_s`` apart so that their dumps do not interleave on the launcher's stderr; returns
+        ``"<name> (pid N)"`` of each, in that order."""
+        from swarm.stacks import STACKS_SIGNAL
+
+        asked = []
+        for c in list(self.children.values()):
+            popen = c.popen
+            if popen is None or popen.poll() is not None or not c.spoke:
+                continue
+            try:
+                os.kill(popen.pid, STACKS_SIGNAL)
+            except (ProcessLookupError, PermissionError):
+                continue
+            asked.append(f"{c.name} (pid {popen.pid})")
+            time.sleep(gap_s)
+        return asked
 
     def lost(self, name: str, why: str) -> str:
         """``name`` was seen lost (its liveliness token went, or it exited): kill what is left of it and
@@ -150,3 +189,55 @@ class Supervisor:
             except subprocess.TimeoutExpired:
                 _LOG.warning("%s did not stop within %.1f s: killing it", c.name, self.grace_s)
             self._kill(c)  # the group too: a grandchild must not outlive it
+
+
+def forward_stacks_signal(sup: Supervisor) -> Callable[[], None]:
+    """In the launcher, :data:`~swarm.stacks.STACKS_SIGNAL` dumps its own stacks and every child's
+    (:meth:`Supervisor.dump_all`, on a thread: the children are asked one after the other). Returns the
+    function that puts the plain dump back."""
+    import faulthandler
+
+    from swarm.stacks import STACKS_SIGNAL, enable_stack_dumps
+
+    faulthandler.unregister(STACKS_SIGNAL)  # the `swarm` command's own dump, which would not forward
+
+    def on_signal(_signum: int, _frame: object) -> None:
+        threading.Thread(target=sup.dump_all, args=(f"{STACKS_SIGNAL.name}",), daemon=True).start()
+
+    signal.signal(STACKS_SIGNAL, on_signal)
+
+    def restore() -> None:
+        signal.signal(STACKS_SIGNAL, signal.SIG_DFL)
+        enable_stack_dumps()
+
+    return restore
+
+
+class StallWatch:
+    """The world's clock standing still in a running run: fed each ``world/clock`` message (its tick and
+    state), :meth:`check` says once per stall that the tick has not moved for ``stall_s`` seconds while
+    the world said it was running. A paused or stopped world, or one not heard from yet, never stalls."""
+
+    def __init__(self, stall_s: float) -> None:
+        self.stall_s = stall_s
+        self.tick: int | None = None
+        self.state: str | None = None
+        self.since: float | None = None
+        self.fired = False
+        self._lock = threading.Lock()
+
+    def on_clock(self, tick: int, state: str, now: float) -> None:
+        with self._lock:
+            if tick != self.tick or state != self.state:
+                self.tick, self.state, self.since, self.fired = tick, state, now, False
+
+    def check(self, now: float) -> tuple[int, float] | None:
+        """``(tick, seconds)`` the first time the clock has stood at ``tick`` for ``stall_s`` or more in a
+        running run; None otherwise (and again until the clock moves)."""
+        with self._lock:
+            if self.since is None or self.state != "running" or self.fired or self.tick is None:
+                return None
+            if now - self.since < self.stall_s:
+                return None
+            self.fired = True
+            return self.tick, now - self.since

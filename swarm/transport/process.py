@@ -28,6 +28,7 @@ import zenoh
 
 from swarm.args import add_scenario_args, agents, load_from_args, seed
 from swarm.errors import ConfigError, SwarmError
+from swarm.stacks import enable_stack_dumps
 from swarm.transport.keys import Keys
 from swarm.transport.session import add_zenoh_arguments, zenoh_args_from
 
@@ -203,6 +204,7 @@ def process_main(
 ) -> int:
     """``python -m <process>``: parse, configure logging (stderr), run until done or a stop signal.
     Bad input (a flag, the scenario) prints one ``<prog>: error: ...`` line and returns 2."""
+    enable_stack_dumps()  # before anything is printed on stdout: the launcher signals a child that has
     parser = argparse.ArgumentParser(prog=prog, description=description)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     add_arguments(parser)

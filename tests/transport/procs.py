@@ -26,6 +26,13 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import IO
 
+REPORT_WAIT_S = 2.0
+"""After a failure, how long the processes get to write their stacks (a launcher asks its children one
+after the other, 0.1 s apart) before they are killed."""
+REPORT_LINES = 400
+"""The lines of each process's output printed after a failure (a launcher's stacks and its children's
+fit in a few hundred)."""
+
 REPO = Path(__file__).resolve().parents[2]
 """The repository root: the working directory of every started process."""
 
@@ -181,9 +188,31 @@ class Procs:
     def __enter__(self) -> Procs:
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, exc_type: object, *exc: object) -> None:
+        if exc_type is not None:
+            self._report()
         for proc in self.procs:
             proc.kill_group()
+
+    def _report(self) -> None:
+        """A test failed (or hung: pytest-timeout's exception lands here): each process still running is
+        asked for its threads' stacks (swarm/stacks.py; a launcher forwards the request to each child),
+        and the end of every process's output is printed, for pytest's report of the failure."""
+        from swarm.stacks import STACKS_SIGNAL
+
+        running = [p for p in self.procs if p.popen.poll() is None]
+        for proc in running:
+            try:
+                os.kill(proc.pid, STACKS_SIGNAL)
+            except ProcessLookupError:
+                pass
+        if running:
+            time.sleep(REPORT_WAIT_S)
+        for proc in self.procs:
+            lines = proc.output().splitlines()
+            print(f"=== {' '.join(proc.args)[:200]} (pid {proc.pid}, exit {proc.popen.poll()}): last "
+                  f"{min(len(lines), REPORT_LINES)} of {len(lines)} lines ===")  # fmt: skip
+            print("\n".join(lines[-REPORT_LINES:]))
 
 
 class Inbox:

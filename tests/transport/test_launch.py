@@ -31,6 +31,8 @@ from tests.transport.procs import Procs, free_port, loopback, wait_until
 
 SEED = 1
 RUN_S = 180.0  # wall-time ceiling of one launched docking (measured ~25 s on this 2-core VM)
+STALL_S = 1.0  # --stall-s of the stalled-agent check: well under the world's 5 s wait for a command
+STOPPED_S = 1.0  # how long the agent stays stopped after the stall is told (then the run goes on)
 
 
 def _launch(procs: Procs, ns: str, *extra: str, json_path=None, headless: bool = True):
@@ -81,8 +83,12 @@ def test_lockstep_launch_equals_the_in_process_run_even_under_garbage_on_every_k
     the same order on the same float64 values, and the codec carries arrays as raw little-endian float64),
     even while bytes, wrong types, NaN, wrong shapes and an unknown schema version arrive on every key of
     the swarm: no process crashes, and the drops are logged per key. An outside client on the printed
-    endpoint sees every mode transition on ``event`` and every mode flown on ``guidance``. (One launch
-    serves both claims: launches are the suite's costly tests.)"""
+    endpoint sees every mode transition on ``event`` and every mode flown on ``guidance``. The chaser's
+    agent is then stopped (SIGSTOP) for a few seconds: the world's clock stands still past ``--stall-s``,
+    and the launcher says so with the stacks of every process (the world waiting in ``_take_commands`` for
+    that agent's command, the mothership's and each agent's threads, the stopped one's once it goes on),
+    and the run is still the same. (One launch serves these claims: launches are the suite's costly
+    tests.)"""
     from swarm.errors import MessageError
     from swarm.transport.keys import AGENT_KINDS, Keys
     from swarm.transport.messages import Event, Guidance, decode
@@ -117,7 +123,9 @@ def test_lockstep_launch_equals_the_in_process_run_even_under_garbage_on_every_k
     targets += [keys.world_clock(), keys.world_event(), keys.anchors(), keys.run_control()]
     with Procs() as procs:
         out = tmp_path / "launch.json"
-        proc, endpoint = _launch(procs, ns, "--until-docked", json_path=out)
+        proc, endpoint = _launch(
+            procs, ns, "--until-docked", "--stall-s", str(STALL_S), "--step-timeout", "60", json_path=out
+        )  # (a slow machine's stop still leaves no tick without command)
         sent = 0
         with _client(endpoint) as session:
             session.declare_subscriber(keys.guidance("chaser"), on_guidance)
@@ -130,14 +138,28 @@ def test_lockstep_launch_equals_the_in_process_run_even_under_garbage_on_every_k
                         session.put(key, payload)
                         sent += 1
                 time.sleep(0.05)
+            chaser = next(int(c.split()[0]) for c in _children(ns) if "agents --id chaser" in c)
+            os.kill(chaser, signal.SIGSTOP)
+            try:
+                told = r"the world's clock has stood at tick \d+ for [\d.]+ s"  # (on the launcher's stderr)
+                wait_until(lambda: re.search(told, proc.output()), 30.0, "the stall told", poll_s=0.05)
+                time.sleep(STOPPED_S)  # (every process but the stopped one dumps its stacks meanwhile)
+            finally:
+                os.kill(chaser, signal.SIGCONT)
             assert proc.wait(RUN_S) == 0, proc.output()
     got = json.loads(out.read_text())["chasers"]["chaser"]
     want = sim_result["chasers"]["chaser"]
     _assert_same_run(got, want)
+    text = proc.output()
+    dumps = text.split("in a running run: the stacks of the launcher", 1)[1]
+    assert re.search(r'swarm/world/process\.py", line \d+ in _take_commands', dumps), dumps
+    for where in ("mothership/", "agents/", "swarm/cli/launch.py"):  # each process's own frames
+        assert f"{where}" in dumps, where
+    assert dumps.count("(most recent call first)") >= 4  # the launcher, world, mothership, 2 agents
+    assert text.count("in a running run: the stacks of") == 1  # told once for one stall
     transitions = [m["mode"] for m in want["modes"]]
     assert [e for e in seen_events if e] == transitions  # every transition, in order (CONTACT from the world)
     assert set(transitions[:-1]) <= set(seen_modes)  # every mode flown appears on guidance
-    text = proc.output()
     assert "Traceback" not in text
     for key in (keys.imu("chaser"), keys.uwb("target"), keys.command("chaser"), keys.truth("target")):
         assert re.search(rf"dropped \d+ invalid messages? on {re.escape(key)}", text), key
