@@ -113,3 +113,29 @@ def test_a_launch_that_fails_is_reported_with_what_it_said(tmp_path, monkeypatch
     msg = str(err.value)
     assert "swarm launch --agents 2 --clock realtime failed (2)" in msg
     assert "warming up" in msg and "scenario: the reason, named" in msg
+
+
+def test_a_hung_launch_is_bounded_and_reported_with_the_stacks_it_wrote(tmp_path, monkeypatch):
+    """A case's launch gets ``--timeout`` (its start plus ten times its span), and when it fails after its
+    launcher had every process write its stacks (a stall or that timeout), the error keeps the dump from its
+    first line, not only the last lines (which would hold the end of the last process's stacks)."""
+    from swarm.bench import swarm as bench
+
+    fake = tmp_path / "launch.py"
+    fake.write_text(
+        "import sys\n"
+        "print('WARNING swarm.launch: the world clock has stood at tick 40 for 30.0 s in a running run: '"
+        "      'the stacks of the launcher (pid 7), then of world (pid 8) follow', file=sys.stderr)\n"
+        "print('  File \"/x/swarm/world/process.py\", line 480 in _take_commands', file=sys.stderr)\n"
+        "for i in range(50):\n"
+        "    print(f'  frame {i}', file=sys.stderr)\n"
+        "print('called with', ' '.join(sys.argv[1:]), file=sys.stderr)\n"
+        "sys.exit(1)\n"
+    )
+    monkeypatch.setattr(bench, "LAUNCH", [sys.executable, str(fake)])
+    with pytest.raises(RuntimeError) as err:
+        bench._case(4, "realtime", 5.0, 2)
+    msg = str(err.value)
+    assert f"--timeout {bench.LAUNCH_START_S + bench.LAUNCH_SLOWEST * 5.0:g}" in msg  # the command it got
+    assert "the stacks of the launcher (pid 7), then of world (pid 8) follow" in msg
+    assert "line 480 in _take_commands" in msg and "frame 49" in msg

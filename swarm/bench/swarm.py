@@ -57,6 +57,13 @@ QUICK = {"vehicles": (2, 8), "clocks": ("lockstep", "realtime"), "span_s": 5.0, 
 FULL = {"vehicles": (2, 8, 32), "clocks": ("lockstep", "realtime"), "span_s": 20.0, "per_process": (1,)}
 DT_S = 0.01  # the docking scenario's tick
 LAUNCH = [sys.executable, "-m", "swarm.cli.main", "launch"]
+LAUNCH_START_S = 300.0
+"""The wall time a launch may take to start (128 vehicles in processes of one: ~1-2 min on 2 cores)..."""
+LAUNCH_SLOWEST = 10.0
+"""... plus this many times its simulated span (a free-running swarm runs at ~1x, lockstep faster): past
+both, ``--timeout`` ends a hung case, with the stacks of every process (``swarm/stacks.py``)."""
+STACKS_LINES = 400
+"""Of a failed launch's log, the lines kept from its stack dump on (a stall or ``--timeout`` wrote it)."""
 """The launcher each case runs (its arguments follow)."""
 
 
@@ -155,7 +162,8 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         cmd = [*LAUNCH, "docking", "--headless", "--until-docked",
                "--agents", str(pairs), "--clock", clock, "--set", f"sim.max_duration_s={span_s}",
                "--json", str(out), "--namespace", ns, "--listen", endpoint,
-               "--vehicles-per-process", str(per_process)]  # fmt: skip
+               "--vehicles-per-process", str(per_process),
+               "--timeout", f"{LAUNCH_START_S + LAUNCH_SLOWEST * span_s:g}"]  # fmt: skip
         if stagger:
             cmd += ["--set", "swarm.stagger_control=true"]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
@@ -181,8 +189,8 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         rc = proc.returncode
         if not out.exists():
             log.seek(0)
-            tail = "\n".join(log.read().splitlines()[-20:])
-            raise RuntimeError(f"swarm launch --agents {pairs} --clock {clock} failed ({rc}):\n{tail}")
+            raise RuntimeError(f"swarm launch --agents {pairs} --clock {clock} failed ({rc}):\n"
+                               f"{_what_it_said(log.read())}")  # fmt: skip
         res = json.loads(out.read_text())
     ticks = max(1, round(res["sim_time_s"] / DT_S))
     cpu = res.get("cpu_s") or {}
@@ -206,6 +214,19 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         "samples": int(lat.size),
         "ticks": ticks,
     }
+
+
+def _what_it_said(text: str) -> str:
+    """A failed launch's log, shortened: its last 20 lines, after the stacks its launcher had every process
+    write when the world's clock stood still or ``--timeout`` came (at most :data:`STACKS_LINES` from the
+    first such dump), which say where each process was."""
+    lines = text.splitlines()
+    first = next((i for i, line in enumerate(lines) if ": the stacks of the launcher (pid " in line), None)
+    tail = lines[-20:]
+    if first is None or first >= len(lines) - 20:
+        return "\n".join(tail)
+    stacks = lines[first : first + STACKS_LINES]
+    return "\n".join([*stacks, "...", *tail] if first + STACKS_LINES < len(lines) - 20 else lines[first:])
 
 
 def _probe_run(proc: subprocess.Popen, endpoint: str, ns: str, pairs: int, probe: _Probe) -> None:
