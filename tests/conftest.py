@@ -7,6 +7,8 @@ import pytest
 
 import swarm  # noqa: F401  (first: it pins numpy's BLAS kernels before any test module imports numpy)
 
+pytest_plugins = ["tests.hard_timeout"]  # the last resort against a hang no signal reaches
+
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--runslow", action="store_true", default=False, help="run tests marked slow")
