@@ -5,7 +5,7 @@ It is ``faulthandler``'s, written from C: it answers even when a thread holds th
 thread waits in a call that never returns, where a Python signal handler would never run. Every process
 enables it first thing (:func:`swarm.transport.process.process_main`, the ``swarm`` command, the router and
 the dashboard). ``swarm launch`` writes its own stacks and forwards the signal to each of its children
-(:meth:`swarm.cli.supervisor.Supervisor.dump_stacks`), and sends it itself when the world's clock stands
+(:meth:`swarm.cli.supervisor.Supervisor.dump_children`), and sends it itself when the world's clock stands
 still in a running run or ``--timeout`` ends a run that did not end: a hung swarm says where each process
 was before it is stopped.
 """

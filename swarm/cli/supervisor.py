@@ -69,17 +69,19 @@ class Supervisor:
         self.max_restarts = max_restarts
         self.backoff_s = backoff_s
         self.grace_s = grace_s
+        self._dumping = threading.Lock()  # one dump at a time (a stall's and a signal's would interleave)
 
     def dump_all(self, why: str) -> None:
-        """The launcher's own stacks, then every child's (:meth:`dump_stacks`), on stderr, announced by a
+        """The launcher's own stacks, then every child's (:meth:`dump_children`), on stderr, announced by a
         line that says ``why`` and which process dumps in which order."""
         from swarm.stacks import dump_stacks
 
-        names = [f"{c.name} (pid {c.popen.pid})" for c in self.children.values() if c.running and c.spoke]
-        _LOG.warning("%s: the stacks of the launcher (pid %d), then of %s follow", why, os.getpid(),
-                     ", ".join(names) or "no child")  # fmt: skip
-        dump_stacks()
-        self.dump_stacks()
+        with self._dumping:
+            names = [f"{c.name} (pid {c.popen.pid})" for c in self.children.values() if c.running and c.spoke]
+            _LOG.warning("%s: the stacks of the launcher (pid %d), then of %s follow", why, os.getpid(),
+                         ", ".join(names) or "no child")  # fmt: skip
+            dump_stacks()
+            self.dump_children()
 
     def start(self, child: Child, rejoin: bool = False) -> None:
         args = [sys.executable, "-m", *child.args, *(child.rejoin_args if rejoin else [])]
@@ -111,7 +113,7 @@ class Supervisor:
             except Exception:  # a closed stderr or a bad callback must not kill the pump
                 pass
 
-    def dump_stacks(self, gap_s: float = STACKS_GAP_S) -> list[str]:
+    def dump_children(self, gap_s: float = STACKS_GAP_S) -> list[str]:
         """Ask every running child that has spoken for its threads' stacks (:mod:`swarm.stacks`), one after
         the other ``gap_s`` apart so that their dumps do not interleave on the launcher's stderr; returns
         ``"<name> (pid N)"`` of each, in that order."""

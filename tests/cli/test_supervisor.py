@@ -75,7 +75,7 @@ def _wait_spoken(*children: Child) -> None:
 
 
 def test_stacks_come_from_each_child_that_has_spoken_and_none_is_harmed(sup, capfd):
-    """:meth:`Supervisor.dump_stacks` signals each running child that has printed its first line, one after
+    """:meth:`Supervisor.dump_children` signals each running child that has printed its first line, one after
     the other: each writes its threads' stacks to the launcher's stderr (the function it waits in is named)
     and goes on running. A child still starting (it has said nothing: the signal would end it before it
     enables the dump) is not signalled and lives on; neither is one that has exited."""
@@ -88,7 +88,7 @@ def test_stacks_come_from_each_child_that_has_spoken_and_none_is_harmed(sup, cap
     os.killpg(ended.popen.pid, signal.SIGKILL)
     ended.popen.wait(5.0)
     capfd.readouterr()
-    asked = sup.dump_stacks(gap_s=0.2)
+    asked = sup.dump_children(gap_s=0.2)
     assert asked == [f"agent/{i} (pid {c.popen.pid})" for i, c in enumerate(ready)]
     err = ""
     deadline = time.monotonic() + 10.0
