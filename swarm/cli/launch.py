@@ -49,6 +49,9 @@ from swarm.step.outcome import chaser_summary, run_summary
 from swarm.world.checkpoint import EXIT_BAD_CHECKPOINT
 
 _LOG = logging.getLogger("swarm.launch")
+HUNG_TICKS = 3
+"""``--hung-ticks``'s default: an agent whose due command the lockstep world went without this many times in
+a row (``--step-timeout`` each, 5 s) is hung, not slow: its stacks, then it is killed and restarted."""
 STALL_S = 30.0
 """``--stall-s``'s default [s]: far beyond a tick's wait for a missing command (``--step-timeout``, 5 s) or
 an agent's restart (a few seconds), so that only a hung process (or a stopped one) reaches it."""
@@ -112,6 +115,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help=f"when the world's clock stands still this long in a running docking run, say so with every "
         f"process's stacks (default {STALL_S:g}; kill -USR1 <launcher pid> asks for them at any time)",
     )  # fmt: skip
+    g.add_argument(
+        "--hung-ticks", type=count("--hung-ticks"), default=HUNG_TICKS, metavar="N",
+        help=f"a lockstep agent whose due command the world went without N times in a row (--step-timeout "
+        f"each) is hung: "
+        f"its stacks, then it is killed and restarted like a lost one (default {HUNG_TICKS}; 0: never)",
+    )  # fmt: skip
     add_world_timeouts(g)
     p.set_defaults(func=run)
 
@@ -163,10 +172,12 @@ class RunLog:
     """What the launcher hears of a run (thread-safe): the world's events, each agent's mode events,
     guidance and summary, and whether the world's clock stands still (:class:`StallWatch`)."""
 
-    def __init__(self, stall_s: float = STALL_S) -> None:
+    def __init__(self, stall_s: float = STALL_S, hung_ticks: int = HUNG_TICKS) -> None:
         from swarm.cli.supervisor import StallWatch
 
         self.stall = StallWatch(stall_s)
+        self.hung_ticks = hung_ticks
+        self.hung: queue.SimpleQueue = queue.SimpleQueue()  # agents found hung, for the supervising loop
         self.lock = threading.Lock()
         self.run_end: dict | None = None
         self.run_start: dict | None = None
@@ -190,9 +201,22 @@ class RunLog:
                 self.ended.set()
             elif msg.kind == "world_resumed":
                 self.resumed.append(msg.data)
+            elif msg.kind == "agent_missing":
+                self._on_missing(msg.data)
         if msg.kind == "world_resumed":
             _LOG.warning("world resumed from its checkpoint at tick %s (t = %.2f s)", msg.data.get("tick"),
                          msg.t_s)  # fmt: skip
+
+    def _on_missing(self, data: dict) -> None:
+        """A lockstep tick the world stepped without some agents' commands (``agent_missing``, whose
+        ``in_a_row`` counts each one's due commands missing since its last): an agent missing
+        :attr:`hung_ticks` in a row is queued on :attr:`hung`, once per such run."""
+        in_a_row = data.get("in_a_row")
+        if self.hung_ticks <= 0 or not isinstance(in_a_row, dict):
+            return
+        for vid, n in in_a_row.items():
+            if n == self.hung_ticks:
+                self.hung.put((vid, n))
 
     def on_event(self, key: str, msg, keys) -> None:
         vid = (keys.parse(key) or (None, None))[1]
@@ -334,7 +358,8 @@ def run(args: argparse.Namespace) -> int:
                 flush=True,
             )
             drops = DropCounter()
-            box = [RunLog(args.stall_s)]  # the current run's log: the callbacks always feed the current one
+            # the current run's log: the callbacks always feed the current one
+            box = [RunLog(args.stall_s, args.hung_ticks)]
             subscribe_decoded(
                 session, keys.world_event(), Event, lambda k, m: box[0].on_world_event(k, m), drops
             )
@@ -393,7 +418,7 @@ def run(args: argparse.Namespace) -> int:
                             if not asked:
                                 stop.wait(3.0)  # a moment to look at the docked pair
                             sup.stop_all(keep=("dashboard",))
-                            box[0] = RunLog(args.stall_s)
+                            box[0] = RunLog(args.stall_s, args.hung_ticks)
                             continue
                         if not args.until_docked:
                             _hold(args, stop, wall0)
@@ -497,6 +522,7 @@ def _supervise(
             _LOG.error("--timeout %.0f s reached", args.timeout)
             sup.dump_all(f"--timeout {args.timeout:g} s reached before the run ended")
             return "failed"
+        _restart_hung(args, sup, log, child_of, announce)
         stood = log.stall.check(time.monotonic())
         if stood is not None:
             why = f"the world's clock has stood at tick {stood[0]} for {stood[1]:.1f} s in a running run"
@@ -547,6 +573,30 @@ def _supervise(
             )
             _LOG.warning("%s restarted (pid %d), %s", c.name, c.popen.pid, how)
     return "stopped"
+
+
+def _restart_hung(args, sup, log: RunLog, child_of: dict[str, str], announce=None) -> None:
+    """Each agent :class:`RunLog` found hung: its process's stacks (``swarm/stacks.py``), then it is killed
+    and restarted as a lost one (:meth:`~swarm.cli.supervisor.Supervisor.lost`; a lockstep world waits for
+    it to rejoin). A hung process keeps its liveliness token: without this the run would go on at one
+    ``--step-timeout`` per tick."""
+    while True:
+        try:
+            vid, ticks = log.hung.get_nowait()
+        except queue.Empty:
+            return
+        name = child_of.get(vid)
+        child = sup.children.get(name) if name is not None else None
+        if child is None or not child.running:
+            continue
+        why = f"{ticks} due commands missing in a row ({args.step_timeout:g} s each): hung"
+        _LOG.error("%s (%s): its stacks follow, then it is restarted", name, why)
+        sup.dump_children(names=(name,))
+        what = sup.lost(name, why)
+        if what:
+            _LOG.warning("%s", what)
+        if announce is not None and what:
+            announce(vid, "lost", {"why": why, "action": what, "role": "agent", "id": vid})
 
 
 def _wait_summaries(sc, log: RunLog, sup, timeout_s: float = 3.0, *, child_of: dict[str, str]) -> None:

@@ -113,14 +113,16 @@ class Supervisor:
             except Exception:  # a closed stderr or a bad callback must not kill the pump
                 pass
 
-    def dump_children(self, gap_s: float = STACKS_GAP_S) -> list[str]:
-        """Ask every running child that has spoken for its threads' stacks (:mod:`swarm.stacks`), one after
-        the other ``gap_s`` apart so that their dumps do not interleave on the launcher's stderr; returns
-        ``"<name> (pid N)"`` of each, in that order."""
+    def dump_children(self, gap_s: float = STACKS_GAP_S, names: tuple[str, ...] | None = None) -> list[str]:
+        """Ask every running child that has spoken (or those of ``names``) for its threads' stacks
+        (:mod:`swarm.stacks`), one after the other ``gap_s`` apart so that their dumps do not interleave on
+        the launcher's stderr; returns ``"<name> (pid N)"`` of each, in that order."""
         from swarm.stacks import STACKS_SIGNAL
 
         asked = []
         for c in list(self.children.values()):
+            if names is not None and c.name not in names:
+                continue
             popen = c.popen
             if popen is None or popen.poll() is not None or not c.spoke:
                 continue

@@ -139,6 +139,7 @@ class WorldProcess:
         self._delay_rng = np.random.default_rng(np.random.SeedSequence(entropy=seed, spawn_key=(2**16,)))
         self.modes = dict.fromkeys(self.ids, "HOLD")  # each agent's mode, from its last command
         self.missing_ticks = 0  # lockstep ticks stepped without some live agent's command
+        self._missed_in_a_row: dict[str, int] = {}  # per agent: its due commands missing since its last one
         # free-running: vehicle-ticks stepped (of vehicles whose agent has commanded), and those stepped
         # with an out-of-date command (the one of the vehicle's last control tick had not come: the one
         # before was held); and the control ticks' commands due, and those that came after their tick
@@ -486,7 +487,11 @@ class WorldProcess:
             if time.monotonic() > deadline:
                 break
         commands, missing = self.barrier.wait(k, 0)
+        for vid in commands:
+            self._missed_in_a_row.pop(vid, None)
         if missing:
+            for vid in missing:
+                self._missed_in_a_row[vid] = self._missed_in_a_row.get(vid, 0) + 1
             # a live agent that sends no command is not flying its vehicle: its actuators go idle (nozzles
             # closed, wheels stopped) until its next command, as for a lost one; holding its last command
             # would keep a thrust on for as long as the agent is stuck (PX4's offboard-loss failsafe)
@@ -495,7 +500,9 @@ class WorldProcess:
                 "tick %d: no command from %s after %.1f s; their actuators idle until one comes",
                 k, missing, self.step_timeout_s,
             )  # fmt: skip
-            self._world_event("agent_missing", k * self.sc.dt_s, {"tick": k, "agents": missing})
+            in_a_row = {vid: self._missed_in_a_row[vid] for vid in missing}  # (the launcher's hung agents)
+            self._world_event("agent_missing", k * self.sc.dt_s, {"tick": k, "agents": missing,
+                                                                  "in_a_row": in_a_row})  # fmt: skip
             for vid in missing:
                 self._idle(vid)
         self._apply(k, commands)

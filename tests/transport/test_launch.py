@@ -33,6 +33,7 @@ SEED = 1
 RUN_S = 180.0  # wall-time ceiling of one launched docking (measured ~25 s on this 2-core VM)
 STALL_S = 1.0  # --stall-s of the stalled-agent check: well under the world's 5 s wait for a command
 STOPPED_S = 1.0  # how long the agent stays stopped after the stall is told (then the run goes on)
+HUNG_TICKS = 2  # --hung-ticks of the hung-agent check, at --step-timeout 1 s: a 2 s stop is a hang there
 
 
 def _launch(procs: Procs, ns: str, *extra: str, json_path=None, headless: bool = True):
@@ -164,6 +165,39 @@ def test_lockstep_launch_equals_the_in_process_run_even_under_garbage_on_every_k
     for key in (keys.imu("chaser"), keys.uwb("target"), keys.command("chaser"), keys.truth("target")):
         assert re.search(rf"dropped \d+ invalid messages? on {re.escape(key)}", text), key
     assert sent > 1000
+
+
+def test_a_hung_agent_is_told_with_its_stacks_killed_and_restarted_and_the_run_goes_on(tmp_path):
+    """A hung agent keeps its liveliness token, so nothing else tells the launcher. Here the chaser's agent
+    is stopped (SIGSTOP) for good in a lockstep run: the world steps on without its command after each
+    ``--step-timeout`` and says so (``agent_missing``); after ``--hung-ticks`` such commands in a row the
+    launcher says the agent is hung, kills it and restarts it like a lost one; it rejoins, and the run
+    ends docked or in a safe hold without a keep-out violation. The target, never late, is left alone."""
+    ns = _ns()
+    with Procs() as procs:
+        out = tmp_path / "launch.json"
+        proc, _ = _launch(procs, ns, "--until-docked", "--step-timeout", "1", "--hung-ticks", str(HUNG_TICKS),
+                          json_path=out)  # fmt: skip
+        proc.wait_for_line(r"^swarm up:", 120.0)
+        time.sleep(2.0)  # into the run
+        wait_until(lambda: any("agents --id chaser" in c for c in _children(ns)), 30.0, "the chaser's agent")
+        chaser = next(int(c.split()[0]) for c in _children(ns) if "agents --id chaser" in c)
+        os.kill(chaser, signal.SIGSTOP)
+        hung = rf"agent/chaser \({HUNG_TICKS} due commands missing in a row \(1 s each\): hung\)"
+        wait_until(lambda: re.search(hung, proc.output()), 60.0, "the hung agent told", poll_s=0.05)
+        wait_until(lambda: re.search(r"agent/chaser restarted \(pid \d+\), rejoining the run", proc.output()),
+                   60.0, "the chaser's restart", poll_s=0.05)  # fmt: skip
+        rc = proc.wait(RUN_S)
+    text = proc.output()
+    assert "Traceback" not in text
+    assert len(re.findall(r"tick \d+: no command from \['chaser'\] after 1\.0 s", text)) >= HUNG_TICKS, text
+    assert re.search(hung + r": its stacks follow, then it is restarted", text), text
+    assert "re-initialised from its sensors" in text
+    res = json.loads(out.read_text())
+    assert res["restarts"] == {"mothership": 0, "agent/chaser": 1, "agent/target": 0, "world": 0}, res
+    c = res["chasers"]["chaser"]
+    assert c["docked"] or c["final_mode"] in ("HOLD", "ABORT"), (rc, c)
+    assert not c["keepout_violated"]
 
 
 def test_killed_dashboard_agent_and_mothership_are_restarted_and_the_run_goes_on(tmp_path):
