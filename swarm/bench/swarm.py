@@ -57,6 +57,7 @@ QUICK = {"vehicles": (2, 8), "clocks": ("lockstep", "realtime"), "span_s": 5.0, 
 FULL = {"vehicles": (2, 8, 32), "clocks": ("lockstep", "realtime"), "span_s": 20.0, "per_process": (1,)}
 DT_S = 0.01  # the docking scenario's tick
 LAUNCH = [sys.executable, "-m", "swarm.cli.main", "launch"]
+"""The launcher each case runs (its arguments follow)."""
 LAUNCH_START_S = 300.0
 """The wall time a launch may take to start (128 vehicles in processes of one: ~1-2 min on 2 cores)..."""
 LAUNCH_SLOWEST = 10.0
@@ -64,7 +65,6 @@ LAUNCH_SLOWEST = 10.0
 both, ``--timeout`` ends a hung case, with the stacks of every process (``swarm/stacks.py``)."""
 STACKS_LINES = 400
 """Of a failed launch's log, the lines kept from its stack dump on (a stall or ``--timeout`` wrote it)."""
-"""The launcher each case runs (its arguments follow)."""
 
 
 def parse_vehicles(text: str) -> tuple[int, ...]:
@@ -222,11 +222,10 @@ def _what_it_said(text: str) -> str:
     first such dump), which say where each process was."""
     lines = text.splitlines()
     first = next((i for i, line in enumerate(lines) if ": the stacks of the launcher (pid " in line), None)
-    tail = lines[-20:]
     if first is None or first >= len(lines) - 20:
-        return "\n".join(tail)
-    stacks = lines[first : first + STACKS_LINES]
-    return "\n".join([*stacks, "...", *tail] if first + STACKS_LINES < len(lines) - 20 else lines[first:])
+        return "\n".join(lines[-20:])
+    stacks, rest = lines[first : first + STACKS_LINES], lines[first + STACKS_LINES :]
+    return "\n".join([*stacks, "...", *rest[-20:]] if len(rest) > 20 else [*stacks, *rest])
 
 
 def _probe_run(proc: subprocess.Popen, endpoint: str, ns: str, pairs: int, probe: _Probe) -> None:

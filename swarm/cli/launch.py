@@ -118,8 +118,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--hung-ticks", type=count("--hung-ticks"), default=HUNG_TICKS, metavar="N",
         help=f"a lockstep agent whose due command the world went without N times in a row (--step-timeout "
-        f"each) is hung: "
-        f"its stacks, then it is killed and restarted like a lost one (default {HUNG_TICKS}; 0: never)",
+        f"each) is hung: its stacks, then it is killed and restarted like a lost one (default {HUNG_TICKS}; "
+        "0: never)",
     )  # fmt: skip
     add_world_timeouts(g)
     p.set_defaults(func=run)
@@ -595,8 +595,8 @@ def _restart_hung(args, sup, log: RunLog, child_of: dict[str, str], announce=Non
         what = sup.lost(name, why)
         if what:
             _LOG.warning("%s", what)
-        if announce is not None and what:
-            announce(vid, "lost", {"why": why, "action": what, "role": "agent", "id": vid})
+            if announce is not None:
+                announce(vid, "lost", {"why": why, "action": what, "role": "agent", "id": vid})
 
 
 def _wait_summaries(sc, log: RunLog, sup, timeout_s: float = 3.0, *, child_of: dict[str, str]) -> None:

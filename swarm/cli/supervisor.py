@@ -69,7 +69,9 @@ class Supervisor:
         self.max_restarts = max_restarts
         self.backoff_s = backoff_s
         self.grace_s = grace_s
-        self._dumping = threading.Lock()  # one dump at a time (a stall's and a signal's would interleave)
+        # one dump at a time (a stall's, a signal's and a hung agent's would interleave); dump_all holds it
+        # around dump_children
+        self._dumping = threading.RLock()
 
     def dump_all(self, why: str) -> None:
         """The launcher's own stacks, then every child's (:meth:`dump_children`), on stderr, announced by a
@@ -77,7 +79,7 @@ class Supervisor:
         from swarm.stacks import dump_stacks
 
         with self._dumping:
-            names = [f"{c.name} (pid {c.popen.pid})" for c in self.children.values() if c.running and c.spoke]
+            names = [f"{c.name} (pid {c.popen.pid})" for c in self._answering()]
             _LOG.warning("%s: the stacks of the launcher (pid %d), then of %s follow", why, os.getpid(),
                          ", ".join(names) or "no child")  # fmt: skip
             dump_stacks()
@@ -120,19 +122,22 @@ class Supervisor:
         from swarm.stacks import STACKS_SIGNAL
 
         asked = []
-        for c in list(self.children.values()):
-            if names is not None and c.name not in names:
-                continue
-            popen = c.popen
-            if popen is None or popen.poll() is not None or not c.spoke:
-                continue
-            try:
-                os.kill(popen.pid, STACKS_SIGNAL)
-            except (ProcessLookupError, PermissionError):
-                continue
-            asked.append(f"{c.name} (pid {popen.pid})")
-            time.sleep(gap_s)
+        with self._dumping:
+            for c in self._answering(names):
+                pid = c.popen.pid
+                try:
+                    os.kill(pid, STACKS_SIGNAL)
+                except (ProcessLookupError, PermissionError):
+                    continue
+                asked.append(f"{c.name} (pid {pid})")
+                time.sleep(gap_s)
         return asked
+
+    def _answering(self, names: tuple[str, ...] | None = None) -> list[Child]:
+        """The running children (of ``names``, if given) that have spoken: those that answer the stacks
+        signal."""
+        return [c for c in list(self.children.values())
+                if (names is None or c.name in names) and c.running and c.spoke]  # fmt: skip
 
     def lost(self, name: str, why: str) -> str:
         """``name`` was seen lost (its liveliness token went, or it exited): kill what is left of it and
@@ -206,7 +211,7 @@ def forward_stacks_signal(sup: Supervisor) -> Callable[[], None]:
     faulthandler.unregister(STACKS_SIGNAL)  # the `swarm` command's own dump, which would not forward
 
     def on_signal(_signum: int, _frame: object) -> None:
-        threading.Thread(target=sup.dump_all, args=(f"{STACKS_SIGNAL.name}",), daemon=True).start()
+        threading.Thread(target=sup.dump_all, args=(STACKS_SIGNAL.name,), daemon=True).start()
 
     signal.signal(STACKS_SIGNAL, on_signal)
 

@@ -204,7 +204,7 @@ def process_main(
 ) -> int:
     """``python -m <process>``: parse, configure logging (stderr), run until done or a stop signal.
     Bad input (a flag, the scenario) prints one ``<prog>: error: ...`` line and returns 2."""
-    enable_stack_dumps()  # before anything is printed on stdout: the launcher signals a child that has
+    enable_stack_dumps()  # before its ready line: the launcher signals only a child that has printed one
     parser = argparse.ArgumentParser(prog=prog, description=description)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     add_arguments(parser)
