@@ -112,8 +112,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     g.add_argument(
         "--stall-s", type=positive_float("--stall-s"), default=STALL_S, metavar="S",
-        help=f"when the world's clock stands still this long in a running docking run, say so with every "
-        f"process's stacks (default {STALL_S:g}; kill -USR1 <launcher pid> asks for them at any time)",
+        help=f"when the world's clock stands still this long in a running run (docking or landing), say "
+        f"so with every process's stacks (default {STALL_S:g}; kill -USR1 <launcher pid> asks for them at "
+        "any time)",
     )  # fmt: skip
     g.add_argument(
         "--hung-ticks", type=count("--hung-ticks"), default=HUNG_TICKS, metavar="N",
@@ -523,10 +524,7 @@ def _supervise(
             sup.dump_all(f"--timeout {args.timeout:g} s reached before the run ended")
             return "failed"
         _restart_hung(args, sup, log, child_of, announce)
-        stood = log.stall.check(time.monotonic())
-        if stood is not None:
-            why = f"the world's clock has stood at tick {stood[0]} for {stood[1]:.1f} s in a running run"
-            threading.Thread(target=sup.dump_all, args=(why,), daemon=True).start()
+        log.stall.tell(sup, time.monotonic())
         try:
             role, pid, alive, t_seen = changes.get(timeout=0.05)
         except queue.Empty:

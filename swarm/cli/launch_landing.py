@@ -24,6 +24,10 @@ UAV's late ticks.
 ``--secure`` gives every process its own certificate and the router an access control list of what each
 may publish and subscribe (:mod:`swarm.transport.security`, mission ``landing``), as for a docking swarm.
 
+A hung process keeps its liveliness token; the world's clock says it: when it stands at one tick for
+``--stall-s`` in a running run, the launcher writes every process's Python stacks (README, "A hung
+process"), as for a docking swarm, and ``--timeout`` does so before it stops an unfinished run.
+
 Run-time faults come from ``swarm fault`` (``camera_loss``, ``uwb_dropout``: :mod:`swarm.world.landing`).
 Not yet for a landing: restarts, run controls, the dashboard's Faults panel.
 """
@@ -100,12 +104,12 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         start_recorder,
     )
     from swarm.cli.sim import print_landing
-    from swarm.cli.supervisor import Child, Supervisor, forward_stacks_signal
+    from swarm.cli.supervisor import Child, StallWatch, Supervisor, forward_stacks_signal
     from swarm.config import parse_override
     from swarm.landing_scenario import load_landing
     from swarm.step.landing import landing_summary
     from swarm.transport.keys import Keys
-    from swarm.transport.messages import DropCounter, Event
+    from swarm.transport.messages import Clock, DropCounter, Event
     from swarm.transport.security import agent_name
     from swarm.transport.session import open_session, subscribe_decoded
 
@@ -149,8 +153,14 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                         got["summaries"][parsed[1]] = msg.data
                         cond.notify_all()
 
+            stall = StallWatch(args.stall_s)  # a hung process keeps its token: the clock says it
+
+            def on_clock(_key: str, msg: Clock) -> None:
+                stall.on_clock(msg.tick, msg.state, time.monotonic())
+
             subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
             subscribe_decoded(session, keys.agent_all("event"), Event, on_agent_event, drops)
+            subscribe_decoded(session, keys.world_clock(), Clock, on_clock, drops)
             recorder = start_recorder(args, session, keys)  # --record: on this router session
             try:
                 if not args.headless:
@@ -183,6 +193,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                             _LOG.error("--timeout: %.0f s passed before the run ended", args.timeout)
                             sup.dump_all(f"--timeout {args.timeout:g} s reached before the run ended")
                             break
+                        stall.tell(sup, time.monotonic())
                         dead = sup.exited()
                         for c in [c for c in dead if c.name == "dashboard"]:  # the run does not need it
                             _LOG.warning("the dashboard exited with status %s; the run goes on without it",

@@ -250,3 +250,13 @@ class StallWatch:
                 return None
             self.fired = True
             return self.tick, now - self.since
+
+    def tell(self, sup: Supervisor, now: float) -> bool:
+        """At a stall (:meth:`check`), every process's stacks (:meth:`Supervisor.dump_all`, on a thread: the
+        children are asked one after the other while the launcher's loop goes on). Whether it told."""
+        stood = self.check(now)
+        if stood is None:
+            return False
+        why = f"the world's clock has stood at tick {stood[0]} for {stood[1]:.1f} s in a running run"
+        threading.Thread(target=sup.dump_all, args=(why,), daemon=True).start()
+        return True

@@ -26,6 +26,10 @@ from swarm.transport.messages import Command, Fault, Imu, Uwb, Vision, encode
 from swarm.transport.session import ZenohArgs, open_session
 from tests.transport.procs import Procs, free_port, loopback
 
+STALL_S = 1.0  # --stall-s of the launched run: well under its --step-timeout, far above a paced tick (1 ms)
+STOPPED_S = 1.0  # how long the stopped agent host stays stopped after the stall is told
+STALL_TOLD = r"the world's clock has stood at tick \d+ for [\d.]+ s in a running run"
+"""The launcher's line at a stall (on its stderr), before every process's stacks."""
 FAULT = ("camera_loss", 9.0, 3.0, ["uav1"])
 """A run-time fault sent to the launched swarm (as ``swarm fault`` does) as soon as its run starts: uav1's
 pad hidden from its camera during its descent (swarm sim: DESCEND at 8.2 s, FINAL at 11.0 s), 0.9 s of wall
@@ -44,6 +48,7 @@ def launched(tmp_path_factory):
     args = [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--headless", "--seed", "0",
             "--namespace", ns, "--listen", loopback(free_port()), "--json", str(out), "--record", str(rec),
             "--pace", "scaled:10", "--vehicles-per-process", "2",
+            "--stall-s", str(STALL_S), "--step-timeout", "60",  # (a stopped host leaves no tick uncommanded)
             "--timeout", "400"]  # fmt: skip
     endpoint = loopback(free_port())
     args[args.index("--listen") + 1] = endpoint
@@ -65,6 +70,7 @@ def launched(tmp_path_factory):
             session.put(Keys(ns).fault(), encode(refused))
             for sub in subs:
                 sub.undeclare()
+            _stop_a_host_past_the_stall(proc, ns)
             deadline = time.monotonic() + 3.0
             while time.monotonic() < deadline and proc.popen.poll() is None:
                 for key, payload in injected:
@@ -74,6 +80,23 @@ def launched(tmp_path_factory):
         text = proc.output()
     garbage = {payload for _, payload in injected}
     return code, text, json.loads(out.read_text()) if out.exists() else None, sc, rec, ns, garbage
+
+
+def _stop_a_host_past_the_stall(proc, ns: str) -> None:
+    """Stop (SIGSTOP) the agent host of uav1 and uav2 until the launcher tells the world's clock stood still
+    past ``--stall-s``, and a little longer (every other process dumps its stacks meanwhile), then let it go
+    on: a hung process keeps its liveliness token, only the clock shows it."""
+    out = subprocess.run(["ps", "-ww", "-eo", "pid,args"], capture_output=True, text=True).stdout
+    host = next(int(line.split()[0]) for line in out.splitlines()
+                if f"--namespace {ns}" in line and "agents.landing --id uav1,uav2" in line)  # fmt: skip
+    os.kill(host, signal.SIGSTOP)
+    try:
+        deadline = time.monotonic() + 60.0
+        while not re.search(STALL_TOLD, proc.output()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(STOPPED_S)
+    finally:
+        os.kill(host, signal.SIGCONT)
 
 
 def _garbage(keys, ids: list[str]) -> list[tuple[str, bytes]]:
@@ -119,6 +142,14 @@ def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
     # the run-time fault: applied, and the refused one named with its reason
     assert "fault applied: camera_loss on ['uav1'] from t = 9.00 s" in text, text
     assert "fault refused: gyro_bias_step: kind: a landing world models camera_loss and uwb_dropout" in text
+    # an agent host stopped (SIGSTOP) after the start: the world's clock stood still past --stall-s, told
+    # once with the stacks of the launcher, the world (waiting for the stopped host's commands), the other
+    # host and the stopped one once it went on; the run is still swarm sim's (below)
+    assert len(re.findall(STALL_TOLD, text)) == 1, text
+    dumps = text.split("in a running run: the stacks of the launcher", 1)[1]
+    assert re.search(r'swarm/world/landing\.py", line \d+ in ', dumps), dumps
+    assert "agents/landing.py" in dumps and "swarm/cli/launch_landing.py" in dumps, dumps
+    assert dumps.count("(most recent call first)") >= 4  # the launcher, the world, two agent hosts
     want = run_landing_fleet(sc, seed=0, record_series=False, faults=[FAULT])
     assert want["uavs"]["uav1"]["retries"] == 1  # the pad lost for 1.5 s in the descent: it climbed, retried
     assert set(got["uavs"]) == set(want["uavs"]) == {"uav1", "uav2", "uav3", "uav4"}
