@@ -22,6 +22,7 @@ Exit status: 0 every chaser docked, 1 not (or the run failed), 2 bad input, 130 
 from __future__ import annotations
 
 import argparse
+import collections
 import itertools
 import json
 import logging
@@ -55,6 +56,11 @@ a row (``--step-timeout`` each, 5 s) is hung, not slow: its stacks, then it is k
 STALL_S = 30.0
 """``--stall-s``'s default [s]: far beyond a tick's wait for a missing command (``--step-timeout``, 5 s) or
 an agent's restart (a few seconds), so that only a hung process (or a stopped one) reaches it."""
+
+GUIDANCE_KEPT = 256
+"""Guidance messages the launcher keeps per chaser (25 s at 10 Hz): only the last one before its contact is
+read, and none after a known contact is kept, so this need only span the contact event's way to the
+launcher."""
 
 VISION_COUNTS = ("features_accepted", "pose_accepted")
 
@@ -183,7 +189,11 @@ class RunLog:
         self.run_end: dict | None = None
         self.run_start: dict | None = None
         self.events: dict[str, list] = {}
-        self.guidance: dict[str, list] = {}
+        # per chaser, bounded (a long run of many chasers sent millions): the latest GUIDANCE_KEPT guidance
+        # messages, none past its contact once that is known, and each Algorithm 1 record once (summarize)
+        self.guidance: dict[str, collections.deque] = {}
+        self.decisions: dict[str, dict[float, tuple[float, dict]]] = {}  # record's t_s -> (its message's, it)
+        self._contact_t: dict[str, float] = {}  # a chaser's contact (or collision) time [s]
         self.summaries: dict[str, dict] = {}
         self.ended = threading.Event()
         self.t_s = 0.0  # the world's latest clock time [s]
@@ -226,11 +236,21 @@ class RunLog:
                 self.summaries[vid] = msg.data
             else:
                 self.events.setdefault(vid, []).append(msg)
+                if msg.kind in ("contact", "collision") and vid not in self._contact_t:
+                    self._contact_t[vid] = msg.data["t_s"]
 
     def on_guidance(self, key: str, msg, keys) -> None:
+        """Keep what :func:`summarize` reads of a chaser's guidance: its latest messages up to its contact
+        (the last one gives the final mode and radii) and each Algorithm 1 record with the time of the
+        first message that carried it (the records up to the contact)."""
         vid = (keys.parse(key) or (None, None))[1]
         with self.lock:
-            self.guidance.setdefault(vid, []).append(msg)
+            if msg.t_s > self._contact_t.get(vid, float("inf")):
+                return  # after its contact: never read (and a docked chaser flies on while others do not)
+            self.guidance.setdefault(vid, collections.deque(maxlen=GUIDANCE_KEPT)).append(msg)
+            dec = msg.decision
+            if dec is not None:
+                self.decisions.setdefault(vid, {}).setdefault(dec["t_s"], (msg.t_s, dec))
 
 
 def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
@@ -250,14 +270,9 @@ def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
                 {"mode": d["to"], "t_s": d["t_s"], "range_m": d["range_m"], "reason": d["reason"]}
                 for d in picked
             ]
-            guid = [g for g in log.guidance.get(cid, []) if g.t_s <= t_end]
+            guid = [g for g in log.guidance.get(cid, ()) if g.t_s <= t_end]
             last = guid[-1] if guid else None
-            decisions, seen = [], set()
-            for g in guid:
-                dec = g.decision
-                if dec is not None and dec["t_s"] not in seen:
-                    seen.add(dec["t_s"])
-                    decisions.append(dec)
+            decisions = [dec for t_s, dec in log.decisions.get(cid, {}).values() if t_s <= t_end]
             summary = log.summaries.get(cid, {})
             counts = summary.get("counts", {})
             c = chaser_summary(
