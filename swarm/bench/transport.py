@@ -5,7 +5,10 @@ Three measurements in one run, all between separate processes on loopback, in th
 
 1. raw Zenoh ping-pong round trip of a 64-byte payload between two client processes (the floor), and the
    echoing process's CPU per message received and published again, from Zenoh's callback thread and
-   handed to a main thread as the swarm's processes do (the per-message floor of a Python process);
+   handed to a main thread as the swarm's processes do (the per-message floor of a Python process); and
+   the CPU of one ``put`` (and, for scale, of numpy's sum of 1000 floats) back to back and after the
+   thread slept :data:`IDLE_S`, as a swarm process does between ticks: a woken thread finds its caches
+   (on a VM, its whole vCPU) cold, and that, not the code, is most of a 100 Hz process's cost per message;
 2. the lockstep tick period of ``swarm launch docking --agents N`` for N = 1, 4, 16 pairs: wall time per
    world tick over a fixed simulated span (``run_end``'s ``wall_s`` / ticks), and the real-time factor;
 3. sensor-to-estimate latency in ``realtime`` mode: a probe client stamps the arrival of the chaser's
@@ -30,6 +33,11 @@ import msgpack
 import numpy as np
 
 from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session
+
+IDLE_S = 0.01
+"""The sleep before each "after idle" sample of the wake cost: a tick of the 100 Hz swarm."""
+WAKE_SAMPLES = 200
+"""Samples of each wake-cost figure (the first tenth dropped: warm-up)."""
 
 QUICK = {"rtt_samples": 500, "pairs": (1, 4), "span_s": 5.0, "latency_s": 4.0}
 FULL = {"rtt_samples": 3000, "pairs": (1, 4, 16), "span_s": 10.0, "latency_s": 10.0}
@@ -80,7 +88,7 @@ def _pong(endpoint: str, ns: str, style: str = "direct") -> None:
         print(json.dumps({"cpu_us_per_echo": 1e6 * cpu / max(n[0], 1), "echoes": n[0]}), flush=True)
 
 
-def _ping(endpoint: str, ns: str, n: int) -> None:
+def _ping(endpoint: str, ns: str, n: int, wake: bool = False) -> None:
     import zenoh
 
     got = threading.Event()
@@ -100,27 +108,47 @@ def _ping(endpoint: str, ns: str, n: int) -> None:
                 continue
             if i >= 50:  # warm-up
                 rtts.append(time.perf_counter() - t0)
-        print(json.dumps(rtts), flush=True)
+        print(json.dumps({"rtts": rtts, "wake": _wake_cost(pub, payload) if wake else None}), flush=True)
 
 
-def _rtt(n: int, style: str = "direct") -> dict:
+def _wake_cost(pub, payload: bytes) -> dict:
+    """This thread's CPU [us, median] for one ``pub.put(payload)`` and for numpy's sum of 1000 floats, back to
+    back (``warm``) and each after a sleep of :data:`IDLE_S` (``idle``)."""
+    x = np.zeros(1000)
+    out = {}
+    for name, op in (("put", lambda: pub.put(payload)), ("numpy_sum", x.sum)):
+        for how, pause in (("warm", 0.0), ("idle", IDLE_S)):
+            cpu = []
+            for _ in range(WAKE_SAMPLES):
+                if pause:
+                    time.sleep(pause)
+                c0 = time.thread_time()
+                op()
+                cpu.append(time.thread_time() - c0)
+            out[f"{name}_{how}_us"] = 1e6 * float(np.median(cpu[WAKE_SAMPLES // 10 :]))
+    return out
+
+
+def _rtt(n: int, style: str = "direct", wake: bool = False) -> dict:
     """Ping-pong between two client processes through a router: the round trip [us] and the pong's CPU per
-    echo [us] (:func:`_pong`'s ``style``)."""
+    echo [us] (:func:`_pong`'s ``style``); with ``wake``, the pinging process's :func:`_wake_cost` too."""
     endpoint, ns = free_loopback_endpoint(), f"bench{os.getpid()}"
     with _router(endpoint):
         pong = subprocess.Popen([sys.executable, "-m", "swarm.bench.transport", "pong", endpoint, ns, style],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
         try:
             assert pong.stdout.readline().strip() == "pong ready"
-            ping = [sys.executable, "-m", "swarm.bench.transport", "ping", endpoint, ns, str(n)]
+            ping = [sys.executable, "-m", "swarm.bench.transport", "ping", endpoint, ns, str(n),
+                    *(["wake"] if wake else [])]  # fmt: skip
             out = subprocess.run(ping, capture_output=True, text=True, timeout=300)
-            rtts = np.array(json.loads(out.stdout.strip().splitlines()[-1])) * 1e6
+            got = json.loads(out.stdout.strip().splitlines()[-1])
+            rtts = np.array(got["rtts"]) * 1e6
         finally:
             pong.stdin.close()
             echo = json.loads(pong.stdout.readline() or "{}")
             pong.wait(10)
     return {"median": float(np.median(rtts)), "p99": float(np.percentile(rtts, 99)), "n": len(rtts),
-            "pong_cpu_us_per_echo": echo.get("cpu_us_per_echo")}  # fmt: skip
+            "pong_cpu_us_per_echo": echo.get("cpu_us_per_echo"), "wake_cost_us": got["wake"]}  # fmt: skip
 
 
 def _lockstep(pairs: int, span_s: float) -> dict:
@@ -181,7 +209,7 @@ def _latency(duration_s: float) -> dict:
 
 
 def run(preset: dict) -> dict:
-    rtt = _rtt(preset["rtt_samples"])
+    rtt = _rtt(preset["rtt_samples"], wake=True)
     handoff = _rtt(preset["rtt_samples"], "handoff")
     lock = {str(n): _lockstep(n, preset["span_s"]) for n in preset["pairs"]}
     latency = _latency(preset["latency_s"])
@@ -209,6 +237,7 @@ def run(preset: dict) -> dict:
 
 def format_report(r: dict) -> str:
     rtt, hand = r["zenoh_rtt_us"], r["handoff_rtt_us"]
+    w = rtt["wake_cost_us"]
     lines = [
         f"Zenoh ping-pong RTT (64 B, two clients via the router): median {rtt['median']:.0f} us, "
         f"p99 {rtt['p99']:.0f} us",
@@ -216,6 +245,9 @@ def format_report(r: dict) -> str:
         f"{rtt['pong_cpu_us_per_echo']:.0f} us from Zenoh's callback thread, "
         f"{hand['pong_cpu_us_per_echo']:.0f} us handed to a main thread as the swarm's processes do "
         f"(RTT median {hand['median']:.0f} us)",
+        f"  CPU of one put: {w['put_warm_us']:.0f} us back to back, {w['put_idle_us']:.0f} us after "
+        f"{IDLE_S * 1e3:.0f} ms idle (numpy's sum of 1000 floats: {w['numpy_sum_warm_us']:.1f} and "
+        f"{w['numpy_sum_idle_us']:.1f} us): what a thread woken every tick pays on this machine",
         "lockstep tick period (swarm launch --agents N):",
     ]
     for n, t in r["lockstep_tick_us"].items():
@@ -241,4 +273,4 @@ if __name__ == "__main__":
     if sys.argv[1] == "pong":
         _pong(sys.argv[2], sys.argv[3], sys.argv[4] if len(sys.argv) > 4 else "direct")
     elif sys.argv[1] == "ping":
-        _ping(sys.argv[2], sys.argv[3], int(sys.argv[4]))
+        _ping(sys.argv[2], sys.argv[3], int(sys.argv[4]), sys.argv[5:6] == ["wake"])
