@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from collections.abc import Callable
+from pathlib import Path
 
 
 def _checked(flag: str, convert: Callable[[str], float], ok: Callable[[float], bool], what: str):
@@ -40,6 +42,28 @@ def positive_int(flag: str) -> Callable[[str], int]:
 def count(flag: str) -> Callable[[str], int]:
     """An argparse type: an integer >= 0 (``--max-restarts 3``)."""
     return _checked(flag, int, lambda v: v >= 0, "an integer >= 0")
+
+
+def output_file(flag: str, dash: bool = False) -> Callable[[str], Path]:
+    """An argparse type: a file to write at the end of a run (``--json FILE``), checked before the run, so
+    that a run of minutes is not lost to a typo: its folder must exist and be writable, and it must not be a
+    folder itself (``dash``: ``-`` passes, for a flag whose ``-`` means none). The writer still reports an
+    error of its own (a full disk)."""
+
+    def parse(text: str) -> Path:
+        p = Path(text)
+        if dash and text == "-":
+            return p
+        folder = p.parent if str(p.parent) else Path(".")
+        if not text or p.is_dir():
+            raise argparse.ArgumentTypeError(f"{flag} must name a file to write, got {text!r} (a folder)")
+        if not folder.is_dir():
+            raise argparse.ArgumentTypeError(f"{flag}: no such folder {str(folder)!r} for {text!r}")
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise argparse.ArgumentTypeError(f"{flag}: folder {str(folder)!r} is not writable, for {text!r}")
+        return p
+
+    return parse
 
 
 SEED_LIMIT = 2**63

@@ -13,8 +13,8 @@ import json
 import logging
 import math
 from collections.abc import Callable
-from pathlib import Path
 
+from swarm.args import output_file
 from swarm.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -106,7 +106,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _add_flags(p: argparse.ArgumentParser, default) -> None:
     p.add_argument("--quick", action="store_true", default=default, help="short run (a few seconds)")
-    p.add_argument("--json", type=Path, metavar="FILE", default=default, help="write the results as JSON")
+    p.add_argument(
+        "--json",
+        type=output_file("--json"),
+        metavar="FILE",
+        default=default,
+        help="write the results as JSON",
+    )
 
 
 def run(args: argparse.Namespace) -> int:

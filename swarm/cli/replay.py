@@ -8,7 +8,7 @@ import json
 import math
 from pathlib import Path
 
-from swarm.args import positive_float, seed
+from swarm.args import output_file, positive_float, seed
 from swarm.config import parse_override
 from swarm.transport.session import add_zenoh_arguments
 
@@ -54,16 +54,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="KEY,KEY",
         help="FILE.mcap: publish only these keys (fnmatch patterns, e.g. '*/imu,*/uwb')",
     )
-    p.add_argument("--json", type=Path, default=None, metavar="FILE", help="write the report as JSON")
+    p.add_argument(
+        "--json", type=output_file("--json"), default=None, metavar="FILE", help="write the report as JSON"
+    )
     p.add_argument(
         "--series",
-        type=Path,
+        type=output_file("--series", dash=True),
         default=Path("estimate.csv"),
         metavar="FILE",
         help="the estimate series as CSV (default estimate.csv; '-' for none)",
     )
     p.add_argument(
-        "--plot", type=Path, default=None, metavar="FILE.png", help="trajectory, error and rejections"
+        "--plot",
+        type=output_file("--plot"),
+        default=None,
+        metavar="FILE.png",
+        help="trajectory, error and rejections",
     )
     p.add_argument(
         "--set",

@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from swarm.args import add_scenario_args, agents, load_from_args, seed
+from swarm.args import add_scenario_args, agents, load_from_args, output_file, seed
 from swarm.errors import ConfigError
 
 
@@ -22,9 +22,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--agents", type=agents, default=1, metavar="N", help="copies of the scenario's pairs (default: 1)"
     )
     p.add_argument(
-        "--json", type=Path, default=None, metavar="FILE", help="write the summary and time series"
+        "--json",
+        type=output_file("--json"),
+        default=None,
+        metavar="FILE",
+        help="write the summary and time series",
     )
-    p.add_argument("--plot", type=Path, default=None, metavar="FILE.png", help="draw trajectory and errors")
+    p.add_argument(
+        "--plot",
+        type=output_file("--plot"),
+        default=None,
+        metavar="FILE.png",
+        help="draw trajectory and errors",
+    )
     p.add_argument("--no-series", action="store_true", help="do not record time series (faster)")
     p.add_argument(
         "--mcap", type=Path, default=None, metavar="FILE.mcap",

@@ -152,8 +152,10 @@ class ZenohArgs:
 def add_zenoh_arguments(parser: argparse.ArgumentParser, *, mode: bool = True) -> None:
     """Add ``--mode`` (unless ``mode=False``, for a command whose mode is fixed), ``--connect`` and
     ``--listen`` (repeatable), ``--zenoh-config FILE`` and ``--multicast-scouting`` to ``parser``, in a
-    group of their own; read them back with :func:`zenoh_args_from`."""
-    g = parser.add_argument_group("Zenoh session")
+    group of their own (or in ``parser`` itself if it is a group already: argparse deprecates nesting them);
+    read them back with :func:`zenoh_args_from`."""
+    nested = isinstance(parser, argparse._ArgumentGroup)
+    g = parser if nested else parser.add_argument_group("Zenoh session")
     if mode:
         g.add_argument(
             "--mode", choices=MODES, default=None, help="session mode (default: the config file's, else peer)"
