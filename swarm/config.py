@@ -54,6 +54,7 @@ import tomllib
 import types
 import typing
 from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any, Literal, TypeVar, get_args, get_origin
 
 from swarm.errors import ConfigError
@@ -157,7 +158,63 @@ def load_toml(
         for key in keys:
             if msg.startswith(key) and msg[len(key) : len(key) + 1] in ("", ":", ".", "[", " "):
                 raise ConfigError(f"{msg} (value set by override {key})") from exc
-        raise ConfigError(f"{name}: {msg}") from exc
+        at = _locate(path, msg)
+        raise ConfigError(
+            f"{name}: {msg}" + ("" if at is None else f" (at line {at[0]}, column {at[1]})")
+        ) from exc
+
+
+_KEY_PATH = re.compile(r"[A-Za-z0-9_\-]+(?:\[\d+\])*(?:\.[A-Za-z0-9_\-]+(?:\[\d+\])*)*")
+_HEADER = re.compile(r"\s*\[\[?\s*([^\]\[]+?)\s*\]\]?\s*(?:#.*)?$")
+_ASSIGN = re.compile(r"(\s*)([A-Za-z0-9_\-\.\s\"']+?)\s*=")
+
+
+def _toml_parts(dotted: str) -> list[str]:
+    return [p.strip().strip("\"'") for p in dotted.split(".")]
+
+
+def _locate(path: str | os.PathLike[str], msg: str) -> tuple[int, int] | None:
+    """Best effort: the line and column (1-based) in the TOML file at ``path`` of the key a validation
+    message ``msg`` begins with (``sim.max_duration_s: ...``, ``anchors_m[2] ...``): the line that sets it
+    (``[table]`` headers and dotted keys followed) or, for a table set by dotted keys, its first line; else
+    the deepest table or key on its path that the file has (a key the file lacks: its table's header).
+    ``None`` when nothing matches (tomllib keeps no positions, so the text is scanned; a key inside an
+    inline table is found at its outer key's line)."""
+    m = _KEY_PATH.match(msg)
+    if m is None:
+        return None
+    want = [re.sub(r"\[\d+\]", "", p) for p in m.group(0).split(".")]
+    field = re.match(r": ([A-Za-z0-9_]+) must ", msg[m.end() :])  # a table's check of a field: "t: f must"
+    if field is not None:
+        want.append(field.group(1))
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    table: list[str] = []
+    best: tuple[int, int, int] | None = None  # (parts matched, line, column)
+    depth = 0  # brackets and braces left open by a value over several lines (its rows are no headers)
+    for n, line in enumerate(text.splitlines(), 1):
+        code = line.split("#", 1)[0]
+        if depth > 0:
+            depth += code.count("[") + code.count("{") - code.count("]") - code.count("}")
+            continue
+        h = _HEADER.match(line)
+        if h is not None:
+            table = _toml_parts(h.group(1))
+            found, col = table, line.index("[") + 1
+        else:
+            a = _ASSIGN.match(line)
+            if a is None:
+                continue
+            found, col = table + _toml_parts(a.group(2)), len(a.group(1)) + 1
+            value = code[a.end() :]
+            depth = max(0, value.count("[") + value.count("{") - value.count("]") - value.count("}"))
+        # the key itself, a table or key on its path, or the first line under it (a table set by dotted keys)
+        score = len(found) if found == want[: len(found)] else len(want) if found[: len(want)] == want else 0
+        if score and (best is None or score > best[0]):
+            best = (score, n, col)
+    return None if best is None else best[1:]
 
 
 def parse_override(text: str) -> tuple[str, object]:

@@ -291,6 +291,39 @@ def test_invalid_field_in_a_file_names_file_and_field(tmp_path: Path) -> None:
         load_toml(Toy, path)
 
 
+@pytest.mark.parametrize(
+    ("text", "match", "line", "column"),
+    [
+        # the key's own line, in its table (not the same name in another table before it)
+        ("seed = 1\n[chaser.dynamics]\nmass_kg = 2.0\n[target.dynamics]\n  mass_kg = 'heavy'\n",
+         r"target\.dynamics\.mass_kg: expected a number", 5, 3),
+        # a dotted key; a multi-line array before it whose last row is no table header
+        ("agents.a.markers_nav = [\n  [0.0, 0.0, 0.0],\n  [1.0, 0.0, 0.0]\n]\nagents.a.gain = -1.0\n",
+         r"agents\.a: gain must be non-negative", 5, 1),
+        # an unknown table set by dotted keys: its first line
+        ("seed = 1\nagent.gain = 1.0\nagent.level = 2\n",
+         r"agent: unknown key \(did you mean 'agents'\?\)", 2, 1),
+        # an unknown key: where it is
+        ("[chaser]\nname = 'c'\n\n[chaser.dynamics]\nmas_kg = 1.0\n",
+         r"chaser\.dynamics\.mas_kg: unknown key", 5, 1),
+        # an array element: its array's line
+        ("seed = 1\nweights = [1.0, 'two']\n", r"weights\[1\]: expected a number", 2, 1),
+        # a table's own check of its field
+        ("seed = 1\n[chaser.dynamics]\nmass_kg = -1.0\n",
+         r"chaser\.dynamics\.mass_kg must be positive", 3, 1),
+        # a table given only by its header before its sub-table
+        ("seed = 1\n[chaser]\nname = 'c'\n[target]\n[target.dynamics]\nmass_kg = 'x'\n",
+         r"target\.dynamics\.mass_kg: expected a number", 6, 1),
+    ],
+)  # fmt: skip
+def test_an_invalid_value_in_a_file_gives_its_line_and_column(tmp_path, text, match, line, column) -> None:
+    """tomllib keeps no positions: the loader finds the key's line in the text, as the syntax errors have."""
+    path = tmp_path / "bad.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=rf"bad\.toml: {match}.* \(at line {line}, column {column}\)$"):
+        load_toml(Toy, path)
+
+
 # --------------------------------------------------------------------------------------- overrides
 
 
