@@ -45,6 +45,7 @@ from swarm.errors import ConfigError
 from swarm.scenario import Scenario
 from swarm.step.agent import AgentInputs, TargetEstimate, VehicleAgent
 from swarm.step.initial import initial_estimate
+from swarm.step.radio import exchange_ticks
 from swarm.step.world import initial_truth
 from swarm.transport.docking_wire import (
     command_payload,
@@ -128,6 +129,7 @@ class AgentProcess:
             ready=set() if ready is None else ready,
             target_reads=target_reads(sc, vehicle_id) if self.chaser else None,
             late_ticks=None if clock.lockstep else round(sc.agent.late_fusion_s / sc.dt_s),
+            uwb_slots=exchange_ticks(sc, vehicle_id),  # a TDMA channel: ranges on the tag's slots only
         )  # fmt: skip
         self.estimate_reads = estimate_reads(sc, vehicle_id)  # the ticks whose estimate goes out
         if rejoin:

@@ -5,8 +5,10 @@
 - Radio network: the radio step, :class:`swarm.step.radio.UwbNetwork` (one round-robin radio per vehicle,
   the sensor model of :mod:`swarm.core.sensors`). From the world's ``truth`` of every vehicle at a UWB
   slot tick ``k`` it publishes one ``uwb(k)`` per vehicle, with ``range_m`` nil when the reply was lost, so
-  a lockstep agent knows not to wait. For agent hosts (``--batch``) it takes the truths of a tick as one
-  ``TruthBatch`` on ``world/truth`` and sends a slot's ranges as one ``UwbBatch`` on ``mothership/uwb``.
+  a lockstep agent knows not to wait; on a TDMA channel (``uwb.tdma``) only for the tags whose slot came in
+  that tick (an idle tag's agent expects none: :func:`swarm.step.radio.exchange_ticks`). For agent hosts
+  (``--batch``) it takes the truths of a tick as one ``TruthBatch`` on ``world/truth`` and sends a slot's
+  ranges as one ``UwbBatch`` on ``mothership/uwb``.
   Slots are processed in tick order: the radios' random streams are consumed exactly as in the in-process
   simulation (same seed, same ranges). A truth of a slot already served (a resumed world publishes its
   checkpointed tick again) is dropped: a slot is served once.
@@ -160,7 +162,9 @@ class MothershipProcess:
         t = k * self.sc.dt_s
         self.network.step(k, t, X, lost, p_nlos)
         if self.batch:
-            self.pub_uwb_batch.put(uwb_slot_batch(self.network, self.ids, k, t))
+            payload = uwb_slot_batch(self.network, self.ids, k, t)
+            if payload is not None:  # (every tag idle on a TDMA channel: nothing to send)
+                self.pub_uwb_batch.put(payload)
         else:
             for vid, payload in uwb_slot(self.network, self.ids, k, t):
                 self.pub_uwb[vid].put(payload)

@@ -90,6 +90,9 @@ def test_repeated_runs_of_a_case_are_summarised_by_their_median_and_spread():
     assert (c["vehicles"], c["ticks"], c["staggered"], c["repeat"], c["runs"]) == (128, 1000, True, 3, runs)
     report = format_report({"span_s": 10, "cores": 2, "load_1min": 1.0, "cases": [c]})
     assert "1.3 % / 13.0 %" in report and "3 runs, late ticks [0.5-3.3 %]" in report
+    assert "TDMA" not in report and "one TDMA UWB channel" in format_report(
+        {"span_s": 10, "cores": 2, "load_1min": 1.0, "cases": [{**c, "tdma": True}]}
+    )
     assert summarise(runs[:1]) is runs[0]
     lock = summarise([one(None, 5.0, 1.0, 1.0), one(None, 6.0, 1.0, 1.0)])
     assert lock["late_tick_share"] is None and "late_tick_share_range" not in lock
@@ -134,8 +137,9 @@ def test_a_hung_launch_is_bounded_and_reported_with_the_stacks_it_wrote(tmp_path
     )
     monkeypatch.setattr(bench, "LAUNCH", [sys.executable, str(fake)])
     with pytest.raises(RuntimeError) as err:
-        bench._case(4, "realtime", 5.0, 2)
+        bench._case(4, "realtime", 5.0, 2, stagger=True, tdma=True)
     msg = str(err.value)
     assert f"--timeout {bench.LAUNCH_START_S + bench.LAUNCH_SLOWEST * 5.0:g}" in msg  # the command it got
+    assert "--set swarm.stagger_control=true --set uwb.tdma=true" in msg  # --stagger, --tdma
     assert "the stacks of the launcher (pid 7), then of world (pid 8) follow" in msg
     assert "line 480 in _take_commands" in msg and "frame 49" in msg

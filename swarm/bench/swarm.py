@@ -20,6 +20,9 @@ one clock (it decodes only the tick number, and a batch's ids):
 - **staggered** (``--stagger``): the vehicles' controller clocks spread over the control period
   (``swarm.stagger_control``: vehicle ``m`` controls on ticks ``m % period``), instead of every vehicle
   controlling on the same tick;
+- **TDMA** (``--tdma``): the tags share one UWB channel (``uwb.tdma``, issue 13's Loco Positioning
+  TWR-TDMA model): each ranges once per frame (~238/N ranges a second for N tags, against 50 each
+  without), and the mothership sends a tag nothing on the slot ticks without its exchange;
 - **sensor-to-estimate latency** p50/p99: ``estimate(k)`` minus ``imu(k)`` arrival, for the first pair's
   two vehicles: the agent's receive, filter and publish time plus one router hop each way. Since 4df9a3d
   the target sends only the estimates its chaser reads (a fifth), so its ticks are a sixth of the samples,
@@ -152,7 +155,8 @@ class _Probe:
         return handler
 
 
-def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagger: bool = False) -> dict:
+def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagger: bool = False,
+          tdma: bool = False) -> dict:  # fmt: skip
     pairs = vehicles // 2
     ns = f"benchswarm{os.getpid()}v{vehicles}p{per_process}{clock}"
     endpoint = free_loopback_endpoint()
@@ -166,6 +170,8 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
                "--timeout", f"{LAUNCH_START_S + LAUNCH_SLOWEST * span_s:g}"]  # fmt: skip
         if stagger:
             cmd += ["--set", "swarm.stagger_control=true"]
+        if tdma:
+            cmd += ["--set", "uwb.tdma=true"]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
         probe = _Probe()
         up, listening = threading.Event(), threading.Event()
@@ -203,6 +209,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         "per_process": per_process,
         "clock": clock,
         "staggered": stagger,
+        "tdma": tdma,
         "cpu_us_per_vehicle_tick": 1e6 * float(np.sum(agents)) / (len(agents) * ticks) if agents else None,
         "world_cpu_us_per_tick": 1e6 * cpu["world"] / ticks if cpu.get("world") is not None else None,
         "late_tick_share": late,
@@ -289,13 +296,13 @@ def summarise(runs: list[dict]) -> dict:
 
 
 def run(preset: dict) -> dict:
-    stagger = bool(preset.get("stagger", False))
+    stagger, tdma = bool(preset.get("stagger", False)), bool(preset.get("tdma", False))
     specs = [(v, c, n) for c in preset["clocks"] for n in preset["per_process"]
              for v in preset["vehicles"] if n <= v]  # fmt: skip
     runs: dict[tuple, list[dict]] = {spec: [] for spec in specs}
     for _ in range(int(preset.get("repeat", 1))):  # round by round: a drift of the machine hits every case
         for v, c, n in specs:
-            runs[v, c, n].append(_case(v, c, preset["span_s"], n, stagger))
+            runs[v, c, n].append(_case(v, c, preset["span_s"], n, stagger, tdma))
     return {
         "cases": [summarise(runs[spec]) for spec in specs],
         "span_s": preset["span_s"],
@@ -312,7 +319,8 @@ def format_report(r: dict) -> str:
     lines = [
         f"swarm launch docking, {r['span_s']:.0f} s simulated per case "
         f"({r['cores']} cores, 1-min load {r['load_1min']:.2f} at the end)"
-        + ("; controller clocks staggered" if any(c.get("staggered") for c in r["cases"]) else ""),
+        + ("; controller clocks staggered" if any(c.get("staggered") for c in r["cases"]) else "")
+        + ("; one TDMA UWB channel" if any(c.get("tdma") for c in r["cases"]) else ""),
         "vehicles  per proc  clock      CPU us/vehicle/tick  world us/tick  late ticks / commands  "
         "real-time  latency p50/p99 us",
     ]

@@ -102,6 +102,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             bp.add_argument("--stagger", action="store_true", default=None,
                             help="stagger the vehicles' controller clocks (swarm.stagger_control): vehicle "
                                  "m controls on ticks m %% period, not all on one tick")  # fmt: skip
+            bp.add_argument("--tdma", action="store_true", default=None,
+                            help="the tags share one UWB channel (uwb.tdma): each ranges once per TDMA "
+                                 "frame, ~238/N times a second for N tags, not 50")  # fmt: skip
 
 
 def _add_flags(p: argparse.ArgumentParser, default) -> None:
@@ -152,6 +155,8 @@ def _swarm(args: argparse.Namespace) -> tuple[dict, str]:
         preset["span_s"] = args.span
     if getattr(args, "stagger", None):
         preset["stagger"] = True
+    if getattr(args, "tdma", None):
+        preset["tdma"] = True
     if getattr(args, "repeat", None) is not None:
         preset["repeat"] = bench.parse_repeat(args.repeat)
     record = bench.run(preset)

@@ -129,6 +129,21 @@ def tdma_slots(scenario) -> tuple[np.ndarray, int]:
     return slots, frame
 
 
+def exchange_ticks(scenario, vehicle_id: str):
+    """The UWB slot ticks on which ``vehicle_id``'s tag has an exchange, as a predicate of the tick ``k``
+    (``k % every == 0`` assumed): with TDMA on, those whose period holds the tag's slot (:func:`tdma_has_slot`
+    at ``t = k * dt``, as :meth:`UwbNetwork.step` has it); ``None`` with TDMA off (every slot tick). On the
+    other ticks the tag is idle: no range, and the mothership sends no ``uwb`` for it (docs/protocol.md,
+    "Rates"), so a lockstep agent does not wait for one."""
+    slots, frame = tdma_slots(scenario)
+    slot = int(slots[list(scenario.vehicles).index(vehicle_id)])
+    if slot < 0:
+        return None
+    dt = scenario.dt_s
+    prm = np.array([scenario.uwb.tdma_slot_s, float(frame), scenario.every(scenario.uwb.rate_hz) * dt])
+    return lambda k: bool(tdma_has_slot(k * dt, slot, prm))
+
+
 @numba.njit(cache=True)
 def tdma_has_slot(t_s, slot, tdma_prm):
     """Whether the tag of TDMA ``slot`` had its slot in the UWB tick period ``(t_s - period, t_s]``:

@@ -182,9 +182,14 @@ def estimate_read(reads: tuple[int, ...] | None, k: int) -> bool:
 
 def uwb_slot(network, ids: list[str], k: int, t: float) -> list[tuple[str, bytes]]:
     """The mothership's ranges of slot tick ``k`` after ``network.step``: ``(vehicle, payload)``, one per
-    vehicle (``range_m`` None where the reply was lost)."""
+    vehicle with an exchange (``range_m`` None where the reply was lost); none for a tag idle on a TDMA
+    channel (its slot not in this tick: :func:`~swarm.step.radio.exchange_ticks`)."""
     ranges = _ranges(network)
-    return [(vid, encode_uwb(k, t, int(network.anchor_id[i]), ranges[i])) for i, vid in enumerate(ids)]
+    return [
+        (vid, encode_uwb(k, t, int(network.anchor_id[i]), ranges[i]))
+        for i, vid in enumerate(ids)
+        if not network.idle[i]
+    ]
 
 
 def _ranges(network) -> tuple[float | None, ...]:
@@ -192,10 +197,15 @@ def _ranges(network) -> tuple[float | None, ...]:
     return tuple(None if lost else float(r) for lost, r in zip(network.lost, network.range_m, strict=True))
 
 
-def uwb_slot_batch(network, ids: list[str], k: int, t: float) -> bytes:
-    """:func:`uwb_slot`'s ranges in one :class:`~swarm.transport.messages.UwbBatch` (agent hosts)."""
-    anchors = tuple(int(a) for a in network.anchor_id)
-    return encode(UwbBatch(k, t, tuple(ids), anchors, _ranges(network)))
+def uwb_slot_batch(network, ids: list[str], k: int, t: float) -> bytes | None:
+    """:func:`uwb_slot`'s ranges in one :class:`~swarm.transport.messages.UwbBatch` (agent hosts); ``None``
+    when every tag is idle (TDMA)."""
+    rows = [i for i in range(len(ids)) if not network.idle[i]]
+    if not rows:
+        return None
+    ranges = _ranges(network)
+    return encode(UwbBatch(k, t, tuple(ids[i] for i in rows), tuple(int(network.anchor_id[i]) for i in rows),
+                           tuple(ranges[i] for i in rows)))  # fmt: skip
 
 
 def filter_counts(agent) -> dict[str, int]:

@@ -4,8 +4,9 @@
 :meth:`swarm.sim.docking.DockingSim.run` the in-process tick order it reproduces:
 
 - an agent processes tick ``k`` once it has ``imu(k)``, ``uwb(k)`` on its UWB slots
-  (``k % uwb_every == 0``), ``vision(k)`` on its camera slots (``k % vision_every == 0``; the camera reports
-  every frame, with zero markers when it saw none) and, for a chaser, its target's ``estimate(k - 1)``
+  (``k % uwb_every == 0``; on a TDMA channel only those with its tag's exchange), ``vision(k)`` on its
+  camera slots (``k % vision_every == 0``; the camera reports every frame, with zero markers when it saw
+  none) and, for a chaser, its target's ``estimate(k - 1)``
   (``estimate(0)`` at ticks 0 and 1). Tick 0 has no sensor samples: the agent only publishes its initial
   estimate and command. Every input of a tick is *expected*, so the tick is complete whatever the order
   in which Zenoh's callback threads deliver them (:class:`AgentTickAssembler`);
@@ -25,7 +26,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from swarm.errors import ConfigError
@@ -156,6 +157,7 @@ class AgentTickAssembler:
         ready: set | None = None,
         target_reads: tuple[int, ...] | None = None,
         late_ticks: int | None = None,
+        uwb_slots: Callable[[int], bool] | None = None,
     ) -> None:
         """``agent_id``: this vehicle; ``is_chaser``: whether ticks need the target's estimates;
         ``target_id``: the target's agent id (required for a chaser); ``uwb_every``: ticks between two UWB
@@ -172,11 +174,14 @@ class AgentTickAssembler:
         ``late_ticks``: a free-running agent's late fusion (``None``: off, the lockstep rule). With it, a tick
         is ready for :meth:`poll` as soon as its ``imu`` is in (the estimator does not wait for a range or a
         frame), and a ``uwb``/``vision`` of a tick already taken, at most ``late_ticks`` ticks before the
-        next one, is kept for :meth:`take_late` (counted ``late``) instead of dropped as stale."""
+        next one, is kept for :meth:`take_late` (counted ``late``) instead of dropped as stale;
+        ``uwb_slots``: of the UWB slot ticks, those with an exchange of this tag (a TDMA channel:
+        :func:`~swarm.step.radio.exchange_ticks`; ``None``: all): only those expect a ``uwb``."""
         self.agent_id = check_id(agent_id)
         self.is_chaser = bool(is_chaser)
         self.target_id = check_id(target_id, "target id") if (is_chaser or target_id is not None) else None
         self.uwb_every = _check_int(uwb_every, "uwb_every", 1)
+        self.uwb_slots = uwb_slots
         self.vision_every = None if vision_every is None else _check_int(vision_every, "vision_every", 1)
         self.max_ahead = _check_int(max_ahead, "max_ahead", 0)
         self.target_reads = None if target_reads is None else tuple(_check_read(r) for r in target_reads)
@@ -257,7 +262,7 @@ class AgentTickAssembler:
         if source_id is not None and source_id != self.agent_id:
             self._counts["unexpected"] += 1
             return False
-        if isinstance(msg, Uwb) and (k == 0 or k % self.uwb_every):
+        if isinstance(msg, Uwb) and not self._uwb_tick(k):
             self._counts["unexpected"] += 1
             return False
         if isinstance(msg, Vision) and (self.vision_every is None or k == 0 or k % self.vision_every):
@@ -315,6 +320,11 @@ class AgentTickAssembler:
         need = max(k - 1, 0)
         return need if need >= self._target_from else None
 
+    def _uwb_tick(self, k: int) -> bool:
+        """Whether tick ``k`` has an exchange of this tag: a UWB slot tick (``k >= 1``) and, on a TDMA
+        channel, one of its slots."""
+        return k > 0 and k % self.uwb_every == 0 and (self.uwb_slots is None or self.uwb_slots(k))
+
     def _missing(self) -> list[str]:
         k = self._next
         if k is None:
@@ -325,7 +335,7 @@ class AgentTickAssembler:
             if frame is None or frame.imu is None:
                 out.append("imu")
             needs_uwb = self._uwb_live and self._uwb_from >= 0 and k >= self._uwb_from
-            if needs_uwb and k % self.uwb_every == 0 and (frame is None or frame.uwb is None):
+            if needs_uwb and self._uwb_tick(k) and (frame is None or frame.uwb is None):
                 out.append("uwb")
             if self.vision_every is not None and k % self.vision_every == 0:
                 if frame is None or frame.vision is None:

@@ -7,6 +7,8 @@ codecs): each vehicle's row of a batch must be that message, field for field (a 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -170,6 +172,37 @@ def test_each_vehicles_entry_of_a_slots_batch_is_the_range_it_would_have_had_alo
     assert batch.ids == tuple(ids) and batch.range_m[1] is None
     assert {vid: batch.sample(vid) for vid in ids} == alone
     assert batch.sample("ghost") is None
+
+
+def test_on_a_tdma_channel_a_slot_sends_ranges_only_of_the_tags_whose_slot_came():
+    """8 pairs on one TDMA channel (16 slots of 4.2 ms, a 67 ms frame, 50 Hz slot ticks): at each slot tick
+    the mothership's ranges (alone and batched) are exactly the tags with an exchange, which each agent
+    predicts from the scenario alone (``exchange_ticks``), and over a second each tag ranges once a frame."""
+    from swarm.step.radio import exchange_ticks
+
+    sc = load_scenario("docking", {"uwb.tdma": True}).with_pairs(8)
+    ids = list(sc.vehicles)
+    net = UwbNetwork(sc, 5)
+    due = {vid: exchange_ticks(sc, vid) for vid in ids}
+    X = np.zeros((len(ids), 13))
+    X[:, 0:3] = np.random.default_rng(1).uniform(-1.0, 1.0, (len(ids), 3))
+    X[:, 9] = 1.0
+    sent = dict.fromkeys(ids, 0)
+    ticks = range(net.every, round(1.0 / sc.dt_s) + 1, net.every)  # one second of slot ticks
+    for k in ticks:
+        t = k * sc.dt_s
+        net.step(k, t, X)
+        alone = [vid for vid, _ in uwb_slot(net, ids, k, t)]
+        assert alone == [vid for vid in ids if due[vid](k)], k
+        payload = uwb_slot_batch(net, ids, k, t)
+        assert (payload is None) == (not alone)
+        assert payload is None or list(decode(payload, UwbBatch).ids) == alone
+        for vid in alone:
+            sent[vid] += 1
+    frame_s = 16 * sc.uwb.tdma_slot_s
+    # each tag's slot comes once a frame (67.2 ms): 14 or 15 times in the second, against 50 slot ticks
+    assert all(math.floor(1.0 / frame_s) <= n <= math.ceil(1.0 / frame_s) for n in sent.values()), sent
+    assert exchange_ticks(load_scenario("docking").with_pairs(8), ids[0]) is None  # TDMA off: every tick
 
 
 @pytest.mark.parametrize("per_process", [1, 2, 16])

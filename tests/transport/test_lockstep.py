@@ -177,6 +177,23 @@ def test_uwb_off_slot_is_dropped_as_unexpected():
     assert asm.unexpected == 1
 
 
+def test_on_a_tdma_channel_only_the_tags_exchange_ticks_wait_for_a_range():
+    """A tag idle on a TDMA channel has no exchange on that slot tick and the mothership sends it nothing:
+    the tick completes on its imu, and a range of such a tick is not its own (unexpected)."""
+    slots = {4, 10}  # the exchange ticks of this tag among the slot ticks 2, 4, 6, 8, 10
+    asm = plain(uwb_every=2, uwb_slots=lambda k: k in slots)
+    got = []
+    for k in range(1, 11):
+        asm.add(imu(k))
+        if k in slots:
+            assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["uwb"], k
+            asm.add(uwb(k))
+        got.append(asm.next_tick(0))
+    assert [g.tick for g in got] == list(range(1, 11))
+    assert [g.tick for g in got if g.uwb is not None] == sorted(slots)
+    assert not asm.add(uwb(12)) and asm.unexpected == 1  # a slot tick, but not one of its exchanges
+
+
 def test_chaser_waits_for_target_estimate_of_previous_tick():
     asm = chaser(uwb_every=5)
     asm.add(imu(1))
