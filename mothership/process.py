@@ -6,9 +6,9 @@
   the sensor model of :mod:`swarm.core.sensors`). From the world's ``truth`` of every vehicle at a UWB
   slot tick ``k`` it publishes one ``uwb(k)`` per vehicle, with ``range_m`` nil when the reply was lost, so
   a lockstep agent knows not to wait; on a TDMA channel (``uwb.tdma``) only for the tags whose slot came in
-  that tick (an idle tag's agent expects none: :func:`swarm.step.radio.exchange_ticks`). For agent hosts
-  (``--batch``) it takes the truths of a tick as one ``TruthBatch`` on ``world/truth`` and sends a slot's
-  ranges as one ``UwbBatch`` on ``mothership/uwb``.
+  that tick (an idle tag's agent expects none: :func:`swarm.step.radio.exchange_ticks`). It takes the
+  truths of a tick as one ``TruthBatch`` on ``world/truth``; for agent hosts (``--batch``) it sends a
+  slot's ranges as one ``UwbBatch`` on ``mothership/uwb``.
   Slots are processed in tick order: the radios' random streams are consumed exactly as in the in-process
   simulation (same seed, same ranges). A truth of a slot already served (a resumed world publishes its
   checkpointed tick again) is dropped: a slot is served once.
@@ -51,9 +51,9 @@ class MothershipProcess:
         rejoin: bool = False,
         batch: bool = False,
     ) -> None:
-        """``batch``: the world's truths taken as ``world/truth`` batches and every vehicle's range of a
-        slot sent in one ``mothership/uwb`` message (agent hosts, docs/protocol.md "Rates"), not one per
-        vehicle either way."""
+        """``batch``: every vehicle's range of a slot sent in one ``mothership/uwb`` message (agent hosts,
+        docs/protocol.md "Rates"), not one per vehicle. The world's truths come as ``world/truth``
+        batches either way."""
         self.sc, self.seed, self.session, self.keys, self.stop = scenario, seed, session, keys, stop
         self.batch = batch
         self.anchors_every_s = anchors_every_s
@@ -72,14 +72,6 @@ class MothershipProcess:
         self._next_slot: int | None = None if rejoin else self.every
         self.slots = 0
         self._world_stopped = False  # the world's last Clock said "stopped": its run is over
-
-    def _on_truth(self, key: str, msg: Truth) -> None:
-        parsed = self.keys.parse(key)
-        vid = parsed[1] if parsed else None
-        if vid not in self.index:
-            self.drops.drop(key, "truth: not a vehicle of this scenario")
-            return
-        self._serve(msg.tick, [(vid, msg)])
 
     def _on_truth_batch(self, key: str, msg: TruthBatch) -> None:
         """A tick's truths of every vehicle (``batch``): each vehicle's, as its own key would have brought
@@ -181,10 +173,9 @@ class MothershipProcess:
         self.pub_uwb_batch = declare_reliable(self.session, k.mothership_uwb(), len(self.ids) <= 2)
         pub_anchors = declare_reliable(self.session, k.anchors(), express=False)
         self._queryable = self.session.declare_queryable(k.anchors(), self._on_query)
-        if self.batch:  # not agent/*/truth too: the world sends those to a viewer only, while one matches
-            subscribe_decoded(self.session, k.world_truth(), TruthBatch, self._on_truth_batch, self.drops)
-        else:
-            subscribe_decoded(self.session, k.agent_all("truth"), Truth, self._on_truth, self.drops)
+        # a slot's truths in one world/truth batch (not agent/*/truth: the world sends those to a viewer
+        # only, while one matches; 32 vehicles: 50 messages a second instead of 1600)
+        subscribe_decoded(self.session, k.world_truth(), TruthBatch, self._on_truth_batch, self.drops)
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
         watch_liveliness(self.session, k, self._on_alive, history=False)
         self._token = declare_liveliness(self.session, k, "mothership", "mothership")

@@ -67,7 +67,7 @@ FILTER_OUTCOMES = ("accepted", "rejected", "refused")
 
 def world_sensors(
     world, ids: list[str], chasers: list[str], k: int, frames, truth_every: int, batch: bool = False,
-    solo=frozenset(), viewed=None,
+    solo=frozenset(), viewed=None, truth_batch: bool | None = None,
 ) -> Sensors:  # fmt: skip
     """The world's samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle (on UWB
     slot ticks: the mothership's radios need no other, and a viewer draws at 50 Hz as well as at 100;
@@ -77,9 +77,9 @@ def world_sensors(
     :data:`~swarm.transport.messages.MAX_PAYLOAD_BYTES`), then :class:`~swarm.transport.messages.ImuBatch`
     (:data:`~swarm.transport.messages.MAX_BATCH` vehicles each), the imu last as in every tick (a host's
     tick is ready on its imu); ``solo`` (vehicles whose samples a ``sensor_delay`` fault holds back) keep
-    their own keys. With ``batch`` the truths go first as :class:`~swarm.transport.messages.TruthBatch`
-    messages (the mothership's), then one per vehicle in ``viewed`` (those a viewer subscribes to; ``None``:
-    every vehicle)."""
+    their own keys. With ``truth_batch`` (default: ``batch``; the world process always: the mothership's
+    radios take them so) the truths go first as :class:`~swarm.transport.messages.TruthBatch` messages,
+    then one per vehicle in ``viewed`` (those a viewer subscribes to; ``None``: every vehicle)."""
     sc = world.sc
     t = k * sc.dt_s
     camera_tick = k % world.vision_every == 0
@@ -87,7 +87,7 @@ def world_sensors(
     out: Sensors = []
     lost, p_nlos = world.radio_env(t)
     truth_tick = k % truth_every == 0
-    if batch and truth_tick:
+    if (batch if truth_batch is None else truth_batch) and truth_tick:
         out.extend(_truth_batches(world, ids, k, t, bool(lost), float(p_nlos)))
     for i, vid in enumerate(ids if truth_tick else ()):
         if viewed is not None and vid not in viewed:
@@ -318,11 +318,13 @@ class DockingTap:
 
     def world(self, sim, k: int, frames) -> None:
         """The world's samples of tick ``k`` (and the clock on its ticks)."""
-        # as the world of a default launch (a process per vehicle): one imu message per vehicle
+        # as the world of a default launch (a process per vehicle): one imu message per vehicle, the truths
+        # in one world/truth batch for the mothership and on each vehicle's key for a recorder (a viewer)
         for kind, vid, payload in world_sensors(
-            sim.world, self._ids, self._chasers, k, frames, self._truth_every
+            sim.world, self._ids, self._chasers, k, frames, self._truth_every, truth_batch=True
         ):
-            self._write(getattr(self.keys, kind)(vid), payload)
+            key = self.keys.world_truth() if kind == "truth_batch" else getattr(self.keys, kind)(vid)
+            self._write(key, payload)
         if k % self.clock_every == 0:
             self._clock(k, k * sim.sc.dt_s, "running")
 

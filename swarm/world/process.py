@@ -88,9 +88,9 @@ class WorldProcess:
     ) -> None:
         """``pace``: a lockstep world that also never runs ahead of this wall clock (realtime or scaled:N;
         every command is still waited for, so the run is the unpaced one); ``batch``: every vehicle's
-        imu of a tick in one ``world/imu`` message, the chasers' camera frames in one ``world/vision`` and
-        the truths in one ``world/truth`` (agent hosts, docs/protocol.md "Rates"), the per-vehicle truths
-        only while a viewer subscribes;
+        imu of a tick in one ``world/imu`` message and the chasers' camera frames in one ``world/vision``
+        (agent hosts, docs/protocol.md "Rates"). The truths of a UWB slot tick go to the mothership in one
+        ``world/truth`` either way, and on each vehicle's key only while a viewer subscribes to it;
         ``checkpoint_dir``: write the state there every tick (``None``: never); ``resume``: a state
         :func:`swarm.world.checkpoint.load` read, to continue from (:class:`CheckpointError` if it is not a
         state of this run: another scenario, seed or vehicle set)."""
@@ -109,7 +109,7 @@ class WorldProcess:
         self.clock_every = max(1, int(clock_every))
         self.process_id = process_id
         self.batch = batch
-        self._viewed: set[str] = set()  # batch: the vehicles whose per-vehicle truth a subscriber matches
+        self._viewed: set[str] = set()  # the vehicles whose per-vehicle truth a subscriber matches
         self.world = World(sc, seed)  # with the run's dispersions and its fault schedule
         self.world.noise_block = PROCESS_NOISE_BLOCK
         self.referee = Referee(sc)
@@ -365,14 +365,15 @@ class WorldProcess:
             "imu": self.pub_imu,
             **{kind: {"": declare_reliable(self.session, key, ex)} for kind, key in batches.items()},
         }
-        if self.batch:  # the per-vehicle truths for a viewer only: kept by Zenoh's matching listeners
-            self._truth_matching = [
-                pub.declare_matching_listener(lambda status, vid=vid: self._on_truth_matching(vid, status))
-                for vid, pub in self.pub_truth.items()
-            ]
-            for vid, pub in self.pub_truth.items():
-                if pub.matching_status.matching:
-                    self._viewed.add(vid)
+        # the per-vehicle truths for a viewer only (the mothership takes world/truth): Zenoh's matching
+        # listeners keep who views which
+        self._truth_matching = [
+            pub.declare_matching_listener(lambda status, vid=vid: self._on_truth_matching(vid, status))
+            for vid, pub in self.pub_truth.items()
+        ]
+        for vid, pub in self.pub_truth.items():
+            if pub.matching_status.matching:
+                self._viewed.add(vid)
         self.pub_event = {v: declare_reliable(self.session, k.event(v)) for v in self.chasers}
         self.pub_clock = declare_reliable(self.session, k.world_clock())
         self.pub_world_event = declare_reliable(self.session, k.world_event())
@@ -395,9 +396,8 @@ class WorldProcess:
         t = k * self.sc.dt_s
         # a vehicle whose samples a sensor_delay window holds back keeps its own imu key (held in _send)
         solo = {v for v in self._delays if self._delay_s(v, t) is not None}
-        viewed = set(self._viewed) if self.batch else None
         return world_sensors(self.world, self.ids, self.chasers, k, frames, self._truth_every, self.batch,
-                             solo, viewed)  # fmt: skip
+                             solo, set(self._viewed), truth_batch=True)  # fmt: skip
 
     def _pub(self, kind: str, vid: str):
         return self._pubs[kind][vid]

@@ -82,6 +82,21 @@ def test_each_vehicles_row_of_the_batch_is_the_imu_it_would_have_had_alone(k_ahr
     assert batch.sample("ghost") is None and batch_samples(batched, "ghost") == []
 
 
+def test_a_world_of_processes_of_one_sends_its_mothership_the_truth_batch_and_its_viewers_their_own():
+    """Agents a process each (no imu batch): the truths of a slot tick still leave as one batch for the
+    mothership, a vehicle's own truth only for a viewer, and the imu and frames on each vehicle's keys."""
+    sc, w, frames = _tick(3, False)
+    ids, chasers = list(sc.vehicles), list(sc.chasers)
+    k = w.k
+    alone = world_sensors(w, ids, chasers, k, frames, 1)
+    out = world_sensors(w, ids, chasers, k, frames, 1, viewed={"chaser1"}, truth_batch=True)
+    assert [kd for kd, _, _ in out if kd.endswith("batch")] == ["truth_batch"] and out[0][0] == "truth_batch"
+    (truths,) = [decode(p, TruthBatch) for kd, _, p in out if kd == "truth_batch"]
+    assert all(truths.sample(vid) == decode(p, Truth) for kd, vid, p in alone if kd == "truth")
+    assert [v for kd, v, _ in out if kd == "truth"] == ["chaser1"]
+    assert [s for s in out if s[0] in ("imu", "vision")] == [s for s in alone if s[0] in ("imu", "vision")]
+
+
 def test_each_chasers_entry_of_the_vision_batch_is_the_frame_it_would_have_had_alone(monkeypatch):
     """A camera tick for agent hosts: the chasers' frames leave their keys for one VisionBatch, after the
     truths and before the imu batch (a host's tick is ready on its imu); each entry is the vehicle's own

@@ -157,9 +157,9 @@ def swarm(request, tmp_path_factory):
 
 
 def test_a_viewer_that_subscribes_to_the_truths_gets_them(swarm):
-    """With agent hosts the world sends its mothership one world/truth batch per UWB slot and a vehicle's own
-    truth only while a viewer subscribes to it (a Zenoh matching listener): this viewer, subscribing in the
-    middle of the run, gets both vehicles' truths from then on."""
+    """The world sends its mothership one world/truth batch per UWB slot (agent hosts or not) and a
+    vehicle's own truth only while a viewer subscribes to it (a Zenoh matching listener): this viewer,
+    subscribing in the middle of the run, gets both vehicles' truths from then on."""
     session, ns = swarm["session"], swarm["ns"]
     got: dict[str, list[int]] = {"chaser": [], "target": []}
 
