@@ -143,7 +143,7 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
             "put": (keys.agent_all("uwb"), keys.mothership_uwb(), keys.anchors()),
             "declare_queryable": (keys.anchors(),),
             "reply": (keys.anchors(),),
-            "declare_subscriber": (keys.agent_all("truth"), keys.world_truth(), keys.world_clock()),
+            "declare_subscriber": (keys.world_truth(), keys.world_clock()),  # (a vehicle's truth: viewers')
             "liveliness_token": (f"{ns}/alive/mothership/*",),
             **watch,  # to say when the world is lost
         }

@@ -119,7 +119,7 @@ def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_
     want = {
         "world": {K.command(v) for v in VEHICLES} | {K.commands(v) for v in VEHICLES}
         | {K.run_control(), K.fault()},
-        "mothership": {K.truth(v) for v in VEHICLES} | {K.world_truth(), K.world_clock()},
+        "mothership": {K.world_truth(), K.world_clock()},  # the truths in one batch, not each vehicle's
         "agent-chaser": {K.imu("chaser"), K.uwb("chaser"), K.vision("chaser"), K.world_clock()}
         | {K.estimate(v) for v in VEHICLES}
         | {K.world_imu(), K.world_vision(), K.mothership_uwb(), K.world_event()},
@@ -131,7 +131,7 @@ def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_
         assert {key for key in ALL_KEYS if _may(acl, name, "declare_subscriber", key)} == keys, name
     # the wildcards the processes declare are allowed as declared (a wider declaration would be refused)
     assert _may(acl, "world", "declare_subscriber", K.agent_all("command"))
-    assert _may(acl, "mothership", "declare_subscriber", K.agent_all("truth"))
+    assert not _may(acl, "mothership", "declare_subscriber", K.agent_all("truth"))  # it takes world/truth
     assert not _may(acl, "agent-chaser", "declare_subscriber", K.agent_topics("chaser"))
 
 
