@@ -66,6 +66,14 @@ def output_file(flag: str, dash: bool = False) -> Callable[[str], Path]:
     return parse
 
 
+def add_output_file(
+    p, flag: str, help: str, *, metavar: str = "FILE", default=None, dash: bool = False
+) -> None:
+    """Add ``flag``, a file written at the end of the run, checked when the command line is read
+    (:func:`output_file`)."""
+    p.add_argument(flag, type=output_file(flag, dash), default=default, metavar=metavar, help=help)
+
+
 SEED_LIMIT = 2**63
 """Seeds are integers in ``0 .. 2**63 - 1``: numpy's ``SeedSequence`` takes any non-negative integer, but a
 launched run's seed travels in the world's ``Clock`` as a msgpack int64 (docs/protocol.md), and a seed a

@@ -14,7 +14,7 @@ import logging
 import math
 from collections.abc import Callable
 
-from swarm.args import output_file
+from swarm.args import add_output_file
 from swarm.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -109,13 +109,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _add_flags(p: argparse.ArgumentParser, default) -> None:
     p.add_argument("--quick", action="store_true", default=default, help="short run (a few seconds)")
-    p.add_argument(
-        "--json",
-        type=output_file("--json"),
-        metavar="FILE",
-        default=default,
-        help="write the results as JSON",
-    )
+    add_output_file(p, "--json", "write the results as JSON", default=default)
 
 
 def run(args: argparse.Namespace) -> int:

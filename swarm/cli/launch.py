@@ -66,7 +66,7 @@ VISION_COUNTS = ("features_accepted", "pose_accepted")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from swarm.args import add_world_timeouts, count, output_file, positive_float
+    from swarm.args import add_output_file, add_world_timeouts, count, positive_float
     from swarm.transport.process import add_process_arguments, clock_arg
 
     p = sub.add_parser(
@@ -89,13 +89,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--timeout", type=positive_float("--timeout"), default=None, metavar="S", help="wall-time limit [s]"
     )
-    g.add_argument(
-        "--json",
-        type=output_file("--json"),
-        default=None,
-        metavar="FILE",
-        help="write the summary (DESIGN.md sec. 8)",
-    )
+    add_output_file(g, "--json", "write the summary (DESIGN.md sec. 8)")
     g.add_argument(
         "--record",
         type=Path,

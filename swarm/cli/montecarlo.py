@@ -14,7 +14,7 @@ import json
 import logging
 from pathlib import Path
 
-from swarm.args import add_scenario_args, load_from_args, output_file, seed
+from swarm.args import add_output_file, add_scenario_args, load_from_args, seed
 from swarm.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -65,13 +65,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--out", type=Path, default=None, metavar="DIR", help="campaign directory (default mc-SCENARIO-seedS)"
     )
     p.add_argument("--resume", type=Path, default=None, metavar="DIR", help="continue the campaign in DIR")
-    p.add_argument(
-        "--json",
-        type=output_file("--json"),
-        default=None,
-        metavar="FILE",
-        help="write the statistics as JSON",
-    )
+    add_output_file(p, "--json", "write the statistics as JSON")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-figures", action="store_true", help="report.md without the PNG figures (faster)")
     p.set_defaults(func=run)

@@ -8,7 +8,7 @@ import json
 import math
 from pathlib import Path
 
-from swarm.args import output_file, positive_float, seed
+from swarm.args import add_output_file, positive_float, seed
 from swarm.config import parse_override
 from swarm.transport.session import add_zenoh_arguments
 
@@ -54,23 +54,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="KEY,KEY",
         help="FILE.mcap: publish only these keys (fnmatch patterns, e.g. '*/imu,*/uwb')",
     )
-    p.add_argument(
-        "--json", type=output_file("--json"), default=None, metavar="FILE", help="write the report as JSON"
-    )
-    p.add_argument(
-        "--series",
-        type=output_file("--series", dash=True),
-        default=Path("estimate.csv"),
-        metavar="FILE",
-        help="the estimate series as CSV (default estimate.csv; '-' for none)",
-    )
-    p.add_argument(
-        "--plot",
-        type=output_file("--plot"),
-        default=None,
-        metavar="FILE.png",
-        help="trajectory, error and rejections",
-    )
+    add_output_file(p, "--json", "write the report as JSON")
+    add_output_file(p, "--series", "the estimate series as CSV (default estimate.csv; '-' for none)",
+                    default=Path("estimate.csv"), dash=True)  # fmt: skip
+    add_output_file(p, "--plot", "trajectory, error and rejections", metavar="FILE.png")
     p.add_argument(
         "--set",
         dest="overrides",

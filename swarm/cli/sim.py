@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from swarm.args import add_scenario_args, agents, load_from_args, output_file, seed
+from swarm.args import add_output_file, add_scenario_args, agents, load_from_args, seed
 from swarm.errors import ConfigError
 
 
@@ -21,20 +21,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--agents", type=agents, default=1, metavar="N", help="copies of the scenario's pairs (default: 1)"
     )
-    p.add_argument(
-        "--json",
-        type=output_file("--json"),
-        default=None,
-        metavar="FILE",
-        help="write the summary and time series",
-    )
-    p.add_argument(
-        "--plot",
-        type=output_file("--plot"),
-        default=None,
-        metavar="FILE.png",
-        help="draw trajectory and errors",
-    )
+    add_output_file(p, "--json", "write the summary and time series")
+    add_output_file(p, "--plot", "draw trajectory and errors", metavar="FILE.png")
     p.add_argument("--no-series", action="store_true", help="do not record time series (faster)")
     p.add_argument(
         "--mcap", type=Path, default=None, metavar="FILE.mcap",
