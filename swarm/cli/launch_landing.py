@@ -93,6 +93,8 @@ def _hold(args: argparse.Namespace, stop: threading.Event, wall0: float) -> None
 
 
 def run_landing_launch(args: argparse.Namespace) -> int:
+    import zenoh
+
     from swarm.cli.children import (
         check_record,
         child_args,
@@ -109,7 +111,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     from swarm.landing_scenario import load_landing
     from swarm.step.landing import landing_summary
     from swarm.transport.keys import Keys
-    from swarm.transport.messages import Clock, DropCounter, Event
+    from swarm.transport.messages import Clock, DropCounter, Event, safe_decode
     from swarm.transport.security import agent_name
     from swarm.transport.session import open_session, subscribe_decoded
 
@@ -153,14 +155,23 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                         got["summaries"][parsed[1]] = msg.data
                         cond.notify_all()
 
-            stall = StallWatch(args.stall_s)  # a hung process keeps its token: the clock says it
-
-            def on_clock(_key: str, msg: Clock) -> None:
-                stall.on_clock(msg.tick, msg.state, time.monotonic())
-
             subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
             subscribe_decoded(session, keys.agent_all("event"), Event, on_agent_event, drops)
-            subscribe_decoded(session, keys.world_clock(), Clock, on_clock, drops)
+            # a hung process keeps its token: the world's clock says it. A landing world sends it every tick,
+            # so the newest is kept in Zenoh (RingChannel(1), as the dashboard takes it) and looked at from
+            # the loop below, not decoded in a callback every tick
+            stall = StallWatch(args.stall_s)
+            clock = session.declare_subscriber(keys.world_clock(), zenoh.handlers.RingChannel(1))
+
+            def watch_clock() -> None:
+                now, sample = time.monotonic(), clock.try_recv()
+                msg = (
+                    None if sample is None else safe_decode(sample.payload, Clock, keys.world_clock(), drops)
+                )
+                if msg is not None:
+                    stall.on_clock(msg.tick, msg.state, now)
+                stall.tell(sup, now)
+
             recorder = start_recorder(args, session, keys)  # --record: on this router session
             try:
                 if not args.headless:
@@ -193,7 +204,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                             _LOG.error("--timeout: %.0f s passed before the run ended", args.timeout)
                             sup.dump_all(f"--timeout {args.timeout:g} s reached before the run ended")
                             break
-                        stall.tell(sup, time.monotonic())
+                        watch_clock()
                         dead = sup.exited()
                         for c in [c for c in dead if c.name == "dashboard"]:  # the run does not need it
                             _LOG.warning("the dashboard exited with status %s; the run goes on without it",
