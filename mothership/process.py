@@ -74,8 +74,8 @@ class MothershipProcess:
         self._world_stopped = False  # the world's last Clock said "stopped": its run is over
 
     def _on_truth_batch(self, key: str, msg: TruthBatch) -> None:
-        """A tick's truths of every vehicle (``batch``): each vehicle's, as its own key would have brought
-        it (a vehicle not of this scenario counted and dropped)."""
+        """A tick's truths of every vehicle (``world/truth``): each vehicle's, as its own key would have
+        brought it (a vehicle not of this scenario counted and dropped)."""
 
         def rows():
             for i, vid in enumerate(msg.ids):

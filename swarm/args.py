@@ -54,8 +54,8 @@ def output_file(flag: str, dash: bool = False) -> Callable[[str], Path]:
         p = Path(text)
         if dash and text == "-":
             return p
-        folder = p.parent if str(p.parent) else Path(".")
-        if not text or p.is_dir():
+        folder = p.parent  # (a bare name's is ".")
+        if p.is_dir():  # ("" is "." too)
             raise argparse.ArgumentTypeError(f"{flag} must name a file to write, got {text!r} (a folder)")
         if not folder.is_dir():
             raise argparse.ArgumentTypeError(f"{flag}: no such folder {str(folder)!r} for {text!r}")

@@ -72,9 +72,7 @@ class UwbNetwork:
         self.env_p = np.zeros(n)
         # TDMA (uwb.tdma): each tag's slot (-1: off) and (slot length, frame length, UWB tick period);
         # per tag, whether this tick had no slot of it, whether it collided, and the collisions so far
-        slots, frame = tdma_slots(scenario)
-        self.tdma_slot = slots
-        self.tdma_prm = np.array([scenario.uwb.tdma_slot_s, float(frame), self.every * scenario.dt_s])
+        self.tdma_slot, self.tdma_prm = tdma_channel(scenario)
         self.idle = np.zeros(n, dtype=np.bool_)
         self.collided = np.zeros(n, dtype=np.bool_)
         self.collisions = np.zeros(n, dtype=np.int64)
@@ -135,13 +133,20 @@ def exchange_ticks(scenario, vehicle_id: str):
     at ``t = k * dt``, as :meth:`UwbNetwork.step` has it); ``None`` with TDMA off (every slot tick). On the
     other ticks the tag is idle: no range, and the mothership sends no ``uwb`` for it (docs/protocol.md,
     "Rates"), so a lockstep agent does not wait for one."""
-    slots, frame = tdma_slots(scenario)
+    slots, prm = tdma_channel(scenario)
     slot = int(slots[list(scenario.vehicles).index(vehicle_id)])
     if slot < 0:
         return None
     dt = scenario.dt_s
-    prm = np.array([scenario.uwb.tdma_slot_s, float(frame), scenario.every(scenario.uwb.rate_hz) * dt])
     return lambda k: bool(tdma_has_slot(k * dt, slot, prm))
+
+
+def tdma_channel(scenario) -> tuple[np.ndarray, np.ndarray]:
+    """``(each tag's slot (n,), tdma_prm)`` of the scenario's TDMA channel: :func:`tdma_slots` and the
+    parameters :func:`tdma_has_slot` takes, ``(slot length [s], frame length [slots], UWB period [s])``."""
+    slots, frame = tdma_slots(scenario)
+    period_s = scenario.every(scenario.uwb.rate_hz) * scenario.dt_s
+    return slots, np.array([scenario.uwb.tdma_slot_s, float(frame), period_s])
 
 
 @numba.njit(cache=True)
