@@ -10,8 +10,8 @@
   truths of a tick as one ``TruthBatch`` on ``world/truth``; for agent hosts (``--batch``) it sends a
   slot's ranges as one ``UwbBatch`` on ``mothership/uwb``.
   Slots are processed in tick order: the radios' random streams are consumed exactly as in the in-process
-  simulation (same seed, same ranges). A truth of a slot already served (a resumed world publishes its
-  checkpointed tick again) is dropped: a slot is served once.
+  simulation (same seed, same ranges). The truths of a slot already served (a resumed world publishes the
+  ticks some process may lack again) are ignored, counted in ``served_again``: a slot is served once.
 - Faults: none of its own. Each truth carries its tag's radio environment at that tick (``uwb_lost``,
   ``nlos_probability``: the world's fault schedule, fixed, mode-triggered and run-time windows alike),
   and the radios apply it, as the in-process radio step does.
@@ -71,6 +71,7 @@ class MothershipProcess:
         # starts at the slot after the first truth it sees (that slot's truths may have come before it)
         self._next_slot: int | None = None if rejoin else self.every
         self.slots = 0
+        self.served_again = 0  # truth batches of slots already served (a resumed world's): ignored
         self._world_stopped = False  # the world's last Clock said "stopped": its run is over
 
     def _on_truth_batch(self, key: str, msg: TruthBatch) -> None:
@@ -93,6 +94,12 @@ class MothershipProcess:
             return
         try:
             with self._lock:
+                if self._next_slot is not None and tick < self._next_slot:
+                    # not an invalid message: a resumed world publishes again the ticks some process may
+                    # lack (swarm.world.process.unconfirmed_ticks), those served already among them
+                    self.served_again += 1
+                    _LOG.debug("truths of tick %d: its UWB slot was already served", tick)
+                    return
                 for vid, truth in truths:
                     self._take(vid, truth)
         except Exception as exc:  # a bug in the radio step: the process fails, its supervisor restarts it
@@ -102,12 +109,10 @@ class MothershipProcess:
     def _take(self, vid: str, msg: Truth) -> None:
         """One slot tick's truth, on the subscriber's thread (a hand-off per truth to the main thread cost
         more than the slot itself, and sat on the lockstep's path); serves every slot it completes."""
-        k = self.keys
         if self._next_slot is None:
             self._next_slot = msg.tick + self.every
             _LOG.info("mothership rejoins the run: ranges from tick %d on", self._next_slot)
-        if msg.tick < self._next_slot:
-            self.drops.drop(k.truth(vid), f"truth of tick {msg.tick}: its UWB slot was already served")
+        if msg.tick < self._next_slot:  # the rest of a rejoining mothership's first tick: not its slot
             return
         slot = self._pending.setdefault(msg.tick, {})
         slot[vid] = msg

@@ -22,8 +22,10 @@ computer died does not keep firing); it joins again with its first command for a
 With a checkpoint directory (``--checkpoint-dir``) the world writes its complete state at every tick ``k``
 (:mod:`swarm.world.checkpoint`) *before* it publishes that tick's sensors, so no process ever saw a sample
 of a tick later than the checkpoint. A world restarted with ``--resume`` continues from it: it announces
-``world/event`` ``world_resumed`` and its clock, re-publishes tick ``k``'s samples (an agent drops those it
-already has) and waits for the commands due at tick ``k`` (an agent that already sent its command re-sends it
+``world/event`` ``world_resumed`` and its clock, re-publishes tick ``k``'s samples and those of the ticks
+before it that some process may not have received (:func:`unconfirmed_ticks`: a killed world loses what its
+Zenoh session had not sent yet; an agent drops those it already has) and waits for the commands due at
+tick ``k`` (an agent that already sent its command re-sends it
 on ``world_resumed``). A lockstep run with a world killed and resumed is the uninterrupted run, bit for bit.
 """
 
@@ -33,14 +35,18 @@ import hashlib
 import heapq
 import itertools
 import logging
+import math
+import pickle
 import queue
 import threading
 import time
+from collections import deque
 from pathlib import Path
 
 import numpy as np
 
 from swarm.scenario import Scenario
+from swarm.step.radio import tdma_channel
 from swarm.step.referee import Referee
 from swarm.step.world import World
 from swarm.transport.docking_wire import batch_samples, contact_event, keepout_event, world_sensors
@@ -157,6 +163,10 @@ class WorldProcess:
         self.ckpt_n = 0
         self.ckpt_bytes = 0
         self._sensors: list[tuple[str, str, bytes]] = []  # the current tick's samples, as published
+        self._sensors_blob: bytes | None = None  # ... pickled once (the checkpoint's, then an earlier tick's)
+        # the samples of the ticks before the current one that some process may not have received yet, as
+        # (tick, pickled samples): in the checkpoint, published again by a resumed world
+        self._earlier: deque[tuple[int, bytes]] = deque(maxlen=unconfirmed_ticks(sc))
         self._wall_before = self._cpu_before = 0.0  # a resumed run's wall and CPU time before the restart
         self._wall0, self._cpu0 = time.perf_counter(), time.process_time()  # reset when the run starts
         self.resumed_at: int | None = None
@@ -178,13 +188,30 @@ class WorldProcess:
         now = time.monotonic()
         return {
             "run": self._run_id(), "tick": self.world.k, "world": self.world.snapshot(pickled_streams=True),
-            "sensors": self._sensors, "modes": dict(self.modes), "referee": self.referee.snapshot(),
+            "sensors": self._pickled_sensors(), "earlier": list(self._earlier),
+            "modes": dict(self.modes), "referee": self.referee.snapshot(),
             "missing_ticks": self.missing_ticks, "state": self.state,
             "delays": {v: list(w) for v, w in self._delays.items()},
             "delay_rng": self._delay_rng.bit_generator.state,
             "held": [(max(0.0, t - now), kind, vid, payload) for t, _, kind, vid, payload in self._held],
             "wall_s": wall_s, "cpu_s": cpu_s,
         }  # fmt: skip
+
+    def _pickled_sensors(self) -> bytes:
+        """The current tick's samples as a pickle, made once per tick: every checkpoint of the tick, then
+        the ticks after it while it is an earlier one, carry the same bytes (no list of tuples pickled again
+        each tick)."""
+        if self._sensors_blob is None:
+            self._sensors_blob = pickle.dumps(self._sensors, protocol=pickle.HIGHEST_PROTOCOL)
+        return self._sensors_blob
+
+    def _new_tick(self, k: int, frames) -> list[tuple[str, str, bytes]]:
+        """Tick ``k``'s samples (:meth:`_encode_tick`) become the current ones, and those of tick ``k - 1``
+        an earlier tick's, kept while some process may not have them (:func:`unconfirmed_ticks`)."""
+        if self._sensors:
+            self._earlier.append((k - 1, self._pickled_sensors()))
+        self._sensors, self._sensors_blob = self._encode_tick(k, frames), None
+        return self._sensors
 
     def _checkpoint(self) -> None:
         """Write the state of the current tick (its samples encoded, not yet published), if asked to."""
@@ -223,7 +250,14 @@ class WorldProcess:
             now = time.monotonic()
             for left, kind, vid, payload in st["held"]:
                 heapq.heappush(self._held, (now + left, next(self._held_seq), kind, vid, payload))
-            self._sensors = list(st["sensors"])
+            sensors = st["sensors"]
+            self._sensors = list(pickle.loads(sensors) if isinstance(sensors, bytes) else sensors)
+            self._sensors_blob = None
+            self._earlier.clear()
+            for k_earlier, blob in st["earlier"]:
+                if not isinstance(blob, bytes):
+                    raise TypeError(f"earlier tick {k_earlier!r}: its samples are not a pickle")
+                self._earlier.append((int(k_earlier), blob))
             self._wall_before, self._cpu_before = float(st["wall_s"]), float(st["cpu_s"])
             tick = int(st["tick"])
         except CheckpointError:
@@ -458,10 +492,14 @@ class WorldProcess:
                 "scenario": self.sc.name}  # fmt: skip
         self._world_event("world_resumed", t, data)
         self._publish_clock(k)
-        for kind, vid, payload in self._sensors:
-            self._pub(kind, vid).put(payload)
-        _LOG.warning("resumed from %s at tick %d (t = %.2f s): %d samples of the tick published again",
-                     self.ckpt_path, k, t, len(self._sensors))  # fmt: skip
+        # the earlier ticks first, in tick order: an agent takes its ticks in order, and the mothership its
+        # UWB slots (each drops what it has already: stale or duplicate)
+        ticks = [(j, pickle.loads(blob)) for j, blob in self._earlier] + [(k, self._sensors)]
+        for _, sensors in ticks:
+            for kind, vid, payload in sensors:
+                self._pub(kind, vid).put(payload)
+        _LOG.warning("resumed from %s at tick %d (t = %.2f s): %d samples of ticks %d-%d published again",
+                     self.ckpt_path, k, t, sum(len(s) for _, s in ticks), ticks[0][0], k)  # fmt: skip
 
     def _apply(self, k: int, commands: dict[str, Command]) -> None:
         """Tick ``k``'s commands into the world step (which opens the mode-triggered fault windows)."""
@@ -691,7 +729,7 @@ class WorldProcess:
                 break
             frames = self.world.step()
             tick += 1
-            self._sensors = self._encode_tick(tick, frames)
+            self._new_tick(tick, frames)
             self._checkpoint()  # before any sample of the tick leaves: a restart resumes at this tick
             self._publish_tick(tick, self._sensors)
             if tick % self.clock_every == 0:
@@ -727,6 +765,23 @@ class WorldProcess:
         self.drops.flush()
         self.stop.wait()
         return end
+
+
+def unconfirmed_ticks(sc: Scenario) -> int:
+    """How many ticks before its current one a lockstep world keeps the samples of, for a restart: those
+    some process may not have received (a world killed loses what its Zenoh session had not sent yet, and
+    an agent that lacks a tick's sample waits for it forever).
+
+    At tick ``m`` the world has every live agent's command of its last control tick ``c <= m - 1`` (it
+    waited for it), so that agent has processed every tick up to ``c >= m - every``: what it may lack lies
+    in the ticks ``m - every + 1 .. m - 1`` (``every``: its control period). The mothership's truths are
+    confirmed by the ranges those agents waited for: every UWB slot tick up to their last exchange (slots
+    are served in tick order), which on a TDMA channel may lie a frame and a UWB period before ``c``."""
+    ticks = max(sc.control_every(v) for v in sc.vehicles)
+    slots, prm = tdma_channel(sc)
+    if (slots >= 0).any():
+        ticks += math.ceil(prm[0] * prm[1] / sc.dt_s) + sc.every(sc.uwb.rate_hz)
+    return ticks
 
 
 def warm_up(sc: Scenario, seed: int = 0) -> None:

@@ -24,7 +24,7 @@ from swarm.transport.messages import Vision, decode
 from swarm.transport.process import ClockSpec
 from swarm.world import checkpoint
 from swarm.world.checkpoint import CheckpointError
-from swarm.world.process import WorldProcess
+from swarm.world.process import WorldProcess, unconfirmed_ticks
 from tests.transport.procs import REPO
 
 SEED = 3
@@ -58,7 +58,7 @@ def _tick(wp: WorldProcess) -> list[tuple[str, str, bytes]]:
         n = wp.world.command_size(vid)
         wp.world.set_command(vid, rng.uniform(0.0, 0.002, n) * (rng.random(n) < 0.3))
     frames = wp.world.step()
-    wp._sensors = wp._encode_tick(wp.world.k, frames)
+    wp._new_tick(wp.world.k, frames)
     wp._checkpoint()
     return wp._sensors
 
@@ -93,6 +93,96 @@ def test_a_resumed_world_publishes_the_same_samples_as_the_uninterrupted_one(sc,
     assert markers_seen > 0 and a.world.k > NOISE_BLOCK  # camera frames and a noise refill were compared
     _same_snapshot(b.world.snapshot(), a.world.snapshot())
     np.testing.assert_array_equal(b.world.X, a.world.X)
+
+
+class _Put:
+    """A publisher that records what it is given, in order, with its key's (kind, vehicle)."""
+
+    def __init__(self, out: list, kind: str, vid: str) -> None:
+        self.out, self.kind, self.vid = out, kind, vid
+
+    def put(self, payload: bytes) -> None:
+        self.out.append((self.kind, self.vid, payload))
+
+
+def _announced(wp: WorldProcess) -> list[tuple[str, str, bytes]]:
+    """What a resumed world publishes on its sample keys when it announces its resumption."""
+    sent: list = []
+    wp._pub = lambda kind, vid: _Put(sent, kind, vid)
+    wp._world_event = lambda *args: None
+    wp._publish_clock = lambda k: None
+    wp._announce_resume(wp.world.k)
+    return sent
+
+
+def test_a_resumed_world_publishes_again_the_earlier_ticks_some_process_may_lack(sc, tmp_path):
+    """A world killed at tick ``m`` may take with it samples of the ticks before ``m`` that its Zenoh
+    session had not sent (an agent lacking one waits for it forever: restarted as hung, the run parts from
+    the simulation). The resumed world publishes them again, in tick order, then tick ``m``'s: exactly the
+    samples those ticks published, for the ``unconfirmed_ticks`` ticks before ``m``."""
+    a = _world(sc, tmp_path)
+    published = {}
+    for _ in range(25):
+        sensors = _tick(a)
+        published[a.world.k] = sensors
+    m = a.world.k
+    b = _world(sc, tmp_path / "unused", resume=checkpoint.load(checkpoint.checkpoint_path(tmp_path)))
+    window = unconfirmed_ticks(sc)
+    assert window == sc.control_every("chaser") < m  # a control period: the world waits for its commands
+    want = [s for k in range(m - window, m + 1) for s in published[k]]
+    assert _announced(b) == want
+    assert {kind for kind, _, _ in want} >= {"imu", "vision", "truth_batch"}  # every kind of sample
+    # and the resumed world keeps them on: its next checkpoint holds the ticks after m - window
+    _tick(b)
+    c = _world(sc, tmp_path / "c", resume=checkpoint.load(checkpoint.checkpoint_path(tmp_path / "unused")))
+    published[m + 1] = b._sensors
+    assert _announced(c) == [s for k in range(m + 1 - window, m + 2) for s in published[k]]
+
+
+def test_a_mothership_serves_each_slot_once_from_a_resumed_worlds_truths_and_fills_a_lost_one(sc, tmp_path):
+    """The mothership's side of a resumption: it got the truths up to a slot, lost the next one with the
+    killed world, then gets the resumed world's ticks again (served slots among them). It serves every
+    slot once, in order, with the ranges of a mothership that got each truth once, and counts the served
+    slots it was sent again as such, not as invalid messages."""
+    from mothership.process import MothershipProcess
+    from swarm.transport.messages import TruthBatch
+
+    a = _world(sc, tmp_path)
+    batches = {}
+    for _ in range(24):
+        for kind, _, payload in _tick(a):
+            if kind == "truth_batch":
+                batches[a.world.k] = payload
+    slots = sorted(batches)
+
+    def mothership() -> tuple[MothershipProcess, list]:
+        ms = MothershipProcess(sc, SEED, None, Keys("ckpt"), threading.Event())
+        sent: list = []
+        ms.pub_uwb = {v: _Put(sent, "uwb", v) for v in ms.ids}
+        return ms, sent
+
+    def feed(ms, ticks) -> None:
+        for k in ticks:
+            ms._on_truth_batch("ckpt/world/truth", decode(batches[k], TruthBatch))
+
+    once, want = mothership()
+    feed(once, slots)
+    resumed, got = mothership()
+    lost = slots[8]
+    feed(resumed, slots[:8])  # then the truths of slot `lost` go with the killed world
+    feed(resumed, [k for k in slots if lost - 10 <= k])  # the resumed world's ticks from 10 before it on
+    assert got == want and resumed.slots == once.slots == len(slots)
+    assert resumed.served_again == sum(1 for k in slots if lost - 10 <= k < lost) > 0
+    assert resumed.drops.total == 0
+
+
+def test_a_tdma_channel_widens_the_unconfirmed_ticks_by_a_frame_and_a_uwb_period(sc):
+    """On a TDMA channel an agent's last range may be a frame older than its last command, so the
+    mothership's truths since then are not confirmed by it."""
+    pairs = load_scenario("docking", overrides={"uwb.tdma": True}).with_pairs(4)
+    frame_s = pairs.uwb.tdma_slot_s * 8  # 8 tags: a frame of 8 slots
+    uwb_every = pairs.every(pairs.uwb.rate_hz)
+    assert unconfirmed_ticks(pairs) >= unconfirmed_ticks(sc.with_pairs(4)) + frame_s / pairs.dt_s + uwb_every
 
 
 def test_the_referee_state_and_faults_are_restored(sc, tmp_path):
