@@ -3,9 +3,9 @@
 The world process writes its complete state every tick before it publishes the tick's samples
 (:mod:`swarm.world.checkpoint`). This bench steps a world of 1, 4 and 16 pairs without Zenoh, as its run
 loop does (step, encode the samples, checkpoint), and times the checkpoint alone: the snapshot, the
-pickle, the CRC and the write + rename, into a directory in memory (``/dev/shm``, where ``swarm launch``
-puts it) and one on the default temporary file system (a disk, here ext4), for comparison with the
-lockstep tick (~1.6 ms for one pair, ``BENCHMARKS.md``, "Transport").
+pickle, the CRCs and the write of a slot in place (with the recent ticks' samples), into a directory in
+memory (``/dev/shm``, where ``swarm launch`` puts it) and one on the default temporary file system (a disk,
+here ext4), for comparison with the lockstep tick (~1.6 ms for one pair, ``BENCHMARKS.md``, "Transport").
 """
 
 from __future__ import annotations

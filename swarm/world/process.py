@@ -162,11 +162,15 @@ class WorldProcess:
         self.ckpt_s = 0.0  # wall time spent writing checkpoints [s], and how many
         self.ckpt_n = 0
         self.ckpt_bytes = 0
+        self._ckpt_file: checkpoint.CheckpointFile | None = None
+        if self.ckpt_path is not None:
+            after = None if resume is None else resume.get("checkpoint")
+            self._ckpt_file = checkpoint.CheckpointFile(self.ckpt_path, after=after)
         self._sensors: list[tuple[str, str, bytes]] = []  # the current tick's samples, as published
-        self._sensors_blob: bytes | None = None  # ... pickled once (the checkpoint's, then an earlier tick's)
+        self._sensors_entry: tuple | None = None  # ... pickled once, as a checkpoint's samples entry
         # the samples of the ticks before the current one that some process may not have received yet, as
-        # (tick, pickled samples): in the checkpoint, published again by a resumed world
-        self._earlier: deque[tuple[int, bytes]] = deque(maxlen=unconfirmed_ticks(sc))
+        # checkpoint sample entries (tick, pickled samples, CRC-32): published again by a resumed world
+        self._earlier: deque[tuple[int, bytes, int]] = deque(maxlen=unconfirmed_ticks(sc))
         self._wall_before = self._cpu_before = 0.0  # a resumed run's wall and CPU time before the restart
         self._wall0, self._cpu0 = time.perf_counter(), time.process_time()  # reset when the run starts
         self.resumed_at: int | None = None
@@ -188,7 +192,6 @@ class WorldProcess:
         now = time.monotonic()
         return {
             "run": self._run_id(), "tick": self.world.k, "world": self.world.snapshot(pickled_streams=True),
-            "sensors": self._pickled_sensors(), "earlier": list(self._earlier),
             "modes": dict(self.modes), "referee": self.referee.snapshot(),
             "missing_ticks": self.missing_ticks, "state": self.state,
             "delays": {v: list(w) for v, w in self._delays.items()},
@@ -197,20 +200,21 @@ class WorldProcess:
             "wall_s": wall_s, "cpu_s": cpu_s,
         }  # fmt: skip
 
-    def _pickled_sensors(self) -> bytes:
-        """The current tick's samples as a pickle, made once per tick: every checkpoint of the tick, then
-        the ticks after it while it is an earlier one, carry the same bytes (no list of tuples pickled again
-        each tick)."""
-        if self._sensors_blob is None:
-            self._sensors_blob = pickle.dumps(self._sensors, protocol=pickle.HIGHEST_PROTOCOL)
-        return self._sensors_blob
+    def _sensors_sample(self) -> tuple[int, bytes, int]:
+        """The current tick's samples as a checkpoint's entry, pickled and checksummed once per tick: every
+        checkpoint of the tick, then those of the ticks after it while it is an earlier one, carry them."""
+        if self._sensors_entry is None:
+            blob = pickle.dumps(self._sensors, protocol=pickle.HIGHEST_PROTOCOL)
+            self._sensors_entry = checkpoint.sample_entry(self.world.k, blob)
+        return self._sensors_entry
 
     def _new_tick(self, k: int, frames) -> list[tuple[str, str, bytes]]:
         """Tick ``k``'s samples (:meth:`_encode_tick`) become the current ones, and those of tick ``k - 1``
         an earlier tick's, kept while some process may not have them (:func:`unconfirmed_ticks`)."""
-        if self._sensors:
-            self._earlier.append((k - 1, self._pickled_sensors()))
-        self._sensors, self._sensors_blob = self._encode_tick(k, frames), None
+        if self._sensors and self._ckpt_file is not None:  # (kept only for a checkpoint)
+            self._earlier.append(self._sensors_entry or checkpoint.sample_entry(k - 1, pickle.dumps(
+                self._sensors, protocol=pickle.HIGHEST_PROTOCOL)))  # fmt: skip
+        self._sensors, self._sensors_entry = self._encode_tick(k, frames), None
         return self._sensors
 
     def _checkpoint(self) -> None:
@@ -221,14 +225,16 @@ class WorldProcess:
         wall = self._wall_before + t0 - self._wall0
         cpu = self._cpu_before + time.process_time() - self._cpu0
         try:
-            self.ckpt_bytes = checkpoint.save(self.ckpt_path, self._state(wall, cpu))
+            samples = [*self._earlier, self._sensors_sample()]
+            self.ckpt_bytes = self._ckpt_file.write(self._state(wall, cpu), samples)
         except OSError as exc:
             # an older checkpoint would resume behind the agents (they would never send its commands):
             # remove it, so that a restart says "no checkpoint" and the launcher gives up on the world
             _LOG.error("checkpoint %s not written (%s): checkpoints off, this run cannot survive a restart "
                        "of the world", self.ckpt_path, exc)  # fmt: skip
+            self._ckpt_file.close()
             self.ckpt_path.unlink(missing_ok=True)
-            self.ckpt_path = None
+            self.ckpt_path = self._ckpt_file = None
             return
         self.ckpt_s += time.perf_counter() - t0
         self.ckpt_n += 1
@@ -250,19 +256,18 @@ class WorldProcess:
             now = time.monotonic()
             for left, kind, vid, payload in st["held"]:
                 heapq.heappush(self._held, (now + left, next(self._held_seq), kind, vid, payload))
-            sensors = st["sensors"]
-            self._sensors = list(pickle.loads(sensors) if isinstance(sensors, bytes) else sensors)
-            self._sensors_blob = None
-            self._earlier.clear()
-            for k_earlier, blob in st["earlier"]:
-                if not isinstance(blob, bytes):
-                    raise TypeError(f"earlier tick {k_earlier!r}: its samples are not a pickle")
-                self._earlier.append((int(k_earlier), blob))
             self._wall_before, self._cpu_before = float(st["wall_s"]), float(st["cpu_s"])
             tick = int(st["tick"])
+            self._earlier.clear()
+            self._sensors, self._sensors_entry = [], None
+            for k_sample, blob in st["samples"]:  # the recent ticks', oldest first, then this tick's
+                if int(k_sample) == tick:
+                    self._sensors = list(pickle.loads(blob))
+                else:
+                    self._earlier.append(checkpoint.sample_entry(int(k_sample), blob))
         except CheckpointError:
             raise
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError, pickle.UnpicklingError) as exc:
             raise CheckpointError(f"{where}: not a state this world can resume: {exc!r}") from None
         if tick != self.world.k:
             raise CheckpointError(f"{where}: tick {tick} but its world is at tick {self.world.k}")
@@ -494,7 +499,7 @@ class WorldProcess:
         self._publish_clock(k)
         # the earlier ticks first, in tick order: an agent takes its ticks in order, and the mothership its
         # UWB slots (each drops what it has already: stale or duplicate)
-        ticks = [(j, pickle.loads(blob)) for j, blob in self._earlier] + [(k, self._sensors)]
+        ticks = [(j, pickle.loads(blob)) for j, blob, _ in self._earlier] + [(k, self._sensors)]
         for _, sensors in ticks:
             for kind, vid, payload in sensors:
                 self._pub(kind, vid).put(payload)
@@ -764,6 +769,8 @@ class WorldProcess:
                       1e6 * self.ckpt_s / self.ckpt_n, self.ckpt_bytes)  # fmt: skip
         self.drops.flush()
         self.stop.wait()
+        if self._ckpt_file is not None:
+            self._ckpt_file.close()
         return end
 
 

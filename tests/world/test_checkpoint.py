@@ -216,6 +216,71 @@ def test_a_world_resumes_only_its_own_runs_checkpoint(sc, tmp_path):
         _world(other, tmp_path, resume=state)
 
 
+@pytest.mark.parametrize("ticks", [12, 13])  # the newest slot is the file's last (cut short) or its first
+def test_a_world_killed_while_writing_a_checkpoint_resumes_from_the_one_before(sc, tmp_path, ticks):
+    """The file holds two slots written in turn: a write cut short (the world killed in it) leaves the
+    checkpoint of the tick before, whose samples the world had not published yet, and the resumed world
+    continues from there as the uninterrupted one did."""
+    a = _world(sc, tmp_path)
+    published = {}
+    for _ in range(ticks):
+        sensors = _tick(a)
+        published[a.world.k] = sensors
+    path = checkpoint.checkpoint_path(tmp_path)
+    newest = checkpoint.load(path)
+    seq, slot = newest["checkpoint"]
+    assert newest["tick"] == a.world.k == ticks == seq
+    data = bytearray(path.read_bytes())
+    capacity = int.from_bytes(data[8:16], "little")
+    cut = 16 + slot * capacity + 200  # the newest slot's write stopped 200 bytes in
+    if slot == 1:
+        data = data[:cut]
+    else:
+        data[cut : 16 + capacity] = bytes(16 + capacity - cut)
+    path.write_bytes(bytes(data))
+    before = checkpoint.load(path)
+    m = ticks - 1
+    assert before["tick"] == m and before["checkpoint"] == (seq - 1, 1 - slot)
+    b = _world(sc, tmp_path / "b", resume=before)
+    assert b.world.k == m and b._sensors == published[m]
+    assert _announced(b) == [
+        s for k in range(m - unconfirmed_ticks(sc), m + 1) if k >= 1 for s in published[k]
+    ]
+    c = _world(sc, tmp_path / "c")  # an uninterrupted world: tick m + 1 again, and on
+    for _ in range(m):
+        _tick(c)
+    for _ in range(3):
+        assert _tick(b) == _tick(c)
+
+
+def test_a_checkpoint_file_is_written_in_place_one_slot_after_the_other(tmp_path):
+    """A write goes to the slot not holding the newest checkpoint, in the same file (no new file, no
+    rename: the cheap path); a resumed writer goes on from the slot it read, to the other one first, so the
+    checkpoint it resumed from stays whole until a newer one is; a state that outgrows the slots makes a
+    new file twice its size."""
+    path = tmp_path / "world.ckpt"
+    f = checkpoint.CheckpointFile(path)
+    samples = [checkpoint.sample_entry(t, bytes([t]) * 100) for t in range(3)]
+    f.write({"tick": 1}, samples[:1])
+    inode = path.stat().st_ino
+    f.write({"tick": 2}, samples[:2])
+    f.write({"tick": 3}, samples)
+    st = checkpoint.load(path)
+    assert path.stat().st_ino == inode and st["tick"] == 3 and st["checkpoint"] == (3, 0)
+    assert st["samples"] == [(t, bytes([t]) * 100) for t in range(3)]
+    f.close()
+    g = checkpoint.CheckpointFile(path, after=st["checkpoint"])
+    g.write({"tick": 4})
+    assert checkpoint.load(path)["checkpoint"] == (4, 1) and path.stat().st_ino == inode
+    big = {"tick": 5, "pad": bytes(3 * g.capacity)}
+    g.write(big)
+    assert path.stat().st_ino != inode and checkpoint.load(path)["pad"] == big["pad"]
+    assert g.capacity >= 2 * len(big["pad"])
+    g.write({"tick": 6})
+    assert checkpoint.load(path)["tick"] == 6 and sorted(p.name for p in tmp_path.iterdir()) == ["world.ckpt"]
+    g.close()
+
+
 def test_a_checkpoint_write_replaces_the_file_whole(sc, tmp_path):
     a = _world(sc, tmp_path)
     _tick(a)
