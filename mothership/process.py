@@ -194,5 +194,8 @@ class MothershipProcess:
                 pub_anchors.put(payload)
                 last_anchors = now
         self.drops.flush()
+        if self.served_again:
+            _LOG.info("%d UWB slots served; %d truth batches of slots already served ignored (a resumed "
+                      "world's ticks published again)", self.slots, self.served_again)  # fmt: skip
         if self._failure is not None:
             raise self._failure
