@@ -7,7 +7,10 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
+
+from swarm.scenario import load_scenario
 
 
 def test_bench_swarm_measures_a_launched_swarm(tmp_path):
@@ -30,7 +33,31 @@ def test_bench_swarm_measures_a_launched_swarm(tmp_path):
     # chaser0's estimates (and the fifth of target0's it sends) matched to their imu, over 300 ticks
     assert case["samples"] > 200
     assert 0 < case["latency_p50_us"] <= case["latency_p99_us"]
-    assert "CPU us/vehicle/tick" in r.stdout
+    # split: the chaser's camera ticks (the scenario's camera period: 60 in the span at 20 Hz) apart
+    sc = load_scenario("docking")
+    frames = case["ticks"] // sc.every(sc.camera.rate_hz)
+    assert frames - 3 <= case["camera_samples"] <= frames and case["samples"] - case["camera_samples"] > 150
+    for part in ("camera", "other"):
+        assert 0 < case[f"latency_{part}_p50_us"] <= case[f"latency_{part}_p99_us"]
+    assert "CPU us/vehicle/tick" in r.stdout and "(camera ticks; others)" in r.stdout
+
+
+def test_the_latency_is_split_into_the_camera_ticks_and_the_others():
+    """The probe's samples: the camera vehicle's at the camera ticks (a multiple of the camera's period)
+    apart, a target's on those ticks not; each part's percentiles those of its own samples (numpy's linear
+    interpolation); none of a kind gives None."""
+    from swarm.bench.swarm import latency_split
+
+    samples = [("c", k, (3e-3 if k % 10 == 0 else 1e-3) + 1e-6 * k) for k in range(1, 101)]
+    samples += [("t", k, 2e-3) for k in range(10, 101, 10)]  # the target's, on the same ticks: no camera
+    got = latency_split(samples, 10, {"c"})
+    camera = [3e3 + k for k in range(10, 101, 10)]
+    other = [1e3 + k for k in range(1, 101) if k % 10] + [2e3] * 10
+    assert (got["samples"], got["camera_samples"]) == (110, 10)
+    assert got["latency_camera_p50_us"] == pytest.approx(sorted(camera)[4] / 2 + sorted(camera)[5] / 2)
+    assert got["latency_other_p99_us"] == pytest.approx(float(np.percentile(other, 99)))
+    assert got["latency_p99_us"] > got["latency_other_p99_us"] > got["latency_other_p50_us"]
+    assert latency_split([("c", 5, 1e-3)], 10, {"c"})["latency_camera_p50_us"] is None
 
 
 def test_late_share_counts_a_swarm_that_never_commanded_as_all_late():

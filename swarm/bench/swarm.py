@@ -26,7 +26,9 @@ one clock (it decodes only the tick number, and a batch's ids):
 - **sensor-to-estimate latency** p50/p99: ``estimate(k)`` minus ``imu(k)`` arrival, for the first pair's
   two vehicles: the agent's receive, filter and publish time plus one router hop each way. Since 4df9a3d
   the target sends only the estimates its chaser reads (a fifth), so its ticks are a sixth of the samples,
-  not a half.
+  not a half. Split beside it (``latency_camera_*`` and ``latency_other_*``): the chaser's camera ticks
+  (``k`` a multiple of the camera's period: the frame is fused before the estimate goes out) and all the
+  other samples, the target's included.
 
 ``--repeat N`` runs every case N times, round by round (so that a drift of the shared machine's speed falls
 on every case alike), and reports each figure's median over the runs with the spread of the late ticks,
@@ -108,7 +110,7 @@ class _Probe:
     def __init__(self) -> None:
         self.lock = threading.Lock()
         self.imu: dict[tuple[str, int], float] = {}
-        self.latency: list[float] = []
+        self.latency: list[tuple[str, int, float]] = []  # (vehicle, tick, estimate's arrival - its imu's [s])
 
     def _tick(self, sample) -> tuple[str, int] | None:
         try:
@@ -150,7 +152,7 @@ class _Probe:
             with self.lock:
                 t0 = self.imu.get(key)
                 if t0 is not None:
-                    getattr(self, into).append(now - t0)
+                    getattr(self, into).append((*key, now - t0))
 
         return handler
 
@@ -201,7 +203,10 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
     ticks = max(1, round(res["sim_time_s"] / DT_S))
     cpu = res.get("cpu_s") or {}
     agents = [v for k, v in cpu.items() if k != "world" and v is not None]
-    lat = np.asarray(probe.latency) * 1e6
+    from swarm.scenario import load_scenario
+
+    sc = load_scenario("docking")
+    lat = latency_split(probe.latency, sc.every(sc.camera.rate_hz), {probed_pair(pairs)[0]})
     late, stepped = late_share(clock, res.get("late_commands"))
     late_cmd, _ = late_share(clock, res.get("late_control_commands"))
     return {
@@ -216,11 +221,32 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         "late_command_share": late_cmd,  # of the control ticks' commands (None: lockstep)
         "commanded_vehicle_ticks": stepped,  # the late share's denominator (None: lockstep)
         "realtime_factor": res.get("realtime_factor"),
-        "latency_p50_us": float(np.percentile(lat, 50)) if lat.size else None,
-        "latency_p99_us": float(np.percentile(lat, 99)) if lat.size else None,
-        "samples": int(lat.size),
+        **lat,
         "ticks": ticks,
     }
+
+
+def probed_pair(pairs: int) -> tuple[str, str]:
+    """The chaser and the target whose latency the probe measures: the first pair."""
+    return ("chaser", "target") if pairs == 1 else ("chaser0", "target0")
+
+
+def latency_split(samples: list[tuple[str, int, float]], camera_every: int, cameras: set[str]) -> dict:
+    """The probe's ``(vehicle, tick, latency [s])`` samples as p50/p99 [us] of all (``latency_p50_us``,
+    ..., ``samples``), of the camera ticks (``latency_camera_*``: a vehicle of ``cameras`` at a tick that is
+    a multiple of ``camera_every``, whose frame is fused before the estimate goes out) and of the others
+    (``latency_other_*``, the target's ticks among them); ``None`` where none."""
+    ticks = np.array([k for _, k, _ in samples], dtype=np.int64)
+    us = np.array([s for _, _, s in samples], dtype=float) * 1e6
+    has_camera = np.array([v in cameras for v, _, _ in samples], dtype=bool)
+    camera = has_camera & (ticks % camera_every == 0)
+    out: dict = {}
+    for name, sel in (("latency", slice(None)), ("latency_camera", camera), ("latency_other", ~camera)):
+        x = us[sel]
+        out[f"{name}_p50_us"] = float(np.percentile(x, 50)) if x.size else None
+        out[f"{name}_p99_us"] = float(np.percentile(x, 99)) if x.size else None
+    out["samples"], out["camera_samples"] = int(us.size), int(camera.sum())
+    return out
 
 
 def _what_it_said(text: str) -> str:
@@ -240,7 +266,7 @@ def _probe_run(proc: subprocess.Popen, endpoint: str, ns: str, pairs: int, probe
     launcher's router at ``endpoint`` until the launcher ``proc`` exits."""
     session = open_session(ZenohArgs(mode="client", connect=(endpoint,)))
     try:
-        probed = ("chaser", "target") if pairs == 1 else ("chaser0", "target0")
+        probed = probed_pair(pairs)
         for vid in probed:
             session.declare_subscriber(f"{ns}/agent/{vid}/imu", probe.on_imu)
             session.declare_subscriber(f"{ns}/agent/{vid}/estimate", probe.on_later("latency"))
@@ -322,7 +348,7 @@ def format_report(r: dict) -> str:
         + ("; controller clocks staggered" if any(c.get("staggered") for c in r["cases"]) else "")
         + ("; one TDMA UWB channel" if any(c.get("tdma") for c in r["cases"]) else ""),
         "vehicles  per proc  clock      CPU us/vehicle/tick  world us/tick  late ticks / commands  "
-        "real-time  latency p50/p99 us",
+        "real-time  latency p50/p99 us (camera ticks; others)",
     ]
     for c in r["cases"]:
         late = "-" if c["late_tick_share"] is None else f"{100 * c['late_tick_share']:.1f} %"
@@ -335,7 +361,10 @@ def format_report(r: dict) -> str:
             f"{_fmt(c['cpu_us_per_vehicle_tick'], '19.0f')}  "
             f"{_fmt(c['world_cpu_us_per_tick'], '13.0f')}  {late:>21}  "
             f"{_fmt(c['realtime_factor'], '8.2f')}x  "
-            f"{_fmt(c['latency_p50_us'], '.0f')}/{_fmt(c['latency_p99_us'], '.0f')}" + _spread(c)
+            f"{_fmt(c['latency_p50_us'], '.0f')}/{_fmt(c['latency_p99_us'], '.0f')}"
+            f" ({_fmt(c.get('latency_camera_p50_us'), '.0f')}/{_fmt(c.get('latency_camera_p99_us'), '.0f')};"
+            f" {_fmt(c.get('latency_other_p50_us'), '.0f')}/{_fmt(c.get('latency_other_p99_us'), '.0f')})"
+            + _spread(c)
         )
     if any("runs" in c for c in r["cases"]):
         lines.append("medians of the runs of each case; [min-max] over them")
