@@ -132,15 +132,6 @@ class CheckpointFile:
             self.fd = None
 
 
-def save(path: Path, state: dict, samples: Samples = ()) -> int:
-    """Write ``state`` (and ``samples``) to a new checkpoint file at ``path``; returns the slot's size."""
-    f = CheckpointFile(path)
-    try:
-        return f.write(state, samples)
-    finally:
-        f.close()
-
-
 def _slot(data: bytes, offset: int, capacity: int) -> tuple[int, dict | None, str]:
     """``(seq, state or None, what is wrong)`` of the slot at ``offset`` (``seq`` 0: never written)."""
     end = min(len(data), offset + capacity)

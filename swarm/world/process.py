@@ -200,20 +200,20 @@ class WorldProcess:
             "wall_s": wall_s, "cpu_s": cpu_s,
         }  # fmt: skip
 
-    def _sensors_sample(self) -> tuple[int, bytes, int]:
-        """The current tick's samples as a checkpoint's entry, pickled and checksummed once per tick: every
-        checkpoint of the tick, then those of the ticks after it while it is an earlier one, carry them."""
+    def _sensors_sample(self, k: int) -> tuple[int, bytes, int]:
+        """The current samples (those of tick ``k``) as a checkpoint's entry, pickled and checksummed once
+        per tick: every checkpoint of the tick, then those of the ticks after it while it is an earlier
+        one, carry them."""
         if self._sensors_entry is None:
             blob = pickle.dumps(self._sensors, protocol=pickle.HIGHEST_PROTOCOL)
-            self._sensors_entry = checkpoint.sample_entry(self.world.k, blob)
+            self._sensors_entry = checkpoint.sample_entry(k, blob)
         return self._sensors_entry
 
     def _new_tick(self, k: int, frames) -> list[tuple[str, str, bytes]]:
         """Tick ``k``'s samples (:meth:`_encode_tick`) become the current ones, and those of tick ``k - 1``
         an earlier tick's, kept while some process may not have them (:func:`unconfirmed_ticks`)."""
         if self._sensors and self._ckpt_file is not None:  # (kept only for a checkpoint)
-            self._earlier.append(self._sensors_entry or checkpoint.sample_entry(k - 1, pickle.dumps(
-                self._sensors, protocol=pickle.HIGHEST_PROTOCOL)))  # fmt: skip
+            self._earlier.append(self._sensors_sample(k - 1))
         self._sensors, self._sensors_entry = self._encode_tick(k, frames), None
         return self._sensors
 
@@ -225,7 +225,7 @@ class WorldProcess:
         wall = self._wall_before + t0 - self._wall0
         cpu = self._cpu_before + time.process_time() - self._cpu0
         try:
-            samples = [*self._earlier, self._sensors_sample()]
+            samples = [*self._earlier, self._sensors_sample(self.world.k)]
             self.ckpt_bytes = self._ckpt_file.write(self._state(wall, cpu), samples)
         except OSError as exc:
             # an older checkpoint would resume behind the agents (they would never send its commands):
