@@ -1,19 +1,23 @@
 """``swarm bench transport``: the swarm over Zenoh on this machine (DESIGN.md section 7).
 
-Three measurements in one run, all between separate processes on loopback, in the launcher's topology
-(every process a Zenoh client of one router, so each message crosses the router):
+Three measurements in one run, all between separate processes on loopback, in the launcher's two
+topologies (``swarm launch --topology``): a ``star`` of Zenoh clients of one router, so each message crosses
+the router, and a ``mesh`` of peers (the default) linked directly, one hop a message:
 
-1. raw Zenoh ping-pong round trip of a 64-byte payload between two client processes (the floor), and the
+1. raw Zenoh ping-pong round trip of a 64-byte payload between two client processes through a router (the
+   star's floor) and between two peers linked directly (the mesh's floor), and the
    echoing process's CPU per message received and published again, from Zenoh's callback thread and
    handed to a main thread as the swarm's processes do (the per-message floor of a Python process); and
    the CPU of one ``put`` (and, for scale, of numpy's sum of 1000 floats) back to back and after the
    thread slept :data:`IDLE_S`, as a swarm process does between ticks: a woken thread finds its caches
    (on a VM, its whole vCPU) cold, and that, not the code, is most of a 100 Hz process's cost per message;
-2. the lockstep tick period of ``swarm launch docking --agents N`` for N = 1, 4, 16 pairs: wall time per
-   world tick over a fixed simulated span (``run_end``'s ``wall_s`` / ticks), and the real-time factor;
-3. sensor-to-estimate latency in ``realtime`` mode: a probe client stamps the arrival of the chaser's
-   ``imu(k)`` and of its ``estimate(k)`` on one clock; the difference is the agent's receive, filter and
-   publish time plus one router hop each way.
+2. the lockstep tick period of ``swarm launch docking --agents N`` for N = 1, 4, 16 pairs (a mesh), and of
+   one pair in a star: wall time per world tick over a fixed simulated span (``run_end``'s ``wall_s`` /
+   ticks), and the real-time factor; each topology's one-pair tick is set against its own floor;
+3. sensor-to-estimate latency in ``realtime`` mode (a mesh): a probe peer stamps the arrival of the
+   chaser's ``imu(k)`` and of its ``estimate(k)`` on one clock; the difference is the agent's receive,
+   filter and publish time plus the hop from the world to the agent (in a star, a probe client of the
+   router: the same plus the router's second hop).
 
 Run as ``python -m swarm.bench.transport ping|pong ...`` it is the ping or the pong process.
 """
@@ -32,6 +36,7 @@ from pathlib import Path
 import msgpack
 import numpy as np
 
+from swarm.cli.children import MESH_LISTEN
 from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session
 
 IDLE_S = 0.01
@@ -47,12 +52,31 @@ def _client(endpoint: str):
     return open_session(ZenohArgs(mode="client", connect=(endpoint,)))
 
 
+def _member(endpoint: str, topology: str):
+    """A session as a launched child of ``topology`` opens it (``swarm.cli.children.child_args``): a client
+    of the router at ``endpoint`` (``star``), or a peer that connects to it and listens for its siblings
+    (``mesh``)."""
+    if topology == "star":
+        return _client(endpoint)
+    return open_session(ZenohArgs(mode="peer", connect=(endpoint,), listen=(MESH_LISTEN,)))
+
+
+def _await_link(s, topology: str, what: str) -> None:
+    """In a mesh, wait until ``s`` has its direct link to the other peer (until then the router brokers
+    their messages: a round trip through it is not the mesh's)."""
+    deadline = time.monotonic() + 10
+    while topology == "mesh" and not list(s.info.peers_zid()):
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"{what}: no direct link to the other peer within 10 s")
+        time.sleep(0.005)
+
+
 def _router(endpoint: str):
     # configured as the launcher's router (lean Zenoh runtime), so that the RTT is the floor of its ticks
     return open_session(ZenohArgs(mode="router", listen=(endpoint,)), lean=True)
 
 
-def _pong(endpoint: str, ns: str, style: str = "direct") -> None:
+def _pong(endpoint: str, ns: str, style: str = "direct", topology: str = "star") -> None:
     """Echo every ping. ``direct``: published from Zenoh's callback thread; ``handoff``: the callback hands
     the message to the main thread through a condition, which publishes it: the pattern of the swarm's
     processes (a callback only queues, the main loop steps and publishes). On stdin's end it prints its CPU
@@ -60,7 +84,7 @@ def _pong(endpoint: str, ns: str, style: str = "direct") -> None:
     import zenoh
 
     first, n = [None], [0]
-    with _client(endpoint) as s:
+    with _member(endpoint, topology) as s:
         pub = s.declare_publisher(f"{ns}/pong", express=True, reliability=zenoh.Reliability.RELIABLE)
         cond, queue, eof = threading.Condition(), [], threading.Event()
 
@@ -88,16 +112,17 @@ def _pong(endpoint: str, ns: str, style: str = "direct") -> None:
         print(json.dumps({"cpu_us_per_echo": 1e6 * cpu / max(n[0], 1), "echoes": n[0]}), flush=True)
 
 
-def _ping(endpoint: str, ns: str, n: int, wake: bool = False) -> None:
+def _ping(endpoint: str, ns: str, n: int, wake: bool = False, topology: str = "star") -> None:
     import zenoh
 
     got = threading.Event()
-    with _client(endpoint) as s:
+    with _member(endpoint, topology) as s:
         pub = s.declare_publisher(f"{ns}/ping", express=True, reliability=zenoh.Reliability.RELIABLE)
         s.declare_subscriber(f"{ns}/pong", lambda _s: got.set())
         deadline = time.monotonic() + 10  # until the router routes our pings to the pong's subscriber
         while not pub.matching_status.matching and time.monotonic() < deadline:
             time.sleep(0.005)
+        _await_link(s, topology, "ping")
         payload = b"x" * 64
         rtts = []
         for i in range(n + 50):
@@ -129,16 +154,17 @@ def _wake_cost(pub, payload: bytes) -> dict:
     return out
 
 
-def _rtt(n: int, style: str = "direct", wake: bool = False) -> dict:
-    """Ping-pong between two client processes through a router: the round trip [us] and the pong's CPU per
-    echo [us] (:func:`_pong`'s ``style``); with ``wake``, the pinging process's :func:`_wake_cost` too."""
+def _rtt(n: int, style: str = "direct", wake: bool = False, topology: str = "star") -> dict:
+    """Ping-pong between two processes of ``topology`` (:func:`_member`: clients through a router, or two
+    peers linked directly): the round trip [us] and the pong's CPU per echo [us] (:func:`_pong`'s
+    ``style``); with ``wake``, the pinging process's :func:`_wake_cost` too."""
     endpoint, ns = free_loopback_endpoint(), f"bench{os.getpid()}"
     with _router(endpoint):
-        pong = subprocess.Popen([sys.executable, "-m", "swarm.bench.transport", "pong", endpoint, ns, style],
-                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
+        pong_cmd = [sys.executable, "-m", "swarm.bench.transport", "pong", endpoint, ns, style, topology]
+        pong = subprocess.Popen(pong_cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         try:
             assert pong.stdout.readline().strip() == "pong ready"
-            ping = [sys.executable, "-m", "swarm.bench.transport", "ping", endpoint, ns, str(n),
+            ping = [sys.executable, "-m", "swarm.bench.transport", "ping", endpoint, ns, str(n), topology,
                     *(["wake"] if wake else [])]  # fmt: skip
             out = subprocess.run(ping, capture_output=True, text=True, timeout=300)
             got = json.loads(out.stdout.strip().splitlines()[-1])
@@ -151,15 +177,17 @@ def _rtt(n: int, style: str = "direct", wake: bool = False) -> dict:
             "pong_cpu_us_per_echo": echo.get("cpu_us_per_echo"), "wake_cost_us": got["wake"]}  # fmt: skip
 
 
-def _lockstep(pairs: int, span_s: float) -> dict:
+def _lockstep(pairs: int, span_s: float, topology: str = "mesh") -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run.json"
         cmd = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--until-docked",
                "--agents", str(pairs), "--set", f"sim.max_duration_s={span_s}", "--json", str(out),
-               "--namespace", f"bench{os.getpid()}x{pairs}"]  # fmt: skip
+               "--namespace", f"bench{os.getpid()}x{pairs}", "--topology", topology]  # fmt: skip
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
         if not out.exists():
-            raise RuntimeError(f"launch --agents {pairs} failed ({r.returncode}):\n{r.stderr[-2000:]}")
+            raise RuntimeError(
+                f"launch --agents {pairs} --topology {topology} failed ({r.returncode}):\n{r.stderr[-2000:]}"
+            )
         res = json.loads(out.read_text())
     ticks = round(res["sim_time_s"] * 100)
     cpu = res.get("cpu_s", {})
@@ -171,14 +199,14 @@ def _lockstep(pairs: int, span_s: float) -> dict:
     }  # fmt: skip
 
 
-def _latency(duration_s: float) -> dict:
+def _latency(duration_s: float, topology: str = "mesh") -> dict:
     from swarm.transport.keys import Keys
 
     ns = f"benchlat{os.getpid()}"
     keys = Keys(ns)
     endpoint = free_loopback_endpoint()
     cmd = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--clock", "realtime",
-           "--namespace", ns, "--listen", endpoint]  # fmt: skip
+           "--namespace", ns, "--listen", endpoint, "--topology", topology]  # fmt: skip
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     imu_at: dict[int, float] = {}
     lat: list[float] = []
@@ -197,7 +225,7 @@ def _latency(duration_s: float) -> dict:
         for line in proc.stdout:
             if line.startswith("swarm up:"):
                 break
-        with _client(endpoint) as s:
+        with _member(endpoint, topology) as s:  # (in a mesh, linked to the world and the chaser directly)
             s.declare_subscriber(keys.imu("chaser"), on_imu)
             s.declare_subscriber(keys.estimate("chaser"), on_est)
             time.sleep(duration_s)
@@ -210,12 +238,15 @@ def _latency(duration_s: float) -> dict:
 
 def run(preset: dict) -> dict:
     rtt = _rtt(preset["rtt_samples"], wake=True)
+    mesh_rtt = _rtt(preset["rtt_samples"], topology="mesh")
     handoff = _rtt(preset["rtt_samples"], "handoff")
     lock = {str(n): _lockstep(n, preset["span_s"]) for n in preset["pairs"]}
+    star = _lockstep(1, preset["span_s"], "star")
     latency = _latency(preset["latency_s"])
     one = lock["1"]["tick_us"]
     return {
         "zenoh_rtt_us": rtt,
+        "mesh_rtt_us": mesh_rtt,
         "handoff_rtt_us": handoff,
         "lockstep_tick_us": {n: v["tick_us"] for n, v in lock.items()},
         "lockstep_realtime_factor": {n: v["realtime_factor"] for n, v in lock.items()},
@@ -223,10 +254,20 @@ def run(preset: dict) -> dict:
             n: {"world": v["world_cpu_us_per_tick"], "agent_mean": v["agent_cpu_us_per_tick"]}
             for n, v in lock.items()
         },
+        "star_one_pair": {
+            "tick_us": star["tick_us"],
+            "realtime_factor": star["realtime_factor"],
+            "world_cpu_us_per_tick": star["world_cpu_us_per_tick"],
+            "agent_cpu_us_per_tick": star["agent_cpu_us_per_tick"],
+        },
         "latency_us": latency,
-        "one_pair_tick_over_rtt": one / rtt["median"],
+        # each topology's tick against the floor of the path its messages take
+        "one_pair_tick_over_rtt": one / mesh_rtt["median"],
+        "star_one_pair_tick_over_rtt": star["tick_us"] / rtt["median"],
+        "one_pair_tick_over_router_rtt": one / rtt["median"],
         "goals": {
-            "one_pair_tick_le_2x_rtt": one <= 2 * rtt["median"],
+            "one_pair_tick_le_2x_rtt": one <= 2 * mesh_rtt["median"],
+            "star_one_pair_tick_le_2x_rtt": star["tick_us"] <= 2 * rtt["median"],
             "pairs16_ge_10x_realtime": lock.get("16", {}).get("realtime_factor", 0) >= 10,
             "latency_p99_lt_1ms": latency["p99"] < 1000,
         },
@@ -236,11 +277,12 @@ def run(preset: dict) -> dict:
 
 
 def format_report(r: dict) -> str:
-    rtt, hand = r["zenoh_rtt_us"], r["handoff_rtt_us"]
+    rtt, mesh, hand = r["zenoh_rtt_us"], r["mesh_rtt_us"], r["handoff_rtt_us"]
     w = rtt["wake_cost_us"]
     lines = [
         f"Zenoh ping-pong RTT (64 B, two clients via the router): median {rtt['median']:.0f} us, "
         f"p99 {rtt['p99']:.0f} us",
+        f"  two peers linked directly (a mesh): median {mesh['median']:.0f} us, p99 {mesh['p99']:.0f} us",
         f"  CPU per message received and sent again by the echoing process: "
         f"{rtt['pong_cpu_us_per_echo']:.0f} us from Zenoh's callback thread, "
         f"{hand['pong_cpu_us_per_echo']:.0f} us handed to a main thread as the swarm's processes do "
@@ -248,7 +290,7 @@ def format_report(r: dict) -> str:
         f"  CPU of one put: {w['put_warm_us']:.0f} us back to back, {w['put_idle_us']:.0f} us after "
         f"{IDLE_S * 1e3:.0f} ms idle (numpy's sum of 1000 floats: {w['numpy_sum_warm_us']:.1f} and "
         f"{w['numpy_sum_idle_us']:.1f} us): what a thread woken every tick pays on this machine",
-        "lockstep tick period (swarm launch --agents N):",
+        "lockstep tick period (swarm launch --agents N, a mesh):",
     ]
     for n, t in r["lockstep_tick_us"].items():
         lines.append(
@@ -260,7 +302,18 @@ def format_report(r: dict) -> str:
                 f"  {n:>2} pair(s): CPU per tick: world {c['world']:.0f} us, "
                 f"each agent {c['agent_mean']:.0f} us"
             )
-    lines.append(f"  one pair / RTT = {r['one_pair_tick_over_rtt']:.1f} (goal <= 2)")
+    st = r["star_one_pair"]
+    lines.append(
+        f"   1 pair,  star: {st['tick_us']:4.0f} us per tick, {st['realtime_factor']:.1f}x real time "
+        f"(CPU per tick: world {st['world_cpu_us_per_tick']:.0f} us, "
+        f"each agent {st['agent_cpu_us_per_tick']:.0f} us)"
+    )
+    lines.append(
+        f"  one pair / RTT (goal <= 2): mesh {r['one_pair_tick_over_rtt']:.1f} (its tick over the peers' "
+        f"RTT; "
+        f"{r['one_pair_tick_over_router_rtt']:.1f} over the router's), star "
+        f"{r['star_one_pair_tick_over_rtt']:.1f} (over the router's)"
+    )
     lat = r["latency_us"]
     lines.append(
         f"sensor-to-estimate latency (realtime): median {lat['median']:.0f} us, p99 {lat['p99']:.0f} us"
@@ -271,6 +324,6 @@ def format_report(r: dict) -> str:
 
 if __name__ == "__main__":
     if sys.argv[1] == "pong":
-        _pong(sys.argv[2], sys.argv[3], sys.argv[4] if len(sys.argv) > 4 else "direct")
+        _pong(sys.argv[2], sys.argv[3], sys.argv[4], sys.argv[5])
     elif sys.argv[1] == "ping":
-        _ping(sys.argv[2], sys.argv[3], int(sys.argv[4]), sys.argv[5:6] == ["wake"])
+        _ping(sys.argv[2], sys.argv[3], int(sys.argv[4]), sys.argv[6:7] == ["wake"], sys.argv[5])

@@ -1,5 +1,6 @@
 """What every launcher shares (``swarm launch`` of a docking or a landing scenario): the children's common
-flags, the client endpoint of the launcher's router, and the ``--record`` recorder on the router's session."""
+flags and their topology, the client endpoint of the launcher's router, and the ``--record`` recorder on the
+router's session."""
 
 from __future__ import annotations
 
@@ -60,6 +61,47 @@ def config_args(args: argparse.Namespace, identity: str) -> list[str]:
     return ["--zenoh-config", args.zenoh_config] if args.zenoh_config else []
 
 
+TOPOLOGIES = ("mesh", "star")
+"""``swarm launch --topology``: how the children link (:func:`topology`)."""
+
+MESH_LISTEN = "tcp/127.0.0.1:0"
+"""Where a child of a ``mesh`` listens for its siblings' links: loopback, a port of the system's choosing
+(the siblings learn it from the router's gossip)."""
+
+
+TOPOLOGY_TEXT = {
+    "mesh": "Zenoh peers linked directly to one another, the router their rendezvous (--topology mesh)",
+    "star": "Zenoh clients of the router, every message through it (--topology star)",
+}
+"""What the launcher logs of each topology."""
+
+
+def topology(args: argparse.Namespace) -> str:
+    """How the swarm's processes (the world, the mothership, the agents) link, ``--topology``:
+
+    - ``star``: each a Zenoh client of the launcher's router, so every message crosses the router (two
+      TCP hops, and the router's CPU for each);
+    - ``mesh``: each a Zenoh peer that connects to the router and listens on :data:`MESH_LISTEN`; the
+      router's gossip tells each the others' endpoints and they link directly, so a message between two
+      of them takes one hop and costs the router nothing. The router stays their rendezvous, the
+      gateway of every client (the dashboard, the recorder, a probe, a process on another machine) and
+      brokers between two peers until their own link is up.
+
+    Default: ``mesh``, and ``star`` with ``--secure``, whose access control and mutual TLS the router
+    enforces: a direct link between two peers would pass by both, so ``--topology mesh --secure`` is
+    refused. BENCHMARKS.md ("A mesh of peers") has what each costs."""
+    chosen, secure = getattr(args, "topology", None), bool(getattr(args, "secure", False))
+    if chosen is None:
+        return "star" if secure else "mesh"
+    if chosen not in TOPOLOGIES:
+        raise ConfigError(f"--topology must be one of {', '.join(TOPOLOGIES)}, got {chosen!r}")
+    if chosen == "mesh" and secure:
+        raise ConfigError("--topology mesh and --secure: the router enforces the access control and the "
+                          "mutual TLS, and a direct link between two peers would pass by it; a secure "
+                          "swarm is a star (leave --topology out, or give --topology star)")  # fmt: skip
+    return chosen
+
+
 def client_endpoint(listen: str) -> str:
     """The endpoint a local child connects to for a listen endpoint (``0.0.0.0``/``[::]`` -> loopback)."""
     proto, _, addr = listen.partition("/")
@@ -76,7 +118,10 @@ def child_args(args: argparse.Namespace, endpoint: str, seed: int) -> list[str]:
     common += ["--agents", str(args.agents), "--seed", str(seed), "--namespace", args.namespace]
     if args.policy:
         common += ["--policy", args.policy]
-    common += ["--mode", "client", "--connect", endpoint]
+    if topology(args) == "mesh":
+        common += ["--mode", "peer", "--connect", endpoint, "--listen", MESH_LISTEN]
+    else:
+        common += ["--mode", "client", "--connect", endpoint]
     if args.lease_ms:
         common += ["--lease-ms", str(args.lease_ms)]
     return common

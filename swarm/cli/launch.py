@@ -35,6 +35,8 @@ import time
 from pathlib import Path
 
 from swarm.cli.children import (
+    TOPOLOGIES,
+    TOPOLOGY_TEXT,
     check_record,
     child_args,
     client_endpoint,
@@ -43,6 +45,7 @@ from swarm.cli.children import (
     router_args,
     secure_router,
     start_recorder,
+    topology,
 )
 from swarm.errors import ConfigError, SwarmError
 from swarm.private_dirs import private_dir
@@ -80,6 +83,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--secure", action="store_true",
         help="mutual TLS and Zenoh access control, with certificates made at run time (README: Security)",
+    )  # fmt: skip
+    g.add_argument(
+        "--topology", choices=TOPOLOGIES, default=None,
+        help="mesh: the world, mothership and agents are Zenoh peers linked directly to one another (one "
+        "hop a message; the router stays their rendezvous and every client's gateway); star: each a client "
+        "of the launcher's router (every message crosses it). Default mesh, star with --secure",
     )  # fmt: skip
     g.add_argument("--dashboard-port", type=int, default=8080, metavar="PORT", help="dashboard port (8080)")
     g.add_argument(
@@ -341,6 +350,7 @@ def run(args: argparse.Namespace) -> int:
     sc = scenario_from(args)
     _hosts(args, sc)  # the agent processes' layout, checked before anything starts
     check_record(args)
+    links = topology(args)  # (--topology mesh with --secure refused before anything starts)
     keys = Keys(args.namespace)
     policy = args.policy or sc.policy
     listen = launch_listen(args)  # (--secure: mutual TLS + Zenoh ACL, each process its own certificate)
@@ -371,6 +381,7 @@ def run(args: argparse.Namespace) -> int:
                 f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",
                 flush=True,
             )
+            _LOG.info("the swarm's processes: %s", TOPOLOGY_TEXT[links])
             drops = DropCounter()
             # the current run's log: the callbacks always feed the current one
             box = [RunLog(args.stall_s, args.hung_ticks)]

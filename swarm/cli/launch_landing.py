@@ -96,6 +96,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     import zenoh
 
     from swarm.cli.children import (
+        TOPOLOGY_TEXT,
         check_record,
         child_args,
         client_endpoint,
@@ -104,6 +105,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         router_args,
         secure_router,
         start_recorder,
+        topology,
     )
     from swarm.cli.sim import print_landing
     from swarm.cli.supervisor import Child, StallWatch, Supervisor, forward_stacks_signal
@@ -117,6 +119,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
 
     _refuse(args)
     check_record(args)
+    links = topology(args)  # (--topology mesh with --secure refused before anything starts)
     sc = load_landing(args.scenario, dict(parse_override(o) for o in args.overrides))
     ids = [u.id for u in sc.uavs()]
     policy = args.policy or sc.policy
@@ -140,6 +143,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                 f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",
                 flush=True,
             )
+            _LOG.info("the swarm's processes: %s", TOPOLOGY_TEXT[links])
             drops = DropCounter()
 
             def on_world_event(_key: str, msg: Event) -> None:

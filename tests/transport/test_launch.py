@@ -130,8 +130,19 @@ def test_lockstep_launch_equals_the_in_process_run_even_under_garbage_on_every_k
     ]
     with Procs() as procs:
         out = tmp_path / "launch.json"
+        # a star: this launch == sim covers the router's path (the other launches here are meshes); its
+        # ~16x real time also leaves the run going when the agent is stopped (a mesh may dock before that)
         proc, endpoint = _launch(
-            procs, ns, "--until-docked", "--stall-s", str(STALL_S), "--step-timeout", "60", json_path=out
+            procs,
+            ns,
+            "--until-docked",
+            "--stall-s",
+            str(STALL_S),
+            "--step-timeout",
+            "60",
+            "--topology",
+            "star",
+            json_path=out,
         )  # (a slow machine's stop still leaves no tick without command)
         sent = 0
         with _client(endpoint) as session:
@@ -485,12 +496,63 @@ def test_faults_injected_at_run_time_reach_the_world_and_the_radios(tmp_path, si
     assert not res["keepout_violated"]
 
 
+def _tcp_sockets(pid: int) -> dict[str, set]:
+    """The TCP sockets process ``pid`` holds, from ``/proc``: ``listen`` (local ports) and ``links``
+    ((local port, remote port) of each established connection) on loopback IPv4."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            target = os.readlink(fd)
+        except OSError:  # closed meanwhile
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    out: dict[str, set] = {"listen": set(), "links": set()}
+    for row in Path("/proc/net/tcp").read_text().splitlines()[1:]:
+        f = row.split()
+        local, remote, state, inode = f[1], f[2], f[3], f[9]
+        if inode in inodes:
+            lport, rport = int(local.split(":")[1], 16), int(remote.split(":")[1], 16)
+            if state == "0A":
+                out["listen"].add(lport)
+            elif state == "01":
+                out["links"].add((lport, rport))
+    return out
+
+
+def _direct_links(pids: dict[str, int]) -> set[frozenset]:
+    """The pairs of processes (by name) with a TCP connection between them: one's established socket whose
+    remote port is one the other listens on."""
+    socks = {name: _tcp_sockets(pid) for name, pid in pids.items()}
+    return {
+        frozenset((a, b))
+        for a, sa in socks.items()
+        for b, sb in socks.items()
+        if a != b and any(remote in sb["listen"] for _, remote in sa["links"])
+    }
+
+
 def test_sigint_to_the_launcher_leaves_no_child_behind():
+    """Also: the default topology is a mesh, in which each of the swarm's processes (world, mothership,
+    agents) has a direct link to every other, besides its link to the launcher's router."""
     ns = _ns()
     with Procs() as procs:
-        proc, _ = _launch(procs, ns)
+        proc, endpoint = _launch(procs, ns)
         proc.wait_for_line(r"^swarm up:", 120.0)
         assert len(_children(ns)) >= 4  # world, mothership, two agents (and the launcher)
+        names = {"swarm.world": "world", "-m mothership": "mothership", "--id chaser": "chaser",
+                 "--id target": "target"}  # fmt: skip
+        pids = {
+            name: int(line.split()[0]) for line in _children(ns) for k, name in names.items() if k in line
+        }
+        assert sorted(pids) == sorted(names.values()), _children(ns)
+        router_port = int(endpoint.rpartition(":")[2])
+        for name, pid in pids.items():  # each still has its link to the router, its rendezvous
+            assert any(remote == router_port for _, remote in _tcp_sockets(pid)["links"]), name
+        want = {frozenset((a, b)) for a in pids for b in pids if a < b}
+        # the links come up from the router's gossip within milliseconds of each process's start: by "swarm
+        # up" (every liveliness token seen) they are, but allow for a slow machine
+        wait_until(lambda: _direct_links(pids) >= want, 10.0, "a direct link between every two processes")
         proc.signal(signal.SIGINT)
         assert proc.wait(30.0) == 130, proc.output()
         wait_until(lambda: not _children(ns), 5.0, f"every process of {ns} to be gone: {_children(ns)}")
@@ -508,6 +570,10 @@ BAD_FLAGS = [
     (["--record", "/nowhere/run.mcap"], "--record: no such directory '/nowhere'"),
     (["--pace", "lockstep"], "--pace must be realtime or scaled:N"),
     (["--clock", "scaled:2", "--pace", "realtime"], "--clock scaled:2 is free-running already"),
+    (
+        ["--topology", "mesh", "--secure"],
+        "--topology mesh and --secure: the router enforces the access control",
+    ),
 ]
 
 
