@@ -11,9 +11,12 @@ import pytest
 from swarm.bench.transport import _rtt
 
 
-@pytest.mark.parametrize("style", ["direct", "handoff"])
-def test_every_ping_is_answered_and_the_pong_reports_its_cpu_per_echo(style):
-    r = _rtt(200, style, wake=style == "direct")
+@pytest.mark.parametrize(
+    ("style", "topology"), [("direct", "star"), ("handoff", "star"), ("handoff", "mesh")]
+)
+def test_every_ping_is_answered_and_the_pong_reports_its_cpu_per_echo(style, topology):
+    # (mesh: two peers that met at the router and ping over their own link; _ping waits for it)
+    r = _rtt(200, style, wake=style == "direct", topology=topology)
     assert r["n"] == 200  # none timed out: the handoff's main loop echoes every message it is handed
     assert 0 < r["median"] <= r["p99"] < 1e6
     # the pong's CPU over 250 echoes (50 warm-up pings): a Python client spends tens to hundreds of us per
@@ -36,7 +39,14 @@ def format_report_line(rtt: dict) -> str:
     from swarm.bench.transport import format_report
 
     lat = {"median": 1.0, "p99": 1.0}
-    r = {"zenoh_rtt_us": rtt, "handoff_rtt_us": rtt, "lockstep_tick_us": {}, "lockstep_realtime_factor": {},
-         "lockstep_cpu_us_per_tick": {}, "one_pair_tick_over_rtt": 1.0, "latency_us": lat,
-         "goals": {}}  # fmt: skip
+    star = {
+        "tick_us": 1.0,
+        "realtime_factor": 1.0,
+        "world_cpu_us_per_tick": 1.0,
+        "agent_cpu_us_per_tick": 1.0,
+    }
+    r = {"zenoh_rtt_us": rtt, "mesh_rtt_us": rtt, "handoff_rtt_us": rtt, "lockstep_tick_us": {},
+         "lockstep_realtime_factor": {}, "lockstep_cpu_us_per_tick": {}, "star_one_pair": star,
+         "one_pair_tick_over_rtt": 1.0, "star_one_pair_tick_over_rtt": 1.0,
+         "one_pair_tick_over_router_rtt": 1.0, "latency_us": lat, "goals": {}}  # fmt: skip
     return next(line for line in format_report(r).splitlines() if "CPU of one put" in line)

@@ -1,9 +1,10 @@
 """``swarm bench swarm``: how many vehicles the swarm runs on this machine (issue 13).
 
-For each case (number of vehicles, clock), ``swarm launch docking --agents V/2`` (one process per vehicle)
-runs for a fixed simulated span while a probe client, on the launcher's router, stamps the arrival of the
-first pair's ``imu(k)`` (with agent hosts: of the ``world/imu`` batch that holds it) and ``estimate(k)`` on
-one clock (it decodes only the tick number, and a batch's ids):
+For each case (number of vehicles, clock, topology), ``swarm launch docking --agents V/2`` (one process per
+vehicle) runs for a fixed simulated span while a probe, which joins the swarm as its processes do (a peer of
+the mesh, ``--topology mesh``, the default; a client of the launcher's router in a ``star``), stamps the
+arrival of the first pair's ``imu(k)`` (with agent hosts: of the ``world/imu`` batch that holds it) and
+``estimate(k)`` on one clock (it decodes only the tick number, and a batch's ids):
 
 - **CPU per vehicle per tick**: the agents' own CPU time (each agent process reports it at the end of the
   run, ``cpu_s`` in the launch summary) over vehicles x ticks; the world's per tick beside it;
@@ -24,7 +25,10 @@ one clock (it decodes only the tick number, and a batch's ids):
   TWR-TDMA model): each ranges once per frame (~238/N ranges a second for N tags, against 50 each
   without), and the mothership sends a tag nothing on the slot ticks without its exchange;
 - **sensor-to-estimate latency** p50/p99: ``estimate(k)`` minus ``imu(k)`` arrival, for the first pair's
-  two vehicles: the agent's receive, filter and publish time plus one router hop each way. Since 4df9a3d
+  two vehicles: the agent's receive, filter and publish time plus the hop from the world to the agent (in a
+  star, plus the router's second hop each way). A tick whose estimate the probe took before its imu (its
+  callbacks run on threads of their own, and a probe short of CPU takes them late) is counted
+  (``estimate_first``, ``camera_estimate_first``), not measured. Since 4df9a3d
   the target sends only the estimates its chaser reads (a fifth), so its ticks are a sixth of the samples,
   not a half. Split beside it (``latency_camera_*`` and ``latency_other_*``): the chaser's camera ticks
   (``k`` a multiple of the camera's period: the frame is fused before the estimate goes out) and all the
@@ -56,7 +60,7 @@ import msgpack
 import numpy as np
 
 from swarm.errors import ConfigError
-from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session
+from swarm.transport.session import free_loopback_endpoint, open_session
 
 QUICK = {"vehicles": (2, 8), "clocks": ("lockstep", "realtime"), "span_s": 5.0, "per_process": (1,)}
 FULL = {"vehicles": (2, 8, 32), "clocks": ("lockstep", "realtime"), "span_s": 20.0, "per_process": (1,)}
@@ -95,6 +99,16 @@ def parse_per_process(text: str) -> tuple[int, ...]:
     return values
 
 
+def parse_topologies(text: str) -> tuple[str, ...]:
+    """``--topology mesh,star`` (``swarm launch --topology``)."""
+    from swarm.cli.children import TOPOLOGIES
+
+    values = tuple(text.split(","))
+    if not values or any(t not in TOPOLOGIES for t in values) or len(set(values)) < len(values):
+        raise ConfigError(f"--topology must be mesh, star or both (comma-separated), got {text!r}")
+    return values
+
+
 def parse_clocks(text: str) -> tuple[str, ...]:
     """``--clock realtime,lockstep``."""
     values = tuple(text.split(","))
@@ -105,12 +119,26 @@ def parse_clocks(text: str) -> tuple[str, ...]:
 
 
 class _Probe:
-    """Arrival stamps of the probed vehicles' imu and estimate ticks (the tick number decoded only)."""
+    """Arrival stamps of the probed vehicles' imu and estimate ticks (the tick number decoded only).
+
+    Each subscriber's callback runs on a Python thread of its own, so the probe can take an estimate's
+    callback before the callback of the imu that came first, when the machine is short of CPU (a lockstep
+    swarm at full speed); the swarm's processes did nothing wrong, the probe's stamps are late. Such ticks
+    are counted (``estimate_first``), not measured."""
 
     def __init__(self) -> None:
         self.lock = threading.Lock()
         self.imu: dict[tuple[str, int], float] = {}
+        self.early: set[tuple[str, int]] = set()  # estimates taken before their imu
         self.latency: list[tuple[str, int, float]] = []  # (vehicle, tick, estimate's arrival - its imu's [s])
+        self.first: list[tuple[str, int]] = []  # (vehicle, tick) whose estimate was taken before its imu
+
+    def _stamp_imu(self, key: tuple[str, int], now: float) -> None:
+        if key in self.early:
+            self.early.discard(key)
+            self.first.append(key)
+        else:
+            self.imu[key] = now
 
     def _tick(self, sample) -> tuple[str, int] | None:
         try:
@@ -124,7 +152,7 @@ class _Probe:
         key = self._tick(sample)
         if key is not None:
             with self.lock:
-                self.imu[key] = now
+                self._stamp_imu(key, now)
 
     def on_imu_batch(self, probed: tuple[str, ...]):
         """The world's ``world/imu`` (agent hosts): one arrival for every probed vehicle in it."""
@@ -139,7 +167,7 @@ class _Probe:
             with self.lock:
                 for vid in probed:
                     if vid in ids:
-                        self.imu[(vid, k)] = now
+                        self._stamp_imu((vid, k), now)
 
         return handler
 
@@ -150,17 +178,19 @@ class _Probe:
             if key is None:
                 return
             with self.lock:
-                t0 = self.imu.get(key)
+                t0 = self.imu.pop(key, None)
                 if t0 is not None:
                     getattr(self, into).append((*key, now - t0))
+                else:
+                    self.early.add(key)
 
         return handler
 
 
 def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagger: bool = False,
-          tdma: bool = False) -> dict:  # fmt: skip
+          tdma: bool = False, topology: str = "mesh") -> dict:  # fmt: skip
     pairs = vehicles // 2
-    ns = f"benchswarm{os.getpid()}v{vehicles}p{per_process}{clock}"
+    ns = f"benchswarm{os.getpid()}v{vehicles}p{per_process}{clock}{topology}"
     endpoint = free_loopback_endpoint()
     # the launcher's stderr (its children's too) into a file: its last lines say why a launch failed
     with tempfile.TemporaryDirectory() as tmp, open(Path(tmp) / "launch.log", "w+") as log:
@@ -168,7 +198,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         cmd = [*LAUNCH, "docking", "--headless", "--until-docked",
                "--agents", str(pairs), "--clock", clock, "--set", f"sim.max_duration_s={span_s}",
                "--json", str(out), "--namespace", ns, "--listen", endpoint,
-               "--vehicles-per-process", str(per_process),
+               "--vehicles-per-process", str(per_process), "--topology", topology,
                "--timeout", f"{LAUNCH_START_S + LAUNCH_SLOWEST * span_s:g}"]  # fmt: skip
         if stagger:
             cmd += ["--set", "swarm.stagger_control=true"]
@@ -189,7 +219,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         try:
             up.wait(300)
             if listening.is_set():  # else it ended (or hangs) before its router listened: nothing to probe
-                _probe_run(proc, endpoint, ns, pairs, probe)
+                _probe_run(proc, endpoint, ns, pairs, probe, topology)
         finally:
             if proc.poll() is None:
                 proc.send_signal(2)
@@ -197,8 +227,8 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         rc = proc.returncode
         if not out.exists():
             log.seek(0)
-            raise RuntimeError(f"swarm launch --agents {pairs} --clock {clock} failed ({rc}):\n"
-                               f"{_what_it_said(log.read())}")  # fmt: skip
+            raise RuntimeError(f"swarm launch --agents {pairs} --clock {clock} --topology {topology} "
+                               f"failed ({rc}):\n{_what_it_said(log.read())}")  # fmt: skip
         res = json.loads(out.read_text())
     ticks = max(1, round(res["sim_time_s"] / DT_S))
     cpu = res.get("cpu_s") or {}
@@ -206,13 +236,15 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
     from swarm.scenario import load_scenario
 
     sc = load_scenario("docking")
-    lat = latency_split(probe.latency, sc.every(sc.camera.rate_hz), {probed_pair(pairs)[0]})
+    camera_every, cameras = sc.every(sc.camera.rate_hz), {probed_pair(pairs)[0]}
+    lat = latency_split(probe.latency, camera_every, cameras)
     late, stepped = late_share(clock, res.get("late_commands"))
     late_cmd, _ = late_share(clock, res.get("late_control_commands"))
     return {
         "vehicles": vehicles,
         "per_process": per_process,
         "clock": clock,
+        "topology": topology,
         "staggered": stagger,
         "tdma": tdma,
         "cpu_us_per_vehicle_tick": 1e6 * float(np.sum(agents)) / (len(agents) * ticks) if agents else None,
@@ -222,6 +254,8 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         "commanded_vehicle_ticks": stepped,  # the late share's denominator (None: lockstep)
         "realtime_factor": res.get("realtime_factor"),
         **lat,
+        "estimate_first": len(probe.first),
+        "camera_estimate_first": sum(v in cameras and k % camera_every == 0 for v, k in probe.first),
         "ticks": ticks,
     }
 
@@ -261,10 +295,17 @@ def _what_it_said(text: str) -> str:
     return "\n".join([*stacks, "...", *rest[-20:]] if len(rest) > 20 else [*stacks, *rest])
 
 
-def _probe_run(proc: subprocess.Popen, endpoint: str, ns: str, pairs: int, probe: _Probe) -> None:
-    """Stamp the first pair's ``imu`` and ``estimate`` arrivals (:class:`_Probe`) on a client of the
-    launcher's router at ``endpoint`` until the launcher ``proc`` exits."""
-    session = open_session(ZenohArgs(mode="client", connect=(endpoint,)))
+def _probe_run(
+    proc: subprocess.Popen, endpoint: str, ns: str, pairs: int, probe: _Probe, topology: str
+) -> None:
+    """Stamp the first pair's ``imu`` and ``estimate`` arrivals (:class:`_Probe`) until the launcher
+    ``proc`` exits, on a session that joins the swarm as its processes do (a client of the launcher's
+    router at ``endpoint`` in a star, a peer of the mesh in a mesh: a client of a mesh's router hears the
+    world's imu through the router, later than the agent hears it directly, and lost the samples whose
+    estimate came first)."""
+    from swarm.cli.children import member_args
+
+    session = open_session(member_args(endpoint, topology))
     try:
         probed = probed_pair(pairs)
         for vid in probed:
@@ -323,12 +364,12 @@ def summarise(runs: list[dict]) -> dict:
 
 def run(preset: dict) -> dict:
     stagger, tdma = bool(preset.get("stagger", False)), bool(preset.get("tdma", False))
-    specs = [(v, c, n) for c in preset["clocks"] for n in preset["per_process"]
-             for v in preset["vehicles"] if n <= v]  # fmt: skip
+    specs = [(v, c, n, t) for c in preset["clocks"] for n in preset["per_process"]
+             for v in preset["vehicles"] if n <= v for t in preset.get("topologies", ("mesh",))]  # fmt: skip
     runs: dict[tuple, list[dict]] = {spec: [] for spec in specs}
     for _ in range(int(preset.get("repeat", 1))):  # round by round: a drift of the machine hits every case
-        for v, c, n in specs:
-            runs[v, c, n].append(_case(v, c, preset["span_s"], n, stagger, tdma))
+        for v, c, n, t in specs:
+            runs[v, c, n, t].append(_case(v, c, preset["span_s"], n, stagger, tdma, t))
     return {
         "cases": [summarise(runs[spec]) for spec in specs],
         "span_s": preset["span_s"],
@@ -347,7 +388,7 @@ def format_report(r: dict) -> str:
         f"({r['cores']} cores, 1-min load {r['load_1min']:.2f} at the end)"
         + ("; controller clocks staggered" if any(c.get("staggered") for c in r["cases"]) else "")
         + ("; one TDMA UWB channel" if any(c.get("tdma") for c in r["cases"]) else ""),
-        "vehicles  per proc  clock      CPU us/vehicle/tick  world us/tick  late ticks / commands  "
+        "vehicles  per proc  clock      links  CPU us/vehicle/tick  world us/tick  late ticks / commands  "
         "real-time  latency p50/p99 us (camera ticks; others)",
     ]
     for c in r["cases"]:
@@ -357,7 +398,7 @@ def format_report(r: dict) -> str:
         if c.get("commanded_vehicle_ticks") == 0:
             late = "no command"
         lines.append(
-            f"{c['vehicles']:>8}  {c['per_process']:>8}  {c['clock']:<9}  "
+            f"{c['vehicles']:>8}  {c['per_process']:>8}  {c['clock']:<9}  {c.get('topology', 'star'):<5}  "
             f"{_fmt(c['cpu_us_per_vehicle_tick'], '19.0f')}  "
             f"{_fmt(c['world_cpu_us_per_tick'], '13.0f')}  {late:>21}  "
             f"{_fmt(c['realtime_factor'], '8.2f')}x  "

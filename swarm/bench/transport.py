@@ -36,7 +36,7 @@ from pathlib import Path
 import msgpack
 import numpy as np
 
-from swarm.cli.children import MESH_LISTEN
+from swarm.cli.children import member_args
 from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session
 
 IDLE_S = 0.01
@@ -48,17 +48,9 @@ QUICK = {"rtt_samples": 500, "pairs": (1, 4), "span_s": 5.0, "latency_s": 4.0}
 FULL = {"rtt_samples": 3000, "pairs": (1, 4, 16), "span_s": 10.0, "latency_s": 10.0}
 
 
-def _client(endpoint: str):
-    return open_session(ZenohArgs(mode="client", connect=(endpoint,)))
-
-
 def _member(endpoint: str, topology: str):
-    """A session as a launched child of ``topology`` opens it (``swarm.cli.children.child_args``): a client
-    of the router at ``endpoint`` (``star``), or a peer that connects to it and listens for its siblings
-    (``mesh``)."""
-    if topology == "star":
-        return _client(endpoint)
-    return open_session(ZenohArgs(mode="peer", connect=(endpoint,), listen=(MESH_LISTEN,)))
+    """A session that joins as a launched child of ``topology`` (:func:`swarm.cli.children.member_args`)."""
+    return open_session(member_args(endpoint, topology))
 
 
 def _await_link(s, topology: str, what: str) -> None:

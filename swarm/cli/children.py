@@ -102,6 +102,18 @@ def topology(args: argparse.Namespace) -> str:
     return chosen
 
 
+def member_args(endpoint: str, links: str):
+    """The Zenoh session of a process that joins a launched swarm of topology ``links`` as its children
+    do (:func:`child_args`): a client of the router at ``endpoint`` (``star``), or a peer that connects to
+    it and listens for its siblings' links (``mesh``). A bench's probe joins so, to hear each message on
+    the path the swarm's own processes hear it on."""
+    from swarm.transport.session import ZenohArgs
+
+    if links == "mesh":
+        return ZenohArgs(mode="peer", connect=(endpoint,), listen=(MESH_LISTEN,))
+    return ZenohArgs(mode="client", connect=(endpoint,))
+
+
 def client_endpoint(listen: str) -> str:
     """The endpoint a local child connects to for a listen endpoint (``0.0.0.0``/``[::]`` -> loopback)."""
     proto, _, addr = listen.partition("/")
