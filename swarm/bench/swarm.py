@@ -2,7 +2,8 @@
 
 For each case (number of vehicles, clock, topology), ``swarm launch docking --agents V/2`` (one process per
 vehicle) runs for a fixed simulated span while a probe, which joins the swarm as its processes do (a peer of
-the mesh, ``--topology mesh``, the default; a client of the launcher's router in a ``star``), stamps the
+a mesh, a client of the launcher's router in a star; ``--topology auto``, the launcher's default, resolved
+as the launcher resolves it), stamps the
 arrival of the first pair's ``imu(k)`` (with agent hosts: of the ``world/imu`` batch that holds it) and
 ``estimate(k)`` on one clock (it decodes only the tick number, and a batch's ids):
 
@@ -100,12 +101,14 @@ def parse_per_process(text: str) -> tuple[int, ...]:
 
 
 def parse_topologies(text: str) -> tuple[str, ...]:
-    """``--topology mesh,star`` (``swarm launch --topology``)."""
+    """``--topology mesh,star`` (``swarm launch --topology``: auto, mesh, star)."""
     from swarm.cli.children import TOPOLOGIES
 
     values = tuple(text.split(","))
     if not values or any(t not in TOPOLOGIES for t in values) or len(set(values)) < len(values):
-        raise ConfigError(f"--topology must be mesh, star or both (comma-separated), got {text!r}")
+        raise ConfigError(
+            f"--topology must be auto, mesh or star, or several (comma-separated), got {text!r}"
+        )
     return values
 
 
@@ -188,8 +191,11 @@ class _Probe:
 
 
 def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagger: bool = False,
-          tdma: bool = False, topology: str = "mesh") -> dict:  # fmt: skip
+          tdma: bool = False, topology: str = "auto") -> dict:  # fmt: skip
+    from swarm.cli.children import resolved
+
     pairs = vehicles // 2
+    links = resolved(topology, 2 + -(-vehicles // per_process))  # the world, the mothership, the agents
     ns = f"benchswarm{os.getpid()}v{vehicles}p{per_process}{clock}{topology}"
     endpoint = free_loopback_endpoint()
     # the launcher's stderr (its children's too) into a file: its last lines say why a launch failed
@@ -219,7 +225,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         try:
             up.wait(300)
             if listening.is_set():  # else it ended (or hangs) before its router listened: nothing to probe
-                _probe_run(proc, endpoint, ns, pairs, probe, topology)
+                _probe_run(proc, endpoint, ns, pairs, probe, links)
         finally:
             if proc.poll() is None:
                 proc.send_signal(2)
@@ -227,7 +233,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         rc = proc.returncode
         if not out.exists():
             log.seek(0)
-            raise RuntimeError(f"swarm launch --agents {pairs} --clock {clock} --topology {topology} "
+            raise RuntimeError(f"swarm launch --agents {pairs} --clock {clock} --topology {links} "
                                f"failed ({rc}):\n{_what_it_said(log.read())}")  # fmt: skip
         res = json.loads(out.read_text())
     ticks = max(1, round(res["sim_time_s"] / DT_S))
@@ -244,7 +250,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         "vehicles": vehicles,
         "per_process": per_process,
         "clock": clock,
-        "topology": topology,
+        "topology": links,
         "staggered": stagger,
         "tdma": tdma,
         "cpu_us_per_vehicle_tick": 1e6 * float(np.sum(agents)) / (len(agents) * ticks) if agents else None,

@@ -92,9 +92,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                             help="vehicle counts, even; default 2,8,32 (2,8 with --quick)")  # fmt: skip
             bp.add_argument("--clock", default=None, metavar="CLOCK[,CLOCK]",
                             help="realtime, lockstep or both (default both)")  # fmt: skip
-            bp.add_argument("--topology", default=None, metavar="mesh|star[,..]",
-                            help="swarm launch --topology of the cases: mesh (default), star or both, each "
-                                 "case run in each, alternately")  # fmt: skip
+            bp.add_argument("--topology", default=None, metavar="auto|mesh|star[,..]",
+                            help="swarm launch --topology of the cases: auto (default, as swarm launch), "
+                                 "mesh, star or several, each case run in each, alternately")  # fmt: skip
             bp.add_argument("--vehicles-per-process", dest="per_process", default=None, metavar="N[,N]",
                             help="agent hosts of N vehicles (default 1: a process per vehicle)")  # fmt: skip
             bp.add_argument("--span", type=float, default=None, metavar="S",

@@ -61,13 +61,20 @@ def config_args(args: argparse.Namespace, identity: str) -> list[str]:
     return ["--zenoh-config", args.zenoh_config] if args.zenoh_config else []
 
 
-TOPOLOGIES = ("mesh", "star")
+TOPOLOGIES = ("auto", "mesh", "star")
 """``swarm launch --topology``: how the children link (:func:`topology`)."""
 
 MESH_LISTEN = "tcp/127.0.0.1:0"
 """Where a child of a ``mesh`` listens for its siblings' links: loopback, a port of the system's choosing
 (the siblings learn it from the router's gossip)."""
 
+MESH_MAX_PEERS = 6
+"""``--topology auto`` makes a mesh of at most this many processes (the world, the mothership, the agent
+processes), a star of more. Measured (BENCHMARKS.md, "A mesh of peers"): one pair (4 processes) runs 18 %
+faster in lockstep as a mesh, with a lower latency, and hosts of 64 for 128 vehicles (4) the same either way;
+from 16 vehicles a process each (18) a mesh costs 12 % more CPU per agent and 40 % more in the world (each
+process writes every message to its own link, where a star's client writes them all to one) and is late
+more often."""
 
 TOPOLOGY_TEXT = {
     "mesh": "Zenoh peers linked directly to one another, the router their rendezvous (--topology mesh)",
@@ -76,8 +83,9 @@ TOPOLOGY_TEXT = {
 """What the launcher logs of each topology."""
 
 
-def topology(args: argparse.Namespace) -> str:
-    """How the swarm's processes (the world, the mothership, the agents) link, ``--topology``:
+def topology(args: argparse.Namespace, processes: int) -> str:
+    """How the swarm's ``processes`` (the world, the mothership, the agent processes) link,
+    ``--topology``:
 
     - ``star``: each a Zenoh client of the launcher's router, so every message crosses the router (two
       TCP hops, and the router's CPU for each);
@@ -85,32 +93,40 @@ def topology(args: argparse.Namespace) -> str:
       router's gossip tells each the others' endpoints and they link directly, so a message between two
       of them takes one hop and costs the router nothing. The router stays their rendezvous, the
       gateway of every client (the dashboard, the recorder, a probe, a process on another machine) and
-      brokers between two peers until their own link is up.
+      brokers between two peers until their own link is up;
+    - ``auto`` (the default): a mesh of at most :data:`MESH_MAX_PEERS` processes, else a star.
 
-    Default: ``mesh``, and ``star`` with ``--secure``, whose access control and mutual TLS the router
-    enforces: a direct link between two peers would pass by both, so ``--topology mesh --secure`` is
-    refused. BENCHMARKS.md ("A mesh of peers") has what each costs."""
-    chosen, secure = getattr(args, "topology", None), bool(getattr(args, "secure", False))
-    if chosen is None:
-        return "star" if secure else "mesh"
+    A ``--secure`` swarm is a star: the router enforces its access control and mutual TLS, which a direct
+    link between two peers would pass by, so ``--topology mesh --secure`` is refused."""
+    chosen, secure = getattr(args, "topology", None) or "auto", bool(getattr(args, "secure", False))
     if chosen not in TOPOLOGIES:
         raise ConfigError(f"--topology must be one of {', '.join(TOPOLOGIES)}, got {chosen!r}")
     if chosen == "mesh" and secure:
         raise ConfigError("--topology mesh and --secure: the router enforces the access control and the "
                           "mutual TLS, and a direct link between two peers would pass by it; a secure "
                           "swarm is a star (leave --topology out, or give --topology star)")  # fmt: skip
+    if chosen == "auto":
+        return "star" if secure or processes > MESH_MAX_PEERS else "mesh"
     return chosen
 
 
+def resolved(chosen: str, processes: int) -> str:
+    """The topology a launch of ``processes`` (the world, the mothership, the agent processes) with
+    ``--topology chosen`` and no ``--secure`` runs in (:func:`topology`): what a bench's probe must join."""
+    return topology(argparse.Namespace(topology=chosen, secure=False), processes)
+
+
 def member_args(endpoint: str, links: str):
-    """The Zenoh session of a process that joins a launched swarm of topology ``links`` as its children
-    do (:func:`child_args`): a client of the router at ``endpoint`` (``star``), or a peer that connects to
-    it and listens for its siblings' links (``mesh``). A bench's probe joins so, to hear each message on
-    the path the swarm's own processes hear it on."""
+    """The Zenoh session of a process that joins a launched swarm of topology ``links`` (``mesh`` or
+    ``star``) as its children do (:func:`child_args`): a client of the router at ``endpoint`` (``star``),
+    or a peer that connects to it and listens for its siblings' links (``mesh``). A bench's probe joins
+    so, to hear each message on the path the swarm's own processes hear it on."""
     from swarm.transport.session import ZenohArgs
 
     if links == "mesh":
         return ZenohArgs(mode="peer", connect=(endpoint,), listen=(MESH_LISTEN,))
+    if links != "star":
+        raise ValueError(f"a launched swarm is a mesh or a star, got {links!r}")
     return ZenohArgs(mode="client", connect=(endpoint,))
 
 
@@ -130,10 +146,10 @@ def child_args(args: argparse.Namespace, endpoint: str, seed: int) -> list[str]:
     common += ["--agents", str(args.agents), "--seed", str(seed), "--namespace", args.namespace]
     if args.policy:
         common += ["--policy", args.policy]
-    if topology(args) == "mesh":
-        common += ["--mode", "peer", "--connect", endpoint, "--listen", MESH_LISTEN]
-    else:
-        common += ["--mode", "client", "--connect", endpoint]
+    session = member_args(endpoint, args.links)  # (the launcher's topology(), resolved once)
+    common += ["--mode", session.mode, "--connect", endpoint]
+    for listen in session.listen:
+        common += ["--listen", listen]
     if args.lease_ms:
         common += ["--lease-ms", str(args.lease_ms)]
     return common

@@ -2,9 +2,12 @@
 
 The launcher opens a Zenoh **router** (``--listen``, default a free loopback port; the line ``swarm
 listening on <endpoint>`` says where an outside client connects) and starts, each in its own process
-group, the mothership, one agent per vehicle, the world and (unless ``--headless``) the dashboard, all as
-Zenoh clients of that router: a star, in which every declaration reaches every process through one node in
-order (a chaser's subscription to its target's estimate is in place before the world announces the run).
+group, the mothership, one agent per vehicle, the world and (unless ``--headless``) the dashboard. The
+dashboard is a client of the router; the others are Zenoh peers that meet at the router and link directly
+to one another (``--topology mesh``; ``auto``, the default, for a few processes), or clients of it
+(``star``: ``auto`` for many, and the only topology with ``--secure``): :func:`swarm.cli.children.topology`,
+docs/protocol.md "Processes and topology" (why a chaser's subscription to its target's estimate is in
+place before the world announces the run, in either).
 
 It waits for every liveliness token (not for a time), supervises the children (an agent or the mothership
 whose token goes or that exits is reported lost and restarted with ``--rejoin``, the world with
@@ -35,6 +38,7 @@ import time
 from pathlib import Path
 
 from swarm.cli.children import (
+    MESH_MAX_PEERS,
     TOPOLOGIES,
     TOPOLOGY_TEXT,
     check_record,
@@ -85,10 +89,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="mutual TLS and Zenoh access control, with certificates made at run time (README: Security)",
     )  # fmt: skip
     g.add_argument(
-        "--topology", choices=TOPOLOGIES, default=None,
+        "--topology", choices=TOPOLOGIES, default="auto",
         help="mesh: the world, mothership and agents are Zenoh peers linked directly to one another (one "
         "hop a message; the router stays their rendezvous and every client's gateway); star: each a client "
-        "of the launcher's router (every message crosses it). Default mesh, star with --secure",
+        f"of the launcher's router (every message crosses it); auto (default): a mesh of at most "
+        f"{MESH_MAX_PEERS} processes, else a star, and a star with --secure",
     )  # fmt: skip
     g.add_argument("--dashboard-port", type=int, default=8080, metavar="PORT", help="dashboard port (8080)")
     g.add_argument(
@@ -348,9 +353,10 @@ def run(args: argparse.Namespace) -> int:
     )
 
     sc = scenario_from(args)
-    _hosts(args, sc)  # the agent processes' layout, checked before anything starts
+    hosts = _hosts(args, sc)  # the agent processes' layout, checked before anything starts
     check_record(args)
-    links = topology(args)  # (--topology mesh with --secure refused before anything starts)
+    # the world, the mothership and the agent processes (mesh with --secure refused before anything starts)
+    args.links = links = topology(args, 2 + len(hosts))
     keys = Keys(args.namespace)
     policy = args.policy or sc.policy
     listen = launch_listen(args)  # (--secure: mutual TLS + Zenoh ACL, each process its own certificate)

@@ -1,10 +1,11 @@
 """``swarm launch`` of a landing scenario (``swarm launch landing-swarm --headless``): the landing world
 process (:mod:`swarm.world.landing`) and one landing agent process per UAV (:mod:`agents.landing`), Zenoh
-clients of the launcher's router, in lockstep. The launcher waits for the world's ``run_end`` and each
-agent's ``summary``, prints every UAV's outcome as ``swarm sim`` does (``--json FILE`` writes the same
-summary as ``swarm sim landing-swarm --json``, but ``decisions`` is the number of Algorithm 1 records, the
-records themselves stay in the agent), stops every process and exits 0 if every UAV landed on its pad or
-aborted safely. With ``--record FILE.mcap`` the launcher's router session records the run
+peers linked directly to one another that met at the launcher's router (a mesh) or clients of it (a star;
+``--topology``, :func:`swarm.cli.children.topology`), in lockstep. The launcher waits for the world's
+``run_end`` and each agent's ``summary``, prints every UAV's outcome as ``swarm sim`` does (``--json FILE``
+writes the same summary as ``swarm sim landing-swarm --json``, but ``decisions`` is the number of Algorithm
+1 records, the records themselves stay in the agent), stops every process and exits 0 if every UAV landed on
+its pad or aborted safely. With ``--record FILE.mcap`` the launcher's router session records the run
 (:class:`swarm.cli.children.LauncherRecorder`).
 
 Unless ``--headless``, the dashboard (``python -m dashboard SCENARIO``: pads, quadrotors, camera frustums,
@@ -119,9 +120,10 @@ def run_landing_launch(args: argparse.Namespace) -> int:
 
     _refuse(args)
     check_record(args)
-    links = topology(args)  # (--topology mesh with --secure refused before anything starts)
     sc = load_landing(args.scenario, dict(parse_override(o) for o in args.overrides))
     ids = [u.id for u in sc.uavs()]
+    # the world and the agent processes (resolved before anything starts: mesh with --secure is refused)
+    args.links = links = topology(args, 1 + -(-len(ids) // args.vehicles_per_process))
     policy = args.policy or sc.policy
     keys = Keys(args.namespace)
     listen = launch_listen(args)  # (--secure: mutual TLS + Zenoh ACL, mission "landing", as a docking swarm)
