@@ -70,11 +70,12 @@ MESH_LISTEN = "tcp/127.0.0.1:0"
 
 MESH_MAX_PEERS = 6
 """``--topology auto`` makes a mesh of at most this many processes (the world, the mothership, the agent
-processes), a star of more. Measured (BENCHMARKS.md, "A mesh of peers"): one pair (4 processes) runs 18 %
-faster in lockstep as a mesh, with a lower latency, and hosts of 64 for 128 vehicles (4) the same either way;
-from 16 vehicles a process each (18) a mesh costs 12 % more CPU per agent and 40 % more in the world (each
-process writes every message to its own link, where a star's client writes them all to one) and is late
-more often."""
+processes), a star of more. Measured alternately (BENCHMARKS.md, "A mesh of peers"): in lockstep one pair
+(4 processes) runs 18 % faster as a mesh and two pairs (6) 13 % faster, with lower latencies, where four
+pairs (10) run no faster and the world pays more CPU; 128 vehicles in hosts of 64 (4) run alike either
+way; from 16 vehicles a process each (18) a mesh costs 12 % more CPU per agent and 40 % more in the world
+(each process writes every message to its own link, where a star's client writes them all to one) and is
+late more often."""
 
 TOPOLOGY_TEXT = {
     "mesh": "Zenoh peers linked directly to one another, the router their rendezvous (--topology mesh)",
