@@ -32,8 +32,8 @@ from swarm.transport.messages import (
 
 Sensors = list[tuple[str, str, bytes]]
 """``(kind, vehicle, payload)`` in publishing order; ``kind`` is ``truth``, ``vision``, ``imu``, or
-``truth_batch``, ``vision_batch`` and ``imu_batch`` (vehicle ``""``: the ``world/truth``, ``world/vision``
-and ``world/imu`` keys of a world that serves agent hosts)."""
+``truth_batch``, ``vision_batch`` and ``imu_batch`` (vehicle ``""``: the ``world/truth`` key of every world,
+the ``world/vision`` and ``world/imu`` keys of a world that serves agent hosts)."""
 
 
 def batch_samples(sensors: Sensors, vid: str) -> list[tuple[str, bytes]]:
@@ -67,7 +67,7 @@ FILTER_OUTCOMES = ("accepted", "rejected", "refused")
 
 def world_sensors(
     world, ids: list[str], chasers: list[str], k: int, frames, truth_every: int, batch: bool = False,
-    solo=frozenset(), viewed=None, truth_batch: bool | None = None,
+    solo=frozenset(), viewed=None,
 ) -> Sensors:  # fmt: skip
     """The world's samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle (on UWB
     slot ticks: the mothership's radios need no other, and a viewer draws at 50 Hz as well as at 100;
@@ -77,9 +77,9 @@ def world_sensors(
     :data:`~swarm.transport.messages.MAX_PAYLOAD_BYTES`), then :class:`~swarm.transport.messages.ImuBatch`
     (:data:`~swarm.transport.messages.MAX_BATCH` vehicles each), the imu last as in every tick (a host's
     tick is ready on its imu); ``solo`` (vehicles whose samples a ``sensor_delay`` fault holds back) keep
-    their own keys. With ``truth_batch`` (default: ``batch``; the world process always: the mothership's
-    radios take them so) the truths go first as :class:`~swarm.transport.messages.TruthBatch` messages,
-    then one per vehicle in ``viewed`` (those a viewer subscribes to; ``None``: every vehicle)."""
+    their own keys. The truths go first as :class:`~swarm.transport.messages.TruthBatch` messages (the
+    mothership's radios take them so), then one per vehicle in ``viewed`` (those a viewer subscribes to;
+    ``None``: every vehicle)."""
     sc = world.sc
     t = k * sc.dt_s
     camera_tick = k % world.vision_every == 0
@@ -87,7 +87,7 @@ def world_sensors(
     out: Sensors = []
     lost, p_nlos = world.radio_env(t)
     truth_tick = k % truth_every == 0
-    if (batch if truth_batch is None else truth_batch) and truth_tick:
+    if truth_tick:
         out.extend(_truth_batches(world, ids, k, t, bool(lost), float(p_nlos)))
     for i, vid in enumerate(ids if truth_tick else ()):
         if viewed is not None and vid not in viewed:
@@ -321,7 +321,7 @@ class DockingTap:
         # as the world of a default launch (a process per vehicle): one imu message per vehicle, the truths
         # in one world/truth batch for the mothership and on each vehicle's key for a recorder (a viewer)
         for kind, vid, payload in world_sensors(
-            sim.world, self._ids, self._chasers, k, frames, self._truth_every, truth_batch=True
+            sim.world, self._ids, self._chasers, k, frames, self._truth_every
         ):
             key = self.keys.world_truth() if kind == "truth_batch" else getattr(self.keys, kind)(vid)
             self._write(key, payload)

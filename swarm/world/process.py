@@ -436,7 +436,7 @@ class WorldProcess:
         # a vehicle whose samples a sensor_delay window holds back keeps its own imu key (held in _send)
         solo = {v for v in self._delays if self._delay_s(v, t) is not None}
         return world_sensors(self.world, self.ids, self.chasers, k, frames, self._truth_every, self.batch,
-                             solo, set(self._viewed), truth_batch=True)  # fmt: skip
+                             solo, set(self._viewed))  # fmt: skip
 
     def _pub(self, kind: str, vid: str):
         return self._pubs[kind][vid]

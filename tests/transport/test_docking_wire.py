@@ -56,7 +56,7 @@ def test_each_vehicles_row_of_the_batch_is_the_imu_it_would_have_had_alone(k_ahr
     alone = world_sensors(w, ids, chasers, k, frames, 1)
     batched = world_sensors(w, ids, chasers, k, frames, 1, batch=True)
     # the per-vehicle truths are the same, in the same order; the imu and frames leave their keys for batches
-    assert [s for s in batched if s[0] not in ("imu_batch", "truth_batch", "vision_batch")] == [
+    assert [s for s in batched if s[0] not in ("imu_batch", "vision_batch")] == [
         s for s in alone if s[0] not in ("imu", "vision")
     ]
     ((_kind, vid, payload),) = [s for s in batched if s[0] == "imu_batch"]
@@ -89,7 +89,7 @@ def test_a_world_of_processes_of_one_sends_its_mothership_the_truth_batch_and_it
     ids, chasers = list(sc.vehicles), list(sc.chasers)
     k = w.k
     alone = world_sensors(w, ids, chasers, k, frames, 1)
-    out = world_sensors(w, ids, chasers, k, frames, 1, viewed={"chaser1"}, truth_batch=True)
+    out = world_sensors(w, ids, chasers, k, frames, 1, viewed={"chaser1"})
     assert [kd for kd, _, _ in out if kd.endswith("batch")] == ["truth_batch"] and out[0][0] == "truth_batch"
     (truths,) = [decode(p, TruthBatch) for kd, _, p in out if kd == "truth_batch"]
     assert all(truths.sample(vid) == decode(p, Truth) for kd, vid, p in alone if kd == "truth")
