@@ -3,9 +3,9 @@
 For each case (number of vehicles, clock, topology), ``swarm launch docking --agents V/2`` (one process per
 vehicle) runs for a fixed simulated span while a probe, which joins the swarm as its processes do (a peer of
 a mesh, a client of the launcher's router in a star; ``--topology auto``, the launcher's default, resolved
-as the launcher resolves it), stamps the
-arrival of the first pair's ``imu(k)`` (with agent hosts: of the ``world/imu`` batch that holds it) and
-``estimate(k)`` on one clock (it decodes only the tick number, and a batch's ids):
+as the launcher resolves it), stamps the arrival of the first pair's ``imu(k)`` (with agent hosts: of the
+``world/imu`` batch that holds it) and ``estimate(k)`` on one clock (it decodes only the tick number, and a
+batch's ids):
 
 - **CPU per vehicle per tick**: the agents' own CPU time (each agent process reports it at the end of the
   run, ``cpu_s`` in the launch summary) over vehicles x ticks; the world's per tick beside it;
