@@ -5,7 +5,7 @@ listening on <endpoint>`` says where an outside client connects) and starts, eac
 group, the mothership, one agent per vehicle, the world and (unless ``--headless``) the dashboard. The
 dashboard is a client of the router; the others are Zenoh peers that meet at the router and link directly
 to one another (``--topology mesh``; ``auto``, the default, for a few processes), or clients of it
-(``star``: ``auto`` for many, and the only topology with ``--secure``): :func:`swarm.cli.children.topology`,
+(``star``: ``auto`` for many, and the only topology with ``--secure``; ``swarm.cli.children.topology``),
 docs/protocol.md "Processes and topology" (why a chaser's subscription to its target's estimate is in
 place before the world announces the run, in either).
 
