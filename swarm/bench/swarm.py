@@ -371,7 +371,7 @@ def summarise(runs: list[dict]) -> dict:
 def run(preset: dict) -> dict:
     stagger, tdma = bool(preset.get("stagger", False)), bool(preset.get("tdma", False))
     specs = [(v, c, n, t) for c in preset["clocks"] for n in preset["per_process"]
-             for v in preset["vehicles"] if n <= v for t in preset.get("topologies", ("mesh",))]  # fmt: skip
+             for v in preset["vehicles"] if n <= v for t in preset.get("topologies", ("auto",))]  # fmt: skip
     runs: dict[tuple, list[dict]] = {spec: [] for spec in specs}
     for _ in range(int(preset.get("repeat", 1))):  # round by round: a drift of the machine hits every case
         for v, c, n, t in specs:
