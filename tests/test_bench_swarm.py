@@ -4,12 +4,14 @@ assertion: the numbers are checked for what they must be whatever the machine's 
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
+from swarm.cpu_latency import DEVICE
 from swarm.scenario import load_scenario
 
 
@@ -17,7 +19,8 @@ def test_bench_swarm_measures_a_launched_swarm(tmp_path):
     out = tmp_path / "swarm.json"
     # agent hosts: the world sends the imu as one world/imu batch, which the latency probe must read
     args = [sys.executable, "-m", "swarm.cli.main", "bench", "swarm", "--vehicles", "4", "--clock",
-            "lockstep", "--span", "3", "--vehicles-per-process", "2", "--json", str(out)]  # fmt: skip
+            "lockstep", "--span", "3", "--vehicles-per-process", "2", "--json", str(out),
+            "--cpu-latency", "0"]  # fmt: skip
     r = subprocess.run(args, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     rec = json.loads(out.read_text())
@@ -45,6 +48,10 @@ def test_bench_swarm_measures_a_launched_swarm(tmp_path):
     for part in ("camera", "other"):
         assert 0 < case[f"latency_{part}_p50_us"] <= case[f"latency_{part}_p99_us"]
     assert "CPU us/vehicle/tick" in r.stdout and "(camera ticks; others)" in r.stdout
+    # the CPU latency request, held by the bench around the case where the machine lets it (root)
+    held = os.access(DEVICE, os.W_OK)
+    assert (case["cpu_latency_us"], case["cpu_latency_held"]) == (0, held)
+    assert case["cpu_latency_effective_us"] == (0 if held else None)
 
 
 def test_the_latency_is_split_into_the_camera_ticks_and_the_others():
@@ -83,6 +90,44 @@ def test_late_share_counts_a_swarm_that_never_commanded_as_all_late():
     assert "1.2 % / 10.5 %" in report
 
 
+def test_each_case_is_run_alternately_with_each_cpu_latency_and_the_report_says_which(monkeypatch):
+    from swarm.bench import swarm as bench
+    from swarm.cpu_latency import CpuLatencyHold
+
+    held_during: list = []
+
+    def fake_hold(us):
+        import contextlib
+
+        @contextlib.contextmanager
+        def cm():
+            state = CpuLatencyHold(us, held=us == 0, effective_us=0 if us == 0 else None)
+            held_during.append(us)
+            yield state
+            held_during.append(("end", us))
+
+        return cm()
+
+    def fake_case(v, c, span, n, stagger, tdma, t):
+        assert held_during and held_during[-1] in (None, 0, 5)  # inside the request's block
+        return {"vehicles": v, "per_process": n, "clock": c, "topology": "mesh",
+                "cpu_us_per_vehicle_tick": 1.0, "world_cpu_us_per_tick": 1.0, "late_tick_share": 0.0,
+                "realtime_factor": 1.0, "latency_p50_us": 1.0, "latency_p99_us": 2.0}  # fmt: skip
+
+    monkeypatch.setattr("swarm.cpu_latency.hold", fake_hold)
+    monkeypatch.setattr(bench, "_case", fake_case)
+    lat = bench.parse_cpu_latencies("off,0,5")
+    assert lat == (None, 0, 5)
+    rec = bench.run({"vehicles": (2,), "clocks": ("realtime",), "span_s": 1.0, "per_process": (1,),
+                     "cpu_latencies": lat, "repeat": 2})  # fmt: skip
+    # round by round: off, 0, 5, off, 0, 5, each case inside its own request
+    assert [u for u in held_during if not isinstance(u, tuple)] == [None, 0, 5, None, 0, 5]
+    assert [(c["cpu_latency_us"], c["cpu_latency_held"]) for c in rec["cases"]] == [(None, False), (0, True),
+                                                                                      (5, False)]  # fmt: skip
+    rows = bench.format_report(rec).splitlines()[2:5]
+    assert [r.split()[4] for r in rows] == ["off", "0", "5!"]  # 5 us not granted: marked
+
+
 @pytest.mark.parametrize(
     ("flags", "expect"),
     [(["--vehicles", "3"], "--vehicles must be even integers in 2..128"),
@@ -90,7 +135,9 @@ def test_late_share_counts_a_swarm_that_never_commanded_as_all_late():
      (["--clock", "scaled:2"], "--clock must be realtime, lockstep or both"),
      (["--span", "0"], "--span must be a number of seconds in 1..3600, got 0.0"),
      (["--vehicles-per-process", "0"], "--vehicles-per-process must be integers in 1..64"),
-     (["--repeat", "0"], "--repeat must be an integer in 1..20, got 0")],
+     (["--repeat", "0"], "--repeat must be an integer in 1..20, got 0"),
+     (["--cpu-latency", "0,0"], "--cpu-latency must be off or microseconds in 0..2000000000, or several"),
+     (["--cpu-latency", "fast"], "got 'fast'")],
 )  # fmt: skip
 def test_bad_bench_swarm_flags_give_one_clear_error(flags, expect):
     r = subprocess.run([sys.executable, "-m", "swarm.cli.main", "bench", "swarm", *flags],

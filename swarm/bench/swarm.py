@@ -25,6 +25,10 @@ batch's ids):
 - **TDMA** (``--tdma``): the tags share one UWB channel (``uwb.tdma``, issue 13's Loco Positioning
   TWR-TDMA model): each ranges once per frame (~238/N ranges a second for N tags, against 50 each
   without), and the mothership sends a tag nothing on the slot ticks without its exchange;
+- **wake** (``--cpu-latency off,0``): the CPU wake-up latency request (:mod:`swarm.cpu_latency`, what
+  ``swarm launch --cpu-latency`` holds) held by the bench while the case runs, each case in each value,
+  alternately; ``cpu_latency_held`` in the JSON says whether the machine granted it (``!`` in the table:
+  it did not, and the case ran with the kernel's idle states);
 - **sensor-to-estimate latency** p50/p99: ``estimate(k)`` minus ``imu(k)`` arrival, for the first pair's
   two vehicles: the agent's receive, filter and publish time plus the hop from the world to the agent (in a
   star, plus the router's second hop each way). A tick whose estimate the probe took before its imu (its
@@ -48,6 +52,7 @@ the two cores the swarm it measured had.
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import subprocess
@@ -368,14 +373,38 @@ def summarise(runs: list[dict]) -> dict:
     return out
 
 
+def parse_cpu_latencies(text: str) -> tuple[int | None, ...]:
+    """``--cpu-latency off,0``: ``swarm launch --cpu-latency`` values (``off``: None), each case run in
+    each."""
+    from swarm.cpu_latency import parse
+
+    try:
+        values = tuple(parse(v) for v in text.split(","))
+    except argparse.ArgumentTypeError:
+        values = ()
+    if not values or len(set(values)) < len(values):
+        raise ConfigError(
+            f"--cpu-latency must be off or microseconds in 0..2000000000, or several (comma-separated), "
+            f"got {text!r}"
+        )
+    return values
+
+
 def run(preset: dict) -> dict:
+    from swarm import cpu_latency
+
     stagger, tdma = bool(preset.get("stagger", False)), bool(preset.get("tdma", False))
-    specs = [(v, c, n, t) for c in preset["clocks"] for n in preset["per_process"]
-             for v in preset["vehicles"] if n <= v for t in preset.get("topologies", ("auto",))]  # fmt: skip
+    specs = [(v, c, n, t, q) for c in preset["clocks"] for n in preset["per_process"]
+             for v in preset["vehicles"] if n <= v for t in preset.get("topologies", ("auto",))
+             for q in preset.get("cpu_latencies", (None,))]  # fmt: skip
     runs: dict[tuple, list[dict]] = {spec: [] for spec in specs}
     for _ in range(int(preset.get("repeat", 1))):  # round by round: a drift of the machine hits every case
-        for v, c, n, t in specs:
-            runs[v, c, n, t].append(_case(v, c, preset["span_s"], n, stagger, tdma, t))
+        for v, c, n, t, q in specs:
+            # the request is the machine's (the launch's and the probe's alike): held here, so that the
+            # record says whether it was
+            with cpu_latency.hold(q) as held:
+                case = _case(v, c, preset["span_s"], n, stagger, tdma, t)
+            runs[v, c, n, t, q].append({**case, **held.as_dict()})
     return {
         "cases": [summarise(runs[spec]) for spec in specs],
         "span_s": preset["span_s"],
@@ -394,8 +423,8 @@ def format_report(r: dict) -> str:
         f"({r['cores']} cores, 1-min load {r['load_1min']:.2f} at the end)"
         + ("; controller clocks staggered" if any(c.get("staggered") for c in r["cases"]) else "")
         + ("; one TDMA UWB channel" if any(c.get("tdma") for c in r["cases"]) else ""),
-        "vehicles  per proc  clock      links  CPU us/vehicle/tick  world us/tick  late ticks / commands  "
-        "real-time  latency p50/p99 us (camera ticks; others)",
+        "vehicles  per proc  clock      links  wake  CPU us/vehicle/tick  world us/tick  "
+        "late ticks / commands  real-time  latency p50/p99 us (camera ticks; others)",
     ]
     for c in r["cases"]:
         late = "-" if c["late_tick_share"] is None else f"{100 * c['late_tick_share']:.1f} %"
@@ -405,6 +434,7 @@ def format_report(r: dict) -> str:
             late = "no command"
         lines.append(
             f"{c['vehicles']:>8}  {c['per_process']:>8}  {c['clock']:<9}  {c.get('topology', 'star'):<5}  "
+            f"{_wake(c):>4}  "
             f"{_fmt(c['cpu_us_per_vehicle_tick'], '19.0f')}  "
             f"{_fmt(c['world_cpu_us_per_tick'], '13.0f')}  {late:>21}  "
             f"{_fmt(c['realtime_factor'], '8.2f')}x  "
@@ -416,6 +446,15 @@ def format_report(r: dict) -> str:
     if any("runs" in c for c in r["cases"]):
         lines.append("medians of the runs of each case; [min-max] over them")
     return "\n".join(lines)
+
+
+def _wake(c: dict) -> str:
+    """The case's ``--cpu-latency``: ``off``, the microseconds held, or ``!`` after them when the request
+    could not be held (no root: the case ran with the kernel's idle states)."""
+    us = c.get("cpu_latency_us")
+    if us is None:
+        return "off"
+    return f"{us}" + ("" if c.get("cpu_latency_held") else "!")
 
 
 def _spread(c: dict) -> str:

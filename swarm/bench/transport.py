@@ -21,6 +21,9 @@ for a swarm of a few processes, one pair's among them):
    filter and publish time plus the hop from the world to the agent (in a star, a probe client of the
    router: the same plus the router's second hop).
 
+``--cpu-latency US`` holds the CPU wake-up latency request of ``swarm launch --cpu-latency``
+(:mod:`swarm.cpu_latency`) for the whole bench: every figure then shows what the swarm gets with it.
+
 Run as ``python -m swarm.bench.transport ping|pong ...`` it is the ping or the pong process.
 """
 
@@ -235,6 +238,14 @@ def _latency(duration_s: float, topology: str = "mesh") -> dict:
 
 
 def run(preset: dict) -> dict:
+    """Every measurement, with ``preset["cpu_latency"]`` (``--cpu-latency``; None: none) held throughout."""
+    from swarm import cpu_latency
+
+    with cpu_latency.hold(preset.get("cpu_latency")) as held:
+        return {**_run(preset), **held.as_dict()}
+
+
+def _run(preset: dict) -> dict:
     rtt = _rtt(preset["rtt_samples"], wake=True)
     mesh_rtt = _rtt(preset["rtt_samples"], topology="mesh")
     handoff = _rtt(preset["rtt_samples"], "handoff")
@@ -279,7 +290,11 @@ def run(preset: dict) -> dict:
 def format_report(r: dict) -> str:
     rtt, mesh, hand = r["zenoh_rtt_us"], r["mesh_rtt_us"], r["handoff_rtt_us"]
     w = rtt["wake_cost_us"]
-    lines = [
+    lines = [] if r.get("cpu_latency_us") is None else [
+        f"CPU wake-up latency request of {r['cpu_latency_us']} us (--cpu-latency): "
+        + ("held throughout" if r.get("cpu_latency_held") else "NOT held: the kernel's idle states")
+    ]  # fmt: skip
+    lines += [
         f"Zenoh ping-pong RTT (64 B, two clients via the router): median {rtt['median']:.0f} us, "
         f"p99 {rtt['p99']:.0f} us",
         f"  two peers linked directly (a mesh): median {mesh['median']:.0f} us, p99 {mesh['p99']:.0f} us",

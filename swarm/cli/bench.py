@@ -14,6 +14,7 @@ import logging
 import math
 from collections.abc import Callable
 
+from swarm import cpu_latency
 from swarm.args import add_output_file
 from swarm.errors import ConfigError
 
@@ -87,6 +88,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     for name, (_, help_text) in BENCHES.items():
         bp = benches.add_parser(name, help=help_text, description=help_text)
         _add_flags(bp, argparse.SUPPRESS)
+        if name == "transport":
+            bp.add_argument("--cpu-latency", dest="cpu_latency", type=cpu_latency.parse, default=None,
+                            metavar="US|off",
+                            help="hold a CPU wake-up latency request (swarm launch --cpu-latency) "
+                                 "for the whole bench: off (default) or microseconds (0: idle CPUs "
+                                 "poll)")  # fmt: skip
         if name == "swarm":
             bp.add_argument("--vehicles", default=None, metavar="N,N,...",
                             help="vehicle counts, even; default 2,8,32 (2,8 with --quick)")  # fmt: skip
@@ -95,6 +102,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             bp.add_argument("--topology", default=None, metavar="auto|mesh|star[,..]",
                             help="swarm launch --topology of the cases: auto (default, as swarm launch), "
                                  "mesh, star or several, each case run in each, alternately")  # fmt: skip
+            bp.add_argument("--cpu-latency", dest="cpu_latency", default=None, metavar="US|off[,..]",
+                            help="hold a CPU wake-up latency request (swarm launch --cpu-latency) while "
+                                 "each case runs: off (default), microseconds (0: idle CPUs poll) or "
+                                 "several, each case run in each, alternately")  # fmt: skip
             bp.add_argument("--vehicles-per-process", dest="per_process", default=None, metavar="N[,N]",
                             help="agent hosts of N vehicles (default 1: a process per vehicle)")  # fmt: skip
             bp.add_argument("--span", type=float, default=None, metavar="S",
@@ -122,6 +133,12 @@ def run(args: argparse.Namespace) -> int:
         log.info("bench %s%s", name, " (quick)" if args.quick else "")
         if name == "swarm" and args.bench == "swarm":  # its own flags override the preset
             record, report = _swarm(args)
+        elif name == "transport" and getattr(args, "cpu_latency", None) is not None:
+            from swarm.bench import transport
+
+            record = transport.run({**(transport.QUICK if args.quick else transport.FULL),
+                                    "cpu_latency": args.cpu_latency})  # fmt: skip
+            report = transport.format_report(record)
         else:
             record, report = BENCHES[name][0](args.quick)
         print(report)
@@ -146,6 +163,8 @@ def _swarm(args: argparse.Namespace) -> tuple[dict, str]:
         preset["clocks"] = bench.parse_clocks(args.clock)
     if getattr(args, "topology", None) is not None:
         preset["topologies"] = bench.parse_topologies(args.topology)
+    if getattr(args, "cpu_latency", None) is not None:
+        preset["cpu_latencies"] = bench.parse_cpu_latencies(args.cpu_latency)
     if getattr(args, "per_process", None) is not None:
         preset["per_process"] = bench.parse_per_process(args.per_process)
     if getattr(args, "span", None) is not None:

@@ -17,7 +17,9 @@ exponential backoff, at most ``--max-restarts`` times), and collects the run fro
 section 8) and the restarts of each process. After the run: ``--until-docked`` exits; ``--repeat`` starts
 the next run with a new seed; otherwise the swarm stays up (for the dashboard) until Ctrl-C or
 ``--timeout``. Ctrl-C, SIGTERM or the end stop every child: SIGTERM,
-then SIGKILL of its process group after a grace period.
+then SIGKILL of its process group after a grace period. ``--cpu-latency 0`` holds a PM QoS request that
+no CPU take longer than 0 us to wake while the swarm runs (``swarm.cpu_latency``: processes woken every
+tick start on a warm CPU; needs root).
 
 Exit status: 0 every chaser docked, 1 not (or the run failed), 2 bad input, 130 interrupted.
 """
@@ -37,6 +39,7 @@ import threading
 import time
 from pathlib import Path
 
+from swarm import cpu_latency
 from swarm.cli.children import (
     MESH_MAX_PEERS,
     TOPOLOGIES,
@@ -141,6 +144,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "0: never)",
     )  # fmt: skip
     add_world_timeouts(g)
+    cpu_latency.add_argument(g)
     p.set_defaults(func=run)
 
 
@@ -327,6 +331,13 @@ def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    """The launch, docking or landing, with ``--cpu-latency``'s request held from before the first process
+    starts until the last has stopped."""
+    with cpu_latency.hold(args.cpu_latency):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     import zenoh
 
     zenoh.try_init_log_from_env()  # RUST_LOG=...: Zenoh's own log (its ACL decisions: access_control=trace)

@@ -13,6 +13,7 @@ import math
 import os
 import re
 import signal
+import struct
 import subprocess
 import sys
 import time
@@ -24,6 +25,7 @@ from pathlib import Path
 import msgpack
 import pytest
 
+from swarm.cpu_latency import DEVICE
 from swarm.scenario import load_scenario
 from swarm.sim.docking import run_docking
 from swarm.transport.session import ZenohArgs, open_session
@@ -539,13 +541,29 @@ def _direct_links(pids: dict[str, int]) -> set[frozenset]:
     }
 
 
+def _machine_cpu_latency() -> int | None:
+    """The kernel's CPU wake-up latency bound [us] (``/dev/cpu_dma_latency``); None if unreadable."""
+    try:
+        fd = os.open(DEVICE, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        return struct.unpack("=i", os.read(fd, 4))[0]
+    finally:
+        os.close(fd)
+
+
 def test_sigint_to_the_launcher_leaves_no_child_behind():
     """Also: the default topology is a mesh, in which each of the swarm's processes (world, mothership,
-    agents) has a direct link to every other, besides its link to the launcher's router."""
+    agents) has a direct link to every other, besides its link to the launcher's router; and
+    ``--cpu-latency 0`` holds the kernel's CPU latency bound at 0 while the swarm runs, and no longer."""
     ns = _ns()
+    before = _machine_cpu_latency()
     with Procs() as procs:
-        proc, endpoint = _launch(procs, ns)
+        proc, endpoint = _launch(procs, ns, "--cpu-latency", "0")
         proc.wait_for_line(r"^swarm up:", 120.0)
+        if os.access(DEVICE, os.W_OK):  # root: granted (else a warning: tests/test_cpu_latency.py)
+            assert _machine_cpu_latency() == 0
         assert len(_children(ns)) >= 4  # world, mothership, two agents (and the launcher)
         names = {"swarm.world": "world", "-m mothership": "mothership", "--id chaser": "chaser",
                  "--id target": "target"}  # fmt: skip
@@ -563,6 +581,7 @@ def test_sigint_to_the_launcher_leaves_no_child_behind():
         proc.signal(signal.SIGINT)
         assert proc.wait(30.0) == 130, proc.output()
         wait_until(lambda: not _children(ns), 5.0, f"every process of {ns} to be gone: {_children(ns)}")
+    assert _machine_cpu_latency() == before  # the request went with the launcher
 
 
 VPP = "--vehicles-per-process"
@@ -577,6 +596,7 @@ BAD_FLAGS = [
     (["--record", "/nowhere/run.mcap"], "--record: no such directory '/nowhere'"),
     (["--pace", "lockstep"], "--pace must be realtime or scaled:N"),
     (["--clock", "scaled:2", "--pace", "realtime"], "--clock scaled:2 is free-running already"),
+    (["--cpu-latency", "-1"], "--cpu-latency must be off or microseconds in 0..2000000000, got '-1'"),
     (
         ["--topology", "mesh", "--secure"],
         "--topology mesh and --secure: the router enforces the access control",

@@ -1,0 +1,91 @@
+"""``--cpu-latency``: the PM QoS CPU latency request a launch holds (``swarm/cpu_latency.py``).
+
+A file stands in for ``/dev/cpu_dma_latency`` where the test is about what is written and when it is
+withdrawn; the kernel's own file is used where the machine lets the test write it (root), to show that the
+request takes effect and goes with the block."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import struct
+from pathlib import Path
+
+import pytest
+
+from swarm.cpu_latency import DEVICE, MAX_US, hold, parse
+
+
+def _open_fds_to(path: Path) -> int:
+    """How many of this process's descriptors are open on ``path``."""
+    n = 0
+    for fd in Path("/proc/self/fd").iterdir():
+        try:
+            n += os.readlink(fd) == str(path)
+        except OSError:  # the listing's own descriptor, closed meanwhile
+            pass
+    return n
+
+
+def test_the_flag_takes_off_or_microseconds_and_names_itself_and_the_value_when_refused():
+    assert parse("off") is None
+    assert parse("0") == 0 and parse("50") == 50 and parse(str(MAX_US)) == MAX_US
+    for bad in ("-1", str(MAX_US + 1), "1.5", "", "none", "0x10"):
+        with pytest.raises(argparse.ArgumentTypeError, match=rf"--cpu-latency must be .* got {bad!r}"):
+            parse(bad)
+
+
+def test_the_request_is_written_as_a_signed_32_bit_value_and_withdrawn_when_the_block_ends(tmp_path):
+    fake = tmp_path / "cpu_dma_latency"
+    fake.write_bytes(b"")
+    with hold(7, device=fake) as held:
+        assert struct.unpack("=i", fake.read_bytes()) == (7,)
+        assert held.held and held.effective_us == 7 and held.error is None
+        assert _open_fds_to(fake) == 1  # the kernel holds a request while its file is open
+        want = {"cpu_latency_us": 7, "cpu_latency_held": True, "cpu_latency_effective_us": 7}
+        assert held.as_dict() == want
+    assert _open_fds_to(fake) == 0
+    with pytest.raises(RuntimeError, match="boom"), hold(0, device=fake):
+        raise RuntimeError("boom")
+    assert _open_fds_to(fake) == 0  # withdrawn when the block raises too
+
+
+def test_off_touches_nothing(tmp_path):
+    fake = tmp_path / "cpu_dma_latency"
+    with hold(None, device=fake) as held:
+        assert not held.held and held.error is None
+    assert not fake.exists()
+
+
+def test_a_request_the_machine_refuses_is_a_warning_naming_the_file_and_the_reason(tmp_path, caplog):
+    missing = tmp_path / "no" / "cpu_dma_latency"
+    with caplog.at_level(logging.WARNING, logger="swarm.cpu_latency"), hold(0, device=missing) as held:
+        ran = True
+    assert ran and not held.held and held.effective_us is None
+    assert held.error == f"{missing}: No such file or directory"
+    assert f"--cpu-latency 0: no CPU latency request held ({held.error})" in caplog.text
+    if os.geteuid() != 0:  # root may write a read-only file
+        ro = tmp_path / "ro"
+        ro.write_bytes(b"")
+        ro.chmod(0o444)
+        with hold(0, device=ro) as held:
+            assert not held.held and "Permission denied" in held.error
+
+
+def _machine_bound() -> int:
+    """The kernel's current CPU latency bound, read as any process may (opening the file adds a request
+    of the default, which lowers nothing)."""
+    fd = os.open(DEVICE, os.O_RDONLY)
+    try:
+        return struct.unpack("=i", os.read(fd, 4))[0]
+    finally:
+        os.close(fd)
+
+
+@pytest.mark.skipif(not os.access(DEVICE, os.R_OK | os.W_OK), reason=f"{DEVICE} is not writable here")
+def test_the_kernel_takes_the_request_for_the_block_alone():
+    before = _machine_bound()
+    with hold(0) as held:
+        assert held.held and held.effective_us == 0 and _machine_bound() == 0
+    assert _machine_bound() == before
