@@ -197,10 +197,10 @@ class _Probe:
 
 def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagger: bool = False,
           tdma: bool = False, topology: str = "auto") -> dict:  # fmt: skip
-    from swarm.cli.children import resolved
+    from swarm.cli.children import resolved, swarm_processes
 
     pairs = vehicles // 2
-    links = resolved(topology, 2 + -(-vehicles // per_process))  # the world, the mothership, the agents
+    links = resolved(topology, swarm_processes(vehicles, per_process))
     ns = f"benchswarm{os.getpid()}v{vehicles}p{per_process}{clock}{topology}"
     endpoint = free_loopback_endpoint()
     # the launcher's stderr (its children's too) into a file: its last lines say why a launch failed

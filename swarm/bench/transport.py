@@ -175,7 +175,7 @@ def _rtt(n: int, style: str = "direct", wake: bool = False, topology: str = "sta
 
 
 def _lockstep(pairs: int, span_s: float, topology: str = "auto") -> dict:
-    from swarm.cli.children import resolved
+    from swarm.cli.children import resolved, swarm_processes
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run.json"
@@ -192,7 +192,7 @@ def _lockstep(pairs: int, span_s: float, topology: str = "auto") -> dict:
     cpu = res.get("cpu_s", {})
     agents = [v for k, v in cpu.items() if k != "world" and v is not None]
     return {
-        "topology": resolved(topology, 2 + 2 * pairs),  # (a process per vehicle, the world, the mothership)
+        "topology": resolved(topology, swarm_processes(2 * pairs)),
         "tick_us": 1e6 * res["wall_s"] / ticks, "realtime_factor": res["realtime_factor"], "ticks": ticks,
         "world_cpu_us_per_tick": 1e6 * cpu["world"] / ticks if cpu.get("world") is not None else None,
         "agent_cpu_us_per_tick": 1e6 * float(np.mean(agents)) / ticks if agents else None,

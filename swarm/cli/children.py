@@ -111,6 +111,14 @@ def topology(args: argparse.Namespace, processes: int) -> str:
     return chosen
 
 
+def swarm_processes(vehicles: int, per_process: int = 1, *, mothership: bool = True) -> int:
+    """The processes a launch of ``vehicles`` starts, the dashboard aside: the world, the mothership (a
+    docking swarm's; a landing has none) and one agent process per ``per_process`` vehicles, the last one
+    hosting the rest (``swarm launch --vehicles-per-process``). The count :func:`topology`'s ``auto``
+    decides by, for the launchers and for the benches' probes alike."""
+    return 1 + int(mothership) + -(-vehicles // per_process)
+
+
 def resolved(chosen: str, processes: int) -> str:
     """The topology a launch of ``processes`` (the world, the mothership, the agent processes) with
     ``--topology chosen`` and no ``--secure`` runs in (:func:`topology`): what a bench's probe must join."""

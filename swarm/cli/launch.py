@@ -52,6 +52,7 @@ from swarm.cli.children import (
     router_args,
     secure_router,
     start_recorder,
+    swarm_processes,
     topology,
 )
 from swarm.errors import ConfigError, SwarmError
@@ -364,10 +365,10 @@ def _run(args: argparse.Namespace) -> int:
     )
 
     sc = scenario_from(args)
-    hosts = _hosts(args, sc)  # the agent processes' layout, checked before anything starts
+    _hosts(args, sc)  # the agent processes' layout (swarm_processes counts it), checked before any start
     check_record(args)
     # the world, the mothership and the agent processes (mesh with --secure refused before anything starts)
-    args.links = links = topology(args, 2 + len(hosts))
+    args.links = links = topology(args, swarm_processes(len(sc.vehicles), args.vehicles_per_process))
     keys = Keys(args.namespace)
     policy = args.policy or sc.policy
     listen = launch_listen(args)  # (--secure: mutual TLS + Zenoh ACL, each process its own certificate)

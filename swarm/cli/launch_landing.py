@@ -106,6 +106,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         router_args,
         secure_router,
         start_recorder,
+        swarm_processes,
         topology,
     )
     from swarm.cli.sim import print_landing
@@ -123,7 +124,8 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     sc = load_landing(args.scenario, dict(parse_override(o) for o in args.overrides))
     ids = [u.id for u in sc.uavs()]
     # the world and the agent processes (resolved before anything starts: mesh with --secure is refused)
-    args.links = links = topology(args, 1 + -(-len(ids) // args.vehicles_per_process))
+    n_proc = swarm_processes(len(ids), args.vehicles_per_process, mothership=False)
+    args.links = links = topology(args, n_proc)
     policy = args.policy or sc.policy
     keys = Keys(args.namespace)
     listen = launch_listen(args)  # (--secure: mutual TLS + Zenoh ACL, mission "landing", as a docking swarm)

@@ -6,7 +6,15 @@ from __future__ import annotations
 
 import pytest
 
-from swarm.cli.children import MESH_LISTEN, MESH_MAX_PEERS, child_args, member_args, resolved, topology
+from swarm.cli.children import (
+    MESH_LISTEN,
+    MESH_MAX_PEERS,
+    child_args,
+    member_args,
+    resolved,
+    swarm_processes,
+    topology,
+)
 from swarm.cli.main import build_parser
 from swarm.errors import ConfigError
 from swarm.transport.session import make_config
@@ -70,3 +78,17 @@ def test_an_unknown_topology_is_refused_naming_the_flag_and_the_value(capsys):
         topology(args, 4)
     with pytest.raises(ValueError, match="a mesh or a star, got 'auto'"):
         member_args(ENDPOINT, "auto")  # (unresolved: the launcher resolves it before any child starts)
+
+
+@pytest.mark.parametrize(
+    ("pairs", "per_process"), [(1, 1), (1, 2), (4, 1), (4, 3), (16, 16), (3, 4), (64, 64)]
+)
+def test_the_process_count_that_auto_decides_by_is_the_launchers_layout(pairs, per_process):
+    # the benches' probes join the topology this count resolves to: it must be the launcher's own layout
+    from swarm.cli.launch import _hosts
+    from swarm.transport.process import scenario_from
+
+    args = _args("--agents", str(pairs), "--vehicles-per-process", str(per_process))
+    sc = scenario_from(args)
+    assert swarm_processes(len(sc.vehicles), per_process) == 2 + len(_hosts(args, sc))  # world, mothership
+    assert swarm_processes(2 * pairs, per_process, mothership=False) == 1 + len(_hosts(args, sc))
