@@ -71,29 +71,6 @@ from swarm.world.checkpoint import CheckpointError
 _LOG = logging.getLogger("swarm.world")
 
 
-def due_first(sensors: list[tuple[str, str, bytes]], due: frozenset[str], lockstep: bool) -> list:
-    """Tick ``k``'s samples in the order to publish them: the own-key ``vision`` and ``imu`` of the vehicles
-    in ``due`` (those that command on this tick) before those of the others, each vehicle's in the order
-    given (its frame before its imu). Each process wakes on its message, and the ones woken first get the
-    cores first: with staggered controller clocks (``swarm.stagger_control``) a tick's few commands are then
-    not queued behind the filter-only ticks of every other vehicle. The rest keep their place: the truth
-    batches first in lockstep, where an agent's UWB tick waits for its range (the mothership's, made from
-    the truths), and after the due vehicles' samples in a free-running swarm, where a range that comes after
-    its tick is fused late (``agent.late_fusion_s``) and the commands are what must not wait. The order
-    changes no message, and lockstep results do not depend on it. When every vehicle is due, or none,
-    ``sensors`` is returned as it is."""
-    if not due or all(vid in due for kind, vid, _ in sensors if kind in ("imu", "vision")):
-        return sensors
-    first = [s for s in sensors if s[0] in ("imu", "vision") and s[1] in due]
-    if not first:
-        return sensors
-    rest = [s for s in sensors if not (s[0] in ("imu", "vision") and s[1] in due)]
-    if not lockstep:
-        return first + rest
-    n_truths = next((i for i, s in enumerate(rest) if s[0] in ("imu", "vision")), len(rest))
-    return rest[:n_truths] + first + rest[n_truths:]
-
-
 class WorldProcess:
     """One run of the world over an open Zenoh session (module docstring)."""
 
@@ -465,10 +442,9 @@ class WorldProcess:
         return self._pubs[kind][vid]
 
     def _publish_tick(self, k: int, sensors: list[tuple[str, str, bytes]]) -> None:
-        """Publish tick ``k``'s samples (:meth:`_encode_tick`); imu and vision through :meth:`_send`, those of
-        the vehicles that command on tick ``k`` first (:func:`due_first`)."""
+        """Publish tick ``k``'s samples (:meth:`_encode_tick`); imu and vision through :meth:`_send`."""
         t = k * self.sc.dt_s
-        for kind, vid, payload in due_first(sensors, self.barrier.due(k), self.clock.lockstep):
+        for kind, vid, payload in sensors:
             if kind in ("imu", "vision"):
                 self._send(vid, t, kind, payload)
             else:  # truths, and the batches (whose vehicles have no delay window: _encode_tick)
