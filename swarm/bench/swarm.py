@@ -376,7 +376,7 @@ def summarise(runs: list[dict]) -> dict:
 def parse_cpu_latencies(text: str) -> tuple[int | None, ...]:
     """``--cpu-latency off,0``: ``swarm launch --cpu-latency`` values (``off``: None), each case run in
     each."""
-    from swarm.cpu_latency import parse
+    from swarm.cpu_latency import MAX_US, parse
 
     try:
         values = tuple(parse(v) for v in text.split(","))
@@ -384,7 +384,7 @@ def parse_cpu_latencies(text: str) -> tuple[int | None, ...]:
         values = ()
     if not values or len(set(values)) < len(values):
         raise ConfigError(
-            f"--cpu-latency must be off or microseconds in 0..2000000000, or several (comma-separated), "
+            f"--cpu-latency must be off or microseconds in 0..{MAX_US}, or several (comma-separated), "
             f"got {text!r}"
         )
     return values
