@@ -13,7 +13,9 @@ longer than the smallest such request. At 0 an idle CPU polls: the same sum then
 tuned's ``latency-performance`` profile do the same. It is a whole-machine setting: an idle core then draws
 power as if busy, so it is off unless asked for.
 
-Writing the file needs root (or a udev rule that opens it to a group). Without it, or on a kernel without
+``swarm launch`` holds it for its whole swarm; a swarm process started by hand (``python -m agents``, the
+world, the mothership: :func:`swarm.transport.process.process_main`) holds its own, for a machine that
+runs no launcher. Writing the file needs root (or a udev rule that opens it to a group). Without it, or on a kernel without
 the file, :func:`hold` logs why and the swarm runs with the kernel's own idle states, as ``cyclictest``
 does; the holder's :attr:`CpuLatencyHold.held` says which happened.
 """

@@ -89,3 +89,30 @@ def test_the_kernel_takes_the_request_for_the_block_alone():
     with hold(0) as held:
         assert held.held and held.effective_us == 0 and _machine_bound() == 0
     assert _machine_bound() == before
+
+
+def test_a_process_started_by_hand_holds_its_own_request_until_it_stops():
+    """``python -m mothership --cpu-latency 0`` (a process on another machine, started without the launcher;
+    every swarm process takes the flag): the request from its start to its end; a bad value is exit 2."""
+    import signal
+    import sys
+
+    from tests.transport.procs import Procs, free_port, loopback
+
+    base = [sys.executable, "-m", "mothership", "docking", "--namespace", f"cpulat{os.getpid()}", "--mode",
+            "peer", "--listen", loopback(free_port())]  # fmt: skip
+    writable = os.access(DEVICE, os.R_OK | os.W_OK)
+    before = _machine_bound() if writable else None
+    with Procs() as procs:
+        bad = procs.start([*base, "--cpu-latency", "-5"])
+        assert bad.wait(60.0) == 2 and "--cpu-latency must be off or microseconds" in bad.output()
+        proc = procs.start([*base, "--cpu-latency", "0"])
+        proc.wait_for_line(r"^mothership mothership ready", 60.0)
+        if writable:
+            assert _machine_bound() == 0
+        else:
+            assert "no CPU latency request held" in proc.output()
+        proc.signal(signal.SIGTERM)
+        assert proc.wait(30.0) == 0, proc.output()
+    if writable:
+        assert _machine_bound() == before

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import zenoh
 
+from swarm import cpu_latency
 from swarm.args import add_scenario_args, agents, load_from_args, seed
 from swarm.errors import ConfigError, SwarmError
 from swarm.stacks import enable_stack_dumps
@@ -208,6 +209,7 @@ def process_main(
     parser = argparse.ArgumentParser(prog=prog, description=description)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     add_arguments(parser)
+    cpu_latency.add_argument(parser)  # a process started by hand (another machine); a launch holds its own
     args = parser.parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
@@ -217,7 +219,8 @@ def process_main(
     stop = threading.Event()
     previous = install_stop_signals(stop)
     try:
-        return int(run(args, stop) or 0)
+        with cpu_latency.hold(args.cpu_latency):
+            return int(run(args, stop) or 0)
     except SwarmError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr, flush=True)
         return 2
