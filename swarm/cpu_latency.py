@@ -15,9 +15,9 @@ power as if busy, so it is off unless asked for.
 
 ``swarm launch`` holds it for its whole swarm; a swarm process started by hand (``python -m agents``, the
 world, the mothership: :func:`swarm.transport.process.process_main`) holds its own, for a machine that
-runs no launcher. Writing the file needs root (or a udev rule that opens it to a group). Without it, or on a kernel without
-the file, :func:`hold` logs why and the swarm runs with the kernel's own idle states, as ``cyclictest``
-does; the holder's :attr:`CpuLatencyHold.held` says which happened.
+runs no launcher. Writing the file needs root (or a udev rule that opens it to a group). Without it, or on
+a kernel without the file, :func:`hold` logs why and the swarm runs with the kernel's own idle states, as
+``cyclictest`` does; the holder's :attr:`CpuLatencyHold.held` says which happened.
 """
 
 from __future__ import annotations
