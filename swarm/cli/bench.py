@@ -21,13 +21,14 @@ from swarm.errors import ConfigError
 log = logging.getLogger(__name__)
 
 
-def _bench(module: str, presets: bool) -> Callable[[bool], tuple[dict, str]]:
+def _bench(module: str, presets: bool) -> Callable[..., tuple[dict, str]]:
     """The runner of ``swarm.bench.<module>``, imported only when it runs (a bench's imports are heavy):
-    ``run(QUICK or FULL)`` for a bench with presets, ``run(quick)`` for the others; then its report."""
+    ``run(QUICK or FULL)`` for a bench with presets (``preset`` entries given to the runner override the
+    preset's: a bench's own flags), ``run(quick)`` for the others; then its report."""
 
-    def runner(quick: bool) -> tuple[dict, str]:
+    def runner(quick: bool, **preset) -> tuple[dict, str]:
         bench = importlib.import_module(f"swarm.bench.{module}")
-        record = bench.run((bench.QUICK if quick else bench.FULL) if presets else quick)
+        record = bench.run({**(bench.QUICK if quick else bench.FULL), **preset} if presets else quick)
         return record, bench.format_report(record)
 
     return runner
@@ -133,12 +134,8 @@ def run(args: argparse.Namespace) -> int:
         log.info("bench %s%s", name, " (quick)" if args.quick else "")
         if name == "swarm" and args.bench == "swarm":  # its own flags override the preset
             record, report = _swarm(args)
-        elif name == "transport" and getattr(args, "cpu_latency", None) is not None:
-            from swarm.bench import transport
-
-            record = transport.run({**(transport.QUICK if args.quick else transport.FULL),
-                                    "cpu_latency": args.cpu_latency})  # fmt: skip
-            report = transport.format_report(record)
+        elif name == "transport" and args.bench == "transport":  # --cpu-latency (None: none)
+            record, report = BENCHES[name][0](args.quick, cpu_latency=args.cpu_latency)
         else:
             record, report = BENCHES[name][0](args.quick)
         print(report)
