@@ -28,7 +28,11 @@ def _bench(module: str, presets: bool) -> Callable[..., tuple[dict, str]]:
 
     def runner(quick: bool, **preset) -> tuple[dict, str]:
         bench = importlib.import_module(f"swarm.bench.{module}")
-        record = bench.run({**(bench.QUICK if quick else bench.FULL), **preset} if presets else quick)
+        if not presets:
+            record = bench.run(quick)
+        else:  # (a preset may be a dict or a bench's own config object: overridden only when asked)
+            chosen = bench.QUICK if quick else bench.FULL
+            record = bench.run({**chosen, **preset} if preset else chosen)
         return record, bench.format_report(record)
 
     return runner
