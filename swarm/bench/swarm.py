@@ -3,9 +3,10 @@
 For each case (number of vehicles, clock, topology), ``swarm launch docking --agents V/2`` (one process per
 vehicle) runs for a fixed simulated span while a probe, which joins the swarm as its processes do (a peer of
 a mesh, a client of the launcher's router in a star; ``--topology auto``, the launcher's default, resolved
-as the launcher resolves it), stamps the arrival of the first pair's ``imu(k)`` (with agent hosts: of the
-``world/imu`` batch that holds it) and ``estimate(k)`` on one clock (it decodes only the tick number, and a
-batch's ids):
+as the launcher resolves it), takes the first pair's ``imu(k)`` (with agent hosts: the ``world/imu`` batch
+that holds it) and ``estimate(k)`` (it decodes only the tick number, and a batch's ids) with the time each
+was published: every process of the case stamps what it publishes (Zenoh's timestamps,
+:data:`TIMESTAMPING`):
 
 - **CPU per vehicle per tick**: the agents' own CPU time (each agent process reports it at the end of the
   run, ``cpu_s`` in the launch summary) over vehicles x ticks; the world's per tick beside it;
@@ -29,15 +30,15 @@ batch's ids):
   ``swarm launch --cpu-latency`` holds) held by the bench while the case runs, each case in each value,
   alternately; ``cpu_latency_held`` in the JSON says whether the machine granted it (``!`` in the table:
   it did not, and the case ran with the kernel's idle states);
-- **sensor-to-estimate latency** p50/p99: ``estimate(k)`` minus ``imu(k)`` arrival, for the first pair's
-  two vehicles: the agent's receive, filter and publish time plus the hop from the world to the agent (in a
-  star, plus the router's second hop each way). A tick whose estimate the probe took before its imu (its
-  callbacks run on threads of their own, and a probe short of CPU takes them late) is counted
-  (``estimate_first``, ``camera_estimate_first``), not measured. Since 4df9a3d
-  the target sends only the estimates its chaser reads (a fifth), so its ticks are a sixth of the samples,
-  not a half. Split beside it (``latency_camera_*`` and ``latency_other_*``): the chaser's camera ticks
-  (``k`` a multiple of the camera's period: the frame is fused before the estimate goes out) and all the
-  other samples, the target's included.
+- **sensor-to-estimate latency** p50/p99: ``estimate(k)``'s publication by the agent minus ``imu(k)``'s
+  by the world, for the first pair's two vehicles: the hop from the world to the agent (in a star, the
+  router's two), the agent's receive, filter and publish time. Both stamps are their publishers' (one
+  machine, one clock), so the probe's own delays are not in it (:class:`_Probe`). Beside it, **delivered**
+  (``latency_delivered_*``): to the estimate's arrival at the probe, what a consumer of the estimates on
+  this machine sees. Since 4df9a3d the target sends only the estimates its chaser reads (a fifth), so its
+  ticks are a sixth of the samples, not a half. Split beside it (``latency_camera_*`` and
+  ``latency_other_*``): the chaser's camera ticks (``k`` a multiple of the camera's period: the frame is
+  fused before the estimate goes out) and all the other samples, the target's included.
 
 ``--repeat N`` runs every case N times, round by round (so that a drift of the shared machine's speed falls
 on every case alike), and reports each figure's median over the runs with the spread of the late ticks,
@@ -126,27 +127,40 @@ def parse_clocks(text: str) -> tuple[str, ...]:
     return values
 
 
-class _Probe:
-    """Arrival stamps of the probed vehicles' imu and estimate ticks (the tick number decoded only).
+TIMESTAMPING = "{ timestamping: { enabled: { router: true, peer: true, client: true } } }"
+"""The Zenoh configuration (``--zenoh-config``) of every process of a case: each session stamps what it
+publishes with its hybrid logical clock (``Sample.timestamp``, Zenoh's HLC: the machine's real-time clock at
+the ``put``, to a few nanoseconds), which the probe reads. The stamp is Zenoh's metadata, not the payload:
+docs/protocol.md's messages are unchanged."""
 
-    Each subscriber's callback runs on a Python thread of its own, so the probe can take an estimate's
-    callback before the callback of the imu that came first, when the machine is short of CPU (a lockstep
-    swarm at full speed); the swarm's processes did nothing wrong, the probe's stamps are late. Such ticks
-    are counted (``estimate_first``), not measured."""
+
+def published_ns(sample) -> int | None:
+    """When ``sample`` was published [ns since the epoch, as ``time.time_ns()``]: its Zenoh timestamp,
+    ``None`` if its publisher did not stamp it."""
+    ts = sample.timestamp
+    return None if ts is None else ts.get_time_as_ntp64().as_nanos()
+
+
+class _Probe:
+    """The probed vehicles' imu and estimate ticks (the tick number decoded only), matched by tick.
+
+    For each estimate it keeps two latencies: from its imu's publication by the world to its own by the
+    agent (``latency``: both stamped by their publishers, :func:`published_ns`), and to its arrival here
+    (``delivered``: what a consumer on this machine sees, the estimate's hop and this probe's own delay
+    taking it included). Neither depends on when this probe takes the imu: until 2026-11-28 the latency was
+    the difference of the two arrivals here, and the probe, a Python process sharing the two cores, took
+    the world's imu ~0.3 ms later than the agent did at the median and up to 2.6 ms at the p99 (BENCHMARKS.md,
+    "Publication stamps"), so the figure was as much the probe's as the swarm's. The two messages may come
+    in either order (each subscriber's callback runs on a thread of its own). A sample without a stamp is
+    counted (``unstamped``), not measured."""
 
     def __init__(self) -> None:
         self.lock = threading.Lock()
-        self.imu: dict[tuple[str, int], float] = {}
-        self.early: set[tuple[str, int]] = set()  # estimates taken before their imu
-        self.latency: list[tuple[str, int, float]] = []  # (vehicle, tick, estimate's arrival - its imu's [s])
-        self.first: list[tuple[str, int]] = []  # (vehicle, tick) whose estimate was taken before its imu
-
-    def _stamp_imu(self, key: tuple[str, int], now: float) -> None:
-        if key in self.early:
-            self.early.discard(key)
-            self.first.append(key)
-        else:
-            self.imu[key] = now
+        self.imu: dict[tuple[str, int], int] = {}  # imu publication [ns], until its estimate comes
+        self.estimate: dict[tuple[str, int], tuple[int, int]] = {}  # (publication, arrival) [ns], imu not in
+        self.latency: list[tuple[str, int, float]] = []  # (vehicle, tick, estimate's publication - imu's [s])
+        self.delivered: list[tuple[str, int, float]] = []  # (vehicle, tick, estimate's arrival - imu's [s])
+        self.unstamped = 0
 
     def _tick(self, sample) -> tuple[str, int] | None:
         try:
@@ -155,44 +169,61 @@ class _Probe:
         except Exception:  # a payload of someone else's making: not ours to measure
             return None
 
+    def _match(self, key: tuple[str, int], imu_ns: int, est_ns: int, arrival_ns: int) -> None:
+        self.latency.append((*key, (est_ns - imu_ns) * 1e-9))
+        self.delivered.append((*key, (arrival_ns - imu_ns) * 1e-9))
+
+    def _imu(self, key: tuple[str, int], pub_ns: int) -> None:
+        est = self.estimate.pop(key, None)
+        if est is None:
+            self.imu[key] = pub_ns
+        else:
+            self._match(key, pub_ns, *est)
+
     def on_imu(self, sample) -> None:
-        now = time.perf_counter()
-        key = self._tick(sample)
-        if key is not None:
-            with self.lock:
-                self._stamp_imu(key, now)
+        key, pub_ns = self._tick(sample), published_ns(sample)
+        if key is None:
+            return
+        with self.lock:
+            if pub_ns is None:
+                self.unstamped += 1
+            else:
+                self._imu(key, pub_ns)
 
     def on_imu_batch(self, probed: tuple[str, ...]):
-        """The world's ``world/imu`` (agent hosts): one arrival for every probed vehicle in it."""
+        """The world's ``world/imu`` (agent hosts): the imu of every probed vehicle in it."""
 
         def handler(sample) -> None:
-            now = time.perf_counter()
             try:
                 obj = msgpack.unpackb(bytes(sample.payload))
                 k, ids = int(obj["tick"]), set(obj["ids"])
             except Exception:  # a payload of someone else's making: not ours to measure
                 return
+            pub_ns = published_ns(sample)
             with self.lock:
+                if pub_ns is None:
+                    self.unstamped += 1
+                    return
                 for vid in probed:
                     if vid in ids:
-                        self._stamp_imu((vid, k), now)
+                        self._imu((vid, k), pub_ns)
 
         return handler
 
-    def on_later(self, into: str):
-        def handler(sample) -> None:
-            now = time.perf_counter()
-            key = self._tick(sample)
-            if key is None:
+    def on_estimate(self, sample) -> None:
+        arrival_ns = time.time_ns()
+        key, pub_ns = self._tick(sample), published_ns(sample)
+        if key is None:
+            return
+        with self.lock:
+            if pub_ns is None:
+                self.unstamped += 1
                 return
-            with self.lock:
-                t0 = self.imu.pop(key, None)
-                if t0 is not None:
-                    getattr(self, into).append((*key, now - t0))
-                else:
-                    self.early.add(key)
-
-        return handler
+            imu_ns = self.imu.pop(key, None)
+            if imu_ns is None:
+                self.estimate[key] = (pub_ns, arrival_ns)
+            else:
+                self._match(key, imu_ns, pub_ns, arrival_ns)
 
 
 def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagger: bool = False,
@@ -206,10 +237,13 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
     # the launcher's stderr (its children's too) into a file: its last lines say why a launch failed
     with tempfile.TemporaryDirectory() as tmp, open(Path(tmp) / "launch.log", "w+") as log:
         out = Path(tmp) / "run.json"
+        zenoh_config = Path(tmp) / "zenoh.json5"
+        zenoh_config.write_text(TIMESTAMPING)
         cmd = [*LAUNCH, "docking", "--headless", "--until-docked",
                "--agents", str(pairs), "--clock", clock, "--set", f"sim.max_duration_s={span_s}",
                "--json", str(out), "--namespace", ns, "--listen", endpoint,
                "--vehicles-per-process", str(per_process), "--topology", topology,
+               "--zenoh-config", str(zenoh_config),
                "--timeout", f"{LAUNCH_START_S + LAUNCH_SLOWEST * span_s:g}"]  # fmt: skip
         if stagger:
             cmd += ["--set", "swarm.stagger_control=true"]
@@ -249,6 +283,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
     sc = load_scenario("docking")
     camera_every, cameras = sc.every(sc.camera.rate_hz), {probed_pair(pairs)[0]}
     lat = latency_split(probe.latency, camera_every, cameras)
+    delivered = latency_split(probe.delivered, camera_every, cameras)
     late, stepped = late_share(clock, res.get("late_commands"))
     late_cmd, _ = late_share(clock, res.get("late_control_commands"))
     return {
@@ -265,8 +300,9 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         "commanded_vehicle_ticks": stepped,  # the late share's denominator (None: lockstep)
         "realtime_factor": res.get("realtime_factor"),
         **lat,
-        "estimate_first": len(probe.first),
-        "camera_estimate_first": sum(v in cameras and k % camera_every == 0 for v, k in probe.first),
+        "latency_delivered_p50_us": delivered["latency_p50_us"],
+        "latency_delivered_p99_us": delivered["latency_p99_us"],
+        "unstamped": probe.unstamped,
         "ticks": ticks,
     }
 
@@ -309,11 +345,10 @@ def _what_it_said(text: str) -> str:
 def _probe_run(
     proc: subprocess.Popen, endpoint: str, ns: str, pairs: int, probe: _Probe, topology: str
 ) -> None:
-    """Stamp the first pair's ``imu`` and ``estimate`` arrivals (:class:`_Probe`) until the launcher
+    """Take the first pair's ``imu`` and ``estimate`` (:class:`_Probe`) until the launcher
     ``proc`` exits, on a session that joins the swarm as its processes do (a client of the launcher's
     router at ``endpoint`` in a star, a peer of the mesh in a mesh: a client of a mesh's router hears the
-    world's imu through the router, later than the agent hears it directly, and lost the samples whose
-    estimate came first)."""
+    world's imu through the router, later than the agent hears it directly)."""
     from swarm.cli.children import member_args
 
     session = open_session(member_args(endpoint, topology))
@@ -321,7 +356,7 @@ def _probe_run(
         probed = probed_pair(pairs)
         for vid in probed:
             session.declare_subscriber(f"{ns}/agent/{vid}/imu", probe.on_imu)
-            session.declare_subscriber(f"{ns}/agent/{vid}/estimate", probe.on_later("latency"))
+            session.declare_subscriber(f"{ns}/agent/{vid}/estimate", probe.on_estimate)
         # for agent hosts the world sends every vehicle's imu in one batch (docs/protocol.md, "Rates")
         session.declare_subscriber(f"{ns}/world/imu", probe.on_imu_batch(probed))
         proc.wait(timeout=1800)
@@ -346,7 +381,13 @@ def parse_repeat(value: int) -> int:
     return value
 
 
-RANGED = ("late_tick_share", "late_command_share", "realtime_factor", "latency_p99_us")
+RANGED = (
+    "late_tick_share",
+    "late_command_share",
+    "realtime_factor",
+    "latency_p99_us",
+    "latency_delivered_p99_us",
+)
 """The figures whose spread over a case's runs is reported beside their median (``<name>_range``)."""
 
 
@@ -424,7 +465,7 @@ def format_report(r: dict) -> str:
         + ("; controller clocks staggered" if any(c.get("staggered") for c in r["cases"]) else "")
         + ("; one TDMA UWB channel" if any(c.get("tdma") for c in r["cases"]) else ""),
         "vehicles  per proc  clock      links  wake  CPU us/vehicle/tick  world us/tick  "
-        "late ticks / commands  real-time  latency p50/p99 us (camera ticks; others)",
+        "late ticks / commands  real-time  latency p50/p99 us (camera ticks; others)  delivered p50/p99 us",
     ]
     for c in r["cases"]:
         late = "-" if c["late_tick_share"] is None else f"{100 * c['late_tick_share']:.1f} %"
@@ -441,7 +482,8 @@ def format_report(r: dict) -> str:
             f"{_fmt(c['latency_p50_us'], '.0f')}/{_fmt(c['latency_p99_us'], '.0f')}"
             f" ({_fmt(c.get('latency_camera_p50_us'), '.0f')}/{_fmt(c.get('latency_camera_p99_us'), '.0f')};"
             f" {_fmt(c.get('latency_other_p50_us'), '.0f')}/{_fmt(c.get('latency_other_p99_us'), '.0f')})"
-            + _spread(c)
+            f"  {_fmt(c.get('latency_delivered_p50_us'), '.0f')}/"
+            f"{_fmt(c.get('latency_delivered_p99_us'), '.0f')}" + _spread(c)
         )
     if any("runs" in c for c in r["cases"]):
         lines.append("medians of the runs of each case; [min-max] over them")
