@@ -86,7 +86,7 @@ def test_the_probe_measures_from_the_publishers_stamps_whatever_order_it_takes_t
     a batch's stamp is every probed vehicle's imu in it."""
     from swarm.bench import swarm as bench
 
-    probe = bench._Probe()
+    probe = bench.LatencyProbe()
     now = iter([5_000_900_000, 5_001_900_000, 5_002_900_000])
     monkeypatch.setattr(bench.time, "time_ns", lambda: next(now))
     probe.on_imu(_Sample("ns/agent/chaser/imu", 7, 5_000_000_000))

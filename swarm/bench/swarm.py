@@ -33,10 +33,10 @@ was published: every process of the case stamps what it publishes (Zenoh's times
 - **sensor-to-estimate latency** p50/p99: ``estimate(k)``'s publication by the agent minus ``imu(k)``'s
   by the world, for the first pair's two vehicles: the hop from the world to the agent (in a star, the
   router's two), the agent's receive, filter and publish time. Both stamps are their publishers' (one
-  machine, one clock), so the probe's own delays are not in it (:class:`_Probe`). Beside it, **delivered**
-  (``latency_delivered_*``): to the estimate's arrival at the probe, what a consumer of the estimates on
-  this machine sees. Since 4df9a3d the target sends only the estimates its chaser reads (a fifth), so its
-  ticks are a sixth of the samples, not a half. Split beside it (``latency_camera_*`` and
+  machine, one clock), so the probe's own delays are not in it (:class:`LatencyProbe`). Beside it,
+  **delivered** (``latency_delivered_*``): to the estimate's arrival at the probe, what a consumer of the
+  estimates on this machine sees. Since 4df9a3d the target sends only the estimates its chaser reads (a
+  fifth), so its ticks are a sixth of the samples, not a half. Split beside it (``latency_camera_*`` and
   ``latency_other_*``): the chaser's camera ticks (``k`` a multiple of the camera's period: the frame is
   fused before the estimate goes out) and all the other samples, the target's included.
 
@@ -141,7 +141,7 @@ def published_ns(sample) -> int | None:
     return None if ts is None else ts.get_time_as_ntp64().as_nanos()
 
 
-class _Probe:
+class LatencyProbe:
     """The probed vehicles' imu and estimate ticks (the tick number decoded only), matched by tick.
 
     For each estimate it keeps two latencies: from its imu's publication by the world to its own by the
@@ -149,8 +149,8 @@ class _Probe:
     (``delivered``: what a consumer on this machine sees, the estimate's hop and this probe's own delay
     taking it included). Neither depends on when this probe takes the imu: until 2026-11-28 the latency was
     the difference of the two arrivals here, and the probe, a Python process sharing the two cores, took
-    the world's imu ~0.3 ms later than the agent did at the median and up to 2.6 ms at the p99 (BENCHMARKS.md,
-    "Publication stamps"), so the figure was as much the probe's as the swarm's. The two messages may come
+    the world's imu 0.25 ms apart from the agent at the median and 2.0 ms at the p99, earlier or later
+    (BENCHMARKS.md, "Publication stamps"): that was in the figure too. The two messages may come
     in either order (each subscriber's callback runs on a thread of its own). A sample without a stamp is
     counted (``unstamped``), not measured."""
 
@@ -250,7 +250,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         if tdma:
             cmd += ["--set", "uwb.tdma=true"]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
-        probe = _Probe()
+        probe = LatencyProbe()
         up, listening = threading.Event(), threading.Event()
 
         def drain() -> None:  # the launcher's stdout: wait for "swarm up", then keep the pipe empty
@@ -343,9 +343,9 @@ def _what_it_said(text: str) -> str:
 
 
 def _probe_run(
-    proc: subprocess.Popen, endpoint: str, ns: str, pairs: int, probe: _Probe, topology: str
+    proc: subprocess.Popen, endpoint: str, ns: str, pairs: int, probe: LatencyProbe, topology: str
 ) -> None:
-    """Take the first pair's ``imu`` and ``estimate`` (:class:`_Probe`) until the launcher
+    """Take the first pair's ``imu`` and ``estimate`` (:class:`LatencyProbe`) until the launcher
     ``proc`` exits, on a session that joins the swarm as its processes do (a client of the launcher's
     router at ``endpoint`` in a star, a peer of the mesh in a mesh: a client of a mesh's router hears the
     world's imu through the router, later than the agent hears it directly)."""

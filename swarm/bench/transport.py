@@ -16,10 +16,10 @@ for a swarm of a few processes, one pair's among them):
    topology: a mesh of one pair, a star of more), and of one pair in a star: wall time per world tick
    over a fixed simulated span (``run_end``'s ``wall_s`` / ticks), and the real-time factor; each
    topology's one-pair tick is set against its own floor;
-3. sensor-to-estimate latency in ``realtime`` mode (a mesh): a probe peer stamps the arrival of the
-   chaser's ``imu(k)`` and of its ``estimate(k)`` on one clock; the difference is the agent's receive,
-   filter and publish time plus the hop from the world to the agent (in a star, a probe client of the
-   router: the same plus the router's second hop).
+3. sensor-to-estimate latency in ``realtime`` mode (a mesh): the chaser's ``estimate(k)``'s publication
+   minus its ``imu(k)``'s, from the publishers' own Zenoh timestamps (the probe of ``swarm bench swarm``,
+   :class:`~swarm.bench.swarm.LatencyProbe`): the hop from the world to the agent plus the agent's receive,
+   filter and publish time; beside it, to the estimate's arrival at the probe (``delivered``).
 
 ``--cpu-latency US`` holds the CPU wake-up latency request of ``swarm launch --cpu-latency``
 (:mod:`swarm.cpu_latency`) for the whole bench: every figure then shows what the swarm gets with it.
@@ -38,9 +38,9 @@ import threading
 import time
 from pathlib import Path
 
-import msgpack
 import numpy as np
 
+from swarm.bench.swarm import TIMESTAMPING, LatencyProbe
 from swarm.cli.children import member_args
 from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session
 
@@ -208,33 +208,31 @@ def _latency(duration_s: float, topology: str = "mesh") -> dict:
     endpoint = free_loopback_endpoint()
     cmd = [sys.executable, "-m", "swarm.cli.main", "launch", "docking", "--headless", "--clock", "realtime",
            "--namespace", ns, "--listen", endpoint, "--topology", topology]  # fmt: skip
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    imu_at: dict[int, float] = {}
-    lat: list[float] = []
-
-    def on_imu(sample) -> None:
-        now = time.perf_counter()  # stamp first: decoding is the probe's cost, not the swarm's
-        imu_at[msgpack.unpackb(bytes(sample.payload))["tick"]] = now
-
-    def on_est(sample) -> None:
-        now = time.perf_counter()
-        k = msgpack.unpackb(bytes(sample.payload))["tick"]
-        if k in imu_at:
-            lat.append(now - imu_at.pop(k))
-
-    try:
-        for line in proc.stdout:
-            if line.startswith("swarm up:"):
-                break
-        with _member(endpoint, topology) as s:  # (in a mesh, linked to the world and the chaser directly)
-            s.declare_subscriber(keys.imu("chaser"), on_imu)
-            s.declare_subscriber(keys.estimate("chaser"), on_est)
-            time.sleep(duration_s)
-    finally:
-        proc.send_signal(2)
-        proc.wait(30)
-    a = np.array(lat[10:]) * 1e6
-    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "n": len(a)}
+    probe = LatencyProbe()
+    with tempfile.TemporaryDirectory() as tmp:
+        zenoh_config = Path(tmp) / "zenoh.json5"
+        zenoh_config.write_text(TIMESTAMPING)  # every process stamps what it publishes
+        cmd += ["--zenoh-config", str(zenoh_config)]
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        try:
+            for line in proc.stdout:
+                if line.startswith("swarm up:"):
+                    break
+            with _member(endpoint, topology) as s:  # (in a mesh, linked to the world and the chaser directly)
+                s.declare_subscriber(keys.imu("chaser"), probe.on_imu)
+                s.declare_subscriber(keys.estimate("chaser"), probe.on_estimate)
+                time.sleep(duration_s)
+        finally:
+            proc.send_signal(2)
+            proc.wait(30)
+    with probe.lock:
+        pairs = zip(probe.latency, probe.delivered, strict=True)
+        ticks = sorted((k, lat, dlv) for (_, k, lat), (_, _, dlv) in pairs)
+    a = np.array([lat for _, lat, _ in ticks[10:]]) * 1e6  # (the first ten: the run's start)
+    d = np.array([dlv for _, _, dlv in ticks[10:]]) * 1e6
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "n": len(a),
+            "delivered_median": float(np.median(d)), "delivered_p99": float(np.percentile(d, 99)),
+            "unstamped": probe.unstamped}  # fmt: skip
 
 
 def run(preset: dict) -> dict:
@@ -332,8 +330,11 @@ def format_report(r: dict) -> str:
     )
     lat = r["latency_us"]
     lines.append(
-        f"sensor-to-estimate latency (realtime): median {lat['median']:.0f} us, p99 {lat['p99']:.0f} us"
-    )
+        f"sensor-to-estimate latency (realtime, imu published -> estimate published): median "
+        f"{lat['median']:.0f} us, p99 {lat['p99']:.0f} us"
+        + (f"; delivered to the probe: median {lat['delivered_median']:.0f} us, p99 "
+           f"{lat['delivered_p99']:.0f} us" if "delivered_p99" in lat else "")
+    )  # fmt: skip
     lines.append("goals: " + ", ".join(f"{k} {'met' if v else 'NOT met'}" for k, v in r["goals"].items()))
     return "\n".join(lines)
 
