@@ -10,6 +10,7 @@ import argparse
 import logging
 import os
 import struct
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -91,28 +92,44 @@ def test_the_kernel_takes_the_request_for_the_block_alone():
     assert _machine_bound() == before
 
 
-def test_a_process_started_by_hand_holds_its_own_request_until_it_stops():
+@pytest.mark.parametrize("what", ["mothership", "router", "replay"])
+def test_a_process_started_by_hand_holds_its_own_request_until_it_stops(what, tmp_path):
     """``python -m mothership --cpu-latency 0`` (a process on another machine, started without the launcher;
-    every swarm process takes the flag): the request from its start to its end; a bad value is exit 2."""
+    every swarm process takes the flag), a router on a machine of its own, a log published as sensor
+    drivers would (``swarm replay DIR --zenoh``): the request from its start to its end; a bad value is
+    exit 2."""
     import signal
     import sys
 
     from tests.transport.procs import Procs, free_port, loopback
 
-    base = [sys.executable, "-m", "mothership", "docking", "--namespace", f"cpulat{os.getpid()}", "--mode",
-            "peer", "--listen", loopback(free_port())]  # fmt: skip
+    ep = loopback(free_port())
+    if what == "mothership":
+        base = [sys.executable, "-m", "mothership", "docking", "--namespace", f"cpulat{os.getpid()}",
+                "--mode", "peer", "--listen", ep]  # fmt: skip
+        ready = r"^mothership mothership ready"
+    elif what == "router":
+        base, ready = [sys.executable, "-m", "swarm.cli.router", "--listen", ep], r"^router listening on "
+    else:
+        log = tmp_path / "log"
+        synth = [sys.executable, "-m", "swarm.cli.main", "synth-log", str(log), "--duration", "20"]
+        made = subprocess.run(synth, capture_output=True, text=True, timeout=120)
+        assert made.returncode == 0, made.stderr
+        base = [sys.executable, "-m", "swarm.cli.main", "replay", str(log), "--zenoh", "--wait", "0.1",
+                "--mode", "peer", "--listen", ep]  # fmt: skip
+        ready = r"^publishing "
     writable = os.access(DEVICE, os.R_OK | os.W_OK)
     before = _machine_bound() if writable else None
     with Procs() as procs:
         bad = procs.start([*base, "--cpu-latency", "-5"])
         assert bad.wait(60.0) == 2 and "--cpu-latency must be off or microseconds" in bad.output()
         proc = procs.start([*base, "--cpu-latency", "0"])
-        proc.wait_for_line(r"^mothership mothership ready", 60.0)
+        proc.wait_for_line(ready, 60.0)
         if writable:
             assert _machine_bound() == 0
         else:
             assert "no CPU latency request held" in proc.output()
-        proc.signal(signal.SIGTERM)
-        assert proc.wait(30.0) == 0, proc.output()
+        proc.signal(signal.SIGINT if what == "replay" else signal.SIGTERM)
+        assert proc.wait(30.0) in ((0, 130) if what == "replay" else (0,)), proc.output()
     if writable:
         assert _machine_bound() == before

@@ -8,6 +8,7 @@ import json
 import math
 from pathlib import Path
 
+from swarm import cpu_latency
 from swarm.args import add_output_file, positive_float, seed
 from swarm.config import parse_override
 from swarm.transport.session import add_zenoh_arguments
@@ -87,6 +88,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="wait this long for a subscriber of the IMU key before starting (default 5 s)",
     )
     add_zenoh_arguments(z)
+    cpu_latency.add_argument(z)  # a paced publisher sleeps between samples, as a sensor driver does
     p.set_defaults(func=run)
 
     s = sub.add_parser(
@@ -224,7 +226,7 @@ def _publish_recording(args: argparse.Namespace) -> int:
     messages, _meta = read_recording(args.log)
     only = tuple(p for p in (args.only or "").split(",") if p)
     stop = threading.Event()
-    with open_session(zenoh_args_from(args)) as session:
+    with cpu_latency.hold(args.cpu_latency), open_session(zenoh_args_from(args)) as session:
         print(f"replaying {args.log}: {len(messages)} messages at {args.speed:g}x", flush=True)
         ack = None
         if args.lockstep is not None:
@@ -251,7 +253,7 @@ def _publish(log, args: argparse.Namespace) -> int:
     check_id(args.vehicle, "--vehicle")
     keys = Keys(args.namespace)
     stop = threading.Event()
-    with open_session(zenoh_args_from(args)) as session:
+    with cpu_latency.hold(args.cpu_latency), open_session(zenoh_args_from(args)) as session:
         print(
             f"publishing {log.path} as {keys.imu(args.vehicle)} and uwb at {args.speed:g}x real time",
             flush=True,

@@ -8,7 +8,9 @@ peer RTT 109 us, through the router 253 us). The standard ``zenohd`` is a drop-i
 Once listening it prints one line, ``router listening on <endpoint> ...``, on stdout (flushed), so that a
 launcher or a test can wait for it; it then runs until SIGINT or SIGTERM, closes its session and exits 0.
 Multicast scouting is off unless ``--multicast-scouting``. One router serves any number of swarms: they
-differ by key namespace.
+differ by key namespace. ``--cpu-latency 0`` holds the CPU wake-up latency request of ``swarm launch`` on the
+router's machine (:mod:`swarm.cpu_latency`): the RTT through a router halved with it here (BENCHMARKS.md,
+"Warm CPUs on request").
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import signal
 import sys
 import threading
 
+from swarm import cpu_latency
 from swarm.errors import SwarmError
 from swarm.stacks import enable_stack_dumps
 from swarm.transport.session import (
@@ -43,6 +46,7 @@ _DESCRIPTION = (
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
     add_zenoh_arguments(p, mode=False)
+    cpu_latency.add_argument(p)  # a router on a machine of its own forwards every tick's messages
     p.epilog = (
         "Without --listen: the config file's endpoints, else tcp/[::]:7447 (every interface). "
         "--connect links this router to other routers."
@@ -77,7 +81,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
         for sig in _STOP_SIGNALS:
             previous[sig] = signal.signal(sig, on_signal)
     try:
-        with open_session(zargs) as session:
+        with cpu_latency.hold(getattr(args, "cpu_latency", None)), open_session(zargs) as session:
             print(READY_PREFIX + " ".join(endpoints), flush=True)
             _LOG.info("router %s up (connect %s)", session.zid(), list(zargs.connect) or "-")
             while not stop.wait(1.0):
