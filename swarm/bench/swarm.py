@@ -180,15 +180,24 @@ class LatencyProbe:
         else:
             self._match(key, pub_ns, *est)
 
-    def on_imu(self, sample) -> None:
-        key, pub_ns = self._tick(sample), published_ns(sample)
+    def _read(self, sample) -> tuple[tuple[str, int], int] | None:
+        """The sample's ``(vehicle, tick)`` and publication stamp [ns]; ``None`` for a payload of someone
+        else's making (not measured) or a sample without a stamp (counted)."""
+        key = self._tick(sample)
         if key is None:
-            return
-        with self.lock:
-            if pub_ns is None:
+            return None
+        pub_ns = published_ns(sample)
+        if pub_ns is None:
+            with self.lock:
                 self.unstamped += 1
-            else:
-                self._imu(key, pub_ns)
+            return None
+        return key, pub_ns
+
+    def on_imu(self, sample) -> None:
+        got = self._read(sample)
+        if got is not None:
+            with self.lock:
+                self._imu(*got)
 
     def on_imu_batch(self, probed: tuple[str, ...]):
         """The world's ``world/imu`` (agent hosts): the imu of every probed vehicle in it."""
@@ -212,13 +221,11 @@ class LatencyProbe:
 
     def on_estimate(self, sample) -> None:
         arrival_ns = time.time_ns()
-        key, pub_ns = self._tick(sample), published_ns(sample)
-        if key is None:
+        got = self._read(sample)
+        if got is None:
             return
+        key, pub_ns = got
         with self.lock:
-            if pub_ns is None:
-                self.unstamped += 1
-                return
             imu_ns = self.imu.pop(key, None)
             if imu_ns is None:
                 self.estimate[key] = (pub_ns, arrival_ns)
