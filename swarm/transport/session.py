@@ -47,7 +47,9 @@ from swarm.transport.messages import MESSAGE_FOR_KIND, DropCounter, Message, saf
 __all__ = [
     "LEAN_RUNTIME",
     "MODES",
+    "QUEUE_CAPACITY",
     "HandlerErrors",
+    "QueuedSubscriber",
     "ZenohArgs",
     "add_zenoh_arguments",
     "check_endpoint",
@@ -383,36 +385,15 @@ class HandlerErrors:
 M = TypeVar("M", bound=Message)
 
 
-def subscribe_decoded(
-    session: zenoh.Session,
+def _decoding(
     key: str,
     msg_type: type[M] | Keys,
     handler: Callable[[str, M], Any],
     counter: DropCounter,
-    *,
-    remote_only: bool = False,
-    log_interval_s: float = 10.0,
-    direct: bool = False,
-) -> zenoh.Subscriber:
-    """Declare a callback subscriber on ``key`` (wildcards allowed) that hands valid messages to ``handler``.
-
-    The callback decodes each sample with :func:`~swarm.transport.messages.safe_decode`: an invalid
-    payload is counted in ``counter`` under its key (and logged at a limited rate) and never reaches the
-    handler. ``handler(key, msg)`` gets the sample's key as a ``str`` and the decoded message, on Zenoh's
-    thread for this subscriber (one thread per subscriber: samples of one publisher arrive in order; make
-    the handler thread-safe). An exception from the handler is logged through :class:`HandlerErrors`
-    (rate-limited) and later samples are still delivered; nothing is raised into Zenoh.
-
-    ``msg_type`` is the message class expected on every key, or a :class:`~swarm.transport.keys.Keys`:
-    then each sample's type comes from its key (``Keys.parse`` and ``MESSAGE_FOR_KIND``), for one
-    wildcard subscriber such as ``keys.agent_topics(agent_id)``; a key outside the protocol is counted as
-    a drop. ``remote_only`` ignores this session's own publications (``Locality.REMOTE``). DELETE samples
-    carry no message and are ignored. Undeclared when the session closes (or by ``.undeclare()``).
-
-    ``direct`` runs the callback on Zenoh's receiving thread (``Callback(indirect=False)``) instead of a
-    Python thread of its own: for a process with many subscribers (an agent host) whose handlers are short
-    and never block. One subscriber's samples still arrive in order.
-    """
+    log_interval_s: float,
+) -> Callable[[zenoh.Sample], None]:
+    """The sample handler of :func:`subscribe_decoded` and :class:`QueuedSubscriber`: decode, count and drop
+    what is invalid, hand the rest to ``handler``; never raises."""
     name = getattr(handler, "__qualname__", handler)
     errors = HandlerErrors(f"handler {name!s} on {key}", log_interval_s)
     if isinstance(msg_type, Keys):
@@ -447,9 +428,94 @@ def subscribe_decoded(
         except Exception as exc:
             errors.record(exc)
 
+    return on_sample
+
+
+def subscribe_decoded(
+    session: zenoh.Session,
+    key: str,
+    msg_type: type[M] | Keys,
+    handler: Callable[[str, M], Any],
+    counter: DropCounter,
+    *,
+    remote_only: bool = False,
+    log_interval_s: float = 10.0,
+    direct: bool = False,
+) -> zenoh.Subscriber:
+    """Declare a callback subscriber on ``key`` (wildcards allowed) that hands valid messages to ``handler``.
+
+    The callback decodes each sample with :func:`~swarm.transport.messages.safe_decode`: an invalid
+    payload is counted in ``counter`` under its key (and logged at a limited rate) and never reaches the
+    handler. ``handler(key, msg)`` gets the sample's key as a ``str`` and the decoded message, on Zenoh's
+    thread for this subscriber (one thread per subscriber: samples of one publisher arrive in order; make
+    the handler thread-safe). An exception from the handler is logged through :class:`HandlerErrors`
+    (rate-limited) and later samples are still delivered; nothing is raised into Zenoh.
+
+    ``msg_type`` is the message class expected on every key, or a :class:`~swarm.transport.keys.Keys`:
+    then each sample's type comes from its key (``Keys.parse`` and ``MESSAGE_FOR_KIND``), for one
+    wildcard subscriber such as ``keys.agent_topics(agent_id)``; a key outside the protocol is counted as
+    a drop. ``remote_only`` ignores this session's own publications (``Locality.REMOTE``). DELETE samples
+    carry no message and are ignored. Undeclared when the session closes (or by ``.undeclare()``).
+
+    ``direct`` runs the callback on Zenoh's receiving thread (``Callback(indirect=False)``) instead of a
+    Python thread of its own: for a process with many subscribers (an agent host) whose handlers are short
+    and never block. One subscriber's samples still arrive in order.
+    """
+    on_sample = _decoding(key, msg_type, handler, counter, log_interval_s)
     origin = zenoh.Locality.REMOTE if remote_only else None
     callback = zenoh.handlers.Callback(on_sample, indirect=False) if direct else on_sample
     return session.declare_subscriber(key, callback, allowed_origin=origin)
+
+
+QUEUE_CAPACITY = 256
+"""Samples a :class:`QueuedSubscriber` keeps until drained; past that the oldest goes. At 100 samples a
+second (an estimate every tick) that is 2.5 s without a drain: an agent's ranges, frames and target
+estimates are stale by then."""
+
+
+class QueuedSubscriber:
+    """A subscriber whose samples wait in Zenoh's own queue until :meth:`drain`, which decodes them as
+    :func:`subscribe_decoded` does and hands the valid ones to ``handler`` on the caller's thread.
+
+    A callback subscriber wakes a Python thread of its own for every sample (the "wake tax" of BENCHMARKS.md
+    on this VM: tens of microseconds each, and the GIL taken from whatever runs). Samples that are used
+    only when something else comes need no such wake: a free-running agent fuses its ranges, frames and
+    target estimates at its next ``imu`` (late fusion), so it drains them there. The queue is a ring of
+    ``capacity`` samples (``zenoh.handlers.RingChannel``): a full one drops its oldest instead of blocking
+    Zenoh's receiving thread. Thread-safe: Zenoh fills the queue on its own thread."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        msg_type: type[M] | Keys,
+        handler: Callable[[str, M], Any],
+        counter: DropCounter,
+        *,
+        capacity: int = QUEUE_CAPACITY,
+        log_interval_s: float = 10.0,
+    ) -> None:
+        if not isinstance(capacity, int) or capacity < 1:
+            raise ConfigError(f"a queued subscriber's capacity must be an integer >= 1, got {capacity!r}")
+        self._on_sample = _decoding(key, msg_type, handler, counter, log_interval_s)
+        self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(capacity))
+
+    def drain(self) -> int:
+        """Hand every sample waiting to the handler, oldest first; the number taken. Never raises (a
+        subscriber whose session closed has nothing waiting)."""
+        n = 0
+        while True:
+            try:
+                sample = self._sub.try_recv()
+            except zenoh.ZError:  # undeclared, or its session closed
+                return n
+            if sample is None:
+                return n
+            self._on_sample(sample)
+            n += 1
+
+    def undeclare(self) -> None:
+        self._sub.undeclare()
 
 
 def declare_liveliness(

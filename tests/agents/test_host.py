@@ -399,3 +399,63 @@ def test_a_rounds_commands_are_packed_with_each_vehicle_once_per_message_in_orde
     big = [(f"v{i}", bytes(MAX_PAYLOAD_BYTES // 3)) for i in range(4)]
     got = [decode(p, CommandBatch) for p in pack_entries(big, CommandBatch)]
     assert [b.ids for b in got] == [("v0", "v1"), ("v2", "v3")]
+
+
+@pytest.mark.parametrize("clock", ["realtime", "lockstep"])
+def test_a_free_running_agent_alone_takes_its_range_frame_and_target_estimate_at_its_imu(clock):
+    """A free-running vehicle alone in its process (a real Zenoh session here) takes its ranges, frames and
+    target estimates from queues at each imu, not as they come: nothing reaches its assembler before the
+    imu, and all of it, with the imu, once the imu is in. In lockstep each input is taken as it comes (a
+    lockstep tick waits for every one of them)."""
+    import time
+
+    from swarm.step.world import initial_truth
+    from swarm.transport.docking_wire import estimate_payload
+    from swarm.transport.messages import Imu, Uwb, Vision, encode
+    from swarm.transport.session import ZenohArgs, open_session
+    from tests.transport.procs import free_port, loopback, wait_until
+
+    sc = load_scenario("docking")
+    keys, ep = Keys(f"queued{clock}"), loopback(free_port())
+    stop = threading.Event()
+    with (
+        open_session(ZenohArgs(mode="peer", listen=(ep,))) as mine,
+        open_session(ZenohArgs(mode="peer", connect=(ep,))) as world,
+    ):
+        proc = AgentProcess(sc, "chaser", 0, "mdp", mine, keys, ClockSpec.parse(clock), stop, hosted=1,
+                            cond=threading.Condition(), ready=set())  # fmt: skip
+        proc.open()
+        assert len(proc._queued) == (3 if clock == "realtime" else 0)  # range, frame, target estimate
+        kept: list[tuple[str, int]] = []
+        add = proc.assembler.add
+        proc.assembler.add = lambda msg, source=None: (
+            kept.append((type(msg).__name__, msg.tick)) or add(msg, source)
+        )
+
+        def put(key, payload):
+            pub = world.declare_publisher(key)
+            wait_until(lambda: pub.matching_status.matching, 5.0, f"the agent's subscriber on {key}")
+            pub.put(payload)
+
+        from swarm.step.agent import VehicleAgent
+
+        x = initial_truth(sc, 0, "target")
+        target = VehicleAgent(sc, "target", x[0:3], x[3:6], x[6:10], np.full(9, 1e-4), "mdp")
+        pts = np.array([[0.01 * i, 0.01 * (i % 2), 0.3] for i in range(4)])
+        put(keys.uwb("chaser"), encode(Uwb(tick=10, t_s=0.1, anchor_id=1, range_m=1.0)))
+        frame = Vision(tick=10, t_s=0.1, target_id="target", face="+x", kind="features", data=pts,
+                       marker_ids=(0, 1, 2, 3))  # fmt: skip
+        put(keys.vision("chaser"), encode(frame))
+        put(keys.estimate("target"), estimate_payload(target, 9))
+        time.sleep(0.3)
+        early = sorted(kept)
+        put(keys.imu("chaser"), encode(Imu(tick=10, t_s=0.1, dt_s=0.01, gyro_body=[0.0, 0.0, 0.0])))
+        wait_until(lambda: ("Imu", 10) in kept, 5.0, "the imu")
+        everything = [("Estimate", 9), ("Imu", 10), ("Uwb", 10), ("Vision", 10)]
+        if clock == "realtime":
+            assert early == [] and sorted(kept) == everything
+            assert kept[-1] == ("Imu", 10)  # the queued inputs first, then the imu that makes the tick
+        else:
+            assert early == [("Estimate", 9), ("Uwb", 10), ("Vision", 10)] and sorted(kept) == everything
+        assert proc.drops.total == 0
+        stop.set()

@@ -26,6 +26,7 @@ from swarm.transport.keys import Keys
 from swarm.transport.messages import DropCounter, Imu, Uwb, encode
 from swarm.transport.session import (
     LEAN_RUNTIME,
+    QueuedSubscriber,
     ZenohArgs,
     add_zenoh_arguments,
     declare_liveliness,
@@ -421,6 +422,45 @@ def test_remote_only_ignores_this_sessions_own_publications(peers, keys) -> None
 def test_subscribe_decoded_refuses_a_non_message_type(peers, keys) -> None:
     with pytest.raises(TypeError, match="msg_type must be a Message class or a Keys"):
         subscribe_decoded(peers[0], keys.imu("x"), dict, lambda k, m: None, DropCounter())  # type: ignore[arg-type]
+
+
+def test_a_queued_subscriber_wakes_nobody_and_hands_over_what_waits_when_drained(peers, keys) -> None:
+    """Samples wait in Zenoh's queue, not on a thread: the handler sees nothing until drain(), then every
+    valid message in order, on the caller's thread; garbage is counted as a callback subscriber counts it;
+    past the capacity the oldest go (a ring, never blocking Zenoh's receiving thread)."""
+    import threading
+
+    a, b = peers
+    key = keys.uwb("chaser")
+    got: list[tuple[str, int, int]] = []
+    drops = DropCounter()
+    handler = lambda k, msg: got.append((k, msg.tick, threading.get_ident()))  # noqa: E731
+    sub = QueuedSubscriber(a, key, Uwb, handler, drops, capacity=4)
+    pub = _publisher(b, key)
+    pub.put(encode(Uwb(tick=1, t_s=0.01, anchor_id=3, range_m=1.0)))
+    pub.put(b"\xc1 not msgpack")
+    pub.put(encode(_imu(2)))  # the wrong type for this key
+    pub.put(encode(Uwb(tick=2, t_s=0.02, anchor_id=4, range_m=1.5)))
+    wait_until(lambda: sub.drain() > 0 or bool(got), TIMEOUT_S, "the samples queued")
+    wait_until(lambda: (sub.drain(), len(got) + drops.total)[1] == 4, TIMEOUT_S, "all four drained")
+    assert [(k, t) for k, t, _ in got] == [(key, 1), (key, 2)]
+    assert {thread for _, _, thread in got} == {threading.get_ident()}  # the drainer's own thread
+    assert drops.count(key) == 2
+    assert sub.drain() == 0  # nothing left
+    # nothing is handed over between drains, however long one waits
+    pub.put(encode(Uwb(tick=3, t_s=0.03, anchor_id=0, range_m=2.0)))
+    time.sleep(0.2)
+    assert len(got) == 2
+    # a ring of 4: ten more samples, only the newest four are there when drained
+    for tick in range(4, 14):
+        pub.put(encode(Uwb(tick=tick, t_s=0.01 * tick, anchor_id=0, range_m=2.0)))
+    time.sleep(0.3)
+    sub.drain()
+    assert [t for _, t, _ in got[2:]] == [10, 11, 12, 13]
+    sub.undeclare()
+    assert sub.drain() == 0  # undeclared: nothing, and no exception
+    with pytest.raises(ConfigError, match="capacity must be an integer >= 1, got 0"):
+        QueuedSubscriber(a, key, Uwb, handler, drops, capacity=0)
 
 
 # ------------------------------------------------------------------------------------------ liveliness
