@@ -449,7 +449,7 @@ class AgentProcess:
         # a free-running vehicle alone in its process takes its ranges, frames and target estimates from
         # queues at each imu, not on a Python thread woken for each (QueuedSubscriber): its tick is ready on
         # its imu alone, and what comes after it is fused before the next tick anyway (late fusion); 32
-        # vehicles a process each: -14 % agent CPU, late ticks 1.8-7.0 % against 4.6-22.1 % (BENCHMARKS.md,
+        # vehicles a process each: -12 % agent CPU, late ticks 1.8-7.0 % against 3.9-22.1 % (BENCHMARKS.md,
         # "Queued inputs"). Lockstep ticks wait for every input, and agent hosts take theirs on Zenoh's thread
         queued = self.hosted == 1 and not self.clock.lockstep
 
