@@ -53,3 +53,45 @@ def test_late_ticks_and_late_commands_follow_the_control_ticks(tmp_path):
     wp.referee.done[list(wp.referee.chasers).index("chaser")] = True  # docked: not stepped on commands
     wp._count_late(21, {})
     assert _counts(wp) == (3, 33, 2, 5)  # the target only
+
+
+def test_a_free_running_world_takes_the_queued_commands_at_its_tick(tmp_path):
+    """Free-running, the commands wait in their queues until the world's tick drains them: a command that
+    came is not held before the tick, then the newest of each vehicle is the one applied, an agent host's
+    batch as much as a single command."""
+    sc = load_scenario("docking")
+    wp = WorldProcess(
+        sc, 0, None, Keys("q"), ClockSpec("realtime"), threading.Event(), checkpoint_dir=tmp_path
+    )
+    came: list = []
+
+    class Queue:
+        def __init__(self, handler) -> None:
+            self.handler = handler
+
+        def drain(self) -> int:
+            taken = [c for c in came if c[0] is self]
+            for _, key, msg in taken:
+                self.handler(key, msg)
+            came[:] = [c for c in came if c[0] is not self]
+            return len(taken)
+
+    single, batch = Queue(wp._on_command), Queue(wp._on_command_batch)
+    wp._queued = [single, batch]
+    n = wp.world.command_size("chaser")
+    older, newer = (Command(tick=0, t_s=0.0, actuators=np.zeros(n), force_body_n=np.zeros(3),
+                            torque_body_nm=np.zeros(3), mode=m) for m in ("HOLD", "APPROACH"))  # fmt: skip
+    came += [(single, "q/agent/chaser/command", older), (single, "q/agent/chaser/command", newer)]
+    assert wp._latest == {}  # nothing taken before the tick
+    assert wp._take_commands(0)
+    assert came == [] and wp.modes["chaser"] == "APPROACH"  # the newer of the two
+    assert wp.commanded_ticks == 1 and wp.drops.total == 0  # the chaser counted from its first command on
+    # an agent host's batch of the next control tick, the same way
+    from swarm.transport.messages import CommandBatch, encode
+
+    later = Command(tick=10, t_s=0.1, actuators=np.zeros(n), force_body_n=np.zeros(3),
+                    torque_body_nm=np.zeros(3), mode="REORIENT")  # fmt: skip
+    came.append((batch, "q/agent/chaser/commands", CommandBatch(ids=("chaser",), commands=(encode(later),))))
+    assert wp._latest == {}
+    assert wp._take_commands(10)
+    assert came == [] and wp.modes["chaser"] == "REORIENT" and wp.drops.total == 0
