@@ -9,8 +9,8 @@ the in-process run:
 2. tick ``k``: take the live agents' ``command(k)`` (an agent commands on its control ticks and the world
    holds it in between; lockstep: wait for those whose control tick ``k`` is, or a timeout; realtime: the
    latest of each, taken from the commands' queues at the tick: ``QueuedSubscriber`` of
-   :mod:`swarm.transport.session`) into the world, whose fault schedule opens the windows the chasers' modes trigger,
-   judge each chaser on the truth (keep-out, contact: ``agent/<id>/event``), then step to ``k + 1`` and
+   :mod:`swarm.transport.session`) into the world, whose fault schedule opens the windows the chasers'
+   modes trigger, judge each chaser on the truth (keep-out, contact: ``agent/<id>/event``), then step to ``k + 1`` and
    publish, per vehicle, ``truth(k+1)`` (with its tag's radio environment, which the mothership's radios
    apply), its camera frame ``vision(k+1)`` on camera ticks (chasers; zero markers when the target is not
    in view) and ``imu(k+1)``;
