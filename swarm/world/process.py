@@ -10,10 +10,10 @@ the in-process run:
    holds it in between; lockstep: wait for those whose control tick ``k`` is, or a timeout; realtime: the
    latest of each, taken from the commands' queues at the tick: ``QueuedSubscriber`` of
    :mod:`swarm.transport.session`) into the world, whose fault schedule opens the windows the chasers'
-   modes trigger, judge each chaser on the truth (keep-out, contact: ``agent/<id>/event``), then step to ``k + 1`` and
-   publish, per vehicle, ``truth(k+1)`` (with its tag's radio environment, which the mothership's radios
-   apply), its camera frame ``vision(k+1)`` on camera ticks (chasers; zero markers when the target is not
-   in view) and ``imu(k+1)``;
+   modes trigger, judge each chaser on the truth (keep-out, contact: ``agent/<id>/event``), then step to
+   ``k + 1`` and publish, per vehicle, ``truth(k+1)`` (with its tag's radio environment, which the
+   mothership's radios apply), its camera frame ``vision(k+1)`` on camera ticks (chasers; zero markers
+   when the target is not in view) and ``imu(k+1)``;
 3. the run ends when every chaser has made contact, at ``sim.max_duration_s``, on a ``reset``/``new_seed``
    run control or a stop signal: ``run_end`` (with each vehicle's total impulse), then clock ``stopped``.
 
