@@ -134,6 +134,14 @@ the ``put``, to a few nanoseconds), which the probe reads. The stamp is Zenoh's 
 docs/protocol.md's messages are unchanged."""
 
 
+def timestamping_args(directory: str | os.PathLike) -> list[str]:
+    """``swarm launch`` flags that have every process of a launch stamp what it publishes: the
+    :data:`TIMESTAMPING` configuration, written into ``directory``."""
+    path = Path(directory) / "zenoh.json5"
+    path.write_text(TIMESTAMPING)
+    return ["--zenoh-config", str(path)]
+
+
 def published_ns(sample) -> int | None:
     """When ``sample`` was published [ns since the epoch, as ``time.time_ns()``]: its Zenoh timestamp,
     ``None`` if its publisher did not stamp it."""
@@ -244,13 +252,11 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
     # the launcher's stderr (its children's too) into a file: its last lines say why a launch failed
     with tempfile.TemporaryDirectory() as tmp, open(Path(tmp) / "launch.log", "w+") as log:
         out = Path(tmp) / "run.json"
-        zenoh_config = Path(tmp) / "zenoh.json5"
-        zenoh_config.write_text(TIMESTAMPING)
         cmd = [*LAUNCH, "docking", "--headless", "--until-docked",
                "--agents", str(pairs), "--clock", clock, "--set", f"sim.max_duration_s={span_s}",
                "--json", str(out), "--namespace", ns, "--listen", endpoint,
                "--vehicles-per-process", str(per_process), "--topology", topology,
-               "--zenoh-config", str(zenoh_config),
+               *timestamping_args(tmp),
                "--timeout", f"{LAUNCH_START_S + LAUNCH_SLOWEST * span_s:g}"]  # fmt: skip
         if stagger:
             cmd += ["--set", "swarm.stagger_control=true"]

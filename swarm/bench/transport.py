@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarm.bench.swarm import TIMESTAMPING, LatencyProbe
+from swarm.bench.swarm import LatencyProbe, timestamping_args
 from swarm.cli.children import member_args
 from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session
 
@@ -210,9 +210,7 @@ def _latency(duration_s: float, topology: str = "mesh") -> dict:
            "--namespace", ns, "--listen", endpoint, "--topology", topology]  # fmt: skip
     probe = LatencyProbe()
     with tempfile.TemporaryDirectory() as tmp:
-        zenoh_config = Path(tmp) / "zenoh.json5"
-        zenoh_config.write_text(TIMESTAMPING)  # every process stamps what it publishes
-        cmd += ["--zenoh-config", str(zenoh_config)]
+        cmd += timestamping_args(tmp)  # every process stamps what it publishes
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         try:
             for line in proc.stdout:

@@ -685,33 +685,19 @@ class WorldProcess:
         warm_up(self.sc, self.seed)  # compiled (or loaded) before this process says it is ready
         self.world.reserve_noise(1)  # and the first tick's noise drawn (the same samples as at its step)
         self._declare()
-        if not self.clock.lockstep:
+        commands = ((k.agent_all("command"), Command, self._on_command),
+                    (k.agent_all("commands"), CommandBatch, self._on_command_batch))  # fmt: skip
+        if self.clock.lockstep:  # the barrier waits on each command as it comes
+            for key, cls, handler in commands:
+                subscribe_decoded(self.session, key, cls, handler, self.drops)
+        else:
             # free-running, the world takes the newest command of each vehicle at its tick: the commands
             # wait in Zenoh's queue until then instead of waking a Python thread each (32 vehicles a
-            # process each: world CPU -7 %, BENCHMARKS.md, "Queued inputs"); lockstep waits on each
+            # process each: world CPU -7 %, BENCHMARKS.md, "Queued inputs")
             self._queued = [
-                QueuedSubscriber(
-                    self.session,
-                    k.agent_all("command"),
-                    Command,
-                    self._on_command,
-                    self.drops,
-                    capacity=COMMAND_QUEUE,
-                ),
-                QueuedSubscriber(
-                    self.session,
-                    k.agent_all("commands"),
-                    CommandBatch,
-                    self._on_command_batch,
-                    self.drops,
-                    capacity=COMMAND_QUEUE,
-                ),
+                QueuedSubscriber(self.session, key, cls, handler, self.drops, capacity=COMMAND_QUEUE)
+                for key, cls, handler in commands
             ]
-        else:
-            subscribe_decoded(self.session, k.agent_all("command"), Command, self._on_command, self.drops)
-            subscribe_decoded(
-                self.session, k.agent_all("commands"), CommandBatch, self._on_command_batch, self.drops
-            )
         subscribe_decoded(self.session, k.run_control(), RunControl, self._on_control, self.drops)
         subscribe_decoded(self.session, k.fault(), Fault, self._on_fault, self.drops)
         watch_liveliness(self.session, k, self._on_alive)
