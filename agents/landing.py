@@ -13,6 +13,16 @@ complete is only fused (its command would reach the world after it flew that tic
 publishes on the newest tick, as a flight controller's estimator runs at the sensors' rate and its controller
 on the newest estimate. A message that does not decode is dropped and counted; a sample of a tick already
 flown is ignored.
+
+Restarts (``swarm launch`` does them). A UAV cannot hang in the sky while a restarted agent
+re-initialises from its sensors, as a docking agent does: with ``--checkpoint-dir`` each UAV's agent writes
+its complete state (filter, guidance and its records, controller: :meth:`~swarm.step.landing.LandingAgent.
+snapshot`) to ``agent-<id>.ckpt`` there after each tick's decision, before its command goes out, as a
+flight computer keeps its state in memory that survives a reboot; ``--resume`` restarts warm from it (none
+written yet: from the start), sends the last tick's command again and goes on with the next tick, whose
+samples the world sends again when the agent's liveliness token comes back. In lockstep the run is then the
+uninterrupted run, bit for bit. On the world's ``world_resumed`` at tick ``k`` an agent whose last command is
+of tick ``k`` sends it again (the new world never had it).
 """
 
 from __future__ import annotations
@@ -40,6 +50,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "process an agent host: their agents on one Zenoh session, each on its own thread, keys and "
         "liveliness per UAV",
     )
+    p.add_argument("--checkpoint-dir", default=None, metavar="DIR",
+                   help="write each UAV's agent state to DIR/agent-<id>.ckpt after every tick (a private "
+                        "directory: the file is a pickle), so that a restart with --resume goes on "
+                        "warm")  # fmt: skip
+    p.add_argument("--resume", action="store_true",
+                   help="restart warm from the checkpoints in --checkpoint-dir (a UAV without one starts "
+                        "from the beginning); a torn or foreign checkpoint is an error naming the file "
+                        "(exit status 3)")  # fmt: skip
 
 
 def run(args: argparse.Namespace, stop: threading.Event) -> int:
@@ -47,6 +65,7 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     from swarm.config import parse_override
     from swarm.errors import ConfigError
     from swarm.landing_scenario import load_landing
+    from swarm.transport.checkpoint import EXIT_BAD_CHECKPOINT, CheckpointError
     from swarm.transport.keys import Keys
     from swarm.transport.session import open_session, zenoh_args_from
 
@@ -56,23 +75,64 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     for uid in ids:
         if uid not in uavs:
             raise ConfigError(f"--id: no UAV {uid!r} in the scenario; it has {', '.join(uavs)}")
+    if args.resume and args.checkpoint_dir is None:
+        raise ConfigError("--resume needs --checkpoint-dir (the directory of the checkpoints to resume)")
     policy = args.policy or sc.policy
+    try:  # read before joining the swarm: a bad checkpoint never shows up as an agent
+        resumed = {u: Resume(args, sc, uavs[u], policy) for u in ids}
+    except CheckpointError as exc:
+        print(f"agents.landing: error: {exc}; not resuming", file=sys.stderr, flush=True)
+        return EXIT_BAD_CHECKPOINT
     warm_up(sc, args.seed, uavs[ids[0]].index, policy)
     keys = Keys(args.namespace)
     with open_session(zenoh_args_from(args)) as session:
         free = not args.clock.lockstep
         if len(ids) == 1:
-            _fly(session, keys, sc, args.seed, uavs[ids[0]], policy, stop, free)
+            _fly(session, keys, sc, args.seed, uavs[ids[0]], policy, stop, free, resumed[ids[0]])
             return 0
         # an agent host: one session, one thread per UAV (agents.cli.run_host)
-        flights = {u: partial(_fly, session, keys, sc, args.seed, uavs[u], policy, stop, free) for u in ids}
+        flights = {u: partial(_fly, session, keys, sc, args.seed, uavs[u], policy, stop, free, resumed[u])
+                   for u in ids}  # fmt: skip
         return run_host(flights, stop)
 
 
-def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, free: bool = False) -> None:
+class Resume:
+    """One UAV's agent checkpoint (module docstring): the file, the state read from it by ``--resume``
+    (None: not resuming, or nothing written yet), and what it must share with this run."""
+
+    def __init__(self, args: argparse.Namespace, sc, uav, policy: str) -> None:
+        import hashlib
+
+        from swarm.transport import checkpoint
+
+        digest = hashlib.sha256(repr(sc).encode()).hexdigest()[:16]  # the scenario, with its overrides
+        self.run_id = {"scenario": sc.name, "fingerprint": digest, "seed": args.seed, "policy": policy,
+                       "uav": uav.id, "clock": str(args.clock)}  # fmt: skip
+        self.path = None
+        self.state: dict | None = None
+        if args.checkpoint_dir is None:
+            return
+        self.path = checkpoint.checkpoint_path(args.checkpoint_dir, f"agent-{uav.id}.ckpt")
+        if args.resume and self.path.exists():
+            st = checkpoint.load(self.path)
+            if st.get("run") != self.run_id:
+                raise checkpoint.CheckpointError(f"checkpoint {self.path}: of another run: {st.get('run')}")
+            self.state = st
+
+    def file(self):
+        """The file to write this UAV's checkpoints to (after the one resumed from), or None."""
+        from swarm.transport import checkpoint
+
+        if self.path is None:
+            return None
+        return checkpoint.CheckpointFile(self.path, None if self.state is None else self.state["checkpoint"])
+
+
+def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, free: bool = False,
+         resume: Resume | None = None) -> None:  # fmt: skip
     """One UAV's agent on ``session`` until the run ends (then its summary, and it waits for ``stop``).
     ``free``: the world is free-running (module docstring): a tick with a later one already complete is
-    fused, not decided on."""
+    fused, not decided on. ``resume``: its checkpoint (module docstring)."""
     from swarm.step.landing import LandingAgent, LandingInputs, Rates
     from swarm.transport import landing_wire as wire
     from swarm.transport.messages import DropCounter, Event, Gnss, Imu, MessageError, Rangefinder, Uwb, Vision
@@ -86,6 +146,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
     cond = threading.Condition()
     inbox: dict[str, dict[int, object]] = {"imu": {}, "uwb": {}, "gnss": {}, "rangefinder": {}, "vision": {}}
     state = {"k": 1, "ended": False}
+    last: dict = {}  # the last command sent: its tick, key and payload (sent again for a resumed world)
     drops = DropCounter()
     n_anchors = len(sc.uwb.anchors_m) if sc.uwb.enabled else 0
 
@@ -123,6 +184,12 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
             with cond:
                 state["ended"] = True
                 cond.notify_all()
+        elif msg.kind == "world_resumed":
+            with cond:
+                again = last.get("tick") == msg.data.get("tick")
+            if again:  # the world that had it is gone
+                pub[last["key"]].put(last["payload"])
+                _LOG.warning("%s: world resumed at tick %s: its command sent again", uid, last["tick"])
 
     def complete(k: int) -> bool:
         return (
@@ -152,10 +219,19 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         ("vision", Vision),
     ):
         subscribe_decoded(session, getattr(keys, kind)(uid), cls, on_sample(kind), drops)
+    n_modes = skipped = 0
+    ckpt = None if resume is None else resume.file()
+    if resume is not None and resume.state is not None:  # warm from the checkpoint: the tick after it next
+        st = resume.state
+        agent.restore(st["agent"])
+        state["k"], n_modes, skipped = st["k"], st["n_modes"], st["skipped"]
+        last.update(st["last"])
+        _LOG.warning("%s: resumed from its checkpoint of tick %d", uid, st["k"] - 1)
     subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
     token = declare_liveliness(session, keys, "agent", uid)
     print_ready("agent", uid)
-    n_modes = skipped = 0
+    if last:  # (the world may be waiting for it: the agent may have been killed before it went out)
+        pub[last["key"]].put(last["payload"])
     while not stop.is_set():
         with cond:
             k = state["k"]
@@ -176,6 +252,12 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         skipped += len(stale)
         cmd = agent.tick(inp)
         out, n_modes = wire.agent_tick(keys, uid, agent, cmd, n_modes)
+        key, payload = out[0]  # the command, first
+        with cond:
+            last.update(tick=k, key=key, payload=payload)
+        if ckpt is not None:  # before the command goes out: the world never has a command of a later tick
+            ckpt.write({"run": resume.run_id, "k": k + 1, "agent": agent.snapshot(), "n_modes": n_modes,
+                        "skipped": skipped, "last": dict(last)})  # fmt: skip
         for key, payload in out:
             pub[key].put(payload)
     if state["ended"]:
@@ -184,6 +266,8 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         _LOG.info("%s: run ended: %s (%d ticks fused without a decision, behind the world)", uid,
                   agent.outcome()["final_mode"], skipped)  # fmt: skip
         stop.wait()
+    if ckpt is not None:
+        ckpt.close()
     token.undeclare()
 
 

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import threading
+from pathlib import Path
 
 from swarm.errors import ConfigError
 
@@ -219,3 +221,16 @@ class LauncherRecorder:
 def start_recorder(args: argparse.Namespace, session, keys) -> LauncherRecorder | None:
     """The launcher's recorder (``--record``), or None."""
     return None if args.record is None else LauncherRecorder(args, session, keys)
+
+
+def checkpoint_root() -> Path:
+    """A private directory (mode 0700: the checkpoints are pickles) for the world's checkpoints (and the
+    landing agents'), outside the source tree, removed at exit. In memory (``/dev/shm``) where there is one:
+    a checkpoint must survive a killed process, not a machine crash, and a write to tmpfs costs ~20 us per
+    tick where one to an ext4 disk cost 1-3 ms here (``BENCHMARKS.md``). One a SIGKILLed launcher left is
+    removed by the next (:func:`swarm.private_dirs.private_dir`)."""
+    from swarm.private_dirs import private_dir
+
+    shm = Path("/dev/shm")
+    base = str(shm) if shm.is_dir() and os.access(shm, os.W_OK | os.X_OK) else None
+    return private_dir("swarm-world-", base)

@@ -31,7 +31,6 @@ import collections
 import itertools
 import json
 import logging
-import os
 import queue
 import shutil
 import signal
@@ -45,6 +44,7 @@ from swarm.cli.children import (
     TOPOLOGIES,
     TOPOLOGY_TEXT,
     check_record,
+    checkpoint_root,
     child_args,
     client_endpoint,
     config_args,
@@ -56,9 +56,8 @@ from swarm.cli.children import (
     topology,
 )
 from swarm.errors import ConfigError, SwarmError
-from swarm.private_dirs import private_dir
 from swarm.step.outcome import chaser_summary, run_summary
-from swarm.world.checkpoint import EXIT_BAD_CHECKPOINT
+from swarm.transport.checkpoint import EXIT_BAD_CHECKPOINT
 
 _LOG = logging.getLogger("swarm.launch")
 HUNG_TICKS = 3
@@ -390,7 +389,7 @@ def _run(args: argparse.Namespace) -> int:
     seed = args.seed
     result: dict | None = None
     wall0 = time.monotonic()
-    args.checkpoint_root = _checkpoint_root()
+    args.checkpoint_root = checkpoint_root()
     runs = itertools.count()
     try:
         zargs = secure_router(args, keys, sc.vehicles, listen, zargs, "docking")
@@ -485,17 +484,6 @@ def _run(args: argparse.Namespace) -> int:
     if result is None:
         return 1
     return 0 if result["chasers"] and all(c["docked"] for c in result["chasers"].values()) else 1
-
-
-def _checkpoint_root() -> Path:
-    """A private directory (mode 0700: the checkpoints are pickles) for the world's checkpoints, outside
-    the source tree, removed at exit. In memory (``/dev/shm``) where there is one: a checkpoint must
-    survive a killed process, not a machine crash, and a write to tmpfs costs ~20 us per tick where one to
-    an ext4 disk cost 1-3 ms here (``BENCHMARKS.md``). One a SIGKILLed launcher left is removed by the next
-    (:func:`swarm.private_dirs.private_dir`)."""
-    shm = Path("/dev/shm")
-    base = str(shm) if shm.is_dir() and os.access(shm, os.W_OK | os.X_OK) else None
-    return private_dir("swarm-world-", base)
 
 
 def _start_run(args, sc, seed, endpoint, sup, Child):

@@ -30,7 +30,16 @@ A hung process keeps its liveliness token; the world's clock says it: when it st
 process"), as for a docking swarm, and ``--timeout`` does so before it stops an unfinished run.
 
 Run-time faults come from ``swarm fault`` (``camera_loss``, ``uwb_dropout``: :mod:`swarm.world.landing`).
-Not yet for a landing: restarts, run controls, the dashboard's Faults panel.
+
+A process that exits before the run ends (killed, crashed) is restarted, with exponential backoff, at most
+``--max-restarts`` times each, as in a docking swarm: the world with ``--resume`` from the checkpoint it
+writes every tick into a private directory of the launcher (:mod:`swarm.world.landing`), an agent (or an
+agent host) in lockstep warm from its own (:mod:`agents.landing`). A lockstep run with the world or agents
+killed and restarted is the uninterrupted run, bit for bit; the summary says how often each process was
+restarted (``restarts`` in ``--json``). Free-running, a lost agent ends the run (the world would fly its UAV
+without a controller), so agents are not restarted there; the world is.
+
+Not yet for a landing: run controls, the dashboard's Faults panel.
 """
 
 from __future__ import annotations
@@ -38,6 +47,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import shutil
 import signal
 import threading
 import time
@@ -99,6 +109,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     from swarm.cli.children import (
         TOPOLOGY_TEXT,
         check_record,
+        checkpoint_root,
         child_args,
         client_endpoint,
         config_args,
@@ -114,6 +125,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     from swarm.config import parse_override
     from swarm.landing_scenario import load_landing
     from swarm.step.landing import landing_summary
+    from swarm.transport.checkpoint import EXIT_BAD_CHECKPOINT
     from swarm.transport.keys import Keys
     from swarm.transport.messages import Clock, DropCounter, Event, safe_decode
     from swarm.transport.security import agent_name
@@ -135,11 +147,13 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     cond = threading.Condition()
     got: dict = {"run_end": None, "summaries": {}}
-    sup = Supervisor(max_restarts=0)
+    sup = Supervisor(max_restarts=args.max_restarts)
     restore_stacks = forward_stacks_signal(sup)  # kill -USR1 <launcher>: every process's stacks
     wall0 = time.monotonic()
     result = None
     args.secure_material = None
+    ckpt_root = checkpoint_root()  # the world's and the agents' checkpoints (removed at exit)
+    restart_agents = args.clock.lockstep  # (free-running, a lost agent ends the run: module docstring)
     try:
         zargs = secure_router(args, keys, ids, listen, zargs, "landing")
         with open_session(zargs, lean=True) as session:  # its own swarm's paced ticks
@@ -191,13 +205,15 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                     name = f"agent/{host[0]}" if n == 1 else f"agents/{'+'.join(host)}"
                     identity = agent_name(host[0])  # (an agent host is refused with --secure above)
                     agent = ["agents.landing", "--id", ",".join(host), *common, *config_args(args, identity)]
-                    sup.start(Child(name, agent))
+                    if restart_agents:
+                        agent += ["--checkpoint-dir", str(ckpt_root)]
+                    sup.start(Child(name, agent, restartable=restart_agents, rejoin_args=["--resume"]))
                 world = ["swarm.world.landing", "--clock", str(args.clock),
                          *(["--pace", str(args.pace)] if args.pace is not None else []),
                          "--step-timeout", str(args.step_timeout),
                          "--start-timeout", str(args.start_timeout), *common,
-                         *config_args(args, "world")]  # fmt: skip
-                sup.start(Child("world", world))
+                         "--checkpoint-dir", str(ckpt_root), *config_args(args, "world")]  # fmt: skip
+                sup.start(Child("world", world, restartable=True, rejoin_args=["--resume"]))
                 print(
                     f"swarm up: world and {len(ids)} landing agents in {-(-len(ids) // n)} processes, "
                     f"seed {args.seed}, clock {_clock_name(args.clock, args.pace)}",
@@ -219,10 +235,15 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                                          c.popen.returncode)  # fmt: skip
                             c.popen = None
                         dead = [c for c in dead if c.name != "dashboard"]
-                        if dead and got["run_end"] is None:
-                            _LOG.error("%s exited with status %s before the run ended", dead[0].name,
-                                       dead[0].popen.returncode)  # fmt: skip
+                        if got["run_end"] is None and _lost(sup, dead, EXIT_BAD_CHECKPOINT):
                             break
+                        for c in sup.due_restarts():
+                            how = (
+                                "resuming from its checkpoint"
+                                if c.name == "world"
+                                else "warm, from its checkpoint"
+                            )
+                            _LOG.warning("%s restarted (pid %d), %s", c.name, c.popen.pid, how)
                         cond.wait(0.1)
                     end = time.monotonic() + 10.0
                     while got["run_end"] is not None and not set(ids) <= set(got["summaries"]):
@@ -252,6 +273,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                         "sim_time_s": round(int(end_data["ticks"]) * sc.dt_s, 4),
                         "wall_s": wall,
                         "run_end_reason": end_data.get("reason"),
+                        "restarts": {c.name: c.restarts for c in sup.children.values()},
                     }
                     for uid, r in uavs.items():
                         print(f"[{uid}]", end=" ")
@@ -260,6 +282,9 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                     how = _clock_name(args.clock, args.pace)
                     print(f"{n_ok} of {len(ids)} UAVs landed on their pads in {sim_s:.1f} s simulated "
                           f"({wall:.1f} s of wall time, {how} over Zenoh)", flush=True)  # fmt: skip
+                    restarted = {n: r for n, r in result["restarts"].items() if r}
+                    if restarted:
+                        print("restarts: " + ", ".join(f"{n} {r}" for n, r in restarted.items()), flush=True)
                     late = {u: r["late_ticks"] for u, r in uavs.items() if "late_ticks" in r}
                     if late:
                         ticks = max(1, int(end_data["ticks"]))
@@ -276,6 +301,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                     recorder.close()
     finally:
         sup.stop_all()
+        shutil.rmtree(ckpt_root, ignore_errors=True)
         if args.secure_material is not None:
             args.secure_material.close()
         for s, h in previous.items():
@@ -287,6 +313,25 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         r["landed"] or r["aborted"] for r in result["uavs"].values()
     )
     return 0 if ok else 1
+
+
+def _lost(sup, dead: list, bad_checkpoint: int) -> bool:
+    """The processes that exited before the run ended, restarted if they may be (:meth:`~swarm.cli.
+    supervisor.Supervisor.lost`); True when one is gone for good (not restartable, out of restarts, or a
+    checkpoint it cannot resume from): the run cannot end."""
+    for c in dead:
+        code = c.popen.returncode
+        if code == bad_checkpoint:
+            _LOG.error("%s exited with status %d: it could not resume from its checkpoint (its log says "
+                       "why); giving up rather than resuming from a bad state", c.name, code)  # fmt: skip
+            return True
+        what = sup.lost(c.name, f"exited with status {code}")
+        if what:
+            _LOG.warning("%s", what)
+        if c.next_start_s is None:
+            _LOG.error("%s exited with status %s before the run ended", c.name, code)
+            return True
+    return False
 
 
 def _clock_name(clock, pace=None) -> str:

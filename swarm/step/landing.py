@@ -25,7 +25,9 @@ no world starts from the same first estimate as the in-process agent.
 
 from __future__ import annotations
 
+import io
 import math
+import pickle
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -166,7 +168,11 @@ class LandingCommand:
 
 class NoiseStream:
     """A UAV's sensor draws: standard normals from its generator, read in order by the compiled world step
-    (:mod:`swarm.step.landing_nb`, "Random draws") from ``Z`` at ``pos[0]``."""
+    (:mod:`swarm.step.landing_nb`, "Random draws") from ``Z`` at ``pos[0]``.
+
+    A block is drawn when fewer than a tick's draws are left, after what was left (``carry``); the
+    generator's state before the draw is kept, so that :meth:`state` is a few hundred bytes, not the block:
+    :meth:`restore` draws the same block again."""
 
     BLOCK = 4096
 
@@ -174,13 +180,115 @@ class NoiseStream:
         self.rng = rng
         self.Z = np.zeros(0)
         self.pos = np.zeros(1, dtype=np.int64)
+        self._before: dict | None = None  # the generator's state before the block in Z was drawn
+        self._carry = np.zeros(0)  # the draws left over from the block before, at the start of Z
 
     def ensure(self, n: int) -> None:
         """At least ``n`` draws left in ``Z``."""
         left = len(self.Z) - int(self.pos[0])
         if left < n:
-            self.Z = np.concatenate([self.Z[self.pos[0] :], self.rng.standard_normal(max(self.BLOCK, n))])
+            self._before = self.rng.bit_generator.state
+            self._carry = self.Z[self.pos[0] :].copy()
+            self.Z = np.concatenate([self._carry, self.rng.standard_normal(max(self.BLOCK, n))])
             self.pos[0] = 0
+
+    def state(self) -> dict:
+        """Where the stream is (:meth:`restore`)."""
+        return {"before": self._before, "carry": self._carry, "size": len(self.Z) - len(self._carry),
+                "pos": int(self.pos[0])}  # fmt: skip
+
+    def restore(self, st: dict) -> None:
+        """Back to :meth:`state` ``st`` of a stream of the same seed: the block drawn again (which leaves the
+        generator where it was: only :meth:`ensure` draws from it), the position."""
+        self._before, self._carry = st["before"], np.asarray(st["carry"], dtype=float)
+        if self._before is None:
+            self.Z = np.zeros(0)
+        else:
+            self.rng.bit_generator.state = self._before
+            self.Z = np.concatenate([self._carry, self.rng.standard_normal(int(st["size"]))])
+        self.pos[0] = int(st["pos"])
+
+
+class SnapshotError(ValueError):
+    """A snapshot that does not fit the object it is restored into (another scenario, seed or version)."""
+
+
+_CONFIG = frozenset({"sc", "setup", "board", "rates", "params", "p", "filt", "guidance", "noise", "renderer",
+                     "detector", "decisions", "modes", "_records"})  # fmt: skip
+"""Attributes :func:`snapshot_state` leaves out: what the scenario and the seed build again, the sub-objects
+(``filt``, ``guidance``, ``noise``: parts of their own) and the guidance's records (:class:`_Records`)."""
+
+
+def _walk(parts: dict[str, object]) -> tuple[list[tuple[str, np.ndarray]], dict[str, object]]:
+    """The arrays (``part.name``, array), in a fixed order, and the other mutable attributes of ``parts``."""
+    arrays, rest = [], {}
+    for part, obj in parts.items():
+        for name, v in vars(obj).items():
+            if name in _CONFIG:
+                continue
+            if isinstance(v, np.ndarray):
+                arrays.append((f"{part}.{name}", v))
+            else:
+                rest[f"{part}.{name}"] = v
+    return arrays, rest
+
+
+def _layout(arrays: list[tuple[str, np.ndarray]]) -> str:
+    """What a snapshot's raw bytes are: every array's name, shape and dtype, in order."""
+    return ";".join(f"{n}:{a.shape}:{a.dtype.str}" for n, a in arrays)
+
+
+def snapshot_state(parts: dict[str, object]) -> dict:
+    """The mutable state of ``parts`` (name -> object): every array attribute's bytes, in one string, and
+    the other attributes (numbers, lists, records) as they are; the configuration (:data:`_CONFIG`) left out.
+    :func:`restore_state` puts it into objects built again from the same scenario and seed."""
+    arrays, rest = _walk(parts)
+    return {"layout": _layout(arrays), "arrays": b"".join(a.tobytes() for _, a in arrays), "rest": rest}
+
+
+def restore_state(parts: dict[str, object], snap: dict) -> None:
+    """``snap`` (:func:`snapshot_state`) into ``parts``, arrays in place; :class:`SnapshotError` if its
+    layout is not theirs."""
+    arrays, rest = _walk(parts)
+    layout = _layout(arrays)
+    if snap.get("layout") != layout or set(snap.get("rest", {})) != set(rest):
+        raise SnapshotError(
+            "the snapshot's layout is not this object's (another scenario, or another version)"
+        )
+    data, at = snap["arrays"], 0
+    if len(data) != sum(a.nbytes for _, a in arrays):
+        raise SnapshotError(
+            f"the snapshot has {len(data)} bytes of arrays, not {sum(a.nbytes for _, a in arrays)}"
+        )
+    for _, a in arrays:
+        a[...] = np.frombuffer(data, dtype=a.dtype, count=a.size, offset=at).reshape(a.shape)
+        at += a.nbytes
+    for key, v in snap["rest"].items():
+        part, name = key.split(".", 1)
+        setattr(parts[part], name, v)
+
+
+class _Records:
+    """An append-only list of records, pickled a chunk at a time: :meth:`blob` pickles only the records added
+    since its last call, and gives every chunk so far, concatenated; :meth:`load` reads them back."""
+
+    def __init__(self) -> None:
+        self.n, self.data = 0, b""
+
+    def blob(self, records: list) -> bytes:
+        if len(records) < self.n:  # (not a list that only grows: start again)
+            self.n, self.data = 0, b""
+        if len(records) > self.n:
+            self.data += pickle.dumps(records[self.n :], protocol=pickle.HIGHEST_PROTOCOL)
+            self.n = len(records)
+        return self.data
+
+    @staticmethod
+    def load(data: bytes) -> list:
+        out, f = [], io.BytesIO(data)
+        while f.tell() < len(data):
+            out.extend(pickle.load(f))
+        return out
 
 
 class _Truth:
@@ -350,6 +458,32 @@ class LandingWorld:
                 raise ValueError(f"vehicle: {uid!r} is not a UAV of this scenario")
             self.uavs[uid].WC[at : at + 2] = (start_s, start_s + duration_s)
 
+    def snapshot(self) -> dict:
+        """The world's complete mutable state (each UAV's truth, its sensors' pending draws and random
+        streams, its faults), for a checkpoint: :meth:`restore` on a world of the same scenario and seed
+        continues exactly as this one does."""
+        return {
+            uid: {
+                "state": snapshot_state({"u": u}),
+                "noise": u.noise.state(),
+                "render_rng": u.render_rng.bit_generator.state,
+            }
+            for uid, u in self.uavs.items()
+        }
+
+    def restore(self, snap: dict) -> None:
+        """A :meth:`snapshot` into this world (built from the same scenario and seed); :class:`SnapshotError`
+        if it is another world's."""
+        if set(snap) != set(self.uavs):
+            raise SnapshotError(
+                f"the snapshot's UAVs {sorted(snap)} are not this world's {sorted(self.uavs)}"
+            )
+        for uid, u in self.uavs.items():
+            s = snap[uid]
+            restore_state({"u": u}, s["state"])
+            u.noise.restore(s["noise"])
+            u.render_rng.bit_generator.state = s["render_rng"]
+
     def outcome(self, uav_id: str) -> dict:
         """The world's half of a UAV's summary: where and how it ended."""
         u = self.uavs[uav_id]
@@ -481,6 +615,7 @@ class LandingAgent:
         self.T_OUT, self.R_OUT, self.COV_OUT = np.zeros(3), np.zeros((3, 3)), np.zeros((6, 6))
         self.series = _Series()
         self._ser, self._ser_n = np.zeros((1, lnb.SER_N)), np.zeros(1, dtype=np.int64)
+        self._records = (_Records(), _Records())  # the snapshots' pickled decisions and mode switches
 
     # the agent's state, as the wire and the summary read it
     @property
@@ -579,6 +714,21 @@ class LandingAgent:
             self.series.add(self._ser[0])
             self._ser_n[0] = 0
         return LandingCommand(inp.k, self.u.copy(), MODES[int(mode)])
+
+    def snapshot(self) -> dict:
+        """The agent's complete mutable state (filter, guidance and its records, controller), for a warm
+        restart: :meth:`restore` on an agent of the same scenario, seed, UAV and policy continues exactly as
+        this one does. The records only grow: each is pickled once, at the first snapshot after it."""
+        g = self.guidance
+        records = {"decisions": self._records[0].blob(g.decisions), "modes": self._records[1].blob(g.modes)}
+        return {**snapshot_state({"a": self, "f": self.filt, "g": g}), **records}
+
+    def restore(self, snap: dict) -> None:
+        """A :meth:`snapshot` into this agent; :class:`SnapshotError` if it is another agent's."""
+        g = self.guidance
+        restore_state({"a": self, "f": self.filt, "g": g}, snap)
+        g.decisions, g.modes = _Records.load(snap["decisions"]), _Records.load(snap["modes"])
+        self._records = (_Records(), _Records())
 
     def outcome(self) -> dict:
         """The agent's half of a UAV's summary: modes, decisions, deviation, detections."""

@@ -49,9 +49,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
+    from swarm.transport import checkpoint
     from swarm.transport.process import check_pace, keys_from, scenario_from, zenoh_args
     from swarm.transport.session import open_session
-    from swarm.world import checkpoint
     from swarm.world.process import WorldProcess
 
     if args.clock_every < 1:

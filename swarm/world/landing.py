@@ -21,11 +21,23 @@ a free-running world, as the docking world is: tick ``k`` is stepped at its wall
 did; each UAV flies the newest command it has (a command of tick ``k`` that comes after tick ``k``'s wall
 time is late: the rotors keep the previous one, as a flight controller's mixer keeps its last setpoint), and
 ``run_end`` counts each UAV's late ticks. A slow agent then costs its UAV accuracy, not the swarm its pace.
+
+Restarts (``swarm launch`` does them, as for a docking swarm). With ``--checkpoint-dir`` the world writes
+its complete state at every tick ``k`` (:mod:`swarm.transport.checkpoint`: the truths, the sensors' random
+streams, the faults, and tick ``k``'s encoded samples), after stepping and *before* it publishes them.
+``--resume`` continues from it: ``world_resumed`` on ``world/event`` (tick ``k``), tick ``k``'s samples
+again (an agent drops what it already has, and one that had answered sends its ``command(k)`` again), then
+on as before. A lockstep run with its world killed and resumed is the uninterrupted run, bit for bit. An
+agent whose liveliness token comes back in a running lockstep run (a restarted agent, warm from its own
+checkpoint: :mod:`agents.landing`) is sent its UAV's samples of the current tick again. A lost agent stops a
+lockstep world until it is back or ``--step-timeout`` passes; a free-running world ends the run (its UAV
+would fly on without a controller).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import logging
 import sys
 import threading
@@ -49,14 +61,60 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pace", type=clock_arg, default=None, metavar="CLOCK",
                    help="a lockstep world paced to this clock (realtime or scaled:N): every command waited "
                         "for, never ahead of the wall clock")  # fmt: skip
+    p.add_argument("--checkpoint-dir", default=None, metavar="DIR",
+                   help="write the world's complete state to DIR/world.ckpt at every tick (a private "
+                        "directory: the file is a pickle), so that a restart with --resume continues the "
+                        "run")  # fmt: skip
+    p.add_argument("--resume", action="store_true",
+                   help="continue the run from the checkpoint in --checkpoint-dir (announced as "
+                        "world_resumed); a missing, torn or foreign checkpoint is an error naming the file "
+                        "(exit status 3)")  # fmt: skip
 
 
 def run(args: argparse.Namespace, stop: threading.Event) -> int:
+    from swarm.transport.checkpoint import EXIT_BAD_CHECKPOINT, CheckpointError
+
+    try:
+        return _run(args, stop)
+    except CheckpointError as exc:
+        print(f"swarm.world.landing: error: {exc}; not resuming", file=sys.stderr, flush=True)
+        return EXIT_BAD_CHECKPOINT
+
+
+def _run_id(sc, seed: int, policy: str, ids: list[str], clock: str) -> dict:
+    """What a checkpoint must share with this world to be resumed by it."""
+    digest = hashlib.sha256(repr(sc).encode()).hexdigest()[:16]  # the scenario, with its overrides
+    return {"scenario": sc.name, "fingerprint": digest, "seed": seed, "policy": policy, "uavs": ids,
+            "clock": clock}  # fmt: skip
+
+
+def _load_resume(args, world, run_id: dict) -> dict:
+    """The checkpoint to resume from, its world state restored into ``world``; CheckpointError naming the
+    file if it is missing, torn, or of another run."""
+    from swarm.step.landing import SnapshotError
+    from swarm.transport import checkpoint
+    from swarm.transport.checkpoint import CheckpointError
+
+    path = checkpoint.checkpoint_path(args.checkpoint_dir)
+    st = checkpoint.load(path)
+    if st.get("run") != run_id:
+        theirs = st.get("run") if isinstance(st.get("run"), dict) else {}
+        diff = {k: (theirs.get(k), v) for k, v in run_id.items() if theirs.get(k) != v}
+        raise CheckpointError(f"checkpoint {path}: of another run: {diff}")
+    try:
+        world.restore(st["world"])
+    except (SnapshotError, KeyError, TypeError, ValueError) as exc:
+        raise CheckpointError(f"checkpoint {path}: unreadable world state: {exc}") from None
+    return st
+
+
+def _run(args: argparse.Namespace, stop: threading.Event) -> int:
     from swarm.config import parse_override
     from swarm.core.landing import LandingMode
     from swarm.errors import ConfigError
     from swarm.landing_scenario import load_landing
     from swarm.step.landing import LandingCommand, LandingWorld
+    from swarm.transport import checkpoint
     from swarm.transport import landing_wire as wire
     from swarm.transport.keys import Keys
     from swarm.transport.messages import LANDING_MODES, Command, DropCounter, Fault
@@ -70,16 +128,27 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     )
 
     check_pace(args.clock, args.pace)
+    if args.resume and args.checkpoint_dir is None:
+        raise ConfigError("--resume needs --checkpoint-dir (the directory of the checkpoint to resume)")
     sc = load_landing(args.scenario, dict(parse_override(o) for o in args.overrides))
     policy = args.policy or sc.policy
     keys = Keys(args.namespace)
     world = LandingWorld(sc, args.seed)
     ids = list(world.uavs)
+    run_id = _run_id(sc, args.seed, policy, ids, str(args.clock))
+    # read before joining the swarm: a bad checkpoint never shows up as a world
+    resume = _load_resume(args, world, run_id) if args.resume else None
+    ckpt = None
+    if args.checkpoint_dir is not None:
+        after = None if resume is None else resume["checkpoint"]
+        ckpt = checkpoint.CheckpointFile(checkpoint.checkpoint_path(args.checkpoint_dir), after)
     dt = sc.dt_s
     drops = DropCounter()
     cond = threading.Condition()
     commands: dict[tuple[str, int], Command] = {}
     alive: set[str] = set()
+    back: set[str] = set()  # agents whose token came back in a running run: sent the current tick again
+    now = {"k": 0, "running": False}  # the tick whose commands are awaited, and whether the run is on
     faults: list[Fault] = []  # run-time faults come, applied before the next tick's samples
 
     def on_fault(_key: str, msg: Fault) -> None:
@@ -114,13 +183,20 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
             drops.drop(key, f"not a landing UAV's rotor command: {uid!r}, mode {msg.mode}")
             return
         with cond:
-            commands[(uid, msg.tick)] = msg
-            cond.notify_all()
+            # lockstep: a command of a tick stepped already (sent again by a restarted agent) is not kept;
+            # free-running: a late one still counts (the newest of each UAV is flown)
+            if not args.clock.lockstep or msg.tick >= now["k"]:
+                commands[(uid, msg.tick)] = msg
+                cond.notify_all()
 
     def on_alive(role: str, pid: str, up: bool) -> None:
         if role == "agent":
             with cond:
                 (alive.add if up else alive.discard)(pid)
+                if up and now["running"] and pid in world.uavs:
+                    back.add(pid)
+                elif not up and now["running"]:
+                    _LOG.warning("agent %s lost at tick %d", pid, now["k"])
                 cond.notify_all()
 
     with open_session(zenoh_args_from(args)) as session:
@@ -148,22 +224,44 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
                         f"agents not up after {args.start_timeout:g} s: {sorted(set(ids) - alive)}"
                     )
                 cond.wait(0.1)
-        put([wire.run_start(keys, sc, args.seed, policy, ids, str(args.clock))])
         n_ticks = round(sc.max_duration_s / dt)
-        k = 0
-        t_wall = time.monotonic()
+        k0, tick_wire, uids = 1, [], []
         reason = "done"
         free = not args.clock.lockstep
         pace = args.clock if free else args.pace
         held: dict[str, LandingCommand] = {}  # free-running: the command each UAV's rotors have
         late = dict.fromkeys(ids, 0)
-        for k in range(1, n_ticks + 1):
-            apply_faults(k)
-            inputs = world.step(k)
-            if not inputs:
-                k -= 1
-                break
-            put(wire.world_tick(keys, world, k, inputs, args.seed))
+        wall_before = 0.0  # a resumed run's wall time before the restart
+        if resume is not None:
+            k0, tick_wire, uids = resume["tick"], resume["wire"], resume["uids"]
+            held, late, wall_before = resume["held"], resume["late"], resume["wall_s"]
+            put([wire.world_event(keys, "world_resumed", (k0 - 1) * dt, {"tick": k0})])
+            _LOG.warning("resumed from the checkpoint of tick %d (t = %.2f s)", k0, k0 * dt)
+        else:
+            put([wire.run_start(keys, sc, args.seed, policy, ids, str(args.clock))])
+        k = k0 - 1
+        # the wall clock of tick k is t_wall + k dt / factor (a resumed run starts its clock again at k0 - 1)
+        t_wall = time.monotonic() - (k0 - 1) * dt / (pace.factor if pace is not None else 1.0)
+        t_start = time.monotonic()
+        with cond:
+            now["running"] = True
+        for k in range(k0, n_ticks + 1):
+            if resume is None or k > k0:
+                apply_faults(k)
+                inputs = world.step(k)
+                if not inputs:
+                    k -= 1
+                    break
+                uids = list(inputs)
+                tick_wire = wire.world_tick(keys, world, k, inputs, args.seed)
+                if ckpt is not None:  # before the samples go out: no process has seen a later tick
+                    ckpt.write({"run": run_id, "tick": k, "world": world.snapshot(), "wire": tick_wire,
+                                "uids": uids, "held": held, "late": late,
+                                "wall_s": wall_before + time.monotonic() - t_start})  # fmt: skip
+            with cond:
+                now["k"] = k
+                back.clear()
+            put(tick_wire)
             if free:  # until tick k's wall time: the newest command come by then is flown, the rest is late
                 due = t_wall + k * dt / pace.factor
                 with cond:
@@ -177,12 +275,12 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
                     reason = "stopped"
                     break
                 with cond:
-                    gone = sorted(uid for uid in inputs if uid not in alive)
+                    gone = sorted(uid for uid in uids if uid not in alive)
                 if gone:  # nobody flies these UAVs any more: the run ends (a lockstep world would time out)
                     reason = "agent_missing"
                     _LOG.error("tick %d: agent_missing (%s lost)", k, ", ".join(gone))
                     break
-                for uid in inputs:
+                for uid in uids:
                     cmd = newest.get(uid)
                     if cmd is None or cmd.tick < k:
                         late[uid] += 1
@@ -194,15 +292,26 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
                 continue
             step_deadline = time.monotonic() + args.step_timeout
             with cond:
-                while not all((uid, k) in commands for uid in inputs):
+                while not all((uid, k) in commands for uid in uids):
                     if stop.is_set():
                         reason = "stopped"
                         break
                     if time.monotonic() > step_deadline:
                         reason = "agent_missing"
                         break
+                    if back:  # a restarted agent: its UAV's samples of this tick again
+                        again = [(key, data) for key, data in tick_wire if _owner(keys, key) in back]
+                        _LOG.warning("agent %s back at tick %d: its samples sent again",
+                                     ", ".join(sorted(back)), k)  # fmt: skip
+                        back.clear()
+                        cond.release()
+                        try:
+                            put(again)
+                        finally:
+                            cond.acquire()
+                        continue
                     cond.wait(0.05)
-                got = {uid: commands.pop((uid, k), None) for uid in inputs}
+                got = {uid: commands.pop((uid, k), None) for uid in uids}
             if reason != "done":
                 missing = [u for u, c in got.items() if c is None]
                 _LOG.error("tick %d: %s (no command from %s)", k, reason, ", ".join(missing) or "-")
@@ -213,15 +322,25 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
                 left = t_wall + k * dt / pace.factor - time.monotonic()
                 if left > 0:
                     stop.wait(left)
+        with cond:
+            now["running"] = False
         for uid in ids:
             if not world.uavs[uid].done:
                 world.uavs[uid].end_k = k
-        wall = time.monotonic() - t_wall
+        wall = wall_before + time.monotonic() - t_start
+        if ckpt is not None:
+            ckpt.close()
         put(wire.run_end(keys, world, k, reason, wall, late if free else None))
         _LOG.info("run ended (%s) at tick %d, %.1f s simulated in %.1f s", reason, k, k * dt, wall)
         time.sleep(0.2)  # let the last messages leave before the session closes
         _ = _token
     return 0 if reason == "done" else 1
+
+
+def _owner(keys, key: str) -> str | None:
+    """The UAV whose key ``key`` is (None: a swarm-wide key)."""
+    parsed = keys.parse(key)
+    return None if parsed is None else parsed[1]
 
 
 def _newest(commands: dict, k: int) -> dict:

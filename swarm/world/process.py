@@ -21,7 +21,7 @@ An agent whose liveliness token goes is dropped from the lockstep and its nozzle
 computer died does not keep firing); it joins again with its first command for a tick not yet stepped.
 
 With a checkpoint directory (``--checkpoint-dir``) the world writes its complete state at every tick ``k``
-(:mod:`swarm.world.checkpoint`) *before* it publishes that tick's sensors, so no process ever saw a sample
+(:mod:`swarm.transport.checkpoint`) *before* it publishes that tick's sensors, so no process ever saw a sample
 of a tick later than the checkpoint. A world restarted with ``--resume`` continues from it: it announces
 ``world/event`` ``world_resumed`` and its clock, re-publishes tick ``k``'s samples and those of the ticks
 before it that some process may not have received (:func:`unconfirmed_ticks`: a killed world loses what its
@@ -50,6 +50,8 @@ from swarm.scenario import Scenario
 from swarm.step.radio import tdma_channel
 from swarm.step.referee import Referee
 from swarm.step.world import World
+from swarm.transport import checkpoint
+from swarm.transport.checkpoint import CheckpointError
 from swarm.transport.docking_wire import batch_samples, contact_event, keepout_event, world_sensors
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import CommandBarrier
@@ -71,8 +73,6 @@ from swarm.transport.session import (
     subscribe_decoded,
     watch_liveliness,
 )
-from swarm.world import checkpoint
-from swarm.world.checkpoint import CheckpointError
 
 _LOG = logging.getLogger("swarm.world")
 
@@ -109,8 +109,8 @@ class WorldProcess:
         (agent hosts, docs/protocol.md "Rates"). The truths of a UWB slot tick go to the mothership in one
         ``world/truth`` either way, and on each vehicle's key only while a viewer subscribes to it;
         ``checkpoint_dir``: write the state there every tick (``None``: never); ``resume``: a state
-        :func:`swarm.world.checkpoint.load` read, to continue from (:class:`CheckpointError` if it is not a
-        state of this run: another scenario, seed or vehicle set)."""
+        :func:`swarm.transport.checkpoint.load` read, to continue from (:class:`CheckpointError` if it is
+        not a state of this run: another scenario, seed or vehicle set)."""
         sc = scenario
         self.sc, self.seed, self.session, self.keys, self.clock, self.stop = (
             sc,

@@ -24,7 +24,7 @@ from swarm.sim.landing import run_landing_fleet
 from swarm.transport.keys import Keys
 from swarm.transport.messages import Command, Fault, Imu, Uwb, Vision, encode
 from swarm.transport.session import ZenohArgs, open_session
-from tests.transport.procs import Procs, free_port, loopback
+from tests.transport.procs import Procs, free_port, loopback, wait_until
 
 STALL_S = 1.0  # --stall-s of the launched run: well under its --step-timeout, far above a paced tick (1 ms)
 STOPPED_S = 1.0  # how long the stopped agent host stays stopped after the stall is told
@@ -195,6 +195,83 @@ def test_swarm_sim_mcap_writes_what_the_launched_processes_published(launched, t
     for key in a:
         assert a[key] == b[key], key
     assert meta["recorder"]["source"] == "swarm sim" and "run_end" in meta
+
+
+def test_a_killed_landing_world_and_agent_come_back_and_the_run_still_equals_swarm_sim(tmp_path):
+    """SIGKILL mid-run (lockstep, one process per UAV): first the world, then uav3's agent once the world is
+    back. The launcher restarts each (``--max-restarts``): the world resumes from its checkpoint of the last
+    tick it stepped and sends that tick again, the agents that had answered it send their commands again;
+    the agent comes back warm from its own checkpoint, and the world sends it its tick again. The run is
+    still ``swarm sim``'s, bit for bit, and the checkpoints are gone after it."""
+    from agents.landing import warm_up
+
+    sc = load_landing("landing-swarm")
+    warm_up(sc, 0, 0, sc.policy)
+    ns, out = f"restart-{free_port()}", tmp_path / "restart.json"
+    endpoint = loopback(free_port())
+    shm_before = set(Path("/dev/shm").glob("swarm-world-*")) if Path("/dev/shm").is_dir() else set()
+    # paced at scaled:4 (a tick every 2.5 ms of wall time) so that the run is still on when each kill lands
+    args = [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--headless", "--seed", "0",
+            "--namespace", ns, "--listen", endpoint, "--json", str(out), "--pace", "scaled:4",
+            "--max-restarts", "2", "--timeout", "300"]  # fmt: skip
+    tick = {"k": 0}
+    kills = {}
+
+    def on_clock(sample) -> None:
+        msg = msgpack.unpackb(bytes(sample.payload.to_bytes()))
+        if isinstance(msg, dict) and isinstance(msg.get("tick"), int):
+            tick["k"] = msg["tick"]
+
+    def kill(marker: str, at_tick: int) -> None:
+        deadline = time.monotonic() + 120.0
+        while tick["k"] < at_tick and time.monotonic() < deadline:
+            time.sleep(0.002)
+        ps = subprocess.run(["ps", "-ww", "-eo", "pid,args"], capture_output=True, text=True).stdout
+        pid = next(int(line.split()[0]) for line in ps.splitlines()
+                   if f"--namespace {ns}" in line and marker in line)  # fmt: skip
+        os.kill(pid, signal.SIGKILL)
+        kills[marker] = tick["k"]
+
+    def logged(pattern: str) -> None:  # (the processes' logs are on the launcher's stderr)
+        wait_until(lambda: re.search(pattern, proc.output(), re.M), 120.0, pattern, poll_s=0.05)
+
+    with Procs() as procs:
+        proc = procs.start(args)
+        proc.wait_for_line(r"^swarm up:", 300.0)
+        with open_session(ZenohArgs(mode="client", connect=(endpoint,))) as session:
+            sub = session.declare_subscriber(Keys(ns).world_clock(), on_clock)
+            kill("swarm.world.landing", 300)
+            logged(r"resumed from the checkpoint of tick \d+")
+            kill("agents.landing --id uav3", 800)
+            logged(r"uav3: resumed from its checkpoint of tick \d+")
+            sub.undeclare()
+        code = proc.wait(300.0)
+        text = proc.output()
+    assert code == 0, text
+    assert "Traceback" not in text
+    got = json.loads(out.read_text())
+    assert got["restarts"] == {"world": 1, "agent/uav1": 0, "agent/uav2": 0, "agent/uav3": 1,
+                               "agent/uav4": 0}, got["restarts"]  # fmt: skip
+    assert "restarts: agent/uav3 1, world 1" in text, text  # (the agents were started before the world)
+    # the world resumed at the tick it had stepped last (its checkpoint is written before the tick goes out)
+    resumed = int(re.search(r"resumed from the checkpoint of tick (\d+)", text).group(1))
+    assert kills["swarm.world.landing"] - 5 <= resumed <= kills["swarm.world.landing"] + 1, (resumed, kills)
+    assert re.search(rf"uav\d: world resumed at tick {resumed}: its command sent again", text), text
+    warm = int(re.search(r"uav3: resumed from its checkpoint of tick (\d+)", text).group(1))
+    assert warm >= kills["agents.landing --id uav3"] - 5, (warm, kills)
+    assert re.search(r"agent uav3 back at tick \d+: its samples sent again", text), text
+    want = run_landing_fleet(sc, seed=0, record_series=False)
+    assert got["run_end_reason"] == "done" and got["landed"] == 4
+    for uid, w in want["uavs"].items():
+        g = got["uavs"][uid]
+        for key in ("landed", "landing_error_m", "energy_j", "landing_time_s", "final_mode", "retries",
+                    "pad_frames", "pad_detections", "deviation_distance_m", "sim_time_s",
+                    "modes"):  # fmt: skip
+            assert g[key] == w[key], (uid, key, g[key], w[key])
+        assert g["decisions"] == len(w["decisions"]), uid
+    assert got["sim_time_s"] == want["sim_time_s"]
+    shm_after = set(Path("/dev/shm").glob("swarm-world-*")) if Path("/dev/shm").is_dir() else set()
+    assert shm_after <= shm_before, shm_after - shm_before  # the launcher's checkpoints removed
 
 
 def test_a_free_running_landing_world_keeps_the_wall_clock_and_a_stalled_agent_costs_only_its_uav(tmp_path):

@@ -19,11 +19,11 @@ import pytest
 from swarm.core.guidance import docking_geometry
 from swarm.scenario import load_scenario
 from swarm.step.world import NOISE_BLOCK, World
+from swarm.transport import checkpoint
+from swarm.transport.checkpoint import CheckpointError
 from swarm.transport.keys import Keys
 from swarm.transport.messages import Vision, decode
 from swarm.transport.process import ClockSpec
-from swarm.world import checkpoint
-from swarm.world.checkpoint import CheckpointError
 from swarm.world.process import WorldProcess, unconfirmed_ticks
 from tests.transport.procs import REPO
 

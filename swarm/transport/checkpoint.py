@@ -1,4 +1,5 @@
-"""The world's checkpoint file: its complete state at one tick, written every tick, read by a restart.
+"""A checkpoint file: a process's complete state at one tick, written every tick, read by a restart (the
+world's, ``world.ckpt``; a landing agent's, ``agent-<id>.ckpt``: :mod:`agents.landing`).
 
 One file, ``<dir>/world.ckpt``, with two slots written in turn (a double buffer): a world killed while it
 writes one leaves the other, the checkpoint of the tick before, whose samples it had not published yet
@@ -53,9 +54,10 @@ class CheckpointError(SwarmError, ValueError):
     """A checkpoint cannot be read or does not belong to this run; the message names the file."""
 
 
-def checkpoint_path(directory: str | os.PathLike) -> Path:
-    """The checkpoint file of a world whose ``--checkpoint-dir`` is ``directory``."""
-    return Path(directory) / FILE_NAME
+def checkpoint_path(directory: str | os.PathLike, name: str = FILE_NAME) -> Path:
+    """The checkpoint file of a world whose ``--checkpoint-dir`` is ``directory`` (``name``: another
+    process's, such as a landing agent's ``agent-<id>.ckpt``, in the same format)."""
+    return Path(directory) / name
 
 
 def sample_entry(tick: int, data: bytes) -> tuple[int, bytes, int]:
