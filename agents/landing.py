@@ -14,15 +14,16 @@ publishes on the newest tick, as a flight controller's estimator runs at the sen
 on the newest estimate. A message that does not decode is dropped and counted; a sample of a tick already
 flown is ignored.
 
-Restarts (``swarm launch`` does them). A UAV cannot hang in the sky while a restarted agent
-re-initialises from its sensors, as a docking agent does: with ``--checkpoint-dir`` each UAV's agent writes
-its complete state (filter, guidance and its records, controller: :meth:`~swarm.step.landing.LandingAgent.
-snapshot`) to ``agent-<id>.ckpt`` there after each tick's decision, before its command goes out, as a
-flight computer keeps its state in memory that survives a reboot; ``--resume`` restarts warm from it (none
-written yet: from the start), sends the last tick's command again and goes on with the next tick, whose
-samples the world sends again when the agent's liveliness token comes back. In lockstep the run is then the
-uninterrupted run, bit for bit. On the world's ``world_resumed`` at tick ``k`` an agent whose last command is
-of tick ``k`` sends it again (the new world never had it).
+Restarts (``swarm launch`` does them). A UAV cannot hang in the sky while a restarted agent re-initialises
+from its sensors, as a docking agent does: with ``--checkpoint-dir`` each UAV's agent writes its complete
+state (filter, guidance and its records, controller: :meth:`~swarm.step.landing.LandingAgent.snapshot`) to
+``agent-<id>.ckpt`` there after each tick's command has gone out (while the world collects the others': off
+the tick's critical path), as a flight computer keeps its state in memory that survives a reboot.
+``--resume`` restarts warm from it (none written yet: from the start), sends its last two commands again
+(the world drops those of ticks it has stepped) and goes on with the tick after the checkpoint's, whose
+samples (and the current tick's) the world sends again when the agent's liveliness token comes back. In
+lockstep the run is then the uninterrupted run, bit for bit. On the world's ``world_resumed`` at tick ``j``
+an agent sends again its commands of tick ``j`` or later (the new world never had them).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import argparse
 import logging
 import sys
 import threading
+from collections import deque
 from functools import partial
 
 from swarm.transport.process import print_ready, process_main
@@ -146,7 +148,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
     cond = threading.Condition()
     inbox: dict[str, dict[int, object]] = {"imu": {}, "uwb": {}, "gnss": {}, "rangefinder": {}, "vision": {}}
     state = {"k": 1, "ended": False}
-    last: dict = {}  # the last command sent: its tick, key and payload (sent again for a resumed world)
+    sent: deque = deque(maxlen=2)  # the last two commands sent, (tick, key, payload): sent again on a restart
     drops = DropCounter()
     n_anchors = len(sc.uwb.anchors_m) if sc.uwb.enabled else 0
 
@@ -185,11 +187,12 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
                 state["ended"] = True
                 cond.notify_all()
         elif msg.kind == "world_resumed":
+            j = msg.data.get("tick")
             with cond:
-                again = last.get("tick") == msg.data.get("tick")
-            if again:  # the world that had it is gone
-                pub[last["key"]].put(last["payload"])
-                _LOG.warning("%s: world resumed at tick %s: its command sent again", uid, last["tick"])
+                again = [c for c in sent if isinstance(j, int) and c[0] >= j]
+            for tick, key, payload in again:  # the world that had them is gone
+                pub[key].put(payload)
+                _LOG.warning("%s: world resumed at tick %s: its command of tick %d sent again", uid, j, tick)
 
     def complete(k: int) -> bool:
         return (
@@ -223,15 +226,15 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
     ckpt = None if resume is None else resume.file()
     if resume is not None and resume.state is not None:  # warm from the checkpoint: the tick after it next
         st = resume.state
-        agent.restore(st["agent"])
+        agent.restore({"state": st["agent"], "records": st["samples"]})
         state["k"], n_modes, skipped = st["k"], st["n_modes"], st["skipped"]
-        last.update(st["last"])
+        sent.extend(st["sent"])
         _LOG.warning("%s: resumed from its checkpoint of tick %d", uid, st["k"] - 1)
     subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
     token = declare_liveliness(session, keys, "agent", uid)
     print_ready("agent", uid)
-    if last:  # (the world may be waiting for it: the agent may have been killed before it went out)
-        pub[last["key"]].put(last["payload"])
+    for _tick, key, payload in sent:  # (the world may be waiting for one: the agent was killed meanwhile)
+        pub[key].put(payload)
     while not stop.is_set():
         with cond:
             k = state["k"]
@@ -252,14 +255,16 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         skipped += len(stale)
         cmd = agent.tick(inp)
         out, n_modes = wire.agent_tick(keys, uid, agent, cmd, n_modes)
-        key, payload = out[0]  # the command, first
         with cond:
-            last.update(tick=k, key=key, payload=payload)
-        if ckpt is not None:  # before the command goes out: the world never has a command of a later tick
-            ckpt.write({"run": resume.run_id, "k": k + 1, "agent": agent.snapshot(), "n_modes": n_modes,
-                        "skipped": skipped, "last": dict(last)})  # fmt: skip
+            sent.append((k, *out[0]))  # the command, first
         for key, payload in out:
             pub[key].put(payload)
+        if ckpt is not None:  # after the command went out, while the world collects the others (off the
+            # tick's critical path): an agent killed before this write comes back at tick k, which the world
+            # sends it again
+            snap = agent.snapshot()  # (its records go as the file's samples: each checksummed once)
+            ckpt.write({"run": resume.run_id, "k": k + 1, "agent": snap["state"], "n_modes": n_modes,
+                        "skipped": skipped, "sent": list(sent)}, snap["records"])  # fmt: skip
     if state["ended"]:
         key, payload = wire.agent_summary(keys, uid, agent)
         pub[key].put(payload)

@@ -5,6 +5,7 @@ one of another world is refused."""
 from __future__ import annotations
 
 import pickle
+import zlib
 
 import numpy as np
 import pytest
@@ -93,15 +94,19 @@ def test_a_noise_stream_restored_draws_what_the_original_draws():
     assert np.array_equal(a.Z, b.Z)
 
 
-def test_records_are_pickled_once_and_read_back_whole():
-    rec, records = _Records(), []
-    blobs = []
-    for i in range(5):
+def test_records_are_pickled_once_merged_past_a_few_chunks_and_read_back_whole():
+    rec, other, records = _Records(0), _Records(1), []
+    for i in range(1, _Records.MERGE + 1):
         records += [{"i": i, "j": j} for j in range(i)]
-        blobs.append(rec.blob(records))
-    assert _Records.load(blobs[-1]) == records
-    assert all(blobs[i + 1].startswith(blobs[i]) for i in range(4))  # earlier records not pickled again
-    assert rec.blob(records) is blobs[-1]  # nothing new: nothing pickled
+        entries = rec.entries(records)
+        assert len(entries) == i  # one chunk per call that added records: the earlier ones not pickled again
+    assert rec.entries(records) is entries and len(entries) == _Records.MERGE  # nothing new: nothing pickled
+    records.append({"i": "last"})
+    merged = rec.entries(records)
+    assert len(merged) == 1 and merged[0][2] == zlib.crc32(merged[0][1])  # merged, checksummed once
+    mixed = [*merged, *other.entries(["a", "b"])]
+    assert _Records.load(mixed, 0) == records and _Records.load(mixed, 1) == ["a", "b"]
+    assert _Records.load([(tag, data) for tag, data, _ in mixed], 0) == records  # as a checkpoint reads them
 
 
 def test_a_snapshot_of_another_world_is_refused():
@@ -110,9 +115,9 @@ def test_a_snapshot_of_another_world_is_refused():
     with pytest.raises(SnapshotError, match="UAVs"):
         LandingWorld(one, SEED).restore(LandingWorld(four, SEED).snapshot())
     snap = LandingAgent(four, SEED, 0, four.policy).snapshot()
-    snap["arrays"] = snap["arrays"][:-8]
+    snap["state"]["arrays"] = snap["state"]["arrays"][:-8]
     with pytest.raises(SnapshotError, match="bytes of arrays"):
         LandingAgent(four, SEED, 0, four.policy).restore(snap)
-    snap["layout"] = "other"
+    snap["state"]["layout"] = "other"
     with pytest.raises(SnapshotError, match="layout"):
         LandingAgent(four, SEED, 0, four.policy).restore(snap)

@@ -92,7 +92,8 @@ def _landing(ticks: int, base: str | None) -> dict:
                 world.hold(uid, cmd)
                 if uid == first:
                     t3 = time.perf_counter()
-                    a_bytes = a_file.write({"k": k + 1, "agent": agents[uid].snapshot()})
+                    snap = agents[uid].snapshot()
+                    a_bytes = a_file.write({"k": k + 1, "agent": snap["state"]}, snap["records"])
                     t4 = time.perf_counter()
             t5 = time.perf_counter()
             w_t.append(t2 - t1)

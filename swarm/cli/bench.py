@@ -70,7 +70,7 @@ BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
     ),
     "checkpoint": (
         _bench("checkpoint", presets=True),
-        "the world's checkpoint per tick (1/4/16 pairs), in memory and on disk",
+        "the checkpoints per tick: the world's (1/4/16 pairs), in memory and on disk; a landing swarm's",
     ),
     "swarm": (
         _bench("swarm", presets=True),

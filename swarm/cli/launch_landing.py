@@ -37,7 +37,8 @@ writes every tick into a private directory of the launcher (:mod:`swarm.world.la
 agent host) in lockstep warm from its own (:mod:`agents.landing`). A lockstep run with the world or agents
 killed and restarted is the uninterrupted run, bit for bit; the summary says how often each process was
 restarted (``restarts`` in ``--json``). Free-running, a lost agent ends the run (the world would fly its UAV
-without a controller), so agents are not restarted there; the world is.
+without a controller), so agents are not restarted there; the world is. ``--max-restarts 0`` restarts
+nothing and writes no checkpoint.
 
 Not yet for a landing: run controls, the dashboard's Faults panel.
 """
@@ -153,7 +154,8 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     result = None
     args.secure_material = None
     ckpt_root = checkpoint_root()  # the world's and the agents' checkpoints (removed at exit)
-    restart_agents = args.clock.lockstep  # (free-running, a lost agent ends the run: module docstring)
+    restarts = args.max_restarts > 0  # (--max-restarts 0: no restart, so no checkpoint written either)
+    restart_agents = restarts and args.clock.lockstep  # (free-running, a lost agent ends the run: docstring)
     try:
         zargs = secure_router(args, keys, ids, listen, zargs, "landing")
         with open_session(zargs, lean=True) as session:  # its own swarm's paced ticks
@@ -208,12 +210,13 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                     if restart_agents:
                         agent += ["--checkpoint-dir", str(ckpt_root)]
                     sup.start(Child(name, agent, restartable=restart_agents, rejoin_args=["--resume"]))
+                world_ckpt = ["--checkpoint-dir", str(ckpt_root)] if restarts else []
                 world = ["swarm.world.landing", "--clock", str(args.clock),
                          *(["--pace", str(args.pace)] if args.pace is not None else []),
                          "--step-timeout", str(args.step_timeout),
                          "--start-timeout", str(args.start_timeout), *common,
-                         "--checkpoint-dir", str(ckpt_root), *config_args(args, "world")]  # fmt: skip
-                sup.start(Child("world", world, restartable=True, rejoin_args=["--resume"]))
+                         *world_ckpt, *config_args(args, "world")]  # fmt: skip
+                sup.start(Child("world", world, restartable=restarts, rejoin_args=["--resume"]))
                 print(
                     f"swarm up: world and {len(ids)} landing agents in {-(-len(ids) // n)} processes, "
                     f"seed {args.seed}, clock {_clock_name(args.clock, args.pace)}",

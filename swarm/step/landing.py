@@ -28,6 +28,7 @@ from __future__ import annotations
 import io
 import math
 import pickle
+import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -214,9 +215,12 @@ class SnapshotError(ValueError):
 
 
 _CONFIG = frozenset({"sc", "setup", "board", "rates", "params", "p", "filt", "guidance", "noise", "renderer",
-                     "detector", "decisions", "modes", "_records"})  # fmt: skip
-"""Attributes :func:`snapshot_state` leaves out: what the scenario and the seed build again, the sub-objects
-(``filt``, ``guidance``, ``noise``: parts of their own) and the guidance's records (:class:`_Records`)."""
+                     "detector", "render_rng", "decisions", "modes", "_records"})  # fmt: skip
+"""Attributes :func:`snapshot_state` leaves out: what the scenario and the seed build again, the parts
+snapshot on their own (``filt``, ``guidance``, ``noise``, ``render_rng``) and the guidance's records
+(:class:`_Records`)."""
+
+_LAYOUTS: dict[tuple, str] = {}  # (name, shape, dtype) of each array, in order -> its layout string
 
 
 def _walk(parts: dict[str, object]) -> tuple[list[tuple[str, np.ndarray]], dict[str, object]]:
@@ -234,8 +238,12 @@ def _walk(parts: dict[str, object]) -> tuple[list[tuple[str, np.ndarray]], dict[
 
 
 def _layout(arrays: list[tuple[str, np.ndarray]]) -> str:
-    """What a snapshot's raw bytes are: every array's name, shape and dtype, in order."""
-    return ";".join(f"{n}:{a.shape}:{a.dtype.str}" for n, a in arrays)
+    """What a snapshot's raw bytes are: every array's name, shape and dtype, in order (formatted once)."""
+    key = tuple((n, a.shape, a.dtype.str) for n, a in arrays)
+    layout = _LAYOUTS.get(key)
+    if layout is None:
+        layout = _LAYOUTS[key] = ";".join(f"{n}:{shape}:{dtype}" for n, shape, dtype in key)
+    return layout
 
 
 def snapshot_state(parts: dict[str, object]) -> dict:
@@ -269,25 +277,39 @@ def restore_state(parts: dict[str, object], snap: dict) -> None:
 
 
 class _Records:
-    """An append-only list of records, pickled a chunk at a time: :meth:`blob` pickles only the records added
-    since its last call, and gives every chunk so far, concatenated; :meth:`load` reads them back."""
+    """An append-only list of records (the guidance's decisions or mode switches) as checkpoint entries
+    ``(tag, pickled chunk, its CRC-32)`` (:func:`swarm.transport.checkpoint.sample_entry`'s shape):
+    :meth:`entries` pickles only the records added since its last call, and checksums each chunk once; past
+    :attr:`MERGE` chunks it merges them into one, so that a checkpoint's table stays short. :meth:`load`
+    reads the records back from the entries of one tag."""
 
-    def __init__(self) -> None:
-        self.n, self.data = 0, b""
+    MERGE = 8
 
-    def blob(self, records: list) -> bytes:
+    def __init__(self, tag: int) -> None:
+        self.tag, self.n, self.chunks = tag, 0, []
+
+    def entries(self, records: list) -> list[tuple[int, bytes, int]]:
         if len(records) < self.n:  # (not a list that only grows: start again)
-            self.n, self.data = 0, b""
+            self.n, self.chunks = 0, []
         if len(records) > self.n:
-            self.data += pickle.dumps(records[self.n :], protocol=pickle.HIGHEST_PROTOCOL)
+            data = pickle.dumps(records[self.n :], protocol=pickle.HIGHEST_PROTOCOL)
+            self.chunks.append((self.tag, data, zlib.crc32(data)))
             self.n = len(records)
-        return self.data
+            if len(self.chunks) > self.MERGE:
+                data = b"".join(c[1] for c in self.chunks)
+                self.chunks = [(self.tag, data, zlib.crc32(data))]
+        return self.chunks
 
     @staticmethod
-    def load(data: bytes) -> list:
-        out, f = [], io.BytesIO(data)
-        while f.tell() < len(data):
-            out.extend(pickle.load(f))
+    def load(entries, tag: int) -> list:
+        """The records of the entries ``(tag, chunk, ...)`` of ``tag``, in order."""
+        out = []
+        for entry in entries:
+            if entry[0] != tag:
+                continue
+            f = io.BytesIO(entry[1])
+            while f.tell() < len(entry[1]):
+                out.extend(pickle.load(f))
         return out
 
 
@@ -615,7 +637,7 @@ class LandingAgent:
         self.T_OUT, self.R_OUT, self.COV_OUT = np.zeros(3), np.zeros((3, 3)), np.zeros((6, 6))
         self.series = _Series()
         self._ser, self._ser_n = np.zeros((1, lnb.SER_N)), np.zeros(1, dtype=np.int64)
-        self._records = (_Records(), _Records())  # the snapshots' pickled decisions and mode switches
+        self._records = (_Records(0), _Records(1))  # the snapshots' pickled decisions and mode switches
 
     # the agent's state, as the wire and the summary read it
     @property
@@ -718,17 +740,20 @@ class LandingAgent:
     def snapshot(self) -> dict:
         """The agent's complete mutable state (filter, guidance and its records, controller), for a warm
         restart: :meth:`restore` on an agent of the same scenario, seed, UAV and policy continues exactly as
-        this one does. The records only grow: each is pickled once, at the first snapshot after it."""
+        this one does. ``state``: everything but the guidance's records; ``records``: those, as checkpoint
+        entries (a checkpoint file's samples, :class:`swarm.transport.checkpoint.CheckpointFile`): they only
+        grow, and each is pickled and checksummed once, at the first snapshot after it."""
         g = self.guidance
-        records = {"decisions": self._records[0].blob(g.decisions), "modes": self._records[1].blob(g.modes)}
-        return {**snapshot_state({"a": self, "f": self.filt, "g": g}), **records}
+        records = [*self._records[0].entries(g.decisions), *self._records[1].entries(g.modes)]
+        return {"state": snapshot_state({"a": self, "f": self.filt, "g": g}), "records": records}
 
     def restore(self, snap: dict) -> None:
-        """A :meth:`snapshot` into this agent; :class:`SnapshotError` if it is another agent's."""
+        """A :meth:`snapshot` into this agent (``records``: entries ``(tag, chunk, ...)``, as a checkpoint
+        file reads them back); :class:`SnapshotError` if it is another agent's."""
         g = self.guidance
-        restore_state({"a": self, "f": self.filt, "g": g}, snap)
-        g.decisions, g.modes = _Records.load(snap["decisions"]), _Records.load(snap["modes"])
-        self._records = (_Records(), _Records())
+        restore_state({"a": self, "f": self.filt, "g": g}, snap["state"])
+        g.decisions, g.modes = _Records.load(snap["records"], 0), _Records.load(snap["records"], 1)
+        self._records = (_Records(0), _Records(1))
 
     def outcome(self) -> dict:
         """The agent's half of a UAV's summary: modes, decisions, deviation, detections."""

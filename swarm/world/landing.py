@@ -24,14 +24,18 @@ time is late: the rotors keep the previous one, as a flight controller's mixer k
 
 Restarts (``swarm launch`` does them, as for a docking swarm). With ``--checkpoint-dir`` the world writes
 its complete state at every tick ``k`` (:mod:`swarm.transport.checkpoint`: the truths, the sensors' random
-streams, the faults, and tick ``k``'s encoded samples), after stepping and *before* it publishes them.
-``--resume`` continues from it: ``world_resumed`` on ``world/event`` (tick ``k``), tick ``k``'s samples
-again (an agent drops what it already has, and one that had answered sends its ``command(k)`` again), then
-on as before. A lockstep run with its world killed and resumed is the uninterrupted run, bit for bit. An
-agent whose liveliness token comes back in a running lockstep run (a restarted agent, warm from its own
-checkpoint: :mod:`agents.landing`) is sent its UAV's samples of the current tick again. A lost agent stops a
-lockstep world until it is back or ``--step-timeout`` passes; a free-running world ends the run (its UAV
-would fly on without a controller).
+streams, the faults, and the encoded samples of ticks ``k`` and ``k - 1``) right *after* it publishes tick
+``k``'s samples, while the agents work on them, so that the write is off the tick's critical path. A world
+killed before the write is done resumes from tick ``k - 1``, whose agents may have answered tick ``k``
+already: each agent keeps its last two commands and sends again those of the resumed tick or later.
+``--resume`` continues from the checkpoint: ``world_resumed`` on ``world/event`` (tick ``j``), tick ``j``'s
+samples again (an agent drops what it already has), the commands the agents send again (one of a later
+tick waits for its tick), then on as before, stepping and publishing again the same ticks (dropped by the
+agents that had them). A lockstep run with its world killed and resumed is the uninterrupted run, bit for
+bit. An agent whose liveliness token comes back in a running lockstep run (a restarted agent, warm from its
+own checkpoint: :mod:`agents.landing`) is sent its UAV's samples of the tick before and of the current tick
+again. A lost agent stops a lockstep world until it is back or ``--step-timeout`` passes; a free-running
+world ends the run (its UAV would fly on without a controller).
 """
 
 from __future__ import annotations
@@ -225,7 +229,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                     )
                 cond.wait(0.1)
         n_ticks = round(sc.max_duration_s / dt)
-        k0, tick_wire, uids = 1, [], []
+        k0, tick_wire, prev_wire, uids = 1, [], [], []
         reason = "done"
         free = not args.clock.lockstep
         pace = args.clock if free else args.pace
@@ -233,7 +237,12 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         late = dict.fromkeys(ids, 0)
         wall_before = 0.0  # a resumed run's wall time before the restart
         if resume is not None:
-            k0, tick_wire, uids = resume["tick"], resume["wire"], resume["uids"]
+            k0, tick_wire, prev_wire, uids = (
+                resume["tick"],
+                resume["wire"],
+                resume["prev_wire"],
+                resume["uids"],
+            )
             held, late, wall_before = resume["held"], resume["late"], resume["wall_s"]
             put([wire.world_event(keys, "world_resumed", (k0 - 1) * dt, {"tick": k0})])
             _LOG.warning("resumed from the checkpoint of tick %d (t = %.2f s)", k0, k0 * dt)
@@ -253,15 +262,18 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                     k -= 1
                     break
                 uids = list(inputs)
-                tick_wire = wire.world_tick(keys, world, k, inputs, args.seed)
-                if ckpt is not None:  # before the samples go out: no process has seen a later tick
-                    ckpt.write({"run": run_id, "tick": k, "world": world.snapshot(), "wire": tick_wire,
-                                "uids": uids, "held": held, "late": late,
-                                "wall_s": wall_before + time.monotonic() - t_start})  # fmt: skip
+                prev_wire, tick_wire = tick_wire, wire.world_tick(keys, world, k, inputs, args.seed)
             with cond:
                 now["k"] = k
                 back.clear()
             put(tick_wire)
+            if ckpt is not None and (resume is None or k > k0):
+                # after the samples went out, while the agents work on them (off the tick's critical path):
+                # a world killed before this write resumes at k - 1, whose commands and tick k's the agents
+                # send again (module docstring)
+                ckpt.write({"run": run_id, "tick": k, "world": world.snapshot(), "wire": tick_wire,
+                            "prev_wire": prev_wire, "uids": uids, "held": held, "late": late,
+                            "wall_s": wall_before + time.monotonic() - t_start})  # fmt: skip
             if free:  # until tick k's wall time: the newest command come by then is flown, the rest is late
                 due = t_wall + k * dt / pace.factor
                 with cond:
@@ -299,8 +311,11 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                     if time.monotonic() > step_deadline:
                         reason = "agent_missing"
                         break
-                    if back:  # a restarted agent: its UAV's samples of this tick again
-                        again = [(key, data) for key, data in tick_wire if _owner(keys, key) in back]
+                    if back:  # a restarted agent: its UAV's samples of the tick before (which its checkpoint
+                        # may lack: it writes it after its command) and of this tick again
+                        again = [
+                            (key, data) for key, data in (*prev_wire, *tick_wire) if _owner(keys, key) in back
+                        ]
                         _LOG.warning("agent %s back at tick %d: its samples sent again",
                                      ", ".join(sorted(back)), k)  # fmt: skip
                         back.clear()
