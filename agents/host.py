@@ -54,7 +54,7 @@ from swarm.transport.messages import (
 from swarm.transport.process import declare_reliable
 from swarm.transport.session import subscribe_decoded, watch_liveliness
 
-__all__ = ["IDLE_S", "SCAN_S", "AgentHost"]
+__all__ = ["IDLE_S", "SCAN_S", "AgentHost", "WakePlanner"]
 
 _LOG = logging.getLogger("swarm.agent")
 
@@ -207,6 +207,8 @@ class AgentHost:
         message brings (a run's end, a stalled tick), and raises what a round raised there."""
         self._live = list(self.procs)
         self.ready.update(self._by_asm)
+        if self.inline and self.procs[0].wake_at_control:
+            threading.Thread(target=self._pace, name="pacer", daemon=True).start()
         while self._live and not self.stop.is_set():
             if self._failure is not None:
                 raise self._failure
@@ -224,6 +226,32 @@ class AgentHost:
         if self._failure is not None:
             raise self._failure
         return self._ended
+
+    def _pace(self) -> None:
+        """``agent.wake_at_control`` (a free-running host of one): wake when :class:`WakePlanner` says, take
+        every input from the queues, run the rounds; poll while the control tick's imu is not in."""
+        p = self.procs[0]
+        plan = WakePlanner(p.dt / p.clock.factor, p.sc.agent.wake_margin_s, p.next_control_tick)
+        try:
+            while self._live and not self.stop.is_set() and self._failure is None:
+                wake = plan.next(p.newest_imu, time.monotonic(), p.ticking())
+                now = time.monotonic()
+                if wake > now:
+                    self.stop.wait(min(wake - now, IDLE_S))
+                    if time.monotonic() < wake:
+                        continue  # (woken for a stop, or waited IDLE_S: look again)
+                polled = 0
+                while True:
+                    now = time.monotonic()
+                    p.drain_inputs()
+                    self.on_news()
+                    if plan.took(p.newest_imu, now, polled) or self.stop.is_set() or not self._live:
+                        break
+                    polled += 1
+                    self.stop.wait(plan.poll_s(p.ticking()))  # the control tick's imu not in yet
+        except BaseException as exc:  # kept for the loop's thread to raise (the host exits 1)
+            self._failure = exc
+            self._kick.set()
 
     def on_news(self) -> None:
         """A vehicle's subscriber callback kept a message (:attr:`inline` hosts): if it made a tick ready,
@@ -313,3 +341,60 @@ def _commands_last(entry: tuple) -> bool:
     Each vehicle's tick is the same in any order: its inputs were taken before the round steps any."""
     p, _late, inp = entry
     return inp is None or not p.commands_at(inp.tick)
+
+
+class WakePlanner:
+    """When a free-running agent alone in its process wakes with ``agent.wake_at_control``
+    (:meth:`AgentHost._pace`): twice per control period. First just after the tick before the control
+    tick is due (the *fusing* wake: the period's ticks so far are fused then, off the command's path; it
+    does not wait for a sample not in yet), then just after the control tick is due (the *control* wake:
+    its tick alone, the decision and the command; it polls until the tick's imu is in).
+
+    When a tick's imu comes is learnt from the wakes, not from the drains' times alone (a wake that comes
+    late sees every sample in and learns little): the imu of tick ``k`` is expected at ``offset + k
+    period``. A control wake that finds its imu not in yet polls for it every ``margin`` and sets
+    ``offset`` from when it came; one that finds it in already moves ``offset`` a margin earlier, so that the
+    wakes keep probing for the arrival; and every wake bounds it by the newest imu it took, which came
+    before it (a wake ticks late learns it at once). Before the run starts it looks every :data:`IDLE_S` /
+    10, then every margin until the first imu, whose arrival is the first guess. Times are
+    ``time.monotonic()`` [s]; ``next_control_tick(newest)`` is the vehicle's first control tick after the
+    newest imu taken (:meth:`agents.process.AgentProcess.next_control_tick`)."""
+
+    def __init__(self, period_s: float, margin_s: float, next_control_tick) -> None:
+        self.period, self.margin = period_s, margin_s
+        self._next_control = next_control_tick
+        self.offset: float | None = None
+        self.fused_for: int | None = None  # the control tick whose period's fusing wake was had
+        self.due = self.target = 0
+
+    def next(self, newest: int | None, now: float, started: bool) -> float:
+        """When the next wake is (the tick it is for: :attr:`target`)."""
+        self.due = due = self._next_control()
+        fusing = newest is not None and newest < due - 1 and self.fused_for != due
+        self.target = due - 1 if fusing else due
+        if self.offset is None:
+            return now + self.poll_s(started)
+        return self.offset + self.target * self.period + self.margin
+
+    def took(self, newest: int | None, now: float, polled: int) -> bool:
+        """A wake took its inputs at ``now`` (the newest imu then: ``newest``) after ``polled`` polls:
+        whether it is done (no further poll)."""
+        if self.target < self.due:
+            self.fused_for = self.due
+        if newest is None:
+            return False
+        if self.offset is None:  # a first guess, late by up to a look: the wake is planned anew
+            self.offset = now - newest * self.period
+            return True
+        self.offset = min(self.offset, now - newest * self.period)  # it came before now
+        got = newest >= self.target
+        if got and self.target == self.due:
+            if polled:  # the newest came within the last margin
+                self.offset = now - self.margin / 2 - newest * self.period
+            else:  # it was in already: look a margin earlier next time
+                self.offset -= self.margin
+        return got or self.target < self.due
+
+    def poll_s(self, started: bool) -> float:
+        """How long to wait before looking again for a sample not in yet."""
+        return self.margin if self.offset is not None or started else IDLE_S / 10

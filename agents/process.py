@@ -179,6 +179,10 @@ class AgentProcess:
         # set by a host of this vehicle alone: called after a kept message, on the subscriber's thread
         self.on_news: Callable[[], None] | None = None
         self._queued: list[QueuedSubscriber] = []  # free-running, a host of one: drained at each imu (open)
+        # free-running, a host of one, agent.wake_at_control: the imu queued too, and everything drained once
+        # per control period by the host's pacer (agents.host.AgentHost._pace)
+        self.wake_at_control = sc.agent.wake_at_control and hosted == 1 and not clock.lockstep
+        self.newest_imu: int | None = None  # the newest imu tick taken from its queue (wake_at_control)
 
     # ------------------------------------------------------------------------------ Zenoh side
 
@@ -190,8 +194,22 @@ class AgentProcess:
             self.on_news()
 
     def _on_queued(self, key: str, msg) -> None:
-        """A range, frame or target estimate taken from its queue at an imu (:meth:`open`)."""
+        """A range, frame or target estimate taken from its queue at an imu (:meth:`open`); with
+        ``wake_at_control``, also the imu, taken at the host's wake."""
+        if isinstance(msg, Imu) and (self.newest_imu is None or msg.tick > self.newest_imu):
+            self.newest_imu = msg.tick
         self.assembler.add(msg, self.target_id if isinstance(msg, Estimate) else self.id)
+
+    def drain_inputs(self) -> None:
+        """``wake_at_control``: take everything the queues hold into the tick assembler (the imu first), for
+        the round that follows."""
+        for sub in self._queued:
+            sub.drain()
+
+    def next_control_tick(self) -> int:
+        """The first of this vehicle's control ticks after the newest imu taken (from tick 1 before any)."""
+        k = 1 if self.newest_imu is None else self.newest_imu + 1
+        return k + (self.control_phase - k) % self.control_every
 
     def _on_target(self, key: str, msg: Estimate) -> None:
         if self.assembler.add(msg, self.target_id) and self.on_news is not None:
@@ -459,7 +477,12 @@ class AgentProcess:
             else:
                 subscribe_decoded(self.session, key, cls, handler, self.drops, direct=d)
 
-        subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops, direct=d)
+        if self.wake_at_control:  # (first: drained first, so that a tick's range finds its imu taken)
+            self._queued.append(
+                QueuedSubscriber(self.session, k.imu(self.id), Imu, self._on_queued, self.drops)
+            )
+        else:
+            subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops, direct=d)
         subscribe(k.uwb(self.id), Uwb, self._on_sensor)
         if self.chaser:
             subscribe(k.vision(self.id), Vision, self._on_sensor)

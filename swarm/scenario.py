@@ -140,6 +140,18 @@ class AgentParams:
     Fusing a 30 ms old range at the current state errs by the distance flown meanwhile (0.6 mm at
     2 cm/s, against a range noise of centimetres). 0: none fused late. Lockstep and in-process runs wait
     for every sample of a tick and do not use it."""
+    wake_at_control: bool = False
+    """A free-running agent alone in its process wakes twice per control period instead of at every gyro
+    sample (as a ROS 2 node whose timers drain its subscriptions' queues): just after the tick before its
+    control tick, to fuse the period's samples so far, and just after its control tick, to fuse that tick,
+    decide and send its command. Its inputs wait in Zenoh's queues in between. ~5 times fewer wakes of a
+    Python thread, the cost of a swarm of many processes on few cores (BENCHMARKS.md, "Two wakes per
+    control period"); the estimates leave up to a control period late, so off by default. Lockstep and
+    agent hosts of several ignore it."""
+    wake_margin_s: float = 0.0005
+    """With ``wake_at_control``: how long after a tick's gyro sample is expected (the earliest arrival seen
+    lately) the agent wakes [s] (wall time); the control tick's sample not in by then is polled for every
+    margin."""
 
     def __post_init__(self) -> None:
         for name in ("health_window_s", "vision_recent_s"):
@@ -148,6 +160,10 @@ class AgentParams:
                 raise ConfigError(f"agent.{name} must be a positive number, got {v!r}")
         if not (np.isfinite(self.late_fusion_s) and self.late_fusion_s >= 0):
             raise ConfigError(f"agent.late_fusion_s must be a number >= 0, got {self.late_fusion_s!r}")
+        if not isinstance(self.wake_at_control, bool):
+            raise ConfigError(f"agent.wake_at_control must be true or false, got {self.wake_at_control!r}")
+        if not (np.isfinite(self.wake_margin_s) and 0 < self.wake_margin_s <= 0.1):
+            raise ConfigError(f"agent.wake_margin_s must be a number in (0, 0.1], got {self.wake_margin_s!r}")
 
 
 @dataclass(frozen=True)

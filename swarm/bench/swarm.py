@@ -23,6 +23,10 @@ was published: every process of the case stamps what it publishes (Zenoh's times
 - **staggered** (``--stagger``): the vehicles' controller clocks spread over the control period
   (``swarm.stagger_control``: vehicle ``m`` controls on ticks ``m % period``), instead of every vehicle
   controlling on the same tick;
+- **agent wake** (``--agent-wake imu,control``): a free-running agent alone in its process wakes at each gyro
+  sample (``imu``, the default) or once per control period (``control``: ``agent.wake_at_control``, its
+  inputs taken from Zenoh's queues then), each case in each, alternately (``agent_wake`` in the JSON; ``ctl``
+  after the clock in the table);
 - **TDMA** (``--tdma``): the tags share one UWB channel (``uwb.tdma``, issue 13's Loco Positioning
   TWR-TDMA model): each ranges once per frame (~238/N ranges a second for N tags, against 50 each
   without), and the mothership sends a tag nothing on the slot ticks without its exchange;
@@ -242,7 +246,7 @@ class LatencyProbe:
 
 
 def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagger: bool = False,
-          tdma: bool = False, topology: str = "auto") -> dict:  # fmt: skip
+          tdma: bool = False, topology: str = "auto", agent_wake: str = "imu") -> dict:  # fmt: skip
     from swarm.cli.children import resolved, swarm_processes
 
     pairs = vehicles // 2
@@ -262,6 +266,8 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
             cmd += ["--set", "swarm.stagger_control=true"]
         if tdma:
             cmd += ["--set", "uwb.tdma=true"]
+        if agent_wake == "control":
+            cmd += ["--set", "agent.wake_at_control=true"]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
         probe = LatencyProbe()
         up, listening = threading.Event(), threading.Event()
@@ -306,6 +312,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         "topology": links,
         "staggered": stagger,
         "tdma": tdma,
+        "agent_wake": agent_wake,
         "cpu_us_per_vehicle_tick": 1e6 * float(np.sum(agents)) / (len(agents) * ticks) if agents else None,
         "world_cpu_us_per_tick": 1e6 * cpu["world"] / ticks if cpu.get("world") is not None else None,
         "late_tick_share": late,
@@ -387,6 +394,15 @@ def late_share(clock: str, late_commands: list[int] | None) -> tuple[float | Non
     return (late_n / stepped if stepped else 1.0), stepped
 
 
+def parse_agent_wakes(text: str) -> tuple[str, ...]:
+    """``--agent-wake imu,control``: how a free-running agent alone in its process wakes (module
+    docstring), each case run in each."""
+    values = tuple(v.strip() for v in text.split(","))
+    if not values or any(v not in ("imu", "control") for v in values) or len(set(values)) < len(values):
+        raise ConfigError(f"--agent-wake must be imu, control or both (comma-separated), got {text!r}")
+    return values
+
+
 def parse_repeat(value: int) -> int:
     """``--repeat N``: runs of each case, 1..20."""
     if not 1 <= value <= 20:
@@ -448,17 +464,18 @@ def run(preset: dict) -> dict:
     from swarm import cpu_latency
 
     stagger, tdma = bool(preset.get("stagger", False)), bool(preset.get("tdma", False))
-    specs = [(v, c, n, t, q) for c in preset["clocks"] for n in preset["per_process"]
+    specs = [(v, c, n, t, q, w) for c in preset["clocks"] for n in preset["per_process"]
              for v in preset["vehicles"] if n <= v for t in preset.get("topologies", ("auto",))
-             for q in preset.get("cpu_latencies", (None,))]  # fmt: skip
+             for q in preset.get("cpu_latencies", (None,)) for w in preset.get("agent_wakes", ("imu",))
+             if w == "imu" or (c != "lockstep" and n == 1)]  # fmt: skip
     runs: dict[tuple, list[dict]] = {spec: [] for spec in specs}
     for _ in range(int(preset.get("repeat", 1))):  # round by round: a drift of the machine hits every case
-        for v, c, n, t, q in specs:
+        for v, c, n, t, q, w in specs:
             # the request is the machine's (the launch's and the probe's alike): held here, so that the
             # record says whether it was
             with cpu_latency.hold(q) as held:
-                case = _case(v, c, preset["span_s"], n, stagger, tdma, t)
-            runs[v, c, n, t, q].append({**case, **held.as_dict()})
+                case = _case(v, c, preset["span_s"], n, stagger, tdma, t, w)
+            runs[v, c, n, t, q, w].append({**case, **held.as_dict()})
     return {
         "cases": [summarise(runs[spec]) for spec in specs],
         "span_s": preset["span_s"],
@@ -486,8 +503,9 @@ def format_report(r: dict) -> str:
             late += f" / {100 * c['late_command_share']:.1f} %"
         if c.get("commanded_vehicle_ticks") == 0:
             late = "no command"
+        clock = c["clock"] + (" ctl" if c.get("agent_wake") == "control" else "")
         lines.append(
-            f"{c['vehicles']:>8}  {c['per_process']:>8}  {c['clock']:<9}  {c.get('topology', 'star'):<5}  "
+            f"{c['vehicles']:>8}  {c['per_process']:>8}  {clock:<9}  {c.get('topology', 'star'):<5}  "
             f"{_wake(c):>4}  "
             f"{_fmt(c['cpu_us_per_vehicle_tick'], '19.0f')}  "
             f"{_fmt(c['world_cpu_us_per_tick'], '13.0f')}  {late:>21}  "

@@ -121,6 +121,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             bp.add_argument("--stagger", action="store_true", default=None,
                             help="stagger the vehicles' controller clocks (swarm.stagger_control): vehicle "
                                  "m controls on ticks m %% period, not all on one tick")  # fmt: skip
+            bp.add_argument("--agent-wake", dest="agent_wake", default=None, metavar="imu|control[,..]",
+                            help="a free-running agent alone in its process wakes at each gyro sample (imu, "
+                                 "the default) or once per control period (control: agent.wake_at_control); "
+                                 "both: each case in each, alternately")  # fmt: skip
             bp.add_argument("--tdma", action="store_true", default=None,
                             help="the tags share one UWB channel (uwb.tdma): each ranges once per TDMA "
                                  "frame, ~238/N times a second for N tags, not 50")  # fmt: skip
@@ -168,6 +172,8 @@ def _swarm(args: argparse.Namespace) -> tuple[dict, str]:
         preset["cpu_latencies"] = bench.parse_cpu_latencies(args.cpu_latency)
     if getattr(args, "per_process", None) is not None:
         preset["per_process"] = bench.parse_per_process(args.per_process)
+    if getattr(args, "agent_wake", None) is not None:
+        preset["agent_wakes"] = bench.parse_agent_wakes(args.agent_wake)
     if getattr(args, "span", None) is not None:
         if not (math.isfinite(args.span) and 1.0 <= args.span <= 3600.0):
             raise ConfigError(f"--span must be a number of seconds in 1..3600, got {args.span}")

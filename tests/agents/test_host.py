@@ -459,3 +459,116 @@ def test_a_free_running_agent_alone_takes_its_range_frame_and_target_estimate_at
             assert early == [("Estimate", 9), ("Uwb", 10), ("Vision", 10)] and sorted(kept) == everything
         assert proc.drops.total == 0
         stop.set()
+
+
+def _simulate_wakes(arrival, n_ticks: int, every: int, phase: int, period: float, margin: float):
+    """Drive a :class:`WakePlanner` against imu arrival times ``arrival[k]`` (monotonic seconds) as the
+    pacer does: wait for its wake, take what has come, poll while it says so. Returns, per control tick, when
+    the wake that took its imu was, and the time of every wake (polls included)."""
+    from agents.host import WakePlanner
+
+    newest_at = lambda now: max((k for k in range(1, n_ticks + 1) if arrival[k] <= now), default=None)  # noqa: E731
+    state = {"newest": None}
+
+    def next_control_tick() -> int:
+        k = 1 if state["newest"] is None else state["newest"] + 1
+        return k + (phase - k) % every
+
+    plan = WakePlanner(period, margin, next_control_tick)
+    now, wakes, took_at = arrival[1] - 0.05, [], {}
+    while state["newest"] is None or state["newest"] < n_ticks - every:
+        now = max(now, plan.next(state["newest"], now, True))
+        polled = 0
+        while True:
+            wakes.append(now)
+            newest = newest_at(now)
+            if newest is not None:
+                for k in range(1 if state["newest"] is None else state["newest"] + 1, newest + 1):
+                    if (k - phase) % every == 0:
+                        took_at[k] = now
+                state["newest"] = newest
+            if plan.took(newest, now, polled):
+                break
+            polled += 1
+            now += plan.poll_s(True)
+        now += 1e-5  # (the round's own time)
+    return took_at, wakes
+
+
+@pytest.mark.parametrize("stall", [False, True])
+def test_a_control_rate_wake_learns_when_the_imu_comes_and_takes_each_control_tick_within_two_margins(stall):
+    """``agent.wake_at_control``: the planner learns the imu's arrival from its wakes. Simulated world:
+    tick k's imu comes at 1.3 ms past its slot, with up to 0.6 ms of jitter; with ``stall``, the world
+    stands still for a second after tick 3 and then catches up at 8 times its pace (some 120 ticks), as a
+    world starting among 30 processes did (the planner polls for its control tick meanwhile). After the
+    first 50 control periods every control tick's imu is taken within two margins of its arrival (a margin
+    past its expected time, plus a poll), at no more than ~4 wakes per period. A planner that learnt only
+    from its control wakes stayed ~17 ticks late for good after such a stall: the first arrival it timed
+    was of a tick still behind the world's schedule, and its fusing wakes, which found everything in,
+    taught it nothing."""
+    period, margin, every, phase, n = 0.01, 0.0005, 10, 3, 2000
+    rng = np.random.default_rng(0)
+    t0 = 1000.0
+    arrival = {k: t0 + k * period + 0.0013 + rng.uniform(0, 0.0006) for k in range(1, n + 1)}
+    if stall:
+        for k in range(4, n + 1):
+            arrival[k] = max(arrival[k], t0 + 3 * period + 1.0 + (k - 4) * period / 8)
+    took_at, wakes = _simulate_wakes(arrival, n, every, phase, period, margin)
+    steady = [k for k in sorted(took_at) if k > 50 * every]
+    assert len(steady) >= 140 and arrival[50 * every] < t0 + 50 * every * period + 0.002  # (caught up)
+    delays = np.array([took_at[k] - arrival[k] for k in steady])
+    assert delays.min() >= 0 and delays.max() <= 2 * margin + 1e-4, delays.max()
+    start = arrival[50 * every]
+    per_period = sum(1 for w in wakes if w > start) / len(steady)
+    assert per_period <= 4.5, per_period
+
+
+def test_a_control_rate_agent_queues_its_imu_too_and_takes_everything_when_drained():
+    """With ``agent.wake_at_control`` a free-running vehicle alone in its process (a real Zenoh session) does
+    not take even its imu as it comes: its four inputs wait in Zenoh's queues (the imu's first) until the
+    pacer drains them, and then the imu comes before the range of its tick. The next control tick is the
+    first of the vehicle's after the newest imu taken."""
+    import time
+
+    from swarm.transport.messages import Imu, Uwb, encode
+    from swarm.transport.session import ZenohArgs, open_session
+    from tests.transport.procs import free_port, loopback, wait_until
+
+    sc = load_scenario("docking", {"agent.wake_at_control": True})
+    keys, ep = Keys("ctlwake"), loopback(free_port())
+    stop = threading.Event()
+    with (
+        open_session(ZenohArgs(mode="peer", listen=(ep,))) as mine,
+        open_session(ZenohArgs(mode="peer", connect=(ep,))) as world,
+    ):
+        proc = AgentProcess(sc, "chaser", 0, "mdp", mine, keys, ClockSpec.parse("realtime"), stop, hosted=1,
+                            cond=threading.Condition(), ready=set())  # fmt: skip
+        assert proc.wake_at_control and proc.next_control_tick() == 1 + (proc.control_phase - 1) % 10
+        proc.open()
+        assert len(proc._queued) == 4  # imu, range, frame, target estimate
+        kept: list[tuple[str, int]] = []
+        add = proc.assembler.add
+        proc.assembler.add = lambda msg, source=None: (
+            kept.append((type(msg).__name__, msg.tick)) or add(msg, source)
+        )
+        uwb = encode(Uwb(tick=10, t_s=0.1, anchor_id=1, range_m=1.0))
+        imu = encode(Imu(tick=10, t_s=0.1, dt_s=0.01, gyro_body=[0.0] * 3))
+        for key, payload in ((keys.uwb("chaser"), uwb), (keys.imu("chaser"), imu)):
+            pub = world.declare_publisher(key)
+            wait_until(lambda pub=pub: pub.matching_status.matching, 5.0, f"the agent's subscriber on {key}")
+            pub.put(payload)
+        time.sleep(0.3)
+        assert kept == [] and proc.newest_imu is None  # nothing taken as it came
+        proc.drain_inputs()
+        assert kept == [("Imu", 10), ("Uwb", 10)] and proc.newest_imu == 10
+        assert proc.next_control_tick() == 11 + (proc.control_phase - 11) % 10
+        stop.set()
+
+
+def test_lockstep_and_agent_hosts_ignore_the_control_rate_wake():
+    sc = load_scenario("docking", {"agent.wake_at_control": True})
+    for clock, hosted in (("lockstep", 1), ("realtime", 2)):
+        cond = threading.Condition()
+        proc = AgentProcess(sc, "chaser", 0, "mdp", None, Keys("x"), ClockSpec.parse(clock),
+                            threading.Event(), hosted=hosted, cond=cond, ready=set())  # fmt: skip
+        assert not proc.wake_at_control, (clock, hosted)
