@@ -79,6 +79,23 @@ class _Stamp:
         return self.ns
 
 
+def test_a_free_running_pair_that_wakes_at_its_control_rate_commands_and_batches_its_estimates(tmp_path):
+    """``--agent-wake control`` (``agent.wake_at_control``) on a launched free-running pair, a process each:
+    the agents command (not every tick late) and publish every estimate, a control period's at a time, so
+    the sensor-to-estimate latency's median is tens of milliseconds (half a 100 ms period on average), where
+    an agent woken by each imu publishes in about one (``BENCHMARKS.md``)."""
+    out = tmp_path / "ctl.json"
+    args = [sys.executable, "-m", "swarm.cli.main", "bench", "swarm", "--vehicles", "2", "--clock",
+            "realtime", "--span", "3", "--agent-wake", "control", "--json", str(out)]  # fmt: skip
+    r = subprocess.run(args, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    (case,) = json.loads(out.read_text())["cases"]
+    assert case["agent_wake"] == "control" and case["ticks"] == 300
+    assert case["commanded_vehicle_ticks"] > 0 and case["late_tick_share"] < 0.5, case
+    assert case["samples"] >= 300, case  # chaser's estimates (and a fifth of the target's), every one
+    assert case["latency_p50_us"] > 5000, case  # batched per control period (an imu wake: ~1 ms)
+
+
 def test_the_probe_measures_from_the_publishers_stamps_whatever_order_it_takes_the_samples(monkeypatch):
     """The latency is the estimate's publication minus its imu's, to the nanosecond, whether the probe
     takes the imu first or the estimate first (its callbacks run on threads of their own); delivered is
@@ -164,8 +181,9 @@ def test_each_case_is_run_alternately_with_each_cpu_latency_and_the_report_says_
 
         return cm()
 
-    def fake_case(v, c, span, n, stagger, tdma, t):
+    def fake_case(v, c, span, n, stagger, tdma, t, w):
         assert held_during and held_during[-1] in (None, 0, 5)  # inside the request's block
+        assert w == "imu"  # (no --agent-wake: the default)
         return {"vehicles": v, "per_process": n, "clock": c, "topology": "mesh",
                 "cpu_us_per_vehicle_tick": 1.0, "world_cpu_us_per_tick": 1.0, "late_tick_share": 0.0,
                 "realtime_factor": 1.0, "latency_p50_us": 1.0, "latency_p99_us": 2.0}  # fmt: skip
@@ -193,13 +211,37 @@ def test_each_case_is_run_alternately_with_each_cpu_latency_and_the_report_says_
      (["--vehicles-per-process", "0"], "--vehicles-per-process must be integers in 1..64"),
      (["--repeat", "0"], "--repeat must be an integer in 1..20, got 0"),
      (["--cpu-latency", "0,0"], "--cpu-latency must be off or microseconds in 0..2000000000, or several"),
-     (["--cpu-latency", "fast"], "got 'fast'")],
+     (["--cpu-latency", "fast"], "got 'fast'"),
+     (["--agent-wake", "imu,sometimes"], "--agent-wake must be imu, control or both (comma-separated)")],
 )  # fmt: skip
 def test_bad_bench_swarm_flags_give_one_clear_error(flags, expect):
     r = subprocess.run([sys.executable, "-m", "swarm.cli.main", "bench", "swarm", *flags],
                        capture_output=True, text=True, timeout=60)  # fmt: skip
     assert r.returncode == 2, r.stderr
     assert expect in r.stderr and "Traceback" not in r.stderr
+
+
+def test_the_control_rate_wake_is_a_case_of_its_own_for_free_running_processes_of_one_only(monkeypatch):
+    """``--agent-wake imu,control``: each free-running case with a process per vehicle runs in both, round by
+    round; lockstep and agent hosts, which ignore ``agent.wake_at_control``, run once."""
+    from swarm.bench import swarm as bench
+
+    ran: list = []
+
+    def fake_case(v, c, span, n, stagger, tdma, t, w):
+        ran.append((c, n, w))
+        return {"vehicles": v, "per_process": n, "clock": c, "topology": "star", "agent_wake": w,
+                "cpu_us_per_vehicle_tick": 1.0, "world_cpu_us_per_tick": 1.0, "late_tick_share": 0.0,
+                "realtime_factor": 1.0, "latency_p50_us": 1.0, "latency_p99_us": 2.0}  # fmt: skip
+
+    monkeypatch.setattr(bench, "_case", fake_case)
+    wakes = bench.parse_agent_wakes("imu,control")
+    rec = bench.run({"vehicles": (4,), "clocks": ("realtime", "lockstep"), "span_s": 1.0,
+                     "per_process": (1, 2), "agent_wakes": wakes})  # fmt: skip
+    assert ran == [("realtime", 1, "imu"), ("realtime", 1, "control"), ("realtime", 2, "imu"),
+                   ("lockstep", 1, "imu"), ("lockstep", 2, "imu")]  # fmt: skip
+    rows = bench.format_report(rec).splitlines()[2:]
+    assert [r.split()[2:4] for r in rows][:2] == [["realtime", "star"], ["realtime", "ctl"]]
 
 
 def test_repeated_runs_of_a_case_are_summarised_by_their_median_and_spread():
