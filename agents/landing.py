@@ -42,7 +42,7 @@ DESCRIPTION = "One landing UAV's on-board software: IMU-driven filter, landing g
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from swarm.transport.process import add_process_arguments
+    from swarm.transport.process import add_checkpoint_arguments, add_process_arguments
 
     add_process_arguments(p)
     p.add_argument(
@@ -52,14 +52,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "process an agent host: their agents on one Zenoh session, each on its own thread, keys and "
         "liveliness per UAV",
     )
-    p.add_argument("--checkpoint-dir", default=None, metavar="DIR",
-                   help="write each UAV's agent state to DIR/agent-<id>.ckpt after every tick (a private "
-                        "directory: the file is a pickle), so that a restart with --resume goes on "
-                        "warm")  # fmt: skip
-    p.add_argument("--resume", action="store_true",
-                   help="restart warm from the checkpoints in --checkpoint-dir (a UAV without one starts "
-                        "from the beginning); a torn or foreign checkpoint is an error naming the file "
-                        "(exit status 3)")  # fmt: skip
+    add_checkpoint_arguments(
+        p,
+        "each UAV's agent state to DIR/agent-<id>.ckpt after every tick, so that a restart with --resume "
+        "goes on warm",
+        "restart warm from the checkpoints in --checkpoint-dir (a UAV without one starts from the beginning)",
+    )
 
 
 def run(args: argparse.Namespace, stop: threading.Event) -> int:

@@ -121,3 +121,31 @@ def test_a_snapshot_of_another_world_is_refused():
     snap["state"]["layout"] = "other"
     with pytest.raises(SnapshotError, match="layout"):
         LandingAgent(four, SEED, 0, four.policy).restore(snap)
+
+
+def test_a_landing_world_refuses_to_resume_from_a_missing_or_foreign_checkpoint(tmp_path):
+    """``python -m swarm.world.landing --resume`` reads its checkpoint before it joins a swarm: none there,
+    or one of another run (here another seed), is an error naming the file, exit status 3 (the launcher
+    then gives up rather than resume from it); nothing is resumed."""
+    import subprocess
+    import sys
+
+    from swarm.transport.checkpoint import CheckpointFile, checkpoint_path
+    from swarm.world.landing import _run_id
+
+    def resume(seed: int) -> subprocess.CompletedProcess:
+        args = [sys.executable, "-m", "swarm.world.landing", "landing-swarm", "--seed", str(seed),
+                "--checkpoint-dir", str(tmp_path), "--resume", "--connect", "tcp/127.0.0.1:9"]  # fmt: skip
+        return subprocess.run(args, capture_output=True, text=True, timeout=120)
+
+    r = resume(0)
+    assert r.returncode == 3 and f"checkpoint {checkpoint_path(tmp_path)}: no such file" in r.stderr, r.stderr
+    sc = load_landing("landing-swarm")
+    ids = [u.id for u in sc.uavs()]
+    f = CheckpointFile(checkpoint_path(tmp_path))
+    f.write({"run": _run_id(sc, 7, sc.policy, ids, "lockstep"), "tick": 5,
+             "world": LandingWorld(sc, 7).snapshot()})  # fmt: skip
+    f.close()
+    r = resume(0)
+    assert r.returncode == 3 and "of another run: {'seed': (7, 0)}" in r.stderr, r.stderr
+    assert "resumed" not in r.stderr and "Traceback" not in r.stderr

@@ -144,6 +144,17 @@ def add_process_arguments(p: argparse.ArgumentParser, *, clock: bool = True) -> 
     add_zenoh_arguments(p)
 
 
+def add_checkpoint_arguments(p: argparse.ArgumentParser, writes: str, resumes: str) -> None:
+    """``--checkpoint-dir DIR`` and ``--resume`` of a process that a restart resumes
+    (:mod:`swarm.transport.checkpoint`): ``writes`` says what it writes there and when, ``resumes`` what
+    ``--resume`` does; a torn or foreign checkpoint is an error naming the file, exit status 3."""
+    p.add_argument("--checkpoint-dir", default=None, metavar="DIR",
+                   help=f"write {writes} (a private directory: the file is a pickle)")  # fmt: skip
+    p.add_argument("--resume", action="store_true",
+                   help=f"{resumes}; a torn or foreign checkpoint is an error naming the file (exit status "
+                        "3)")  # fmt: skip
+
+
 def scenario_from(args: argparse.Namespace):
     """The scenario the flags name, with ``--set`` overrides and ``--agents`` copies."""
     return load_from_args(args).with_pairs(args.agents)

@@ -55,7 +55,7 @@ DESCRIPTION = "The landing world: quadrotor truth and sensors of every UAV, lock
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from swarm.args import positive_float
-    from swarm.transport.process import add_process_arguments, clock_arg
+    from swarm.transport.process import add_checkpoint_arguments, add_process_arguments, clock_arg
 
     add_process_arguments(p)
     p.add_argument("--step-timeout", type=positive_float("--step-timeout"), default=30.0, metavar="S",
@@ -65,14 +65,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pace", type=clock_arg, default=None, metavar="CLOCK",
                    help="a lockstep world paced to this clock (realtime or scaled:N): every command waited "
                         "for, never ahead of the wall clock")  # fmt: skip
-    p.add_argument("--checkpoint-dir", default=None, metavar="DIR",
-                   help="write the world's complete state to DIR/world.ckpt at every tick (a private "
-                        "directory: the file is a pickle), so that a restart with --resume continues the "
-                        "run")  # fmt: skip
-    p.add_argument("--resume", action="store_true",
-                   help="continue the run from the checkpoint in --checkpoint-dir (announced as "
-                        "world_resumed); a missing, torn or foreign checkpoint is an error naming the file "
-                        "(exit status 3)")  # fmt: skip
+    add_checkpoint_arguments(
+        p,
+        "the world's complete state to DIR/world.ckpt at every tick, so that a restart with --resume "
+        "continues the run",
+        "continue the run from the checkpoint in --checkpoint-dir (announced as "
+        "world_resumed); a missing checkpoint is an error too",
+    )
 
 
 def run(args: argparse.Namespace, stop: threading.Event) -> int:
