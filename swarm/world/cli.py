@@ -16,7 +16,7 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from swarm.args import add_world_timeouts
-    from swarm.transport.process import add_process_arguments, clock_arg
+    from swarm.transport.process import add_checkpoint_arguments, add_process_arguments, clock_arg
 
     add_process_arguments(p)
     add_world_timeouts(p)
@@ -36,16 +36,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--clock-every", type=int, default=10, metavar="TICKS",
         help="publish world/clock every this many ticks (default 10)",
     )  # fmt: skip
-    p.add_argument(
-        "--checkpoint-dir", default=None, metavar="DIR",
-        help="write the world's complete state to DIR/world.ckpt at every tick (a private directory: the "
-        "file is a pickle), so that a restart with --resume continues the run",
-    )  # fmt: skip
-    p.add_argument(
-        "--resume", action="store_true",
-        help="continue the run from the checkpoint in --checkpoint-dir (announced as world_resumed); a "
-        "missing, torn or foreign checkpoint is an error naming the file (exit status 3)",
-    )  # fmt: skip
+    add_checkpoint_arguments(
+        p,
+        "the world's complete state to DIR/world.ckpt at every tick, so that a restart with --resume "
+        "continues the run",
+        "continue the run from the checkpoint in --checkpoint-dir (announced as "
+        "world_resumed); a missing checkpoint is an error too",
+    )
 
 
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
