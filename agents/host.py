@@ -234,7 +234,7 @@ class AgentHost:
         plan = WakePlanner(p.dt / p.clock.factor, p.sc.agent.wake_margin_s, p.next_control_tick)
         try:
             while self._live and not self.stop.is_set() and self._failure is None:
-                wake = plan.next(p.newest_imu, time.monotonic(), p.ticking())
+                wake = plan.next(p.newest_imu, time.monotonic())
                 now = time.monotonic()
                 if wake > now:
                     self.stop.wait(min(wake - now, IDLE_S))
@@ -248,7 +248,7 @@ class AgentHost:
                     if plan.took(p.newest_imu, now, polled) or self.stop.is_set() or not self._live:
                         break
                     polled += 1
-                    self.stop.wait(plan.poll_s(p.ticking()))  # the control tick's imu not in yet
+                    self.stop.wait(plan.poll_s())  # the control tick's imu not in yet
         except BaseException as exc:  # kept for the loop's thread to raise (the host exits 1)
             self._failure = exc
             self._kick.set()
@@ -355,8 +355,9 @@ class WakePlanner:
     period``. A control wake that finds its imu not in yet polls for it every ``margin`` and sets
     ``offset`` from when it came; one that finds it in already moves ``offset`` a margin earlier, so that the
     wakes keep probing for the arrival; and every wake bounds it by the newest imu it took, which came
-    before it (a wake ticks late learns it at once). Before the run starts it looks every :data:`IDLE_S` /
-    10, then every margin until the first imu, whose arrival is the first guess. Times are
+    before it (a wake ticks late learns it at once). Until the first imu it looks every :data:`IDLE_S` /
+    10; that imu's arrival is the first guess (a look every margin there, 32 processes polling at 2 kHz at
+    a run's start, made the world's first ticks later, and more of them late). Times are
     ``time.monotonic()`` [s]; ``next_control_tick(newest)`` is the vehicle's first control tick after the
     newest imu taken (:meth:`agents.process.AgentProcess.next_control_tick`)."""
 
@@ -367,13 +368,13 @@ class WakePlanner:
         self.fused_for: int | None = None  # the control tick whose period's fusing wake was had
         self.due = self.target = 0
 
-    def next(self, newest: int | None, now: float, started: bool) -> float:
+    def next(self, newest: int | None, now: float) -> float:
         """When the next wake is (the tick it is for: :attr:`target`)."""
         self.due = due = self._next_control()
         fusing = newest is not None and newest < due - 1 and self.fused_for != due
         self.target = due - 1 if fusing else due
         if self.offset is None:
-            return now + self.poll_s(started)
+            return now + self.poll_s()
         return self.offset + self.target * self.period + self.margin
 
     def took(self, newest: int | None, now: float, polled: int) -> bool:
@@ -395,6 +396,6 @@ class WakePlanner:
                 self.offset -= self.margin
         return got or self.target < self.due
 
-    def poll_s(self, started: bool) -> float:
+    def poll_s(self) -> float:
         """How long to wait before looking again for a sample not in yet."""
-        return self.margin if self.offset is not None or started else IDLE_S / 10
+        return self.margin if self.offset is not None else IDLE_S / 10

@@ -477,7 +477,7 @@ def _simulate_wakes(arrival, n_ticks: int, every: int, phase: int, period: float
     plan = WakePlanner(period, margin, next_control_tick)
     now, wakes, took_at = arrival[1] - 0.05, [], {}
     while state["newest"] is None or state["newest"] < n_ticks - every:
-        now = max(now, plan.next(state["newest"], now, True))
+        now = max(now, plan.next(state["newest"], now))
         polled = 0
         while True:
             wakes.append(now)
@@ -490,7 +490,7 @@ def _simulate_wakes(arrival, n_ticks: int, every: int, phase: int, period: float
             if plan.took(newest, now, polled):
                 break
             polled += 1
-            now += plan.poll_s(True)
+            now += plan.poll_s()
         now += 1e-5  # (the round's own time)
     return took_at, wakes
 
