@@ -101,13 +101,10 @@ class Resume:
     (None: not resuming, or nothing written yet), and what it must share with this run."""
 
     def __init__(self, args: argparse.Namespace, sc, uav, policy: str) -> None:
-        import hashlib
-
         from swarm.transport import checkpoint
 
-        digest = hashlib.sha256(repr(sc).encode()).hexdigest()[:16]  # the scenario, with its overrides
-        self.run_id = {"scenario": sc.name, "fingerprint": digest, "seed": args.seed, "policy": policy,
-                       "uav": uav.id, "clock": str(args.clock)}  # fmt: skip
+        self.run_id = {"scenario": sc.name, "fingerprint": checkpoint.fingerprint(sc), "seed": args.seed,
+                       "policy": policy, "uav": uav.id, "clock": str(args.clock)}  # fmt: skip
         self.path = None
         self.state: dict | None = None
         if args.checkpoint_dir is None:
@@ -115,8 +112,7 @@ class Resume:
         self.path = checkpoint.checkpoint_path(args.checkpoint_dir, f"agent-{uav.id}.ckpt")
         if args.resume and self.path.exists():
             st = checkpoint.load(self.path)
-            if st.get("run") != self.run_id:
-                raise checkpoint.CheckpointError(f"checkpoint {self.path}: of another run: {st.get('run')}")
+            checkpoint.check_run(f"checkpoint {self.path}", st.get("run"), self.run_id, "agent")
             self.state = st
 
     def file(self):

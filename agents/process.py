@@ -188,8 +188,7 @@ class AgentProcess:
 
     def _on_sensor(self, key: str, msg) -> None:
         if self._queued and isinstance(msg, Imu):
-            for sub in self._queued:  # what came since the last imu: fused in the tick this imu makes ready
-                sub.drain()
+            self.drain_inputs()  # what came since the last imu: fused in the tick this imu makes ready
         if self.assembler.add(msg, self.id) and self.on_news is not None:
             self.on_news()
 
@@ -201,8 +200,8 @@ class AgentProcess:
         self.assembler.add(msg, self.target_id if isinstance(msg, Estimate) else self.id)
 
     def drain_inputs(self) -> None:
-        """``wake_at_control``: take everything the queues hold into the tick assembler (the imu first), for
-        the round that follows."""
+        """Take everything the queues hold into the tick assembler (with ``wake_at_control``, the imu first),
+        for the tick or the round that follows."""
         for sub in self._queued:
             sub.drain()
 
@@ -477,10 +476,8 @@ class AgentProcess:
             else:
                 subscribe_decoded(self.session, key, cls, handler, self.drops, direct=d)
 
-        if self.wake_at_control:  # (first: drained first, so that a tick's range finds its imu taken)
-            self._queued.append(
-                QueuedSubscriber(self.session, k.imu(self.id), Imu, self._on_queued, self.drops)
-            )
+        if self.wake_at_control:  # queued too (first: drained first, so that a tick's range finds its imu)
+            subscribe(k.imu(self.id), Imu, self._on_sensor)
         else:
             subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops, direct=d)
         subscribe(k.uwb(self.id), Uwb, self._on_sensor)

@@ -147,5 +147,5 @@ def test_a_landing_world_refuses_to_resume_from_a_missing_or_foreign_checkpoint(
              "world": LandingWorld(sc, 7).snapshot()})  # fmt: skip
     f.close()
     r = resume(0)
-    assert r.returncode == 3 and "of another run: {'seed': (7, 0)}" in r.stderr, r.stderr
+    assert r.returncode == 3 and "of another run: seed 7 (this world: 0)" in r.stderr, r.stderr
     assert "resumed" not in r.stderr and "Traceback" not in r.stderr

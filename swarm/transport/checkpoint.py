@@ -26,6 +26,7 @@ before anything is unpickled.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import pickle
 import struct
@@ -58,6 +59,21 @@ def checkpoint_path(directory: str | os.PathLike, name: str = FILE_NAME) -> Path
     """The checkpoint file of a world whose ``--checkpoint-dir`` is ``directory`` (``name``: another
     process's, such as a landing agent's ``agent-<id>.ckpt``, in the same format)."""
     return Path(directory) / name
+
+
+def fingerprint(scenario) -> str:
+    """A scenario's fingerprint, overrides included: a checkpoint's run says which scenario wrote it."""
+    return hashlib.sha256(repr(scenario).encode()).hexdigest()[:16]
+
+
+def check_run(where: str, run: object, mine: dict, who: str = "world") -> None:
+    """:class:`CheckpointError` (``where``: the file) if a checkpoint's ``run`` is not ``mine`` (what this
+    process runs: scenario, fingerprint, seed, ...), naming each field that differs and both values."""
+    theirs = run if isinstance(run, dict) else {}
+    if theirs != mine:
+        diff = ", ".join(f"{k} {theirs.get(k)!r} (this {who}: {mine[k]!r})" for k in mine
+                         if theirs.get(k) != mine[k])  # fmt: skip
+        raise CheckpointError(f"{where}: of another run: {diff}")
 
 
 def sample_entry(tick: int, data: bytes) -> tuple[int, bytes, int]:

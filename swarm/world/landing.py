@@ -41,7 +41,6 @@ world ends the run (its UAV would fly on without a controller).
 from __future__ import annotations
 
 import argparse
-import hashlib
 import logging
 import sys
 import threading
@@ -86,8 +85,9 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
 
 def _run_id(sc, seed: int, policy: str, ids: list[str], clock: str) -> dict:
     """What a checkpoint must share with this world to be resumed by it."""
-    digest = hashlib.sha256(repr(sc).encode()).hexdigest()[:16]  # the scenario, with its overrides
-    return {"scenario": sc.name, "fingerprint": digest, "seed": seed, "policy": policy, "uavs": ids,
+    from swarm.transport.checkpoint import fingerprint
+
+    return {"scenario": sc.name, "fingerprint": fingerprint(sc), "seed": seed, "policy": policy, "uavs": ids,
             "clock": clock}  # fmt: skip
 
 
@@ -100,10 +100,7 @@ def _load_resume(args, world, run_id: dict) -> dict:
 
     path = checkpoint.checkpoint_path(args.checkpoint_dir)
     st = checkpoint.load(path)
-    if st.get("run") != run_id:
-        theirs = st.get("run") if isinstance(st.get("run"), dict) else {}
-        diff = {k: (theirs.get(k), v) for k, v in run_id.items() if theirs.get(k) != v}
-        raise CheckpointError(f"checkpoint {path}: of another run: {diff}")
+    checkpoint.check_run(f"checkpoint {path}", st.get("run"), run_id)
     try:
         world.restore(st["world"])
     except (SnapshotError, KeyError, TypeError, ValueError) as exc:
@@ -254,7 +251,8 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         with cond:
             now["running"] = True
         for k in range(k0, n_ticks + 1):
-            if resume is None or k > k0:
+            stepped = resume is None or k > k0  # (a resumed world's first tick is the checkpoint's, stepped)
+            if stepped:
                 apply_faults(k)
                 inputs = world.step(k)
                 if not inputs:
@@ -266,7 +264,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                 now["k"] = k
                 back.clear()
             put(tick_wire)
-            if ckpt is not None and (resume is None or k > k0):
+            if ckpt is not None and stepped:
                 # after the samples went out, while the agents work on them (off the tick's critical path):
                 # a world killed before this write resumes at k - 1, whose commands and tick k's the agents
                 # send again (module docstring)

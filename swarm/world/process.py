@@ -32,7 +32,6 @@ on ``world_resumed``). A lockstep run with a world killed and resumed is the uni
 
 from __future__ import annotations
 
-import hashlib
 import heapq
 import itertools
 import logging
@@ -195,8 +194,8 @@ class WorldProcess:
     def _run_id(self) -> dict:
         """What a checkpoint must share with this world to be resumed by it."""
         if self._run_id_cache is None:
-            digest = hashlib.sha256(repr(self.sc).encode()).hexdigest()[:16]  # the scenario, with overrides
-            self._run_id_cache = {"scenario": self.sc.name, "fingerprint": digest, "seed": self.seed,
+            self._run_id_cache = {"scenario": self.sc.name, "fingerprint": checkpoint.fingerprint(self.sc),
+                                  "seed": self.seed,
                                   "vehicles": self.ids}  # fmt: skip
         return self._run_id_cache
 
@@ -254,11 +253,7 @@ class WorldProcess:
     def _restore(self, st: dict) -> None:
         where = f"checkpoint {self.ckpt_path}" if self.ckpt_path is not None else "checkpoint"
         try:
-            run, mine = st["run"], self._run_id()
-            if run != mine:
-                diff = ", ".join(f"{k} {run.get(k)!r} (this world: {mine[k]!r})" for k in mine
-                                 if run.get(k) != mine[k])  # fmt: skip
-                raise CheckpointError(f"{where}: of another run: {diff}")
+            checkpoint.check_run(where, st["run"], self._run_id())
             self.world.restore(st["world"])
             self.modes.update(st["modes"])
             self.referee.restore(st["referee"])
