@@ -2,7 +2,8 @@
 
 A thin adapter around the agent step, :class:`swarm.step.agent.VehicleAgent`, the object the in-process
 simulation steps.
-It subscribes only to its own sensors (``imu``, ``uwb``, ``vision`` for a chaser), its target's
+It subscribes only to its own sensors (``imu``, ``uwb``, ``vision`` for a chaser, and in lockstep their
+``bundle`` of several ticks), its target's
 ``estimate`` (a chaser), ``world/clock`` and liveliness; it publishes ``estimate`` (every tick; a target's
 on the ticks before its chasers read it), ``guidance`` and ``command`` (every control tick: the world holds
 the command in between) and ``event`` (mode transitions; a ``summary`` when the run ends).
@@ -63,6 +64,7 @@ from swarm.transport.docking_wire import (
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import AgentTickAssembler, TickInputs
 from swarm.transport.messages import (
+    Bundle,
     Clock,
     DropCounter,
     Estimate,
@@ -70,6 +72,7 @@ from swarm.transport.messages import (
     Imu,
     Uwb,
     Vision,
+    bundle_messages,
     encode,
     estimate_and_payload,
 )
@@ -87,6 +90,10 @@ END_DRAIN_S = 5.0
 """After the world's stopped clock at tick ``k``, a lockstep agent processes the ticks up to ``k`` (their
 samples may come after the stopped clock, on other subscribers' threads, or all at once from a recording),
 and gives up on them after this long without a complete tick [s]."""
+
+
+_SENSOR_TYPES = ("Imu", "Uwb", "Vision")
+"""The entries of a bundle an agent takes: its own sensors' samples."""
 
 
 def _target(e: Estimate) -> TargetEstimate:
@@ -191,6 +198,11 @@ class AgentProcess:
             self.drain_inputs()  # what came since the last imu: fused in the tick this imu makes ready
         if self.assembler.add(msg, self.id) and self.on_news is not None:
             self.on_news()
+
+    def _on_bundle(self, key: str, msg: Bundle) -> None:
+        """A bundle's samples (docs/protocol.md, "Bundles"), each as its own key would have brought it."""
+        for sample in bundle_messages(msg, key, self.drops, _SENSOR_TYPES):
+            self._on_sensor(key, sample)
 
     def _on_queued(self, key: str, msg) -> None:
         """A range, frame or target estimate taken from its queue at an imu (:meth:`open`); with
@@ -481,6 +493,8 @@ class AgentProcess:
         else:
             subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops, direct=d)
         subscribe(k.uwb(self.id), Uwb, self._on_sensor)
+        if self.clock.lockstep:  # a lockstep world's (and mothership's) ticks in one message each
+            subscribe_decoded(self.session, k.bundle(self.id), Bundle, self._on_bundle, self.drops, direct=d)
         if self.chaser:
             subscribe(k.vision(self.id), Vision, self._on_sensor)
             if not self.target_local:  # else the target's agent in this host hands its estimates over

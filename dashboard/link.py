@@ -28,6 +28,7 @@ from dashboard.state import SwarmState
 from swarm.transport.keys import Keys
 from swarm.transport.messages import (
     Anchors,
+    Bundle,
     Clock,
     DropCounter,
     Estimate,
@@ -40,6 +41,7 @@ from swarm.transport.messages import (
     Vision,
     VisionBatch,
     batch_rows,
+    bundle_messages,
     encode,
     safe_decode,
 )
@@ -102,6 +104,9 @@ class SwarmLink:
         # dashboard met the mothership's periodic anchors there: AttributeError in _on_anchors, logged)
         self._have_anchors = threading.Event()
         self._rings: list[tuple[str, str, type[Message], zenoh.Subscriber]] = []
+        # a lockstep world sends a chaser's frames in the bundles of its ticks (docs/protocol.md, "Bundles"):
+        # the newest bundle's newest frame is the newest frame
+        self._bundles: list[tuple[str, zenoh.Subscriber]] = []
         self._clock = session.declare_subscriber(keys.world_clock(), zenoh.handlers.RingChannel(1))
         # a swarm of agent hosts sends the chasers' frames of a tick in world/vision batches (one, or a few
         # for a large swarm): the newest few are kept, so a tick's every batch is there when the frame looks
@@ -129,6 +134,10 @@ class SwarmLink:
                 key = getattr(self.keys, kind)(agent_id)
                 sub = self.session.declare_subscriber(key, zenoh.handlers.RingChannel(1))
                 self._rings.append((agent_id, kind, cls, sub))
+            ring = zenoh.handlers.RingChannel(1)
+            self._bundles.append(
+                (agent_id, self.session.declare_subscriber(self.keys.bundle(agent_id), ring))
+            )
             _LOG.debug("subscribed to vehicle %s", agent_id)
 
     def poll(self) -> int:
@@ -154,6 +163,16 @@ class SwarmLink:
             for agent_id, frame in [] if batch is None else batch_rows(batch, key, self.drops):
                 n += 1
                 self.state.on_message("vision", agent_id, frame)
+        for agent_id, sub in self._bundles:
+            sample = sub.try_recv()
+            if sample is None or sample.kind != zenoh.SampleKind.PUT:
+                continue
+            key = str(sample.key_expr)
+            bundle = safe_decode(sample.payload, Bundle, key, self.drops)
+            frames = [] if bundle is None else bundle_messages(bundle, key, self.drops, ("Vision",))
+            if frames:
+                n += 1
+                self.state.on_message("vision", agent_id, frames[-1])
         for agent_id, kind, cls, sub in self._rings:
             sample = sub.try_recv()
             if sample is None or sample.kind != zenoh.SampleKind.PUT:

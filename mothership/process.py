@@ -8,7 +8,9 @@
   a lockstep agent knows not to wait; on a TDMA channel (``uwb.tdma``) only for the tags whose slot came in
   that tick (an idle tag's agent expects none: :func:`swarm.step.radio.exchange_ticks`). It takes the
   truths of a tick as one ``TruthBatch`` on ``world/truth``; for agent hosts (``--batch``) it sends a
-  slot's ranges as one ``UwbBatch`` on ``mothership/uwb``.
+  slot's ranges as one ``UwbBatch`` on ``mothership/uwb``. A lockstep world's truths of several ticks
+  come as one ``Bundle`` on ``world/bundle``; the ranges of its slots then leave as one ``Bundle`` per
+  vehicle on ``agent/<id>/bundle``.
   Slots are processed in tick order: the radios' random streams are consumed exactly as in the in-process
   simulation (same seed, same ranges). The truths of a slot already served (a resumed world publishes the
   ticks some process may lack again) are ignored, counted in ``served_again``: a slot is served once.
@@ -30,7 +32,17 @@ import zenoh
 from swarm.step.radio import UwbNetwork
 from swarm.transport.docking_wire import uwb_slot, uwb_slot_batch
 from swarm.transport.keys import Keys
-from swarm.transport.messages import Anchors, Clock, DropCounter, Truth, TruthBatch, encode
+from swarm.transport.messages import (
+    Anchors,
+    Bundle,
+    Clock,
+    DropCounter,
+    Truth,
+    TruthBatch,
+    bundle_messages,
+    encode,
+    pack_bundle,
+)
 from swarm.transport.process import PROCESS_NOISE_BLOCK, declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
 
@@ -74,7 +86,7 @@ class MothershipProcess:
         self.served_again = 0  # truth batches of slots already served (a resumed world's): ignored
         self._world_stopped = False  # the world's last Clock said "stopped": its run is over
 
-    def _on_truth_batch(self, key: str, msg: TruthBatch) -> None:
+    def _on_truth_batch(self, key: str, msg: TruthBatch, out: dict | None = None) -> None:
         """A tick's truths of every vehicle (``world/truth``): each vehicle's, as its own key would have
         brought it (a vehicle not of this scenario counted and dropped)."""
 
@@ -85,11 +97,23 @@ class MothershipProcess:
                 else:
                     self.drops.drop(key, f"truth: {vid!r} is not a vehicle of this scenario")
 
-        self._serve(msg.tick, rows())
+        self._serve(msg.tick, rows(), out)
 
-    def _serve(self, tick: int, truths) -> None:
+    def _on_bundle(self, key: str, msg: Bundle) -> None:
+        """A lockstep world's truth batches of several ticks (``world/bundle``): each served as a
+        ``world/truth`` batch, and the ranges of its slots sent as one ``agent/<id>/bundle`` per vehicle
+        (docs/protocol.md, "Bundles")."""
+        out: dict[str, list[tuple[str, bytes, int]]] = {}
+        for batch in bundle_messages(msg, key, self.drops, ("TruthBatch",)):
+            self._on_truth_batch(key, batch, out)  # type: ignore[arg-type]
+        for vid, entries in out.items():
+            for payload in pack_bundle(entries):
+                self.pub_bundle[vid].put(payload)
+
+    def _serve(self, tick: int, truths, out: dict | None = None) -> None:
         """Tick ``tick``'s ``(vehicle, truth)`` pairs (an iterable, taken only on a UWB slot tick) into the
-        slots (:meth:`_take`), under the lock; a failure is kept for :meth:`run` to raise."""
+        slots (:meth:`_take`), under the lock; a failure is kept for :meth:`run` to raise. ``out``: the
+        ranges go there, per vehicle, as bundle entries, instead of out at once."""
         if tick % self.every or tick == 0 or self._failure is not None:
             return
         try:
@@ -101,12 +125,12 @@ class MothershipProcess:
                     _LOG.debug("truths of tick %d: its UWB slot was already served", tick)
                     return
                 for vid, truth in truths:
-                    self._take(vid, truth)
+                    self._take(vid, truth, out)
         except Exception as exc:  # a bug in the radio step: the process fails, its supervisor restarts it
             _LOG.exception("UWB slot failed")
             self._failure = exc
 
-    def _take(self, vid: str, msg: Truth) -> None:
+    def _take(self, vid: str, msg: Truth, out: dict | None = None) -> None:
         """One slot tick's truth, on the subscriber's thread (a hand-off per truth to the main thread cost
         more than the slot itself, and sat on the lockstep's path); serves every slot it completes."""
         if self._next_slot is None:
@@ -118,7 +142,7 @@ class MothershipProcess:
         slot[vid] = msg
         # slots complete in tick order (the world steps in order); serve every complete one
         while len(self._pending.get(self._next_slot, ())) == len(self.ids):
-            self._slot(self._next_slot, self._pending.pop(self._next_slot))
+            self._slot(self._next_slot, self._pending.pop(self._next_slot), out)
             self._next_slot += self.every
         if len(self._pending) > 1000:  # a vehicle's truth never came: skip its slot, say so
             oldest = min(self._pending)
@@ -148,7 +172,7 @@ class MothershipProcess:
             else:
                 _LOG.warning("world %s lost; no truth, so no ranges, until it is back", pid)
 
-    def _slot(self, k: int, truths: dict[str, Truth]) -> None:
+    def _slot(self, k: int, truths: dict[str, Truth], out: dict | None = None) -> None:
         X = np.zeros((len(self.ids), 13))
         lost = np.zeros(len(self.ids), dtype=np.bool_)
         p_nlos = np.zeros(len(self.ids))
@@ -158,7 +182,10 @@ class MothershipProcess:
             lost[i], p_nlos[i] = m.uwb_lost, m.nlos_probability
         t = k * self.sc.dt_s
         self.network.step(k, t, X, lost, p_nlos)
-        if self.batch:
+        if out is not None:  # a bundle's slot: the ranges go out with the bundle's others
+            for vid, payload in uwb_slot(self.network, self.ids, k, t):
+                out.setdefault(vid, []).append(("Uwb", payload, k))
+        elif self.batch:
             payload = uwb_slot_batch(self.network, self.ids, k, t)
             if payload is not None:  # (every tag idle on a TDMA channel: nothing to send)
                 self.pub_uwb_batch.put(payload)
@@ -176,11 +203,16 @@ class MothershipProcess:
         # a slot's ranges are a burst: batched beyond one pair (docs/protocol.md, "QoS")
         self.pub_uwb = {v: declare_reliable(self.session, k.uwb(v), len(self.ids) <= 2) for v in self.ids}
         self.pub_uwb_batch = declare_reliable(self.session, k.mothership_uwb(), len(self.ids) <= 2)
+        self.pub_bundle = {
+            v: declare_reliable(self.session, k.bundle(v), len(self.ids) <= 2) for v in self.ids
+        }
         pub_anchors = declare_reliable(self.session, k.anchors(), express=False)
         self._queryable = self.session.declare_queryable(k.anchors(), self._on_query)
         # a slot's truths in one world/truth batch (not agent/*/truth: the world sends those to a viewer
         # only, while one matches; 32 vehicles: 50 messages a second instead of 1600)
         subscribe_decoded(self.session, k.world_truth(), TruthBatch, self._on_truth_batch, self.drops)
+        # a lockstep world's ticks up to its next awaited command in one message (docs/protocol.md, "Bundles")
+        subscribe_decoded(self.session, k.world_bundle(), Bundle, self._on_bundle, self.drops)
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
         watch_liveliness(self.session, k, self._on_alive, history=False)
         self._token = declare_liveliness(self.session, k, "mothership", "mothership")

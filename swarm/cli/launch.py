@@ -132,6 +132,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "free-running",
     )  # fmt: skip
     g.add_argument(
+        "--no-bundles", dest="bundles", action="store_false",
+        help="a lockstep world sends each sample on its own key at its tick, not the ticks up to the next "
+        "awaited command in one Bundle per receiver (docs/protocol.md, \"Bundles\"; the run is the same)",
+    )  # fmt: skip
+    g.add_argument(
         "--stall-s", type=positive_float("--stall-s"), default=STALL_S, metavar="S",
         help=f"when the world's clock stands still this long in a running run (docking or landing), say "
         f"so with every process's stacks (default {STALL_S:g}; kill -USR1 <launcher pid> asks for them at "
@@ -157,6 +162,8 @@ def world_args(args: argparse.Namespace) -> list[str]:
         world += ["--pace", str(args.pace)]
     if _hosted(args):  # one message for many vehicles' imu, one for their truths
         world += ["--batch"]
+    if not getattr(args, "bundles", True):
+        world += ["--no-bundles"]
     return world
 
 

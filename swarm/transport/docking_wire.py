@@ -16,7 +16,6 @@ from swarm.transport.messages import (
     Event,
     Guidance,
     ImuBatch,
-    TruthBatch,
     UwbBatch,
     VisionBatch,
     decode,
@@ -25,6 +24,7 @@ from swarm.transport.messages import (
     encode_estimate,
     encode_imu,
     encode_truth,
+    encode_truth_batch,
     encode_uwb,
     encode_vision,
     pack_entries,
@@ -135,10 +135,7 @@ def _truth_batches(world, ids: list[str], k: int, t: float, lost: bool, p_nlos: 
     X, effort = world.X, np.asarray(world.effort, dtype=np.float64)
     for a in range(0, len(ids), MAX_BATCH):
         b = min(a + MAX_BATCH, len(ids))
-        n = b - a
-        x = np.ascontiguousarray(X[a:b], dtype=np.float64)
-        payload = encode(TruthBatch(k, t, tuple(ids[a:b]), x[:, 0:3], x[:, 3:6], x[:, 6:10], x[:, 10:13],
-                                    effort[a:b], (lost,) * n, np.full(n, p_nlos)))  # fmt: skip
+        payload = encode_truth_batch(k, t, tuple(ids[a:b]), X[a:b], effort[a:b], lost, p_nlos)
         out.append(("truth_batch", "", payload))
     return out
 

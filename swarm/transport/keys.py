@@ -2,8 +2,8 @@
 
 DESIGN.md section 4: one namespace per swarm (default ``tpods``) so that two swarms can share a router.
 Per-vehicle topics are ``<ns>/agent/<id>/<kind>``; the rest are ``<ns>/world/clock``, ``<ns>/world/imu``,
-``<ns>/world/truth``, ``<ns>/mothership/uwb``, ``<ns>/mothership/anchors``, ``<ns>/control/run``,
-``<ns>/control/fault`` and the liveliness tokens ``<ns>/alive/<role>/<id>``.
+``<ns>/world/truth``, ``<ns>/world/bundle``, ``<ns>/mothership/uwb``, ``<ns>/mothership/anchors``,
+``<ns>/control/run``, ``<ns>/control/fault`` and the liveliness tokens ``<ns>/alive/<role>/<id>``.
 Agent ids and roles are single key chunks of ``[A-Za-z0-9_-]`` (1 to 64 characters), so that no id can
 smuggle a ``/`` or a wildcard into a key. ``docs/protocol.md`` lists every key with its publisher,
 subscribers, rate and QoS.
@@ -23,7 +23,7 @@ ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 AGENT_KINDS: tuple[str, ...] = (
     "imu", "uwb", "vision", "gnss", "rangefinder", "estimate", "guidance", "command", "commands", "truth",
-    "event",
+    "event", "bundle",
 )  # fmt: skip
 """The per-vehicle topics ``<ns>/agent/<id>/<kind>``."""
 
@@ -36,6 +36,7 @@ _FIXED = {
     ("world", "imu"): "world_imu",
     ("world", "vision"): "world_vision",
     ("world", "truth"): "world_truth",
+    ("world", "bundle"): "world_bundle",
     ("mothership", "anchors"): "anchors",
     ("mothership", "uwb"): "mothership_uwb",
     ("control", "run"): "run_control",
@@ -122,6 +123,11 @@ class Keys:
         """Mode transitions, docking, aborts, estimator resets of one vehicle."""
         return self._agent(agent_id, "event")
 
+    def bundle(self, agent_id: str) -> str:
+        """Several lockstep ticks' samples of one vehicle in one message (``Bundle``): world (its ``imu``
+        and ``vision``) and mothership (its ``uwb``) -> agent, viewers."""
+        return self._agent(agent_id, "bundle")
+
     def agent_all(self, kind: str) -> str:
         """Wildcard over every vehicle's ``kind`` topic: ``<ns>/agent/*/<kind>``."""
         if kind not in AGENT_KINDS:
@@ -153,6 +159,11 @@ class Keys:
         """Every vehicle's true state of one tick in one message (``TruthBatch``): a simulated world serving
         agent hosts -> its mothership (never an agent)."""
         return f"{self.namespace}/world/truth"
+
+    def world_bundle(self) -> str:
+        """Several lockstep ticks' ``world/truth`` batches in one message (``Bundle``): a lockstep world ->
+        its mothership."""
+        return f"{self.namespace}/world/bundle"
 
     def world_event(self) -> str:
         """Run start and end (with each vehicle's total impulse), lockstep timeouts: world -> launcher,
@@ -202,7 +213,8 @@ class Keys:
     def parse(self, key: object) -> tuple[str, str | None] | None:
         """Inverse of the builders: ``(kind, agent_id)`` for ``<ns>/agent/<id>/<kind>``; ``(name, None)``
         for a swarm-wide key, named by its builder (``world_clock``, ``world_event``, ``world_imu``,
-        ``world_vision``, ``world_truth``, ``anchors``, ``mothership_uwb``, ``run_control``, ``fault``);
+        ``world_vision``, ``world_truth``, ``world_bundle``, ``anchors``, ``mothership_uwb``, ``run_control``,
+        ``fault``);
         ``("alive", process_id)`` for a liveliness token (its role: :meth:`parse_alive`). ``None`` for a
         key outside this namespace, a wildcard or anything this protocol does not define. ``key`` may be a
         ``str`` or any object whose ``str()`` is the key (a Zenoh ``KeyExpr``)."""

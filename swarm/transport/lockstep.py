@@ -269,6 +269,12 @@ class AgentTickAssembler:
             self._counts["unexpected"] += 1
             return False
         why = self._window(k)
+        if why == "stale" and isinstance(msg, Uwb) and self._uwb_live and self._uwb_from < 0:
+            # the mothership (back, or found by a joining agent) serves its slots in tick order: its first
+            # range came after its tick was taken without one, so every tick from the next waits for its
+            # range (else each later range could lose the same race: a lockstep world's ticks come in a
+            # bundle before the bundle of their ranges, docs/protocol.md "Bundles")
+            self._uwb_from = self._next if self._next is not None else k + 1
         if why == "stale" and k in self._taken and not isinstance(msg, Imu):
             return self._add_late(msg)
         if why is not None:

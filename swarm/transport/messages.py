@@ -41,6 +41,7 @@ from swarm.errors import ConfigError, MessageError
 from swarm.transport.keys import ID_PATTERN
 
 __all__ = [
+    "BUNDLE_TYPES",
     "CLOCK_STATES",
     "DOCKING_MODES",
     "EVENT_KINDS",
@@ -58,6 +59,7 @@ __all__ = [
     "SCHEMA_VERSION",
     "VISION_KINDS",
     "Anchors",
+    "Bundle",
     "Clock",
     "Command",
     "CommandBatch",
@@ -79,16 +81,19 @@ __all__ = [
     "Vision",
     "VisionBatch",
     "batch_rows",
+    "bundle_messages",
     "decode",
     "encode",
     "encode_command",
     "encode_estimate",
     "encode_imu",
     "encode_truth",
+    "encode_truth_batch",
     "encode_uwb",
     "encode_vision",
     "estimate_and_payload",
     "estimate_message",
+    "pack_bundle",
     "pack_entries",
     "safe_decode",
 ]
@@ -1008,6 +1013,91 @@ class CommandBatch(_Batch):
         return None if row is None else _entry(self.commands, "commands", row, Command)
 
 
+BUNDLE_TYPES: tuple[str, ...] = ("Imu", "Uwb", "Vision", "TruthBatch")
+"""The messages a :class:`Bundle` may carry: a lockstep tick's samples (docs/protocol.md, "Bundles")."""
+
+
+@dataclass(frozen=True, eq=False)
+class Bundle(Message):
+    """The samples of several consecutive lockstep ticks for one receiver, in one message: what a lockstep
+    world sends on ``<ns>/agent/<id>/bundle`` (that vehicle's ``imu`` and ``vision``) and
+    ``<ns>/world/bundle`` (the ``world/truth`` batches, for the mothership), and the mothership on
+    ``<ns>/agent/<id>/bundle`` (that vehicle's ``uwb``), instead of one message per sample (docs/protocol.md,
+    "Bundles"). Entry ``i`` is the message its own key would have carried, type ``types[i]``: its msgpack
+    bytes, decoded and checked by the receiver (:func:`bundle_messages`), in the order they would have been
+    published."""
+
+    tick: int
+    """The newest tick of any entry (>= 0)."""
+    types: tuple[str, ...]
+    """Each entry's message type, one of :data:`BUNDLE_TYPES`."""
+    entries: tuple[bytes, ...]
+    """The entries, 1 to :data:`MAX_BATCH`, one per type: each an encoded message (msgpack bin); the whole
+    message stays within :data:`MAX_PAYLOAD_BYTES`."""
+
+    def __post_init__(self) -> None:
+        types = _bundle_types(self.types)
+        if not isinstance(self.entries, list | tuple) or len(self.entries) != len(types):
+            raise MessageError(f"entries: expected one per type ({len(types)}), got {_show(self.entries)}")
+        entries = _blobs(self.entries, "entries", "wire")
+        _set(self, tick=_int(self.tick, "tick"), types=types, entries=entries)
+
+
+def _bundle_types(value: object) -> tuple[str, ...]:
+    if not isinstance(value, list | tuple) or not 1 <= len(value) <= MAX_BATCH:
+        raise MessageError(f"types: expected 1 to {MAX_BATCH} message types, got {_show(value)}")
+    for i, t in enumerate(value):
+        if t not in BUNDLE_TYPES:
+            raise MessageError(f"types[{i}]: expected one of {', '.join(BUNDLE_TYPES)}, got {_show(t)}")
+    return tuple(value)
+
+
+def bundle_messages(
+    bundle: Bundle, key: str, drops: DropCounter, accept: Container[str] = BUNDLE_TYPES
+) -> list[Message]:
+    """The entries of ``bundle`` whose type is in ``accept``, each decoded and checked as its own key's
+    would be, in the bundle's order. An entry that does not decode, or whose tick is later than the
+    bundle's, is dropped and counted in ``drops`` under ``key`` naming the entry (``entries[3]: ...``), and
+    the others are kept: one bad entry loses no other sample. An entry of another type is skipped (a viewer
+    that draws frames only takes the ``Vision`` entries)."""
+    out: list[Message] = []
+    for i, (name, blob) in enumerate(zip(bundle.types, bundle.entries, strict=True)):
+        if name not in accept:
+            continue
+        try:
+            msg = decode(blob, MESSAGE_TYPES[name])
+        except MessageError as exc:
+            drops.drop(key, f"entries[{i}]: {exc}")
+            continue
+        if msg.tick > bundle.tick:  # type: ignore[attr-defined]
+            drops.drop(key, f"entries[{i}]: tick {msg.tick} after the bundle's {bundle.tick}")  # type: ignore[attr-defined]
+            continue
+        out.append(msg)
+    return out
+
+
+def pack_bundle(entries: list[tuple[str, bytes, int]]) -> list[bytes]:
+    """``(type, encoded message, tick)`` entries, in order, in as few :class:`Bundle` messages as keep each
+    within :data:`MAX_PAYLOAD_BYTES` and :data:`MAX_BATCH` entries (each message's ``tick`` its newest)."""
+    out: list[bytes] = []
+    types: list[str] = []
+    blobs: list[bytes] = []
+    tick = 0
+    size = _BATCH_ENVELOPE
+    for name, payload, k in entries:
+        row = len(payload) + len(name) + 8  # the bin and str headers of the entry and its type
+        if types and (size + row > MAX_PAYLOAD_BYTES or len(types) == MAX_BATCH):
+            out.append(encode(Bundle(tick, tuple(types), tuple(blobs))))
+            types, blobs, size = [], [], _BATCH_ENVELOPE
+        types.append(name)
+        blobs.append(payload)
+        tick = max(tick, k) if len(types) > 1 else k
+        size += row
+    if types:
+        out.append(encode(Bundle(tick, tuple(types), tuple(blobs))))
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class Estimate(Message):
     """The pose estimate of one vehicle after tick ``k``'s measurements: ``<ns>/agent/<id>/estimate``."""
@@ -1369,6 +1459,39 @@ class TruthBatch(_Batch):
         })  # fmt: skip
 
 
+_TRUTH_BATCH_FIELDS = ("tick", "t_s", "ids", "p_nav", "v_nav", "q_nav_body", "w_body", "effort", "uwb_lost",
+                       "nlos_probability")  # fmt: skip
+
+
+def encode_truth_batch(
+    tick: int, t_s: float, ids: tuple[str, ...], X: np.ndarray, effort: np.ndarray, uwb_lost: bool,
+    nlos_probability: float,
+) -> bytes:  # fmt: skip
+    """``encode(TruthBatch(...))`` of the rows of ``X`` (N, 13: position, velocity, attitude, rate, the
+    world's truth layout), every tag in the same radio environment, the same bytes without building the
+    message (the sender fast paths above; a world sends one every UWB slot tick)."""
+    n = len(ids)
+    x = np.ascontiguousarray(X, dtype=np.float64)
+    p, v, q, w = x[:, 0:3], x[:, 3:6], x[:, 6:10], x[:, 10:13]
+    effort = np.ascontiguousarray(effort, dtype=np.float64)
+    nlos = np.full(n, nlos_probability)
+    plain = (
+        _is_tick(tick) and _is_time(t_s) and type(ids) is tuple and ids in _KNOWN_IDS and x.shape == (n, 13)
+        and effort.shape == (n,) and type(uwb_lost) is bool and type(nlos_probability) is float
+        and 0.0 <= nlos_probability <= 1.0
+    )  # fmt: skip
+    if plain:
+        n2 = (q * q).sum(axis=1)
+        plain = (
+            math.isfinite(t_s + float(x.sum()) + float(effort.sum())) and bool((effort >= 0.0).all())
+            and bool(((n2 >= _UNIT_LO) & (n2 <= _UNIT_HI)).all())
+        )  # fmt: skip
+    if not plain:
+        return encode(TruthBatch(tick, t_s, ids, p, v, q, w, effort, (uwb_lost,) * n, nlos))
+    values = (tick, t_s, ids, p, v, q, w, effort, (uwb_lost,) * n, nlos)
+    return _pack("TruthBatch", dict(zip(_TRUTH_BATCH_FIELDS, values, strict=True)))
+
+
 def _truth_rows(effort: np.ndarray, nlos: np.ndarray) -> None:
     """The ranges of a :class:`TruthBatch`'s per-row numbers."""
     if (effort < 0.0).any():
@@ -1520,6 +1643,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         CommandBatch,
         Truth,
         TruthBatch,
+        Bundle,
         Event,
         Clock,
         Anchors,
@@ -1536,7 +1660,7 @@ MESSAGE_FOR_KIND: dict[str, type[Message]] = {
     "commands": CommandBatch,
     "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "world_imu": ImuBatch,
     "world_vision": VisionBatch, "anchors": Anchors, "mothership_uwb": UwbBatch, "world_truth": TruthBatch,
-    "run_control": RunControl, "fault": Fault,
+    "run_control": RunControl, "fault": Fault, "bundle": Bundle, "world_bundle": Bundle,
 }  # fmt: skip
 """The message carried by each key kind of :meth:`swarm.transport.keys.Keys.parse`."""
 
@@ -1746,6 +1870,12 @@ class _CommandBatchWire(_Wire):
     commands: list[bytes]
 
 
+class _BundleWire(_Wire):
+    tick: _Nat
+    types: list[str]  # checked by _bundle_types
+    entries: list[bytes]
+
+
 class _TruthWire(_Wire):
     tick: _Nat
     t_s: _Time
@@ -1923,6 +2053,13 @@ def _truth_batch(w: _TruthBatchWire) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def _bundle(w: _BundleWire) -> dict[str, Any]:
+    types = _bundle_types(w.types)
+    if len(w.entries) != len(types):
+        raise _Defer
+    return {"tick": w.tick, "types": types, "entries": tuple(w.entries)}
+
+
 def _clock(w: _ClockWire) -> dict[str, Any]:
     return {"tick": w.tick, "t_s": _fin(w.t_s), "state": w.state, "seed": w.seed}
 
@@ -1942,6 +2079,7 @@ _FAST: dict[type[Message], tuple[msgspec.msgpack.Decoder, Callable[[Any], dict[s
         (CommandBatch, _CommandBatchWire, _command_batch),
         (Truth, _TruthWire, _truth),
         (TruthBatch, _TruthBatchWire, _truth_batch),
+        (Bundle, _BundleWire, _bundle),
         (Clock, _ClockWire, _clock),
     )
 }

@@ -35,6 +35,7 @@ import msgpack
 import msgspec
 
 from swarm.errors import LogError
+from swarm.transport.messages import Bundle, safe_decode
 
 _LOG = logging.getLogger("swarm.record")
 
@@ -141,11 +142,36 @@ class McapSink:
         self._world_event = keys.world_event()
 
     def write(self, key: str, payload: bytes) -> None:
+        entries = self._unbundled(key, payload)
+        if entries is not None:  # each sample of a lockstep bundle on the key it stands for
+            for entry_key, entry in entries:
+                self.write(entry_key, entry)
+            return
         self.last_ns = swarm_time_ns(payload, self.last_ns)
         self.views.handle(key, payload, self.last_ns)
         self.counts[key] = self.counts.get(key, 0) + 1
         if key == self._world_event:
             self._metadata(payload)
+
+    def _unbundled(self, key: str, payload: bytes) -> list[tuple[str, bytes]] | None:
+        """A valid ``Bundle``'s entries as ``(key, payload)``: each on the key its own message has
+        (``agent/<id>/imu``, ``uwb``, ``vision``; ``world/truth``), so that a recording of a lockstep swarm
+        has the channels of any other; ``None`` for any other sample (and a bundle that does not decode:
+        recorded as it came)."""
+        parsed = self.keys.parse(key)
+        if parsed is None or parsed[0] not in ("bundle", "world_bundle"):
+            return None
+        bundle = safe_decode(payload, Bundle, key, self.views.drops)
+        if bundle is None:
+            return None
+        vid = parsed[1]
+        out = []
+        for name, entry in zip(bundle.types, bundle.entries, strict=True):
+            if name == "TruthBatch":
+                out.append((self.keys.world_truth(), entry))
+            elif vid is not None:
+                out.append((getattr(self.keys, name.lower())(vid), entry))
+        return out
 
     def _metadata(self, payload: bytes) -> None:
         try:

@@ -8,10 +8,11 @@ each link to an identity by the common name (CN) of the certificate it presented
 
 - ``world``: sensors (``agent/*/imu``, ``agent/*/vision``, and ``world/imu``: every vehicle's imu of a tick
   in one message for agent hosts), ``agent/*/truth`` (and ``world/truth``, the mothership's batch),
-  ``world/clock``,
+  ``agent/*/bundle`` and ``world/bundle`` (a lockstep world's ticks in one message), ``world/clock``,
   ``world/event``, and ``agent/*/event`` (contact, collision and keep-out events on the chaser's key);
-- ``mothership``: ``agent/*/uwb`` (and ``mothership/uwb``, a slot's ranges in one message for agent hosts)
-  and ``mothership/anchors`` (a publication, a queryable, its replies);
+- ``mothership``: ``agent/*/uwb`` (and ``mothership/uwb``, a slot's ranges in one message for agent hosts;
+  ``agent/*/bundle``, a lockstep bundle's ranges) and ``mothership/anchors`` (a publication, a queryable,
+  its replies);
 - ``agent-<id>``: ``agent/<id>/estimate|guidance|command|event`` only;
 - ``dashboard``: the operator's controls only, ``control/run`` (pause, resume, reset, new seed) and
   ``control/fault`` (its Faults panel injects the faults ``swarm fault`` does: an operator's console may
@@ -131,8 +132,9 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
     if name == "world":
         return {
             "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/vision", "agent/*/truth",
-                                                "agent/*/event", "world/imu", "world/vision", "world/truth",
-                                                "world/clock", "world/event")),
+                                                "agent/*/event", "agent/*/bundle", "world/imu",
+                                                "world/vision", "world/truth", "world/bundle", "world/clock",
+                                                "world/event")),
             "declare_subscriber": (keys.agent_all("command"), keys.agent_all("commands"), keys.run_control(),
                                    keys.fault()),
             "liveliness_token": (f"{ns}/alive/world/*",),
@@ -140,10 +142,11 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         }  # fmt: skip
     if name == "mothership":
         return {
-            "put": (keys.agent_all("uwb"), keys.mothership_uwb(), keys.anchors()),
+            "put": (keys.agent_all("uwb"), keys.agent_all("bundle"), keys.mothership_uwb(), keys.anchors()),
             "declare_queryable": (keys.anchors(),),
             "reply": (keys.anchors(),),
-            "declare_subscriber": (keys.world_truth(), keys.world_clock()),  # (a vehicle's truth: viewers')
+            # (a vehicle's truth: viewers')
+            "declare_subscriber": (keys.world_truth(), keys.world_bundle(), keys.world_clock()),
             "liveliness_token": (f"{ns}/alive/mothership/*",),
             **watch,  # to say when the world is lost
         }
@@ -168,7 +171,8 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         return {
             "put": (keys.estimate(vid), keys.guidance(vid), keys.command(vid), keys.commands(vid),
                     keys.event(vid)),
-            "declare_subscriber": (keys.imu(vid), keys.uwb(vid), keys.vision(vid), keys.agent_all("estimate"),
+            "declare_subscriber": (keys.imu(vid), keys.uwb(vid), keys.vision(vid), keys.bundle(vid),
+                                   keys.agent_all("estimate"),
                                    keys.world_imu(), keys.world_vision(), keys.mothership_uwb(),
                                    keys.world_clock(), keys.world_event()),  # world_resumed
             "liveliness_token": (keys.alive("agent", vid),),

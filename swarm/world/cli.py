@@ -33,6 +33,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "mothership (the per-vehicle truths only while a viewer subscribes)",
     )  # fmt: skip
     p.add_argument(
+        "--no-bundles", dest="bundles", action="store_false",
+        help="lockstep: publish each sample on its own key at its tick, not the ticks up to the next command "
+        "awaited in one Bundle per receiver (agent/<id>/bundle, world/bundle; docs/protocol.md \"Bundles\": "
+        "a free-running, paced or --batch world never bundles)",
+    )  # fmt: skip
+    p.add_argument(
         "--clock-every", type=int, default=10, metavar="TICKS",
         help="publish world/clock every this many ticks (default 10)",
     )  # fmt: skip
@@ -67,6 +73,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
                 sc, args.seed, session, keys_from(args), args.clock, stop, step_timeout_s=args.step_timeout,
                 start_timeout_s=args.start_timeout, clock_every=args.clock_every,
                 checkpoint_dir=args.checkpoint_dir, resume=resume, pace=args.pace, batch=args.batch,
+                bundles=args.bundles,
             )  # fmt: skip
             end = proc.run()
     except checkpoint.CheckpointError as exc:

@@ -64,6 +64,7 @@ from swarm.transport.messages import (
     RunControl,
     batch_rows,
     encode,
+    pack_bundle,
 )
 from swarm.transport.process import PROCESS_NOISE_BLOCK, ClockSpec, declare_reliable
 from swarm.transport.session import (
@@ -101,6 +102,7 @@ class WorldProcess:
         resume: dict | None = None,
         pace: ClockSpec | None = None,
         batch: bool = False,
+        bundles: bool = True,
     ) -> None:
         """``pace``: a lockstep world that also never runs ahead of this wall clock (realtime or scaled:N;
         every command is still waited for, so the run is the unpaced one); ``batch``: every vehicle's
@@ -109,7 +111,10 @@ class WorldProcess:
         ``world/truth`` either way, and on each vehicle's key only while a viewer subscribes to it;
         ``checkpoint_dir``: write the state there every tick (``None``: never); ``resume``: a state
         :func:`swarm.transport.checkpoint.load` read, to continue from (:class:`CheckpointError` if it is
-        not a state of this run: another scenario, seed or vehicle set)."""
+        not a state of this run: another scenario, seed or vehicle set); ``bundles``: an unpaced lockstep
+        world without ``batch`` sends the samples of the ticks up to the next one an agent commands on as
+        one ``Bundle`` per receiver (docs/protocol.md, "Bundles"), and writes its checkpoint only before it
+        sends them."""
         sc = scenario
         self.sc, self.seed, self.session, self.keys, self.clock, self.stop = (
             sc,
@@ -125,6 +130,11 @@ class WorldProcess:
         self.clock_every = max(1, int(clock_every))
         self.process_id = process_id
         self.batch = batch
+        # a lockstep world's samples wait for the next tick an agent commands on, then leave as one Bundle per
+        # receiver: no agent can use a tick before then anyway (its command needs every tick up to it)
+        self.bundles = bundles and clock.lockstep and self.pace is None and not batch
+        self._bundle: dict[str, list[tuple[str, bytes, int]]] = {}  # per receiver ("": the mothership)
+        self._bundle_ticks = 0  # ticks in the pending bundles
         self._viewed: set[str] = set()  # the vehicles whose per-vehicle truth a subscriber matches
         self.world = World(sc, seed)  # with the run's dispersions and its fault schedule
         self.world.noise_block = PROCESS_NOISE_BLOCK
@@ -132,6 +142,9 @@ class WorldProcess:
         self.ids = list(sc.vehicles)
         self.chasers = sc.chasers
         self._truth_every = sc.every(sc.uwb.rate_hz)  # the UWB slot period [ticks]
+        # a bundle holds at most a control period's ticks (the longest): the world flushes at every agent's
+        # control tick, and at this bound when no live agent is due (all lost, or all done)
+        self._bundle_max = max(sc.control_every(v) for v in self.ids)
         self.drops = DropCounter()
         # each agent commands on its control ticks and the world holds the command in between (the in-process
         # run's World.take_commands takes the vehicles that decided one): the lockstep waits on those ticks
@@ -423,6 +436,9 @@ class WorldProcess:
         self.pub_event = {v: declare_reliable(self.session, k.event(v)) for v in self.chasers}
         self.pub_clock = declare_reliable(self.session, k.world_clock())
         self.pub_world_event = declare_reliable(self.session, k.world_event())
+        if self.bundles:
+            self.pub_bundle = {v: declare_reliable(self.session, k.bundle(v), ex) for v in self.ids}
+            self.pub_bundle[""] = declare_reliable(self.session, k.world_bundle(), ex)
 
     def _on_truth_matching(self, vid: str, status) -> None:
         if status.matching:
@@ -449,14 +465,41 @@ class WorldProcess:
         return self._pubs[kind][vid]
 
     def _publish_tick(self, k: int, sensors: list[tuple[str, str, bytes]]) -> None:
-        """Publish tick ``k``'s samples (:meth:`_encode_tick`); imu and vision through :meth:`_send`."""
+        """Publish tick ``k``'s samples (:meth:`_encode_tick`); imu and vision through :meth:`_send`. With
+        bundles, into the pending bundles instead (a viewer's per-vehicle truth at once), sent once an agent
+        is due at ``k`` or they hold the longest control period's ticks (:meth:`_flush_bundles`)."""
         t = k * self.sc.dt_s
+        if self.bundles:
+            for kind, vid, payload in sensors:
+                receiver = _BUNDLED.get(kind)
+                if receiver is None:  # a viewer's truth
+                    self._pub(kind, vid).put(payload)
+                else:
+                    self._bundle.setdefault(vid, []).append((receiver, payload, k))
+            self._bundle_ticks += 1
+            if self.barrier.due(k) or self._bundle_ticks >= self._bundle_max:
+                self._flush_bundles()
+            return
         for kind, vid, payload in sensors:
             if kind in ("imu", "vision"):
                 self._send(vid, t, kind, payload)
             else:  # truths, and the batches (whose vehicles have no delay window: _encode_tick)
                 self._pub(kind, vid).put(payload)
         self._release()
+
+    def _flush_bundles(self, checkpoint_first: bool = True) -> None:
+        """Send the pending bundles, one per receiver (more if they exceed a message), after the checkpoint
+        of the current tick: no sample leaves before the checkpoint of its tick or a later one (at the end
+        of the run none: the world's state is then past its last tick)."""
+        if not self._bundle_ticks:
+            return
+        if checkpoint_first:
+            self._checkpoint()
+        for vid, entries in self._bundle.items():
+            for payload in pack_bundle(entries):
+                self.pub_bundle[vid].put(payload)
+        self._bundle.clear()
+        self._bundle_ticks = 0
 
     def _send(self, vid: str, t: float, kind: str, payload: bytes) -> None:
         """Publish now, or (a ``sensor_delay`` fault window) hold for a random delay: samples leave late and
@@ -591,6 +634,10 @@ class WorldProcess:
             joining, self._joining = self._joining, []
             if joining:
                 self.barrier.set_live(self.barrier.live | set(joining))
+        with self._lock:
+            waiting = bool(self._awaited or self._returned)
+        if waiting:  # the other agents go on up to the current tick meanwhile
+            self._flush_bundles()
         deadline = time.monotonic() + self.start_timeout_s
         while not self.stop.is_set():
             self._hand_tick_to_returned()
@@ -732,6 +779,7 @@ class WorldProcess:
             if self.state == "stopped":
                 break
             if self.state == "paused":
+                self._flush_bundles()
                 time.sleep(0.01)
                 pace0, pace_k = time.monotonic(), tick
                 continue
@@ -753,7 +801,8 @@ class WorldProcess:
             frames = self.world.step()
             tick += 1
             self._new_tick(tick, frames)
-            self._checkpoint()  # before any sample of the tick leaves: a restart resumes at this tick
+            if not self.bundles:  # (bundles: at each flush, before any of their samples leaves)
+                self._checkpoint()  # before any sample of the tick leaves: a restart resumes at this tick
             self._publish_tick(tick, self._sensors)
             if tick % self.clock_every == 0:
                 self._publish_clock(tick)
@@ -762,6 +811,7 @@ class WorldProcess:
                 left = due - time.monotonic()
                 if left > 0:
                     self.stop.wait(left)
+        self._flush_bundles(checkpoint_first=False)  # the ticks up to the last: the agents process them
         wall = self._wall_before + time.perf_counter() - wall0
         cpu = self._cpu_before + time.process_time() - cpu0
         self.state = "stopped"
@@ -790,6 +840,11 @@ class WorldProcess:
         if self._ckpt_file is not None:
             self._ckpt_file.close()
         return end
+
+
+_BUNDLED = {"imu": "Imu", "vision": "Vision", "truth_batch": "TruthBatch"}
+"""The samples a bundling world sends in bundles, by their kind in ``world_sensors``: the message type of the
+entry (the receiver: the vehicle's agent, and ``""`` for the mothership's truth batches)."""
 
 
 def unconfirmed_ticks(sc: Scenario) -> int:

@@ -11,6 +11,7 @@ process must survive (no traceback, launcher exit 0).
 from __future__ import annotations
 
 import json
+import logging
 import sys
 import time
 
@@ -25,9 +26,11 @@ from swarm.sim.docking import run_docking
 from swarm.transport.keys import AGENT_KINDS, Keys
 from swarm.transport.messages import (
     MESSAGE_FOR_KIND,
+    Bundle,
     Clock,
     Command,
     CommandBatch,
+    DropCounter,
     Estimate,
     Fault,
     Imu,
@@ -40,11 +43,15 @@ from swarm.transport.messages import (
     UwbBatch,
     Vision,
     VisionBatch,
+    bundle_messages,
     decode,
     encode,
 )
 from swarm.transport.session import ZenohArgs, open_session
 from tests.transport.procs import Procs, free_port, loopback
+
+_SILENT = logging.getLogger("tests.transport.fuzz.silent")
+_SILENT.disabled = True
 
 SEED = 3
 EXAMPLES = 2500  # payloads per run: "thousands", while the docking (~25 s of wall time here) is under way
@@ -84,6 +91,9 @@ _VALID = {
     "world_vision": VisionBatch(
         10, 0.1, ("chaser",), (encode(Vision(10, 0.1, "target", "+x", "features", np.zeros((0, 3)), ())),)
     ),
+    "bundle": Bundle(
+        8, ("Imu", "Uwb"), (encode(Imu(7, 0.07, 0.01, np.zeros(3), _Q)), encode(Uwb(8, 0.08, 1, 1.5)))
+    ),
     "run_control": RunControl("pause"),
     "fault": Fault("camera_loss", duration_s=1.0, vehicle="chaser"),
 }
@@ -94,6 +104,7 @@ def _keys(ns: str) -> list[tuple[str, str]]:
     out = [(kind, getattr(k, kind)(vid)) for kind in AGENT_KINDS for vid in ("chaser", "target")]
     fixed = [("world_clock", k.world_clock()), ("world_event", k.world_event()), ("world_imu", k.world_imu()),
              ("world_vision", k.world_vision()), ("world_truth", k.world_truth()),
+             ("world_bundle", k.world_bundle()),
              ("mothership_uwb", k.mothership_uwb()), ("anchors", k.anchors()),
              ("run_control", k.run_control()), ("fault", k.fault())]  # fmt: skip
     return [*out, *fixed]
@@ -116,6 +127,8 @@ def _refused(kind: str, payload: bytes) -> bool:
         return True
     if isinstance(msg, VisionBatch | CommandBatch):  # its entries are decoded by whoever takes them: refused
         return not any(_frame_ok(msg, vid) for vid in msg.ids)  # if none decodes
+    if isinstance(msg, Bundle):  # likewise, each entry as the receiver takes it
+        return not bundle_messages(msg, "fuzz", DropCounter(logger=_SILENT))
     return False  # a valid message: not this test's business (see the module docstring)
 
 

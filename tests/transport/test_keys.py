@@ -14,7 +14,7 @@ from swarm.transport.keys import AGENT_KINDS, ID_PATTERN, Keys, check_id
 
 EXPECTED_AGENT_KINDS = (
     "imu", "uwb", "vision", "gnss", "rangefinder", "estimate", "guidance", "command", "commands", "truth",
-    "event",
+    "event", "bundle",
 )  # fmt: skip
 
 
@@ -36,6 +36,8 @@ def test_every_key_string_matches_the_protocol_table(ns):
     assert k.world_vision() == f"{ns}/world/vision"
     assert k.mothership_uwb() == f"{ns}/mothership/uwb"
     assert k.world_truth() == f"{ns}/world/truth"
+    assert k.bundle("c_1") == f"{ns}/agent/c_1/bundle"
+    assert k.world_bundle() == f"{ns}/world/bundle"
     assert k.anchors() == f"{ns}/mothership/anchors"
     assert k.run_control() == f"{ns}/control/run"
     assert k.alive("agent", "chaser") == f"{ns}/alive/agent/chaser"
@@ -50,7 +52,7 @@ def test_default_namespace_is_tpods():
     assert Keys().imu("a") == "tpods/agent/a/imu"
 
 
-def test_agent_kinds_are_the_ten_per_vehicle_topics():
+def test_agent_kinds_are_the_twelve_per_vehicle_topics():
     assert AGENT_KINDS == EXPECTED_AGENT_KINDS
 
 
@@ -69,6 +71,7 @@ def test_parse_inverts_every_per_vehicle_key(ns, kind):
         "world_imu",
         "world_vision",
         "world_truth",
+        "world_bundle",
         "anchors",
         "mothership_uwb",
         "run_control",

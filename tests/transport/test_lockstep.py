@@ -454,6 +454,31 @@ def test_a_lost_mothership_stops_the_wait_for_ranges_until_they_flow_again():
     assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["uwb"]  # from then on, waited for
 
 
+def test_ranges_that_always_come_after_their_ticks_are_waited_for_from_the_first_stale_one():
+    """A lockstep world sends a control period's ticks in one bundle and the mothership their ranges in
+    another, after it: a joining agent (or one whose mothership came back) that waits for ranges only from
+    the first that arrives in time would take every tick of every bundle before its range, for good (a
+    restarted chaser never re-initialised and drifted into its target). The first range that comes late
+    proves the mothership serves: from the next tick on, each waits for its range."""
+    asm = plain(uwb_every=2)
+    asm.set_uwb_live(False)
+    asm.set_uwb_live(True)  # back: no range arrived yet
+    for k in range(1, 11):  # the world's bundle of ticks 1-10
+        asm.add(imu(k))
+    assert [asm.next_tick(0).tick for _ in range(10)] == list(range(1, 11))  # none waited for ...
+    for k in range(2, 11, 2):  # ... then the mothership's bundle: every range stale
+        assert not asm.add(uwb(k))
+    for k in range(11, 21):  # the next bundle
+        asm.add(imu(k))
+    assert asm.next_tick(0).tick == 11
+    assert asm.next_tick(SHORT) is None and asm.waiting_for() == ["uwb"]  # tick 12 waits for its range
+    for k in range(12, 21, 2):
+        asm.add(uwb(k))
+    got = [asm.next_tick(0) for _ in range(9)]
+    assert [g.tick for g in got] == list(range(12, 21))
+    assert [g.uwb.tick for g in got if g.uwb is not None] == list(range(12, 21, 2))
+
+
 @pytest.mark.parametrize("seed", range(5))
 def test_concurrent_producers_in_shuffled_order_give_the_in_process_tick_sequence(seed):
     n, uwb_every, vision_every = 60, 2, 5

@@ -34,6 +34,7 @@ from swarm.transport.messages import (
     MESSAGE_TYPES,
     SCHEMA_VERSION,
     Anchors,
+    Bundle,
     Clock,
     Command,
     CommandBatch,
@@ -91,6 +92,12 @@ VALID = {
         7, 0.07, ("chaser0", "target0"), [[1.0, 2.0, 1.0], [0.0, 0.0, 0.0]], np.zeros((2, 3)), [Q, Q],
         np.zeros((2, 3)), [0.5, 0.0], (False, True), [0.0, 0.25],
     ),
+    Bundle: Bundle(11, ("Imu", "Vision", "Imu", "Uwb"), (
+        encode(Imu(10, 0.10, 0.01, [0.1, 0.2, 0.3], Q)),
+        encode(Vision(11, 0.11, "target", "+x", "features", np.full((6, 3), 0.1), (0, 1, 2, 3, 4, 5))),
+        encode(Imu(11, 0.11, 0.01, [0.1, 0.2, 0.3], Q)),
+        encode(Uwb(10, 0.10, 1, 1.5)),
+    )),
     Event: Event(0.08, "mode", {"from": "HOLD", "to": "APPROACH", "range_m": 1.0}),
     Clock: Clock(8, 0.08, "running", 42),
     Anchors: Anchors((0, 1, 2, 3), ANCHORS_MS),
@@ -259,6 +266,19 @@ STRATEGIES = {
             arrays(np.float64, len(vids), elements=nonneg),
             st.lists(st.booleans(), min_size=len(vids), max_size=len(vids)).map(tuple),
             arrays(np.float64, len(vids), elements=st.floats(0.0, 1.0)),
+        )
+    ),
+    Bundle: st.lists(
+        st.sampled_from(("Imu", "Uwb")).flatmap(
+            lambda name: st.builds(Imu if name == "Imu" else Uwb, st.integers(0, 10**6), times,
+                                   *((st.floats(1e-6, 10.0), vec(3)) if name == "Imu" else
+                                     (st.integers(0, 2**31 - 1), st.none() | nonneg)))
+        ),
+        min_size=1, max_size=12,
+    ).flatmap(
+        lambda msgs_: st.builds(
+            Bundle, st.integers(max(m.tick for m in msgs_), 2**64 - 1),
+            st.just(tuple(type(m).__name__ for m in msgs_)), st.just(tuple(encode(m) for m in msgs_)),
         )
     ),
     Event: st.builds(Event, times, st.from_regex(r"[a-z][a-z0-9_]{0,20}", fullmatch=True), event_data),
@@ -847,6 +867,7 @@ def test_every_key_kind_maps_to_a_message():
         "anchors",
         "mothership_uwb",
         "world_truth",
+        "world_bundle",
         "run_control",
         "fault",
     }
@@ -949,7 +970,7 @@ FAST = [cls for cls in ALL if cls in msgs._FAST]
 def test_the_fast_path_covers_the_messages_of_every_tick():
     assert set(FAST) == {
         Imu, ImuBatch, Uwb, UwbBatch, Vision, VisionBatch, Estimate, Guidance, Command, CommandBatch, Truth,
-        TruthBatch, Clock,
+        TruthBatch, Bundle, Clock,
     }  # fmt: skip
 
 
@@ -1326,3 +1347,107 @@ def test_encode_uwb_gives_the_bytes_and_the_errors_of_the_message_encode(monkeyp
         a = args()
         a[i] = value
         assert (_same_as(encode_uwb, Uwb, a) is not None) == accepted, name
+
+
+# ----------------------------------------------------------------------------------------------- bundles
+
+
+def test_a_bundle_gives_its_entries_in_order_and_drops_only_the_bad_ones():
+    """A receiver takes a lockstep bundle's samples as their own keys would have brought them, in order; an
+    entry that does not decode, claims another type or a tick after the bundle's is dropped, counted and
+    named, and costs no other entry (docs/protocol.md, "Bundles")."""
+    b = VALID[Bundle]
+    drops = DropCounter(logger=SILENT)
+    got = msgs.bundle_messages(b, "k", drops)
+    assert [type(m).__name__ for m in got] == ["Imu", "Vision", "Imu", "Uwb"]
+    assert got[1] == decode(b.entries[1], Vision) and got[3] == decode(b.entries[3], Uwb)
+    assert drops.total == 0
+    # a viewer takes the frames only
+    assert [type(m) for m in msgs.bundle_messages(b, "k", drops, ("Vision",))] == [Vision]
+    bad = Bundle(11, ("Imu", "Imu", "Uwb", "Imu"), (
+        b.entries[0],
+        b.entries[1],  # a Vision said to be an Imu
+        encode(Uwb(12, 0.12, 1, 1.5)),  # after the bundle's tick
+        encode(Imu(11, 0.11, 0.01, [0.1, 0.2, 0.3], Q))[:-3],  # cut short
+    ))  # fmt: skip
+    got = msgs.bundle_messages(bad, "tpods/agent/chaser/bundle", drops)
+    assert got == [decode(b.entries[0], Imu)]
+    assert drops.total == 3
+    reasons = drops.counts()
+    assert reasons == {"tpods/agent/chaser/bundle": 3}
+
+
+@pytest.mark.parametrize(
+    ("change", "error"),
+    [
+        (lambda w: w.__setitem__("types", ["Imu", "Estimate"]), "types[1]: expected one of Imu, Uwb, Vision"),
+        (lambda w: w.__setitem__("types", []), "types: expected 1 to 256 message types"),
+        (lambda w: w.__setitem__("entries", w["entries"][:1]), "entries: expected one per type (2)"),
+        (lambda w: w["entries"].__setitem__(0, "text"), "entries[0]: expected the bytes of a wire message"),
+        (lambda w: w.__setitem__("tick", -1), "tick: "),
+    ],
+)
+def test_a_bad_bundle_is_refused_naming_the_field(change, error):
+    w = wire(Bundle(3, ("Imu", "Uwb"), (encode(VALID[Imu]), encode(VALID[Uwb]))))
+    change(w)
+    with pytest.raises(MessageError) as got:
+        decode(pack(w), Bundle)
+    assert str(got.value).startswith(error)
+
+
+def test_pack_bundle_splits_at_the_payload_limit_and_keeps_the_order():
+    """The world's and the mothership's bundles: every entry once, in order, no message above
+    :data:`MAX_PAYLOAD_BYTES` or :data:`MAX_BATCH` entries, each message's tick its newest entry's."""
+    frame = encode(Vision(0, 0.0, "target", "+x", "features", np.full((60, 3), 0.5), tuple(range(60))))
+    entries = []
+    for k in range(1, 60):  # ~1.5 kB frames and imu: a few messages
+        frame_k = Vision(k, k * 0.01, "target", "+x", "features", np.full((60, 3), 0.5), tuple(range(60)))
+        entries.append(("Vision", encode(frame_k), k))
+        entries.append(("Imu", encode(Imu(k, k * 0.01, 0.01, [0.1, 0.2, 0.3], Q)), k))
+    assert len(frame) * 59 > MAX_PAYLOAD_BYTES  # (so that it must split)
+    out = msgs.pack_bundle(entries)
+    assert len(out) > 1 and all(len(p) <= MAX_PAYLOAD_BYTES for p in out)
+    bundles = [decode(p, Bundle) for p in out]
+    assert [e for b in bundles for e in b.entries] == [e for _, e, _ in entries]
+    assert [n for b in bundles for n in b.types] == [n for n, _, _ in entries]
+    for b in bundles:
+        assert b.tick == max(m.tick for m in msgs.bundle_messages(b, "k", DropCounter(logger=SILENT)))
+    many = [("Uwb", encode(Uwb(k, 0.01 * k, 1, 1.0)), k) for k in range(600)]
+    assert [len(decode(p, Bundle).types) for p in msgs.pack_bundle(many)] == [256, 256, 88]
+
+
+def _truth_batch_args(rng):
+    n = int(rng.integers(1, 6))
+    X = rng.normal(size=(n, 13))
+    X[:, 6:10] = np.array([_unit(rng) for _ in range(n)])
+    vids = tuple(f"v{i}" for i in range(n))
+    msgs._vehicle_ids(vids, "ids", 1)  # (a world's id list is known after its first batch)
+    return [int(rng.integers(0, 10**6)), float(rng.uniform(0, 100)), vids, X, rng.uniform(0, 5, size=n),
+            bool(rng.uniform() < 0.2), float(rng.uniform(0, 1))]  # fmt: skip
+
+
+def _truth_batch(k, t, vids, X, effort, lost, p_nlos):
+    n = len(vids)
+    x = np.asarray(X, dtype=np.float64)
+    return TruthBatch(k, t, vids, x[:, 0:3], x[:, 3:6], x[:, 6:10], x[:, 10:13], effort, (lost,) * n,
+                      np.full(n, p_nlos))  # fmt: skip
+
+
+def test_encode_truth_batch_gives_the_bytes_and_the_errors_of_the_message_encode(monkeypatch):
+    """Oracle: ``encode(TruthBatch(...))``, the world's reference path for a UWB slot's truths."""
+    rng = np.random.default_rng(15)
+    _through_the_fast_path(monkeypatch, msgs.encode_truth_batch, _truth_batch, _truth_batch_args, rng)
+    variants = {
+        "NaN position": (lambda a: a[3].__setitem__((0, 0), np.nan), False),
+        "infinite rate": (lambda a: a[3].__setitem__((0, 12), np.inf), False),
+        "not a unit quaternion": (lambda a: a[3].__setitem__((0, slice(6, 10)), [0.0, 0.0, 0.0, 1.1]), False),
+        "negative effort": (lambda a: a[4].__setitem__(0, -0.5), False),
+        "NLOS probability above 1": (lambda a: a.__setitem__(6, 1.5), False),
+        "negative time": (lambda a: a.__setitem__(1, -1.0), False),
+        "bad id": (lambda a: a.__setitem__(2, ("v 0", *a[2][1:])), False),
+        "float32 state": (lambda a: a.__setitem__(3, a[3].astype(np.float32)), True),
+        "numpy tick": (lambda a: a.__setitem__(0, np.int64(3)), True),
+    }
+    changes = {name: change for name, (change, _) in variants.items()}
+    _decided_as_the_message(msgs.encode_truth_batch, _truth_batch, _truth_batch_args, rng, changes,
+                            [name for name, (_, ok) in variants.items() if ok])  # fmt: skip

@@ -1,8 +1,9 @@
 """Recording (issue 16): a launched lockstep docking recorded (`swarm launch --record`: a `swarm record`
 child on the launcher's router), read back with the plain `mcap` reader; the counts per key equal an
-independent subscriber's; the payloads decode with plain msgpack; record -> replay -> record gives the same
-payloads in the same order; a truncated or corrupt file is refused naming the file and the offset, without
-hanging."""
+independent subscriber's (which counts each entry of a lockstep bundle under its own key, as the recorder
+writes it: docs/protocol.md, "Bundles"); the payloads decode with plain msgpack; record -> replay -> record
+gives the same payloads in the same order; a truncated or corrupt file is refused naming the file and the
+offset, without hanging."""
 
 from __future__ import annotations
 
@@ -41,8 +42,17 @@ def recorded(tmp_path_factory):
     lock = threading.Lock()
 
     def count(sample) -> None:
+        key = str(sample.key_expr)
+        keys_ = [key]
+        if key.endswith("/bundle"):  # a lockstep world's bundle: recorded as its entries, each on its own key
+            obj = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
+            base = key.rsplit("/", 1)[0]
+            keys_ = [
+                f"{ns}/world/truth" if t == "TruthBatch" else f"{base}/{t.lower()}" for t in obj["types"]
+            ]
         with lock:
-            counts[str(sample.key_expr)] += 1
+            for k in keys_:
+                counts[k] += 1
 
     with Procs() as procs:
         _router(procs, ep)

@@ -29,7 +29,7 @@ from swarm.errors import ConfigError
 from swarm.scenario import load_scenario
 from swarm.sim.docking import run_docking
 from swarm.transport.keys import AGENT_KINDS, Keys
-from swarm.transport.messages import Clock, Command, Imu, decode, encode
+from swarm.transport.messages import Bundle, Clock, Command, DropCounter, Imu, bundle_messages, decode, encode
 from swarm.transport.recording import read_recording
 from swarm.transport.security import (
     ACL_MESSAGES,
@@ -49,9 +49,10 @@ K = Keys(NS)
 # What each identity may publish, from issue 7 and docs/protocol.md ("Access control"): (identity, key).
 MAY_PUT = {
     "world": {K.imu(v) for v in VEHICLES} | {K.vision(v) for v in VEHICLES} | {K.truth(v) for v in VEHICLES}
-    | {K.event(v) for v in VEHICLES}
-    | {K.world_imu(), K.world_vision(), K.world_truth(), K.world_clock(), K.world_event()},
-    "mothership": {K.uwb(v) for v in VEHICLES} | {K.mothership_uwb(), K.anchors()},
+    | {K.event(v) for v in VEHICLES} | {K.bundle(v) for v in VEHICLES}
+    | {K.world_imu(), K.world_vision(), K.world_truth(), K.world_bundle(), K.world_clock(), K.world_event()},
+    "mothership": {K.uwb(v) for v in VEHICLES} | {K.bundle(v) for v in VEHICLES}
+    | {K.mothership_uwb(), K.anchors()},
     "agent-chaser": {K.estimate("chaser"), K.guidance("chaser"), K.command("chaser"), K.commands("chaser"),
                      K.event("chaser")},
     "agent-target": {K.estimate("target"), K.guidance("target"), K.command("target"), K.commands("target"),
@@ -61,7 +62,8 @@ MAY_PUT = {
 }  # fmt: skip
 ALL_KEYS = sorted({getattr(K, kind)(v) for kind in AGENT_KINDS for v in VEHICLES}
                   | {K.world_clock(), K.world_event(), K.world_imu(), K.world_vision(), K.world_truth(),
-                     K.anchors(), K.mothership_uwb(), K.run_control(), K.fault()})  # fmt: skip
+                     K.world_bundle(), K.anchors(), K.mothership_uwb(), K.run_control(),
+                     K.fault()})  # fmt: skip
 
 
 def _may(acl: dict, name: str, message: str, key: str, flow: str = "ingress") -> bool:
@@ -119,8 +121,9 @@ def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_
     want = {
         "world": {K.command(v) for v in VEHICLES} | {K.commands(v) for v in VEHICLES}
         | {K.run_control(), K.fault()},
-        "mothership": {K.world_truth(), K.world_clock()},  # the truths in one batch, not each vehicle's
-        "agent-chaser": {K.imu("chaser"), K.uwb("chaser"), K.vision("chaser"), K.world_clock()}
+        "mothership": {K.world_truth(), K.world_bundle(), K.world_clock()},  # batches, not each vehicle's
+        "agent-chaser": {K.imu("chaser"), K.uwb("chaser"), K.vision("chaser"), K.bundle("chaser")}
+        | {K.world_clock()}
         | {K.estimate(v) for v in VEHICLES}
         | {K.world_imu(), K.world_vision(), K.mothership_uwb(), K.world_event()},
         "dashboard": set(ALL_KEYS),
@@ -520,9 +523,16 @@ def test_secure_launch_docks_as_the_simulation_while_intruders_are_denied_by_zen
 
     def on(kind: str):
         def record(sample: zenoh.Sample) -> None:
-            msg = decode(sample.payload.to_bytes(), Imu if kind == "imu" else Command)
+            if kind == "bundle":  # a lockstep world's imu come in its bundles (docs/protocol.md, "Bundles")
+                got = bundle_messages(
+                    decode(sample.payload.to_bytes(), Bundle), kind, DropCounter(), ("Imu",)
+                )
+                kind_ = "imu"
+            else:
+                got = [decode(sample.payload.to_bytes(), Imu if kind == "imu" else Command)]
+                kind_ = kind
             with lock:
-                seen[kind].append(msg)
+                seen[kind_].extend(got)
 
         return record
 
@@ -543,6 +553,7 @@ def test_secure_launch_docks_as_the_simulation_while_intruders_are_denied_by_zen
         stop, sent, matched = threading.Event(), [0], []
         try:
             monitor.declare_subscriber(keys.imu("chaser"), on("imu"))
+            monitor.declare_subscriber(keys.bundle("chaser"), on("bundle"))
             monitor.declare_subscriber(keys.command("chaser"), on("command"))
             monitor.declare_subscriber(
                 keys.world_clock(), lambda s: clock.__setitem__(0, decode(s.payload.to_bytes(), Clock).tick)
