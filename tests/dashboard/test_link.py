@@ -94,3 +94,42 @@ def test_the_frames_of_a_world_vision_batch_reach_each_vehicle_and_a_bad_one_is_
     assert snap["chaser"].vision_rows == 6 and snap["chaser"].vision_t_s == 0.1
     assert snap.get("chaser2") is None or snap["chaser2"].vision_rows is None
     assert drops.count(keys.world_vision()) == 1
+
+
+def test_the_newest_frame_of_a_lockstep_bundle_is_drawn_and_a_bad_entry_is_counted():
+    """A lockstep world sends a chaser's frames in its bundles (docs/protocol.md, "Bundles"): the dashboard
+    draws the bundle's newest frame, skips its imu, and counts an entry that does not decode without losing
+    the others. Two real sessions on loopback."""
+    from swarm.transport.messages import Bundle, Imu, Vision
+
+    keys = Keys(f"link{free_port()}")
+    state = SwarmState({"chaser": ("chaser", "target")}, np.zeros((0, 3)))
+    endpoint = loopback(free_port())
+    old = Vision(5, 0.05, "target", "+x", "features", np.full((6, 3), 0.2), (0, 1, 2, 3, 4, 5))
+    new = Vision(10, 0.1, "target", "+x", "features", np.full((4, 3), 0.2), (0, 1, 2, 3))
+    imu = Imu(10, 0.1, 0.01, np.zeros(3))
+    bundle = Bundle(
+        10, ("Vision", "Imu", "Vision", "Vision"), (encode(old), encode(imu), encode(new), b"\x81")
+    )
+    drops = DropCounter()
+    with open_session(ZenohArgs(mode="peer", listen=(endpoint,))) as session:
+        link = SwarmLink(session, keys, state, drops, anchors_retry_s=0.05)
+        try:
+            with open_session(ZenohArgs(mode="peer", connect=(endpoint,))) as other:
+                pub = other.declare_publisher(keys.bundle("chaser"))
+                deadline = time.monotonic() + 10.0
+                while not pub.matching_status.matching and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                pub.put(encode(bundle))
+                while (
+                    state.snapshot().agents.get("chaser") is None
+                    or state.snapshot().agents["chaser"].vision_rows is None
+                ):
+                    assert time.monotonic() < deadline, "the bundle's frame never reached the dashboard"
+                    link.poll()
+                    time.sleep(0.01)
+        finally:
+            link.close()
+    snap = state.snapshot().agents
+    assert snap["chaser"].vision_rows == 4 and snap["chaser"].vision_t_s == 0.1
+    assert drops.count(keys.bundle("chaser")) == 1
