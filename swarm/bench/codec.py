@@ -22,7 +22,7 @@ QUICK = {"repeat": 3, "number": 300}
 def examples() -> list:
     """One realistic message of each hot-path type (the docking chaser's sizes; the batches of agent hosts
     for a swarm of 32 vehicles, an AHRS tick's, its 16 chasers' frames each of six markers; a host of 16's
-    commands of a round)."""
+    commands of a round; a lockstep chaser's bundle of a control period)."""
     from swarm.core.decision_keys import DECISION_KEYS
     from swarm.transport import messages as m
 
@@ -73,8 +73,24 @@ def examples() -> list:
             (False,) * 32,
             np.zeros(32),
         ),
+        m.Bundle(10, *_period(m, rng, q)),
         m.Clock(5, 0.05, "running", 3),
     ]
+
+
+def _period(m, rng, q) -> tuple[tuple, tuple]:
+    """A lockstep world's bundle of a control period for a chaser (docs/protocol.md, "Bundles"): the imu of
+    ticks 1-10 and its camera frames of ticks 5 and 10 (each of six markers, before that tick's imu)."""
+    types, entries = [], []
+    for k in range(1, 11):
+        if k % 5 == 0:
+            markers = rng.normal(size=(6, 3))
+            frame = m.Vision(k, 0.01 * k, "target", "+x", "features", markers, tuple(range(6)))
+            types.append("Vision")
+            entries.append(m.encode(frame))
+        types.append("Imu")
+        entries.append(m.encode(m.Imu(k, 0.01 * k, 0.01, np.full(3, 0.01), q)))
+    return tuple(types), tuple(entries)
 
 
 def fast_encoders() -> dict:
