@@ -208,7 +208,7 @@ def test_a_hung_agent_is_told_with_its_stacks_killed_and_restarted_and_the_run_g
         proc, _ = _launch(procs, ns, "--until-docked", "--step-timeout", "1", "--hung-ticks", str(HUNG_TICKS),
                           json_path=out)  # fmt: skip
         proc.wait_for_line(r"^swarm up:", 120.0)
-        time.sleep(2.0)  # into the run
+        time.sleep(1.0)  # into the run (a lockstep pair docks ~3.5 s into it here)
         wait_until(lambda: any("agents --id chaser" in c for c in _children(ns)), 30.0, "the chaser's agent")
         chaser = next(int(c.split()[0]) for c in _children(ns) if "agents --id chaser" in c)
         os.kill(chaser, signal.SIGSTOP)
@@ -378,7 +378,7 @@ def test_a_killed_world_resumes_from_its_checkpoint_and_the_run_equals_the_simul
         out = tmp_path / "launch.json"
         proc, _ = _launch(procs, ns, "--until-docked", json_path=out)
         proc.wait_for_line(r"^swarm up:", 120.0)
-        killed_at, _ = _kill_world(ns, 3.0)
+        killed_at, _ = _kill_world(ns, 1.0)  # (a lockstep pair docks ~3.5 s into the run here)
         rc = proc.wait(RUN_S)
     text = proc.output()
     assert rc == 0, text
@@ -453,7 +453,7 @@ def test_a_world_whose_checkpoint_is_damaged_is_not_resumed_and_the_launcher_giv
     with Procs() as procs:
         proc, _ = _launch(procs, ns, "--until-docked")
         proc.wait_for_line(r"^swarm up:", 120.0)
-        _, victim = _kill_world(ns, 2.0, signal.SIGSTOP)
+        _, victim = _kill_world(ns, 1.0, signal.SIGSTOP)  # (a lockstep pair docks ~3.5 s into the run)
         path = Path(re.search(r"--checkpoint-dir (\S+)", victim).group(1)) / "world.ckpt"
         path.write_bytes(b"garbage, not a checkpoint")
         os.kill(int(victim.split()[0]), signal.SIGKILL)

@@ -635,7 +635,7 @@ def test_a_world_killed_in_a_secure_run_resumes_with_its_identity_and_the_run_eq
                 "--until-docked", "--seed", str(SEED), "--namespace", ns, "--json", str(out)]  # fmt: skip
         proc = procs.start(args)
         proc.wait_for_line(r"^swarm up:", 180.0)
-        time.sleep(3.0)
+        time.sleep(1.0)  # into the run (a lockstep pair docks ~3.5 s into it here)
         (first,) = world()
         os.kill(int(first[0]), signal.SIGKILL)
         wait_until(lambda: len(world()) == 1 and world()[0][0] != first[0], 60.0, "the restarted world")
