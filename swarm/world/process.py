@@ -22,12 +22,14 @@ computer died does not keep firing); it joins again with its first command for a
 
 With a checkpoint directory (``--checkpoint-dir``) the world writes its complete state at every tick ``k``
 (:mod:`swarm.transport.checkpoint`) *before* it publishes that tick's sensors, so no process ever saw a sample
-of a tick later than the checkpoint. A world restarted with ``--resume`` continues from it: it announces
-``world/event`` ``world_resumed`` and its clock, re-publishes tick ``k``'s samples and those of the ticks
-before it that some process may not have received (:func:`unconfirmed_ticks`: a killed world loses what its
-Zenoh session had not sent yet; an agent drops those it already has) and waits for the commands due at
-tick ``k`` (an agent that already sent its command re-sends it
-on ``world_resumed``). A lockstep run with a world killed and resumed is the uninterrupted run, bit for bit.
+of a tick later than the checkpoint. An unpaced lockstep world keeps the samples of the ticks up to the next
+one an agent commands on and then sends them as one ``Bundle`` per receiver (docs/protocol.md, "Bundles"); it
+writes its checkpoint just before it sends them, with the same guarantee. A world restarted with ``--resume``
+continues from it: it announces ``world/event`` ``world_resumed`` and its clock, re-publishes tick ``k``'s
+samples and those of the ticks before it that some process may not have received (:func:`unconfirmed_ticks`:
+a killed world loses what its Zenoh session had not sent yet; an agent drops those it already has) and waits
+for the commands due at tick ``k`` (an agent that already sent its command re-sends it on
+``world_resumed``). A lockstep run with a world killed and resumed is the uninterrupted run, bit for bit.
 """
 
 from __future__ import annotations
