@@ -162,7 +162,7 @@ def world_args(args: argparse.Namespace) -> list[str]:
         world += ["--pace", str(args.pace)]
     if _hosted(args):  # one message for many vehicles' imu, one for their truths
         world += ["--batch"]
-    if not getattr(args, "bundles", True):
+    if not args.bundles:
         world += ["--no-bundles"]
     return world
 

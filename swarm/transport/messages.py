@@ -28,7 +28,7 @@ import math
 import re
 import threading
 import time
-from collections.abc import Callable, Container
+from collections.abc import Callable, Container, Sequence
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Annotated, Any, Literal, TypeVar
 
@@ -948,25 +948,34 @@ _BATCH_ENVELOPE = 96
 the type's name, a tick and a time, the two lists' headers (~60) [bytes]."""
 
 
+def _spans(entries: Sequence[tuple], distinct: bool) -> list[tuple[int, int]]:
+    """``(label, encoded message, ...)`` entries, in order, cut into as few runs ``entries[a:b]`` as keep
+    each message of them within :data:`MAX_PAYLOAD_BYTES` and :data:`MAX_BATCH` entries (``distinct``: a
+    label at most once per run). The packing of :func:`pack_entries` and :func:`pack_bundle`."""
+    spans: list[tuple[int, int]] = []
+    start, size, labels = 0, _BATCH_ENVELOPE, set()
+    for i, (label, payload, *_) in enumerate(entries):
+        row = len(payload) + len(label) + 8  # the bin and str headers of the entry and its label
+        if i > start and (size + row > MAX_PAYLOAD_BYTES or i - start == MAX_BATCH or label in labels):
+            spans.append((start, i))
+            start, size, labels = i, _BATCH_ENVELOPE, set()
+        size += row
+        if distinct:
+            labels.add(label)
+    if start < len(entries):
+        spans.append((start, len(entries)))
+    return spans
+
+
 def pack_entries(entries: list[tuple[str, bytes]], make: Callable[[tuple, tuple], Message]) -> list[bytes]:
     """``(vehicle, encoded message)`` entries, in order, in as few batch messages (``make(ids, payloads)``:
     a :class:`VisionBatch` or :class:`CommandBatch`) as keep each within :data:`MAX_PAYLOAD_BYTES` and
     :data:`MAX_BATCH` vehicles, a vehicle at most once per message (a host that caught up on two of its
     ticks in one round sends the second command in the next message, after the first)."""
-    out: list[bytes] = []
-    ids: list[str] = []
-    blobs: list[bytes] = []
-    size = _BATCH_ENVELOPE
-    for vid, payload in entries:
-        row = len(payload) + len(vid) + 8  # the bin and str headers of the entry and its id
-        if ids and (size + row > MAX_PAYLOAD_BYTES or len(ids) == MAX_BATCH or vid in ids):
-            out.append(encode(make(tuple(ids), tuple(blobs))))
-            ids, blobs, size = [], [], _BATCH_ENVELOPE
-        ids.append(vid)
-        blobs.append(payload)
-        size += row
-    if ids:
-        out.append(encode(make(tuple(ids), tuple(blobs))))
+    out = []
+    for a, b in _spans(entries, distinct=True):
+        ids, blobs = zip(*entries[a:b], strict=True)
+        out.append(encode(make(ids, blobs)))
     return out
 
 
@@ -1079,22 +1088,10 @@ def bundle_messages(
 def pack_bundle(entries: list[tuple[str, bytes, int]]) -> list[bytes]:
     """``(type, encoded message, tick)`` entries, in order, in as few :class:`Bundle` messages as keep each
     within :data:`MAX_PAYLOAD_BYTES` and :data:`MAX_BATCH` entries (each message's ``tick`` its newest)."""
-    out: list[bytes] = []
-    types: list[str] = []
-    blobs: list[bytes] = []
-    tick = 0
-    size = _BATCH_ENVELOPE
-    for name, payload, k in entries:
-        row = len(payload) + len(name) + 8  # the bin and str headers of the entry and its type
-        if types and (size + row > MAX_PAYLOAD_BYTES or len(types) == MAX_BATCH):
-            out.append(encode(Bundle(tick, tuple(types), tuple(blobs))))
-            types, blobs, size = [], [], _BATCH_ENVELOPE
-        types.append(name)
-        blobs.append(payload)
-        tick = max(tick, k) if len(types) > 1 else k
-        size += row
-    if types:
-        out.append(encode(Bundle(tick, tuple(types), tuple(blobs))))
+    out = []
+    for a, b in _spans(entries, distinct=False):
+        types, blobs, ticks = zip(*entries[a:b], strict=True)
+        out.append(encode(Bundle(max(ticks), types, blobs)))
     return out
 
 

@@ -636,7 +636,6 @@ class WorldProcess:
             joining, self._joining = self._joining, []
             if joining:
                 self.barrier.set_live(self.barrier.live | set(joining))
-        with self._lock:
             waiting = bool(self._awaited or self._returned)
         if waiting:  # the other agents go on up to the current tick meanwhile
             self._flush_bundles()

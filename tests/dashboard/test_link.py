@@ -60,6 +60,32 @@ def test_anchors_arriving_while_the_link_is_built_are_taken_without_an_error(cap
     assert snap.anchors_version == 1 and np.array_equal(snap.anchors[1], anchors.positions_nav)
 
 
+def _put_until_chaser_frame(
+    keys: Keys, state: SwarmState, drops: DropCounter, key: str, payload: bytes
+) -> None:
+    """A link on a real peer session; another session on loopback puts ``payload`` on ``key`` (once the
+    link's subscriber matches) and the link is polled until the chaser has a frame (10 s at most)."""
+    endpoint = loopback(free_port())
+    with open_session(ZenohArgs(mode="peer", listen=(endpoint,))) as session:
+        link = SwarmLink(session, keys, state, drops, anchors_retry_s=0.05)
+        try:
+            with open_session(ZenohArgs(mode="peer", connect=(endpoint,))) as other:
+                pub = other.declare_publisher(key)
+                deadline = time.monotonic() + 10.0
+                while not pub.matching_status.matching and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                pub.put(payload)
+                while (
+                    state.snapshot().agents.get("chaser") is None
+                    or state.snapshot().agents["chaser"].vision_rows is None
+                ):
+                    assert time.monotonic() < deadline, f"the frame on {key} never reached the dashboard"
+                    link.poll()
+                    time.sleep(0.01)
+        finally:
+            link.close()
+
+
 def test_the_frames_of_a_world_vision_batch_reach_each_vehicle_and_a_bad_one_is_counted():
     """A swarm of agent hosts sends the chasers' frames in world/vision batches (docs/protocol.md): the
     dashboard draws each vehicle's frame from its entry, as from its own vision key, and an entry that does
@@ -68,28 +94,10 @@ def test_the_frames_of_a_world_vision_batch_reach_each_vehicle_and_a_bad_one_is_
 
     keys = Keys(f"link{free_port()}")
     state = SwarmState({"chaser": ("chaser", "target"), "chaser2": ("chaser", "target2")}, np.zeros((0, 3)))
-    endpoint = loopback(free_port())
     frame = Vision(10, 0.1, "target", "+x", "features", np.full((6, 3), 0.2), (0, 1, 2, 3, 4, 5))
     batch = VisionBatch(10, 0.1, ("chaser", "chaser2"), (encode(frame), b"\x81\xa1v\x02"))
     drops = DropCounter()
-    with open_session(ZenohArgs(mode="peer", listen=(endpoint,))) as session:
-        link = SwarmLink(session, keys, state, drops, anchors_retry_s=0.05)
-        try:
-            with open_session(ZenohArgs(mode="peer", connect=(endpoint,))) as other:
-                pub = other.declare_publisher(keys.world_vision())
-                deadline = time.monotonic() + 10.0
-                while not pub.matching_status.matching and time.monotonic() < deadline:
-                    time.sleep(0.01)
-                pub.put(encode(batch))
-                while (
-                    state.snapshot().agents.get("chaser") is None
-                    or state.snapshot().agents["chaser"].vision_rows is None
-                ):
-                    assert time.monotonic() < deadline, "the batch's frame never reached the dashboard"
-                    link.poll()
-                    time.sleep(0.01)
-        finally:
-            link.close()
+    _put_until_chaser_frame(keys, state, drops, keys.world_vision(), encode(batch))
     snap = state.snapshot().agents
     assert snap["chaser"].vision_rows == 6 and snap["chaser"].vision_t_s == 0.1
     assert snap.get("chaser2") is None or snap["chaser2"].vision_rows is None
@@ -104,7 +112,6 @@ def test_the_newest_frame_of_a_lockstep_bundle_is_drawn_and_a_bad_entry_is_count
 
     keys = Keys(f"link{free_port()}")
     state = SwarmState({"chaser": ("chaser", "target")}, np.zeros((0, 3)))
-    endpoint = loopback(free_port())
     old = Vision(5, 0.05, "target", "+x", "features", np.full((6, 3), 0.2), (0, 1, 2, 3, 4, 5))
     new = Vision(10, 0.1, "target", "+x", "features", np.full((4, 3), 0.2), (0, 1, 2, 3))
     imu = Imu(10, 0.1, 0.01, np.zeros(3))
@@ -112,24 +119,7 @@ def test_the_newest_frame_of_a_lockstep_bundle_is_drawn_and_a_bad_entry_is_count
         10, ("Vision", "Imu", "Vision", "Vision"), (encode(old), encode(imu), encode(new), b"\x81")
     )
     drops = DropCounter()
-    with open_session(ZenohArgs(mode="peer", listen=(endpoint,))) as session:
-        link = SwarmLink(session, keys, state, drops, anchors_retry_s=0.05)
-        try:
-            with open_session(ZenohArgs(mode="peer", connect=(endpoint,))) as other:
-                pub = other.declare_publisher(keys.bundle("chaser"))
-                deadline = time.monotonic() + 10.0
-                while not pub.matching_status.matching and time.monotonic() < deadline:
-                    time.sleep(0.01)
-                pub.put(encode(bundle))
-                while (
-                    state.snapshot().agents.get("chaser") is None
-                    or state.snapshot().agents["chaser"].vision_rows is None
-                ):
-                    assert time.monotonic() < deadline, "the bundle's frame never reached the dashboard"
-                    link.poll()
-                    time.sleep(0.01)
-        finally:
-            link.close()
+    _put_until_chaser_frame(keys, state, drops, keys.bundle("chaser"), encode(bundle))
     snap = state.snapshot().agents
     assert snap["chaser"].vision_rows == 4 and snap["chaser"].vision_t_s == 0.1
     assert drops.count(keys.bundle("chaser")) == 1

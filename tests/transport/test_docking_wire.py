@@ -231,6 +231,8 @@ def test_the_launcher_asks_world_and_mothership_for_batches_only_for_agent_hosts
     from swarm.cli.launch import mothership_args, world_args
 
     args = argparse.Namespace(clock="lockstep", step_timeout=5.0, start_timeout=180.0, checkpoint_dir="/x",
-                              pace=None, vehicles_per_process=per_process)  # fmt: skip
+                              pace=None, vehicles_per_process=per_process, bundles=True)  # fmt: skip
     assert ("--batch" in world_args(args)) == (per_process > 1)
+    assert "--no-bundles" not in world_args(args)
+    assert "--no-bundles" in world_args(argparse.Namespace(**{**vars(args), "bundles": False}))
     assert mothership_args(args) == ["mothership", *(["--batch"] if per_process > 1 else [])]
