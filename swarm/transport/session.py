@@ -228,9 +228,12 @@ def make_config(args: ZenohArgs) -> zenoh.Config:
       how long a router's open waits for scouting answers (500 ms by default, measured), pointless
       without multicast.
     - ``transport/link/tx/lease`` [ms]: ``args.lease_ms``, if given.
+    - ``transport/shared_memory/enabled``: ``false`` unless the file configures ``shared_memory``
+      (below, and BENCHMARKS.md, "Zenoh's shared memory off").
 
     ConfigError names the file when it cannot be read or parsed, and the flag when Zenoh refuses a value.
     """
+    shm_configured = False
     if args.config_file is None:
         config = zenoh.Config()
     else:
@@ -241,6 +244,8 @@ def make_config(args: ZenohArgs) -> zenoh.Config:
             config = zenoh.Config.from_file(str(path))
         except zenoh.ZError as exc:
             raise ConfigError(f"--zenoh-config: cannot load {str(path)!r}: {_zerror_text(exc)}") from None
+        # (Zenoh's default is true, so whether the file set it shows in its text only)
+        shm_configured = "shared_memory" in path.read_text(errors="replace")
     if args.mode is not None:
         _insert(config, "mode", args.mode, "--mode")
     if args.connect:
@@ -256,6 +261,14 @@ def make_config(args: ZenohArgs) -> zenoh.Config:
         _insert(config, "scouting/delay", 0, "--multicast-scouting")
     if args.lease_ms is not None:
         _insert(config, "transport/link/tx/lease", args.lease_ms, "transport.lease_ms")
+    if not shm_configured:
+        # Zenoh 1.x has its shared-memory transport on by default, "lazy": a session sets up its 16 MiB pool
+        # and maps its peers' segments at the first message over 3 kB it sends or takes, in a run's first
+        # ticks (the world's batches and bundles). 32 processes on two cores then zeroed pages for tens of
+        # milliseconds at once (perf: clear_page_erms), the world stepped its first ticks up to 180 ms late,
+        # and 1.2-2.8 % of a 10 s run's vehicle-ticks were late, nearly all in its first 50 ticks; with it
+        # off, 0.1-0.45 %. Our messages are a few kilobytes, which loopback TCP carries as cheaply
+        _insert(config, "transport/shared_memory/enabled", False, "--zenoh-config")
     return config
 
 

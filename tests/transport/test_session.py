@@ -130,6 +130,21 @@ def test_config_file_is_the_base_and_flags_override_it(tmp_path) -> None:
     assert _get(overridden, "transport/link/tx/lease") == 2000
 
 
+def test_shared_memory_is_off_unless_the_config_file_configures_it(tmp_path) -> None:
+    """Zenoh's shared memory (on by default) set up its pool in a run's first ticks and made a 32-vehicle
+    world late (make_config): off for every session, unless a ``--zenoh-config`` file says otherwise."""
+    assert json.loads(zenoh.Config().get_json("transport/shared_memory/enabled")) is True  # Zenoh's default
+    assert _get(make_config(ZenohArgs()), "transport/shared_memory/enabled") is False
+    other = tmp_path / "other.json5"
+    other.write_text("{ transport: { link: { tx: { lease: 3000 } } } }")
+    assert _get(make_config(ZenohArgs(config_file=str(other))), "transport/shared_memory/enabled") is False
+    on = tmp_path / "on.json5"
+    on.write_text('{ transport: { shared_memory: { enabled: true, mode: "init" } } }')
+    kept = make_config(ZenohArgs(config_file=str(on), mode="peer"))
+    assert _get(kept, "transport/shared_memory/enabled") is True
+    assert _get(kept, "transport/shared_memory/mode") == "init"
+
+
 def test_listen_endpoints_are_the_configured_ones_or_zenohs_default_for_the_mode() -> None:
     assert listen_endpoints(make_config(ZenohArgs(mode="router", listen=("tcp/127.0.0.1:0",)))) == (
         "tcp/127.0.0.1:0",
