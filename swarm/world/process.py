@@ -135,6 +135,10 @@ class WorldProcess:
         # a lockstep world's samples wait for the next tick an agent commands on, then leave as one Bundle per
         # receiver: no agent can use a tick before then anyway (its command needs every tick up to it)
         self.bundles = bundles and clock.lockstep and self.pace is None and not batch
+        # free-running, agents a process each: the agents' samples go out before the mothership's truths
+        # (world_sensors' truth_last), whose ranges such an agent does not wait for; -4 % on one pair's
+        # latency p99 (BENCHMARKS.md, "The clock between the ticks"); agent hosts were not measured so
+        self._truth_last = not clock.lockstep and not batch
         self._bundle: dict[str, list[tuple[str, bytes, int]]] = {}  # per receiver ("": the mothership)
         self._bundle_ticks = 0  # ticks in the pending bundles
         self._viewed: set[str] = set()  # the vehicles whose per-vehicle truth a subscriber matches
@@ -461,7 +465,7 @@ class WorldProcess:
         # a vehicle whose samples a sensor_delay window holds back keeps its own imu key (held in _send)
         solo = {v for v in self._delays if self._delay_s(v, t) is not None}
         return world_sensors(self.world, self.ids, self.chasers, k, frames, self._truth_every, self.batch,
-                             solo, set(self._viewed))  # fmt: skip
+                             solo, set(self._viewed), truth_last=self._truth_last)  # fmt: skip
 
     def _pub(self, kind: str, vid: str):
         return self._pubs[kind][vid]
