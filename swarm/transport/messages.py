@@ -1912,6 +1912,16 @@ def _fin(x: float | None) -> float | None:
 
 
 def _arr(a: _Array | None, shape: tuple[int | None, ...]) -> Any:
+    out = _arr_shaped(a, shape)
+    # finite: a small array's sum in Python (a NaN or an infinity carries through; a finite sum too large
+    # to hold defers to the reference, which decides exactly), a larger one's entries in numpy
+    if out is not None and not (math.isfinite(_total(out)) if out.size <= 16 else np.isfinite(out).all()):
+        raise _Defer
+    return out
+
+
+def _arr_shaped(a: _Array | None, shape: tuple[int | None, ...]) -> Any:
+    """:func:`_arr` without its finiteness check (the caller's)."""
     if a is None:
         return None
     if len(a.shape) != len(shape):
@@ -1923,12 +1933,7 @@ def _arr(a: _Array | None, shape: tuple[int | None, ...]) -> Any:
         n *= got
     if len(a.data) != 8 * n:
         raise _Defer
-    out = np.frombuffer(a.data, "<f8").reshape(a.shape).astype(np.float64)  # a writable copy
-    # finite: a small array's sum in Python (a NaN or an infinity carries through; a finite sum too large
-    # to hold defers to the reference, which decides exactly), a larger one's entries in numpy
-    if not (math.isfinite(_total(out)) if n <= 16 else np.isfinite(out).all()):
-        raise _Defer
-    return out
+    return np.frombuffer(a.data, "<f8").reshape(a.shape).astype(np.float64)  # a writable copy
 
 
 def _q(a: _Array | None, name: str) -> Any:
@@ -1999,6 +2004,19 @@ def _entries(ids: list[str], blobs: list[bytes]) -> tuple[tuple[str, ...], tuple
 
 
 def _estimate(w: _EstimateWire) -> dict[str, Any]:
+    if _ESTIMATE_ARRAYS is not None and w.q_nav_body is not None:
+        # a process that encodes estimates has the compiled checks loaded: one call checks all four arrays
+        # where numpy took some ten (on a chaser's imu path, its target's estimate: BENCHMARKS.md, "The clock
+        # between the ticks"); anything but their plain verdict takes the checks below, which decide exactly
+        arrays = [_arr_shaped(a, shape) for a, shape in zip((w.p_nav, w.v_nav, w.q_nav_body, w.cov),
+                                                            _ESTIMATE_SHAPES, strict=True)]  # fmt: skip
+        if _estimate_arrays(*arrays) == _PLAIN:
+            p, v, q, cov = arrays
+            return {
+                "tick": w.tick, "t_s": _fin(w.t_s), "p_nav": p, "v_nav": v, "q_nav_body": q, "cov": cov,
+                "sigma_pos_max_m": _fin(w.sigma_pos_max_m), "mahalanobis_d": _fin(w.mahalanobis_d),
+                "rejection_fraction": w.rejection_fraction, "counts": w.counts,
+            }  # fmt: skip
     return {
         "tick": w.tick, "t_s": _fin(w.t_s), "p_nav": _arr(w.p_nav, (3,)), "v_nav": _arr(w.v_nav, (3,)),
         "q_nav_body": _q(w.q_nav_body, "q_nav_body"), "cov": _covariance(_arr(w.cov, (9, 9)), "cov"),

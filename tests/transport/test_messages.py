@@ -1045,6 +1045,65 @@ def test_the_fast_path_never_accepts_what_the_reference_refuses(case):
         assert fast is None or fast == reference
 
 
+@st.composite
+def estimates_at_edges(draw):
+    """An estimate's payload, its arrays (and a few other fields) at the checks' edges or left as written."""
+    msg = draw(STRATEGIES[Estimate])
+    obj = wire(msg)
+    for name in draw(st.lists(st.sampled_from(["p_nav", "v_nav", "q_nav_body", "cov", "t_s"]), max_size=3)):
+        old = obj.get(name)
+        shape = old["shape"] if isinstance(old, dict) and "shape" in old else None
+        obj[name] = draw(arrays_at_edges(shape)) if shape is not None else draw(edge_values)
+    return msg, obj
+
+
+@pytest.mark.parametrize("compiled", [False, True], ids=["numpy checks", "compiled checks"])
+@settings(max_examples=400, suppress_health_check=[HealthCheck.too_slow])
+@given(case=estimates_at_edges())
+def test_an_estimate_decodes_the_same_with_the_compiled_array_checks_or_without(compiled, case):
+    """A process that encodes estimates has the compiled array checks loaded (``_codec_nb``), and its
+    decoder then checks an estimate's four arrays in one call (a chaser decodes its target's on its imu's
+    path); one that never encodes (a viewer) keeps numpy's checks. Either way the fast path takes exactly
+    what the reference accepts, to the same message, and leaves the rest to it."""
+    msg, obj = case
+    msgs._estimate_arrays(np.zeros(3), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.eye(9))  # loaded
+    loaded = msgs._ESTIMATE_ARRAYS
+    payload = pack(obj)
+    try:
+        msgs._ESTIMATE_ARRAYS = loaded if compiled else None
+        fast = msgs._decode_fast(payload, Estimate)
+    finally:
+        msgs._ESTIMATE_ARRAYS = loaded
+    try:
+        reference = msgs._decode_reference(payload, Estimate)
+    except MessageError:
+        assert fast is None
+    else:
+        assert fast is None or fast == reference
+        if obj == wire(msg):  # as written: the fast path takes it
+            assert fast == msg
+
+
+def test_with_the_compiled_checks_loaded_a_plain_estimate_skips_numpys(monkeypatch):
+    """The compiled checks, not numpy's, decide a plain estimate once loaded (else the test above would
+    test one path twice); numpy's still decide one they do not call plain (here: off symmetry)."""
+    rng = np.random.default_rng(3)
+    args = _estimate_args(rng)
+    payload = msgs.encode_estimate(*args)  # (loads the compiled checks)
+    assert msgs._ESTIMATE_ARRAYS is not None
+    with monkeypatch.context() as m:
+        m.setattr(msgs, "_covariance", lambda p, name: pytest.fail("numpy's covariance check ran"))
+        got = msgs._decode_fast(payload, Estimate)
+    assert got is not None and np.array_equal(got.cov, args[5]) and got.tick == args[0]
+    obj = msgpack.unpackb(payload)
+    cov = np.frombuffer(obj["cov"]["data"], "<f8").reshape(9, 9).copy()
+    cov[0, 1] += 1.0  # not symmetric: refused, by the reference's own error
+    obj["cov"]["data"] = cov.tobytes()
+    assert msgs._decode_fast(pack(obj), Estimate) is None
+    with pytest.raises(MessageError, match="cov: not symmetric"):
+        msgs._decode_reference(pack(obj), Estimate)
+
+
 # ------------------------------------------------------------------------------ encode_estimate
 
 
