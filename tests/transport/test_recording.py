@@ -123,16 +123,18 @@ def test_record_replay_record_gives_the_same_payloads_in_the_same_order(recorded
     again = tmp_path / "again.mcap"
     with Procs() as procs:
         _router(procs, ep)
-        rec = procs.start([*PY, "record", str(again), "--namespace", recorded["ns"], "--mode", "client",
-                           "--connect", ep])  # fmt: skip
+        # --until-end: the recorder stops 0.5 s after the replayed run_end reaches it, not when the replay
+        # says it has sent everything (the router may still be forwarding the last messages then: a
+        # SIGINT at that moment lost the last 5 of ~2700 messages once in a full suite)
+        rec = procs.start([*PY, "record", str(again), "--namespace", recorded["ns"], "--until-end",
+                           "--mode", "client", "--connect", ep])  # fmt: skip
         rec.wait_for_line(r"^recording ", 60.0)
         rep = procs.start([*PY, "replay", str(recorded["path"]), "--speed", "inf", "--mode", "client",
                            "--connect", ep])  # fmt: skip
         assert rep.wait(300.0) == 0, rep.output()
         n = sum(recorded["counts"].values())
         wait_until(lambda: f"sent {n} messages" in rep.output(), 10.0, "the replay's summary")
-        rec.signal(2)  # SIGINT: the recorder finishes its file
-        assert rec.wait(60.0) == 0, rec.output()
+        assert rec.wait(60.0) == 0, rec.output()  # (it stopped itself once the run's end was in)
     first, _ = read_recording(recorded["path"])
     second, _ = read_recording(again)
     assert [(m.key, m.payload) for m in second] == [(m.key, m.payload) for m in first]
