@@ -2004,25 +2004,26 @@ def _entries(ids: list[str], blobs: list[bytes]) -> tuple[tuple[str, ...], tuple
 
 
 def _estimate(w: _EstimateWire) -> dict[str, Any]:
-    if _ESTIMATE_ARRAYS is not None and w.q_nav_body is not None:
-        # a process that encodes estimates has the compiled checks loaded: one call checks all four arrays
-        # where numpy took some ten (on a chaser's imu path, its target's estimate: BENCHMARKS.md, "The clock
-        # between the ticks"); anything but their plain verdict takes the checks below, which decide exactly
-        arrays = [_arr_shaped(a, shape) for a, shape in zip((w.p_nav, w.v_nav, w.q_nav_body, w.cov),
-                                                            _ESTIMATE_SHAPES, strict=True)]  # fmt: skip
-        if _estimate_arrays(*arrays) == _PLAIN:
-            p, v, q, cov = arrays
-            return {
-                "tick": w.tick, "t_s": _fin(w.t_s), "p_nav": p, "v_nav": v, "q_nav_body": q, "cov": cov,
-                "sigma_pos_max_m": _fin(w.sigma_pos_max_m), "mahalanobis_d": _fin(w.mahalanobis_d),
-                "rejection_fraction": w.rejection_fraction, "counts": w.counts,
-            }  # fmt: skip
+    p, v, q, cov = _estimate_wire_arrays(w)
     return {
-        "tick": w.tick, "t_s": _fin(w.t_s), "p_nav": _arr(w.p_nav, (3,)), "v_nav": _arr(w.v_nav, (3,)),
-        "q_nav_body": _q(w.q_nav_body, "q_nav_body"), "cov": _covariance(_arr(w.cov, (9, 9)), "cov"),
+        "tick": w.tick, "t_s": _fin(w.t_s), "p_nav": p, "v_nav": v, "q_nav_body": q, "cov": cov,
         "sigma_pos_max_m": _fin(w.sigma_pos_max_m), "mahalanobis_d": _fin(w.mahalanobis_d),
         "rejection_fraction": w.rejection_fraction, "counts": w.counts,
     }  # fmt: skip
+
+
+def _estimate_wire_arrays(w: _EstimateWire) -> list[Any]:
+    """An estimate's four arrays, checked. A process that encodes estimates has the compiled checks loaded:
+    one call checks all four where numpy took some ten (on a chaser's imu path, its target's estimate:
+    BENCHMARKS.md, "The truths last, an estimate's compiled checks ..."); anything but their plain verdict,
+    and any process without them (a viewer), takes numpy's checks, which decide exactly."""
+    if _ESTIMATE_ARRAYS is not None and w.q_nav_body is not None:
+        arrays = [_arr_shaped(a, shape) for a, shape in zip((w.p_nav, w.v_nav, w.q_nav_body, w.cov),
+                                                            _ESTIMATE_SHAPES, strict=True)]  # fmt: skip
+        if _estimate_arrays(*arrays) == _PLAIN:
+            return arrays
+    return [_arr(w.p_nav, (3,)), _arr(w.v_nav, (3,)), _q(w.q_nav_body, "q_nav_body"),
+            _covariance(_arr(w.cov, (9, 9)), "cov")]  # fmt: skip
 
 
 def _guidance(w: _GuidanceWire) -> dict[str, Any]:

@@ -135,10 +135,6 @@ class WorldProcess:
         # a lockstep world's samples wait for the next tick an agent commands on, then leave as one Bundle per
         # receiver: no agent can use a tick before then anyway (its command needs every tick up to it)
         self.bundles = bundles and clock.lockstep and self.pace is None and not batch
-        # free-running, agents a process each: the agents' samples go out before the mothership's truths
-        # (world_sensors' truth_last), whose ranges such an agent does not wait for; -4 % on one pair's
-        # latency p99 (BENCHMARKS.md, "The clock between the ticks"); agent hosts were not measured so
-        self._truth_last = not clock.lockstep and not batch
         self._bundle: dict[str, list[tuple[str, bytes, int]]] = {}  # per receiver ("": the mothership)
         self._bundle_ticks = 0  # ticks in the pending bundles
         self._viewed: set[str] = set()  # the vehicles whose per-vehicle truth a subscriber matches
@@ -464,8 +460,12 @@ class WorldProcess:
         t = k * self.sc.dt_s
         # a vehicle whose samples a sensor_delay window holds back keeps its own imu key (held in _send)
         solo = {v for v in self._delays if self._delay_s(v, t) is not None}
+        # free-running, agents a process each: the agents' samples go out before the mothership's truths,
+        # whose ranges such an agent does not wait for; -4 % on one pair's latency p99 (BENCHMARKS.md, "The
+        # truths last, ..."); agent hosts were not measured so
+        truth_last = not self.clock.lockstep and not self.batch
         return world_sensors(self.world, self.ids, self.chasers, k, frames, self._truth_every, self.batch,
-                             solo, set(self._viewed), truth_last=self._truth_last)  # fmt: skip
+                             solo, set(self._viewed), truth_last=truth_last)  # fmt: skip
 
     def _pub(self, kind: str, vid: str):
         return self._pubs[kind][vid]
@@ -828,11 +828,10 @@ class WorldProcess:
             if not self.bundles:  # (bundles: at each flush, before any of their samples leaves)
                 self._checkpoint()  # before any sample of the tick leaves: a restart resumes at this tick
             self._publish_tick(tick, self._sensors)
-            if self.pace is None:  # an unpaced lockstep world: no idle time in its ticks
-                if tick % self.clock_every == 0:
-                    self._publish_clock(tick)
-                continue
-            self._pace_to(tick, pace0 + (tick - pace_k) * dt / self.pace.factor)
+            if self.pace is not None:  # free-running, or a paced lockstep (never ahead of the wall clock)
+                self._pace_to(tick, pace0 + (tick - pace_k) * dt / self.pace.factor)
+            elif tick % self.clock_every == 0:  # an unpaced lockstep world: no idle time in its ticks
+                self._publish_clock(tick)
         self._flush_bundles(checkpoint_first=False)  # the ticks up to the last: the agents process them
         wall = self._wall_before + time.perf_counter() - wall0
         cpu = self._cpu_before + time.process_time() - cpu0
