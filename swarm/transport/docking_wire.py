@@ -67,7 +67,7 @@ FILTER_OUTCOMES = ("accepted", "rejected", "refused")
 
 def world_sensors(
     world, ids: list[str], chasers: list[str], k: int, frames, truth_every: int, batch: bool = False,
-    solo=frozenset(), viewed=None, truth_last: bool = False,
+    solo=frozenset(), viewed=None,
 ) -> Sensors:  # fmt: skip
     """The world's samples of tick ``k``, encoded, in publishing order: truth(k) of every vehicle (on UWB
     slot ticks: the mothership's radios need no other, and a viewer draws at 50 Hz as well as at 100;
@@ -79,9 +79,8 @@ def world_sensors(
     tick is ready on its imu); ``solo`` (vehicles whose samples a ``sensor_delay`` fault holds back) keep
     their own keys. The truths go first as :class:`~swarm.transport.messages.TruthBatch` messages (the
     mothership's radios take them so), then one per vehicle in ``viewed`` (those a viewer subscribes to;
-    ``None``: every vehicle); with ``truth_last`` (a free-running world of agents a process each) they go
-    after everything else instead: the agents' samples first, ahead of the mothership's work on the
-    ranges, which a free-running agent does not wait for."""
+    ``None``: every vehicle). A free-running world of agents a process each holds the truths back and
+    sends them halfway to the next tick (:meth:`swarm.world.process.WorldProcess._pace_to`)."""
     sc = world.sc
     t = k * sc.dt_s
     camera_tick = k % world.vision_every == 0
@@ -98,7 +97,7 @@ def world_sensors(
         truth = encode_truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], float(world.effort[i]), bool(lost),
                              float(p_nlos))  # fmt: skip
         truths.append(("truth", vid, truth))
-    out: Sensors = [] if truth_last else truths
+    out: Sensors = truths
     seen: list[tuple[str, bytes]] = []  # batch: the frames of the vehicles not in solo
     chasers = frozenset(chasers) if camera_tick else frozenset()
     for vid in ids:
@@ -128,8 +127,6 @@ def world_sensors(
         ahrs = [vid for vid in chunk if frames[vid].q_ahrs_nav_body is not None]
         q = np.array([frames[vid].q_ahrs_nav_body for vid in ahrs], dtype=np.float64).reshape(len(ahrs), 4)
         out.append(("imu_batch", "", encode(ImuBatch(k, t, sc.dt_s, tuple(chunk), gyro, tuple(ahrs), q))))
-    if truth_last:
-        out.extend(truths)
     return out
 
 

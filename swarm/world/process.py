@@ -130,6 +130,7 @@ class WorldProcess:
         self.step_timeout_s = step_timeout_s
         self.start_timeout_s = start_timeout_s
         self.clock_every = max(1, int(clock_every))
+        self._between: list[tuple] = []  # (publisher, payload): a tick's truths, until halfway to the next
         self.process_id = process_id
         self.batch = batch
         # a lockstep world's samples wait for the next tick an agent commands on, then leave as one Bundle per
@@ -460,12 +461,17 @@ class WorldProcess:
         t = k * self.sc.dt_s
         # a vehicle whose samples a sensor_delay window holds back keeps its own imu key (held in _send)
         solo = {v for v in self._delays if self._delay_s(v, t) is not None}
-        # free-running, agents a process each: the agents' samples go out before the mothership's truths,
-        # whose ranges such an agent does not wait for; -4 % on one pair's latency p99 (BENCHMARKS.md, "The
-        # truths last, ..."); agent hosts were not measured so
-        truth_last = not self.clock.lockstep and not self.batch
         return world_sensors(self.world, self.ids, self.chasers, k, frames, self._truth_every, self.batch,
-                             solo, set(self._viewed), truth_last=truth_last)  # fmt: skip
+                             solo, set(self._viewed))  # fmt: skip
+
+    def _truths_between_ticks(self) -> bool:
+        """Whether a tick's truths wait until halfway to the next tick (:meth:`_pace_to`): in a free-running
+        world of agents a process each. Such an agent never waits for a range (it fuses one that comes after
+        its tick before its next), so the mothership's wake and its ranges need not fall on the instant
+        when the agents take their ``imu``; one pair's sensor-to-estimate p99 -23 % (BENCHMARKS.md, "The
+        truths between the ticks"). A lockstep agent waits for its range: the truths lead the tick there.
+        Agent hosts were not measured so and keep them first."""
+        return not self.clock.lockstep and not self.batch
 
     def _pub(self, kind: str, vid: str):
         return self._pubs[kind][vid]
@@ -486,9 +492,12 @@ class WorldProcess:
             if self.barrier.due(k) or self._bundle_ticks >= self._bundle_max:
                 self._flush_bundles()
             return
+        between = self._truths_between_ticks()
         for kind, vid, payload in sensors:
             if kind in ("imu", "vision"):
                 self._send(vid, t, kind, payload)
+            elif between:  # the truths (no batches without hosts), sent by _pace_to
+                self._between.append((self._pub(kind, vid), payload))
             else:  # truths, and the batches (whose vehicles have no delay window: _encode_tick)
                 self._pub(kind, vid).put(payload)
         self._release()
@@ -524,15 +533,21 @@ class WorldProcess:
 
     def _pace_to(self, tick: int, due: float) -> None:
         """A paced world (free-running, or a paced lockstep), tick ``tick``'s samples out: wait until
-        ``due`` (``time.monotonic()``), when the next tick is, publishing the clock on the way if it is due.
+        ``due`` (``time.monotonic()``), when the next tick is, publishing on the way, halfway to ``due``, the
+        tick's truths held back (:meth:`_truths_between_ticks`) and the clock if it is due.
 
-        The clock goes out halfway to ``due``, not with the samples: every subscriber wakes for it (the
-        agents, the mothership, the launcher), and with the samples it fell on the vehicles' busiest tick
-        (the camera's, a range's, the control's). One pair's sensor-to-estimate p99 fell by 15 %
-        (BENCHMARKS.md, "The clock between the ticks"). A world behind its schedule publishes it at once."""
-        if tick % self.clock_every == 0:
+        The clock goes out halfway, not with the samples: every subscriber wakes for it (the agents, the
+        mothership, the launcher), and with the samples it fell on the vehicles' busiest tick (the camera's,
+        a range's, the control's). One pair's sensor-to-estimate p99 fell by 15 % (BENCHMARKS.md, "The
+        clock between the ticks"); the truths, the same way, by 23 % more. A world behind its schedule
+        publishes them at once."""
+        if tick % self.clock_every == 0 or self._between:
             self._wait_until(due - 0.5 * self.sc.dt_s / self.pace.factor)
-            self._publish_clock(tick)
+            for pub, payload in self._between:
+                pub.put(payload)
+            self._between.clear()
+            if tick % self.clock_every == 0:
+                self._publish_clock(tick)
         self._wait_until(due)
 
     def _wait_until(self, t: float) -> None:

@@ -97,19 +97,6 @@ def test_a_world_of_processes_of_one_sends_its_mothership_the_truth_batch_and_it
     assert [s for s in out if s[0] in ("imu", "vision")] == [s for s in alone if s[0] in ("imu", "vision")]
 
 
-def test_truth_last_sends_the_agents_samples_first_and_nothing_else_changes():
-    """A free-running world of agents a process each (``truth_last``): the same samples, byte for byte, the
-    imu and frames first in their usual order, then the truths (the mothership's batch, a viewer's own)."""
-    sc, w, frames = _tick(3, False, camera=True)
-    ids, chasers = list(sc.vehicles), list(sc.chasers)
-    first = world_sensors(w, ids, chasers, w.k, frames, 1, viewed={"chaser1"})
-    last = world_sensors(w, ids, chasers, w.k, frames, 1, viewed={"chaser1"}, truth_last=True)
-    truths = [s for s in first if s[0].startswith("truth")]
-    assert [kd for kd, _, _ in truths] == ["truth_batch", "truth"] and first[: len(truths)] == truths
-    assert last == first[len(truths) :] + truths
-    assert {kd for kd, _, _ in first[len(truths) :]} == {"imu", "vision"}
-
-
 def test_each_chasers_entry_of_the_vision_batch_is_the_frame_it_would_have_had_alone(monkeypatch):
     """A camera tick for agent hosts: the chasers' frames leave their keys for one VisionBatch, after the
     truths and before the imu batch (a host's tick is ready on its imu); each entry is the vehicle's own
