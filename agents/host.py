@@ -135,14 +135,16 @@ class AgentHost:
         if self.inline:
             self.on_news()
 
-    def _on_batch(self, key: str, msg: ImuBatch | UwbBatch | VisionBatch) -> None:
+    def _on_batch(
+        self, key: str, msg: ImuBatch | UwbBatch | VisionBatch, published_ns: int | None = None
+    ) -> None:
         """The world's imu (``world/imu``) or camera frames (``world/vision``), or the mothership's ranges
         (``mothership/uwb``), of every vehicle, sent for agent hosts (``--batch``): each hosted vehicle's
         row, as its own key would have brought it (a host of one steps it here,
-        :meth:`AgentProcess._on_sensor`); a frame that does not decode is counted (:attr:`shared_drops`) and
-        loses no other vehicle's."""
+        :meth:`AgentProcess._on_sensor`; an imu with the batch's publication stamp); a frame that does not
+        decode is counted (:attr:`shared_drops`) and loses no other vehicle's."""
         for vid, sample in batch_rows(msg, key, self.shared_drops, self._by_id):
-            self._by_id[vid]._on_sensor(key, sample)
+            self._by_id[vid]._on_sensor(key, sample, published_ns)
 
     def _send_commands(self) -> None:
         """The commands the round's vehicles decided so far, to the world in one message (or a few)."""
@@ -176,7 +178,7 @@ class AgentHost:
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.shared_drops)
         direct = not self.inline  # as the vehicles' own sensor subscribers (AgentProcess.open)
         subscribe_decoded(self.session, k.world_imu(), ImuBatch, self._on_batch, self.shared_drops,
-                          direct=direct)  # fmt: skip
+                          direct=direct, stamped=True)  # fmt: skip
         subscribe_decoded(self.session, k.mothership_uwb(), UwbBatch, self._on_batch, self.shared_drops,
                           direct=direct)  # fmt: skip
         subscribe_decoded(self.session, k.world_vision(), VisionBatch, self._on_batch, self.shared_drops,

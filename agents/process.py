@@ -80,11 +80,15 @@ from swarm.transport.process import ClockSpec, declare_reliable, print_ready
 from swarm.transport.session import (
     QueuedSubscriber,
     declare_liveliness,
+    imu_stamp_attachment,
     subscribe_decoded,
     watch_liveliness,
 )
 
 _LOG = logging.getLogger("swarm.agent")
+
+_STAMPS_KEPT = 64
+"""The imu publication stamps an agent keeps for its estimates' attachments at most (ticks)."""
 
 END_DRAIN_S = 5.0
 """After the world's stopped clock at tick ``k``, a lockstep agent processes the ticks up to ``k`` (their
@@ -190,25 +194,36 @@ class AgentProcess:
         # per control period by the host's pacer (agents.host.AgentHost._pace)
         self.wake_at_control = sc.agent.wake_at_control and hosted == 1 and not clock.lockstep
         self.newest_imu: int | None = None  # the newest imu tick taken from its queue (wake_at_control)
+        # each imu's publication stamp [ns] (a world with Zenoh timestamping on), until its tick's estimate
+        # carries it as an attachment (docs/protocol.md, "Estimate"): any subscriber can then tell the
+        # sensor-to-estimate latency without taking the imu itself (swarm bench's probe)
+        self._imu_published: dict[int, int] = {}
 
     # ------------------------------------------------------------------------------ Zenoh side
 
-    def _on_sensor(self, key: str, msg) -> None:
-        if self._queued and isinstance(msg, Imu):
-            self.drain_inputs()  # what came since the last imu: fused in the tick this imu makes ready
+    def _on_sensor(self, key: str, msg, published_ns: int | None = None) -> None:
+        if isinstance(msg, Imu):
+            if published_ns is not None:
+                self._stamp_imu(msg.tick, published_ns)
+            if self._queued:
+                self.drain_inputs()  # what came since the last imu: fused in the tick this imu makes ready
         if self.assembler.add(msg, self.id) and self.on_news is not None:
             self.on_news()
 
-    def _on_bundle(self, key: str, msg: Bundle) -> None:
-        """A bundle's samples (docs/protocol.md, "Bundles"), each as its own key would have brought it."""
+    def _on_bundle(self, key: str, msg: Bundle, published_ns: int | None = None) -> None:
+        """A bundle's samples (docs/protocol.md, "Bundles"), each as its own key would have brought it (its
+        ``imu`` stamped with the bundle's publication)."""
         for sample in bundle_messages(msg, key, self.drops, _SENSOR_TYPES):
-            self._on_sensor(key, sample)
+            self._on_sensor(key, sample, published_ns)
 
-    def _on_queued(self, key: str, msg) -> None:
+    def _on_queued(self, key: str, msg, published_ns: int | None = None) -> None:
         """A range, frame or target estimate taken from its queue at an imu (:meth:`open`); with
         ``wake_at_control``, also the imu, taken at the host's wake."""
-        if isinstance(msg, Imu) and (self.newest_imu is None or msg.tick > self.newest_imu):
-            self.newest_imu = msg.tick
+        if isinstance(msg, Imu):
+            if self.newest_imu is None or msg.tick > self.newest_imu:
+                self.newest_imu = msg.tick
+            if published_ns is not None:
+                self._stamp_imu(msg.tick, published_ns)
         self.assembler.add(msg, self.target_id if isinstance(msg, Estimate) else self.id)
 
     def drain_inputs(self) -> None:
@@ -313,9 +328,36 @@ class AgentProcess:
     def _counts(self) -> dict[str, int]:
         return filter_counts(self.agent)
 
+    def _stamp_imu(self, k: int, published_ns: int) -> None:
+        """Keep ``imu(k)``'s publication stamp for ``estimate(k)`` (on a subscriber's thread), the newest
+        ``_STAMPS_KEPT`` at most (a vehicle that publishes no estimate for a while: re-initialising)."""
+        stamps = self._imu_published
+        stamps[k] = published_ns
+        if len(stamps) > _STAMPS_KEPT:
+            for tick in [t for t in list(stamps) if t <= k - _STAMPS_KEPT]:
+                stamps.pop(tick, None)
+
+    def _imu_stamp(self, k: int) -> bytes | None:
+        """The attachment of ``estimate(k)``: ``imu(k)``'s publication stamp, if it had one (those of ticks up
+        to ``k`` forgotten either way)."""
+        stamps = self._imu_published
+        if not stamps:
+            return None
+        ns = stamps.pop(k, None)
+        for tick in [t for t in list(stamps) if t < k]:
+            stamps.pop(tick, None)
+        return None if ns is None else imu_stamp_attachment(ns)
+
+    def _put_estimate(self, payload: bytes, stamp: bytes | None) -> None:
+        if stamp is None:
+            self.pub_estimate.put(payload)
+        else:
+            self.pub_estimate.put(payload, attachment=stamp)
+
     def _publish_estimate(self, k: int) -> None:
         # a target's estimate goes out on the ticks before those its chasers read it (docs/protocol.md,
         # "Rates"): a fifth of them with a 20 Hz camera and 10 Hz control; any other vehicle's, every tick
+        stamp = self._imu_stamp(k)
         if not estimate_read(self.estimate_reads, k):
             return
         # an estimate no subscriber matches is not encoded (Zenoh would drop it unsent): in a headless swarm
@@ -325,11 +367,11 @@ class AgentProcess:
         listened = self._estimate_listened
         if not self.local_chasers:
             if listened:
-                self.pub_estimate.put(estimate_payload(self.agent, k))
+                self._put_estimate(estimate_payload(self.agent, k), stamp)
             return
         msg, payload = estimate_and_payload(*estimate_args(self.agent, k), payload=listened)
         if payload is not None:
-            self.pub_estimate.put(payload)
+            self._put_estimate(payload, stamp)
         for chaser in self.local_chasers:
             chaser.assembler.add(msg, self.id)
 
@@ -482,19 +524,23 @@ class AgentProcess:
         # "Queued inputs"). Lockstep ticks wait for every input, and agent hosts take theirs on Zenoh's thread
         queued = self.hosted == 1 and not self.clock.lockstep
 
-        def subscribe(key: str, cls, handler) -> None:
+        def subscribe(key: str, cls, handler, stamped: bool = False) -> None:
             if queued:
-                self._queued.append(QueuedSubscriber(self.session, key, cls, self._on_queued, self.drops))
+                self._queued.append(
+                    QueuedSubscriber(self.session, key, cls, self._on_queued, self.drops, stamped=stamped)
+                )
             else:
-                subscribe_decoded(self.session, key, cls, handler, self.drops, direct=d)
+                subscribe_decoded(self.session, key, cls, handler, self.drops, direct=d, stamped=stamped)
 
         if self.wake_at_control:  # queued too (first: drained first, so that a tick's range finds its imu)
-            subscribe(k.imu(self.id), Imu, self._on_sensor)
+            subscribe(k.imu(self.id), Imu, self._on_sensor, stamped=True)
         else:
-            subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops, direct=d)
+            subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops, direct=d,
+                              stamped=True)  # fmt: skip
         subscribe(k.uwb(self.id), Uwb, self._on_sensor)
         if self.clock.lockstep:  # a lockstep world's (and mothership's) ticks in one message each
-            subscribe_decoded(self.session, k.bundle(self.id), Bundle, self._on_bundle, self.drops, direct=d)
+            subscribe_decoded(self.session, k.bundle(self.id), Bundle, self._on_bundle, self.drops, direct=d,
+                              stamped=True)  # fmt: skip
         if self.chaser:
             subscribe(k.vision(self.id), Vision, self._on_sensor)
             if not self.target_local:  # else the target's agent in this host hands its estimates over

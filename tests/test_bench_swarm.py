@@ -3,6 +3,7 @@ assertion: the numbers are checked for what they must be whatever the machine's 
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import subprocess
@@ -17,7 +18,7 @@ from swarm.scenario import load_scenario
 
 def test_bench_swarm_measures_a_launched_swarm(tmp_path):
     out = tmp_path / "swarm.json"
-    # agent hosts: the world sends the imu as one world/imu batch, which the latency probe must read
+    # agent hosts: the world sends the imu as one world/imu batch, whose stamp each vehicle's estimate carries
     args = [sys.executable, "-m", "swarm.cli.main", "bench", "swarm", "--vehicles", "4", "--clock",
             "lockstep", "--span", "3", "--vehicles-per-process", "2", "--json", str(out),
             "--cpu-latency", "0"]  # fmt: skip
@@ -33,11 +34,12 @@ def test_bench_swarm_measures_a_launched_swarm(tmp_path):
     assert case["cpu_us_per_vehicle_tick"] > 0 and case["world_cpu_us_per_tick"] > 0
     assert case["late_tick_share"] is None  # lockstep: no tick is late by construction
     assert case["realtime_factor"] > 0
-    # every process stamped what it published (the bench's Zenoh configuration reached each of them)
-    assert case["unstamped"] == 0
-    # chaser0's estimates (and the fifth of target0's it sends) matched to their imu, over 300 ticks, in
-    # whatever order the probe took the two: 300 + 60, less the last tick or two whose estimate went out
-    # as the run ended
+    # every process stamped what it published (the bench's Zenoh configuration reached each of them), and
+    # every estimate but the two initial ones (made before any imu) carried its imu's stamp
+    assert case["unstamped"] == 0 and case["without_imu_stamp"] == 2
+    # chaser0's estimates (and the fifth of target0's it sends), each with its imu's stamp (the host's imu
+    # batch's, which it attached), over 300 ticks: 300 + 60, less the last tick or two whose estimate went
+    # out as the run ended
     assert 350 <= case["samples"] <= 360
     assert 0 < case["latency_p50_us"] <= case["latency_p99_us"]
     # split: the chaser's camera ticks (the scenario's camera period: 60 in the span at 20 Hz) apart
@@ -58,14 +60,19 @@ def test_bench_swarm_measures_a_launched_swarm(tmp_path):
 
 
 class _Sample:
-    """A Zenoh sample as the probe reads it: key, payload and the publisher's timestamp (or none)."""
+    """A Zenoh sample as the probe reads it: key, payload, the publisher's timestamp (or none) and the
+    attachment (``imu_ns``: an agent's, with its imu's publication stamp; bytes: anybody's)."""
 
-    def __init__(self, key: str, tick: int, published_ns: int | None, batch_ids=None) -> None:
+    def __init__(
+        self, key: str, tick: int, published_ns: int | None, imu_ns: int | bytes | None = None
+    ) -> None:
         import msgpack
 
-        body = {"tick": tick} if batch_ids is None else {"tick": tick, "ids": batch_ids}
-        self.key_expr, self.payload = key, msgpack.packb(body)
+        from swarm.transport.session import imu_stamp_attachment
+
+        self.key_expr, self.payload = key, msgpack.packb({"tick": tick})
         self.timestamp = None if published_ns is None else _Stamp(published_ns)
+        self.attachment = imu_stamp_attachment(imu_ns) if isinstance(imu_ns, int) else imu_ns
 
 
 class _Stamp:
@@ -96,23 +103,20 @@ def test_a_free_running_pair_that_wakes_at_its_control_rate_commands_and_batches
     assert case["latency_p50_us"] > 5000, case  # batched per control period (an imu wake: ~1 ms)
 
 
-def test_the_probe_measures_from_the_publishers_stamps_whatever_order_it_takes_the_samples(monkeypatch):
-    """The latency is the estimate's publication minus its imu's, to the nanosecond, whether the probe
-    takes the imu first or the estimate first (its callbacks run on threads of their own); delivered is
-    the estimate's arrival here minus the imu's publication; an unstamped sample is counted, not matched;
-    a batch's stamp is every probed vehicle's imu in it."""
+def test_the_probe_measures_from_the_publishers_stamps_the_imus_attached_to_each_estimate(monkeypatch):
+    """The latency is the estimate's publication minus its imu's (the stamp the agent attached), to the
+    nanosecond; delivered is the estimate's arrival here minus the imu's publication; an estimate without
+    either stamp, or with an attachment of anybody else's making, is counted, not measured."""
     from swarm.bench import swarm as bench
 
     probe = bench.LatencyProbe()
-    now = iter([5_000_900_000, 5_001_900_000, 5_002_900_000])
+    now = itertools.chain([5_000_900_000, 5_001_900_000, 5_002_900_000], itertools.repeat(0))
     monkeypatch.setattr(bench.time, "time_ns", lambda: next(now))
-    probe.on_imu(_Sample("ns/agent/chaser/imu", 7, 5_000_000_000))
-    probe.on_estimate(_Sample("ns/agent/chaser/estimate", 7, 5_000_412_345))  # arrives at 5_000_900_000
-    probe.on_estimate(_Sample("ns/agent/chaser/estimate", 8, 5_001_600_000))  # before its imu
-    probe.on_imu(_Sample("ns/agent/chaser/imu", 8, 5_001_000_000))
-    probe.on_imu(_Sample("ns/agent/target/imu", 8, None))
-    probe.on_estimate(_Sample("ns/agent/target/estimate", 9, 5_002_500_000))
-    probe.on_imu_batch(("chaser", "target"))(_Sample("ns/world/imu", 9, 5_002_000_000, ["target", "x"]))
+    probe.on_estimate(
+        _Sample("ns/agent/chaser/estimate", 7, 5_000_412_345, 5_000_000_000)
+    )  # arrives at .9 ms
+    probe.on_estimate(_Sample("ns/agent/chaser/estimate", 8, 5_001_600_000, 5_001_000_000))
+    probe.on_estimate(_Sample("ns/agent/target/estimate", 9, 5_002_500_000, 5_002_000_000))
     ok = pytest.approx
     assert probe.latency == [("chaser", 7, ok(412_345e-9, abs=1e-12)), ("chaser", 8, ok(600e-6)),
                              ("target", 9, ok(500e-6))]  # fmt: skip
@@ -121,10 +125,16 @@ def test_the_probe_measures_from_the_publishers_stamps_whatever_order_it_takes_t
         ("chaser", 8, ok(900e-6)),
         ("target", 9, ok(900e-6)),
     ]
-    assert probe.unstamped == 1 and not probe.imu and not probe.estimate
+    assert probe.unstamped == probe.without_imu == 0
+    probe.on_estimate(_Sample("ns/agent/chaser/estimate", 10, None, 5_003_000_000))  # the agent's unstamped
+    probe.on_estimate(_Sample("ns/agent/chaser/estimate", 11, 5_004_000_000))  # its imu's: no attachment
+    probe.on_estimate(_Sample("ns/agent/chaser/estimate", 12, 5_005_000_000, b"\x81\xa1x\x01"))  # {"x": 1}
+    assert len(probe.latency) == 3 and (probe.unstamped, probe.without_imu) == (1, 2)
     # a payload of someone else's making is not measured, and does not raise into Zenoh's thread
-    probe.on_imu(type("S", (), {"key_expr": "ns/agent/chaser/imu", "payload": b"\xc1", "timestamp": None})())
-    assert len(probe.latency) == 3 and probe.unstamped == 1
+    bad = type("S", (), {"key_expr": "ns/agent/chaser/estimate", "payload": b"\xc1", "timestamp": None,
+                         "attachment": None})()  # fmt: skip
+    probe.on_estimate(bad)
+    assert len(probe.latency) == 3 and (probe.unstamped, probe.without_imu) == (1, 2)
 
 
 def test_the_latency_is_split_into_the_camera_ticks_and_the_others():

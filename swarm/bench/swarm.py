@@ -3,10 +3,9 @@
 For each case (number of vehicles, clock, topology), ``swarm launch docking --agents V/2`` (one process per
 vehicle) runs for a fixed simulated span while a probe, which joins the swarm as its processes do (a peer of
 a mesh, a client of the launcher's router in a star; ``--topology auto``, the launcher's default, resolved
-as the launcher resolves it), takes the first pair's ``imu(k)`` (with agent hosts: the ``world/imu`` batch
-that holds it) and ``estimate(k)`` (it decodes only the tick number, and a batch's ids) with the time each
-was published: every process of the case stamps what it publishes (Zenoh's timestamps,
-:data:`TIMESTAMPING`):
+as the launcher resolves it), takes the first pair's ``estimate(k)`` (it decodes only the tick number)
+with the time it was published and the time its ``imu(k)`` was, which the agent attaches to it: every
+process of the case stamps what it publishes (Zenoh's timestamps, :data:`TIMESTAMPING`):
 
 - **CPU per vehicle per tick**: the agents' own CPU time (each agent process reports it at the end of the
   run, ``cpu_s`` in the launch summary) over vehicles x ticks; the world's per tick beside it;
@@ -37,7 +36,8 @@ was published: every process of the case stamps what it publishes (Zenoh's times
 - **sensor-to-estimate latency** p50/p99: ``estimate(k)``'s publication by the agent minus ``imu(k)``'s
   by the world, for the first pair's two vehicles: the hop from the world to the agent (in a star, the
   router's two), the agent's receive, filter and publish time. Both stamps are their publishers' (one
-  machine, one clock), so the probe's own delays are not in it (:class:`LatencyProbe`). Beside it,
+  machine, one clock), so the probe's own delays are not in it, and the probe takes no imu
+  (:class:`LatencyProbe`). Beside it,
   **delivered** (``latency_delivered_*``): to the estimate's arrival at the probe, what a consumer of the
   estimates on this machine sees. Since 4df9a3d the target sends only the estimates its chaser reads (a
   fifth), so its ticks are a sixth of the samples, not a half. Split beside it (``latency_camera_*`` and
@@ -71,7 +71,7 @@ import msgpack
 import numpy as np
 
 from swarm.errors import ConfigError
-from swarm.transport.session import free_loopback_endpoint, open_session
+from swarm.transport.session import attached_imu_ns, free_loopback_endpoint, open_session, published_ns
 
 QUICK = {"vehicles": (2, 8), "clocks": ("lockstep", "realtime"), "span_s": 5.0, "per_process": (1,)}
 FULL = {"vehicles": (2, 8, 32), "clocks": ("lockstep", "realtime"), "span_s": 20.0, "per_process": (1,)}
@@ -146,103 +146,44 @@ def timestamping_args(directory: str | os.PathLike) -> list[str]:
     return ["--zenoh-config", str(path)]
 
 
-def published_ns(sample) -> int | None:
-    """When ``sample`` was published [ns since the epoch, as ``time.time_ns()``]: its Zenoh timestamp,
-    ``None`` if its publisher did not stamp it."""
-    ts = sample.timestamp
-    return None if ts is None else ts.get_time_as_ntp64().as_nanos()
-
-
 class LatencyProbe:
-    """The probed vehicles' imu and estimate ticks (the tick number decoded only), matched by tick.
+    """The probed vehicles' estimates, each with the publication stamp of the imu it was computed from.
 
     For each estimate it keeps two latencies: from its imu's publication by the world to its own by the
-    agent (``latency``: both stamped by their publishers, :func:`published_ns`), and to its arrival here
-    (``delivered``: what a consumer on this machine sees, the estimate's hop and this probe's own delay
-    taking it included). Neither depends on when this probe takes the imu: until 2026-11-28 the latency was
-    the difference of the two arrivals here, and the probe, a Python process sharing the two cores, took
-    the world's imu 0.25 ms apart from the agent at the median and 2.0 ms at the p99, earlier or later
-    (BENCHMARKS.md, "Publication stamps"): that was in the figure too. The two messages may come
-    in either order (each subscriber's callback runs on a thread of its own). A sample without a stamp is
-    counted (``unstamped``), not measured."""
+    agent (``latency``: both stamped by their publishers: :func:`~swarm.transport.session.published_ns` of
+    the estimate, and the imu's, which the agent attaches to it, :func:`~swarm.transport.session.
+    attached_imu_ns`), and to its arrival here (``delivered``: what a consumer on this machine sees, the
+    estimate's hop and this probe's own delay taking it included). The probe takes no imu: until
+    2026-11-29 it subscribed to every probed imu and matched the two by tick, and so was woken with the
+    agents at each tick's instant, on the same two cores, for a message no deployment has a reader of
+    (BENCHMARKS.md, "The sensor's stamp on the estimate"). An estimate without its own stamp is counted
+    (``unstamped``: a process the bench's Zenoh configuration did not reach), one without its imu's
+    (``without_imu``: the initial ``estimate(0)``, made before any imu) too; neither is measured."""
 
     def __init__(self) -> None:
         self.lock = threading.Lock()
-        self.imu: dict[tuple[str, int], int] = {}  # imu publication [ns], until its estimate comes
-        self.estimate: dict[tuple[str, int], tuple[int, int]] = {}  # (publication, arrival) [ns], imu not in
         self.latency: list[tuple[str, int, float]] = []  # (vehicle, tick, estimate's publication - imu's [s])
         self.delivered: list[tuple[str, int, float]] = []  # (vehicle, tick, estimate's arrival - imu's [s])
         self.unstamped = 0
-
-    def _tick(self, sample) -> tuple[str, int] | None:
-        try:
-            vid = str(sample.key_expr).split("/")[-2]
-            return vid, int(msgpack.unpackb(bytes(sample.payload))["tick"])
-        except Exception:  # a payload of someone else's making: not ours to measure
-            return None
-
-    def _match(self, key: tuple[str, int], imu_ns: int, est_ns: int, arrival_ns: int) -> None:
-        self.latency.append((*key, (est_ns - imu_ns) * 1e-9))
-        self.delivered.append((*key, (arrival_ns - imu_ns) * 1e-9))
-
-    def _imu(self, key: tuple[str, int], pub_ns: int) -> None:
-        est = self.estimate.pop(key, None)
-        if est is None:
-            self.imu[key] = pub_ns
-        else:
-            self._match(key, pub_ns, *est)
-
-    def _read(self, sample) -> tuple[tuple[str, int], int] | None:
-        """The sample's ``(vehicle, tick)`` and publication stamp [ns]; ``None`` for a payload of someone
-        else's making (not measured) or a sample without a stamp (counted)."""
-        key = self._tick(sample)
-        if key is None:
-            return None
-        pub_ns = published_ns(sample)
-        if pub_ns is None:
-            with self.lock:
-                self.unstamped += 1
-            return None
-        return key, pub_ns
-
-    def on_imu(self, sample) -> None:
-        got = self._read(sample)
-        if got is not None:
-            with self.lock:
-                self._imu(*got)
-
-    def on_imu_batch(self, probed: tuple[str, ...]):
-        """The world's ``world/imu`` (agent hosts): the imu of every probed vehicle in it."""
-
-        def handler(sample) -> None:
-            try:
-                obj = msgpack.unpackb(bytes(sample.payload))
-                k, ids = int(obj["tick"]), set(obj["ids"])
-            except Exception:  # a payload of someone else's making: not ours to measure
-                return
-            pub_ns = published_ns(sample)
-            with self.lock:
-                if pub_ns is None:
-                    self.unstamped += 1
-                    return
-                for vid in probed:
-                    if vid in ids:
-                        self._imu((vid, k), pub_ns)
-
-        return handler
+        self.without_imu = 0
 
     def on_estimate(self, sample) -> None:
         arrival_ns = time.time_ns()
-        got = self._read(sample)
-        if got is None:
+        try:
+            vid = str(sample.key_expr).split("/")[-2]
+            k = int(msgpack.unpackb(bytes(sample.payload))["tick"])
+        except Exception:  # a payload of someone else's making: not ours to measure
             return
-        key, pub_ns = got
+        pub_ns, imu_ns = published_ns(sample), attached_imu_ns(sample)
         with self.lock:
-            imu_ns = self.imu.pop(key, None)
-            if imu_ns is None:
-                self.estimate[key] = (pub_ns, arrival_ns)
-            else:
-                self._match(key, imu_ns, pub_ns, arrival_ns)
+            if pub_ns is None or imu_ns is None:
+                if pub_ns is None:
+                    self.unstamped += 1
+                else:
+                    self.without_imu += 1
+                return
+            self.latency.append((vid, k, (pub_ns - imu_ns) * 1e-9))
+            self.delivered.append((vid, k, (arrival_ns - imu_ns) * 1e-9))
 
 
 def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagger: bool = False,
@@ -323,6 +264,7 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
         "latency_delivered_p50_us": delivered["latency_p50_us"],
         "latency_delivered_p99_us": delivered["latency_p99_us"],
         "unstamped": probe.unstamped,
+        "without_imu_stamp": probe.without_imu,
         "ticks": ticks,
     }
 
@@ -365,20 +307,15 @@ def _what_it_said(text: str) -> str:
 def _probe_run(
     proc: subprocess.Popen, endpoint: str, ns: str, pairs: int, probe: LatencyProbe, topology: str
 ) -> None:
-    """Take the first pair's ``imu`` and ``estimate`` (:class:`LatencyProbe`) until the launcher
+    """Take the first pair's ``estimate`` (:class:`LatencyProbe`) until the launcher
     ``proc`` exits, on a session that joins the swarm as its processes do (a client of the launcher's
-    router at ``endpoint`` in a star, a peer of the mesh in a mesh: a client of a mesh's router hears the
-    world's imu through the router, later than the agent hears it directly)."""
+    router at ``endpoint`` in a star, a peer of the mesh in a mesh: as a consumer of the estimates would)."""
     from swarm.cli.children import member_args
 
     session = open_session(member_args(endpoint, topology))
     try:
-        probed = probed_pair(pairs)
-        for vid in probed:
-            session.declare_subscriber(f"{ns}/agent/{vid}/imu", probe.on_imu)
+        for vid in probed_pair(pairs):
             session.declare_subscriber(f"{ns}/agent/{vid}/estimate", probe.on_estimate)
-        # for agent hosts the world sends every vehicle's imu in one batch (docs/protocol.md, "Rates")
-        session.declare_subscriber(f"{ns}/world/imu", probe.on_imu_batch(probed))
         proc.wait(timeout=1800)
     finally:
         session.close()

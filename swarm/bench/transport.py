@@ -217,7 +217,6 @@ def _latency(duration_s: float, topology: str = "mesh") -> dict:
                 if line.startswith("swarm up:"):
                     break
             with _member(endpoint, topology) as s:  # (in a mesh, linked to the world and the chaser directly)
-                s.declare_subscriber(keys.imu("chaser"), probe.on_imu)
                 s.declare_subscriber(keys.estimate("chaser"), probe.on_estimate)
                 time.sleep(duration_s)
         finally:
@@ -230,7 +229,7 @@ def _latency(duration_s: float, topology: str = "mesh") -> dict:
     d = np.array([dlv for _, _, dlv in ticks[10:]]) * 1e6
     return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "n": len(a),
             "delivered_median": float(np.median(d)), "delivered_p99": float(np.percentile(d, 99)),
-            "unstamped": probe.unstamped}  # fmt: skip
+            "unstamped": probe.unstamped, "without_imu_stamp": probe.without_imu}  # fmt: skip
 
 
 def run(preset: dict) -> dict:

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
+import msgpack
 import zenoh
 
 from swarm.errors import ConfigError, SwarmError
@@ -398,15 +399,49 @@ class HandlerErrors:
 M = TypeVar("M", bound=Message)
 
 
+def published_ns(sample: zenoh.Sample) -> int | None:
+    """When ``sample`` was published [ns since the epoch, as ``time.time_ns()``]: its Zenoh timestamp (the
+    publisher's hybrid logical clock at its ``put``, present when its session has ``timestamping`` on),
+    ``None`` if its publisher did not stamp it."""
+    ts = sample.timestamp
+    return None if ts is None else ts.get_time_as_ntp64().as_nanos()
+
+
+IMU_STAMP = "imu_published_ns"
+"""The field of an estimate's Zenoh attachment (docs/protocol.md, "Estimate"): the publication stamp of the
+``imu`` it was computed from [ns since the epoch] (:func:`published_ns` of that sample)."""
+
+
+def imu_stamp_attachment(imu_ns: int) -> bytes:
+    """An estimate's attachment: ``{"imu_published_ns": imu_ns}`` in msgpack."""
+    return msgpack.packb({IMU_STAMP: imu_ns})
+
+
+def attached_imu_ns(sample: zenoh.Sample) -> int | None:
+    """The ``imu_published_ns`` an estimate's sample carries as its attachment; ``None`` without one, or for
+    one of anybody else's making (not a msgpack map with that field an integer in 0 .. 2^64 - 1)."""
+    att = sample.attachment
+    if att is None:
+        return None
+    try:
+        obj = msgpack.unpackb(bytes(att))
+    except Exception:
+        return None
+    ns = obj.get(IMU_STAMP) if isinstance(obj, dict) else None
+    return ns if type(ns) is int and 0 <= ns < 2**64 else None
+
+
 def _decoding(
     key: str,
     msg_type: type[M] | Keys,
-    handler: Callable[[str, M], Any],
+    handler: Callable[..., Any],
     counter: DropCounter,
     log_interval_s: float,
+    stamped: bool = False,
 ) -> Callable[[zenoh.Sample], None]:
     """The sample handler of :func:`subscribe_decoded` and :class:`QueuedSubscriber`: decode, count and drop
-    what is invalid, hand the rest to ``handler``; never raises."""
+    what is invalid, hand the rest to ``handler`` (with ``stamped``, also the sample's :func:`published_ns`);
+    never raises."""
     name = getattr(handler, "__qualname__", handler)
     errors = HandlerErrors(f"handler {name!s} on {key}", log_interval_s)
     if isinstance(msg_type, Keys):
@@ -437,7 +472,10 @@ def _decoding(
             msg = safe_decode(sample.payload, cls, key_str, counter)
             if msg is None:
                 return
-            handler(key_str, msg)  # type: ignore[arg-type]
+            if stamped:
+                handler(key_str, msg, published_ns(sample))
+            else:
+                handler(key_str, msg)
         except Exception as exc:
             errors.record(exc)
 
@@ -454,6 +492,7 @@ def subscribe_decoded(
     remote_only: bool = False,
     log_interval_s: float = 10.0,
     direct: bool = False,
+    stamped: bool = False,
 ) -> zenoh.Subscriber:
     """Declare a callback subscriber on ``key`` (wildcards allowed) that hands valid messages to ``handler``.
 
@@ -473,8 +512,11 @@ def subscribe_decoded(
     ``direct`` runs the callback on Zenoh's receiving thread (``Callback(indirect=False)``) instead of a
     Python thread of its own: for a process with many subscribers (an agent host) whose handlers are short
     and never block. One subscriber's samples still arrive in order.
+
+    ``stamped`` calls ``handler(key, msg, published_ns)`` instead, with the sample's publication stamp
+    (:func:`published_ns`; ``None`` when its publisher does not stamp).
     """
-    on_sample = _decoding(key, msg_type, handler, counter, log_interval_s)
+    on_sample = _decoding(key, msg_type, handler, counter, log_interval_s, stamped)
     origin = zenoh.Locality.REMOTE if remote_only else None
     callback = zenoh.handlers.Callback(on_sample, indirect=False) if direct else on_sample
     return session.declare_subscriber(key, callback, allowed_origin=origin)
@@ -507,10 +549,12 @@ class QueuedSubscriber:
         *,
         capacity: int = QUEUE_CAPACITY,
         log_interval_s: float = 10.0,
+        stamped: bool = False,
     ) -> None:
+        """``stamped``: as :func:`subscribe_decoded`'s."""
         if not isinstance(capacity, int) or capacity < 1:
             raise ConfigError(f"a queued subscriber's capacity must be an integer >= 1, got {capacity!r}")
-        self._on_sample = _decoding(key, msg_type, handler, counter, log_interval_s)
+        self._on_sample = _decoding(key, msg_type, handler, counter, log_interval_s, stamped)
         self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(capacity))
 
     def drain(self) -> int:

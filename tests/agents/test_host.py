@@ -90,6 +90,53 @@ def test_an_estimate_is_encoded_only_for_a_subscriber_and_always_handed_to_a_hos
     assert np.array_equal(msg.p_nav, want.p_nav) and np.array_equal(msg.cov, want.cov)
 
 
+class _StampedPublisher(_Publisher):
+    """A publisher that also keeps each ``put``'s attachment (``None`` when it was given none)."""
+
+    def __init__(self) -> None:
+        super().__init__(True)
+        self.attachments: list[bytes | None] = []
+
+    def put(self, payload: bytes, attachment: bytes | None = None) -> None:
+        super().put(payload)
+        self.attachments.append(attachment)
+
+
+def test_an_estimate_carries_the_publication_stamp_of_its_ticks_imu_and_only_that():
+    """Each imu's stamp (its subscriber's ``published_ns``) rides on the estimate of its tick as a msgpack
+    attachment; a tick whose imu was unstamped sends none; a target's estimates that do not go out (not
+    read by its chaser) still forget their stamps, and a vehicle that sends none for a while (re-initialising)
+    keeps only the newest ``_STAMPS_KEPT``."""
+    import msgpack
+
+    from agents import process as agent_process
+    from swarm.step.agent import VehicleAgent
+    from swarm.step.world import initial_truth
+
+    sc = load_scenario("docking")
+    _, p = _host(["chaser", "target"], sc, clock="realtime")
+    for v, proc in p.items():
+        x = initial_truth(sc, 0, v)
+        proc.agent = VehicleAgent(sc, v, x[0:3], x[3:6], x[6:10], np.full(9, 1e-4), "mdp")
+        proc.pub_estimate = _StampedPublisher()
+        proc._estimate_listened = True
+        proc.local_chasers = []  # (each as if alone: the target publishes, no hand-over)
+    chaser, target = p["chaser"], p["target"]
+    ns = 1_764_400_000_000_000_000
+    for k in (1, 2, 3):
+        for proc in (chaser, target):
+            proc._on_sensor("t/imu", _imu(k), None if k == 2 else ns + k)
+            proc._publish_estimate(k)
+    unpack = [None if a is None else msgpack.unpackb(a) for a in chaser.pub_estimate.attachments]
+    assert unpack == [{"imu_published_ns": ns + 1}, None, {"imu_published_ns": ns + 3}]
+    assert target.pub_estimate.attachments == []  # estimates 1 to 3 are not read by the chaser: none sent
+    assert not chaser._imu_published and not target._imu_published  # nothing kept past its tick
+    kept = agent_process._STAMPS_KEPT
+    for k in range(10, 10 + 3 * kept):  # a vehicle that sends no estimate meanwhile
+        chaser._on_sensor("t/imu", _imu(k), ns + k)
+    assert sorted(chaser._imu_published) == list(range(10 + 2 * kept, 10 + 3 * kept))
+
+
 def test_a_free_running_agent_fuses_a_late_range_and_frame_as_the_tick_would_have():
     """Late fusion (free-running): the range and the camera frame of tick k that came after its estimate
     went out are fused before tick k + 1, with the values the tick would have fused; a re-initialising
@@ -239,7 +286,7 @@ def test_the_worlds_batch_gives_each_hosted_vehicle_its_own_row_and_no_other():
     host, p = _host(["chaser0", "target0"], sc)
     got = {vid: [] for vid in p}
     for vid, proc in p.items():
-        proc._on_sensor = lambda key, msg, vid=vid: got[vid].append((key, msg))
+        proc._on_sensor = lambda key, msg, published_ns=None, vid=vid: got[vid].append((key, msg))
     gyro = np.arange(12.0).reshape(4, 3)
     q = np.array([[0.0, 0.0, 0.0, 1.0]])
     batch = ImuBatch(5, 0.05, 0.01, ("chaser1", "target0", "chaser0", "target1"), gyro, ("chaser0",), q)
@@ -257,7 +304,7 @@ def test_the_motherships_batch_gives_each_hosted_vehicle_its_own_range_and_no_ot
     host, p = _host(["chaser0", "target0"], sc)
     got = {vid: [] for vid in p}
     for vid, proc in p.items():
-        proc._on_sensor = lambda key, msg, vid=vid: got[vid].append((key, msg))
+        proc._on_sensor = lambda key, msg, published_ns=None, vid=vid: got[vid].append((key, msg))
     batch = UwbBatch(4, 0.04, ("target1", "chaser0", "target0"), (2, 0, 3), (1.25, None, 0.75))
     host._on_batch("t/mothership/uwb", batch)
     assert got == {"chaser0": [("t/mothership/uwb", Uwb(4, 0.04, 0, None))],
@@ -274,7 +321,7 @@ def test_the_worlds_vision_batch_gives_each_hosted_chaser_its_own_frame_and_drop
     host, p = _host(["chaser0", "target0", "chaser2"], sc)
     got = {vid: [] for vid in p}
     for vid, proc in p.items():
-        proc._on_sensor = lambda key, msg, vid=vid: got[vid].append((key, msg))
+        proc._on_sensor = lambda key, msg, published_ns=None, vid=vid: got[vid].append((key, msg))
     frame = Vision(10, 0.1, "target0", "+x", "features", np.full((6, 3), 0.25), (0, 1, 2, 3, 4, 5))
     other = Vision(10, 0.1, "target1", "+x", "features", np.zeros((0, 3)), ())
     batch = VisionBatch(10, 0.1, ("chaser1", "chaser0", "chaser2"), (encode(other), encode(frame), b"junk"))

@@ -29,7 +29,9 @@ from swarm.transport.session import (
     QueuedSubscriber,
     ZenohArgs,
     add_zenoh_arguments,
+    attached_imu_ns,
     declare_liveliness,
+    imu_stamp_attachment,
     listen_endpoints,
     make_config,
     open_session,
@@ -547,3 +549,62 @@ def test_liveliness_watcher_ignores_keys_outside_the_protocol_and_survives_its_h
 def test_declare_liveliness_refuses_an_id_that_is_not_one_key_chunk(peers, keys) -> None:
     with pytest.raises(ConfigError, match="process id"):
         declare_liveliness(peers[0], keys, "agent", "a/b")
+
+
+# ------------------------------------------------------------------------------------------ stamps
+
+
+@pytest.mark.parametrize("stamping", [True, False])
+def test_a_stamped_subscriber_hands_over_the_publishers_stamp_queued_or_not(tmp_path, keys, stamping) -> None:
+    """``stamped``: the handler gets the sample's publication stamp, the publisher's clock at its ``put``
+    (Zenoh's timestamping on, for the publisher only) or ``None`` (off), with a callback and from a queue."""
+    conf = tmp_path / "stamps.json5"
+    conf.write_text("{ timestamping: { enabled: { peer: true } } }" if stamping else "{}")
+    endpoint = loopback(free_port())
+    with (
+        open_session(ZenohArgs(mode="peer", listen=(endpoint,))) as a,
+        open_session(ZenohArgs(mode="peer", connect=(endpoint,), config_file=str(conf))) as b,
+    ):
+        inbox: queue.Queue = queue.Queue()
+        drops = DropCounter()
+        subscribe_decoded(a, keys.imu("chaser"), Imu, lambda *args: inbox.put(args), drops, stamped=True)
+        got: list = []
+        sub = QueuedSubscriber(
+            a, keys.imu("chaser"), Imu, lambda *args: got.append(args), drops, stamped=True
+        )
+        pub = _publisher(b, keys.imu("chaser"))
+        before = time.time_ns()
+        pub.put(encode(_imu(7)))
+        after = time.time_ns()
+        key, msg, ns = inbox.get(timeout=TIMEOUT_S)
+        wait_until(lambda: sub.drain() or got, TIMEOUT_S, "the queued imu")
+        assert (key, msg.tick) == (keys.imu("chaser"), 7) and [(k, m.tick, n) for k, m, n in got] == [
+            (key, 7, ns)
+        ]
+        if stamping:  # (an HLC stamp: the real-time clock, to within its logical counter's few ns)
+            assert before - 1000 <= ns <= after + 1000
+        else:
+            assert ns is None
+        assert drops.total == 0
+
+
+def test_an_estimates_attachment_carries_its_imus_stamp_and_refuses_anybody_elses(peers, keys) -> None:
+    """``imu_stamp_attachment`` puts ``{"imu_published_ns": ns}`` in msgpack, any msgpack library reads it,
+    and ``attached_imu_ns`` reads it back off a received sample; none, or one of anybody else's making, is
+    ``None``, never an exception."""
+    import msgpack
+
+    ns = 1_764_400_000_123_456_789
+    assert msgpack.unpackb(imu_stamp_attachment(ns)) == {"imu_published_ns": ns}
+    a, b = peers
+    inbox: queue.Queue = queue.Queue()
+    a.declare_subscriber(keys.estimate("chaser"), inbox.put)
+    pub = _publisher(b, keys.estimate("chaser"))
+    field = "imu_published_ns"
+    bad = [None, b"", b"\xc1", msgpack.packb([ns]), msgpack.packb({"x": ns}), msgpack.packb({field: -1}),
+           msgpack.packb({field: 1.5}), msgpack.packb({field: True}),
+           msgpack.packb({field: str(ns)})]  # fmt: skip
+    for attachment in [imu_stamp_attachment(ns), imu_stamp_attachment(0), *bad]:
+        pub.put(b"payload", attachment=attachment)
+    got = [attached_imu_ns(inbox.get(timeout=TIMEOUT_S)) for _ in range(2 + len(bad))]
+    assert got == [ns, 0] + [None] * len(bad)
