@@ -344,8 +344,9 @@ class AgentProcess:
         if not stamps:
             return None
         ns = stamps.pop(k, None)
-        for tick in [t for t in list(stamps) if t < k]:
-            stamps.pop(tick, None)
+        if stamps:  # (a later tick's, or older ones no estimate took)
+            for tick in [t for t in list(stamps) if t < k]:
+                stamps.pop(tick, None)
         return None if ns is None else imu_stamp_attachment(ns)
 
     def _put_estimate(self, payload: bytes, stamp: bytes | None) -> None:

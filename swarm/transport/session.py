@@ -412,9 +412,13 @@ IMU_STAMP = "imu_published_ns"
 ``imu`` it was computed from [ns since the epoch] (:func:`published_ns` of that sample)."""
 
 
+_IMU_STAMP_HEAD = b"\x81" + msgpack.packb(IMU_STAMP) + b"\xcf"  # a map of one entry, its value a uint 64
+
+
 def imu_stamp_attachment(imu_ns: int) -> bytes:
-    """An estimate's attachment: ``{"imu_published_ns": imu_ns}`` in msgpack."""
-    return msgpack.packb({IMU_STAMP: imu_ns})
+    """An estimate's attachment: ``{"imu_published_ns": imu_ns}`` in msgpack (the value always as a uint 64,
+    which any msgpack reader takes; built without a packer: it is on the estimate's path)."""
+    return _IMU_STAMP_HEAD + imu_ns.to_bytes(8, "big")
 
 
 def attached_imu_ns(sample: zenoh.Sample) -> int | None:
