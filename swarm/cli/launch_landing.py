@@ -181,9 +181,9 @@ def run_landing_launch(args: argparse.Namespace) -> int:
 
             subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
             subscribe_decoded(session, keys.agent_all("event"), Event, on_agent_event, drops)
-            # a hung process keeps its token: the world's clock says it. A landing world sends it every tick,
-            # so the newest is kept in Zenoh (RingChannel(1), as the dashboard takes it) and looked at from
-            # the loop below, not decoded in a callback every tick
+            # a hung process keeps its token: the world's clock says it. The newest is kept in Zenoh
+            # (RingChannel(1), as the dashboard takes it) and looked at from the loop below, not decoded in a
+            # callback for each
             stall = StallWatch(args.stall_s)
             clock = session.declare_subscriber(keys.world_clock(), zenoh.handlers.RingChannel(1))
 

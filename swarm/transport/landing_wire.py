@@ -29,10 +29,16 @@ Wire = list[tuple[str, bytes]]
 """``(key, payload)`` in publishing order."""
 
 
-def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int) -> Wire:
+CLOCK_EVERY = 10
+"""A landing world's ``world/clock`` goes out every this many ticks (``--clock-every``), at its run's start
+and on a resume, as the docking world's: the agents take their ticks from their samples, the clock is for
+viewers, joiners and the launcher's stall watch (docs/protocol.md, "Rates")."""
+
+
+def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int, clock_every: int = CLOCK_EVERY) -> Wire:
     """The world's tick ``k``: per UAV ``imu``, ``uwb`` (a UWB tick), ``gnss`` (a fix), ``rangefinder`` (a
-    rangefinder tick), ``vision`` (a camera tick: the pad's corners as pixels) and ``truth``; then the
-    clock."""
+    rangefinder tick), ``vision`` (a camera tick: the pad's corners as pixels) and ``truth``; then, every
+    ``clock_every`` ticks, the clock."""
     sc, dt = world.sc, world.sc.dt_s
     t = k * dt
     out: Wire = []
@@ -55,8 +61,14 @@ def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int) -> Wire:
         u = world.uavs[uid]
         x = u.x
         out.append((keys.truth(uid), encode(Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], u.energy_j))))
-    out.append((keys.world_clock(), encode(Clock(k, t, "running", seed))))
+    if k % clock_every == 0:
+        out.append(running_clock(keys, k, dt, seed))
     return out
+
+
+def running_clock(keys: Keys, k: int, dt: float, seed: int) -> tuple[str, bytes]:
+    """The world's ``running`` clock at tick ``k``."""
+    return keys.world_clock(), encode(Clock(k, k * dt, "running", seed))
 
 
 def camera_frame(msg: Vision) -> tuple[np.ndarray, np.ndarray]:
@@ -171,7 +183,8 @@ class McapTap:
 
     def start(self, world, policy: str) -> None:
         ids = [u for u in world.uavs if not world.uavs[u].done]
-        self._write([run_start(self.keys, world.sc, self.seed, policy, ids, "sim")])
+        self._write([run_start(self.keys, world.sc, self.seed, policy, ids, "sim"),
+                     running_clock(self.keys, 0, world.sc.dt_s, self.seed)])  # fmt: skip
 
     def world(self, k: int, world, inputs: dict) -> None:
         self._write(world_tick(self.keys, world, k, inputs, self.seed))

@@ -3,16 +3,16 @@ landing scenario): the world step of :mod:`swarm.step.landing` for every UAV, ov
 
 Per tick ``k``, for every UAV not done: the truth steps, then the tick's samples go out on the UAV's keys
 (``docs/protocol.md``): an ``Imu`` with ``acc_body`` (stamped ``t - dt``), on a UWB tick a ``Uwb`` (the
-anchor's index; ``range_m`` nil when the anchor is out of reach), on a GNSS tick a ``Gnss``, on a camera
-tick a ``Vision`` of kind ``pixels`` (target ``pad-<uav>``, face ``+z``, every corner of every detected
-marker: row ``4 m + c`` is corner ``c`` of marker ``m``; none when the pad is not in view), and a
-``Truth``; then ``world/clock``. The world waits for each such UAV's ``Command`` of tick ``k`` (its mode
-one of the landing modes), holds it, and steps on. When every UAV is done (landed for a second, or hovering
-at the abort height) it publishes ``run_end`` on ``world/event`` with each UAV's outcome and a ``stopped``
-clock, and exits 0. It waits for every UAV's agent (liveliness ``alive/agent/<id>``) before the first tick.
-It takes run-time faults on ``control/fault`` (``swarm fault``): ``camera_loss`` (the pad hidden from a
-UAV's camera) and ``uwb_dropout`` (its UWB replies lost), for one UAV or all; other kinds are refused with a
-``fault_refused`` event.
+anchor's index; ``range_m`` nil when the anchor is out of reach), on a GNSS tick a ``Gnss``, on a camera tick
+a ``Vision`` of kind ``pixels`` (target ``pad-<uav>``, face ``+z``, every corner of every detected marker: row
+``4 m + c`` is corner ``c`` of marker ``m``; none when the pad is not in view), and a ``Truth``; then, every
+``--clock-every`` ticks (10), ``world/clock`` (also at the run's start and on a resume). The world waits for
+each such UAV's ``Command`` of tick ``k`` (its mode one of the landing modes), holds it, and steps on. When
+every UAV is done (landed for a second, or hovering at the abort height) it publishes ``run_end`` on
+``world/event`` with each UAV's outcome and a ``stopped`` clock, and exits 0. It waits for every UAV's agent
+(liveliness ``alive/agent/<id>``) before the first tick. It takes run-time faults on ``control/fault``
+(``swarm fault``): ``camera_loss`` (the pad hidden from a UAV's camera) and ``uwb_dropout`` (its UWB replies
+lost), for one UAV or all; other kinds are refused with a ``fault_refused`` event.
 
 ``--clock lockstep`` (the default) steps as fast as the agents answer: the run is ``swarm sim``'s. With
 ``--pace`` a lockstep world also never runs ahead of the wall clock (at ``realtime`` or ``scaled:N``, to watch
@@ -53,7 +53,8 @@ DESCRIPTION = "The landing world: quadrotor truth and sensors of every UAV, lock
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from swarm.args import positive_float
+    from swarm.args import positive_float, positive_int
+    from swarm.transport.landing_wire import CLOCK_EVERY
     from swarm.transport.process import add_checkpoint_arguments, add_process_arguments, clock_arg
 
     add_process_arguments(p)
@@ -64,6 +65,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pace", type=clock_arg, default=None, metavar="CLOCK",
                    help="a lockstep world paced to this clock (realtime or scaled:N): every command waited "
                         "for, never ahead of the wall clock")  # fmt: skip
+    p.add_argument("--clock-every", type=positive_int("--clock-every"), default=CLOCK_EVERY, metavar="TICKS",
+                   help=f"publish world/clock every this many ticks (default {CLOCK_EVERY})")  # fmt: skip
     add_checkpoint_arguments(
         p,
         "the world's complete state to DIR/world.ckpt at every tick, so that a restart with --resume "
@@ -240,10 +243,12 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                 resume["uids"],
             )
             held, late, wall_before = resume["held"], resume["late"], resume["wall_s"]
-            put([wire.world_event(keys, "world_resumed", (k0 - 1) * dt, {"tick": k0})])
+            put([wire.world_event(keys, "world_resumed", (k0 - 1) * dt, {"tick": k0}),
+                 wire.running_clock(keys, k0 - 1, dt, args.seed)])  # fmt: skip
             _LOG.warning("resumed from the checkpoint of tick %d (t = %.2f s)", k0, k0 * dt)
         else:
-            put([wire.run_start(keys, sc, args.seed, policy, ids, str(args.clock))])
+            put([wire.run_start(keys, sc, args.seed, policy, ids, str(args.clock)),
+                 wire.running_clock(keys, 0, dt, args.seed)])  # fmt: skip
         k = k0 - 1
         # the wall clock of tick k is t_wall + k dt / factor (a resumed run starts its clock again at k0 - 1)
         t_wall = time.monotonic() - (k0 - 1) * dt / (pace.factor if pace is not None else 1.0)
@@ -259,7 +264,8 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                     k -= 1
                     break
                 uids = list(inputs)
-                prev_wire, tick_wire = tick_wire, wire.world_tick(keys, world, k, inputs, args.seed)
+                prev_wire, tick_wire = tick_wire, wire.world_tick(keys, world, k, inputs, args.seed,
+                                                                  args.clock_every)  # fmt: skip
             with cond:
                 now["k"] = k
                 back.clear()

@@ -22,6 +22,7 @@ from swarm.errors import SwarmError
 from swarm.landing_scenario import load_landing
 from swarm.sim.landing import run_landing_fleet
 from swarm.transport.keys import Keys
+from swarm.transport.landing_wire import CLOCK_EVERY
 from swarm.transport.messages import Command, Fault, Imu, Uwb, Vision, encode
 from swarm.transport.session import ZenohArgs, open_session
 from tests.transport.procs import Procs, free_port, loopback, wait_until
@@ -255,8 +256,11 @@ def test_a_killed_landing_world_and_agent_come_back_and_the_run_still_equals_swa
     assert "restarts: agent/uav3 1, world 1" in text, text  # (the agents were started before the world)
     # the world resumed at the tick it had stepped last, or the one before (its checkpoint is written after
     # the tick's samples went out)
+    # (this test's tick is the world's newest clock, which it sends every CLOCK_EVERY ticks: up to that many
+    # behind the tick the world was at)
     resumed = int(re.search(r"resumed from the checkpoint of tick (\d+)", text).group(1))
-    assert kills["swarm.world.landing"] - 5 <= resumed <= kills["swarm.world.landing"] + 1, (resumed, kills)
+    at = kills["swarm.world.landing"]
+    assert at - 5 <= resumed <= at + CLOCK_EVERY, (resumed, kills)
     again = rf"uav\d: world resumed at tick {resumed}: its command of tick {resumed} sent again"
     assert re.search(again, text), text
     warm = int(re.search(r"uav3: resumed from its checkpoint of tick (\d+)", text).group(1))
@@ -385,3 +389,30 @@ def test_what_a_landing_launch_does_not_do_yet_is_refused_before_anything_starts
         timeout=60,
     )
     assert r.returncode == 2 and expected in r.stderr, r.stderr
+
+
+def test_the_landing_worlds_clock_goes_out_every_clock_every_ticks_and_nothing_else_changes():
+    """``world_tick``: the samples of every tick as before, the ``running`` clock only on the ticks that are a
+    multiple of ``clock_every`` (CLOCK_EVERY by default), last; with ``clock_every=1`` every tick."""
+    from swarm.step.landing import LandingWorld
+    from swarm.transport import landing_wire as wire
+    from swarm.transport.messages import Clock, decode
+
+    sc = load_landing("landing-swarm")
+    world, keys = LandingWorld(sc, 0), Keys("clk")
+    clocked = []
+    for k in range(1, 2 * CLOCK_EVERY + 2):
+        inputs = world.step(k)
+        every, default = (
+            wire.world_tick(keys, world, k, inputs, 7, 1),
+            wire.world_tick(keys, world, k, inputs, 7),
+        )
+        assert every[-1][0] == keys.world_clock() and every[:-1] == [
+            s for s in default if s[0] != keys.world_clock()
+        ]
+        clock = decode(every[-1][1], Clock)
+        assert (clock.tick, clock.t_s, clock.state, clock.seed) == (k, k * sc.dt_s, "running", 7)
+        if default[-1][0] == keys.world_clock():
+            assert default[-1] == every[-1]
+            clocked.append(k)
+    assert clocked == [CLOCK_EVERY, 2 * CLOCK_EVERY]
