@@ -85,19 +85,18 @@ def world_sensors(
     t = k * sc.dt_s
     camera_tick = k % world.vision_every == 0
     face = sc.guidance.docking_face
-    truths: Sensors = []
+    out: Sensors = []
     lost, p_nlos = world.radio_env(t)
     truth_tick = k % truth_every == 0
     if truth_tick:
-        truths.extend(_truth_batches(world, ids, k, t, bool(lost), float(p_nlos)))
+        out.extend(_truth_batches(world, ids, k, t, bool(lost), float(p_nlos)))
     for i, vid in enumerate(ids if truth_tick else ()):
         if viewed is not None and vid not in viewed:
             continue
         x = world.X[i]
         truth = encode_truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], float(world.effort[i]), bool(lost),
                              float(p_nlos))  # fmt: skip
-        truths.append(("truth", vid, truth))
-    out: Sensors = truths
+        out.append(("truth", vid, truth))
     seen: list[tuple[str, bytes]] = []  # batch: the frames of the vehicles not in solo
     chasers = frozenset(chasers) if camera_tick else frozenset()
     for vid in ids:
