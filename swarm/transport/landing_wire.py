@@ -9,6 +9,7 @@ import numpy as np
 
 from swarm.transport.keys import Keys
 from swarm.transport.messages import (
+    CLOCK_EVERY,
     Clock,
     Command,
     Estimate,
@@ -27,12 +28,6 @@ from swarm.transport.messages import (
 
 Wire = list[tuple[str, bytes]]
 """``(key, payload)`` in publishing order."""
-
-
-CLOCK_EVERY = 10
-"""A landing world's ``world/clock`` goes out every this many ticks (``--clock-every``), at its run's start
-and on a resume, as the docking world's: the agents take their ticks from their samples, the clock is for
-viewers, joiners and the launcher's stall watch (docs/protocol.md, "Rates")."""
 
 
 def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int, clock_every: int = CLOCK_EVERY) -> Wire:

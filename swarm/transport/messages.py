@@ -1524,9 +1524,16 @@ class Event(Message):
         )  # fmt: skip
 
 
+CLOCK_EVERY = 10
+"""A world's ``world/clock`` goes out every this many ticks by default (``--clock-every``), and at every
+state change: the agents take their ticks from their samples, the clock is for viewers, joiners and the
+launcher's stall watch (docs/protocol.md, "Rates")."""
+
+
 @dataclass(frozen=True, eq=False)
 class Clock(Message):
-    """The world's clock and run state, once per tick: ``<ns>/world/clock``."""
+    """The world's clock and run state, every :data:`CLOCK_EVERY` ticks and at every state change:
+    ``<ns>/world/clock``."""
 
     tick: int
     """Current tick ``k`` (>= 0)."""

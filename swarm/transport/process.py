@@ -27,10 +27,11 @@ from dataclasses import dataclass
 import zenoh
 
 from swarm import cpu_latency
-from swarm.args import add_scenario_args, agents, load_from_args, seed
+from swarm.args import add_scenario_args, agents, load_from_args, positive_int, seed
 from swarm.errors import ConfigError, SwarmError
 from swarm.stacks import enable_stack_dumps
 from swarm.transport.keys import Keys
+from swarm.transport.messages import CLOCK_EVERY
 from swarm.transport.session import add_zenoh_arguments, zenoh_args_from
 
 __all__ = [
@@ -142,6 +143,12 @@ def add_process_arguments(p: argparse.ArgumentParser, *, clock: bool = True) -> 
         help="Zenoh link lease: a hung peer is seen lost after about this long (default Zenoh's 10000)",
     )
     add_zenoh_arguments(p)
+
+
+def add_clock_every(p: argparse.ArgumentParser) -> None:
+    """A world's ``--clock-every TICKS`` (the docking world's and the landing world's)."""
+    p.add_argument("--clock-every", type=positive_int("--clock-every"), default=CLOCK_EVERY, metavar="TICKS",
+                   help=f"publish world/clock every this many ticks (default {CLOCK_EVERY})")  # fmt: skip
 
 
 def add_checkpoint_arguments(p: argparse.ArgumentParser, writes: str, resumes: str) -> None:

@@ -16,7 +16,12 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from swarm.args import add_world_timeouts
-    from swarm.transport.process import add_checkpoint_arguments, add_process_arguments, clock_arg
+    from swarm.transport.process import (
+        add_checkpoint_arguments,
+        add_clock_every,
+        add_process_arguments,
+        clock_arg,
+    )
 
     add_process_arguments(p)
     add_world_timeouts(p)
@@ -38,10 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "awaited in one Bundle per receiver (agent/<id>/bundle, world/bundle; docs/protocol.md \"Bundles\": "
         "a free-running, paced or --batch world never bundles)",
     )  # fmt: skip
-    p.add_argument(
-        "--clock-every", type=int, default=10, metavar="TICKS",
-        help="publish world/clock every this many ticks (default 10)",
-    )  # fmt: skip
+    add_clock_every(p)
     add_checkpoint_arguments(
         p,
         "the world's complete state to DIR/world.ckpt at every tick, so that a restart with --resume "
@@ -57,8 +59,6 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     from swarm.transport.session import open_session
     from swarm.world.process import WorldProcess
 
-    if args.clock_every < 1:
-        raise ConfigError(f"--clock-every must be an integer >= 1, got {args.clock_every!r}")
     if args.resume and args.checkpoint_dir is None:
         raise ConfigError("--resume needs --checkpoint-dir (the directory of the checkpoint to resume)")
     check_pace(args.clock, args.pace)

@@ -53,9 +53,13 @@ DESCRIPTION = "The landing world: quadrotor truth and sensors of every UAV, lock
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from swarm.args import positive_float, positive_int
-    from swarm.transport.landing_wire import CLOCK_EVERY
-    from swarm.transport.process import add_checkpoint_arguments, add_process_arguments, clock_arg
+    from swarm.args import positive_float
+    from swarm.transport.process import (
+        add_checkpoint_arguments,
+        add_clock_every,
+        add_process_arguments,
+        clock_arg,
+    )
 
     add_process_arguments(p)
     p.add_argument("--step-timeout", type=positive_float("--step-timeout"), default=30.0, metavar="S",
@@ -65,8 +69,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pace", type=clock_arg, default=None, metavar="CLOCK",
                    help="a lockstep world paced to this clock (realtime or scaled:N): every command waited "
                         "for, never ahead of the wall clock")  # fmt: skip
-    p.add_argument("--clock-every", type=positive_int("--clock-every"), default=CLOCK_EVERY, metavar="TICKS",
-                   help=f"publish world/clock every this many ticks (default {CLOCK_EVERY})")  # fmt: skip
+    add_clock_every(p)
     add_checkpoint_arguments(
         p,
         "the world's complete state to DIR/world.ckpt at every tick, so that a restart with --resume "

@@ -57,6 +57,7 @@ from swarm.transport.docking_wire import batch_samples, contact_event, keepout_e
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import CommandBarrier
 from swarm.transport.messages import (
+    CLOCK_EVERY,
     Clock,
     Command,
     CommandBatch,
@@ -98,7 +99,7 @@ class WorldProcess:
         *,
         step_timeout_s: float = 5.0,
         start_timeout_s: float = 180.0,
-        clock_every: int = 10,
+        clock_every: int = CLOCK_EVERY,
         process_id: str = "world",
         checkpoint_dir: str | Path | None = None,
         resume: dict | None = None,

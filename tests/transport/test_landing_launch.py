@@ -22,8 +22,7 @@ from swarm.errors import SwarmError
 from swarm.landing_scenario import load_landing
 from swarm.sim.landing import run_landing_fleet
 from swarm.transport.keys import Keys
-from swarm.transport.landing_wire import CLOCK_EVERY
-from swarm.transport.messages import Command, Fault, Imu, Uwb, Vision, encode
+from swarm.transport.messages import CLOCK_EVERY, Command, Fault, Imu, Uwb, Vision, encode
 from swarm.transport.session import ZenohArgs, open_session
 from tests.transport.procs import Procs, free_port, loopback, wait_until
 
