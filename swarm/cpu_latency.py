@@ -124,3 +124,76 @@ def hold(us: int | None, device: Path = DEVICE) -> Iterator[CpuLatencyHold]:
     finally:
         if fd is not None:
             os.close(fd)  # the kernel withdraws the request
+
+
+SYSFS_CPU = Path("/sys/devices/system/cpu")
+"""Where the kernel shows its cpuidle driver, governor and each CPU's idle states."""
+
+HALTPOLL_NS = Path("/sys/module/haltpoll/parameters/guest_halt_poll_ns")
+"""A KVM guest's halt polling (the ``haltpoll`` governor): how long an idle vCPU polls before it halts.
+The kernel's default is 200000 ns; a boot line may set it (this project's VM: 0, BENCHMARKS.md)."""
+
+
+def _read(path: Path) -> str | None:
+    try:
+        return path.read_text().strip()
+    except (OSError, UnicodeDecodeError):
+        return None
+
+
+def _int(text: str | None) -> int | None:
+    try:
+        return int(text) if text is not None else None
+    except ValueError:
+        return None
+
+
+def idle_config(cpu_root: Path = SYSFS_CPU, haltpoll_ns: Path = HALTPOLL_NS, device: Path = DEVICE) -> dict:
+    """The machine's CPU idle configuration, for a benchmark's record: what makes a woken process pay the
+    "wake tax" (module docstring). Keys: ``driver`` and ``governor`` (cpuidle), ``states`` (cpu0's, each
+    ``{"name", "exit_latency_us", "disabled"}``), ``guest_halt_poll_ns`` (a KVM guest's halt polling) and
+    ``pm_qos_bound_us`` (the smallest CPU latency request of all processes, :data:`MAX_US` for none; read
+    from :data:`DEVICE`, which needs root). Each is None where this kernel has no such file or it cannot be
+    read: the record says what was not known rather than failing the bench."""
+    idle = cpu_root / "cpuidle"
+    states = []
+    state_dirs = sorted((cpu_root / "cpu0" / "cpuidle").glob("state[0-9]*"), key=lambda p: int(p.name[5:]))
+    for d in state_dirs:
+        disabled = _int(_read(d / "disable"))
+        states.append({
+            "name": _read(d / "name"),
+            "exit_latency_us": _int(_read(d / "latency")),
+            "disabled": None if disabled is None else bool(disabled),
+        })  # fmt: skip
+    bound = None
+    try:
+        fd = os.open(device, os.O_RDONLY | os.O_CLOEXEC)
+        try:
+            raw = os.read(fd, _S32.size)
+            bound = _S32.unpack(raw)[0] if len(raw) == _S32.size else None
+        finally:
+            os.close(fd)
+    except OSError:
+        pass
+    return {
+        "driver": _read(idle / "current_driver"),
+        "governor": _read(idle / "current_governor") or _read(idle / "current_governor_ro"),
+        "states": states or None,
+        "guest_halt_poll_ns": _int(_read(haltpoll_ns)),
+        "pm_qos_bound_us": bound,
+    }
+
+
+def describe_idle(cfg: dict) -> str:
+    """One line of :func:`idle_config` for a bench's report."""
+    states = ", ".join(
+        f"{s['name']} {s['exit_latency_us']} us" + (" (disabled)" if s["disabled"] else "")
+        for s in cfg.get("states") or []
+    )  # fmt: skip
+    parts = [f"driver {cfg.get('driver') or 'unknown'}", f"states: {states or 'unknown'}"]
+    if cfg.get("guest_halt_poll_ns") is not None:
+        parts.append(f"guest halt polling {cfg['guest_halt_poll_ns']} ns")
+    bound = cfg.get("pm_qos_bound_us")
+    parts.append("no PM QoS request" if bound == MAX_US else f"PM QoS bound {bound} us" if bound is not None
+                 else "PM QoS bound unknown")  # fmt: skip
+    return "CPU idle: " + "; ".join(parts)

@@ -175,7 +175,7 @@ def test_late_share_counts_a_swarm_that_never_commanded_as_all_late():
 
 def test_each_case_is_run_alternately_with_each_cpu_latency_and_the_report_says_which(monkeypatch):
     from swarm.bench import swarm as bench
-    from swarm.cpu_latency import CpuLatencyHold
+    from swarm.cpu_latency import CpuLatencyHold, describe_idle
 
     held_during: list = []
 
@@ -208,8 +208,11 @@ def test_each_case_is_run_alternately_with_each_cpu_latency_and_the_report_says_
     assert [u for u in held_during if not isinstance(u, tuple)] == [None, 0, 5, None, 0, 5]
     assert [(c["cpu_latency_us"], c["cpu_latency_held"]) for c in rec["cases"]] == [(None, False), (0, True),
                                                                                       (5, False)]  # fmt: skip
-    rows = bench.format_report(rec).splitlines()[2:5]
-    assert [r.split()[4] for r in rows] == ["off", "0", "5!"]  # 5 us not granted: marked
+    lines = bench.format_report(rec).splitlines()
+    assert lines[-1] == describe_idle(rec["cpu_idle"])  # the machine's idle states, read once for the record
+    head = next(i for i, line in enumerate(lines) if line.startswith("vehicles"))
+    # 5 us not granted: marked
+    assert [r.split()[4] for r in lines[head + 1 : head + 4]] == ["off", "0", "5!"]
 
 
 @pytest.mark.parametrize(

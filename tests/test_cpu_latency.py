@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from swarm.cpu_latency import DEVICE, MAX_US, hold, parse
+from swarm.cpu_latency import DEVICE, MAX_US, describe_idle, hold, idle_config, parse
 
 
 def _open_fds_to(path: Path) -> int:
@@ -133,3 +133,61 @@ def test_a_process_started_by_hand_holds_its_own_request_until_it_stops(what, tm
         assert proc.wait(30.0) in ((0, 130) if what == "replay" else (0,)), proc.output()
     if writable:
         assert _machine_bound() == before
+
+
+def _fake_sysfs(root: Path, states: list[tuple[str, str, str]], driver: str | None = "haltpoll") -> Path:
+    """A ``/sys/devices/system/cpu`` with cpu0's idle states (name, exit latency, disable) as files."""
+    if driver is not None:
+        (root / "cpuidle").mkdir(parents=True)
+        (root / "cpuidle" / "current_driver").write_text(driver + "\n")
+        (root / "cpuidle" / "current_governor_ro").write_text("menu\n")
+    for i, (name, latency, disable) in enumerate(states):
+        d = root / "cpu0" / "cpuidle" / f"state{i}"
+        d.mkdir(parents=True)
+        (d / "name").write_text(name + "\n")
+        (d / "latency").write_text(latency + "\n")
+        (d / "disable").write_text(disable + "\n")
+    return root
+
+
+def test_the_idle_configuration_is_read_state_by_state_in_their_order(tmp_path):
+    # twelve states: state10 and state11 must sort after state2 (numerically, not as text)
+    states = [("POLL", "0", "0"), ("C1", "2", "0"), ("C2", "80", "1")] + [
+        (f"C{i}", str(100 * i), "0") for i in range(3, 12)
+    ]
+    cpu = _fake_sysfs(tmp_path / "cpu", states)
+    poll = tmp_path / "guest_halt_poll_ns"
+    poll.write_text("200000\n")
+    device = tmp_path / "cpu_dma_latency"
+    device.write_bytes(struct.pack("=i", 25))
+    cfg = idle_config(cpu, poll, device)
+    assert cfg["driver"] == "haltpoll" and cfg["governor"] == "menu"
+    assert [s["name"] for s in cfg["states"]] == [s[0] for s in states]
+    assert cfg["states"][2] == {"name": "C2", "exit_latency_us": 80, "disabled": True}
+    assert cfg["states"][11]["exit_latency_us"] == 1100 and cfg["states"][11]["disabled"] is False
+    assert cfg["guest_halt_poll_ns"] == 200000 and cfg["pm_qos_bound_us"] == 25
+    line = describe_idle(cfg)
+    assert "C2 80 us (disabled)" in line and "guest halt polling 200000 ns" in line
+    assert "PM QoS bound 25 us" in line
+
+
+def test_an_idle_configuration_the_kernel_does_not_show_is_none_not_an_error(tmp_path):
+    cpu = _fake_sysfs(tmp_path / "cpu", [("POLL", "not a number", "")], driver=None)
+    cfg = idle_config(cpu, tmp_path / "absent", tmp_path / "absent_device")
+    assert cfg == {
+        "driver": None,
+        "governor": None,
+        "states": [{"name": "POLL", "exit_latency_us": None, "disabled": None}],
+        "guest_halt_poll_ns": None,
+        "pm_qos_bound_us": None,
+    }
+    assert describe_idle(cfg) == ("CPU idle: driver unknown; states: POLL None us; PM QoS bound unknown")
+    assert idle_config(tmp_path / "nothing", tmp_path / "absent", tmp_path / "absent")["states"] is None
+
+
+@pytest.mark.skipif(not os.access(DEVICE, os.R_OK | os.W_OK), reason=f"{DEVICE} is not writable here")
+def test_the_machine_bound_read_with_the_idle_configuration_follows_a_held_request():
+    assert idle_config()["pm_qos_bound_us"] == _machine_bound()
+    with hold(0):
+        assert idle_config()["pm_qos_bound_us"] == 0
+        assert "PM QoS bound 0 us" in describe_idle(idle_config())

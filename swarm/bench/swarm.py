@@ -70,6 +70,7 @@ from pathlib import Path
 import msgpack
 import numpy as np
 
+from swarm import cpu_latency
 from swarm.errors import ConfigError
 from swarm.transport.session import attached_imu_ns, free_loopback_endpoint, open_session, published_ns
 
@@ -383,22 +384,19 @@ def summarise(runs: list[dict]) -> dict:
 def parse_cpu_latencies(text: str) -> tuple[int | None, ...]:
     """``--cpu-latency off,0``: ``swarm launch --cpu-latency`` values (``off``: None), each case run in
     each."""
-    from swarm.cpu_latency import MAX_US, parse
-
     try:
-        values = tuple(parse(v) for v in text.split(","))
+        values = tuple(cpu_latency.parse(v) for v in text.split(","))
     except argparse.ArgumentTypeError:
         values = ()
     if not values or len(set(values)) < len(values):
         raise ConfigError(
-            f"--cpu-latency must be off or microseconds in 0..{MAX_US}, or several (comma-separated), "
-            f"got {text!r}"
+            f"--cpu-latency must be off or microseconds in 0..{cpu_latency.MAX_US}, "
+            f"or several (comma-separated), got {text!r}"
         )
     return values
 
 
 def run(preset: dict) -> dict:
-    from swarm import cpu_latency
 
     stagger, tdma = bool(preset.get("stagger", False)), bool(preset.get("tdma", False))
     specs = [(v, c, n, t, q, w) for c in preset["clocks"] for n in preset["per_process"]
@@ -418,6 +416,7 @@ def run(preset: dict) -> dict:
         "span_s": preset["span_s"],
         "cores": os.cpu_count(),
         "load_1min": os.getloadavg()[0],
+        "cpu_idle": cpu_latency.idle_config(),  # what a process woken every tick pays: the VM's or laptop's
     }
 
 
@@ -455,6 +454,8 @@ def format_report(r: dict) -> str:
         )
     if any("runs" in c for c in r["cases"]):
         lines.append("medians of the runs of each case; [min-max] over them")
+    if r.get("cpu_idle"):
+        lines.append(cpu_latency.describe_idle(r["cpu_idle"]))
     return "\n".join(lines)
 
 

@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from swarm import cpu_latency
 from swarm.bench.swarm import LatencyProbe, timestamping_args
 from swarm.cli.children import member_args
 from swarm.transport.session import ZenohArgs, free_loopback_endpoint, open_session
@@ -234,8 +235,6 @@ def _latency(duration_s: float, topology: str = "mesh") -> dict:
 
 def run(preset: dict) -> dict:
     """Every measurement, with ``preset["cpu_latency"]`` (``--cpu-latency``; None: none) held throughout."""
-    from swarm import cpu_latency
-
     with cpu_latency.hold(preset.get("cpu_latency")) as held:
         return {**_run(preset), **held.as_dict()}
 
@@ -279,6 +278,7 @@ def _run(preset: dict) -> dict:
         },
         "cores": os.cpu_count(),
         "load_1min": os.getloadavg()[0],
+        "cpu_idle": cpu_latency.idle_config(),  # the wake tax's cause (swarm.cpu_latency), while it was held
     }
 
 
@@ -289,6 +289,8 @@ def format_report(r: dict) -> str:
         f"CPU wake-up latency request of {r['cpu_latency_us']} us (--cpu-latency): "
         + ("held throughout" if r.get("cpu_latency_held") else "NOT held: the kernel's idle states")
     ]  # fmt: skip
+    if r.get("cpu_idle"):
+        lines.append(cpu_latency.describe_idle(r["cpu_idle"]))
     lines += [
         f"Zenoh ping-pong RTT (64 B, two clients via the router): median {rtt['median']:.0f} us, "
         f"p99 {rtt['p99']:.0f} us",
