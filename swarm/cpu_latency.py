@@ -26,6 +26,7 @@ import argparse
 import contextlib
 import logging
 import os
+import re
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -134,6 +135,9 @@ HALTPOLL_NS = Path("/sys/module/haltpoll/parameters/guest_halt_poll_ns")
 The kernel's default is 200000 ns; a boot line may set it (this project's VM: 0, BENCHMARKS.md)."""
 
 
+_STATE = re.compile(r"state(\d+)")  # an idle state's directory, numbered from 0 (the shallowest)
+
+
 def _read(path: Path) -> str | None:
     try:
         return path.read_text().strip()
@@ -157,8 +161,8 @@ def idle_config(cpu_root: Path = SYSFS_CPU, haltpoll_ns: Path = HALTPOLL_NS, dev
     read: the record says what was not known rather than failing the bench."""
     idle = cpu_root / "cpuidle"
     states = []
-    state_dirs = sorted((cpu_root / "cpu0" / "cpuidle").glob("state[0-9]*"), key=lambda p: int(p.name[5:]))
-    for d in state_dirs:
+    numbered = ((d, _STATE.fullmatch(d.name)) for d in (cpu_root / "cpu0" / "cpuidle").glob("state*"))
+    for _, d in sorted((int(m[1]), d) for d, m in numbered if m):
         disabled = _int(_read(d / "disable"))
         states.append({
             "name": _read(d / "name"),

@@ -156,6 +156,7 @@ def test_the_idle_configuration_is_read_state_by_state_in_their_order(tmp_path):
         (f"C{i}", str(100 * i), "0") for i in range(3, 12)
     ]
     cpu = _fake_sysfs(tmp_path / "cpu", states)
+    (cpu / "cpu0" / "cpuidle" / "state1x").mkdir()  # not a state's directory: left out
     poll = tmp_path / "guest_halt_poll_ns"
     poll.write_text("200000\n")
     device = tmp_path / "cpu_dma_latency"

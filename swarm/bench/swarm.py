@@ -397,7 +397,6 @@ def parse_cpu_latencies(text: str) -> tuple[int | None, ...]:
 
 
 def run(preset: dict) -> dict:
-
     stagger, tdma = bool(preset.get("stagger", False)), bool(preset.get("tdma", False))
     specs = [(v, c, n, t, q, w) for c in preset["clocks"] for n in preset["per_process"]
              for v in preset["vehicles"] if n <= v for t in preset.get("topologies", ("auto",))
