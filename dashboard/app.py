@@ -33,7 +33,7 @@ import zenoh
 
 from dashboard import kinds, mapping, panels
 from dashboard import nodes as scene_nodes
-from dashboard.faults import FaultPanel
+from dashboard.faults import DOCKING, LANDING, FaultPanel
 from dashboard.landing import LandingSceneView, frame_landing_scene, uav_vehicles
 from dashboard.link import SwarmLink
 from dashboard.nodes import set_if_changed as _set
@@ -315,7 +315,8 @@ class GuiView:
         self.playback = None
         if player is not None:
             self.playback = PlaybackPanel(gui, *player)
-        if link is not None and landing is not None:  # the landing world takes no run control yet
+        # the landing world takes no run control yet (its faults: the Faults panel below)
+        if link is not None and landing is not None:
             self._send = link.send
         elif link is not None:
             self._send = link.send
@@ -367,13 +368,13 @@ class GuiView:
             self.modes = gui.add_markdown("")
         with gui.add_folder("Events"):
             self.events = gui.add_markdown("no events yet")
-        self.faults: FaultPanel | None = None
-        if landing is not None:
-            pass  # the landing world applies no run-time fault yet: no Faults panel
-        elif link is not None:
-            self.faults = FaultPanel(gui, link.send_fault, link.listeners, vehicles)
+        # the faults the world takes: a landing world's two kinds, on one UAV or every UAV
+        menu = LANDING if landing is not None else DOCKING
+        self.uwb_network = menu.uwb_network  # how the event log words a UWB fault
+        if link is not None:
+            self.faults = FaultPanel(gui, link.send_fault, link.listeners, vehicles, menu)
         else:
-            self.faults = FaultPanel(gui, None, lambda: False, vehicles)
+            self.faults = FaultPanel(gui, None, lambda: False, vehicles, menu)
         with gui.add_folder("View", expand_by_default=False):
             sigma = gui.add_slider("ellipsoid σ", min=1.0, max=5.0, step=0.5, initial_value=scene.n_sigma)
             trails = gui.add_checkbox("trails", initial_value=True)
@@ -399,8 +400,7 @@ class GuiView:
         restored, :meth:`SceneView.invalidate`)."""
         self._events_version = None
         self._plot_key = None
-        if self.faults is not None:
-            self.faults.invalidate()
+        self.faults.invalidate()
 
     def _make_handler(self, command: str) -> Callable[[object], None]:
         def on_click(_event: object) -> None:
@@ -439,9 +439,8 @@ class GuiView:
         _set(self.modes, "content", panels.modes_markdown(selected.modes if selected else ()))
         if snap.events_version != self._events_version:
             self._events_version = snap.events_version
-            _set(self.events, "content", panels.events_markdown(snap.events))
-        if self.faults is not None:
-            self.faults.update(snap)
+            _set(self.events, "content", panels.events_markdown(snap.events, uwb_network=self.uwb_network))
+        self.faults.update(snap)
         if self.playback is not None:
             self.playback.update()
 

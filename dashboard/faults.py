@@ -10,6 +10,11 @@ sensor delay) and the mothership (UWB) answer with ``fault`` events when they ap
 ``fault_refused`` event when it cannot (a ``sensor_delay`` in a lockstep run, a vehicle it does not know,
 a camera loss on a vehicle without a camera); the panel lists both (:func:`dashboard.panels.faults_markdown`).
 
+What the panel offers follows the world it talks to (:class:`FaultMenu`): a docking swarm's five kinds
+(:data:`DOCKING`), and a landing swarm's two (:data:`LANDING`, the kinds
+:attr:`~swarm.step.landing.LandingWorld.FAULTS` models: ``camera_loss`` hides the pad from a UAV's camera,
+``uwb_dropout`` loses its UWB replies, on one UAV or on every UAV, both applied by the landing world).
+
 :func:`fault_of` and :func:`kind_hint` are pure (tested without a server); :class:`FaultPanel` is the Viser
 side.
 """
@@ -19,7 +24,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import viser
@@ -27,9 +32,13 @@ import viser
 from dashboard import panels
 from dashboard.state import Snapshot
 from swarm.errors import ConfigError, MessageError
+from swarm.step.landing import LandingWorld
 from swarm.transport.messages import FAULT_KINDS, Fault
 
-__all__ = ["EVERY_CHASER", "FAULT_INPUTS", "FaultForm", "FaultPanel", "fault_of", "kind_hint", "sent_text"]
+__all__ = [
+    "DOCKING", "EVERY_CHASER", "EVERY_UAV", "FAULT_INPUTS", "LANDING", "FaultForm", "FaultMenu", "FaultPanel",
+    "fault_of", "kind_hint", "sent_text",
+]  # fmt: skip
 
 _LOG = logging.getLogger("dashboard.faults")
 
@@ -45,6 +54,9 @@ FAULT_INPUTS: dict[str, tuple[str, ...]] = {
 }
 """The panel inputs each fault kind uses (the others are hidden and not sent). UWB faults have no vehicle:
 the mothership applies them to the whole radio network."""
+
+EVERY_UAV = "every UAV"
+"""A landing swarm's choice that sends ``vehicle = None`` (the landing world applies it to every UAV)."""
 
 LABELS: dict[str, str] = {
     "vehicle": "vehicle",
@@ -73,6 +85,42 @@ _HINTS = {
 }
 
 
+_LANDING_HINTS = {
+    "camera_loss": "the UAV's camera sees no pad marker (the landing world applies it)",
+    "uwb_dropout": "every UWB reply to the UAV is lost: no range (the landing world applies it)",
+}
+
+
+@dataclass(frozen=True)
+class FaultMenu:
+    """The faults a world takes, as the panel offers them."""
+
+    inputs: Mapping[str, tuple[str, ...]]
+    """Each kind offered, in the panel's order, and the inputs it uses (the others hidden and not sent)."""
+    hints: Mapping[str, str]
+    """One line per kind on what it does and who applies it."""
+    every: str
+    """The vehicle choice that sends ``vehicle = None``."""
+    uwb_network: bool
+    """Whether a UWB fault acts on the whole radio network (a docking swarm's, applied to every vehicle
+    whatever the vehicle choice) rather than on the vehicles it names (a landing swarm's)."""
+    appliers: str
+    """Who announces a fault applied, as the panel's sent line says it."""
+
+
+DOCKING = FaultMenu(
+    {k: FAULT_INPUTS[k] for k in FAULT_KINDS}, _HINTS, EVERY_CHASER, uwb_network=True,
+    appliers="world or mothership",
+)  # fmt: skip
+"""A docking swarm's world and mothership: every kind of :data:`~swarm.transport.messages.FAULT_KINDS`."""
+
+LANDING = FaultMenu(
+    {kind: ("vehicle", "duration", "start") for kind in LandingWorld.FAULTS}, _LANDING_HINTS, EVERY_UAV,
+    uwb_network=False, appliers="world",
+)  # fmt: skip
+"""A landing swarm's world: the kinds it models, each on one UAV or every UAV, for a window."""
+
+
 @dataclass(frozen=True)
 class FaultForm:
     """What the panel's inputs hold, in the panel's units."""
@@ -80,7 +128,7 @@ class FaultForm:
     kind: str
     """One of :data:`~swarm.transport.messages.FAULT_KINDS`."""
     vehicle: str = EVERY_CHASER
-    """A vehicle id, or :data:`EVERY_CHASER`."""
+    """A vehicle id, or the menu's ``every`` (:data:`EVERY_CHASER`, :data:`EVERY_UAV`)."""
     duration_s: object = 5.0
     """Length of the window [s] (the GUI's number; validated by ``Fault``)."""
     start_s: object = 0.0
@@ -98,12 +146,14 @@ def _error(field: str, why: str) -> ConfigError:
     return ConfigError(f"{label} ({field}): {why}" if label else f"{field}: {why}")
 
 
-def fault_of(form: FaultForm) -> Fault:
-    """The :class:`Fault` the panel sends for ``form``: the inputs of its kind only (:data:`FAULT_INPUTS`),
+def fault_of(form: FaultForm, menu: FaultMenu = DOCKING) -> Fault:
+    """The :class:`Fault` the panel sends for ``form``: the inputs of its kind only (``menu.inputs``),
     ``start_s`` 0 as "at once", the gyro rate converted from deg/s to rad/s, validated by ``Fault`` itself.
     ConfigError naming the panel input, the wire field and the value, e.g. ``NLOS probability (probability):
-    an nlos_burst needs one in (0, 1], got 1.5``."""
-    uses = FAULT_INPUTS.get(form.kind, ())
+    an nlos_burst needs one in (0, 1], got 1.5``; ConfigError for a kind the menu does not offer."""
+    if form.kind not in menu.inputs:
+        raise _error("kind", f"this world takes {', '.join(menu.inputs)}, got {form.kind!r}")
+    uses = menu.inputs[form.kind]
     rate = None
     if "rate" in uses:
         try:
@@ -111,7 +161,7 @@ def fault_of(form: FaultForm) -> Fault:
         except (TypeError, ValueError):
             raise _error("rate_rad_s", f"expected three numbers, got {form.rate_deg_s!r}") from None
     start = form.start_s if "start" in uses else None
-    vehicle = form.vehicle if "vehicle" in uses and form.vehicle != EVERY_CHASER else None
+    vehicle = form.vehicle if "vehicle" in uses and form.vehicle != menu.every else None
     try:
         return Fault(
             kind=form.kind,
@@ -127,10 +177,10 @@ def fault_of(form: FaultForm) -> Fault:
         raise _error(field, why) from None
 
 
-def kind_hint(kind: str, clock_mode: str | None) -> str:
+def kind_hint(kind: str, clock_mode: str | None, menu: FaultMenu = DOCKING) -> str:
     """One line on what ``kind`` does, who applies it, and (``sensor_delay``) whether this run's clock,
     as the world announced it in ``run_start``, lets it."""
-    text = f"_{_HINTS.get(kind, '')}._"
+    text = f"_{menu.hints.get(kind, '')}._"
     if kind == "sensor_delay" and clock_mode == "lockstep":
         text += " **This run is lockstep: the world will refuse it.**"
     elif kind == "sensor_delay" and clock_mode is not None:
@@ -138,21 +188,27 @@ def kind_hint(kind: str, clock_mode: str | None) -> str:
     return text
 
 
-def sent_text(msg: Fault, listening: bool, at: str) -> str:
+def sent_text(msg: Fault, listening: bool, at: str, menu: FaultMenu = DOCKING) -> str:
     """The panel's line after a fault was published at wall time ``at``."""
-    who = "" if msg.kind in ("uwb_dropout", "nlos_burst") else f" on {msg.vehicle or EVERY_CHASER}"
+    network = menu.uwb_network and msg.kind in ("uwb_dropout", "nlos_burst")
+    who = "" if network else f" on {msg.vehicle or menu.every}"
     dur = "" if msg.duration_s is None else f" for {msg.duration_s:g} s"
     head = f"sent **{msg.kind}**{who}{dur} at {at}"
     if not listening:
         return f"{head}, but nobody listens on control/fault (is the swarm up?)"
-    return f"{head}: the world or mothership lists it below once applied"
+    return (
+        f"{head}: the "
+        + ("world or mothership" if menu is DOCKING else "world")
+        + " lists it below once applied"
+    )
 
 
 class FaultPanel:
     """The Faults folder of the GUI: kind, vehicle, the kind's parameters, Inject, the last action and the
     faults applied or refused. ``send`` publishes a :class:`Fault`; ``listening`` says whether anyone
     subscribes to ``control/fault``. With ``send=None`` (a recording's playback) the panel only lists the
-    faults: its inputs and Inject are hidden."""
+    faults: its inputs and Inject are hidden. ``menu`` says which kinds the world takes (:data:`DOCKING`,
+    :data:`LANDING`)."""
 
     def __init__(
         self,
@@ -160,15 +216,19 @@ class FaultPanel:
         send: Callable[[Fault], object] | None,
         listening: Callable[[], bool],
         vehicles: Sequence[str],
+        menu: FaultMenu = DOCKING,
     ) -> None:
         self._send = send
         self.listening = listening
+        self.menu = menu
+        kinds = tuple(menu.inputs)
+        first = "camera_loss" if "camera_loss" in kinds else kinds[0]
         with gui.add_folder("Faults"):
-            self.kind = gui.add_dropdown("fault", FAULT_KINDS, initial_value="camera_loss")
-            self.hint = gui.add_markdown(kind_hint("camera_loss", None))
-            options = [EVERY_CHASER, *sorted(vehicles, key=panels.natural_key)]
+            self.kind = gui.add_dropdown("fault", kinds, initial_value=first)
+            self.hint = gui.add_markdown(kind_hint(first, None, menu))
+            options = [menu.every, *sorted(vehicles, key=panels.natural_key)]
             self.inputs: dict[str, viser.GuiInputHandle] = {
-                "vehicle": gui.add_dropdown(LABELS["vehicle"], options, initial_value=EVERY_CHASER),
+                "vehicle": gui.add_dropdown(LABELS["vehicle"], options, initial_value=menu.every),
                 "duration": gui.add_number(LABELS["duration"], 5.0, step=0.1),
                 "start": gui.add_number(LABELS["start"], 0.0, step=0.1, hint="0: at once"),
                 "probability": gui.add_number(LABELS["probability"], 0.2, step=0.05),
@@ -177,7 +237,7 @@ class FaultPanel:
             }  # fmt: skip
             self.button = gui.add_button("Inject", color="red")
             self.sent = gui.add_markdown("")
-            self.log = gui.add_markdown(panels.faults_markdown(()))
+            self.log = gui.add_markdown(panels.faults_markdown((), uwb_network=menu.uwb_network))
         self._clock_mode: str | None = None
         self._faults_version: int | None = None
         self._show_inputs()
@@ -197,11 +257,11 @@ class FaultPanel:
     def _show_inputs(self) -> None:
         if self._send is None:
             return
-        uses = FAULT_INPUTS.get(str(self.kind.value), ())
+        uses = self.menu.inputs.get(str(self.kind.value), ())
         for name, handle in self.inputs.items():
             if handle.visible != (name in uses):
                 handle.visible = name in uses
-        self.hint.content = kind_hint(str(self.kind.value), self._clock_mode)
+        self.hint.content = kind_hint(str(self.kind.value), self._clock_mode, self.menu)
 
     def form(self) -> FaultForm:
         """The inputs as they are now."""
@@ -220,7 +280,7 @@ class FaultPanel:
             self.sent.content = f"**not sent** ({at}): a recording is played, there is no swarm to send to"
             return None
         try:
-            msg = fault_of(form)
+            msg = fault_of(form, self.menu)
         except ConfigError as exc:
             self.sent.content = f"**not sent** ({at}): {exc}"
             _LOG.info("fault not sent: %s", exc)
@@ -231,23 +291,23 @@ class FaultPanel:
             self.sent.content = f"could not send {form.kind}: {exc}"
             _LOG.warning("could not send fault %s: %s", form.kind, exc)
             return None
-        self.sent.content = sent_text(msg, self.listening(), at)
+        self.sent.content = sent_text(msg, self.listening(), at, self.menu)
         return msg
 
     def update(self, snap: Snapshot) -> None:
         """Vehicles seen for the first time join the vehicle choice; the hint follows the run's clock; the
         list follows the faults the world and the mothership announced."""
         vehicle = self.inputs["vehicle"]
-        known = [o for o in vehicle.options if o != EVERY_CHASER]  # type: ignore[attr-defined]
+        known = [o for o in vehicle.options if o != self.menu.every]  # type: ignore[attr-defined]
         if any(a not in known for a in snap.agents):
             ids = sorted(set(known) | set(snap.agents), key=panels.natural_key)
-            vehicle.options = [EVERY_CHASER, *ids]  # type: ignore[attr-defined]
+            vehicle.options = [self.menu.every, *ids]  # type: ignore[attr-defined]
         if snap.clock_mode != self._clock_mode and self._send is not None:
             self._clock_mode = snap.clock_mode
-            self.hint.content = kind_hint(str(self.kind.value), self._clock_mode)
+            self.hint.content = kind_hint(str(self.kind.value), self._clock_mode, self.menu)
         if snap.faults_version != self._faults_version:
             self._faults_version = snap.faults_version
-            self.log.content = panels.faults_markdown(snap.faults)
+            self.log.content = panels.faults_markdown(snap.faults, uwb_network=self.menu.uwb_network)
 
     def invalidate(self) -> None:
         """List the faults again at the next :meth:`update`."""

@@ -216,9 +216,11 @@ def _text(value: object) -> str:
     return str(value)
 
 
-def fault_text(source: str, ev: Event) -> str:
+def fault_text(source: str, ev: Event, uwb_network: bool = True) -> str:
     """One line for a ``fault`` (applied) or ``fault_refused`` event of the world, from its free-form data
-    (``kind``, ``start_s``, ``duration_s``, ``vehicles``; ``vehicle``, ``reason``)."""
+    (``kind``, ``start_s``, ``duration_s``, ``vehicles``; ``vehicle``, ``reason``). ``uwb_network``: a UWB
+    fault acts on the whole radio network (a docking swarm's), not on the vehicles it names (a landing
+    swarm's)."""
     d = ev.data
     kind = _text(d.get("kind", "?"))
     if ev.kind == "fault_refused":
@@ -227,21 +229,22 @@ def fault_text(source: str, ev: Event) -> str:
     start, dur = d.get("start_s"), d.get("duration_s")
     when = f" from t = {start:.2f} s" if isinstance(start, int | float) else ""
     when += f" for {dur:g} s" if isinstance(dur, int | float) else " (lasts)"
-    who = "the UWB network" if kind in ("uwb_dropout", "nlos_burst") else _text(d.get("vehicles", "?"))
+    network = uwb_network and kind in ("uwb_dropout", "nlos_burst")
+    who = "the UWB network" if network else _text(d.get("vehicles", "?"))
     return _cell(f"t = {ev.t_s:.2f} s · **{kind}** applied by the {source} on {who}{when}")
 
 
-def faults_markdown(faults: Sequence[tuple[str, Event]], last: int = 8) -> str:
+def faults_markdown(faults: Sequence[tuple[str, Event]], last: int = 8, uwb_network: bool = True) -> str:
     """The latest ``last`` faults applied or refused (``(source, event)``), newest first."""
     if not faults:
         return "no fault applied yet"
-    return "\n".join(f"- {fault_text(s, e)}" for s, e in reversed(list(faults)[-last:]))
+    return "\n".join(f"- {fault_text(s, e, uwb_network)}" for s, e in reversed(list(faults)[-last:]))
 
 
-def _event_text(agent_id: str, ev: Event) -> str:
+def _event_text(agent_id: str, ev: Event, uwb_network: bool = True) -> str:
     d = ev.data
     if ev.kind in ("fault", "fault_refused"):
-        return fault_text(agent_id, ev).replace("**", "")
+        return fault_text(agent_id, ev, uwb_network).replace("**", "")
     if ev.kind == "mode":
         detail = f"{d.get('from', '?')} → {d.get('to', '?')}"
         if isinstance(d.get("range_m"), int | float):
@@ -251,8 +254,8 @@ def _event_text(agent_id: str, ev: Event) -> str:
     return _cell(f"t = {ev.t_s:.2f} s · {agent_id} · {ev.kind} {detail}".strip())
 
 
-def events_markdown(events: Sequence[tuple[str, Event]], last: int = 10) -> str:
-    """The latest ``last`` events of the swarm, newest first."""
+def events_markdown(events: Sequence[tuple[str, Event]], last: int = 10, uwb_network: bool = True) -> str:
+    """The latest ``last`` events of the swarm, newest first (``uwb_network``: :func:`fault_text`)."""
     if not events:
         return "no events yet"
-    return "\n".join(f"- {_event_text(a, e)}" for a, e in reversed(list(events)[-last:]))
+    return "\n".join(f"- {_event_text(a, e, uwb_network)}" for a, e in reversed(list(events)[-last:]))

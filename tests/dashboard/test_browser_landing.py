@@ -7,7 +7,10 @@ its recorded scenario: at two times of the time slider the screenshots differ wh
 (their poses projected through the dashboard's initial camera).
 
 numba's cache is warmed in this process first (a cold compile in five processes at once outlasts the
-world's start timeout on two cores); the launched run then takes ~15 s. Screenshots are kept in
+world's start timeout on two cores). The run is paced (``--pace scaled:0.5``: lockstep, never ahead of half
+the wall clock's rate), so that a fault injected from the page reaches the world while the UAVs still fly
+(the page takes 10-20 s of clicks here, with software WebGL; unpaced the run is over in ~7 s); it takes
+~40 s. Screenshots are kept in
 ``artifacts/`` (``dashboard-landing-*.png``).
 """
 
@@ -30,8 +33,9 @@ import pytest
 from dashboard.landing import frame_landing_scene
 from swarm.core.landing import LandingMode
 from swarm.landing_scenario import load_landing
+from swarm.step.landing import LandingWorld
 from swarm.transport.recording import read_recording
-from tests.dashboard.conftest import ARTIFACTS, START_TIMEOUT_S, new_namespace
+from tests.dashboard.conftest import ARTIFACTS, START_TIMEOUT_S, choose, fill_number, new_namespace
 from tests.dashboard.test_browser import MIN_SCENE_VARIANCE, SCENE_REGION, UI_TIMEOUT_MS
 from tests.dashboard.test_browser_playback import _seek, _steady_screenshot, _window
 from tests.transport.procs import Proc, Procs, free_port, loopback
@@ -39,7 +43,7 @@ from tests.transport.procs import Proc, Procs, free_port, loopback
 WIDTH, HEIGHT = 1280, 800
 UAVS = ("uav1", "uav2", "uav3", "uav4")
 LANDING_MODES = {m.value for m in LandingMode}
-RUN_TIMEOUT_S = 240.0  # the launched run: ~15 s here with numba's cache warm, far more on a loaded machine
+RUN_TIMEOUT_S = 240.0  # the launched run: ~40 s here with numba's cache warm, far more on a loaded machine
 T1_S, T2_S = 2.0, 12.0  # cruising or deviating far from the pads, then descending over them
 MIN_MOVED = 8.0  # mean grey-level change in the window of a UAV that moved away or came
 
@@ -64,7 +68,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LandingRun]:
         launcher = procs.start(
             [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--seed", "0",
              "--dashboard-port", "0", "--namespace", ns, "--listen", loopback(free_port()),
-             "--record", str(rec), "--timeout", "600"]
+             "--record", str(rec), "--timeout", "600", "--pace", "scaled:0.5"]
         )  # fmt: skip
         url = launcher.wait_for_line(r"^dashboard on (http://\S+)$", 120.0).group(1)
         yield LandingRun(launcher, url, rec, ns)
@@ -100,6 +104,32 @@ def _wait_rows(pg, ok, what: str, timeout_s: float) -> dict[str, list[str]]:
         if time.monotonic() > deadline:
             raise AssertionError(f"{what} never showed; table rows: {rows}\n{pg.inner_text('body')}")
         time.sleep(0.2)
+
+
+def test_the_faults_panel_offers_the_landing_worlds_kinds_and_the_world_applies_a_uwb_dropout(
+    live_page, run: LandingRun
+):
+    """While the UAVs fly (before the test below waits for them to land): the Faults panel offers what a
+    landing world models, no more; a bad duration is refused on the page; a 1 s UWB dropout of uav2 is
+    applied by the landing world, whose ``fault`` event the page lists on uav2 (the docking wording, "the
+    UWB network", would be wrong here). One second without ranges is well within what the IMU-driven filter
+    rides through: the run still ends with four UAVs landed (the next test)."""
+    _wait_rows(live_page, lambda r: r[1] in LANDING_MODES, "four UAVs with a landing mode", 120.0)
+    live_page.get_by_label("fault", exact=True).click(timeout=UI_TIMEOUT_MS)
+    offered = {o.strip() for o in live_page.get_by_role("option").all_inner_texts()}
+    assert offered == set(LandingWorld.FAULTS), offered
+    live_page.get_by_role("option", name="uwb_dropout", exact=True).click(timeout=UI_TIMEOUT_MS)
+    choose(live_page, "vehicle", "uav2", UI_TIMEOUT_MS)
+    fill_number(live_page, "duration [s]", "-1", UI_TIMEOUT_MS)
+    live_page.get_by_role("button", name="Inject").click()
+    live_page.get_by_text("duration [s] (duration_s): must be > 0, got -1.0").wait_for(timeout=UI_TIMEOUT_MS)
+    fill_number(live_page, "duration [s]", "1", UI_TIMEOUT_MS)
+    live_page.get_by_role("button", name="Inject").click()
+    live_page.get_by_text("sent uwb_dropout on uav2 for 1 s").first.wait_for(timeout=UI_TIMEOUT_MS)
+    live_page.get_by_text("uwb_dropout applied by the world on uav2").first.wait_for(timeout=UI_TIMEOUT_MS)
+    ARTIFACTS.mkdir(exist_ok=True)
+    live_page.screenshot(path=str(ARTIFACTS / "dashboard-landing-fault.png"))
+    assert "the UWB network" not in live_page.inner_text("body")
 
 
 def test_the_live_page_shows_four_uavs_flying_landing_modes_then_all_landed(live_page, run: LandingRun):

@@ -8,9 +8,21 @@ import math
 import numpy as np
 import pytest
 
-from dashboard.faults import EVERY_CHASER, FAULT_INPUTS, FaultForm, fault_of, kind_hint, sent_text
+from dashboard import panels
+from dashboard.faults import (
+    DOCKING,
+    EVERY_CHASER,
+    EVERY_UAV,
+    FAULT_INPUTS,
+    LANDING,
+    FaultForm,
+    fault_of,
+    kind_hint,
+    sent_text,
+)
 from swarm.errors import ConfigError, MessageError
-from swarm.transport.messages import FAULT_KINDS, Fault, decode, encode
+from swarm.step.landing import LandingWorld
+from swarm.transport.messages import FAULT_KINDS, Event, Fault, decode, encode
 
 
 def test_every_fault_kind_has_its_inputs() -> None:
@@ -90,3 +102,37 @@ def test_the_sent_line_names_the_fault_and_warns_when_nobody_listens() -> None:
     assert sent_text(msg, True, "12:00:00").startswith("sent **camera_loss** on chaser for 3 s at 12:00:00")
     assert "nobody listens on control/fault" in sent_text(msg, False, "12:00:00")
     assert " on " not in sent_text(fault_of(FaultForm("uwb_dropout")), True, "12:00:00")
+
+
+def test_the_landing_menu_offers_what_the_landing_world_models_each_on_one_uav_or_every_uav() -> None:
+    assert tuple(LANDING.inputs) == LandingWorld.FAULTS and tuple(DOCKING.inputs) == FAULT_KINDS
+    for kind in LandingWorld.FAULTS:
+        one = fault_of(FaultForm(kind, vehicle="uav2", duration_s=2.0, probability=9.0), LANDING)
+        # a landing UWB dropout is the named UAV's (docking's is the whole network's: no vehicle)
+        assert (one.kind, one.vehicle, one.duration_s, one.probability) == (kind, "uav2", 2.0, None)
+        assert fault_of(FaultForm(kind, vehicle=EVERY_UAV, duration_s=2.0), LANDING).vehicle is None
+        assert LANDING.hints[kind] in kind_hint(kind, "lockstep", LANDING)
+    assert fault_of(FaultForm("uwb_dropout", vehicle="uav2", duration_s=2.0)).vehicle is None  # docking's
+
+
+def test_a_kind_the_world_does_not_take_is_refused_naming_what_it_takes() -> None:
+    with pytest.raises(
+        ConfigError, match=r"kind: this world takes camera_loss, uwb_dropout, got 'nlos_burst'"
+    ):
+        fault_of(FaultForm("nlos_burst", duration_s=1.0, probability=0.5), LANDING)
+    with pytest.raises(ConfigError, match="got 'meteor'"):
+        fault_of(FaultForm("meteor"))
+
+
+def test_a_landing_uwb_dropout_is_worded_as_the_uavs_it_names_not_the_network() -> None:
+    msg = fault_of(FaultForm("uwb_dropout", vehicle="uav3", duration_s=1.5), LANDING)
+    assert sent_text(msg, True, "12:00:00", LANDING).startswith("sent **uwb_dropout** on uav3 for 1.5 s")
+    assert sent_text(msg, True, "12:00:00", LANDING).endswith("the world lists it below once applied")
+    every = fault_of(FaultForm("camera_loss", vehicle=EVERY_UAV, duration_s=1.0), LANDING)
+    assert " on every UAV for 1 s" in sent_text(every, True, "12:00:00", LANDING)
+    applied = Event(1.0, "fault", {"kind": "uwb_dropout", "start_s": 1.0, "duration_s": 1.5,
+                                   "vehicles": ["uav3"]})  # fmt: skip
+    listed = panels.faults_markdown([("world", applied)], uwb_network=False)
+    assert "uwb_dropout** applied by the world on uav3 from t = 1.00 s for 1.5 s" in listed
+    assert "on the UWB network" in panels.faults_markdown([("world", applied)])  # docking's wording
+    assert "applied by the world on uav3" in panels.events_markdown([("world", applied)], uwb_network=False)

@@ -14,12 +14,14 @@ import pytest
 
 from dashboard import kinds, landing, panels
 from dashboard.app import DashboardApp, DashboardParams
+from dashboard.faults import LANDING
 from dashboard.mapping import FOV_COLORS, MODE_COLORS
 from dashboard.playback import Recording, scenario_of
 from dashboard.state import SwarmState
 from swarm.core import rotations as rot
 from swarm.kinds.quadrotor.dynamics import rotor_positions
 from swarm.landing_scenario import LandingScenario, load_landing
+from swarm.step.landing import LandingWorld
 from swarm.transport.messages import Estimate, Guidance, Truth, Vision
 from tests.dashboard.test_kinds import RecordingScene
 
@@ -186,7 +188,10 @@ def test_a_landing_recording_is_drawn_with_its_landing_scenario(tmp_path, sc):
         assert "0.30 |" in table  # 200 J/s for 1.5 s
         assert isinstance(app.scene, landing.LandingSceneView)
         assert app.scene.nodes["uav1"].fov.color == FOV_COLORS["seen"]
-        assert app.gui.faults is None and not app.gui.buttons  # the landing world takes neither
+        assert not app.gui.buttons  # the landing world takes no run control
+        # a recording's Faults panel: the landing world's kinds, the recorded faults listed, nothing to inject
+        assert app.gui.faults.menu is LANDING and tuple(app.gui.faults.kind.options) == LandingWorld.FAULTS
+        assert not app.gui.faults.button.visible and app.gui.faults.log.content == "no fault applied yet"
         app.player.seek(0.5)  # backward: CRUISE, no markers yet
         app.frame()
         app.gui.update_panels(app.state.snapshot(), 0)
