@@ -315,18 +315,17 @@ class GuiView:
         self.playback = None
         if player is not None:
             self.playback = PlaybackPanel(gui, *player)
-        # the landing world takes no run control yet (its faults: the Faults panel below)
-        if link is not None and landing is not None:
+        if link is not None:
             self._send = link.send
-        elif link is not None:
-            self._send = link.send
+            controls = (
+                ("Pause", "pause", "yellow"),
+                ("Resume", "resume", "green"),
+                ("Reset", "reset", "gray"),
+                ("New seed", "new_seed", "blue"),
+            )
             with gui.add_folder("Run"):
-                for label, command, color in (
-                    ("Pause", "pause", "yellow"),
-                    ("Resume", "resume", "green"),
-                    ("Reset", "reset", "gray"),
-                    ("New seed", "new_seed", "blue"),
-                ):
+                # a landing world takes pause and resume (a new run is a new launch)
+                for label, command, color in controls[:2] if landing is not None else controls:
                     button = gui.add_button(label, color=color)
                     button.on_click(self._make_handler(command))
                     self.buttons[command] = button

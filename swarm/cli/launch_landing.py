@@ -40,7 +40,8 @@ restarted (``restarts`` in ``--json``). Free-running, a lost agent ends the run 
 without a controller), so agents are not restarted there; the world is. ``--max-restarts 0`` restarts
 nothing and writes no checkpoint.
 
-Not yet for a landing: run controls, the dashboard's Faults panel.
+The dashboard (and any ``control/run`` publisher) pauses and resumes a landing world; it refuses
+``reset`` and ``new_seed``: a new landing run is a new launch.
 """
 
 from __future__ import annotations

@@ -63,7 +63,12 @@ def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int, clock_every: 
 
 def running_clock(keys: Keys, k: int, dt: float, seed: int) -> tuple[str, bytes]:
     """The world's ``running`` clock at tick ``k``."""
-    return keys.world_clock(), encode(Clock(k, k * dt, "running", seed))
+    return clock(keys, k, dt, seed, "running")
+
+
+def clock(keys: Keys, k: int, dt: float, seed: int, state: str) -> tuple[str, bytes]:
+    """The world's clock at tick ``k`` in ``state`` (``running``, ``paused``)."""
+    return keys.world_clock(), encode(Clock(k, k * dt, state, seed))
 
 
 def camera_frame(msg: Vision) -> tuple[np.ndarray, np.ndarray]:

@@ -116,7 +116,7 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
             "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/uwb", "agent/*/gnss",
                                                 "agent/*/rangefinder", "agent/*/vision", "agent/*/truth",
                                                 "world/clock", "world/event")),
-            "declare_subscriber": (keys.agent_all("command"), keys.fault()),
+            "declare_subscriber": (keys.agent_all("command"), keys.run_control(), keys.fault()),
             "liveliness_token": (f"{ns}/alive/world/*",),
             **watch,
         }  # fmt: skip

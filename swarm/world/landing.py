@@ -12,7 +12,11 @@ every UAV is done (landed for a second, or hovering at the abort height) it publ
 ``world/event`` with each UAV's outcome and a ``stopped`` clock, and exits 0. It waits for every UAV's agent
 (liveliness ``alive/agent/<id>``) before the first tick. It takes run-time faults on ``control/fault``
 (``swarm fault``): ``camera_loss`` (the pad hidden from a UAV's camera) and ``uwb_dropout`` (its UWB replies
-lost), for one UAV or all; other kinds are refused with a ``fault_refused`` event.
+lost), for one UAV or all; other kinds are refused with a ``fault_refused`` event. It takes ``pause`` and
+``resume`` on ``control/run`` (the dashboard's Run folder) between two ticks: paused, it steps nothing, its
+clock says ``paused``, and a paced or free-running run's wall clock stops with it (no tick is late for the
+pause; the run's ``wall_s`` leaves it out). ``reset`` and ``new_seed`` are refused with a warning: a new
+landing run is a new launch. A restarted world resumes running.
 
 ``--clock lockstep`` (the default) steps as fast as the agents answer: the run is ``swarm sim``'s. With
 ``--pace`` a lockstep world also never runs ahead of the wall clock (at ``realtime`` or ``scaled:N``, to watch
@@ -123,7 +127,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
     from swarm.transport import checkpoint
     from swarm.transport import landing_wire as wire
     from swarm.transport.keys import Keys
-    from swarm.transport.messages import LANDING_MODES, Command, DropCounter, Fault
+    from swarm.transport.messages import LANDING_MODES, Command, DropCounter, Fault, RunControl
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import (
         declare_liveliness,
@@ -154,12 +158,37 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
     commands: dict[tuple[str, int], Command] = {}
     alive: set[str] = set()
     back: set[str] = set()  # agents whose token came back in a running run: sent the current tick again
-    now = {"k": 0, "running": False}  # the tick whose commands are awaited, and whether the run is on
+    # the tick whose commands are awaited, whether the run is on, and whether it is paused
+    now = {"k": 0, "running": False, "paused": False}
     faults: list[Fault] = []  # run-time faults come, applied before the next tick's samples
 
     def on_fault(_key: str, msg: Fault) -> None:
         with cond:
             faults.append(msg)
+
+    controls: list[str] = []  # run controls come (pause, resume), taken between two ticks
+
+    def on_control(_key: str, msg: RunControl) -> None:
+        with cond:
+            controls.append(msg.command)
+            cond.notify_all()
+
+    def paused_at(k: int) -> bool:
+        """Take the pending run controls before tick ``k``; True when the run is paused. ``reset`` and
+        ``new_seed`` (a docking world's) are not a landing world's: refused with a warning."""
+        with cond:
+            pending = list(controls)
+            controls.clear()
+        for command in pending:
+            if command in ("pause", "resume"):
+                if now["paused"] != (command == "pause"):
+                    now["paused"] = command == "pause"
+                    state = "paused" if now["paused"] else "running"
+                    put([wire.clock(keys, k - 1, dt, args.seed, state)])
+                    _LOG.info("run control %s: clock %s at tick %d", command, state, k - 1)
+            else:
+                _LOG.warning("run control %s refused: a landing world takes pause and resume only", command)
+        return now["paused"]
 
     def apply_faults(k: int) -> None:
         """Run-time faults (``swarm fault``): a window opens no earlier than tick ``k``, whose samples are
@@ -217,6 +246,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
 
         subscribe_decoded(session, keys.agent_all("command"), Command, on_command, drops)
         subscribe_decoded(session, keys.fault(), Fault, on_fault, drops)
+        subscribe_decoded(session, keys.run_control(), RunControl, on_control, drops)
         watch_liveliness(session, keys, on_alive)
         _token = declare_liveliness(session, keys, "world", "world")
         print_ready("world", "landing")
@@ -259,6 +289,20 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         with cond:
             now["running"] = True
         for k in range(k0, n_ticks + 1):
+            if paused_at(k):  # between two ticks: tick k - 1 flown, tick k not stepped; the wall clock stops
+                paused_since = time.monotonic()
+                while not stop.is_set():
+                    with cond:
+                        cond.wait_for(lambda: controls or stop.is_set(), 0.1)
+                    if not paused_at(k):
+                        break
+                if stop.is_set():
+                    reason = "stopped"
+                    break
+                # a paced or free-running run's ticks keep their spacing after it; the run's wall time leaves
+                # it out
+                t_wall += time.monotonic() - paused_since
+                t_start += time.monotonic() - paused_since
             stepped = resume is None or k > k0  # (a resumed world's first tick is the checkpoint's, stepped)
             if stepped:
                 apply_faults(k)

@@ -1,7 +1,9 @@
 """The dashboard of a landing swarm in a real browser (issue 15, part 5): ``swarm launch landing-swarm`` with
 its dashboard (no ``--headless``) and ``--record``, the real landing world and four landing agent processes
 in lockstep over loopback Zenoh. Headless Chromium on the live page sees the four UAVs, their landing modes
-and their rotor energy, and all four LANDED when the run ends; the launcher then holds until SIGINT, which
+and their rotor energy; its Faults panel offers the landing world's two kinds and a UWB dropout injected
+from it is applied by the world and listed; its Pause and Resume stop and restart the world's clock; and all
+four LANDED when the run ends; the launcher then holds until SIGINT, which
 stops it cleanly. The run's recording played back (``python -m dashboard --open``) shows the landing from
 its recorded scenario: at two times of the time slider the screenshots differ where the recorded UAVs are
 (their poses projected through the dashboard's initial camera).
@@ -16,6 +18,7 @@ the wall clock's rate), so that a fault injected from the page reaches the world
 
 from __future__ import annotations
 
+import re
 import signal
 import sys
 import time
@@ -106,13 +109,14 @@ def _wait_rows(pg, ok, what: str, timeout_s: float) -> dict[str, list[str]]:
         time.sleep(0.2)
 
 
-def test_the_faults_panel_offers_the_landing_worlds_kinds_and_the_world_applies_a_uwb_dropout(
+def test_the_landing_page_injects_the_landing_worlds_faults_and_pauses_and_resumes_its_run(
     live_page, run: LandingRun
 ):
     """While the UAVs fly (before the test below waits for them to land): the Faults panel offers what a
     landing world models, no more; a bad duration is refused on the page; a 1 s UWB dropout of uav2 is
     applied by the landing world, whose ``fault`` event the page lists on uav2 (the docking wording, "the
-    UWB network", would be wrong here). One second without ranges is well within what the IMU-driven filter
+    UWB network", would be wrong here). Then Pause: the status line says the clock is paused; Resume: it
+    runs again. One second without ranges is well within what the IMU-driven filter
     rides through: the run still ends with four UAVs landed (the next test)."""
     _wait_rows(live_page, lambda r: r[1] in LANDING_MODES, "four UAVs with a landing mode", 120.0)
     live_page.get_by_label("fault", exact=True).click(timeout=UI_TIMEOUT_MS)
@@ -130,6 +134,11 @@ def test_the_faults_panel_offers_the_landing_worlds_kinds_and_the_world_applies_
     ARTIFACTS.mkdir(exist_ok=True)
     live_page.screenshot(path=str(ARTIFACTS / "dashboard-landing-fault.png"))
     assert "the UWB network" not in live_page.inner_text("body")
+    # the Run folder's Pause: the landing world stops between two ticks and its clock says so; Resume
+    live_page.get_by_role("button", name="Pause", exact=True).click()
+    live_page.get_by_text(re.compile(r"paused · tick \d+")).first.wait_for(timeout=UI_TIMEOUT_MS)
+    live_page.get_by_role("button", name="Resume", exact=True).click()
+    live_page.get_by_text(re.compile(r"running · tick \d+")).first.wait_for(timeout=UI_TIMEOUT_MS)
 
 
 def test_the_live_page_shows_four_uavs_flying_landing_modes_then_all_landed(live_page, run: LandingRun):
@@ -143,7 +152,9 @@ def test_the_live_page_shows_four_uavs_flying_landing_modes_then_all_landed(live
     # a quadrotor of 1.5 kg hovers on ~170 W: every landing of 15-50 s took kilojoules
     assert all(1.0 < e < 30.0 for e in energy_kj.values()), energy_kj
     assert "landing" in live_page.inner_text("body")  # the title says what is drawn
-    assert live_page.get_by_role("button", name="Pause", exact=True).count() == 0  # no run control
+    # pause and resume only: a new landing run is a new launch
+    assert live_page.get_by_role("button", name="Reset", exact=True).count() == 0
+    assert live_page.get_by_role("button", name="New seed", exact=True).count() == 0
     run.launcher.wait_for_line(r"^4 of 4 UAVs landed on their pads", 30.0)
     run.launcher.wait_for_line(r"^run over; the dashboard stays up", 30.0)
 

@@ -22,12 +22,24 @@ from swarm.errors import SwarmError
 from swarm.landing_scenario import load_landing
 from swarm.sim.landing import run_landing_fleet
 from swarm.transport.keys import Keys
-from swarm.transport.messages import CLOCK_EVERY, Command, Fault, Imu, Uwb, Vision, encode
+from swarm.transport.messages import (
+    CLOCK_EVERY,
+    Clock,
+    Command,
+    Fault,
+    Imu,
+    RunControl,
+    Uwb,
+    Vision,
+    decode,
+    encode,
+)
 from swarm.transport.session import ZenohArgs, open_session
 from tests.transport.procs import Procs, free_port, loopback, wait_until
 
 STALL_S = 1.0  # --stall-s of the launched run: well under its --step-timeout, far above a paced tick (1 ms)
 STOPPED_S = 1.0  # how long the stopped agent host stays stopped after the stall is told
+PAUSED_S = 2.0  # how long the run is paused: twice --stall-s (a paused run is no stall)
 STALL_TOLD = r"the world's clock has stood at tick \d+ for [\d.]+ s in a running run"
 """The launcher's line at a stall (on its stderr), before every process's stacks."""
 FAULT = ("camera_loss", 9.0, 3.0, ["uav1"])
@@ -70,6 +82,7 @@ def launched(tmp_path_factory):
             session.put(Keys(ns).fault(), encode(refused))
             for sub in subs:
                 sub.undeclare()
+            paused = _pause_and_resume(session, Keys(ns), proc)
             _stop_a_host_past_the_stall(proc, ns)
             deadline = time.monotonic() + 3.0
             while time.monotonic() < deadline and proc.popen.poll() is None:
@@ -79,7 +92,45 @@ def launched(tmp_path_factory):
         code = proc.wait(480.0)
         text = proc.output()
     garbage = {payload for _, payload in injected}
-    return code, text, json.loads(out.read_text()) if out.exists() else None, sc, rec, ns, garbage
+    got = json.loads(out.read_text()) if out.exists() else None
+    return code, text, got, sc, rec, ns, garbage, paused
+
+
+def _pause_and_resume(session, keys: Keys, proc) -> dict:
+    """Pause the run as the dashboard's Pause does (``RunControl`` on ``control/run``), watch the world's
+    clock for ``PAUSED_S`` (longer than ``--stall-s``: a paused run must not be told as a stall), then resume
+    it and see the clock run again. Returns the clocks seen: the paused one, any later during the pause,
+    and the first running one after the resume."""
+    seen: list[Clock] = []
+    cond = threading.Condition()
+
+    def on_clock(sample) -> None:
+        with cond:
+            seen.append(decode(bytes(sample.payload), Clock))
+            cond.notify_all()
+
+    def first(pred, after: int, timeout: float) -> Clock:
+        with cond:
+            assert cond.wait_for(lambda: any(pred(c) for c in seen[after:]), timeout), (seen, proc.output())
+            return next(c for c in seen[after:] if pred(c))
+
+    sub = session.declare_subscriber(keys.world_clock(), on_clock)
+    try:
+        session.put(keys.run_control(), encode(RunControl("reset")))  # a docking world's: refused, ignored
+        session.put(keys.run_control(), encode(RunControl("pause")))
+        at = first(lambda c: c.state == "paused", 0, 30.0)
+        with cond:
+            n = len(seen)
+        time.sleep(PAUSED_S)
+        with cond:
+            during = seen[n:]
+        session.put(keys.run_control(), encode(RunControl("resume")))
+        with cond:
+            n = len(seen)
+        again = first(lambda c: c.state == "running", n, 30.0)
+    finally:
+        sub.undeclare()
+    return {"paused": at, "during": during, "resumed": again}
 
 
 def _stop_a_host_past_the_stall(proc, ns: str) -> None:
@@ -127,7 +178,7 @@ def _garbage(keys, ids: list[str]) -> list[tuple[str, bytes]]:
 
 
 def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
-    code, text, got, sc, _, _, _ = launched
+    code, text, got, sc, _, _, _, paused = launched
     assert code == 0, text
     assert "Traceback" not in text
     # the garbage was seen, dropped and counted by the agents and the world (rate-limited warnings)
@@ -142,6 +193,13 @@ def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
     # the run-time fault: applied, and the refused one named with its reason
     assert "fault applied: camera_loss on ['uav1'] from t = 9.00 s" in text, text
     assert "fault refused: gyro_bias_step: kind: a landing world models camera_loss and uwb_dropout" in text
+    # paused (the dashboard's Pause) for twice --stall-s: the clock said paused and stood still, no stall was
+    # told for it (the one below is the stopped host's), and after the resume it ran on from the same tick;
+    # a reset (a docking world's) refused. The run is still swarm sim's (below)
+    assert paused["during"] == [] or all(c.tick == paused["paused"].tick for c in paused["during"])
+    assert paused["resumed"].tick >= paused["paused"].tick
+    assert "run control pause: clock paused at tick" in text and "run control resume: clock running" in text
+    assert "run control reset refused: a landing world takes pause and resume only" in text
     # an agent host stopped (SIGSTOP) after the start: the world's clock stood still past --stall-s, told
     # once with the stacks of the launcher, the world (waiting for the stopped host's commands), the other
     # host and the stopped one once it went on; the run is still swarm sim's (below)
@@ -170,7 +228,7 @@ def test_swarm_sim_mcap_writes_what_the_launched_processes_published(launched, t
     from swarm.transport.landing_wire import McapTap
     from swarm.transport.recording import read_recording
 
-    code, text, _, sc, rec, ns, garbage = launched
+    code, text, _, sc, rec, ns, garbage, _ = launched
     assert code == 0, text
     sim = tmp_path / "sim.mcap"
     run_landing_fleet(sc, seed=0, record_series=False, tap=McapTap(sim, 0, ns), faults=[FAULT])

@@ -141,8 +141,9 @@ def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_
 def test_a_landing_swarms_world_also_sends_ranges_and_fixes_and_its_agents_read_their_own(material):
     """Mission ``landing`` (``swarm launch landing-swarm --secure``): the landing world puts every UAV's
     imu, uwb, gnss, rangefinder, vision and truth (it is its own radio network: there is no mothership) and
-    reads the commands; a landing agent reads its own sensors, gnss included, never another UAV's, and puts
-    what a docking agent puts; a docking world may put neither ranges nor fixes."""
+    reads the commands, the faults and the run controls; a landing agent reads its own sensors, gnss
+    included, never another UAV's, and puts what a docking agent puts; a docking world may put neither
+    ranges nor fixes."""
     from swarm.transport.security import access_control, identities, rights
 
     acl = access_control(K, identities(VEHICLES), "landing")
@@ -155,7 +156,7 @@ def test_a_landing_swarms_world_also_sends_ranges_and_fixes_and_its_agents_read_
     }
     assert {key for key in keys if _may(acl, "world", "declare_subscriber", key)} == {
         K.command(v) for v in VEHICLES
-    } | {K.fault()}  # and the run-time faults (swarm fault)
+    } | {K.fault(), K.run_control()}  # and the run-time faults (swarm fault), pause and resume
     reads = {key for key in keys if _may(acl, "agent-chaser", "declare_subscriber", key)}
     own = (K.imu, K.uwb, K.gnss, K.rangefinder, K.vision)
     assert reads == {key("chaser") for key in own} | {K.world_event()}
