@@ -317,15 +317,13 @@ class GuiView:
             self.playback = PlaybackPanel(gui, *player)
         if link is not None:
             self._send = link.send
-            controls = (
-                ("Pause", "pause", "yellow"),
-                ("Resume", "resume", "green"),
-                ("Reset", "reset", "gray"),
-                ("New seed", "new_seed", "blue"),
-            )
             with gui.add_folder("Run"):
-                # a landing world takes pause and resume (a new run is a new launch)
-                for label, command, color in controls[:2] if landing is not None else controls:
+                for label, command, color in (
+                    ("Pause", "pause", "yellow"),
+                    ("Resume", "resume", "green"),
+                    ("Reset", "reset", "gray"),
+                    ("New seed", "new_seed", "blue"),
+                ):
                     button = gui.add_button(label, color=color)
                     button.on_click(self._make_handler(command))
                     self.buttons[command] = button

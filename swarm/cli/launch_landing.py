@@ -40,13 +40,17 @@ restarted (``restarts`` in ``--json``). Free-running, a lost agent ends the run 
 without a controller), so agents are not restarted there; the world is. ``--max-restarts 0`` restarts
 nothing and writes no checkpoint.
 
-The dashboard (and any ``control/run`` publisher) pauses and resumes a landing world; it refuses
-``reset`` and ``new_seed``: a new landing run is a new launch.
+The dashboard (and any ``control/run`` publisher) pauses and resumes a landing world. Its Reset and New
+seed end the run (``run_end``'s ``reason``, with the ``next_seed`` asked for): the launcher then stops the
+world and the agents (not the dashboard) and starts the next run, with the same seed or the one asked for
+(else the seed after), each run's checkpoints in a directory of their own. ``--repeat`` does the same after
+every run (the seed after), as for a docking swarm; ``--json`` holds the last run's summary.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import logging
 import shutil
@@ -66,8 +70,6 @@ def _refuse(args: argparse.Namespace) -> None:
                           "UAV's identity; run secure swarms with one process per UAV")  # fmt: skip
     if args.agents != 1:
         raise ConfigError("--agents: a landing scenario lists its UAVs ([[fleet]] in the file)")
-    if args.repeat:
-        raise ConfigError("--repeat: not yet for a landing scenario")
     check_pace(args.clock, args.pace)
 
 
@@ -201,103 +203,130 @@ def run_landing_launch(args: argparse.Namespace) -> int:
             try:
                 if not args.headless:
                     _start_dashboard(args, endpoint, sup, Child, stop)
-                common = child_args(args, endpoint, args.seed)
-                n = args.vehicles_per_process  # agent hosts: N UAVs' agents in one process (default 1)
-                for i in range(0, len(ids), n):
-                    host = ids[i : i + n]
-                    name = f"agent/{host[0]}" if n == 1 else f"agents/{'+'.join(host)}"
-                    identity = agent_name(host[0])  # (an agent host is refused with --secure above)
-                    agent = ["agents.landing", "--id", ",".join(host), *common, *config_args(args, identity)]
-                    if restart_agents:
-                        agent += ["--checkpoint-dir", str(ckpt_root)]
-                    sup.start(Child(name, agent, restartable=restart_agents, rejoin_args=["--resume"]))
-                world_ckpt = ["--checkpoint-dir", str(ckpt_root)] if restarts else []
-                world = ["swarm.world.landing", "--clock", str(args.clock),
-                         *(["--pace", str(args.pace)] if args.pace is not None else []),
-                         "--step-timeout", str(args.step_timeout),
-                         "--start-timeout", str(args.start_timeout), *common,
-                         *world_ckpt, *config_args(args, "world")]  # fmt: skip
-                sup.start(Child("world", world, restartable=restarts, rejoin_args=["--resume"]))
-                print(
-                    f"swarm up: world and {len(ids)} landing agents in {-(-len(ids) // n)} processes, "
-                    f"seed {args.seed}, clock {_clock_name(args.clock, args.pace)}",
-                    flush=True,
-                )
-                deadline = None if args.timeout is None else wall0 + args.timeout
-                with cond:
-                    while got["run_end"] is None:
-                        if stop.is_set():
-                            break
-                        if deadline is not None and time.monotonic() > deadline:
-                            _LOG.error("--timeout: %.0f s passed before the run ended", args.timeout)
-                            sup.dump_all(f"--timeout {args.timeout:g} s reached before the run ended")
-                            break
-                        watch_clock()
-                        dead = sup.exited()
-                        for c in [c for c in dead if c.name == "dashboard"]:  # the run does not need it
-                            _LOG.warning("the dashboard exited with status %s; the run goes on without it",
-                                         c.popen.returncode)  # fmt: skip
-                            c.popen = None
-                        dead = [c for c in dead if c.name != "dashboard"]
-                        if got["run_end"] is None and _lost(sup, dead, EXIT_BAD_CHECKPOINT):
-                            break
-                        for c in sup.due_restarts():
-                            how = (
-                                "resuming from its checkpoint"
-                                if c.name == "world"
-                                else "warm, from its checkpoint"
+                seed = args.seed
+                for run_i in itertools.count():  # one iteration per run (reset, new seed, --repeat)
+                    with cond:
+                        got["run_end"], got["summaries"] = None, {}
+                    run_dir = ckpt_root / f"run-{run_i}"  # this run's checkpoints: none of another run's
+                    run_dir.mkdir()
+                    common = child_args(args, endpoint, seed)
+                    n = args.vehicles_per_process  # agent hosts: N UAVs' agents in one process (default 1)
+                    for i in range(0, len(ids), n):
+                        host = ids[i : i + n]
+                        name = f"agent/{host[0]}" if n == 1 else f"agents/{'+'.join(host)}"
+                        identity = agent_name(host[0])  # (an agent host is refused with --secure above)
+                        agent = [
+                            "agents.landing",
+                            "--id",
+                            ",".join(host),
+                            *common,
+                            *config_args(args, identity),
+                        ]
+                        if restart_agents:
+                            agent += ["--checkpoint-dir", str(run_dir)]
+                        sup.start(Child(name, agent, restartable=restart_agents, rejoin_args=["--resume"]))
+                    world_ckpt = ["--checkpoint-dir", str(run_dir)] if restarts else []
+                    world = ["swarm.world.landing", "--clock", str(args.clock),
+                             *(["--pace", str(args.pace)] if args.pace is not None else []),
+                             "--step-timeout", str(args.step_timeout),
+                             "--start-timeout", str(args.start_timeout), *common,
+                             *world_ckpt, *config_args(args, "world")]  # fmt: skip
+                    sup.start(Child("world", world, restartable=restarts, rejoin_args=["--resume"]))
+                    print(
+                        f"swarm up: world and {len(ids)} landing agents in {-(-len(ids) // n)} processes, "
+                        f"seed {seed}, clock {_clock_name(args.clock, args.pace)}",
+                        flush=True,
+                    )
+                    deadline = None if args.timeout is None else wall0 + args.timeout
+                    with cond:
+                        while got["run_end"] is None:
+                            if stop.is_set():
+                                break
+                            if deadline is not None and time.monotonic() > deadline:
+                                _LOG.error("--timeout: %.0f s passed before the run ended", args.timeout)
+                                sup.dump_all(f"--timeout {args.timeout:g} s reached before the run ended")
+                                break
+                            watch_clock()
+                            dead = sup.exited()
+                            for c in [c for c in dead if c.name == "dashboard"]:  # the run does not need it
+                                code = c.popen.returncode
+                                _LOG.warning("the dashboard exited with status %s; the run goes on", code)
+                                c.popen = None
+                            dead = [c for c in dead if c.name != "dashboard"]
+                            if got["run_end"] is None and _lost(sup, dead, EXIT_BAD_CHECKPOINT):
+                                break
+                            for c in sup.due_restarts():
+                                how = (
+                                    "resuming from its checkpoint"
+                                    if c.name == "world"
+                                    else "warm, from its checkpoint"
+                                )
+                                _LOG.warning("%s restarted (pid %d), %s", c.name, c.popen.pid, how)
+                            cond.wait(0.1)
+                        end = time.monotonic() + 10.0
+                        while got["run_end"] is not None and not set(ids) <= set(got["summaries"]):
+                            if time.monotonic() > end:
+                                missing = sorted(set(ids) - set(got["summaries"]))
+                                _LOG.error("no summary from %s", ", ".join(missing))
+                                break
+                            cond.wait(0.1)
+                    if got["run_end"] is not None and set(ids) <= set(got["summaries"]):
+                        end_data = got["run_end"]
+                        wall = float(end_data.get("wall_s", time.monotonic() - wall0))
+                        uavs = {}
+                        for uid in ids:
+                            w = end_data["uavs"][uid]
+                            uavs[uid] = landing_summary(
+                                sc, policy, seed, w, got["summaries"][uid], w["end_tick"], wall
                             )
-                            _LOG.warning("%s restarted (pid %d), %s", c.name, c.popen.pid, how)
-                        cond.wait(0.1)
-                    end = time.monotonic() + 10.0
-                    while got["run_end"] is not None and not set(ids) <= set(got["summaries"]):
-                        if time.monotonic() > end:
-                            missing = sorted(set(ids) - set(got["summaries"]))
-                            _LOG.error("no summary from %s", ", ".join(missing))
-                            break
-                        cond.wait(0.1)
-                if got["run_end"] is not None and set(ids) <= set(got["summaries"]):
-                    end_data = got["run_end"]
-                    wall = float(end_data.get("wall_s", time.monotonic() - wall0))
-                    uavs = {}
-                    for uid in ids:
-                        w = end_data["uavs"][uid]
-                        uavs[uid] = landing_summary(
-                            sc, policy, args.seed, w, got["summaries"][uid], w["end_tick"], wall
-                        )
-                        if "late_ticks" in w:  # free-running: ticks flown on an older command
-                            uavs[uid]["late_ticks"] = int(w["late_ticks"])
-                    result = {
-                        "scenario": sc.name,
-                        "policy": policy,
-                        "seed": args.seed,
-                        "camera_mode": sc.camera.mode,
-                        "landed": sum(1 for v in uavs.values() if v["landed"]),
-                        "uavs": uavs,
-                        "sim_time_s": round(int(end_data["ticks"]) * sc.dt_s, 4),
-                        "wall_s": wall,
-                        "run_end_reason": end_data.get("reason"),
-                        "restarts": {c.name: c.restarts for c in sup.children.values()},
-                    }
-                    for uid, r in uavs.items():
-                        print(f"[{uid}]", end=" ")
-                        print_landing(r)
-                    n_ok, sim_s = result["landed"], result["sim_time_s"]
-                    how = _clock_name(args.clock, args.pace)
-                    print(f"{n_ok} of {len(ids)} UAVs landed on their pads in {sim_s:.1f} s simulated "
-                          f"({wall:.1f} s of wall time, {how} over Zenoh)", flush=True)  # fmt: skip
-                    restarted = {n: r for n, r in result["restarts"].items() if r}
-                    if restarted:
-                        print("restarts: " + ", ".join(f"{n} {r}" for n, r in restarted.items()), flush=True)
-                    late = {u: r["late_ticks"] for u, r in uavs.items() if "late_ticks" in r}
-                    if late:
-                        ticks = max(1, int(end_data["ticks"]))
-                        print("late ticks (flown on an older command): " + ", ".join(
-                            f"{u} {n} ({n / ticks:.1%})" for u, n in late.items()), flush=True)  # fmt: skip
-                    if args.json is not None:
-                        args.json.write_text(json.dumps(result, indent=1))
-                if not args.headless and not args.until_docked and got["run_end"] is not None:
-                    _hold(args, stop, wall0)
+                            if "late_ticks" in w:  # free-running: ticks flown on an older command
+                                uavs[uid]["late_ticks"] = int(w["late_ticks"])
+                        result = {
+                            "scenario": sc.name,
+                            "policy": policy,
+                            "seed": seed,
+                            "camera_mode": sc.camera.mode,
+                            "landed": sum(1 for v in uavs.values() if v["landed"]),
+                            "uavs": uavs,
+                            "sim_time_s": round(int(end_data["ticks"]) * sc.dt_s, 4),
+                            "wall_s": wall,
+                            "run_end_reason": end_data.get("reason"),
+                            "restarts": {c.name: c.restarts for c in sup.children.values()},
+                        }
+                        for uid, r in uavs.items():
+                            print(f"[{uid}]", end=" ")
+                            print_landing(r)
+                        n_ok, sim_s = result["landed"], result["sim_time_s"]
+                        how = _clock_name(args.clock, args.pace)
+                        print(f"{n_ok} of {len(ids)} UAVs landed on their pads in {sim_s:.1f} s simulated "
+                              f"({wall:.1f} s of wall time, {how} over Zenoh)", flush=True)  # fmt: skip
+                        restarted = {n: r for n, r in result["restarts"].items() if r}
+                        if restarted:
+                            print(
+                                "restarts: " + ", ".join(f"{n} {r}" for n, r in restarted.items()), flush=True
+                            )
+                        late = {u: r["late_ticks"] for u, r in uavs.items() if "late_ticks" in r}
+                        if late:
+                            ticks = max(1, int(end_data["ticks"]))
+                            each = ", ".join(f"{u} {n} ({n / ticks:.1%})" for u, n in late.items())
+                            print(f"late ticks (flown on an older command): {each}", flush=True)
+                        if args.json is not None:
+                            args.json.write_text(json.dumps(result, indent=1))
+                    end_data = got["run_end"] or {}
+                    asked = end_data.get("reason") in ("reset", "new_seed")  # the dashboard's Reset, New seed
+                    if (args.repeat or asked) and got["run_end"] is not None and not stop.is_set():
+                        nxt = end_data.get("next_seed")
+                        if nxt is not None:
+                            seed = int(nxt)
+                        elif end_data.get("reason") != "reset":
+                            seed += 1
+                        if not asked:
+                            stop.wait(3.0)  # a moment to look at the landed UAVs
+                        sup.stop_all(keep=("dashboard",))
+                        continue
+                    if not args.headless and not args.until_docked and got["run_end"] is not None:
+                        _hold(args, stop, wall0)
+                    break
                 sup.stop_all()
             finally:
                 if recorder is not None:

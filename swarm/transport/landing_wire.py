@@ -149,15 +149,24 @@ def run_start(keys: Keys, sc, seed: int, policy: str, ids: list[str], clock: str
 
 
 def run_end(
-    keys: Keys, world, k: int, reason: str, wall_s: float, late: dict[str, int] | None = None
+    keys: Keys,
+    world,
+    k: int,
+    reason: str,
+    wall_s: float,
+    late: dict[str, int] | None = None,
+    next_seed: int | None = None,
 ) -> Wire:
     """The world's ``run_end`` (each UAV's outcome) and its ``stopped`` clock; a free-running world adds each
-    UAV's ``late_ticks`` (ticks whose command had not come by the tick's wall time)."""
+    UAV's ``late_ticks`` (ticks whose command had not come by the tick's wall time), a run ended by a
+    ``reset`` or ``new_seed`` the ``next_seed`` asked for (nil: the same seed, or the launcher's next)."""
     outcome = {uid: {**world.outcome(uid), "end_tick": world.uavs[uid].end_k} for uid in world.uavs}
     for uid, n in (late or {}).items():
         outcome[uid]["late_ticks"] = n
     t = k * world.sc.dt_s
     data = {"reason": reason, "ticks": k, "wall_s": wall_s, "uavs": outcome}
+    if reason in ("reset", "new_seed"):
+        data["next_seed"] = next_seed
     return [
         (keys.world_event(), encode(Event(t, "run_end", data))),
         (keys.world_clock(), encode(Clock(k, t, "stopped", world.seed))),

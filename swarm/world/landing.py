@@ -15,8 +15,9 @@ every UAV is done (landed for a second, or hovering at the abort height) it publ
 lost), for one UAV or all; other kinds are refused with a ``fault_refused`` event. It takes ``pause`` and
 ``resume`` on ``control/run`` (the dashboard's Run folder) between two ticks: paused, it steps nothing, its
 clock says ``paused``, and a paced or free-running run's wall clock stops with it (no tick is late for the
-pause; the run's ``wall_s`` leaves it out). ``reset`` and ``new_seed`` are refused with a warning: a new
-landing run is a new launch. A restarted world resumes running.
+pause; the run's ``wall_s`` leaves it out). ``reset`` and ``new_seed`` end the run before the next tick,
+paused or not (``run_end``'s ``reason``, with the ``next_seed`` asked for, if any): ``swarm launch`` then
+starts the next run, the same seed or a new one, with new processes. A restarted world resumes running.
 
 ``--clock lockstep`` (the default) steps as fast as the agents answer: the run is ``swarm sim``'s. With
 ``--pace`` a lockstep world also never runs ahead of the wall clock (at ``realtime`` or ``scaled:N``, to watch
@@ -166,29 +167,31 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         with cond:
             faults.append(msg)
 
-    controls: list[str] = []  # run controls come (pause, resume), taken between two ticks
+    controls: list[RunControl] = []  # run controls come, taken between two ticks
+    asked: dict = {}  # a reset or new_seed: the run ends, {"reason", "next_seed"}
 
     def on_control(_key: str, msg: RunControl) -> None:
         with cond:
-            controls.append(msg.command)
+            controls.append(msg)
             cond.notify_all()
 
     def paused_at(k: int) -> bool:
         """Take the pending run controls before tick ``k``; True when the run is paused. ``reset`` and
-        ``new_seed`` (a docking world's) are not a landing world's: refused with a warning."""
+        ``new_seed`` end the run (``asked``), paused or not: the launcher starts the next one."""
         with cond:
             pending = list(controls)
             controls.clear()
-        for command in pending:
-            if command in ("pause", "resume"):
-                if now["paused"] != (command == "pause"):
-                    now["paused"] = command == "pause"
-                    state = "paused" if now["paused"] else "running"
-                    put([wire.clock(keys, k - 1, dt, args.seed, state)])
-                    _LOG.info("run control %s: clock %s at tick %d", command, state, k - 1)
-            else:
-                _LOG.warning("run control %s refused: a landing world takes pause and resume only", command)
-        return now["paused"]
+        for msg in pending:
+            if msg.command in ("reset", "new_seed"):
+                if not asked:
+                    asked.update(reason=msg.command, next_seed=msg.seed)
+                    _LOG.info("run control %s: the run ends at tick %d", msg.command, k - 1)
+            elif now["paused"] != (msg.command == "pause"):
+                now["paused"] = msg.command == "pause"
+                state = "paused" if now["paused"] else "running"
+                put([wire.clock(keys, k - 1, dt, args.seed, state)])
+                _LOG.info("run control %s: clock %s at tick %d", msg.command, state, k - 1)
+        return now["paused"] and not asked
 
     def apply_faults(k: int) -> None:
         """Run-time faults (``swarm fault``): a window opens no earlier than tick ``k``, whose samples are
@@ -303,6 +306,10 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                 # it out
                 t_wall += time.monotonic() - paused_since
                 t_start += time.monotonic() - paused_since
+            if asked:  # the dashboard's Reset or New seed: the run ends before tick k
+                k -= 1
+                reason = asked["reason"]
+                break
             stepped = resume is None or k > k0  # (a resumed world's first tick is the checkpoint's, stepped)
             if stepped:
                 apply_faults(k)
@@ -395,11 +402,11 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         wall = wall_before + time.monotonic() - t_start
         if ckpt is not None:
             ckpt.close()
-        put(wire.run_end(keys, world, k, reason, wall, late if free else None))
+        put(wire.run_end(keys, world, k, reason, wall, late if free else None, asked.get("next_seed")))
         _LOG.info("run ended (%s) at tick %d, %.1f s simulated in %.1f s", reason, k, k * dt, wall)
         time.sleep(0.2)  # let the last messages leave before the session closes
         _ = _token
-    return 0 if reason == "done" else 1
+    return 0 if reason in ("done", "reset", "new_seed") else 1  # (an end asked for is no failure)
 
 
 def _owner(keys, key: str) -> str | None:

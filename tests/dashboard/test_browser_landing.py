@@ -10,9 +10,8 @@ its recorded scenario: at two times of the time slider the screenshots differ wh
 
 numba's cache is warmed in this process first (a cold compile in five processes at once outlasts the
 world's start timeout on two cores). The run is paced (``--pace scaled:0.5``: lockstep, never ahead of half
-the wall clock's rate), so that a fault injected from the page reaches the world while the UAVs still fly
-(the page takes 10-20 s of clicks here, with software WebGL; unpaced the run is over in ~7 s); it takes
-~40 s. Screenshots are kept in
+the wall clock's rate), so that the page's Pause comes while the UAVs still fly (unpaced the run is over in ~7
+s, and the page's clicks take seconds each with software WebGL); it takes ~40 s. Screenshots are kept in
 ``artifacts/`` (``dashboard-landing-*.png``).
 """
 
@@ -112,13 +111,16 @@ def _wait_rows(pg, ok, what: str, timeout_s: float) -> dict[str, list[str]]:
 def test_the_landing_page_injects_the_landing_worlds_faults_and_pauses_and_resumes_its_run(
     live_page, run: LandingRun
 ):
-    """While the UAVs fly (before the test below waits for them to land): the Faults panel offers what a
-    landing world models, no more; a bad duration is refused on the page; a 1 s UWB dropout of uav2 is
-    applied by the landing world, whose ``fault`` event the page lists on uav2 (the docking wording, "the
-    UWB network", would be wrong here). Then Pause: the status line says the clock is paused; Resume: it
-    runs again. One second without ranges is well within what the IMU-driven filter
-    rides through: the run still ends with four UAVs landed (the next test)."""
+    """While the UAVs fly (before the test below waits for them to land), Pause first: the landing world stops
+    between two ticks and the status line says its clock is paused, so that the clicks below, however slow
+    the machine, find the run still on. The Faults panel offers what a landing world models, no more; a bad
+    duration is refused on the page; a 1 s UWB dropout of uav2 is sent. Resume: the clock runs again, the
+    landing world applies the dropout at its next tick, and the page lists it on uav2 (the docking wording,
+    "the UWB network", would be wrong here). One second without ranges is well within what the IMU-driven
+    filter rides through: the run still ends with four UAVs landed (the next test)."""
     _wait_rows(live_page, lambda r: r[1] in LANDING_MODES, "four UAVs with a landing mode", 120.0)
+    live_page.get_by_role("button", name="Pause", exact=True).click()
+    live_page.get_by_text(re.compile(r"paused · tick \d+")).first.wait_for(timeout=UI_TIMEOUT_MS)
     live_page.get_by_label("fault", exact=True).click(timeout=UI_TIMEOUT_MS)
     offered = {o.strip() for o in live_page.get_by_role("option").all_inner_texts()}
     assert offered == set(LandingWorld.FAULTS), offered
@@ -130,15 +132,13 @@ def test_the_landing_page_injects_the_landing_worlds_faults_and_pauses_and_resum
     fill_number(live_page, "duration [s]", "1", UI_TIMEOUT_MS)
     live_page.get_by_role("button", name="Inject").click()
     live_page.get_by_text("sent uwb_dropout on uav2 for 1 s").first.wait_for(timeout=UI_TIMEOUT_MS)
+    assert "no fault applied yet" in live_page.inner_text("body")  # paused: the world steps no tick
+    live_page.get_by_role("button", name="Resume", exact=True).click()
+    live_page.get_by_text(re.compile(r"running · tick \d+")).first.wait_for(timeout=UI_TIMEOUT_MS)
     live_page.get_by_text("uwb_dropout applied by the world on uav2").first.wait_for(timeout=UI_TIMEOUT_MS)
     ARTIFACTS.mkdir(exist_ok=True)
     live_page.screenshot(path=str(ARTIFACTS / "dashboard-landing-fault.png"))
     assert "the UWB network" not in live_page.inner_text("body")
-    # the Run folder's Pause: the landing world stops between two ticks and its clock says so; Resume
-    live_page.get_by_role("button", name="Pause", exact=True).click()
-    live_page.get_by_text(re.compile(r"paused · tick \d+")).first.wait_for(timeout=UI_TIMEOUT_MS)
-    live_page.get_by_role("button", name="Resume", exact=True).click()
-    live_page.get_by_text(re.compile(r"running · tick \d+")).first.wait_for(timeout=UI_TIMEOUT_MS)
 
 
 def test_the_live_page_shows_four_uavs_flying_landing_modes_then_all_landed(live_page, run: LandingRun):
@@ -152,9 +152,9 @@ def test_the_live_page_shows_four_uavs_flying_landing_modes_then_all_landed(live
     # a quadrotor of 1.5 kg hovers on ~170 W: every landing of 15-50 s took kilojoules
     assert all(1.0 < e < 30.0 for e in energy_kj.values()), energy_kj
     assert "landing" in live_page.inner_text("body")  # the title says what is drawn
-    # pause and resume only: a new landing run is a new launch
-    assert live_page.get_by_role("button", name="Reset", exact=True).count() == 0
-    assert live_page.get_by_role("button", name="New seed", exact=True).count() == 0
+    # the Run folder's four controls, as a docking swarm's (New seed: tests/transport/test_landing_launch.py)
+    for name in ("Pause", "Resume", "Reset", "New seed"):
+        assert live_page.get_by_role("button", name=name, exact=True).count() == 1, name
     run.launcher.wait_for_line(r"^4 of 4 UAVs landed on their pads", 30.0)
     run.launcher.wait_for_line(r"^run over; the dashboard stays up", 30.0)
 

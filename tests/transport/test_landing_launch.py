@@ -116,7 +116,6 @@ def _pause_and_resume(session, keys: Keys, proc) -> dict:
 
     sub = session.declare_subscriber(keys.world_clock(), on_clock)
     try:
-        session.put(keys.run_control(), encode(RunControl("reset")))  # a docking world's: refused, ignored
         session.put(keys.run_control(), encode(RunControl("pause")))
         at = first(lambda c: c.state == "paused", 0, 30.0)
         with cond:
@@ -194,12 +193,11 @@ def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
     assert "fault applied: camera_loss on ['uav1'] from t = 9.00 s" in text, text
     assert "fault refused: gyro_bias_step: kind: a landing world models camera_loss and uwb_dropout" in text
     # paused (the dashboard's Pause) for twice --stall-s: the clock said paused and stood still, no stall was
-    # told for it (the one below is the stopped host's), and after the resume it ran on from the same tick;
-    # a reset (a docking world's) refused. The run is still swarm sim's (below)
+    # told for it (the one below is the stopped host's), and after the resume it ran on from the same tick:
+    # the run is still swarm sim's (below)
     assert paused["during"] == [] or all(c.tick == paused["paused"].tick for c in paused["during"])
     assert paused["resumed"].tick >= paused["paused"].tick
     assert "run control pause: clock paused at tick" in text and "run control resume: clock running" in text
-    assert "run control reset refused: a landing world takes pause and resume only" in text
     # an agent host stopped (SIGSTOP) after the start: the world's clock stood still past --stall-s, told
     # once with the stacks of the launcher, the world (waiting for the stopped host's commands), the other
     # host and the stopped one once it went on; the run is still swarm sim's (below)
@@ -424,6 +422,51 @@ def test_a_secure_landing_swarm_lands_as_swarm_sim_with_every_process_on_its_own
         for key in ("landed", "landing_error_m", "landing_time_s", "energy_j", "modes"):
             assert g[key] == w[key], (uid, key)
     assert not d.exists()  # the launcher removed its certificates and keys
+
+
+def test_new_seed_ends_the_run_and_the_launcher_starts_the_next_which_is_swarm_sims_of_that_seed(tmp_path):
+    """The dashboard's New seed (``RunControl("new_seed", 7)`` on ``control/run``) while one UAV flies: the
+    landing world ends the run (``run_end`` reason ``new_seed``, ``next_seed`` 7); the launcher stops the
+    world and the agent and starts a run of seed 7, which with ``--until-docked`` is the last: its summary
+    equals ``swarm sim landing --seed 7``. Paced at scaled:5 so that the first run is still on when the
+    control comes (one landing: ~15 s simulated)."""
+    from agents.landing import warm_up
+
+    sc = load_landing("landing")
+    warm_up(sc, 0, 0, sc.policy)
+    ns, out, endpoint = f"newseed-{free_port()}", tmp_path / "run.json", loopback(free_port())
+    args = [sys.executable, "-m", "swarm.cli.main", "launch", "landing", "--headless", "--until-docked",
+            "--seed", "0", "--namespace", ns, "--listen", endpoint, "--json", str(out), "--pace", "scaled:5",
+            "--timeout", "400"]  # fmt: skip
+    with Procs() as procs:
+        proc = procs.start(args)
+        proc.wait_for_line(r"^swarm up: .*, seed 0, ", 300.0)
+        with open_session(ZenohArgs(mode="client", connect=(endpoint,))) as session:
+            running = threading.Event()
+            sub = session.declare_subscriber(
+                Keys(ns).world_clock(),
+                lambda s: running.set() if decode(bytes(s.payload), Clock).state == "running" else None,
+            )
+            assert running.wait(300.0), proc.output()
+            session.put(Keys(ns).run_control(), encode(RunControl("new_seed", 7)))
+            sub.undeclare()
+        proc.wait_for_line(r"^swarm up: .*, seed 7, ", 120.0)
+        code = proc.wait(400.0)
+        text = proc.output()
+    assert code == 0, text
+    assert "Traceback" not in text
+    assert re.search(r"run control new_seed: the run ends at tick \d+", text), text
+    assert len(re.findall(r"^swarm up: ", text, re.M)) == 2  # the asked run, then seed 7's
+    got = json.loads(out.read_text())
+    assert got["seed"] == 7 and got["run_end_reason"] == "done", got
+    want = run_landing_fleet(sc, seed=7, record_series=False)
+    assert set(got["uavs"]) == set(want["uavs"])
+    for uid, w in want["uavs"].items():
+        g = got["uavs"][uid]
+        for key in ("landed", "landing_error_m", "energy_j", "landing_time_s", "final_mode", "retries",
+                    "pad_frames", "deviation_distance_m", "sim_time_s", "start_m"):  # fmt: skip
+            assert g[key] == w[key], (uid, key, g[key], w[key])
+        assert g["modes"] == w["modes"], uid
 
 
 @pytest.mark.parametrize(
