@@ -122,9 +122,11 @@ def test_the_landing_page_injects_the_landing_worlds_faults_and_pauses_and_resum
     live_page.get_by_role("button", name="Pause", exact=True).click()
     live_page.get_by_text(re.compile(r"paused · tick \d+")).first.wait_for(timeout=UI_TIMEOUT_MS)
     live_page.get_by_label("fault", exact=True).click(timeout=UI_TIMEOUT_MS)
+    live_page.get_by_role("option").first.wait_for(timeout=UI_TIMEOUT_MS)  # the list open
     offered = {o.strip() for o in live_page.get_by_role("option").all_inner_texts()}
     assert offered == set(LandingWorld.FAULTS), offered
-    live_page.get_by_role("option", name="uwb_dropout", exact=True).click(timeout=UI_TIMEOUT_MS)
+    live_page.keyboard.press("Escape")  # closed again: a re-render of the panel may have closed it anyway
+    choose(live_page, "fault", "uwb_dropout", UI_TIMEOUT_MS)
     choose(live_page, "vehicle", "uav2", UI_TIMEOUT_MS)
     fill_number(live_page, "duration [s]", "-1", UI_TIMEOUT_MS)
     live_page.get_by_role("button", name="Inject").click()
