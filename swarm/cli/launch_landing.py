@@ -207,6 +207,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                 for run_i in itertools.count():  # one iteration per run (reset, new seed, --repeat)
                     with cond:
                         got["run_end"], got["summaries"] = None, {}
+                    result = None  # (a run stopped before its end has none: exit 130, not a past run's)
                     run_dir = ckpt_root / f"run-{run_i}"  # this run's checkpoints: none of another run's
                     run_dir.mkdir()
                     common = child_args(args, endpoint, seed)
@@ -322,6 +323,8 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                             seed += 1
                         if not asked:
                             stop.wait(3.0)  # a moment to look at the landed UAVs
+                        if stop.is_set():  # Ctrl-C meanwhile: no next run
+                            break
                         sup.stop_all(keep=("dashboard",))
                         continue
                     if not args.headless and not args.until_docked and got["run_end"] is not None:
