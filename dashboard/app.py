@@ -367,11 +367,8 @@ class GuiView:
             self.events = gui.add_markdown("no events yet")
         # the faults the world takes: a landing world's two kinds, on one UAV or every UAV
         menu = LANDING if landing is not None else DOCKING
-        self.uwb_network = menu.uwb_network  # how the event log words a UWB fault
-        if link is not None:
-            self.faults = FaultPanel(gui, link.send_fault, link.listeners, vehicles, menu)
-        else:
-            self.faults = FaultPanel(gui, None, lambda: False, vehicles, menu)
+        send, listening = (link.send_fault, link.listeners) if link is not None else (None, lambda: False)
+        self.faults = FaultPanel(gui, send, listening, vehicles, menu)
         with gui.add_folder("View", expand_by_default=False):
             sigma = gui.add_slider("ellipsoid σ", min=1.0, max=5.0, step=0.5, initial_value=scene.n_sigma)
             trails = gui.add_checkbox("trails", initial_value=True)
@@ -436,7 +433,8 @@ class GuiView:
         _set(self.modes, "content", panels.modes_markdown(selected.modes if selected else ()))
         if snap.events_version != self._events_version:
             self._events_version = snap.events_version
-            _set(self.events, "content", panels.events_markdown(snap.events, uwb_network=self.uwb_network))
+            uwb_network = self.faults.menu.uwb_network  # how the event log words a UWB fault
+            _set(self.events, "content", panels.events_markdown(snap.events, uwb_network=uwb_network))
         self.faults.update(snap)
         if self.playback is not None:
             self.playback.update()

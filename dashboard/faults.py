@@ -196,11 +196,7 @@ def sent_text(msg: Fault, listening: bool, at: str, menu: FaultMenu = DOCKING) -
     head = f"sent **{msg.kind}**{who}{dur} at {at}"
     if not listening:
         return f"{head}, but nobody listens on control/fault (is the swarm up?)"
-    return (
-        f"{head}: the "
-        + ("world or mothership" if menu is DOCKING else "world")
-        + " lists it below once applied"
-    )
+    return f"{head}: the {menu.appliers} lists it below once applied"
 
 
 class FaultPanel:
