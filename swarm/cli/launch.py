@@ -362,7 +362,15 @@ def _run(args: argparse.Namespace) -> int:
     from swarm.cli.sim import print_summary
     from swarm.cli.supervisor import Child, Supervisor, forward_stacks_signal
     from swarm.transport.keys import Keys
-    from swarm.transport.messages import Clock, DropCounter, Event, Guidance, encode
+    from swarm.transport.messages import (
+        NEW_RUN_COMMANDS,
+        Clock,
+        DropCounter,
+        Event,
+        Guidance,
+        encode,
+        next_run_seed,
+    )
     from swarm.transport.process import scenario_from
     from swarm.transport.session import (
         open_session,
@@ -456,14 +464,9 @@ def _run(args: argparse.Namespace) -> int:
                             args.json.write_text(json.dumps(result, indent=1))
                         end = log.run_end or {}
                         # the dashboard asked for a new run
-                        asked = end.get("reason") in ("reset", "new_seed")
+                        asked = end.get("reason") in NEW_RUN_COMMANDS
                         if (args.repeat or asked) and not stop.is_set():
-                            nxt = end.get("next_seed")
-                            seed = (
-                                int(nxt)
-                                if nxt is not None
-                                else (seed if end.get("reason") == "reset" else seed + 1)
-                            )
+                            seed = next_run_seed(end, seed)
                             if not asked:
                                 stop.wait(3.0)  # a moment to look at the docked pair
                             sup.stop_all(keep=("dashboard",))

@@ -131,7 +131,14 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     from swarm.step.landing import landing_summary
     from swarm.transport.checkpoint import EXIT_BAD_CHECKPOINT
     from swarm.transport.keys import Keys
-    from swarm.transport.messages import Clock, DropCounter, Event, safe_decode
+    from swarm.transport.messages import (
+        NEW_RUN_COMMANDS,
+        Clock,
+        DropCounter,
+        Event,
+        next_run_seed,
+        safe_decode,
+    )
     from swarm.transport.security import agent_name
     from swarm.transport.session import open_session, subscribe_decoded
 
@@ -314,13 +321,9 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                         if args.json is not None:
                             args.json.write_text(json.dumps(result, indent=1))
                     end_data = got["run_end"] or {}
-                    asked = end_data.get("reason") in ("reset", "new_seed")  # the dashboard's Reset, New seed
+                    asked = end_data.get("reason") in NEW_RUN_COMMANDS  # the dashboard's Reset, New seed
                     if (args.repeat or asked) and got["run_end"] is not None and not stop.is_set():
-                        nxt = end_data.get("next_seed")
-                        if nxt is not None:
-                            seed = int(nxt)
-                        elif end_data.get("reason") != "reset":
-                            seed += 1
+                        seed = next_run_seed(end_data, seed)
                         if not asked:
                             stop.wait(3.0)  # a moment to look at the landed UAVs
                         if stop.is_set():  # Ctrl-C meanwhile: no next run

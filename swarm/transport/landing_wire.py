@@ -10,6 +10,7 @@ import numpy as np
 from swarm.transport.keys import Keys
 from swarm.transport.messages import (
     CLOCK_EVERY,
+    NEW_RUN_COMMANDS,
     Clock,
     Command,
     Estimate,
@@ -165,11 +166,11 @@ def run_end(
         outcome[uid]["late_ticks"] = n
     t = k * world.sc.dt_s
     data = {"reason": reason, "ticks": k, "wall_s": wall_s, "uavs": outcome}
-    if reason in ("reset", "new_seed"):
+    if reason in NEW_RUN_COMMANDS:
         data["next_seed"] = next_seed
     return [
         (keys.world_event(), encode(Event(t, "run_end", data))),
-        (keys.world_clock(), encode(Clock(k, t, "stopped", world.seed))),
+        clock(keys, k, world.sc.dt_s, world.seed, "stopped"),
     ]
 
 

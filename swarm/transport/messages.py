@@ -54,6 +54,7 @@ __all__ = [
     "MESSAGE_FOR_KIND",
     "MESSAGE_TYPES",
     "MODES",
+    "NEW_RUN_COMMANDS",
     "QUAT_NORM_TOL",
     "RUN_COMMANDS",
     "SCHEMA_VERSION",
@@ -93,6 +94,7 @@ __all__ = [
     "encode_vision",
     "estimate_and_payload",
     "estimate_message",
+    "next_run_seed",
     "pack_bundle",
     "pack_entries",
     "safe_decode",
@@ -145,6 +147,20 @@ POSE_LEN = 43
 (``swarm.core.camera.POSE_N``)."""
 CLOCK_STATES: tuple[str, ...] = ("running", "paused", "stopped")
 RUN_COMMANDS: tuple[str, ...] = ("pause", "resume", "reset", "new_seed")
+NEW_RUN_COMMANDS: tuple[str, ...] = ("reset", "new_seed")
+"""The run controls that end the run for the next one (the world's ``run_end`` ``reason``)."""
+
+
+def next_run_seed(end: dict, seed: int) -> int:
+    """The seed of the run after the one ``end`` (a world's ``run_end`` data) ended, whose seed was ``seed``:
+    the ``next_seed`` a ``reset`` or ``new_seed`` asked for, else the same seed for a ``reset`` and the next
+    one otherwise (``new_seed``, ``swarm launch --repeat``)."""
+    nxt = end.get("next_seed")
+    if nxt is not None:
+        return int(nxt)
+    return seed if end.get("reason") == "reset" else seed + 1
+
+
 EVENT_KINDS: tuple[str, ...] = (
     "mode",
     "docked",

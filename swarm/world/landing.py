@@ -128,7 +128,14 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
     from swarm.transport import checkpoint
     from swarm.transport import landing_wire as wire
     from swarm.transport.keys import Keys
-    from swarm.transport.messages import LANDING_MODES, Command, DropCounter, Fault, RunControl
+    from swarm.transport.messages import (
+        LANDING_MODES,
+        NEW_RUN_COMMANDS,
+        Command,
+        DropCounter,
+        Fault,
+        RunControl,
+    )
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import (
         declare_liveliness,
@@ -182,7 +189,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
             pending = list(controls)
             controls.clear()
         for msg in pending:
-            if msg.command in ("reset", "new_seed"):
+            if msg.command in NEW_RUN_COMMANDS:
                 if not asked:
                     asked.update(reason=msg.command, next_seed=msg.seed)
                     _LOG.info("run control %s: the run ends at tick %d", msg.command, k - 1)
@@ -406,7 +413,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         _LOG.info("run ended (%s) at tick %d, %.1f s simulated in %.1f s", reason, k, k * dt, wall)
         time.sleep(0.2)  # let the last messages leave before the session closes
         _ = _token
-    return 0 if reason in ("done", "reset", "new_seed") else 1  # (an end asked for is no failure)
+    return 0 if reason == "done" or reason in NEW_RUN_COMMANDS else 1  # (an end asked for is no failure)
 
 
 def _owner(keys, key: str) -> str | None:

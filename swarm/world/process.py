@@ -58,6 +58,7 @@ from swarm.transport.keys import Keys
 from swarm.transport.lockstep import CommandBarrier
 from swarm.transport.messages import (
     CLOCK_EVERY,
+    NEW_RUN_COMMANDS,
     Clock,
     Command,
     CommandBatch,
@@ -725,7 +726,7 @@ class WorldProcess:
                 self.state = "paused"
             elif msg.command == "resume" and self.state == "paused":
                 self.state = "running"
-            elif msg.command in ("reset", "new_seed"):
+            elif msg.command in NEW_RUN_COMMANDS:
                 self.end_reason = msg.command
                 self.next_seed = msg.seed
                 self.state = "stopped"

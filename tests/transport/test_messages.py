@@ -1519,3 +1519,14 @@ def test_encode_truth_batch_gives_the_bytes_and_the_errors_of_the_message_encode
     changes = {name: change for name, (change, _) in variants.items()}
     _decided_as_the_message(msgs.encode_truth_batch, _truth_batch, _truth_batch_args, rng, changes,
                             [name for name, (_, ok) in variants.items() if ok])  # fmt: skip
+
+
+def test_the_next_runs_seed_is_the_one_asked_for_else_the_same_after_a_reset_and_the_next_otherwise():
+    from swarm.transport.messages import NEW_RUN_COMMANDS, next_run_seed
+
+    assert NEW_RUN_COMMANDS == ("reset", "new_seed")
+    assert next_run_seed({"reason": "reset", "next_seed": None}, 4) == 4
+    assert next_run_seed({"reason": "new_seed", "next_seed": None}, 4) == 5
+    assert next_run_seed({"reason": "new_seed", "next_seed": 11}, 4) == 11
+    assert next_run_seed({"reason": "reset", "next_seed": 0}, 4) == 0  # a seed 0 asked for is kept
+    assert next_run_seed({"reason": "done"}, 4) == 5  # --repeat
