@@ -114,9 +114,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         TOPOLOGY_TEXT,
         check_record,
         checkpoint_root,
-        child_args,
         client_endpoint,
-        config_args,
         launch_listen,
         router_args,
         secure_router,
@@ -124,11 +122,9 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         swarm_processes,
         topology,
     )
-    from swarm.cli.sim import print_landing
     from swarm.cli.supervisor import Child, StallWatch, Supervisor, forward_stacks_signal
     from swarm.config import parse_override
     from swarm.landing_scenario import load_landing
-    from swarm.step.landing import landing_summary
     from swarm.transport.checkpoint import EXIT_BAD_CHECKPOINT
     from swarm.transport.keys import Keys
     from swarm.transport.messages import (
@@ -139,7 +135,6 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         next_run_seed,
         safe_decode,
     )
-    from swarm.transport.security import agent_name
     from swarm.transport.session import open_session, subscribe_decoded
 
     _refuse(args)
@@ -217,34 +212,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                     result = None  # (a run stopped before its end has none: exit 130, not a past run's)
                     run_dir = ckpt_root / f"run-{run_i}"  # this run's checkpoints: none of another run's
                     run_dir.mkdir()
-                    common = child_args(args, endpoint, seed)
-                    n = args.vehicles_per_process  # agent hosts: N UAVs' agents in one process (default 1)
-                    for i in range(0, len(ids), n):
-                        host = ids[i : i + n]
-                        name = f"agent/{host[0]}" if n == 1 else f"agents/{'+'.join(host)}"
-                        identity = agent_name(host[0])  # (an agent host is refused with --secure above)
-                        agent = [
-                            "agents.landing",
-                            "--id",
-                            ",".join(host),
-                            *common,
-                            *config_args(args, identity),
-                        ]
-                        if restart_agents:
-                            agent += ["--checkpoint-dir", str(run_dir)]
-                        sup.start(Child(name, agent, restartable=restart_agents, rejoin_args=["--resume"]))
-                    world_ckpt = ["--checkpoint-dir", str(run_dir)] if restarts else []
-                    world = ["swarm.world.landing", "--clock", str(args.clock),
-                             *(["--pace", str(args.pace)] if args.pace is not None else []),
-                             "--step-timeout", str(args.step_timeout),
-                             "--start-timeout", str(args.start_timeout), *common,
-                             *world_ckpt, *config_args(args, "world")]  # fmt: skip
-                    sup.start(Child("world", world, restartable=restarts, rejoin_args=["--resume"]))
-                    print(
-                        f"swarm up: world and {len(ids)} landing agents in {-(-len(ids) // n)} processes, "
-                        f"seed {seed}, clock {_clock_name(args.clock, args.pace)}",
-                        flush=True,
-                    )
+                    _start_run(args, ids, endpoint, seed, run_dir, sup, restarts, restart_agents)
                     deadline = None if args.timeout is None else wall0 + args.timeout
                     with cond:
                         while got["run_end"] is None:
@@ -257,8 +225,10 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                             watch_clock()
                             dead = sup.exited()
                             for c in [c for c in dead if c.name == "dashboard"]:  # the run does not need it
-                                code = c.popen.returncode
-                                _LOG.warning("the dashboard exited with status %s; the run goes on", code)
+                                _LOG.warning(
+                                    "the dashboard exited with status %s; the run goes on without it",
+                                    c.popen.returncode,
+                                )
                                 c.popen = None
                             dead = [c for c in dead if c.name != "dashboard"]
                             if got["run_end"] is None and _lost(sup, dead, EXIT_BAD_CHECKPOINT):
@@ -279,47 +249,9 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                                 break
                             cond.wait(0.1)
                     if got["run_end"] is not None and set(ids) <= set(got["summaries"]):
-                        end_data = got["run_end"]
-                        wall = float(end_data.get("wall_s", time.monotonic() - wall0))
-                        uavs = {}
-                        for uid in ids:
-                            w = end_data["uavs"][uid]
-                            uavs[uid] = landing_summary(
-                                sc, policy, seed, w, got["summaries"][uid], w["end_tick"], wall
-                            )
-                            if "late_ticks" in w:  # free-running: ticks flown on an older command
-                                uavs[uid]["late_ticks"] = int(w["late_ticks"])
-                        result = {
-                            "scenario": sc.name,
-                            "policy": policy,
-                            "seed": seed,
-                            "camera_mode": sc.camera.mode,
-                            "landed": sum(1 for v in uavs.values() if v["landed"]),
-                            "uavs": uavs,
-                            "sim_time_s": round(int(end_data["ticks"]) * sc.dt_s, 4),
-                            "wall_s": wall,
-                            "run_end_reason": end_data.get("reason"),
-                            "restarts": {c.name: c.restarts for c in sup.children.values()},
-                        }
-                        for uid, r in uavs.items():
-                            print(f"[{uid}]", end=" ")
-                            print_landing(r)
-                        n_ok, sim_s = result["landed"], result["sim_time_s"]
-                        how = _clock_name(args.clock, args.pace)
-                        print(f"{n_ok} of {len(ids)} UAVs landed on their pads in {sim_s:.1f} s simulated "
-                              f"({wall:.1f} s of wall time, {how} over Zenoh)", flush=True)  # fmt: skip
-                        restarted = {n: r for n, r in result["restarts"].items() if r}
-                        if restarted:
-                            print(
-                                "restarts: " + ", ".join(f"{n} {r}" for n, r in restarted.items()), flush=True
-                            )
-                        late = {u: r["late_ticks"] for u, r in uavs.items() if "late_ticks" in r}
-                        if late:
-                            ticks = max(1, int(end_data["ticks"]))
-                            each = ", ".join(f"{u} {n} ({n / ticks:.1%})" for u, n in late.items())
-                            print(f"late ticks (flown on an older command): {each}", flush=True)
-                        if args.json is not None:
-                            args.json.write_text(json.dumps(result, indent=1))
+                        result = _result(
+                            args, sc, policy, seed, ids, got["run_end"], got["summaries"], sup, wall0
+                        )
                     end_data = got["run_end"] or {}
                     asked = end_data.get("reason") in NEW_RUN_COMMANDS  # the dashboard's Reset, New seed
                     if (args.repeat or asked) and got["run_end"] is not None and not stop.is_set():
@@ -352,6 +284,84 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         r["landed"] or r["aborted"] for r in result["uavs"].values()
     )
     return 0 if ok else 1
+
+
+def _start_run(args, ids: list[str], endpoint: str, seed: int, run_dir, sup, restarts: bool,
+               restart_agents: bool) -> None:  # fmt: skip
+    """Start one run's processes, the agents (``--vehicles-per-process`` UAVs each) and the world, their
+    checkpoints in ``run_dir`` where they may be restarted, and say so (``swarm up: ...``)."""
+    from swarm.cli.children import child_args, config_args
+    from swarm.cli.supervisor import Child
+    from swarm.transport.security import agent_name
+
+    common = child_args(args, endpoint, seed)
+    n = args.vehicles_per_process  # agent hosts: N UAVs' agents in one process (default 1)
+    for i in range(0, len(ids), n):
+        host = ids[i : i + n]
+        name = f"agent/{host[0]}" if n == 1 else f"agents/{'+'.join(host)}"
+        identity = agent_name(host[0])  # (an agent host is refused with --secure: _refuse)
+        agent = ["agents.landing", "--id", ",".join(host), *common, *config_args(args, identity)]
+        if restart_agents:
+            agent += ["--checkpoint-dir", str(run_dir)]
+        sup.start(Child(name, agent, restartable=restart_agents, rejoin_args=["--resume"]))
+    world_ckpt = ["--checkpoint-dir", str(run_dir)] if restarts else []
+    world = ["swarm.world.landing", "--clock", str(args.clock),
+             *(["--pace", str(args.pace)] if args.pace is not None else []),
+             "--step-timeout", str(args.step_timeout),
+             "--start-timeout", str(args.start_timeout), *common,
+             *world_ckpt, *config_args(args, "world")]  # fmt: skip
+    sup.start(Child("world", world, restartable=restarts, rejoin_args=["--resume"]))
+    print(
+        f"swarm up: world and {len(ids)} landing agents in {-(-len(ids) // n)} processes, "
+        f"seed {seed}, clock {_clock_name(args.clock, args.pace)}",
+        flush=True,
+    )
+
+
+def _result(args, sc, policy: str, seed: int, ids: list[str], end_data: dict, summaries: dict, sup,
+            wall0: float) -> dict:  # fmt: skip
+    """The run's summary from the world's ``run_end`` and each agent's ``summary`` event (``swarm sim``'s
+    fields per UAV), printed, and written to ``--json``."""
+    from swarm.cli.sim import print_landing
+    from swarm.step.landing import landing_summary
+
+    wall = float(end_data.get("wall_s", time.monotonic() - wall0))
+    uavs = {}
+    for uid in ids:
+        w = end_data["uavs"][uid]
+        uavs[uid] = landing_summary(sc, policy, seed, w, summaries[uid], w["end_tick"], wall)
+        if "late_ticks" in w:  # free-running: ticks flown on an older command
+            uavs[uid]["late_ticks"] = int(w["late_ticks"])
+    result = {
+        "scenario": sc.name,
+        "policy": policy,
+        "seed": seed,
+        "camera_mode": sc.camera.mode,
+        "landed": sum(1 for v in uavs.values() if v["landed"]),
+        "uavs": uavs,
+        "sim_time_s": round(int(end_data["ticks"]) * sc.dt_s, 4),
+        "wall_s": wall,
+        "run_end_reason": end_data.get("reason"),
+        "restarts": {c.name: c.restarts for c in sup.children.values()},
+    }
+    for uid, r in uavs.items():
+        print(f"[{uid}]", end=" ")
+        print_landing(r)
+    n_ok, sim_s = result["landed"], result["sim_time_s"]
+    how = _clock_name(args.clock, args.pace)
+    print(f"{n_ok} of {len(ids)} UAVs landed on their pads in {sim_s:.1f} s simulated "
+          f"({wall:.1f} s of wall time, {how} over Zenoh)", flush=True)  # fmt: skip
+    restarted = {n: r for n, r in result["restarts"].items() if r}
+    if restarted:
+        print("restarts: " + ", ".join(f"{n} {r}" for n, r in restarted.items()), flush=True)
+    late = {u: r["late_ticks"] for u, r in uavs.items() if "late_ticks" in r}
+    if late:
+        ticks = max(1, int(end_data["ticks"]))
+        print("late ticks (flown on an older command): " + ", ".join(
+            f"{u} {n} ({n / ticks:.1%})" for u, n in late.items()), flush=True)  # fmt: skip
+    if args.json is not None:
+        args.json.write_text(json.dumps(result, indent=1))
+    return result
 
 
 def _lost(sup, dead: list, bad_checkpoint: int) -> bool:
