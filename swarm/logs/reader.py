@@ -4,6 +4,10 @@ Every error names the file, and where it is in the file the line and the column 
 column 2 (anchor_id): unknown anchor 9; anchors.csv has 0, 1, 2, 3``), as a :class:`~swarm.errors.LogError`.
 A NaN or empty value in a sample (an IMU or range reading, not a time) is what a logger writes for a lost
 reading: that row is skipped and counted in :attr:`Log.skipped`, never fed to a filter.
+
+``uwb.csv`` and ``anchors.csv`` may have a header and no rows (a log without two-way ranges: a TDoA flight,
+or an import from a source that logged none); the optional ``height.csv``, ``baro.csv`` and ``tdoa.csv`` are
+read into their own fields (``docs/logs.md``).
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from swarm.config import load_toml
-from swarm.core.imu_filter import ImuFilterParams
+from swarm.core.imu_filter import ImuFilterParams, PhaseParams, RobustParams
 from swarm.errors import ConfigError, LogError
 
 IMU_COLUMNS = (
@@ -35,7 +39,16 @@ TRUTH_COLUMNS = ("t_s", "x_m", "y_m", "z_m", "qx", "qy", "qz", "qw")
 VISION_COLUMNS = ("t_s", "marker_id", "x_m", "y_m", "z_m")
 VISION_SIGMA_COLUMNS = ("sigma_x_m", "sigma_y_m", "sigma_z_m")
 MARKER_COLUMNS = ("marker_id", "x_m", "y_m", "z_m")
+HEIGHT_COLUMNS = ("t_s", "range_m")
+BARO_COLUMNS = ("t_s", "height_m")
+TDOA_COLUMNS = ("t_s", "anchor_a", "anchor_b", "ddist_m")
 QUAT_NORM_TOL = 1e-3
+TDOA_BASELINE_TOL_M = 0.1
+"""How much longer than the two anchors' baseline a TDoA distance difference may be [m]. By the triangle
+inequality ``||p - a_b| - |p - a_a|| <= |a_b - a_a|``, so a longer one is a measurement error (the Crazyflie
+firmware drops it before its filter: ``isDistanceDiffSmallerThanDistanceBetweenAnchors`` in
+``outlierFilterTdoa.c``); the tolerance covers the anchor survey's error and float32 rounding of the logged
+values, not the ranging noise (an importer drops those rows, counted, as the firmware does)."""
 
 
 @dataclass(frozen=True)
@@ -124,6 +137,8 @@ class Initial:
     sigma_gyro_bias_rad_s: float = 0.01
     sigma_range_bias_m: float = 0.3
     """Prior on each range bias [m] (after calibration it is the calibration's uncertainty)."""
+    sigma_common_offset_m: float = 0.3
+    """Prior on the offset common to every anchor [m] (the calibration's median bias, or zero)."""
 
     def __post_init__(self) -> None:
         for name in (
@@ -133,6 +148,7 @@ class Initial:
             "sigma_accel_bias_m_s2",
             "sigma_gyro_bias_rad_s",
             "sigma_range_bias_m",
+            "sigma_common_offset_m",
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -144,11 +160,69 @@ class Recovery:
     """``[recovery]`` of log.toml: what the replay does after a divergence."""
 
     enabled: bool = True
-    """Re-initialise the position from ranges when the divergence test fires (else only report it)."""
+    """Recover when the divergence test fires (else only report it)."""
+    mode: str = "inflate"
+    """``inflate``: scale the position and velocity covariance by the window's median NIS over its
+    chi-square median, the estimate kept (it cannot make the estimate worse; the ranges then pull it);
+    ``refix``: re-initialise the position from the latest range to each anchor (the first model's)."""
+    max_inflation: float = 1e6
+    """Largest covariance scale of one ``inflate`` recovery."""
     max_range_age_s: float = 1.0
     """Ranges older than this [s] are not used for the fix."""
     sigma_velocity_m_s: float = 1.0
     """Velocity standard deviation after a re-initialisation [m/s] (the velocity is set to zero)."""
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("inflate", "refix"):
+            raise ConfigError(f"recovery.mode must be 'inflate' or 'refix', got {self.mode!r}")
+        if not (math.isfinite(self.max_inflation) and self.max_inflation >= 1.0):
+            raise ConfigError(f"recovery.max_inflation must be a finite number >= 1, got {self.max_inflation!r}")
+
+
+@dataclass(frozen=True)
+class HeightLog:
+    """``[height]`` of log.toml: the downward range finder of ``height.csv``."""
+
+    enabled: bool = True
+    """Fuse ``height.csv`` when the log has one."""
+    sigma_m: float = 0.02
+    """Its white noise [m]."""
+    max_range_m: float = 3.0
+    """Readings beyond are refused (the sensor's reach; past it a ToF sensor reports junk)."""
+    max_tilt_deg: float = 30.0
+    """Readings at a larger estimated tilt are refused (the beam leaves the flat ground of the model)."""
+    ground_z_m: float | None = None
+    """The ground's height in nav [m]; leave out to take the calibration position's height minus the static
+    segment's median reading (the sensor's own offset included), else 0."""
+    gate_probability: float = 0.9995
+    """Hard gate: chi-square(1) quantile of the squared Mahalanobis distance."""
+
+    def __post_init__(self) -> None:
+        for name in ("sigma_m", "max_range_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ConfigError(f"height.{name} must be a finite number > 0, got {v!r}")
+        if not 0.0 < self.max_tilt_deg < 90.0:
+            raise ConfigError(f"height.max_tilt_deg must be in (0, 90), got {self.max_tilt_deg!r}")
+        if not 0.5 < self.gate_probability < 1.0:
+            raise ConfigError(f"height.gate_probability must be in (0.5, 1), got {self.gate_probability!r}")
+
+
+@dataclass(frozen=True)
+class BaroLog:
+    """``[baro]`` of log.toml: the barometric height of ``baro.csv`` (its offset is a filter state)."""
+
+    enabled: bool = True
+    """Fuse ``baro.csv`` when the log has one."""
+    sigma_m: float = 0.5
+    """Its white noise [m] (a small quadrotor's barometer in its own prop wash)."""
+    gate_probability: float = 0.9995
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.sigma_m) and self.sigma_m > 0):
+            raise ConfigError(f"baro.sigma_m must be a finite number > 0, got {self.sigma_m!r}")
+        if not 0.5 < self.gate_probability < 1.0:
+            raise ConfigError(f"baro.gate_probability must be in (0.5, 1), got {self.gate_probability!r}")
 
 
 @dataclass(frozen=True)
@@ -173,6 +247,10 @@ class LogConfig:
     calibration: Calibration = Calibration()
     initial: Initial = Initial()
     recovery: Recovery = Recovery()
+    robust: RobustParams = RobustParams()
+    phases: PhaseParams = PhaseParams()
+    height: HeightLog = HeightLog()
+    baro: BaroLog = BaroLog()
     faults: Faults = Faults()
     output_every: int = 10
     """Write one estimate row every this many IMU samples (10: 100 Hz for a 1 kHz IMU)."""
@@ -210,6 +288,22 @@ class Log:
     """Its standard deviation per camera axis (n, 3) [m]."""
     marker_ids: np.ndarray | None = None
     markers_nav: np.ndarray | None = None
+    height_t: np.ndarray | None = None
+    """``height.csv``: times of the downward range finder's samples (strictly increasing) [s]."""
+    height_range: np.ndarray | None = None
+    """Its range along body -z from the body origin [m] (>= 0; rows without a return are skipped)."""
+    baro_t: np.ndarray | None = None
+    """``baro.csv``: times of the barometric altitudes (strictly increasing) [s]."""
+    baro_height: np.ndarray | None = None
+    """Barometric altitude, up, with any constant offset [m]."""
+    tdoa_t: np.ndarray | None = None
+    """``tdoa.csv``: times of the TDoA measurements (non-decreasing) [s]."""
+    tdoa_a: np.ndarray | None = None
+    """Index into :attr:`anchors_nav` of each measurement's anchor A."""
+    tdoa_b: np.ndarray | None = None
+    """Index into :attr:`anchors_nav` of its anchor B (never A)."""
+    tdoa_ddist: np.ndarray | None = None
+    """Distance difference ``|p - a_b| - |p - a_a|`` [m] (the Crazyflie's distanceDiff of idB minus idA)."""
     skipped: dict[str, int] = field(default_factory=dict)
     """Rows skipped per file (a NaN or empty sample value)."""
 
@@ -219,9 +313,15 @@ def _at(name: str, line: int, col: int, column: str) -> str:
     return f"{name}, line {line}, column {col + 1} ({column})"
 
 
-def _rows(path: Path, columns: tuple[str, ...], optional: bool = False, maybe: tuple[str, ...] = ()):
+def _rows(
+    path: Path,
+    columns: tuple[str, ...],
+    optional: bool = False,
+    maybe: tuple[str, ...] = (),
+    allow_empty: bool = False,
+):
     """The header's positions of ``columns`` (and of those of ``maybe`` it has) and the data rows ``(line
-    number, fields)`` of a CSV file."""
+    number, fields)`` of a CSV file (``allow_empty``: a header without rows is no rows, not an error)."""
     name = path.name
     if not path.is_file():
         if optional:
@@ -258,7 +358,7 @@ def _rows(path: Path, columns: tuple[str, ...], optional: bool = False, maybe: t
         if len(fields) != len(header):
             raise LogError(f"{name}, line {no}: {len(fields)} fields, the header has {len(header)}")
         rows.append((no, fields))
-    if not rows:
+    if not rows and not allow_empty:
         raise LogError(f"{name}: no data rows after the header")
     return where, rows
 
@@ -270,11 +370,12 @@ def _table(
     skipped: dict[str, int],
     optional: bool = False,
     maybe: tuple[str, ...] = (),
+    allow_empty: bool = False,
 ):
     """The columns as a float array (rows, len(columns)); a NaN or empty value in a ``nan_ok`` column skips
     the row (counted), anywhere else it is an error naming line and column. The columns of ``maybe`` that
     the header has follow ``columns``."""
-    got = _rows(path, columns, optional, maybe)
+    got = _rows(path, columns, optional, maybe, allow_empty)
     if got is None:
         return None, None, None
     where, rows = got
@@ -318,14 +419,25 @@ def _ids(name: str, what: str, ids: np.ndarray, lines: np.ndarray, col: int):
     return ids, {int(v): k for k, v in enumerate(ids)}
 
 
-def _lookup(name: str, column: str, values: np.ndarray, lines, col: int, index: dict, ids, listing: str):
-    """The index of each id in ``values``; an unknown or non-integer id names its line and column."""
+def _lookup(
+    name: str,
+    column: str,
+    values: np.ndarray,
+    lines,
+    col: int,
+    index: dict,
+    ids,
+    listing: str,
+    what: str | None = None,
+):
+    """The index of each id in ``values``; an unknown or non-integer id names its line and column (``what``:
+    the word for an id, by default the column's name less ``_id``)."""
     out = np.empty(len(values), dtype=np.int64)
     for k, v in enumerate(values):
         if v != int(v) or int(v) not in index:
             raise LogError(
-                f"{_at(name, lines[k], col, column)}: unknown {column[:-3]} {v:g}; "
-                f"{listing} has {', '.join(str(i) for i in ids)}"
+                f"{_at(name, lines[k], col, column)}: unknown {what or column[:-3]} {v:g}; "
+                f"{listing} has {', '.join(str(i) for i in ids) or 'none'}"
             )
         out[k] = index[int(v)]
     return out
@@ -357,12 +469,12 @@ def read_log(directory: str | os.PathLike[str], overrides: dict[str, object] | N
 
         config = from_mapping(LogConfig, apply_overrides({}, overrides or {}))
     skipped: dict[str, int] = {}
-    a, a_lines, a_cols = _table(d / "anchors.csv", ANCHOR_COLUMNS, (), skipped)
+    a, a_lines, a_cols = _table(d / "anchors.csv", ANCHOR_COLUMNS, (), skipped, allow_empty=True)
     ids, index = _ids("anchors.csv", "anchor", a[:, 0], a_lines, a_cols[0])
 
     imu, i_lines, i_cols = _table(d / "imu.csv", IMU_COLUMNS, IMU_COLUMNS[1:], skipped)
     _monotonic("imu.csv", imu[:, 0], i_lines, i_cols[0], strict=True)
-    uwb, u_lines, u_cols = _table(d / "uwb.csv", UWB_COLUMNS, ("range_m",), skipped)
+    uwb, u_lines, u_cols = _table(d / "uwb.csv", UWB_COLUMNS, ("range_m",), skipped, allow_empty=True)
     _monotonic("uwb.csv", uwb[:, 0], u_lines, u_cols[0], strict=False)
     anchor_index = _lookup("uwb.csv", "anchor_id", uwb[:, 1], u_lines, u_cols[1], index, ids, "anchors.csv")
     neg = np.flatnonzero(uwb[:, 2] < 0.0)
@@ -402,7 +514,56 @@ def read_log(directory: str | os.PathLike[str], overrides: dict[str, object] | N
             truth[:, 4:8] / norms[:, None],
         )
     _read_vision(d, log, skipped)
+    _read_height_baro(d, log, skipped)
+    _read_tdoa(d, log, index, skipped)
     return log
+
+
+def _read_height_baro(d: Path, log: Log, skipped: dict[str, int]) -> None:
+    """The optional ``height.csv`` (a downward range finder) and ``baro.csv`` (barometric altitude)."""
+    h, h_lines, h_cols = _table(d / "height.csv", HEIGHT_COLUMNS, ("range_m",), skipped, optional=True)
+    if h is not None:
+        _monotonic("height.csv", h[:, 0], h_lines, h_cols[0], strict=True)
+        neg = np.flatnonzero(h[:, 1] < 0.0)
+        if len(neg):
+            k = int(neg[0])
+            raise LogError(
+                f"{_at('height.csv', h_lines[k], h_cols[1], 'range_m')}: negative range {float(h[k, 1])!r}"
+            )
+        log.height_t, log.height_range = h[:, 0].copy(), h[:, 1].copy()
+    b, b_lines, b_cols = _table(d / "baro.csv", BARO_COLUMNS, ("height_m",), skipped, optional=True)
+    if b is not None:
+        _monotonic("baro.csv", b[:, 0], b_lines, b_cols[0], strict=True)
+        log.baro_t, log.baro_height = b[:, 0].copy(), b[:, 1].copy()
+
+
+def _read_tdoa(d: Path, log: Log, index: dict[int, int], skipped: dict[str, int]) -> None:
+    """The optional ``tdoa.csv``: anchors of ``anchors.csv``, two different ones per row, and a distance
+    difference no longer than their baseline (plus :data:`TDOA_BASELINE_TOL_M`)."""
+    td, lines, cols = _table(d / "tdoa.csv", TDOA_COLUMNS, ("ddist_m",), skipped, optional=True)
+    if td is None:
+        return
+    _monotonic("tdoa.csv", td[:, 0], lines, cols[0], strict=False)
+    ids = log.anchor_ids
+    a = _lookup("tdoa.csv", "anchor_a", td[:, 1], lines, cols[1], index, ids, "anchors.csv", "anchor")
+    b = _lookup("tdoa.csv", "anchor_b", td[:, 2], lines, cols[2], index, ids, "anchors.csv", "anchor")
+    same = np.flatnonzero(a == b)
+    if len(same):
+        k = int(same[0])
+        raise LogError(
+            f"{_at('tdoa.csv', lines[k], cols[2], 'anchor_b')}: anchor {int(td[k, 2])} is also anchor_a: a "
+            "distance difference needs two different anchors"
+        )
+    baseline = np.linalg.norm(log.anchors_nav[b] - log.anchors_nav[a], axis=1)
+    bad = np.flatnonzero(np.abs(td[:, 3]) > baseline + TDOA_BASELINE_TOL_M)
+    if len(bad):
+        k = int(bad[0])
+        raise LogError(
+            f"{_at('tdoa.csv', lines[k], cols[3], 'ddist_m')}: |{float(td[k, 3])!r}| is longer than the "
+            f"{baseline[k]:.3f} m between anchors {int(td[k, 1])} and {int(td[k, 2])} "
+            f"(+ {TDOA_BASELINE_TOL_M:g} m): no position has that distance difference"
+        )
+    log.tdoa_t, log.tdoa_a, log.tdoa_b, log.tdoa_ddist = td[:, 0].copy(), a, b, td[:, 3].copy()
 
 
 def _read_vision(d: Path, log: Log, skipped: dict[str, int]) -> None:
@@ -452,3 +613,11 @@ def read_markers(path: Path, skipped: dict[str, int] | None = None) -> tuple[np.
     mk, m_lines, m_cols = _table(Path(path), MARKER_COLUMNS, (), {} if skipped is None else skipped)
     mids, _ = _ids(Path(path).name, "marker", mk[:, 0], m_lines, m_cols[0])
     return mids, mk[:, 1:4].copy()
+
+
+def read_anchors(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """An ``anchors.csv`` file: the anchor ids (integers >= 0, each once) and their positions (n, 3), nav
+    [m]; LogError naming the line and column of a bad row."""
+    a, a_lines, a_cols = _table(Path(path), ANCHOR_COLUMNS, (), {})
+    ids, _ = _ids(Path(path).name, "anchor", a[:, 0], a_lines, a_cols[0])
+    return ids, a[:, 1:4].copy()
