@@ -10,7 +10,7 @@ PYTEST_ARGS ?=
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[test,bench,dask]'
+	$(PY) -m pip install -q -e '.[test,bench,dask,import]'
 	touch $(STAMP)
 
 # The swarm as processes with its dashboard (http://localhost:8080), at twice real time (a docking takes about
