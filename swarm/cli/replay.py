@@ -113,6 +113,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="HZ",
         help="add a downward camera seeing floor markers at HZ frames per second (vision.csv, markers.csv)",
     )
+    s.add_argument(
+        "--profile",
+        default=None,
+        metavar="NAME|FILE",
+        help="draw the range errors and IMU noise from this sensor profile (a sensors.toml, or a bundled "
+        "name such as real-crazyflie): offsets, take-off step, multipath, NLOS episodes, vibration "
+        "(default: the synthetic model)",
+    )
+    s.add_argument(
+        "--height",
+        type=positive_float("--height"),
+        default=None,
+        metavar="HZ",
+        help="add a downward range finder at HZ (height.csv)",
+    )
+    s.add_argument(
+        "--baro",
+        type=positive_float("--baro"),
+        default=None,
+        metavar="HZ",
+        help="add a barometer at HZ (baro.csv)",
+    )
     s.set_defaults(func=run_synth)
 
 
@@ -120,17 +142,31 @@ def run_synth(args: argparse.Namespace) -> int:
     from swarm.errors import ConfigError
     from swarm.logs.synthetic import SyntheticSpec, make_log
 
-    spec = SyntheticSpec(duration_s=args.duration, vision_rate_hz=args.vision or 0.0)
+    spec = SyntheticSpec(
+        duration_s=args.duration,
+        vision_rate_hz=args.vision or 0.0,
+        height_rate_hz=args.height or 0.0,
+        baro_rate_hz=args.baro or 0.0,
+    )
+    profile = None
+    if args.profile is not None:
+        from swarm.sensors.profile import load_profile
+
+        profile = load_profile(args.profile)
     if args.duration <= spec.static_s + spec.takeoff_s:
         raise ConfigError(
             f"--duration must exceed the static segment and take-off ({spec.static_s + spec.takeoff_s:g} s), "
             f"got {args.duration:g}"
         )
-    make_log(args.out, args.seed, spec)
-    files = "imu.csv, uwb.csv, anchors.csv, truth.csv, " + (
-        "vision.csv, markers.csv, " if args.vision else ""
+    make_log(args.out, args.seed, spec, profile)
+    files = (
+        "imu.csv, uwb.csv, anchors.csv, truth.csv, "
+        + ("vision.csv, markers.csv, " if args.vision else "")
+        + ("height.csv, " if args.height else "")
+        + ("baro.csv, " if args.baro else "")
     )
-    print(f"wrote {args.out}/ ({files}log.toml): {args.duration:g} s, seed {args.seed}")
+    what = "" if profile is None else f", sensor profile {profile.name!r}"
+    print(f"wrote {args.out}/ ({files}log.toml): {args.duration:g} s, seed {args.seed}{what}")
     return 0
 
 

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from swarm.core import rotations as rot
+from swarm.logs import phenomena as ph
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
@@ -74,6 +75,26 @@ class SyntheticSpec:
     marker_size_m: float = 0.15
     outlier_probability: float = 0.01
     outlier_m: float = 0.5
+    nlos_episode: tuple[int, float, float, float] | None = None
+    """``(anchor, t_start_s, duration_s, excess_m)``: one deterministic NLOS episode, every range of that
+    anchor in ``[t_start_s, t_start_s + duration_s)`` long by ``excess_m`` (None: none)."""
+    blackout: tuple[float, float] | None = None
+    """``(t_start_s, duration_s)``: no range at all in that window (no rows; None: none)."""
+    height_rate_hz: float = 0.0
+    """A downward range finder's rate (``height.csv``; 0: none)."""
+    height_sigma_m: float = 0.005
+    height_max_range_m: float = 4.0
+    height_min_cos_tilt: float = 0.866
+    """No return when tilted more than this (cos 30 deg)."""
+    height_ground_z_m: float = 0.0
+    """The floor's height in nav: the pad's IMU stands ``pad_m[2]`` above it."""
+    baro_rate_hz: float = 0.0
+    """A barometer's rate (``baro.csv``; 0: none)."""
+    baro_sigma_m: float = 0.2
+    baro_offset_m: float = 92.5
+    """The altitude of the nav origin the barometer reads (any constant) [m]."""
+    baro_drift_m_rts: float = 0.01
+    """The barometer's slow drift, a random walk [m/sqrt(s)] (weather, temperature)."""
 
 
 ANCHORS = np.array(
@@ -162,13 +183,26 @@ def _write(path: Path, header: str, rows: np.ndarray, fmt) -> None:
     np.savetxt(path, rows, delimiter=",", header=header, comments="", fmt=fmt)
 
 
-def make_log(directory, seed: int = 0, spec: SyntheticSpec | None = None) -> dict:
-    """Write a synthetic log into ``directory`` (created); returns the true biases and the NLOS anchor."""
+def make_log(directory, seed: int = 0, spec: SyntheticSpec | None = None, profile=None) -> dict:
+    """Write a synthetic log into ``directory`` (created); returns the true biases and the NLOS anchor.
+
+    ``profile`` (a :class:`swarm.sensors.profile.SensorProfile`, None: the model above, sample for sample
+    as before profiles existed) replaces the range error model and the IMU's noise by the profile's
+    (:mod:`swarm.logs.phenomena`): per-anchor offsets ``offset_m`` spread by ``offset_spread_m``, a step
+    ``takeoff_step_m`` (spread ``takeoff_step_spread_m``) from the take-off on (``t >= static_s``, the
+    rotors spin up and the vehicle leaves the pad), white noise ``ground_sigma_m`` before and ``sigma_m``
+    after, a Gauss-Markov multipath error, NLOS episodes and isolated outliers in flight, the IMU's white
+    noise densities and its vibration in flight. The scene stays the spec's: the trajectory, the range
+    rate, losses and jitter, the slow walk of the airborne biases, the one NLOS anchor. The main stream's
+    draws are the same with or without a profile, so a profile changes only what it models."""
     spec = spec or SyntheticSpec()
     rng = np.random.default_rng(seed)
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     T = spec.duration_s
+    imu_p = profile.imu if profile is not None else None
+    accel_noise = spec.accel_noise if imu_p is None else imu_p.accel_noise_m_s2_rthz
+    gyro_noise = spec.gyro_noise if imu_p is None else imu_p.gyro_noise_rad_s_rthz
 
     # IMU: jittered sample times, a gap, biases with a random walk
     n = int(T * spec.imu_rate_hz)
@@ -183,8 +217,11 @@ def make_log(directory, seed: int = 0, spec: SyntheticSpec | None = None) -> dic
     steps = np.diff(t_imu, prepend=0.0)[:, None]
     ba = ba0 + np.cumsum(rng.normal(size=(len(t_imu), 3)) * spec.accel_bias_rw * np.sqrt(steps), axis=0)
     bg = bg0 + np.cumsum(rng.normal(size=(len(t_imu), 3)) * spec.gyro_bias_rw * np.sqrt(steps), axis=0)
-    gyro = w + bg + rng.normal(size=w.shape) * spec.gyro_noise * math.sqrt(spec.imu_rate_hz)
-    acc = f + ba + rng.normal(size=f.shape) * spec.accel_noise * math.sqrt(spec.imu_rate_hz)
+    gyro = w + bg + rng.normal(size=w.shape) * gyro_noise * math.sqrt(spec.imu_rate_hz)
+    acc = f + ba + rng.normal(size=f.shape) * accel_noise * math.sqrt(spec.imu_rate_hz)
+    if imu_p is not None:
+        vib_g, vib_a = ph.vibration(seed, imu_p, t_imu >= spec.static_s)
+        gyro, acc = gyro + vib_g, acc + vib_a
     _write(
         d / "imu.csv",
         "t_s,gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,acc_x_m_s2,acc_y_m_s2,acc_z_m_s2",
@@ -200,8 +237,13 @@ def make_log(directory, seed: int = 0, spec: SyntheticSpec | None = None) -> dic
     p, _, q, _, _ = truth_at(spec, t_rng)
     tag = p + rot.quat_rotate(q, np.broadcast_to(np.array(spec.lever_arm_m), p.shape))
     true_range = np.linalg.norm(tag - ANCHORS[anchor], axis=1)
-    b0 = rng.uniform(*spec.range_bias_m, m)
-    step = rng.uniform(-spec.range_bias_step_m, spec.range_bias_step_m, m)
+    uwb_p = profile.uwb if profile is not None else None
+    if uwb_p is None:
+        b0 = rng.uniform(*spec.range_bias_m, m)
+        step = rng.uniform(-spec.range_bias_step_m, spec.range_bias_step_m, m)
+    else:  # the same draws (uniform(a, b, m) is a + (b - a) times m doubles), spread as the profile says
+        b0 = ph.spread_draw(uwb_p.offset_m, uwb_p.offset_spread_m, rng.uniform(0.0, 1.0, m))
+        step = ph.spread_draw(uwb_p.takeoff_step_m, uwb_p.takeoff_step_spread_m, rng.uniform(0.0, 1.0, m))
     airborne = t_rng >= spec.static_s + spec.takeoff_s
     walk = np.zeros((len(t_rng), m))
     walk[1:] = np.cumsum(
@@ -209,15 +251,32 @@ def make_log(directory, seed: int = 0, spec: SyntheticSpec | None = None) -> dic
     )
     walk -= walk[np.searchsorted(t_rng, spec.static_s + spec.takeoff_s).clip(0, len(t_rng) - 1)]
     walk[~airborne] = 0.0
-    bias = b0[anchor] + airborne * (step[anchor] + walk[np.arange(len(t_rng)), anchor])
-    z = true_range + bias + rng.normal(size=len(t_rng)) * spec.range_sigma_m
+    white = rng.normal(size=len(t_rng))
+    episodes: list[ph.Episode] = []
+    range_outliers = np.zeros(len(t_rng), dtype=bool)
+    if uwb_p is None:
+        bias = b0[anchor] + airborne * (step[anchor] + walk[np.arange(len(t_rng)), anchor])
+        z = true_range + bias + white * spec.range_sigma_m
+    else:
+        lifted = t_rng >= spec.static_s
+        bias = b0[anchor] + lifted * step[anchor] + airborne * walk[np.arange(len(t_rng)), anchor]
+        sigma = np.where(lifted, uwb_p.sigma_m, uwb_p.ground_sigma_m)
+        extra, episodes, range_outliers = ph.range_errors(seed, uwb_p, t_rng, anchor, lifted, m, T)
+        z = true_range + bias + white * sigma + extra
     nlos = (anchor == spec.nlos_anchor) & airborne & (rng.random(len(t_rng)) < spec.nlos_probability)
     z[nlos] += rng.exponential(spec.nlos_excess_m, nlos.sum())
     lost = rng.random(len(t_rng)) < spec.range_loss
+    if spec.nlos_episode is not None:
+        a_ep, t0_ep, dur_ep, excess_ep = spec.nlos_episode
+        forced = ph.Episode(int(a_ep), float(t0_ep), float(t0_ep + dur_ep), float(excess_ep))
+        z += ph.episode_excess(t_rng, anchor, [forced])
+        episodes = [*episodes, forced]
     z[lost] = np.nan  # a lost reply: the logger writes nan, the reader skips and counts the row
-    _write(
-        d / "uwb.csv", "t_s,anchor_id,range_m", np.column_stack([t_rng, anchor, z]), ["%.6f", "%d", "%.6f"]
-    )
+    rows = np.column_stack([t_rng, anchor, z])
+    if spec.blackout is not None:
+        b_from, b_for = spec.blackout
+        rows = rows[~((t_rng >= b_from) & (t_rng < b_from + b_for))]
+    _write(d / "uwb.csv", "t_s,anchor_id,range_m", rows, ["%.6f", "%d", "%.6f"])
     _write(
         d / "anchors.csv",
         "anchor_id,x_m,y_m,z_m",
@@ -229,6 +288,7 @@ def make_log(directory, seed: int = 0, spec: SyntheticSpec | None = None) -> dic
     pt, _, qt, _, _ = truth_at(spec, t_truth)
     _write(d / "truth.csv", "t_s,x_m,y_m,z_m,qx,qy,qz,qw", np.column_stack([t_truth, pt, qt]), "%.7f")
 
+    extra_toml, baro_drift = _write_height_baro(d, seed, spec)
     vision_toml = ""
     outliers = np.zeros(0, dtype=np.int64)
     if spec.vision_rate_hz > 0:
@@ -244,11 +304,11 @@ camera_quaternion = [1.0, 0.0, 0.0, 0.0]   # camera +z along body -z: looking do
     (
         d / "log.toml"
     ).write_text(f"""# Synthetic flight (swarm synth-log --seed {seed}): {T:g} s, {m} anchors, anchor {spec.nlos_anchor} NLOS.
-name = "synthetic flight, seed {seed}"
+name = "synthetic flight, seed {seed}"{"" if profile is None else f"  # sensor profile {profile.name!r}"}
 
 [estimator]
-accel_noise = {spec.accel_noise:g}
-gyro_noise = {spec.gyro_noise:g}
+accel_noise = {_flight_density(accel_noise, imu_p and imu_p.accel_vibration_m_s2, spec):g}
+gyro_noise = {_flight_density(gyro_noise, imu_p and imu_p.gyro_vibration_rad_s, spec):g}
 accel_bias_rw = {max(spec.accel_bias_rw, 1e-4):g}
 gyro_bias_rw = {max(spec.gyro_bias_rw, 1e-6):g}
 range_bias = true
@@ -264,8 +324,8 @@ position_m = [{pad}]
 # the pad is surveyed: the first position is known to ~2 cm
 sigma_position_m = 0.02
 yaw_deg = {spec.yaw0_deg:g}
-sigma_range_bias_m = {max(spec.range_bias_step_m, 0.03):g}
-{vision_toml}""")  # noqa: E501
+sigma_range_bias_m = {max(spec.range_bias_step_m, 0.03) if uwb_p is None else max(abs(uwb_p.takeoff_step_m) + uwb_p.takeoff_step_spread_m, 0.03):g}
+{vision_toml}{extra_toml}""")  # noqa: E501
     return {
         "accel_bias": ba0,
         "gyro_bias": bg0,
@@ -275,7 +335,47 @@ sigma_range_bias_m = {max(spec.range_bias_step_m, 0.03):g}
         "range_bias_final": b0 + step + walk[-1],
         "nlos_t": t_rng[nlos & ~lost],
         "vision_outliers": outliers,
+        "profile": None if profile is None else profile.name,
+        "takeoff_s": spec.static_s,
+        "nlos_episodes": episodes,
+        "range_outliers_t": t_rng[range_outliers & ~lost],
+        "baro_drift_final_m": baro_drift,
     }
+
+
+def _flight_density(density: float, vibration: float | None, spec: SyntheticSpec) -> float:
+    """The white noise density a filter should assume in flight: the sensor's own and the vibration's
+    spread ``v`` per sample at the IMU rate ``r`` as a density ``v / sqrt(r)``, added in power."""
+    return math.hypot(density, (vibration or 0.0) / math.sqrt(spec.imu_rate_hz))
+
+
+def _write_height_baro(d: Path, seed: int, spec: SyntheticSpec) -> tuple[str, float | None]:
+    """``height.csv`` and ``baro.csv`` when the spec asks for them (:mod:`swarm.logs.phenomena`), and their
+    log.toml tables (written only once log.toml knows them: the reader refuses an unknown table). Returns
+    the tables' text and the barometer's final drift (None without a barometer)."""
+    from swarm.logs.reader import LogConfig
+
+    known = LogConfig.__dataclass_fields__
+    toml, drift = "", None
+    if spec.height_rate_hz > 0:
+        t = np.arange(0.0, spec.duration_s, 1.0 / spec.height_rate_hz)
+        p, _, q, _, _ = truth_at(spec, t)
+        cos_tilt = 1.0 - 2.0 * (q[:, 0] ** 2 + q[:, 1] ** 2)  # R_22 of body -> nav
+        _write(d / "height.csv", "t_s,range_m", ph.height_rows(seed, t, p[:, 2], cos_tilt, spec), "%.6f")
+        if "height" in known:
+            toml += (
+                f"\n[height]\nsigma_m = {spec.height_sigma_m:g}\nmax_range_m = {spec.height_max_range_m:g}\n"
+                f"min_cos_tilt = {spec.height_min_cos_tilt:g}\nground_z_m = {spec.height_ground_z_m:g}\n"
+            )
+    if spec.baro_rate_hz > 0:
+        t = np.arange(0.0, spec.duration_s, 1.0 / spec.baro_rate_hz)
+        p, _, _, _, _ = truth_at(spec, t)
+        rows, walk = ph.baro_rows(seed, t, p[:, 2], spec)
+        _write(d / "baro.csv", "t_s,height_m", rows, "%.6f")
+        drift = float(walk[-1])
+        if "baro" in known:
+            toml += f"\n[baro]\nsigma_m = {spec.baro_sigma_m:g}\n"
+    return toml, drift
 
 
 def _write_vision(d: Path, spec: SyntheticSpec, rng: np.random.Generator) -> np.ndarray:
