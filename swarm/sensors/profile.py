@@ -71,7 +71,7 @@ class AnchorProfile:
     ground_sigma_m: float | None = None
     """Robust sigma (1.4826 MAD) of the residual on the ground [m]."""
     sigma_m: float | None = None
-    """Robust sigma of the clear in-flight residual [m] (white and Gauss-Markov parts together)."""
+    """White noise sigma of the clear in-flight residual [m] (the Gauss-Markov part apart)."""
     gm_sigma_m: float | None = None
     """Stationary sigma of the time-correlated (Gauss-Markov) part of the in-flight residual [m]."""
     gm_tau_s: float | None = None
