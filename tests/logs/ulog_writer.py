@@ -38,21 +38,23 @@ def _fmt(fields: list[tuple[str, str]]) -> str:
     return out
 
 
-def ulog_bytes(topics: dict[str, list[tuple[str, str]]], data: list[tuple[str, tuple]], multi=None) -> bytes:
+def ulog_bytes(topics: dict[str, list[tuple[str, str]]], data: list[tuple], instances=None) -> bytes:
     """A ULog file: ``topics`` maps a topic name to its fields ``(type, name)`` (the first must be
-    ``uint64_t timestamp``); ``data`` is ``(topic, values)`` in file order, values flat (an array field takes
-    as many values as its length). ``multi`` maps a topic to its multi_id (default 0)."""
+    ``uint64_t timestamp``); ``data`` is ``(topic, values)`` or ``((topic, multi_id), values)`` in file
+    order, values flat (an array field takes as many values as its length). ``instances`` maps a topic to
+    its multi_ids (default ``(0,)``): one subscription each."""
     out = bytearray(MAGIC + bytes([1]) + struct.pack("<Q", 0))
     out += _msg(b"B", bytes(8) + bytes(8) + bytes(24))
     for name, fields in topics.items():
         text = name + ":" + "".join(f"{t} {n};" for t, n in fields)
         out += _msg(b"F", text.encode())
     ids = {}
-    for k, name in enumerate(topics):
-        ids[name] = k
-        mid = (multi or {}).get(name, 0)
-        out += _msg(b"A", struct.pack("<BH", mid, k) + name.encode())
+    for name in topics:
+        for mid in (instances or {}).get(name, (0,)):
+            ids[(name, mid)] = len(ids)
+            out += _msg(b"A", struct.pack("<BH", mid, ids[(name, mid)]) + name.encode())
     fmts = {name: _fmt(fields) for name, fields in topics.items()}
-    for name, values in data:
-        out += _msg(b"D", struct.pack("<H", ids[name]) + struct.pack(fmts[name], *values))
+    for key, values in data:
+        name, mid = key if isinstance(key, tuple) else (key, 0)
+        out += _msg(b"D", struct.pack("<H", ids[(name, mid)]) + struct.pack(fmts[name], *values))
     return bytes(out)
