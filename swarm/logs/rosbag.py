@@ -87,7 +87,9 @@ def _read(path: Path, topics: dict[str, str]) -> dict[str, list]:
                         f"{path.name}: no topic {topic!r} for --{role}-topic (the bag has "
                         f"{', '.join(f'{t} ({c.msgtype})' for t, c in sorted(have.items())) or 'none'})"
                     )
-            role_of = {topic: role for role, topic in topics.items()}
+            role_of: dict[str, list[str]] = {}
+            for role, topic in topics.items():
+                role_of.setdefault(topic, []).append(role)
             cons = [c for c in reader.connections if c.topic in role_of]
             for k, (con, bag_ns, raw) in enumerate(reader.messages(connections=cons)):
                 try:
@@ -96,7 +98,8 @@ def _read(path: Path, topics: dict[str, str]) -> dict[str, list]:
                     raise LogError(
                         f"{path.name}: message {k} on {con.topic} cannot be decoded: {exc}"
                     ) from None
-                out[role_of[con.topic]].append((_stamp_ns(msg, bag_ns), con.msgtype, msg))
+                for role in role_of[con.topic]:
+                    out[role].append((_stamp_ns(msg, bag_ns), con.msgtype, msg))
     except AnyReaderError as exc:
         raise LogError(f"{path.name}: not a readable ROS bag: {exc}") from None
     except OSError as exc:
