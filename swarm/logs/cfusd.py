@@ -9,7 +9,7 @@ timestamp (version 1: u32 milliseconds; version 2: u64 microseconds) and the pac
 The last 4 bytes are the CRC32 (zlib) of everything before them. Every integer is little-endian.
 
 Decoding walks the events once to find their offsets (they differ in size, so they must be walked), then
-reads each event type's fields with one numpy structured view: a 4 MB log decodes in ~0.1 s.
+reads each event type's fields with one numpy structured view: a 4 MB log decodes in ~0.15-0.2 s.
 
 Damage: a bad magic, an unknown version, a header cut short or malformed, an event id that no definition
 names, or a CRC mismatch of a whole file is refused with a :class:`~swarm.errors.LogError` naming the file
