@@ -77,15 +77,18 @@ class AllanFit:
 def allan_fit(y: np.ndarray, dt: float, tau_white_min_s: float = 0.02) -> AllanFit:
     """Allan deviation of the (n, 3) static samples ``y`` at ``dt`` and its noise terms (module docstring).
     ``N`` is the geometric mean of ``adev * sqrt(tau)``, weighted by ``1 / tau`` (the number of independent
-    clusters), over ``tau`` in ``[tau_white_min_s, max(T/10, tau_white_min_s)]`` (T the segment's length),
-    clamped at 1 s; the slope over that range is reported, so a
-    caller can see whether white noise dominates there (a low-pass filter in the sensor flattens the
-    shortest taus: the range starts above them)."""
+    clusters), over ``tau`` from ``lo`` to ``max(T / 10, 2 lo)`` clamped at 1 s (T the segment's length),
+    ``lo`` the larger of ``tau_white_min_s`` and three times the tau of the curve's maximum: a low-pass
+    filter in the sensor (a Crazyflie's firmware filters its gyro and accelerometer) makes the curve rise
+    as ``sqrt(tau)`` up to about its time constant and bend over; the -1/2 line starts a few times past
+    the hump. The slope over that range is reported, so a caller can see whether white noise dominates
+    there."""
     y = np.asarray(y, dtype=float)
     tau, adev, _ = overlapping_adev(y - y.mean(axis=0), dt)
     T = len(y) * dt
-    hi = min(1.0, max(T / 10.0, tau_white_min_s))
-    sel = (tau >= tau_white_min_s * 0.999) & (tau <= hi * 1.001)
+    lo = max(tau_white_min_s, 3.0 * float(np.max(tau[np.argmax(adev, axis=0)])))
+    hi = min(1.0, max(T / 10.0, 2.0 * lo))
+    sel = (tau >= lo * 0.999) & (tau <= hi * 1.001)
     if sel.sum() < 2:
         sel = np.zeros(len(tau), dtype=bool)
         sel[: min(3, len(tau))] = True

@@ -293,7 +293,8 @@ def fit_log(log: Log, prm: FitParams | None = None, source: str = "", name: str 
     for a in range(m):
         sel = log.uwb_anchor == a
         if not (flight & sel).any():
-            notes.append(f"anchor {int(log.anchor_ids[a])}: no range in flight, left out")
+            what = "no range in flight" if sel.any() else "no range in the log"
+            notes.append(f"anchor {int(log.anchor_ids[a])}: {what}, left out")
             continue
         if not (ground & sel).any():
             notes.append(f"anchor {int(log.anchor_ids[a])}: no range on the ground (no ground bias)")
@@ -415,8 +416,9 @@ def _imu(log: Log, intervals, prm: FitParams, notes: list[str]):
     if T < 10.0:
         notes.append(
             f"static segment of {T:.1f} s: the Allan deviation reaches tau = {gyro.tau_s[-1]:.2f} s only; "
-            f"N is read on tau {gyro.white_taus_s[0]:.2g}-{gyro.white_taus_s[1]:.2g} s, extrapolated along "
-            "the -1/2 line to 1 s"
+            f"N is read on tau {gyro.white_taus_s[0]:.2g}-{gyro.white_taus_s[1]:.2g} s (gyro), "
+            f"{accel.white_taus_s[0]:.2g}-{accel.white_taus_s[1]:.2g} s (accelerometer), extrapolated "
+            "along the -1/2 line to 1 s"
         )
     for what, a in (("gyro", gyro), ("accelerometer", accel)):
         if not a.floor_reached:

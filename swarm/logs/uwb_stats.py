@@ -9,10 +9,14 @@ reflection), and for a while: the reflected path's extra length changes slowly w
 NLOS episode is a *sustained positive* excursion of the residual above the clear distribution, and the
 clear distribution is the residual's lowest dense mode. The method:
 
-1. start from the midpoint and length of the shortest half of the samples (the "shorth", Rousseeuw &
-   Leroy 1988, Statistica Neerlandica 42(2)): it locates the densest half even when more than half of the
-   samples are long, where a median would be dragged up; its scale is the length / 1.349 (the shortest half
-   of a Gaussian is ``2 * 0.6745 sigma``);
+1. start from the lowest dense mode: among the intervals holding a tenth of the samples, those at most
+   3 times as long as the shortest are "dense" (a sample density at least a third of the peak's); the
+   lowest run of dense intervals is the clear mode, its location the midpoint of the shortest interval in
+   that run (a shortest-interval mode estimator, the "shorth" of Rousseeuw & Leroy 1988, Statistica
+   Neerlandica 42(2), taken on a tenth and from below: a tight NLOS mode holding more than half of the
+   samples is denser than the clear one and would win a plain shorth; up to 3 times denser, the clear
+   mode still counts as dense); its scale from the samples below the location, which NLOS never reaches:
+   ``1.4826 median(loc - x)`` (a half-normal's median is ``0.6745 sigma``);
 2. flag the ranges whose running median over ``window`` ranges lies more than ``k`` sigmas above the clear
    location (the running median keeps an episode whole through single noisy ranges, and ignores one-off
    spikes); a run of flagged ranges that lasts ``min_duration_s`` and holds ``min_ranges`` ranges is an
@@ -56,8 +60,6 @@ from scipy import ndimage, optimize
 
 MAD_SCALE = 1.4826
 """1 / Phi^-1(3/4): MAD * this is a Gaussian's sigma."""
-SHORTH_SCALE = 1.349
-"""Length of a Gaussian's shortest half in sigmas (2 Phi^-1(3/4))."""
 
 
 def robust(x: np.ndarray) -> tuple[float, float]:
@@ -68,17 +70,22 @@ def robust(x: np.ndarray) -> tuple[float, float]:
     return m, float(MAD_SCALE * np.median(np.abs(x - m)))
 
 
-def shorth(x: np.ndarray) -> tuple[float, float]:
-    """Midpoint of the shortest interval holding half of ``x`` and its length / 1.349 (Rousseeuw & Leroy
-    1988)."""
-    xs = np.sort(x)
+def lowest_mode(x: np.ndarray, share: float = 0.1, slack: float = 3.0) -> tuple[float, float]:
+    """Location and scale of the lowest dense mode of ``x`` (module docstring, step 1)."""
+    xs = np.sort(np.asarray(x, dtype=float))
     n = len(xs)
-    h = n // 2 + 1
-    if n < 3:
+    h = max(2, math.ceil(share * n))
+    if n < 8 or h >= n:
         return robust(x)
     widths = xs[h - 1 :] - xs[: n - h + 1]
-    i = int(np.argmin(widths))
-    return 0.5 * float(xs[i] + xs[i + h - 1]), float(widths[i]) / SHORTH_SCALE
+    dense = widths <= slack * widths.min()
+    first = int(np.argmax(dense))
+    run_end = first + int(np.argmin(dense[first:])) if not dense[first:].all() else len(dense)
+    i = first + int(np.argmin(widths[first:run_end]))
+    loc = 0.5 * float(xs[i] + xs[i + h - 1])
+    below = loc - xs[xs < loc]
+    scale = MAD_SCALE * float(np.median(below)) if len(below) >= 3 else float(widths[i])
+    return loc, scale
 
 
 @dataclass(frozen=True)
@@ -119,7 +126,7 @@ def split_nlos(
         return NlosSplit(loc, sig, np.full(n, -1), [])
     dt = float(np.median(np.diff(t))) if interval_s is None else interval_s
     smooth = ndimage.median_filter(r, size=window, mode="nearest")
-    loc, sig = shorth(r)
+    loc, sig = lowest_mode(r)
     label = np.full(n, -1)
     episodes: list[tuple[float, float, float]] = []
     for _ in range(10):
