@@ -63,7 +63,8 @@ class AllanFit:
     noise_density: np.ndarray
     """N per axis, the white-noise (random walk) coefficient [unit * sqrt(s)] = [unit / sqrt(Hz)]."""
     bias_instability: np.ndarray
-    """B per axis = min adev / 0.664 [unit] (an upper bound when the floor is not reached)."""
+    """B per axis = min adev / 0.664 [unit], the minimum taken from the white range's start on (an upper
+    bound when the floor is not reached)."""
     tau_min_s: np.ndarray
     """Where each axis' minimum lies [s]."""
     floor_reached: bool
@@ -99,7 +100,9 @@ def allan_fit(y: np.ndarray, dt: float, tau_white_min_s: float = 0.02) -> AllanF
     slope = (
         float(np.mean([np.polyfit(lt, la[:, k], 1)[0] for k in range(la.shape[1])])) if len(lt) > 1 else -0.5
     )
-    imin = np.argmin(adev, axis=0)
+    # the floor is looked for past the low-pass hump (below it the filter, not the sensor, shapes the curve)
+    start = int(np.flatnonzero(sel)[0])
+    imin = start + np.argmin(adev[start:], axis=0)
     floor = bool(np.all(imin < len(tau) - 1))
     return AllanFit(
         tau,
