@@ -183,11 +183,11 @@ def _airborne_intervals(t: np.ndarray, h: np.ndarray, prm: FitParams) -> list[tu
     threshold, runs of either state shorter than the dwell absorbed into their neighbours."""
     raw = h > prm.airborne_height_m
     for state in (True, False):  # drop short hops, then fill short dips
-        for a, b in uwb_stats._runs(raw == state):
+        for a, b in uwb_stats.runs(raw == state):
             inner = a > 0 and b < len(t) if not state else True
             if inner and t[b - 1] - t[a] < prm.airborne_dwell_s:
                 raw[a:b] = not state
-    return [(float(t[a]), float(t[b - 1])) for a, b in uwb_stats._runs(raw)]
+    return [(float(t[a]), float(t[b - 1])) for a, b in uwb_stats.runs(raw)]
 
 
 def _phase(t: np.ndarray, intervals, margin: float) -> tuple[np.ndarray, np.ndarray]:

@@ -102,7 +102,7 @@ class NlosSplit:
     """Each episode's ``(start_s, end_s, mean excess over location_m)``."""
 
 
-def _runs(flag: np.ndarray) -> list[tuple[int, int]]:
+def runs(flag: np.ndarray) -> list[tuple[int, int]]:
     """``[start, stop)`` of each run of True."""
     d = np.diff(np.concatenate([[0], flag.astype(np.int8), [0]]))
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
@@ -133,7 +133,7 @@ def split_nlos(
         thr = loc + k * max(sig, 1e-6)
         new = np.full(n, -1)
         episodes = []
-        for a, b in _runs(smooth > thr):
+        for a, b in runs(smooth > thr):
             if b - a >= min_ranges and t[b - 1] - t[a] + dt >= min_duration_s:
                 new[a:b] = len(episodes)
                 episodes.append((float(t[a]), float(t[b - 1] + dt), 0.0))

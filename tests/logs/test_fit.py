@@ -36,6 +36,17 @@ def test_the_flight_phases_come_from_the_truth_height(fitted):
     assert r.static_s[1] == pytest.approx(r.takeoff_s - FitParams().static_margin_s)
 
 
+def test_a_change_of_phase_must_hold_the_dwell():
+    from swarm.logs.fit import _airborne_intervals
+
+    t = np.arange(0.0, 30.0, 0.01)
+    h = np.where((t >= 10.0) & (t < 25.0), 0.5, 0.0)
+    h[(t >= 3.0) & (t < 3.3)] = 0.5  # a 0.3 s hop on the ground (a bump of the mocap, a nudge): not a flight
+    h[(t >= 15.0) & (t < 15.2)] = 0.0  # a 0.2 s dip in flight (a mocap glitch): still one flight
+    got = _airborne_intervals(t, h, FitParams(airborne_dwell_s=0.5))
+    assert got == [(pytest.approx(10.0), pytest.approx(24.99))]
+
+
 def test_ground_bias_and_sigma_per_anchor(fitted):
     _, drawn, r = fitted
     for a in r.anchors:
