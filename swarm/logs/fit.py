@@ -288,7 +288,10 @@ def fit_log(log: Log, prm: FitParams | None = None, source: str = "", name: str 
         raise LogError(f"uwb.csv: no range in flight ({len(intervals)} airborne intervals from truth.csv)")
     m = len(log.anchor_ids)
     intervals_by = [np.diff(log.uwb_t[flight & (log.uwb_anchor == a)]) for a in range(m)]
-    dt = float(np.median([np.median(d) for d in intervals_by if len(d) > 10]))
+    per_anchor = [float(np.median(d)) for d in intervals_by if len(d) > 10]
+    if not per_anchor:
+        raise LogError(f"uwb.csv: no anchor has more than 11 ranges in flight ({int(flight.sum())} in all)")
+    dt = float(np.median(per_anchor))
     anchors, acs = [], []
     for a in range(m):
         sel = log.uwb_anchor == a
