@@ -128,6 +128,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             bp.add_argument("--tdma", action="store_true", default=None,
                             help="the tags share one UWB channel (uwb.tdma): each ranges once per TDMA "
                                  "frame, ~238/N times a second for N tags, not 50")  # fmt: skip
+    _add_peer(benches)
 
 
 def _add_flags(p: argparse.ArgumentParser, default) -> None:
@@ -155,6 +156,64 @@ def run(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc.strerror}") from exc
         log.info("wrote %s", args.json)
+    return 0
+
+
+def _add_peer(benches: argparse._SubParsersAction) -> None:
+    """``swarm bench peer LOG --util-eskf DIR``: not one of :data:`BENCHES` (it needs a log and the
+    user's checkout of a peer's code, so a bare ``swarm bench`` does not run it)."""
+    text = "the UTIL dataset authors' ESKF (your checkout) on a TDoA log, scored as swarm replay scores"
+    bp = benches.add_parser("peer", help=text, description=text)
+    bp.add_argument("log", metavar="LOG", help="a log folder with tdoa.csv and truth.csv (docs/logs.md)")
+    bp.add_argument(
+        "--util-eskf",
+        dest="util_eskf",
+        required=True,
+        metavar="DIR",
+        help="a checkout of utiasDSL/util-uwb-dataset, or its scripts/estimation folder",
+    )
+    bp.add_argument(
+        "--mode",
+        default="auto",
+        choices=("auto", "tdoa2", "tdoa3"),
+        help="TDoA2 keeps only the 8 ring pairs, as their main.py (auto: from the pairs)",
+    )
+    bp.add_argument(
+        "--span",
+        default="full",
+        choices=("full", "airborne"),
+        help="the whole log (default), or only where the truth is 0.2 m above its start",
+    )
+    bp.add_argument(
+        "--initial",
+        default="truth",
+        choices=("truth", "authors"),
+        help="initial position: the truth's (default) or main.py's (1.25, 0, 0.07)",
+    )
+    bp.add_argument(
+        "--downsample",
+        type=int,
+        default=8,
+        metavar="N",
+        help="every N-th IMU sample and TDoA row of a pair (main.py: 8)",
+    )
+    add_output_file(bp, "--json", "write the results as JSON", default=argparse.SUPPRESS)
+    bp.set_defaults(func=_peer)
+
+
+def _peer(args: argparse.Namespace) -> int:
+    from swarm.bench import peer_util
+
+    cfg = peer_util.PeerConfig(
+        mode=args.mode, downsample=args.downsample, initial=args.initial, span=args.span
+    )
+    record = peer_util.run_peer(args.log, args.util_eskf, cfg)
+    print(peer_util.format_report(record))
+    if args.json is not None:
+        try:
+            args.json.write_text(json.dumps(_finite_or_null(record), indent=2) + "\n")
+        except OSError as exc:
+            raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc.strerror}") from exc
     return 0
 
 
