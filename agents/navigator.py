@@ -96,7 +96,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     from swarm.logs.online import OnlineNavigator
     from swarm.logs.reader import LogConfig
     from swarm.transport.keys import Keys, check_id
-    from swarm.transport.messages import DropCounter, Event, Imu, Uwb, Vision, encode
+    from swarm.transport.messages import DropCounter, Event, Imu, Rangefinder, Uwb, Vision, encode
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import open_session, subscribe_decoded, zenoh_args_from
 
@@ -135,6 +135,11 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
             if m.range_m is not None:
                 nav.uwb(m.t_s, m.anchor_id, m.range_m)
 
+        def on_rangefinder(_key: str, m: Rangefinder) -> None:
+            last[0], last[1] = time.monotonic(), last[1] + 1
+            if m.range_m is not None:
+                nav.height(m.t_s, m.range_m)
+
         def on_vision(key: str, m: Vision) -> None:
             last[0], last[1] = time.monotonic(), last[1] + 1
             if m.kind != "features":
@@ -151,6 +156,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
         subscribe_decoded(session, keys.imu(args.id), Imu, on_imu, drops)
         subscribe_decoded(session, keys.uwb(args.id), Uwb, on_uwb, drops)
         subscribe_decoded(session, keys.vision(args.id), Vision, on_vision, drops)
+        subscribe_decoded(session, keys.rangefinder(args.id), Rangefinder, on_rangefinder, drops)
         print(f"navigator {args.id} ready", flush=True)
 
         def publish(final: bool = False) -> None:
@@ -160,7 +166,9 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
             for ev in events:
                 data = {k: v for k, v in ev.items() if k not in ("t_s", "kind")}
                 pub_ev.put(encode(Event(ev["t_s"], ev["kind"], data)))
-                _LOG.warning("%s at %.2f s: %s", ev["kind"], ev["t_s"], ev.get("reason", ev.get("fault", "")))
+                level = logging.INFO if ev["kind"] in ("takeoff", "landing") else logging.WARNING
+                why = ev.get("reason", ev.get("fault", ""))
+                _LOG.log(level, "%s at %.2f s: %s", ev["kind"], ev["t_s"], why)
 
         while not stop.wait(0.01):
             publish()

@@ -14,8 +14,10 @@ from swarm.config import load_toml
 from swarm.core.imu_filter import ImuFilterParams
 from swarm.core.landing import LandingGuidanceParams
 from swarm.core.pad_vision import PadBoardParams, PadCameraParams
+from swarm.core.range_errors import check_range_errors
 from swarm.errors import ConfigError
 from swarm.kinds.quadrotor import QuadrotorParams
+from swarm.sensors.options import SensorsSpec, apply_sensor_profile
 
 Vec3 = tuple[float, float, float]
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
@@ -73,6 +75,17 @@ class LandingImu:
     gyro_noise: float = 0.001
     accel_bias_m_s2: float = 0.02
     gyro_bias_rad_s: float = 0.002
+    vibration_accel_m_s2: float = 0.0
+    """Extra white spread of the accelerometer in flight (rotor vibration), a standard deviation per sample,
+    not a density [m/s^2] (real Crazyflie: 0.095-0.12 in flight, 0.008-0.010 on the ground; 0: none)."""
+    vibration_gyro_rad_s: float = 0.0
+    """The same for the gyro [rad/s] (real Crazyflie: 0.03-0.05 in flight, 0.002-0.003 on the ground)."""
+
+    def __post_init__(self) -> None:
+        for name in ("vibration_accel_m_s2", "vibration_gyro_rad_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"imu.{name} must be a finite number >= 0, got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -85,6 +98,35 @@ class LandingUwb:
     sigma_m: float = 0.10
     max_range_m: float = 15.0
     lever_arm_m: Vec3 = (0.0, 0.0, 0.05)
+    # The range errors of real flights (swarm.core.range_errors; DESIGN.md sec. 11): all off by default.
+    offset_m: float = 0.0
+    """Common range offset [m] (an antenna delay: real Loco Positioning ranges read short, -0.17..-0.36)."""
+    offset_spread_m: float = 0.0
+    """Standard deviation of the per-anchor offsets around ``offset_m`` (uniform, drawn per run) [m]."""
+    takeoff_bias_step_m: float = 0.0
+    """Mean ground-to-air bias step [m], added while the UAV is off the ground."""
+    takeoff_bias_step_spread_m: float = 0.0
+    """Standard deviation of that step over the anchors (uniform, drawn per run and UAV) [m]."""
+    multipath_sigma_m: float = 0.0
+    """Stationary sigma of the time-correlated multipath error in flight (Gauss-Markov, per anchor) [m]."""
+    multipath_tau_s: float = 1.0
+    """Its correlation time [s]."""
+    nlos_episode_rate_hz: float = 0.0
+    """Onset rate of sustained NLOS episodes per anchor in flight [1/s] (0: none)."""
+    nlos_episode_s: float = 4.0
+    """Mean length of an episode (exponential) [s]."""
+    nlos_episode_excess_m: float = 0.3
+    """Mean excess of an episode's ranges [m] (uniform in [0.5, 1.5] times this, per episode)."""
+    outlier_probability: float = 0.0
+    """Probability that a range is an isolated outlier, long by an exponential excess."""
+    outlier_excess_m: float = 1.0
+    """The outliers' mean excess [m]."""
+
+    def __post_init__(self) -> None:
+        check_range_errors(self)
+        if not (isinstance(self.outlier_probability, int | float) and 0.0 <= self.outlier_probability <= 1.0):
+            raise ConfigError(f"uwb.outlier_probability must be in [0, 1], got {self.outlier_probability!r}")
+        _check_positive(self, ("outlier_excess_m",), "uwb.")
 
 
 @dataclass(frozen=True)
@@ -214,13 +256,20 @@ class LandingScenario:
     gnss: LandingGnss = LandingGnss()
     rangefinder: LandingRangefinder = LandingRangefinder()
     initial: LandingInitial = LandingInitial()
-    estimator: ImuFilterParams = field(default_factory=lambda: ImuFilterParams(range_bias=False, huber_k=2.0))
+    estimator: ImuFilterParams = field(
+        default_factory=lambda: ImuFilterParams(
+            range_bias=False, range_common_offset=False, range_gm=False, range_bias_rw=0.01, huber_k=2.0
+        )
+    )
     landing: LandingGuidanceParams = field(default_factory=LandingGuidanceParams)
     faults: LandingFaults = LandingFaults()
     dispersions: LandingDispersions = LandingDispersions()
     kinds: LandingKinds = LandingKinds()
     fleet: tuple[FleetUav, ...] = ()
     """Several UAVs, each with its pad (``landing-swarm.toml``); empty: the one ``[vehicle]`` on ``[pad]``."""
+    sensors: SensorsSpec = field(default_factory=SensorsSpec)
+    """A sensor profile whose numbers fill the ``[uwb]`` and ``[imu]`` options the file leaves out
+    (:mod:`swarm.sensors.options`); read when the file is loaded."""
 
     def uavs(self) -> list[Uav]:
         """The run's UAVs in order (index 0 draws the one-UAV scenario's random streams)."""
@@ -264,4 +313,7 @@ def is_landing_scenario(name_or_path) -> bool:
 
 
 def load_landing(name_or_path, overrides: dict | None = None) -> LandingScenario:
-    return load_toml(LandingScenario, _scenario_path(name_or_path), overrides)
+    def migrate(data: dict, name: str) -> dict:
+        return apply_sensor_profile(data, name, "landing", overrides)
+
+    return load_toml(LandingScenario, _scenario_path(name_or_path), overrides, migrate=migrate)

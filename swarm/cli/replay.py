@@ -67,6 +67,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="KEY=VALUE",
         help="override a log.toml key, e.g. --set estimator.huber_k=0 (repeatable)",
     )
+    p.add_argument(
+        "--sensors",
+        default=None,
+        metavar="FILE|NAME",
+        help="a sensor profile (swarm fit's sensors.toml, or a bundled name such as real-crazyflie) as the "
+        "filter's prior; log.toml and --set keys win (docs/logs.md)",
+    )
     z = p.add_argument_group("publishing the log on a swarm (--zenoh)")
     z.add_argument(
         "--zenoh", action="store_true", help="publish the log on the swarm's keys instead of filtering"
@@ -183,6 +190,11 @@ def run(args: argparse.Namespace) -> int:
     if args.log.suffix == ".mcap":
         return _publish_recording(args)
     overrides = dict(parse_override(o) for o in args.overrides)
+    if args.sensors is not None:
+        from swarm.logs.prior import with_profile
+        from swarm.sensors.profile import load_profile
+
+        overrides = with_profile(args.log, load_profile(args.sensors), overrides)
     log = read_log(args.log, overrides)
     if args.zenoh:
         return _publish(log, args)

@@ -41,6 +41,11 @@ PRM_LEVER = 8  # 8:11 UWB tag lever arm, body [m]
 PRM_GATE = 11  # hard gate on the squared Mahalanobis distance of a range
 PRM_HUBER = 12  # Huber threshold on the normalised innovation (0: off)
 N_PRM = 13
+# Optional extension, one pair per error state past the core 15 (range-error model, barometer offset):
+# PRM[N_PRM + 2 k] = the correlation time tau [s] of error state 15 + k (0: a random walk),
+# PRM[N_PRM + 2 k + 1] = its sigma (a random walk's density [unit/sqrt(s)], or a first-order Gauss-Markov
+# process's stationary standard deviation [unit]). Without the extension every such state is a random walk of density
+# PRM_SIG_RB (the per-anchor range biases of the first model).
 
 # outcome of an update
 ACCEPTED, REJECTED, REFUSED = 0, 1, 2
@@ -194,8 +199,30 @@ def predict_one(X, P, gyro, acc, dt, PRM):
         P[ETH + i, ETH + i] += qg
         P[EBA + i, EBA + i] += qba
         P[EBG + i, EBG + i] += qbg
+    if PRM.shape[0] < N_PRM + 2 * (n - 15):
+        for i in range(15, n):
+            P[i, i] += qrb
+        return True
+    # the extra states (range-error model): a random walk adds sigma^2 dt; a first-order Gauss-Markov state
+    # x' = -x / tau + w decays by phi = exp(-dt / tau) with the exact discrete variance sigma^2 (1 - phi^2)
+    # (Maybeck 1979, vol. 1, sec. 4.11; Brown & Hwang 2012, sec. 4.2): its nominal value x <- phi x and F's
+    # diagonal entry phi, so row and column of P scale by phi (F P F^T with F = diag(.., phi, ..))
+    tau_prev, phi = -1.0, 1.0
     for i in range(15, n):
-        P[i, i] += qrb
+        k = N_PRM + 2 * (i - 15)
+        tau, s = PRM[k], PRM[k + 1]
+        if tau > 0.0:
+            if tau != tau_prev:
+                phi = math.exp(-dt / tau)
+                tau_prev = tau
+            X[XRB + i - ERB] *= phi
+            for j in range(n):
+                P[i, j] *= phi
+            for j in range(n):
+                P[j, i] *= phi
+            P[i, i] += s * s * (1.0 - phi * phi)
+        else:
+            P[i, i] += s * s * dt
     return True
 
 
@@ -204,6 +231,14 @@ def range_row(X, anchor, bias_index, lever, H):
     """The predicted range ``|p + R(q) l - a| + b_r`` and its Jacobian row ``H`` (N,) with respect to the
     error state: ``u^T`` on ``dp``, ``-(u_b x l)`` on ``dtheta`` (``u_b = R^T u``, from
     ``R (I + [dtheta]x) l``), 1 on the anchor's bias (``bias_index`` >= 0, its error-state index)."""
+    return range_row3(X, anchor, bias_index, -1, -1, lever, H)
+
+
+@njit(cache=True)
+def range_row3(X, anchor, i0, i1, i2, lever, H):
+    """:func:`range_row` with up to three additive error terms of the range-error model, each an error-state
+    index or -1: ``h = |p + R(q) l - a| + x[i0] + x[i1] + x[i2]`` (a common offset, the anchor's offset and
+    its Gauss-Markov multipath term), each with a 1 in ``H``."""
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = qmat9(X[XQ], X[XQ + 1], X[XQ + 2], X[XQ + 3])
     l0, l1, l2 = lever[0], lever[1], lever[2]
     d0 = X[XP] + r00 * l0 + r01 * l1 + r02 * l2 - anchor[0]
@@ -222,9 +257,15 @@ def range_row(X, anchor, bias_index, lever, H):
     H[ETH + 1] = -(b2 * l0 - b0 * l2)
     H[ETH + 2] = -(b0 * l1 - b1 * l0)
     h = r
-    if bias_index >= 0:
-        H[bias_index] = 1.0
-        h += X[XRB + bias_index - ERB]
+    if i0 >= 0:
+        H[i0] = 1.0
+        h += X[XRB + i0 - ERB]
+    if i1 >= 0:
+        H[i1] = 1.0
+        h += X[XRB + i1 - ERB]
+    if i2 >= 0:
+        H[i2] = 1.0
+        h += X[XRB + i2 - ERB]
     return h
 
 
@@ -262,24 +303,41 @@ def update_range_one(X, P, anchor, bias_index, z, sigma, PRM, work, out):
     underweighted by inflating its variance by ``|e| / k`` (Huber's M-estimator as an iteratively reweighted
     Kalman update; an NLOS range that passes the gate pulls with a bounded influence). ``work`` (3, N) is
     scratch; ``out`` receives ``(outcome, d2, innovation)``; returns the outcome."""
+    return update_range3(X, P, anchor, bias_index, -1, -1, z, sigma, PRM, work, out)
+
+
+@njit(cache=True)
+def range_innovation(X, P, anchor, i0, i1, i2, PRM, work):
+    """The predicted range of :func:`range_row3` and ``H P H^T``; leaves ``H`` in ``work[0]`` and ``P H^T``
+    in ``work[1]`` for :func:`apply_scalar`."""
+    n = P.shape[0]
+    H, b = work[0], work[1]
+    h = range_row3(X, anchor, i0, i1, i2, PRM[PRM_LEVER : PRM_LEVER + 3], H)
+    hph = 0.0
+    for i in range(n):  # b = P H^T over H's nonzero entries: dp, dtheta and the range-error terms
+        s = (P[i, 0] * H[0] + P[i, 1] * H[1] + P[i, 2] * H[2] + P[i, 6] * H[6] + P[i, 7] * H[7]
+             + P[i, 8] * H[8])  # fmt: skip
+        if i0 >= 0:
+            s += P[i, i0]
+        if i1 >= 0:
+            s += P[i, i1]
+        if i2 >= 0:
+            s += P[i, i2]
+        b[i] = s
+        hph += H[i] * s
+    return h, hph
+
+
+@njit(cache=True)
+def update_range3(X, P, anchor, i0, i1, i2, z, sigma, PRM, work, out):
+    """:func:`update_range_one` with the range-error terms of :func:`range_row3`."""
     out[1] = 0.0
     out[2] = 0.0
     if not (np.isfinite(z) and np.isfinite(sigma) and sigma > 0.0 and z >= 0.0):
         out[0] = REFUSED
         return REFUSED
-    n = P.shape[0]
-    H, b, dx = work[0], work[1], work[2]
-    h = range_row(X, anchor, bias_index, PRM[PRM_LEVER : PRM_LEVER + 3], H)
+    h, hph = range_innovation(X, P, anchor, i0, i1, i2, PRM, work)
     nu = z - h
-    hph = 0.0
-    nz = bias_index >= 0
-    for i in range(n):  # b = P H^T over H's nonzero entries: dp, dtheta and the anchor's bias
-        s = (P[i, 0] * H[0] + P[i, 1] * H[1] + P[i, 2] * H[2] + P[i, 6] * H[6] + P[i, 7] * H[7]
-             + P[i, 8] * H[8])  # fmt: skip
-        if nz:
-            s += P[i, bias_index]
-        b[i] = s
-        hph += H[i] * s
     r = sigma * sigma
     S = hph + r
     d2 = nu * nu / S
@@ -291,6 +349,17 @@ def update_range_one(X, P, anchor, bias_index, z, sigma, PRM, work, out):
     if k > 0.0 and d2 > k * k:
         r *= math.sqrt(d2) / k
         S = hph + r
+    apply_scalar(X, P, work, nu, S)
+    out[0] = ACCEPTED
+    return ACCEPTED
+
+
+@njit(cache=True)
+def apply_scalar(X, P, work, nu, S):
+    """The Kalman update of a scalar innovation ``nu`` of variance ``S`` with ``P H^T`` in ``work[1]``:
+    ``dx = P H^T nu / S``, ``P <- P - P H^T H P / S``, then the injection and reset (:func:`inject`)."""
+    n = P.shape[0]
+    b, dx = work[1], work[2]
     for i in range(n):
         dx[i] = b[i] * nu / S
     # P <- P - b b^T / S over the whole matrix, row by row (contiguous, vectorised); ``(b_i b_j) (1 / S)``
@@ -301,8 +370,6 @@ def update_range_one(X, P, anchor, bias_index, z, sigma, PRM, work, out):
         for j in range(n):
             P[i, j] -= (bi * b[j]) * inv_s
     inject(X, P, dx)
-    out[0] = ACCEPTED
-    return ACCEPTED
 
 
 # ------------------------------------------------------------------------------------------ log replay
@@ -310,52 +377,298 @@ def update_range_one(X, P, anchor, bias_index, z, sigma, PRM, work, out):
 EV_DONE, EV_DIVERGED, EV_PAUSE = 0, 1, 2
 
 # ST (int64 state of a replay): cursors and counters
-ST_I_IMU, ST_I_RNG, ST_I_OUT, ST_WIN_FILL, ST_WIN_POS, ST_HELD, ST_DROPPED, ST_IMU_REFUSED = range(8)
-N_ST = 8
+(ST_I_IMU, ST_I_RNG, ST_I_OUT, ST_WIN_FILL, ST_WIN_POS, ST_HELD, ST_DROPPED, ST_IMU_REFUSED, ST_I_AUX,
+ ST_N_PHASE) = range(10)  # fmt: skip
+N_ST = 10
+
+# RS (anchors, N_RS): the range-error model's per-anchor robust state, float64
+RS_VAR = 0  # the white-noise variance in use [m^2] (the prior, then adapted in flight)
+RS_C2 = 1  # exponentially weighted mean of the squared innovation of accepted ranges [m^2] (NaN: none yet)
+RS_HPH = 2  # exponentially weighted mean of H P H^T of those ranges [m^2]
+RS_CUSUM = 3  # one-sided CUSUM of the normalised innovation (NLOS detection)
+RS_NLOS = 4  # 1 while the anchor is held as NLOS
+RS_NLOS_SINCE = 5  # when the current episode was declared [s]
+RS_EPREV = 6  # the previous accepted normalised innovation (NaN: none)
+RS_EE = 7  # exponentially weighted mean of e_k e_{k-1}
+RS_E2 = 8  # exponentially weighted mean of e_k^2
+RS_EPISODES = 9  # NLOS episodes declared
+RS_NLOS_RANGES = 10  # ranges held out as NLOS
+RS_AIR_VAR_SUM = 11  # sum of RS_VAR over the ranges taken while airborne (the in-flight sigma reported)
+RS_AIR_N = 12
+RS_STEPS = 13  # episodes longer than the longest NLOS episode: taken as an offset change
+RS_GRACE_UNTIL = 14  # no NLOS episode is declared before this time [s] (set by a recovery)
+N_RS = 15
+
+# RP: the robust settings of a replay (swarm.core.imu_filter.RobustParams.vector)
+RP_ADAPT = 0  # 1: per-anchor noise adaptation (covariance matching)
+RP_ADAPT_ALPHA = 1  # weight of one range in its exponentially weighted means
+RP_VAR_FLOOR = 2  # smallest adapted variance [m^2]
+RP_VAR_CEIL = 3  # largest [m^2]
+RP_NLOS = 4  # 1: per-anchor CUSUM NLOS detection
+RP_CUSUM_K = 5  # its reference value (allowance) on the normalised innovation
+RP_CUSUM_H = 6  # its decision threshold
+RP_CUSUM_CLIP = 7  # a single normalised innovation's largest contribution
+RP_NLOS_MAX_S = 8  # an episode held longer than this is an offset change: released, the offset re-opened
+RP_VIB_TAU = 9  # time constant of the vibration detector [s]
+RP_VIB_THRESHOLD = 10  # airborne above this vibration level [m/s^2] (a ratio times the level standing still)
+RP_TAKEOFF_HEIGHT = 11  # airborne above this height over the ground reference [m] (0: height not used)
+RP_DWELL = 12  # a phase change holds this long before it is declared [s]
+RP_REOPEN_VAR = 13  # variance added to each anchor's offset at a phase change [m^2]
+RP_GROUND_Z = 14  # the ground reference height [m, nav z]
+RP_ESS = 15  # 1: the window test counts correlated innovations by their effective sample size
+RP_PHASES = 16  # 1: detect take-off and landing
+RP_REOPEN_BARO_VAR = 17  # variance added to the barometer offset at a phase change [m^2]
+RP_BARO_INDEX = 18  # the barometer offset's error index (-1: none)
+RP_NLOS_MAX_HELD = 19  # at most this many anchors held out as NLOS at once
+N_RP = 20
+
+# PH: flight-phase detector state
+PH_VIB, PH_A0, PH_A1, PH_A2, PH_HAVE, PH_AIR, PH_SINCE = range(7)
+N_PH = 7
+
+# aux samples (height.csv, baro.csv) and AUX parameters
+AUX_HEIGHT, AUX_BARO = 0, 1
+(AX_H_SIGMA, AX_H_GROUND, AX_H_COS, AX_H_MAX, AX_H_GATE, AX_B_SIGMA, AX_B_INDEX, AX_B_GATE, AX_H_ON,
+ AX_B_ON) = range(10)  # fmt: skip
+N_AX = 10
+
+
+@njit(cache=True)
+def robust_init(RS, sigma):
+    """Per-anchor robust state at the start of a replay, from the prior sigmas ``sigma`` (M,) [m]."""
+    RS[:, :] = 0.0
+    for a in range(RS.shape[0]):
+        RS[a, RS_VAR] = sigma[a] * sigma[a]
+        RS[a, RS_C2] = np.nan
+        RS[a, RS_EPREV] = np.nan
+        RS[a, RS_NLOS_SINCE] = -np.inf
+
+
+@njit(cache=True)
+def fuse_range(X, P, PRM, RP, anchor_pos, ridx, a, z, t, RS, work, res):
+    """One range ``z`` [m] to anchor ``a`` (position ``anchor_pos``, error-state indices ``ridx[a]`` of its
+    range-error terms) through the robust range model; returns the outcome and leaves ``(outcome, d2, nu,
+    weight)`` in ``res`` (``weight``: this range's share of an independent one in the window test).
+
+    1. **NLOS** (``RP_NLOS``): a one-sided CUSUM (Page 1954) of the normalised innovation
+       ``e = nu / sqrt(S)``,
+       ``c <- min(max(0, c + min(e, clip) - k), 2 h)``: NLOS ranges are always long, so a sustained positive
+       ``e`` drives ``c`` over ``h`` and the anchor is held out (its ranges rejected, counted) until ``c``
+       falls under ``h / 2``; at most ``RP_NLOS_MAX_HELD`` anchors at once (when most anchors disagree, the
+       estimate is wrong, not the anchors: that is the divergence test's to say, and held ranges stay out
+       of its window, ``weight`` -1). An episode held longer than ``RP_NLOS_MAX_S`` is not NLOS but an
+       offset change
+       (the take-off step of a real anchor): released, and the anchor's offset variance re-opened so that
+       the filter learns the new offset.
+    2. **Gate and Huber** as :func:`update_range3`.
+    3. **Noise adaptation** (``RP_ADAPT``): covariance matching on the accepted innovations (Mehra 1972;
+       Mohamed & Schwarz 1999, eq. 20-21, with an exponentially weighted window as Myers & Tapley 1976):
+       ``R = E[nu^2] - E[H P H^T]``, clipped into ``[RP_VAR_FLOOR, RP_VAR_CEIL]``; the prior (the ground
+       calibration) is where it starts.
+    4. **Effective sample size**: the lag-1 autocorrelation ``rho`` of the anchor's accepted ``e`` (weighted
+       means of ``e_k e_{k-1}`` and ``e_k^2``); for jointly Gaussian ``e`` the squares correlate with
+       ``rho^2`` (Isserlis), so a range counts as ``(1 - rho^2) / (1 + rho^2)`` independent ones in the
+       window's NIS test (the AR(1) effective sample size, Wilks 2011 sec. 5.2.4)."""
+    res[0], res[1], res[2], res[3] = REFUSED, 0.0, 0.0, 1.0
+    var = RS[a, RS_VAR]
+    if not (np.isfinite(z) and z >= 0.0 and np.isfinite(var) and var > 0.0):
+        return REFUSED
+    i0, i1, i2 = ridx[a, 0], ridx[a, 1], ridx[a, 2]
+    h, hph = range_innovation(X, P, anchor_pos, i0, i1, i2, PRM, work)
+    nu = z - h
+    S = hph + var
+    d2 = nu * nu / S
+    e = nu / math.sqrt(S)
+    res[1], res[2] = d2, nu
+    if RP[RP_NLOS] > 0.0 and t < RS[a, RS_GRACE_UNTIL]:
+        RS[a, RS_CUSUM] = 0.0  # re-converging after a recovery: large innovations are the filter's
+    elif RP[RP_NLOS] > 0.0:
+        hc = RP[RP_CUSUM_H]
+        c = RS[a, RS_CUSUM] + min(e, RP[RP_CUSUM_CLIP]) - RP[RP_CUSUM_K]
+        c = min(max(c, 0.0), 2.0 * hc)
+        RS[a, RS_CUSUM] = c
+        if RS[a, RS_NLOS] > 0.0:
+            if c < 0.5 * hc:
+                RS[a, RS_NLOS] = 0.0
+            elif t - RS[a, RS_NLOS_SINCE] > RP[RP_NLOS_MAX_S]:
+                RS[a, RS_NLOS] = 0.0
+                RS[a, RS_CUSUM] = 0.0
+                RS[a, RS_STEPS] += 1.0
+                if i1 >= 0:
+                    P[i1, i1] += RP[RP_REOPEN_VAR]
+        elif c > hc:
+            held = 0
+            for b in range(RS.shape[0]):
+                held += RS[b, RS_NLOS] > 0.0
+            if held < RP[RP_NLOS_MAX_HELD]:
+                RS[a, RS_NLOS] = 1.0
+                RS[a, RS_NLOS_SINCE] = t
+                RS[a, RS_EPISODES] += 1.0
+        if RS[a, RS_NLOS] > 0.0:
+            RS[a, RS_NLOS_RANGES] += 1.0
+            res[0], res[3] = REJECTED, -1.0
+            return REJECTED
+    if d2 > PRM[PRM_GATE]:
+        res[0] = REJECTED
+        return REJECTED
+    w = 1.0
+    if RP[RP_ESS] > 0.0:
+        ep = RS[a, RS_EPREV]
+        al = RP[RP_ADAPT_ALPHA]
+        if np.isfinite(ep):
+            RS[a, RS_EE] += al * (e * ep - RS[a, RS_EE])
+            RS[a, RS_E2] += al * (d2 - RS[a, RS_E2])
+            if RS[a, RS_E2] > 0.0:
+                rho = min(max(RS[a, RS_EE] / RS[a, RS_E2], 0.0), 0.95)
+                w = (1.0 - rho * rho) / (1.0 + rho * rho)
+        else:
+            RS[a, RS_E2] = d2
+        RS[a, RS_EPREV] = e
+    res[3] = w
+    r = var
+    k = PRM[PRM_HUBER]
+    if k > 0.0 and d2 > k * k:
+        r *= math.sqrt(d2) / k
+    apply_scalar(X, P, work, nu, hph + r)
+    if RP[RP_ADAPT] > 0.0:
+        al = RP[RP_ADAPT_ALPHA]
+        if np.isfinite(RS[a, RS_C2]):
+            RS[a, RS_C2] += al * (nu * nu - RS[a, RS_C2])
+            RS[a, RS_HPH] += al * (hph - RS[a, RS_HPH])
+        else:  # the first accepted range: start from the prior
+            RS[a, RS_C2] = var + hph
+            RS[a, RS_HPH] = hph
+        RS[a, RS_VAR] = min(max(RS[a, RS_C2] - RS[a, RS_HPH], RP[RP_VAR_FLOOR]), RP[RP_VAR_CEIL])
+    res[0] = ACCEPTED
+    return ACCEPTED
+
+
+@njit(cache=True)
+def phase_step(X, P, RP, PH, ridx, acc, dt, t):
+    """The flight-phase detector on one IMU sample (specific force ``acc`` [m/s^2], ``dt`` [s] since the
+    previous one); returns +1 at a take-off, -1 at a landing, 0 otherwise. Airborne when the RMS change of
+    the specific force between samples (rotor vibration: ~0.01 m/s^2 standing, ~0.1 in flight on a small
+    quadrotor, DESIGN.md sec. 11; low-passed with ``RP_VIB_TAU``) exceeds ``RP_VIB_THRESHOLD``, or the
+    estimated height above the ground reference exceeds ``RP_TAKEOFF_HEIGHT``; a change holds for
+    ``RP_DWELL`` before it is declared (as PX4's land detector's hysteresis). At a change each anchor's
+    offset variance grows by ``RP_REOPEN_VAR``: the offsets move when the vehicle leaves or meets the
+    ground (DESIGN.md sec. 11), a step a slow random walk cannot follow; so does a barometer's offset
+    (``RP_REOPEN_BARO_VAR``)."""
+    if RP[RP_PHASES] <= 0.0:
+        return 0
+    if PH[PH_HAVE] > 0.0 and dt > 0.0:
+        d0, d1, d2 = acc[0] - PH[PH_A0], acc[1] - PH[PH_A1], acc[2] - PH[PH_A2]
+        g = 1.0 - math.exp(-dt / RP[RP_VIB_TAU])
+        PH[PH_VIB] += g * ((d0 * d0 + d1 * d1 + d2 * d2) / 6.0 - PH[PH_VIB])  # per axis, diff var = 2 s^2
+    PH[PH_A0], PH[PH_A1], PH[PH_A2], PH[PH_HAVE] = acc[0], acc[1], acc[2], 1.0
+    air = math.sqrt(PH[PH_VIB]) > RP[RP_VIB_THRESHOLD]
+    hmin = RP[RP_TAKEOFF_HEIGHT]
+    if hmin > 0.0 and X[XP + 2] - RP[RP_GROUND_Z] > hmin:
+        air = True
+    now = PH[PH_AIR] > 0.0
+    if air == now:
+        PH[PH_SINCE] = -1.0
+        return 0
+    if PH[PH_SINCE] < 0.0:
+        PH[PH_SINCE] = t
+        return 0
+    if t - PH[PH_SINCE] < RP[RP_DWELL]:
+        return 0
+    PH[PH_AIR] = 1.0 if air else 0.0
+    PH[PH_SINCE] = -1.0
+    for a in range(ridx.shape[0]):
+        i1 = ridx[a, 1]
+        if i1 >= 0:
+            P[i1, i1] += RP[RP_REOPEN_VAR]
+    ib = int(RP[RP_BARO_INDEX])
+    if ib >= 0:  # the rotors' downwash moves a barometer's reading at take-off as much as a metre
+        P[ib, ib] += RP[RP_REOPEN_BARO_VAR]
+    return 1 if air else -1
+
+
+@njit(cache=True)
+def fuse_aux(X, P, AX, kind, z, res):
+    """One height sample: ``AUX_HEIGHT`` a downward rangefinder's distance ``z`` [m]
+    (:func:`update_height_one`, refused beyond ``AX_H_MAX`` or past the tilt limit), ``AUX_BARO`` a
+    barometric height ``z`` [m] with its offset state: ``h = p_z + b_baro`` (``AX_B_INDEX``). Gated on the
+    squared Mahalanobis distance; returns the outcome (``res``: outcome, d2)."""
+    res[0], res[1] = REFUSED, 0.0
+    if not np.isfinite(z):
+        return REFUSED
+    if kind == AUX_HEIGHT:
+        if AX[AX_H_ON] <= 0.0 or z < 0.0 or z > AX[AX_H_MAX]:
+            return REFUSED
+        return update_height_one(X, P, AX[AX_H_GROUND], z, AX[AX_H_SIGMA], AX[AX_H_COS], AX[AX_H_GATE], res)
+    ib = int(AX[AX_B_INDEX])
+    if AX[AX_B_ON] <= 0.0 or ib < 0:
+        return REFUSED
+    n = P.shape[0]
+    H = np.zeros((1, n))
+    H[0, EP + 2] = 1.0
+    H[0, ib] = 1.0
+    nu = np.empty(1)
+    nu[0] = z - (X[XP + 2] + X[XRB + ib - ERB])
+    R_meas = np.empty((1, 1))
+    R_meas[0, 0] = AX[AX_B_SIGMA] ** 2
+    return _vector_update(X, P, H, nu, R_meas, AX[AX_B_GATE], res)
 
 
 @njit(cache=True)
 def replay(
-    X, P, PRM, tf, t_stop, imu_t, imu_gyro, imu_acc, rng_t, rng_anchor, rng_z, anchors, bias_of, sigma_of,
-    ST, counts, win_rej, win_d2, nis_limit, reject_share_max, last_range, last_range_t,
+    X, P, PRM, tf, t_stop, imu_t, imu_gyro, imu_acc, rng_t, rng_anchor, rng_z, anchors, ridx, RS, RP,
+    aux_t, aux_kind, aux_z, AX, aux_outcome, PH, phase_t, phase_air,
+    ST, counts, win_rej, win_d2, win_w, win_all, nis_limit, reject_share_max, last_range, last_range_t,
     out_every, out_t, out_X, out_P, nis_t, nis_anchor, nis_d2, nis_outcome,
 ):  # fmt: skip
     """Run the filter over a log from the cursors in ``ST`` until its end (returns ``EV_DONE``), a
     divergence (``EV_DIVERGED``, the cursors left after the range that declared it, for the caller to
-    re-initialise and call again) or the first sample after ``t_stop`` (``EV_PAUSE``). Samples are
-    processed in time order; an IMU sample is held over the
-    interval that follows it (zero-order hold), so the filter predicts to each range's own time stamp.
-
-    Divergence (the windowed test of :mod:`swarm.core.imu_filter`): over the last ``W = len(win_rej)``
-    ranges, the share rejected by the gate above ``reject_share_max``, or the mean NIS of the accepted
-    ones above ``nis_limit[n_accepted]`` (chi-square quantiles computed by the caller)."""
-    n_imu, n_rng = imu_t.shape[0], rng_t.shape[0]
+    recover and call again) or the first sample after ``t_stop`` (``EV_PAUSE``). Samples are processed in
+    time order (at one time: IMU, range, then height samples); an IMU sample is held over the interval that
+    follows it (zero-order hold), so the filter predicts to each sample's own time stamp. Ranges go through
+    :func:`fuse_range`, heights through :func:`fuse_aux`, and each IMU sample through the phase detector
+    (:func:`phase_step`; a change is written to ``phase_t``/``phase_air``)."""
+    n_imu, n_rng, n_aux = imu_t.shape[0], rng_t.shape[0], aux_t.shape[0]
     n = P.shape[0]
     work = np.empty((3, n))
-    res = np.empty(3)
+    res = np.empty(4)
     tcur = tf[0]
-    while ST[ST_I_IMU] < n_imu or ST[ST_I_RNG] < n_rng:
-        i, j = ST[ST_I_IMU], ST[ST_I_RNG]
-        take_imu = j >= n_rng or (i < n_imu and imu_t[i] <= rng_t[j])
-        t = imu_t[i] if take_imu else rng_t[j]
+    while ST[ST_I_IMU] < n_imu or ST[ST_I_RNG] < n_rng or ST[ST_I_AUX] < n_aux:
+        i, j, q = ST[ST_I_IMU], ST[ST_I_RNG], ST[ST_I_AUX]
+        kind = 0
+        t = imu_t[i] if i < n_imu else np.inf
+        if j < n_rng and rng_t[j] < t:
+            kind, t = 1, rng_t[j]
+        if q < n_aux and aux_t[q] < t:
+            kind, t = 2, aux_t[q]
         if t > t_stop:
             tf[0] = tcur
             return EV_PAUSE
         if t < tcur:  # older than the filter: dropped, counted
             ST[ST_DROPPED] += 1
-            if take_imu:
+            if kind == 0:
                 ST[ST_I_IMU] += 1
-            else:
+            elif kind == 1:
                 ST[ST_I_RNG] += 1
+            else:
+                ST[ST_I_AUX] += 1
             continue
+        dt = t - tcur
         if ST[ST_HELD] >= 0:
             h = ST[ST_HELD]
-            if not predict_one(X, P, imu_gyro[h], imu_acc[h], t - tcur, PRM):
+            if not predict_one(X, P, imu_gyro[h], imu_acc[h], dt, PRM):
                 ST[ST_IMU_REFUSED] += 1
         tcur = t
-        if take_imu:
+        if kind == 0:
+            h_prev = ST[ST_HELD]
             ST[ST_HELD] = i
             ST[ST_I_IMU] += 1
+            ch = phase_step(
+                X, P, RP, PH, ridx, imu_acc[i], imu_t[i] - imu_t[h_prev] if h_prev >= 0 else 0.0, t
+            )
+            if ch != 0 and ST[ST_N_PHASE] < phase_t.shape[0]:
+                phase_t[ST[ST_N_PHASE]] = t
+                phase_air[ST[ST_N_PHASE]] = 1 if ch > 0 else 0
+                ST[ST_N_PHASE] += 1
             if i % out_every == 0 and ST[ST_I_OUT] < out_t.shape[0]:
                 o = ST[ST_I_OUT]
                 out_t[o] = t
@@ -365,15 +678,24 @@ def replay(
                         out_P[o, a, b] = P[a, b]
                 ST[ST_I_OUT] += 1
             continue
+        if kind == 2:
+            ST[ST_I_AUX] += 1
+            aux_outcome[q] = fuse_aux(X, P, AX, aux_kind[q], aux_z[q], res)
+            continue
         ST[ST_I_RNG] += 1
         a = rng_anchor[j]
-        outcome = update_range_one(X, P, anchors[a], bias_of[a], rng_z[j], sigma_of[a], PRM, work, res)
+        outcome = fuse_range(X, P, PRM, RP, anchors[a], ridx, a, rng_z[j], t, RS, work, res)
         nis_t[j], nis_anchor[j], nis_d2[j], nis_outcome[j] = t, a, res[1], outcome
         counts[a, outcome] += 1
         if outcome == REFUSED:
             continue
+        if PH[PH_AIR] > 0.0:
+            RS[a, RS_AIR_VAR_SUM] += RS[a, RS_VAR]
+            RS[a, RS_AIR_N] += 1.0
         last_range[a], last_range_t[a] = rng_z[j], t
-        if window_push(win_rej, win_d2, ST, outcome, res[1], nis_limit, reject_share_max):
+        if res[3] >= 0.0 and window_push(
+            win_rej, win_d2, win_w, win_all, ST, outcome, res[1], res[2], res[3], nis_limit, reject_share_max
+        ):
             tf[0] = tcur
             return EV_DIVERGED
     tf[0] = tcur
@@ -381,15 +703,20 @@ def replay(
 
 
 @njit(cache=True)
-def window_push(win_rej, win_d2, ST, outcome, d2, nis_limit, reject_share_max):
-    """One gated range (``outcome`` accepted or rejected, squared distance ``d2``) into the divergence test's
-    window (cursors in ``ST``); True if the full window now declares the filter inconsistent: the share
-    rejected above ``reject_share_max``, or the mean NIS of the accepted ones above ``nis_limit[n_accepted]``.
-    Shared by :func:`replay` and the live navigator (:mod:`swarm.logs.online`), so both decide alike."""
+def window_push(win_rej, win_d2, win_w, win_all, ST, outcome, d2, nu, w, nis_limit, reject_share_max):
+    """One gated range (``outcome`` accepted or rejected, squared distance ``d2``, innovation ``nu`` [m] (its
+    square kept in ``win_all`` for the recovery), worth ``w`` independent ranges) into the divergence test's
+    window (cursors in ``ST``); True if the full window now declares the
+    filter inconsistent: the share rejected above ``reject_share_max``, or the mean NIS of the accepted ones
+    above ``nis_limit[n_eff]``, ``n_eff`` the accepted ranges' summed weights rounded down (correlated
+    innovations carry less evidence than independent ones, so the limit of fewer is wider). Shared by
+    :func:`replay` and the live navigator (:mod:`swarm.logs.online`), so both decide alike."""
     W = win_rej.shape[0]
     pos = ST[ST_WIN_POS]
     win_rej[pos] = 1.0 if outcome == REJECTED else 0.0
     win_d2[pos] = d2 if outcome == ACCEPTED else 0.0
+    win_w[pos] = w if outcome == ACCEPTED else 0.0
+    win_all[pos] = nu * nu
     ST[ST_WIN_POS] = (pos + 1) % W
     if ST[ST_WIN_FILL] < W:
         ST[ST_WIN_FILL] += 1
@@ -397,11 +724,14 @@ def window_push(win_rej, win_d2, ST, outcome, d2, nis_limit, reject_share_max):
         return False
     rej = 0.0
     s = 0.0
+    sw = 0.0
     for k in range(W):
         rej += win_rej[k]
         s += win_d2[k]
+        sw += win_w[k]
     n_acc = W - int(rej)
-    return rej / W > reject_share_max or (n_acc > 0 and s / n_acc > nis_limit[n_acc])
+    n_eff = min(max(int(sw + 1e-9), 1), n_acc) if n_acc > 0 else 0
+    return rej / W > reject_share_max or (n_acc > 0 and s / n_acc > nis_limit[n_eff])
 
 
 # ------------------------------------------------------------------------------------------- batches
@@ -416,10 +746,11 @@ def predict_batch(X, P, gyro, acc, dt, PRM, refused):
 
 
 @njit(cache=True)
-def update_range_batch(X, P, anchor, bias_index, z, sigma, PRM, work, res, out, d2):
-    """:func:`update_range_one` on every filter of the batch (``z`` (n,)): outcomes and squared distances."""
+def update_range_batch(X, P, anchor, idx3, z, sigma, PRM, work, res, out, d2):
+    """:func:`update_range3` (range-error terms ``idx3`` (3,)) on every filter of the batch (``z`` (n,)):
+    outcomes and squared distances."""
     for i in range(X.shape[0]):
-        out[i] = update_range_one(X[i], P[i], anchor, bias_index, z[i], sigma, PRM, work, res)
+        out[i] = update_range3(X[i], P[i], anchor, idx3[0], idx3[1], idx3[2], z[i], sigma, PRM, work, res)
         d2[i] = res[1]
 
 

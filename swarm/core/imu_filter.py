@@ -52,9 +52,26 @@ class ImuFilterParams:
     gyro_bias_rw: float = 1e-5
     """Gyro bias random walk [rad/s^2/sqrt(Hz)]."""
     range_bias: bool = True
-    """Estimate one range bias per anchor (random walk)."""
-    range_bias_rw: float = 0.01
-    """Range bias random walk [m/sqrt(s)]."""
+    """Estimate one range offset per anchor (a random walk around its calibrated value: antenna delay and
+    the anchor's own multipath)."""
+    range_bias_rw: float = 0.002
+    """The per-anchor offset's random walk [m/sqrt(s)] (slow: the step at take-off is a phase change's
+    re-opened covariance, not a walk)."""
+    range_common_offset: bool = True
+    """Estimate one offset common to every anchor (the tag's antenna delay), a random walk."""
+    range_common_offset_rw: float = 0.001
+    """Its random walk [m/sqrt(s)]."""
+    range_gm: bool = True
+    """A first-order Gauss-Markov range error per anchor (time-correlated multipath; real ranges correlate
+    0.3-0.84 at 0.1 s and 0.06-0.44 at 1 s, DESIGN.md sec. 11)."""
+    range_gm_sigma_m: float = 0.02
+    """Its stationary standard deviation [m]: the least correlated part; the white part adapts in flight
+    (``[robust] adapt``). 0.02 m held on the development hover (NEES 2.2) and on a synthetic flight of the
+    ``real-crazyflie`` profile (NEES 4.6); 0.05 m made both conservative (NEES ~1), 0.01 m overconfident."""
+    range_gm_tau_s: float = 1.0
+    """Its correlation time [s] (0.5-2 s held on real flights)."""
+    baro_offset_rw: float = 0.01
+    """The barometer offset's random walk [m/sqrt(s)] (a state only when a log has ``baro.csv``)."""
     gravity_nav: tuple[float, float, float] = (0.0, 0.0, -9.81)
     """Gravity in the navigation frame [m/s^2] (the log's gravity axis)."""
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -72,7 +89,8 @@ class ImuFilterParams:
     """False-alarm probability per window of the windowed NIS test under a consistent filter."""
 
     def __post_init__(self) -> None:
-        for name in ("accel_noise", "gyro_noise", "accel_bias_rw", "gyro_bias_rw", "range_bias_rw"):
+        for name in ("accel_noise", "gyro_noise", "accel_bias_rw", "gyro_bias_rw", "range_bias_rw",
+                     "range_common_offset_rw", "range_gm_sigma_m", "baro_offset_rw"):  # fmt: skip
             v = getattr(self, name)
             if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0.0):
                 raise ConfigError(f"estimator.{name} must be a finite number >= 0, got {v!r}")
@@ -89,6 +107,11 @@ class ImuFilterParams:
         if not 0.0 < self.divergence_alpha < 0.5:
             raise ConfigError(
                 f"estimator.divergence_alpha must be in (0, 0.5), got {self.divergence_alpha!r}"
+            )
+        if not (isinstance(self.range_gm_tau_s, int | float) and np.isfinite(self.range_gm_tau_s)
+                and self.range_gm_tau_s > 0.0):  # fmt: skip
+            raise ConfigError(
+                f"estimator.range_gm_tau_s must be a finite number > 0, got {self.range_gm_tau_s!r}"
             )
         g = np.asarray(self.gravity_nav, dtype=float)
         if g.shape != (3,) or not np.isfinite(g).all() or not 5.0 < np.linalg.norm(g) < 15.0:
@@ -107,6 +130,176 @@ class ImuFilterParams:
         prm[nb.PRM_GATE] = chi2.ppf(self.gate_probability, 1)
         prm[nb.PRM_HUBER] = self.huber_k
         return prm
+
+
+@dataclass(frozen=True)
+class RobustParams:
+    """The robust range model of a replay (``[robust]`` of log.toml; :func:`swarm.core._imu_nb.fuse_range`):
+    per-anchor noise adaptation, NLOS episodes, and the window test's effective sample size."""
+
+    adapt: bool = True
+    """Estimate each anchor's white-noise sigma in flight (covariance matching); the ground calibration, or
+    ``[uwb] sigma_m``, is only its prior."""
+    adapt_alpha: float = 0.02
+    """Weight of one range in the adaptation's exponentially weighted means (memory ~1 / alpha ranges)."""
+    sigma_ceiling_m: float = 0.5
+    """Largest adapted sigma [m] (the floor is ``[uwb] sigma_floor_m``)."""
+    nlos: bool = True
+    """Detect sustained NLOS per anchor (a one-sided CUSUM of the normalised innovation) and hold its ranges
+    out while it lasts."""
+    cusum_k: float = 1.0
+    """The CUSUM's allowance on the normalised innovation (half the 2-sigma shift it is tuned to)."""
+    cusum_h: float = 6.0
+    """Its decision threshold (released under half of it)."""
+    cusum_clip: float = 4.0
+    """A single range's largest contribution (an isolated outlier does not declare an episode)."""
+    nlos_max_s: float = 10.0
+    """An episode held longer is taken as a change of the anchor's offset: released, the offset re-opened."""
+    nlos_grace_s: float = 3.0
+    """After a recovery no episode is declared for this long [s]: while the filter re-converges, its large
+    innovations are its own, not the anchors'."""
+    nlos_max_held_share: float = 0.25
+    """At most this share of the anchors (at least one) is held out at once."""
+    ess: bool = True
+    """Count correlated innovations by their effective sample size in the divergence test."""
+
+    def __post_init__(self) -> None:
+        for name in ("adapt_alpha", "sigma_ceiling_m", "cusum_k", "cusum_h", "cusum_clip", "nlos_max_s",
+                     "nlos_grace_s"):  # fmt: skip
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0.0):
+                raise ConfigError(f"robust.{name} must be a finite number > 0, got {v!r}")
+        if not 0.0 < self.nlos_max_held_share <= 1.0:
+            raise ConfigError(
+                f"robust.nlos_max_held_share must be in (0, 1], got {self.nlos_max_held_share!r}"
+            )
+        if self.adapt_alpha >= 1.0:
+            raise ConfigError(f"robust.adapt_alpha must be in (0, 1), got {self.adapt_alpha!r}")
+
+
+@dataclass(frozen=True)
+class PhaseParams:
+    """Take-off and landing detection (``[phases]`` of log.toml; :func:`swarm.core._imu_nb.phase_step`)."""
+
+    enabled: bool = True
+    """Detect the phases and re-open the per-anchor offsets at each change."""
+    vibration_tau_s: float = 0.25
+    """Time constant of the vibration level (RMS change of the specific force between samples) [s]."""
+    vibration_ratio: float = 3.0
+    """Airborne above this many times the vibration level standing still (the static segment's, else the
+    log's first second): a small quadrotor's rotors raise it ~10x (0.01 -> 0.1 m/s^2, DESIGN.md sec. 11);
+    relative, so that an IMU's own noise and sample rate do not matter."""
+    takeoff_height_m: float = 0.3
+    """Airborne, too, when the estimate is this high over the ground reference [m] (0: not used)."""
+    dwell_s: float = 0.5
+    """A change must hold this long [s]."""
+    reopen_sigma_m: float = 0.1
+    """Standard deviation added to each anchor's offset at a change [m] (steps of -0.02 to +0.36 m were
+    measured at take-off on real anchors, DESIGN.md sec. 11)."""
+    reopen_baro_sigma_m: float = 1.0
+    """Standard deviation added to the barometer's offset at a change [m] (rotor downwash)."""
+
+    def __post_init__(self) -> None:
+        for name in ("vibration_tau_s", "vibration_ratio", "dwell_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0.0):
+                raise ConfigError(f"phases.{name} must be a finite number > 0, got {v!r}")
+        for name in ("takeoff_height_m", "reopen_sigma_m", "reopen_baro_sigma_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0.0):
+                raise ConfigError(f"phases.{name} must be a finite number >= 0, got {v!r}")
+
+
+def robust_vector(
+    robust: RobustParams,
+    phases: PhaseParams,
+    sigma_floor_m: float,
+    ground_z_m: float,
+    baro_index: int = -1,
+    n_anchors: int = 8,
+    ground_vibration_m_s2: float = np.inf,
+):
+    """The kernels' ``RP`` vector (:mod:`swarm.core._imu_nb`, ``RP_*``); ``ground_vibration_m_s2`` is the
+    vibration level standing still (:func:`vibration_level`; infinite: not used)."""
+    rp = np.zeros(nb.N_RP)
+    rp[nb.RP_NLOS_MAX_HELD] = max(1, int(robust.nlos_max_held_share * n_anchors))
+    rp[nb.RP_REOPEN_BARO_VAR] = phases.reopen_baro_sigma_m**2
+    rp[nb.RP_BARO_INDEX] = baro_index
+    rp[nb.RP_ADAPT] = float(robust.adapt)
+    rp[nb.RP_ADAPT_ALPHA] = robust.adapt_alpha
+    rp[nb.RP_VAR_FLOOR] = sigma_floor_m**2
+    rp[nb.RP_VAR_CEIL] = robust.sigma_ceiling_m**2
+    rp[nb.RP_NLOS] = float(robust.nlos)
+    rp[nb.RP_CUSUM_K], rp[nb.RP_CUSUM_H], rp[nb.RP_CUSUM_CLIP] = (
+        robust.cusum_k,
+        robust.cusum_h,
+        robust.cusum_clip,
+    )
+    rp[nb.RP_NLOS_MAX_S] = robust.nlos_max_s
+    rp[nb.RP_VIB_TAU] = phases.vibration_tau_s
+    rp[nb.RP_VIB_THRESHOLD] = phases.vibration_ratio * ground_vibration_m_s2
+    rp[nb.RP_TAKEOFF_HEIGHT] = phases.takeoff_height_m
+    rp[nb.RP_DWELL] = phases.dwell_s
+    rp[nb.RP_REOPEN_VAR] = phases.reopen_sigma_m**2
+    rp[nb.RP_GROUND_Z] = ground_z_m
+    rp[nb.RP_ESS] = float(robust.ess)
+    rp[nb.RP_PHASES] = float(phases.enabled)
+    return rp
+
+
+def vibration_level(acc_body) -> float:
+    """The vibration level of specific-force samples ``acc_body`` (n, 3) [m/s^2] as the phase detector
+    measures it (:func:`swarm.core._imu_nb.phase_step`): the RMS per axis of the change between samples over
+    sqrt(2) (a white noise's own standard deviation)."""
+    d = np.diff(np.asarray(acc_body, dtype=float), axis=0)
+    return float(np.sqrt(np.mean(np.sum(d * d, axis=1)) / 6.0)) if len(d) else float("inf")
+
+
+@dataclass(frozen=True)
+class StateLayout:
+    """Where the extra error states of the range-error model sit (after the 15 core ones), in this order: the
+    common offset, one offset per anchor, one Gauss-Markov term per anchor, the barometer offset; -1 where a
+    part is off."""
+
+    n_err: int
+    common: int
+    offset: np.ndarray
+    """(M,) error index of each anchor's offset."""
+    gm: np.ndarray
+    """(M,) error index of each anchor's Gauss-Markov term."""
+    baro: int
+    ridx: np.ndarray
+    """(M, 3): the three range-error terms of each anchor's range (common, offset, Gauss-Markov)."""
+    ext: np.ndarray
+    """The PRM extension: (tau [s] or 0, sigma) per extra state."""
+
+
+def state_layout(n_anchors: int, params: ImuFilterParams, baro: bool = False) -> StateLayout:
+    """The extra error states for ``n_anchors`` anchors (:class:`StateLayout`)."""
+    k = N_CORE
+    ext: list[tuple[float, float]] = []
+    common = -1
+    if params.range_common_offset and n_anchors:
+        common, k = k, k + 1
+        ext.append((0.0, params.range_common_offset_rw))
+    offset = np.full(n_anchors, -1, dtype=np.int64)
+    if params.range_bias:
+        offset[:] = np.arange(k, k + n_anchors)
+        k += n_anchors
+        ext += [(0.0, params.range_bias_rw)] * n_anchors
+    gm = np.full(n_anchors, -1, dtype=np.int64)
+    if params.range_gm:
+        gm[:] = np.arange(k, k + n_anchors)
+        k += n_anchors
+        ext += [(params.range_gm_tau_s, params.range_gm_sigma_m)] * n_anchors
+    b = -1
+    if baro:
+        b, k = k, k + 1
+        ext.append((0.0, params.baro_offset_rw))
+    ridx = np.column_stack([np.full(n_anchors, common, dtype=np.int64), offset, gm]).astype(np.int64)
+    return StateLayout(
+        k, common, offset, gm, b, np.ascontiguousarray(ridx), np.asarray(ext, float).reshape(-1)
+    )
 
 
 @lru_cache(maxsize=16)
@@ -129,10 +322,10 @@ def _gate3(probability: float) -> float:
     return chi2_gate(probability, 3)
 
 
-def state_size(n_anchors: int, params: ImuFilterParams) -> tuple[int, int]:
-    """(nominal, error) state sizes for ``n_anchors`` anchors."""
-    m = n_anchors if params.range_bias else 0
-    return 16 + m, N_CORE + m
+def state_size(n_anchors: int, params: ImuFilterParams, baro: bool = False) -> tuple[int, int]:
+    """(nominal, error) state sizes for ``n_anchors`` anchors (:func:`state_layout`)."""
+    ne = state_layout(n_anchors, params, baro).n_err
+    return ne + 1, ne
 
 
 class ImuFilter:
@@ -142,13 +335,16 @@ class ImuFilter:
     (n_anchors, 3) holds the accepted, rejected and refused ranges per anchor (summed over the batch);
     ``dropped`` the samples older than the filter's time."""
 
-    def __init__(self, params: ImuFilterParams, anchors_nav, X, P, t_s: float, sigma_range_m) -> None:
+    def __init__(
+        self, params: ImuFilterParams, anchors_nav, X, P, t_s: float, sigma_range_m, baro: bool = False
+    ) -> None:
         self.params = params
         self.anchors = np.ascontiguousarray(anchors_nav, dtype=float)
         if self.anchors.ndim != 2 or self.anchors.shape[1] != 3:
             raise ValueError(f"anchors_nav: expected shape (M, 3), got {self.anchors.shape}")
         m = len(self.anchors)
-        nx, ne = state_size(m, params)
+        self.layout = state_layout(m, params, baro)
+        nx, ne = self.layout.n_err + 1, self.layout.n_err
         self.X = np.ascontiguousarray(np.atleast_2d(X), dtype=float).copy()
         self.P = np.ascontiguousarray(P, dtype=float).copy()
         if self.P.ndim == 2:
@@ -158,8 +354,12 @@ class ImuFilter:
                 f"X, P: expected (n, {nx}) and (n, {ne}, {ne}), got {self.X.shape}, {self.P.shape}"
             )
         self.sigma = np.broadcast_to(np.asarray(sigma_range_m, dtype=float), (m,)).copy()
-        self.bias_of = np.array([N_CORE + a if params.range_bias else -1 for a in range(m)], dtype=np.int64)
+        self.bias_of = self.layout.offset
+        """Each anchor's offset state (-1: none), for the kernels that take one range-error term."""
+        self.ridx = self.layout.ridx
         self.prm = params.vector()
+        if params.range_common_offset or params.range_gm or baro:
+            self.prm = np.concatenate([self.prm, self.layout.ext])
         self.t = float(t_s)
         self._gyro: np.ndarray | None = None  # the held IMU sample (n, 3)
         self._acc: np.ndarray | None = None
@@ -183,11 +383,20 @@ class ImuFilter:
         accel_bias=None,
         gyro_bias=None,
         range_bias=None,
+        common_offset: float = 0.0,
+        sigma_common_m: float | None = None,
+        baro: bool = False,
+        sigma_baro_m: float = 1.0,
     ) -> ImuFilter:
         """One filter from a first state and its standard deviations ``sigmas`` = ``(p [m], v [m/s],
-        attitude [rad], accelerometer bias [m/s^2], gyro bias [rad/s], range bias [m])``."""
+        attitude [rad], accelerometer bias [m/s^2], gyro bias [rad/s], range bias [m])``; the per-anchor
+        offsets start at ``range_bias`` (M,), the common offset at ``common_offset`` with
+        ``sigma_common_m`` (default: the range bias sigma), the Gauss-Markov terms at zero with their
+        stationary sigma, the barometer offset (``baro``) at zero with ``sigma_baro_m`` (the first
+        barometer sample sets it, :mod:`swarm.logs.replay`)."""
         m = len(np.asarray(anchors_nav))
-        nx, ne = state_size(m, params)
+        lay = state_layout(m, params, baro)
+        nx, ne = lay.n_err + 1, lay.n_err
         X = np.zeros(nx)
         X[nb.XP : nb.XP + 3], X[nb.XV : nb.XV + 3], X[nb.XQ : nb.XQ + 4] = p, v, q
         if accel_bias is not None:
@@ -195,7 +404,7 @@ class ImuFilter:
         if gyro_bias is not None:
             X[nb.XBG : nb.XBG + 3] = gyro_bias
         if params.range_bias and range_bias is not None:
-            X[nb.XRB :] = range_bias
+            X[lay.offset + 1] = range_bias  # nominal index = error index + 1 past the quaternion
         s = (1.0, 0.5, 0.05, 0.1, 0.01, 0.3) if sigmas is None else sigmas
         diag = np.concatenate(
             [
@@ -204,10 +413,17 @@ class ImuFilter:
                 np.full(3, s[2]),
                 np.full(3, s[3]),
                 np.full(3, s[4]),
-                np.full(ne - N_CORE, s[5]),
+                np.zeros(ne - N_CORE),
             ]
         )
-        return cls(params, anchors_nav, X, np.diag(diag**2), t_s, sigma_range_m)
+        if lay.common >= 0:
+            X[lay.common + 1] = common_offset
+            diag[lay.common] = s[5] if sigma_common_m is None else sigma_common_m
+        diag[lay.offset[lay.offset >= 0]] = s[5]
+        diag[lay.gm[lay.gm >= 0]] = params.range_gm_sigma_m
+        if lay.baro >= 0:
+            diag[lay.baro] = sigma_baro_m
+        return cls(params, anchors_nav, X, np.diag(diag**2), t_s, sigma_range_m, baro)
 
     @property
     def n(self) -> int:
@@ -235,7 +451,20 @@ class ImuFilter:
 
     @property
     def range_bias(self) -> np.ndarray:
-        return self.X[:, nb.XRB :]
+        """(n, M) each anchor's offset (zeros without offset states; the common offset not included)."""
+        off = self.layout.offset
+        if not len(off) or off[0] < 0:
+            return np.zeros((self.n, len(off)))
+        return self.X[:, off + 1]
+
+    @property
+    def range_error_total(self) -> np.ndarray:
+        """(n, M) the whole modelled range error per anchor: common + offset + Gauss-Markov term [m]."""
+        tot = np.zeros((self.n, len(self.layout.ridx)))
+        for j in range(3):
+            idx = self.layout.ridx[:, j]
+            tot[:, idx >= 0] += self.X[:, idx[idx >= 0] + 1]
+        return tot
 
     def _predict_to(self, t_s: float) -> None:
         if self._gyro is not None and t_s > self.t:
@@ -272,7 +501,7 @@ class ImuFilter:
             self.X,
             self.P,
             self.anchors[anchor],
-            self.bias_of[anchor],
+            self.ridx[anchor],
             np.ascontiguousarray(z),
             self.sigma[anchor],
             self.prm,
@@ -333,6 +562,21 @@ class ImuFilter:
         for i in range(self.n):
             out[i] = nb.update_position_one(self.X[i], self.P[i], z, R, gate, res)
         return out
+
+    def inflate(self, i: int, var_p: float, var_v: float) -> None:
+        """Add ``var_p`` [m^2] to each axis of filter ``i``'s position covariance and ``var_v`` [m^2/s^2] to
+        its velocity's (positive definite whenever ``P`` is): the estimate stays where it is, and the
+        ranges that disagree with it can pull it again (additive covariance inflation; the Crazyflie's
+        TDoA outlier filter opens its gate likewise when its share of good measurements falls). Their cross
+        terms with the other states are cleared (the block-diagonal part of a positive definite matrix is
+        positive definite): what went wrong is the position, and a range's pull on it must not move the
+        offsets and biases through correlations learnt before."""
+        P = self.P[i]
+        P[0:6, 6:] = 0.0
+        P[6:, 0:6] = 0.0
+        for k in range(3):
+            P[k, k] += var_p
+            P[3 + k, 3 + k] += var_v
 
     def reset_position(self, i: int, p_nav, cov_p, sigma_v_m_s: float) -> None:
         """Re-initialise filter ``i``'s position (and its covariance ``cov_p`` (3, 3)) and its velocity (zero,

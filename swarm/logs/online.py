@@ -34,9 +34,9 @@ from swarm.core import rotations as rot
 from swarm.core.imu_filter import ImuFilter, divergence_limits
 from swarm.errors import ConfigError
 from swarm.logs.reader import Log, LogConfig
-from swarm.logs.replay import _recover, build_filter
+from swarm.logs.replay import _Window, aux_streams, build_filter, jump, recover, robust_state
 
-_IMU, _UWB, _VISION = 0, 1, 2  # the order of samples of one time: the replay's
+_IMU, _UWB, _HEIGHT, _BARO, _VISION = 0, 1, 2, 3, 4  # the order of samples of one time: the replay's
 
 
 @dataclass
@@ -110,6 +110,18 @@ class OnlineNavigator:
             return
         self._push(float(t_s), _UWB, (k, float(range_m)))
 
+    def height(self, t_s: float, range_m: float) -> None:
+        """A downward rangefinder's distance [m] (``height.csv``; NaN or None: no reading, not fed)."""
+        if range_m is not None and math.isfinite(range_m):
+            self._push(float(t_s), _HEIGHT, float(range_m))
+
+    def baro(self, t_s: float, height_m: float) -> None:
+        """A barometric height [m] (``baro.csv``), any offset. The barometer's offset is a state of the
+        filter only if a reading arrived before the filter started (as in a replay of a log with
+        ``baro.csv``); without it, readings are refused (counted in ``aux_counts``)."""
+        if height_m is not None and math.isfinite(height_m):
+            self._push(float(t_s), _BARO, float(height_m))
+
     def vision(self, t_s: float, marker_id: int, xyz_cam) -> None:
         """A detection of marker ``marker_id`` at ``xyz_cam`` (3,) [m] in the camera frame (``vision.csv``);
         its sigma is ``[vision] sigma_m`` of log.toml. An unknown marker is counted, not fed; with
@@ -164,6 +176,8 @@ class OnlineNavigator:
         """Build the filter from the kept samples as the replay builds it from a log, then process them."""
         kept = [s for s in self._kept if s[1] == _IMU]  # vision is not used to build the filter
         rng = [s for s in self._kept if s[1] == _UWB]
+        hgt = [s for s in self._kept if s[1] == _HEIGHT]
+        bar = [s for s in self._kept if s[1] == _BARO]
         if not kept:
             return  # no IMU sample yet: keep waiting
         log = Log(
@@ -178,19 +192,26 @@ class OnlineNavigator:
             self.anchor_ids,
             self.anchors_nav,
         )
-        f, _, self._correction = build_filter(log)
+        log.height_t, log.height_range = np.array([s[0] for s in hgt]), np.array([s[3] for s in hgt])
+        log.baro_t, log.baro_height = np.array([s[0] for s in bar]), np.array([s[3] for s in bar])
+        f, cal, self._correction = build_filter(log)
         self.f = f
         prm = self.config.estimator
         self.X, self.P = f.X[0], f.P[0]
         self.t = f.t
         self._held = False
+        self._held_t = math.nan
         self._gyro, self._acc = np.zeros(3), np.zeros(3)
         self._ST = np.zeros(nb.N_ST, dtype=np.int64)
-        self._win_rej, self._win_d2 = np.zeros(prm.window), np.zeros(prm.window)
+        self._win = _Window(prm.window)
+        self._RS, self._RP, self._PH = robust_state(log, f, cal)
+        self._AX = aux_streams(log, f, cal)[3]
+        self.aux_counts = np.zeros((2, 3), dtype=np.int64)
+        """Height samples (rangefinder, barometer) accepted, rejected, refused."""
         self._limits = divergence_limits(prm.window, prm.divergence_alpha)
         m = len(self.anchors_nav)
         self._last_range, self._last_range_t = np.full(m, np.nan), np.full(m, -np.inf)
-        self._work, self._res = np.empty((3, self.P.shape[0])), np.empty(3)
+        self._work, self._res = np.empty((3, self.P.shape[0])), np.empty(4)
         self._d2 = math.nan
         faults = self.config.faults
         self._t_stop = faults.jump_at_s if faults.jump_at_s is not None else math.inf
@@ -220,50 +241,45 @@ class OnlineNavigator:
         if self._held and not nb.predict_one(X, P, self._gyro, self._acc, t - self.t, prm):
             self.imu_refused += 1
         self.t = t
+        f = self.f
         if kind == _IMU:
             tick, g, a = data
-            self._gyro, self._acc, self._held = g, a, True
+            dt = t - self._held_t if self._held else 0.0
+            self._gyro, self._acc, self._held, self._held_t = g, a, True, t
+            ch = nb.phase_step(X, P, self._RP, self._PH, f.ridx, a, dt, t)
+            if ch != 0:
+                self.events.append({"t_s": float(t), "kind": "takeoff" if ch > 0 else "landing"})
             if tick % self.config.output_every == 0:
                 self._estimate(t, tick)
             return
+        if kind in (_HEIGHT, _BARO):
+            aux = nb.AUX_HEIGHT if kind == _HEIGHT else nb.AUX_BARO
+            outcome = nb.fuse_aux(X, P, self._AX, aux, data, self._res)
+            self.aux_counts[aux, outcome] += 1
+            return
         k, z = data
-        f = self.f
         z = z - self._correction[k]
-        outcome = nb.update_range_one(
-            X, P, f.anchors[k], f.bias_of[k], z, f.sigma[k], prm, self._work, self._res
-        )
+        RS = self._RS
+        outcome = nb.fuse_range(X, P, prm, self._RP, f.anchors[k], f.ridx, k, z, t, RS, self._work, self._res)
         f.counts[k, outcome] += 1
         if outcome == nb.REFUSED:
             return
+        if self._PH[nb.PH_AIR] > 0.0:
+            RS[k, nb.RS_AIR_VAR_SUM] += RS[k, nb.RS_VAR]
+            RS[k, nb.RS_AIR_N] += 1.0
         self._d2 = float(self._res[1])
         self._last_range[k], self._last_range_t[k] = z, t
-        cfg = self.config
-        if nb.window_push(
-            self._win_rej,
-            self._win_d2,
-            self._ST,
-            outcome,
-            self._res[1],
+        cfg, w = self.config, self._win
+        if self._res[3] >= 0.0 and nb.window_push(
+            w.rej, w.d2, w.w, w.all, self._ST, outcome, self._res[1], self._res[2], self._res[3],
             self._limits,
             cfg.estimator.reject_share_max,
-        ):
-            self.events.append(
-                _recover(f, None, cfg, t, self._win_rej, self._win_d2, self._last_range, self._last_range_t)
-            )
-            self._ST[nb.ST_WIN_FILL] = self._ST[nb.ST_WIN_POS] = 0
-            self._win_rej[:] = 0.0
-            self._win_d2[:] = 0.0
+        ):  # fmt: skip
+            self.events.append(recover(f, cfg, t, w, self._last_range, self._last_range_t, RS))
+            w.clear(self._ST)
 
     def _jump(self) -> None:
-        faults = self.config.faults
-        X, P = self.X, self.P
-        X[nb.XP : nb.XP + 3] += faults.jump_m
-        P[0:3, :] = 0.0
-        P[:, 0:3] = 0.0
-        P[0:3, 0:3] = np.eye(3) * faults.jump_sigma_m**2
-        self.events.append(
-            {"t_s": float(self.t), "kind": "fault", "fault": "position_jump", "jump_m": list(faults.jump_m)}
-        )
+        self.events.append(jump(self.X, self.P, self.config.faults, float(self.t)))
         self._t_stop = math.inf
 
     def _estimate(self, t: float, tick: int) -> None:
@@ -276,7 +292,7 @@ class OnlineNavigator:
                 self.X.copy(),
                 self.P[0:9, 0:9].copy(),
                 self._d2,
-                float(self._win_rej.sum() / fill) if fill else 0.0,
+                float(self._win.rej.sum() / fill) if fill else 0.0,
                 {
                     "range_accepted": int(c[:, nb.ACCEPTED].sum()),
                     "range_rejected": int(c[:, nb.REJECTED].sum()),

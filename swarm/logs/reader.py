@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from swarm.config import load_toml
-from swarm.core.imu_filter import ImuFilterParams
+from swarm.core.imu_filter import ImuFilterParams, PhaseParams, RobustParams
 from swarm.errors import ConfigError, LogError
 
 IMU_COLUMNS = (
@@ -116,10 +116,20 @@ class Calibration:
     the fit's residuals: their common part is absorbed)."""
     range_bias: bool = True
     """Calibrate a bias per anchor (else only sigma)."""
+    position_sigma_m: float = 0.01
+    """Standard deviation of the surveyed ``position_m`` [m]: the filter's first position sigma when given
+    (``[initial] sigma_position_m`` otherwise)."""
+    range_bias_sigma_m: float = 0.02
+    """Standard deviation of a calibrated range offset [m] (the common one and each anchor's): the filter's
+    prior on them after a calibration at a surveyed position (``[initial]`` sigmas otherwise)."""
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.until_s) and self.until_s >= 0):
             raise ConfigError(f"calibration.until_s must be a finite number >= 0, got {self.until_s!r}")
+        for name in ("position_sigma_m", "range_bias_sigma_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ConfigError(f"calibration.{name} must be a finite number > 0, got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -137,6 +147,8 @@ class Initial:
     sigma_gyro_bias_rad_s: float = 0.01
     sigma_range_bias_m: float = 0.3
     """Prior on each range bias [m] (after calibration it is the calibration's uncertainty)."""
+    sigma_common_offset_m: float = 0.3
+    """Prior on the offset common to every anchor [m] (the calibration's median bias, or zero)."""
 
     def __post_init__(self) -> None:
         for name in (
@@ -146,6 +158,7 @@ class Initial:
             "sigma_accel_bias_m_s2",
             "sigma_gyro_bias_rad_s",
             "sigma_range_bias_m",
+            "sigma_common_offset_m",
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -157,11 +170,73 @@ class Recovery:
     """``[recovery]`` of log.toml: what the replay does after a divergence."""
 
     enabled: bool = True
-    """Re-initialise the position from ranges when the divergence test fires (else only report it)."""
+    """Recover when the divergence test fires (else only report it)."""
+    mode: str = "inflate"
+    """``inflate``: add the window's median squared range innovation to the position covariance and
+    ``sigma_velocity_m_s`` squared to the velocity's, the estimate kept (it cannot make the estimate worse;
+    the ranges then pull it); ``refix``: re-initialise the position from the latest range to each anchor
+    and zero the velocity (the first model's)."""
+    max_position_sigma_m: float = 10.0
+    """Largest position standard deviation one ``inflate`` recovery adds [m]."""
     max_range_age_s: float = 1.0
     """Ranges older than this [s] are not used for the fix."""
     sigma_velocity_m_s: float = 1.0
-    """Velocity standard deviation after a re-initialisation [m/s] (the velocity is set to zero)."""
+    """Velocity standard deviation added (``inflate``) or set with a zero velocity (``refix``) [m/s]."""
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("inflate", "refix"):
+            raise ConfigError(f"recovery.mode must be 'inflate' or 'refix', got {self.mode!r}")
+        if not (math.isfinite(self.max_position_sigma_m) and self.max_position_sigma_m > 0.0):
+            raise ConfigError(
+                "recovery.max_position_sigma_m must be a finite number > 0, "
+                f"got {self.max_position_sigma_m!r}"
+            )
+
+
+@dataclass(frozen=True)
+class HeightLog:
+    """``[height]`` of log.toml: the downward range finder of ``height.csv``."""
+
+    enabled: bool = True
+    """Fuse ``height.csv`` when the log has one."""
+    sigma_m: float = 0.02
+    """Its white noise [m]."""
+    max_range_m: float = 3.0
+    """Readings beyond are refused (the sensor's reach; past it a ToF sensor reports junk)."""
+    max_tilt_deg: float = 30.0
+    """Readings at a larger estimated tilt are refused (the beam leaves the flat ground of the model)."""
+    ground_z_m: float | None = None
+    """The ground's height in nav [m]; leave out to take the calibration position's height minus the static
+    segment's median reading (the sensor's own offset included), else 0."""
+    gate_probability: float = 0.9995
+    """Hard gate: chi-square(1) quantile of the squared Mahalanobis distance."""
+
+    def __post_init__(self) -> None:
+        for name in ("sigma_m", "max_range_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ConfigError(f"height.{name} must be a finite number > 0, got {v!r}")
+        if not 0.0 < self.max_tilt_deg < 90.0:
+            raise ConfigError(f"height.max_tilt_deg must be in (0, 90), got {self.max_tilt_deg!r}")
+        if not 0.5 < self.gate_probability < 1.0:
+            raise ConfigError(f"height.gate_probability must be in (0.5, 1), got {self.gate_probability!r}")
+
+
+@dataclass(frozen=True)
+class BaroLog:
+    """``[baro]`` of log.toml: the barometric height of ``baro.csv`` (its offset is a filter state)."""
+
+    enabled: bool = True
+    """Fuse ``baro.csv`` when the log has one."""
+    sigma_m: float = 0.5
+    """Its white noise [m] (a small quadrotor's barometer in its own prop wash)."""
+    gate_probability: float = 0.9995
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.sigma_m) and self.sigma_m > 0):
+            raise ConfigError(f"baro.sigma_m must be a finite number > 0, got {self.sigma_m!r}")
+        if not 0.5 < self.gate_probability < 1.0:
+            raise ConfigError(f"baro.gate_probability must be in (0.5, 1), got {self.gate_probability!r}")
 
 
 @dataclass(frozen=True)
@@ -186,6 +261,10 @@ class LogConfig:
     calibration: Calibration = Calibration()
     initial: Initial = Initial()
     recovery: Recovery = Recovery()
+    robust: RobustParams = field(default_factory=RobustParams)
+    phases: PhaseParams = field(default_factory=PhaseParams)
+    height: HeightLog = HeightLog()
+    baro: BaroLog = BaroLog()
     faults: Faults = Faults()
     output_every: int = 10
     """Write one estimate row every this many IMU samples (10: 100 Hz for a 1 kHz IMU)."""

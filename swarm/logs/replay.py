@@ -17,7 +17,7 @@ from scipy.stats import chi2
 
 from swarm.core import _imu_nb as nb
 from swarm.core import rotations as rot
-from swarm.core.imu_filter import ImuFilter, divergence_limits
+from swarm.core.imu_filter import ImuFilter, divergence_limits, robust_vector, vibration_level
 from swarm.core.ranging import position_from_ranges
 from swarm.errors import LogError
 from swarm.logs.calibrate import StaticCalibration, calibrate_static, level_attitude
@@ -53,6 +53,19 @@ class ReplayResult:
     than the filter, after the last sample, or ``vision.enabled = false``)."""
     vision_d2: np.ndarray | None = None
     """Per row: the squared Mahalanobis distance of the detection (NaN if not used)."""
+    robust: np.ndarray | None = None
+    """(anchors, ``N_RS``): the range model's per-anchor state at the end (:mod:`swarm.core._imu_nb`)."""
+    sigma_prior: np.ndarray | None = None
+    """Per anchor: the white-noise sigma the filter started from (ground calibration or ``uwb.sigma_m``)."""
+    range_error_m: np.ndarray | None = None
+    """Per anchor: the modelled range error at the end (common + offset + Gauss-Markov) [m]."""
+    common_offset_m: float | None = None
+    offset_total_m: np.ndarray | None = None
+    """Per anchor: the common offset plus the anchor's own at the end [m] (the range bias of the model)."""
+    aux_kind: np.ndarray | None = None
+    """Per height sample (``height.csv`` then ``baro.csv`` rows, in time order): its kind."""
+    aux_outcome: np.ndarray | None = None
+    """Its outcome: accepted, rejected, refused."""
 
     # ------------------------------------------------------------------------------------- against truth
 
@@ -104,6 +117,19 @@ class ReplayResult:
         }
         if self.vision_outcome is not None:
             out["vision"] = self._vision_summary()
+        if self.robust is not None:
+            out["range_model"] = self._range_model_summary(ids)
+        if self.aux_kind is not None and len(self.aux_kind):
+            out["height"] = {
+                name: {
+                    "samples": int(np.sum(self.aux_kind == kind)),
+                    "accepted": int(np.sum((self.aux_kind == kind) & (self.aux_outcome == nb.ACCEPTED))),
+                    "rejected": int(np.sum((self.aux_kind == kind) & (self.aux_outcome == nb.REJECTED))),
+                    "refused": int(np.sum((self.aux_kind == kind) & (self.aux_outcome == nb.REFUSED))),
+                }
+                for kind, name in ((nb.AUX_HEIGHT, "rangefinder"), (nb.AUX_BARO, "barometer"))
+                if np.any(self.aux_kind == kind)
+            }
         acc = self.nis_outcome == nb.ACCEPTED
         lo1, hi1 = chi2.ppf([(1 - BAND) / 2, (1 + BAND) / 2], 1)
         d2 = self.nis_d2[acc]
@@ -139,6 +165,28 @@ class ReplayResult:
                 }
             )
         return out
+
+    def _range_model_summary(self, ids: list[str]) -> dict:
+        """Per anchor: the prior (ground) sigma against the adapted one in flight, the NLOS episodes, the
+        modelled range error at the end; the common offset."""
+        RS = self.robust
+        air_n = RS[:, nb.RS_AIR_N]
+        flight = np.where(air_n > 0, np.sqrt(RS[:, nb.RS_AIR_VAR_SUM] / np.maximum(air_n, 1)), np.nan)
+        return {
+            "common_offset_m": self.common_offset_m,
+            "by_anchor": {
+                a: {
+                    "sigma_ground_m": _num(float(self.sigma_prior[k])),
+                    "sigma_flight_m": _num(float(flight[k])),
+                    "sigma_end_m": _num(float(np.sqrt(RS[k, nb.RS_VAR]))),
+                    "nlos_episodes": int(RS[k, nb.RS_EPISODES]),
+                    "nlos_ranges": int(RS[k, nb.RS_NLOS_RANGES]),
+                    "offset_changes": int(RS[k, nb.RS_STEPS]),
+                    "range_error_m": _num(float(self.range_error_m[k])),
+                }
+                for k, a in enumerate(ids)
+            },
+        }
 
     def _vision_summary(self) -> dict:
         lg = self.log
@@ -261,19 +309,25 @@ def build_filter(log: Log) -> tuple[ImuFilter, StaticCalibration | None, np.ndar
         p0 = _initial_position(log, lever_nav)
     correction = np.zeros(m)
     rb0 = None
+    common = 0.0
     if cal is not None and cfg.calibration.range_bias:
         rb = np.nan_to_num(cal.range_bias, nan=0.0)
+        if prm.range_common_offset and np.isfinite(cal.range_bias).any():
+            common = float(np.median(cal.range_bias[np.isfinite(cal.range_bias)]))
+            rb = np.where(np.isfinite(cal.range_bias), rb - common, 0.0)
         if prm.range_bias:
             rb0 = rb
         else:
             correction = rb  # constant biases, corrected before the filter
+    surveyed = cal is not None and cal.position_surveyed and ini.position_m is None
+    calibrated = surveyed and cfg.calibration.range_bias
     sigmas = (
-        ini.sigma_position_m,
+        cfg.calibration.position_sigma_m if surveyed else ini.sigma_position_m,
         ini.sigma_velocity_m_s,
         math.radians(ini.sigma_attitude_deg),
         ini.sigma_accel_bias_m_s2,
         ini.sigma_gyro_bias_rad_s,
-        ini.sigma_range_bias_m,
+        cfg.calibration.range_bias_sigma_m if calibrated else ini.sigma_range_bias_m,
     )
     f = ImuFilter.create(
         prm,
@@ -287,8 +341,67 @@ def build_filter(log: Log) -> tuple[ImuFilter, StaticCalibration | None, np.ndar
         accel_bias=None if cal is None else cal.accel_bias,
         gyro_bias=None if cal is None else cal.gyro_bias,
         range_bias=rb0,
+        common_offset=common,
+        sigma_common_m=cfg.calibration.range_bias_sigma_m if calibrated else ini.sigma_common_offset_m,
+        baro=_has(log, "baro_t") and cfg.baro.enabled,
     )
     return f, cal, correction
+
+
+def _has(log: Log, name: str) -> bool:
+    v = getattr(log, name, None)
+    return v is not None and len(v) > 0
+
+
+def ground_height(log: Log, cal: StaticCalibration | None) -> float:
+    """The ground's height for ``height.csv`` (``[height] ground_z_m``): given, else the calibration
+    position's height minus the static segment's median reading, else 0."""
+    h = log.config.height
+    if h.ground_z_m is not None:
+        return float(h.ground_z_m)
+    if cal is not None and _has(log, "height_t"):
+        seg = log.height_range[log.height_t < cal.until_s]
+        seg = seg[np.isfinite(seg)]
+        if len(seg):
+            return float(cal.position_nav[2] - np.median(seg))
+    return 0.0
+
+
+def aux_streams(log: Log, f: ImuFilter, cal: StaticCalibration | None):
+    """``height.csv`` and ``baro.csv`` as one time-ordered stream for the compiled loop: times, kinds
+    (``AUX_HEIGHT``, ``AUX_BARO``), values, and the ``AX`` parameter vector. The barometer's offset state
+    starts at the first reading minus the filter's first height (then it is estimated)."""
+    cfg = log.config
+    parts_t, parts_k, parts_z = [np.zeros(0)], [np.zeros(0, np.int64)], [np.zeros(0)]
+    ax = np.zeros(nb.N_AX)
+    ax[nb.AX_B_INDEX] = -1.0
+    if _has(log, "height_t") and cfg.height.enabled:
+        hc = cfg.height
+        ax[nb.AX_H_ON] = 1.0
+        ax[nb.AX_H_SIGMA], ax[nb.AX_H_MAX] = hc.sigma_m, hc.max_range_m
+        ax[nb.AX_H_COS] = math.cos(math.radians(hc.max_tilt_deg))
+        ax[nb.AX_H_GROUND] = ground_height(log, cal)
+        ax[nb.AX_H_GATE] = chi2.ppf(hc.gate_probability, 1)
+        parts_t.append(log.height_t)
+        parts_k.append(np.full(len(log.height_t), nb.AUX_HEIGHT, np.int64))
+        parts_z.append(log.height_range)
+    if f.layout.baro >= 0:
+        bc = cfg.baro
+        ax[nb.AX_B_ON] = 1.0
+        ax[nb.AX_B_SIGMA], ax[nb.AX_B_INDEX] = bc.sigma_m, f.layout.baro
+        ax[nb.AX_B_GATE] = chi2.ppf(bc.gate_probability, 1)
+        f.X[:, f.layout.baro + 1] = float(log.baro_height[0]) - f.X[0, nb.XP + 2]
+        parts_t.append(log.baro_t)
+        parts_k.append(np.full(len(log.baro_t), nb.AUX_BARO, np.int64))
+        parts_z.append(log.baro_height)
+    t = np.concatenate(parts_t)
+    order = np.argsort(t, kind="stable")
+    return (
+        np.ascontiguousarray(t[order]),
+        np.ascontiguousarray(np.concatenate(parts_k)[order]),
+        np.ascontiguousarray(np.concatenate(parts_z)[order]),
+        ax,
+    )
 
 
 def replay_log(log: Log) -> ReplayResult:
@@ -308,11 +421,15 @@ def replay_log(log: Log) -> ReplayResult:
     ST[nb.ST_HELD] = -1
     tf = np.array([f.t])
     W = prm.window
-    win_rej, win_d2 = np.zeros(W), np.zeros(W)
+    win = _Window(W)
     limits = divergence_limits(W, prm.divergence_alpha)
     last_range, last_range_t = np.full(m, np.nan), np.full(m, -np.inf)
     imu_t, gyro, acc = (np.ascontiguousarray(a) for a in (log.imu_t, log.gyro, log.acc))
     uwb_t, uwb_a = np.ascontiguousarray(log.uwb_t), np.ascontiguousarray(log.uwb_anchor)
+    aux_t, aux_kind, aux_z, AX = aux_streams(log, f, cal)
+    aux_outcome = np.full(len(aux_t), -1, dtype=np.int64)
+    RS, RP, PH = robust_state(log, f, cal)
+    phase_t, phase_air = np.zeros(64), np.zeros(64, dtype=np.int64)
     faults = cfg.faults
     t_stop = faults.jump_at_s if faults.jump_at_s is not None else math.inf
     events: list[dict] = []
@@ -322,64 +439,28 @@ def replay_log(log: Log) -> ReplayResult:
     while True:
         t_vis = vision.next_t() if vision is not None and cfg.vision.enabled else math.inf
         ev = nb.replay(
-            X,
-            P,
-            f.prm,
-            tf,
-            min(t_stop, t_vis),
-            imu_t,
-            gyro,
-            acc,
-            uwb_t,
-            uwb_a,
-            ranges,
-            f.anchors,
-            f.bias_of,
-            f.sigma,
-            ST,
-            f.counts,
-            win_rej,
-            win_d2,
-            limits,
-            prm.reject_share_max,
-            last_range,
-            last_range_t,
-            every,
-            out_t,
-            out_X,
-            out_P,
-            nis_t,
-            nis_anchor,
-            nis_d2,
-            nis_outcome,
-        )
+            X, P, f.prm, tf, min(t_stop, t_vis), imu_t, gyro, acc, uwb_t, uwb_a, ranges, f.anchors, f.ridx,
+            RS, RP, aux_t, aux_kind, aux_z, AX, aux_outcome, PH, phase_t, phase_air, ST, f.counts,
+            win.rej, win.d2, win.w, win.all, limits, prm.reject_share_max, last_range, last_range_t,
+            every, out_t, out_X, out_P, nis_t, nis_anchor, nis_d2, nis_outcome,
+        )  # fmt: skip
         if ev == nb.EV_DONE:
             break
         if ev == nb.EV_PAUSE and t_vis <= t_stop:  # a detection of vision.csv is next
             vision.update(X, P, f.prm, tf, ST, gyro, acc)
             continue
         if ev == nb.EV_PAUSE:  # the forced divergence of [faults]
-            X[nb.XP : nb.XP + 3] += faults.jump_m
-            P[0:3, :] = 0.0
-            P[:, 0:3] = 0.0
-            P[0:3, 0:3] = np.eye(3) * faults.jump_sigma_m**2
-            events.append(
-                {
-                    "t_s": float(tf[0]),
-                    "kind": "fault",
-                    "fault": "position_jump",
-                    "jump_m": list(faults.jump_m),
-                }
-            )
+            events.append(jump(X, P, faults, float(tf[0])))
             t_stop = math.inf
             continue
-        events.append(_recover(f, log, cfg, float(tf[0]), win_rej, win_d2, last_range, last_range_t))
-        ST[nb.ST_WIN_FILL] = ST[nb.ST_WIN_POS] = 0
-        win_rej[:] = 0.0
-        win_d2[:] = 0.0
+        events.append(recover(f, cfg, float(tf[0]), win, last_range, last_range_t, RS))
+        win.clear(ST)
     wall = time.perf_counter() - t0
     k = int(ST[nb.ST_I_OUT])
-    return ReplayResult(
+    for j in range(int(ST[nb.ST_N_PHASE])):
+        events.append({"t_s": float(phase_t[j]), "kind": "takeoff" if phase_air[j] else "landing"})
+    events.sort(key=lambda e: e["t_s"])
+    res = ReplayResult(
         log,
         cal,
         out_t[:k],
@@ -400,6 +481,58 @@ def replay_log(log: Log) -> ReplayResult:
         None if vision is None else vision.outcome,
         None if vision is None else vision.d2,
     )
+    res.robust = RS
+    res.range_error_m = f.range_error_total[0].copy()
+    res.offset_total_m = f.range_bias[0] + (res_common := _common(f))
+    res.common_offset_m = res_common if f.layout.common >= 0 else None
+    res.sigma_prior = f.sigma.copy()
+    res.aux_kind, res.aux_outcome = aux_kind, aux_outcome
+    return res
+
+
+def robust_state(log: Log, f: ImuFilter, cal: StaticCalibration | None):
+    """The range model's per-anchor state ``RS`` (from the filter's prior sigmas), its settings ``RP`` and
+    the phase detector's state ``PH`` (:mod:`swarm.core._imu_nb`), as a replay and the live navigator start
+    them. The take-off height is measured from the calibration position's height, else the filter's first;
+    the vibration level standing still from the static segment, else the log's first second."""
+    cfg = log.config
+    RS = np.zeros((len(f.anchors), nb.N_RS))
+    nb.robust_init(RS, f.sigma)
+    ground = float(cal.position_nav[2]) if cal is not None else float(f.X[0, nb.XP + 2])
+    still = log.imu_t < (cal.until_s if cal is not None else log.imu_t[0] + 1.0)
+    RP = robust_vector(
+        cfg.robust, cfg.phases, cfg.uwb.sigma_floor_m, ground, f.layout.baro, len(f.anchors),
+        vibration_level(log.acc[still]),
+    )  # fmt: skip
+    PH = np.zeros(nb.N_PH)
+    PH[nb.PH_SINCE] = -1.0
+    return RS, RP, PH
+
+
+def _common(f: ImuFilter) -> float:
+    return float(f.X[0, f.layout.common + 1]) if f.layout.common >= 0 else 0.0
+
+
+class _Window:
+    """The divergence test's window (:func:`swarm.core._imu_nb.window_push`): rejected flags, the accepted
+    ranges' NIS and effective-sample weights, and every range's NIS."""
+
+    def __init__(self, W: int) -> None:
+        self.rej, self.d2, self.w, self.all = np.zeros(W), np.zeros(W), np.zeros(W), np.zeros(W)
+
+    def clear(self, ST) -> None:
+        ST[nb.ST_WIN_FILL] = ST[nb.ST_WIN_POS] = 0
+        for a in (self.rej, self.d2, self.w, self.all):
+            a[:] = 0.0
+
+
+def jump(X, P, faults, t: float) -> dict:
+    """The forced divergence of ``[faults]``: the estimate jumps, its covariance shrinks."""
+    X[nb.XP : nb.XP + 3] += faults.jump_m
+    P[0:3, :] = 0.0
+    P[:, 0:3] = 0.0
+    P[0:3, 0:3] = np.eye(3) * faults.jump_sigma_m**2
+    return {"t_s": t, "kind": "fault", "fault": "position_jump", "jump_m": list(faults.jump_m)}
 
 
 class _Vision:
@@ -442,33 +575,68 @@ class _Vision:
         self.d2[k] = self.res[1]
 
 
-def _recover(f: ImuFilter, log: Log, cfg, t: float, win_rej, win_d2, last_range, last_range_t) -> dict:
-    """After the divergence test fired at ``t``: the event, and the re-initialisation from ranges."""
-    W = len(win_rej)
-    rej = float(win_rej.sum())
+def recover(f: ImuFilter, cfg, t: float, win: _Window, last_range, last_range_t, RS) -> dict:
+    """After the divergence test fired at ``t``: the ``estimator_reset`` event, and the recovery of
+    ``[recovery] mode``. ``inflate`` adds the 90th percentile of the squared innovations of the window's
+    rejected ranges (of all its ranges when none was rejected; at most ``max_position_sigma_m`` squared:
+    a range's innovation is the position error projected on the anchor's direction, so the largest ones
+    measure the error, and a covariance too large costs only a few ranges' weight) to each axis of the
+    position covariance, and
+    ``sigma_velocity_m_s`` squared to the velocity's: what the ranges saw is how far the estimate may be,
+    and the estimate is kept, so a false alarm costs nothing but a few ranges' weight; then the
+    least-squares fix of the latest range to each anchor (soft-L1 against NLOS) is fused as one position
+    measurement with its covariance, so that a large error is not left to the linearised scalar updates
+    (the fix is not a reset: a consistent estimate barely moves). ``refix`` re-initialises the position from
+    the
+    latest range to each anchor (least squares) and zeroes the velocity. Both clear the NLOS holds."""
+    W = len(win.rej)
+    rej = float(win.rej.sum())
     n_acc = W - int(rej)
     event = {
         "t_s": t,
         "kind": "estimator_reset",
         "window": W,
         "reject_share": rej / W,
-        "mean_nis": (float(win_d2.sum()) / n_acc) if n_acc else None,
+        "mean_nis": (float(win.d2.sum()) / n_acc) if n_acc else None,
+        "n_eff": float(win.w.sum()),
     }
     rec = cfg.recovery
-    fresh = {
-        a: float(last_range[a] - (f.range_bias[0, a] if f.range_bias.shape[1] else 0.0))
-        for a in range(len(last_range))
-        if t - last_range_t[a] <= rec.max_range_age_s
-    }
-    limit = divergence_limits(W, cfg.estimator.divergence_alpha)[n_acc] if n_acc else None
+    limit = (
+        divergence_limits(W, cfg.estimator.divergence_alpha)[max(1, int(win.w.sum() + 1e-9))]
+        if n_acc
+        else None
+    )
     event["reason"] = (
         f"{rej / W:.0%} of the last {W} ranges rejected (limit {cfg.estimator.reject_share_max:.0%})"
         if rej / W > cfg.estimator.reject_share_max
-        else f"mean NIS {event['mean_nis']:.2f} of {n_acc} accepted ranges above {limit:.2f}, its "
-        f"chi-square quantile at 1 - {cfg.estimator.divergence_alpha:g}"
+        else f"mean NIS {event['mean_nis']:.2f} of {n_acc} accepted ranges (worth {event['n_eff']:.1f} "
+        f"independent ones) above {limit:.2f}, its chi-square quantile at 1 - "
+        f"{cfg.estimator.divergence_alpha:g}"
     )
     if not rec.enabled:
         event["action"] = "reported only (recovery.enabled = false)"
+        return event
+    RS[:, nb.RS_NLOS] = 0.0
+    RS[:, nb.RS_CUSUM] = 0.0
+    RS[:, nb.RS_GRACE_UNTIL] = t + cfg.robust.nlos_grace_s
+    fresh = {
+        a: float(last_range[a] - f.range_error_total[0, a])
+        for a in range(len(last_range))
+        if t - last_range_t[a] <= rec.max_range_age_s
+    }
+    if rec.mode == "inflate":
+        rejected = win.rej > 0.5
+        seen = win.all[rejected] if rejected.any() else win.all  # the ranges that disagree say how far
+        var = float(min(np.quantile(seen, 0.9), rec.max_position_sigma_m**2))
+        f.inflate(0, var, rec.sigma_velocity_m_s**2)
+        event.update({"action": "position and velocity covariance inflated", "sigma_added_m": math.sqrt(var)})
+        if len(fresh) >= 4:  # the latest ranges' least-squares fix as one measurement of the position
+            q = f.q_nav_body[0]
+            lever_nav = rot.quat_rotate(q, np.asarray(cfg.estimator.lever_arm_m, dtype=float))
+            p, jtj_inv = position_from_ranges(f.anchors, fresh, lever_nav, f.p_nav[0])
+            cov = jtj_inv * float(np.max(f.sigma) ** 2) + np.eye(3) * 1e-4
+            out = f.update_position(t, p, cov)
+            event["fix"] = {"anchors": len(fresh), "position_m": p.tolist(), "outcome": int(out[0])}
         return event
     if len(fresh) < 4:
         event["action"] = (

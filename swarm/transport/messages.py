@@ -177,6 +177,8 @@ EVENT_KINDS: tuple[str, ...] = (
     "agent_missing",
     "fault",
     "fault_refused",
+    "takeoff",
+    "landing",
 )
 """Event kinds in use; the set is open (any ``[a-z][a-z0-9_]*`` name is accepted)."""
 

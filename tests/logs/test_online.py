@@ -53,8 +53,11 @@ def _same(nav, r):
 def test_fed_in_time_order_it_gives_the_replay_bit_for_bit(flight):
     log = read_log(flight)
     nav = _run(log, _samples(log))
-    _same(nav, replay_log(log))
-    assert nav.dropped == 0 and nav.events == []
+    r = replay_log(log)
+    _same(nav, r)
+    # the flight's take-off (a phase change, not a reset) is seen alike by both, at the same sample
+    assert nav.dropped == 0 and nav.events == r.events
+    assert [e["kind"] for e in nav.events] == ["takeoff"]
     e = nav.estimates[-1]
     assert e.counts["range_accepted"] == int(nav.f.counts[:, 0].sum()) and 0.0 <= e.reject_share <= 1.0
 
@@ -79,7 +82,8 @@ def test_a_forced_divergence_is_detected_and_recovered_as_in_the_replay(flight):
     r = replay_log(log)
     nav = _run(log, _samples(log))
     _same(nav, r)
-    assert [e["kind"] for e in nav.events] == [e["kind"] for e in r.events] == ["fault", "estimator_reset"]
+    kinds = [e["kind"] for e in r.events if e["kind"] not in ("takeoff", "landing")]
+    assert kinds == ["fault", "estimator_reset"]
     assert nav.events == r.events
 
 
