@@ -28,6 +28,7 @@ from swarm.core.sensors import AhrsParams, GyroParams, UwbParams
 from swarm.errors import ConfigError
 from swarm.kinds import KINDS, KindsParams, VehicleKind
 from swarm.kinds.dispersions import DispersionParams
+from swarm.sensors.options import SensorsSpec, apply_sensor_profile
 
 Vec3 = tuple[float, float, float]
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
@@ -258,6 +259,9 @@ class Scenario:
     faults: FaultParams = field(default_factory=FaultParams)
     """Injected sensor faults (NLOS bursts, UWB dropouts, camera loss, gyro bias step), fixed in time or
     triggered by a guidance mode (:mod:`swarm.core.faults`); all off by default."""
+    sensors: SensorsSpec = field(default_factory=SensorsSpec)
+    """A sensor profile whose numbers fill the ``[uwb]`` and ``[gyro]`` options the file leaves out
+    (:mod:`swarm.sensors.options`); read when the file is loaded."""
 
     def __post_init__(self) -> None:
         seq = self.euler_seq
@@ -529,6 +533,8 @@ def load_scenario(name_or_path: str | Path, overrides: dict | None = None) -> Sc
     path = Path(name_or_path)
     if not path.suffix and not path.exists():
         path = SCENARIO_DIR / f"{name_or_path}.toml"
-    return load_toml(
-        Scenario, path, overrides=overrides, migrate=migrate_legacy, migrate_key=migrate_override_key
-    )
+
+    def migrate(data: dict, name: str) -> dict:
+        return apply_sensor_profile(migrate_legacy(data, name), name, "docking", overrides)
+
+    return load_toml(Scenario, path, overrides=overrides, migrate=migrate, migrate_key=migrate_override_key)

@@ -117,7 +117,7 @@ def fly_compiled(
     every = lnb.SERIES_EVERY if record_series else 0
     k = 1
     while True:
-        u.noise.ensure(world.draws)
+        world.ensure_draws(u)
         noise = (u.noise.Z, u.noise.pos, world.draws)
         code, k = lnb.run_landing_ticks(k, n_ticks + 1, wa, aa, ga, ctl, *noise, SER, SER_n, every)
         agent.guidance.drain()

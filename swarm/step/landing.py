@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from swarm.core import range_errors as rerr
 from swarm.core import rotations as rot
 from swarm.core._pad_nb import camera_vector
 from swarm.core.imu_filter import ImuFilter, ImuFilterParams, chi2_gate
@@ -210,14 +211,51 @@ class NoiseStream:
         self.pos[0] = int(st["pos"])
 
 
+class FixedNoise:
+    """The draws of a UAV's ``uwb_errors`` stream (:func:`swarm.step.landing_nb.world_errors`): as
+    :class:`NoiseStream`, but the buffer ``Z`` is refilled in place, so that the compiled loop's world tuple
+    holds it for the whole run (the leftover draws moved to its start, the rest drawn anew). Empty when
+    ``size`` is 0: a scenario without the errors draws nothing."""
+
+    def __init__(self, rng: np.random.Generator, size: int) -> None:
+        self.rng = rng
+        self.Z = np.zeros(size)
+        self.pos = np.array([size], dtype=np.int64)  # nothing drawn yet: every slot used
+        self._before: dict | None = None
+        self._carry = np.zeros(0)
+
+    def ensure(self, n: int) -> None:
+        """At least ``n`` (<= the buffer's size) draws left in ``Z``."""
+        size, used = len(self.Z), int(self.pos[0])
+        if size - used < n:
+            self._before = self.rng.bit_generator.state
+            self._carry = self.Z[used:].copy()
+            self.Z[: len(self._carry)] = self._carry
+            self.Z[len(self._carry) :] = self.rng.standard_normal(size - len(self._carry))
+            self.pos[0] = 0
+
+    def state(self) -> dict:
+        """Where the stream is (:meth:`restore`)."""
+        return {"before": self._before, "carry": self._carry, "pos": int(self.pos[0])}
+
+    def restore(self, st: dict) -> None:
+        """Back to :meth:`state` ``st`` of a stream of the same seed (the block drawn again)."""
+        self._before, self._carry = st["before"], np.asarray(st["carry"], dtype=float)
+        if self._before is not None:
+            self.rng.bit_generator.state = self._before
+            self.Z[: len(self._carry)] = self._carry
+            self.Z[len(self._carry) :] = self.rng.standard_normal(len(self.Z) - len(self._carry))
+        self.pos[0] = int(st["pos"])
+
+
 class SnapshotError(ValueError):
     """A snapshot that does not fit the object it is restored into (another scenario, seed or version)."""
 
 
 _CONFIG = frozenset({"sc", "setup", "board", "rates", "params", "p", "filt", "guidance", "noise", "renderer",
-                     "detector", "render_rng", "decisions", "modes", "_records"})  # fmt: skip
+                     "detector", "render_rng", "decisions", "modes", "_records", "errs"})  # fmt: skip
 """Attributes :func:`snapshot_state` leaves out: what the scenario and the seed build again, the parts
-snapshot on their own (``filt``, ``guidance``, ``noise``, ``render_rng``) and the guidance's records
+snapshot on their own (``filt``, ``guidance``, ``noise``, ``render_rng``, ``errs``) and the guidance's records
 (:class:`_Records`)."""
 
 _LAYOUTS: dict[tuple, str] = {}  # (name, shape, dtype) of each array, in order -> its layout string
@@ -313,11 +351,22 @@ class _Records:
         return out
 
 
+@dataclass
+class _Errors:
+    """What a UAV's world needs of the scenario's range errors and vibration: the ``[uwb]`` params, the
+    anchors' offsets, its ``uwb_errors`` stream and the size of its block of draws (0: none on)."""
+
+    uwb: object
+    offsets: np.ndarray
+    rng: np.random.Generator
+    block: int
+
+
 class _Truth:
     """One UAV's truth, its world state (``WSC``) and its sensors' draws."""
 
     def __init__(self, setup: LandingSetup, x: np.ndarray, s: np.ndarray, held: np.ndarray, n_markers: int,
-                 render_rng: np.random.Generator) -> None:  # fmt: skip
+                 render_rng: np.random.Generator, errors: _Errors) -> None:  # fmt: skip
         self.setup, self.x, self.s, self.held = setup, x, s, held
         self.WSC = np.zeros(lnb.WSC_N)
         self.WSC[lnb.WSC_LANDED_T] = np.nan
@@ -331,6 +380,14 @@ class _Truth:
         self.WC[lnb.WC_UWB_OFF : lnb.WC_UWB_OFF + 2] = np.nan
         self.noise = NoiseStream(setup.rng)
         self.render_rng = render_rng
+        # the range errors and vibration of real flights (swarm.core.range_errors), drawn from the UAV's own
+        # uwb_errors stream: the anchors' offsets (set by the world), the take-off steps, each link's state
+        m, u = len(errors.offsets), errors.uwb
+        self.errs = FixedNoise(errors.rng, errors.block)
+        self.ERR_OFF = np.array(errors.offsets, dtype=float)
+        self.ERR_STEP = rerr.draw_steps(u, errors.rng, m) if errors.block else np.zeros(m)
+        self.ERR_RS = np.zeros((m, rerr.RS_N))
+        self.ERR_RS[:, rerr.RS_T] = np.nan
         self.INP = np.zeros(lnb.INP_N)
         self.CIDX = np.zeros(n_markers, dtype=np.int64)
         self.CPX = np.zeros((n_markers, 4, 2))
@@ -415,6 +472,15 @@ class LandingWorld:
         self.CAM = camera_vector(cam.intrinsics)
         n_markers = len(self.corners)
         self.draws = lnb.draws_per_tick(n_markers)
+        self.err_prm = rerr.range_error_vector(sc.uwb, sc.uwb.outlier_probability, sc.uwb.outlier_excess_m)
+        self.vib = np.zeros(lnb.VIB_N)
+        self.vib[lnb.VIB_ACC] = sc.imu.vibration_accel_m_s2
+        self.vib[lnb.VIB_GYRO] = sc.imu.vibration_gyro_rad_s
+        self.errors_on = bool(self.err_prm[rerr.RE_ON] or self.vib.any())
+        m = len(self.anchors)
+        offsets = np.zeros(m)
+        if self.err_prm[rerr.RE_ON]:  # the anchors' offsets: one stream for the fleet, which shares them
+            offsets = rerr.draw_offsets(sc.uwb, np.random.default_rng(_seeds(seed, 0, 19)), m)
         self.renderer = Renderer(sc.pad.board, cam.intrinsics) if cam.mode == "rendered" else None
         self.detector = make_detector(sc.pad.board) if cam.mode == "rendered" else None
         self.uavs: dict[str, _Truth] = {}
@@ -427,7 +493,9 @@ class LandingWorld:
             s[0:4] = self.air.hover_omega_rad_s
             held = np.full(4, self.air.hover_omega_rad_s)
             render_rng = np.random.default_rng(_seeds(seed, u.index, 17))
-            self.uavs[u.id] = _Truth(st, x, s, held, n_markers, render_rng)
+            errors = _Errors(sc.uwb, offsets, np.random.default_rng(_seeds(seed, u.index, 18)),
+                             NoiseStream.BLOCK if self.errors_on else 0)  # fmt: skip
+            self.uavs[u.id] = _Truth(st, x, s, held, n_markers, render_rng, errors)
 
     def active(self) -> list[str]:
         return [i for i, u in self.uavs.items() if not u.done]
@@ -440,11 +508,21 @@ class LandingWorld:
         """The arrays of :func:`swarm.step.landing_nb.world_sample` (after ``k``, without the draws), in
         :func:`~swarm.step.landing_nb.run_landing_ticks`' order."""
         return (u.x, u.s, u.held, self.kp, u.WSC, u.WC, self.WP, self.anchors, self.corners, self.CAM, u.INP,
-                u.CIDX, u.CPX)  # fmt: skip
+                u.CIDX, u.CPX, self.err_prm, self.vib, u.ERR_RS, u.ERR_OFF, u.ERR_STEP, u.errs.Z,
+                u.errs.pos)  # fmt: skip
+
+    def ensure_draws(self, u: _Truth) -> None:
+        """At least a tick's draws left in each of the UAV's buffers."""
+        u.noise.ensure(self.draws)
+        if self.errors_on:
+            u.errs.ensure(lnb.ERR_DRAWS_PER_TICK)
 
     def _step_one(self, u: _Truth, k: int) -> LandingInputs:
-        u.noise.ensure(self.draws)
+        self.ensure_draws(u)
         lnb.world_sample(k, *self.arrays(u)[:10], u.noise.Z, u.noise.pos, u.INP, u.CIDX, u.CPX)
+        if self.errors_on:
+            lnb.world_errors(u.s, self.err_prm, self.vib, u.ERR_RS, u.ERR_OFF, u.ERR_STEP, u.errs.Z,
+                             u.errs.pos, u.INP)  # fmt: skip
         inp = inputs_of(u.INP, u.CIDX, u.CPX, self.board)
         if u.INP[lnb.INP_CAM] == lnb.CAM_RENDER:
             t_cam = u.INP[lnb.INP_T_CAM : lnb.INP_T_CAM + 3].copy()
@@ -484,7 +562,7 @@ class LandingWorld:
         """The world's complete mutable state (each UAV's truth, its sensors' pending draws and random
         streams, its faults), for a checkpoint: :meth:`restore` on a world of the same scenario and seed
         continues exactly as this one does."""
-        return {
+        snap = {
             uid: {
                 "state": snapshot_state({"u": u}),
                 "noise": u.noise.state(),
@@ -492,6 +570,10 @@ class LandingWorld:
             }
             for uid, u in self.uavs.items()
         }
+        if self.errors_on:  # (only then: a snapshot without them is the one of before)
+            for uid, u in self.uavs.items():
+                snap[uid]["errs"] = u.errs.state()
+        return snap
 
     def restore(self, snap: dict) -> None:
         """A :meth:`snapshot` into this world (built from the same scenario and seed); :class:`SnapshotError`
@@ -505,6 +587,8 @@ class LandingWorld:
             restore_state({"u": u}, s["state"])
             u.noise.restore(s["noise"])
             u.render_rng.bit_generator.state = s["render_rng"]
+            if self.errors_on:
+                u.errs.restore(s["errs"])
 
     def outcome(self, uav_id: str) -> dict:
         """The world's half of a UAV's summary: where and how it ended."""

@@ -33,6 +33,7 @@ from numba import njit
 
 from swarm.core import _imu_nb as inb
 from swarm.core import _landing_nb as lnb
+from swarm.core import range_errors as rerr
 from swarm.core._pad_nb import corner_frame_nb, pack_frame_nb
 from swarm.core._pnp_nb import solve_pose_nb
 from swarm.core._rot_nb import qmat, qmat9, qrotate
@@ -114,6 +115,15 @@ RUN_NOISE = 1
 """Tick ``k`` may run out of noise draws: refill ``Z`` and call again from ``k``."""
 RUN_DRAIN = 2
 """A record buffer (mode switches, passes, series) may overflow at tick ``k``: drain and call again."""
+
+
+ERR_DRAWS_PER_TICK = 6 + rerr.ERR_DRAWS
+"""The most draws a tick takes from a UAV's ``uwb_errors`` stream: the IMU's vibration (6) and one range's
+errors (:data:`swarm.core.range_errors.ERR_DRAWS`)."""
+
+VIB_ACC, VIB_GYRO = 0, 1
+VIB_N = 2
+"""``VIB``: the IMU's vibration in flight, accelerometer [m/s^2] and gyro [rad/s] standard deviations."""
 
 
 def draws_per_tick(n_markers: int) -> int:
@@ -219,6 +229,30 @@ def world_sample(k, x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, Z, zpos,
                     for c in range(3):
                         INP[INP_R_CAM_PAD + 3 * r + c] = R_cp[r, c]
     zpos[0] = i
+
+
+@njit(cache=True)
+def world_errors(s, REP, VIB, RS, OFF, STEP, Z2, zpos2, INP):
+    """After :func:`world_sample`, what real flights add to its samples (:mod:`swarm.core.range_errors`),
+    from the UAV's own draws ``Z2`` at ``zpos2[0]`` (nothing drawn when off): in flight (``s``: the
+    quadrotor off the ground), the IMU's vibration ``VIB`` (6 draws a tick whenever it is on, added in
+    flight), and each range's errors (``REP``, the link states ``RS`` (anchors, RS_N), the anchors' offsets
+    ``OFF`` and the UAV's take-off steps ``STEP``)."""
+    i = zpos2[0]
+    airborne = s[qd.S_GROUND] == 0.0
+    if VIB[VIB_ACC] > 0.0 or VIB[VIB_GYRO] > 0.0:
+        if airborne:
+            for j in range(3):
+                INP[INP_ACC + j] += VIB[VIB_ACC] * Z2[i + j]
+                INP[INP_GYRO + j] += VIB[VIB_GYRO] * Z2[i + 3 + j]
+        i += 6
+    if REP[rerr.RE_ON] != 0.0 and INP[INP_HAS_UWB] != 0.0:
+        a = int(INP[INP_ANCHOR])
+        extra, _ = rerr.range_error_step(INP[INP_T], airborne, RS[a], Z2[i : i + rerr.ERR_DRAWS], REP, OFF[a],
+                                         STEP[a])  # fmt: skip
+        INP[INP_RANGE] += extra
+        i += rerr.ERR_DRAWS
+    zpos2[0] = i
 
 
 @njit(cache=True)
@@ -386,21 +420,26 @@ def series_sample(SER, SER_n, t, p_true, AF, mode):
 
 @njit(cache=True)
 def run_landing_ticks(k, k1, world, agent, guid, ctl, Z, zpos, need, SER, SER_n, series_every):
-    """Ticks ``k .. k1 - 1`` of one UAV (module docstring), each :func:`world_sample`, :func:`agent_fuse`,
+    """Ticks ``k .. k1 - 1`` of one UAV (module docstring), each :func:`world_sample` (and
+    :func:`world_errors` when the scenario has them), :func:`agent_fuse`,
     :func:`agent_decide`, :func:`world_hold` and, every ``series_every`` ticks (0: never), a series sample.
     Returns ``(RUN_*, k)``: done (or ``k1`` reached), or the tick at which ``Z`` needs ``need`` more draws or
     a record buffer may overflow (nothing of that tick done)."""
-    x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, INP, CIDX, CPX = world
+    x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, INP, CIDX, CPX = world[:13]
+    REP, VIB, RS, OFF, STEP, Z2, zpos2 = world[13:]
+    errors = REP[rerr.RE_ON] != 0.0 or VIB[VIB_ACC] > 0.0 or VIB[VIB_GYRO] > 0.0
     POSE, X, P, AF, HELD, NIS, counts, anchs, bias_of, sigma, prm, work, res, AC = agent[:14]
     OBJ, IMG, VAR, T_OUT, R_OUT, COV_OUT = agent[14:]
     G, GP, REF, EV, EV_n, DEC, DEC_n = guid
     cs, cp, u, act = ctl
     while k < k1:
-        if Z.shape[0] - zpos[0] < need:
+        if Z.shape[0] - zpos[0] < need or (errors and Z2.shape[0] - zpos2[0] < ERR_DRAWS_PER_TICK):
             return RUN_NOISE, k
         if EV_n[0] + 4 > EV.shape[0] or DEC_n[0] + 4 > DEC.shape[0] or SER_n[0] + 1 > SER.shape[0]:
             return RUN_DRAIN, k
         world_sample(k, x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, Z, zpos, INP, CIDX, CPX)
+        if errors:
+            world_errors(s, REP, VIB, RS, OFF, STEP, Z2, zpos2, INP)
         agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchs, bias_of, sigma, prm, work, res,
                    AC, corners, CAM, OBJ, IMG, VAR, T_OUT, R_OUT, COV_OUT)  # fmt: skip
         mode = agent_decide(INP, X, P, AF, NIS, G, GP, REF, EV, EV_n, DEC, DEC_n, cs, cp, u, act)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from swarm.core import range_errors as re_
 from swarm.core._rot_nb import qrotate
 from swarm.core.sensors import UwbRadio, UwbSample, uwb_exchange
 from swarm.step.streams import stream
@@ -76,6 +77,22 @@ class UwbNetwork:
         self.idle = np.zeros(n, dtype=np.bool_)
         self.collided = np.zeros(n, dtype=np.bool_)
         self.collisions = np.zeros(n, dtype=np.int64)
+        # the range errors of real flights (swarm.core.range_errors), off unless [uwb] switches them on: the
+        # per-anchor offsets (one stream for the network), each link's take-off step, state and draws (a
+        # stream per vehicle, uwb_errors), so that switching them on changes no other draw
+        u, m = scenario.uwb, len(self.anchors)
+        self.err_prm = re_.range_error_vector(u)
+        self.err_on = bool(self.err_prm[re_.RE_ON])
+        self.airborne = np.array([not scenario.kind(v).planar for v in self.ids], dtype=np.bool_)
+        self.err_state = np.zeros((n, m, re_.RS_N))
+        self.err_state[:, :, re_.RS_T] = np.nan
+        self.err_offset, self.err_step = np.zeros(m), np.zeros((n, m))
+        self.err_noise = np.zeros((n, 0, re_.ERR_DRAWS))
+        self.err_rng = {}
+        if self.err_on:
+            self.err_offset = re_.draw_offsets(u, stream(seed, 0, "uwb_anchors"), m)
+            self.err_rng = {vid: stream(seed, i, "uwb_errors") for i, vid in enumerate(self.ids)}
+            self.err_step = np.array([re_.draw_steps(u, self.err_rng[v], m) for v in self.ids]).reshape(n, m)
 
     def reserve_noise(self, exchanges: int) -> None:
         """Pre-draw the normals of the next ``exchanges`` exchanges of every radio (four each)."""
@@ -88,6 +105,12 @@ class UwbNetwork:
         for i, vid in enumerate(self.ids):
             new[i, :left] = self.noise[i, used:]
             new[i, left:] = self.rng[vid].standard_normal((rows - left, 4))
+        if self.err_on:  # the range errors' draws, row for row with the exchanges'
+            err = np.empty((self.noise.shape[0], rows, re_.ERR_DRAWS))
+            for i, vid in enumerate(self.ids):
+                err[i, :left] = self.err_noise[i, used:]
+                err[i, left:] = self.err_rng[vid].standard_normal((rows - left, re_.ERR_DRAWS))
+            self.err_noise = err
         self.noise, self.ui[0] = new, 0
 
     def step(self, k: int, t_s: float, truth, env_lost=None, env_p=None) -> dict[str, UwbSample]:
@@ -106,6 +129,9 @@ class UwbNetwork:
             self.env_lost, self.env_p, self.lost, self.anchor_id, self.range_m, self.outlier,
             self.tdma_slot, self.tdma_prm, self.idle, self.collided, self.collisions,
         )  # fmt: skip
+        uwb_errors_tick(t_s, self.lost, self.anchor_id, self.range_m, self.outlier, self.airborne,
+                        self.err_state, self.err_offset, self.err_step, self.err_noise, self.ui,
+                        self.err_prm)  # fmt: skip
         return {
             vid: UwbSample(t_s, int(self.anchor_id[i]), float(self.range_m[i]), bool(self.outlier[i]))
             for i, vid in enumerate(self.ids)
@@ -199,6 +225,27 @@ def uwb_tick(t_s, X, lever, anchors, drift, prm, next_anchor, noise, ui, env_los
         if collided[v]:
             lost[v], outlier[v] = True, False
     ui[0] += 1
+
+
+@numba.njit(cache=True)
+def uwb_errors_tick(t_s, lost, anchor_id, range_m, outlier, airborne, state, offset, step, noise, ui, prm):
+    """The range errors of real flights (:mod:`swarm.core.range_errors`) added to the exchanges
+    :func:`uwb_tick` just made (its noise row ``ui[0] - 1``): every reply not lost gets
+    :func:`~swarm.core.range_errors.range_error_step` of its vehicle-anchor link, clipped at zero as the
+    exchange's range is; one in an NLOS episode is marked an outlier. Nothing when ``prm`` is off."""
+    if prm[re_.RE_ON] == 0.0:
+        return
+    row = ui[0] - 1
+    for v in range(range_m.shape[0]):
+        if lost[v]:
+            continue
+        a = anchor_id[v]
+        extra, blocked = re_.range_error_step(
+            t_s, airborne[v], state[v, a], noise[v, row], prm, offset[a], step[v, a]
+        )
+        r = range_m[v] + extra
+        range_m[v] = r if r > 0.0 else 0.0
+        outlier[v] = outlier[v] or blocked
 
 
 def clear_env(n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-STREAMS = ("init", "gyro", "ahrs", "camera", "uwb")
+STREAMS = ("init", "gyro", "ahrs", "camera", "uwb", "uwb_errors", "uwb_anchors")
+"""Appended only: a stream's index is part of its key, so a new name changes no existing stream."""
 
 
 def stream(seed: int, vehicle_index: int, name: str) -> np.random.Generator:

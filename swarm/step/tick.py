@@ -4,7 +4,8 @@ A tick is the radio step, every agent's step (the target estimates a chaser take
 samples, and on a vehicle's control ticks guidance, Algorithm 1 and its kind's controller), the world
 holding the new commands, the referee and the world step. :func:`run_ticks` runs those ticks by calling
 the *same* compiled step functions that the objects call one tick at a time, in the same order, on the
-same arrays: :func:`swarm.step.radio.radio_env` and :func:`~swarm.step.radio.uwb_tick`,
+same arrays: :func:`swarm.step.radio.radio_env`, :func:`~swarm.step.radio.uwb_tick` and
+:func:`~swarm.step.radio.uwb_errors_tick`,
 :func:`swarm.step.agent.agent_imu`, :func:`~swarm.step.agent.agent_uwb` and
 :func:`~swarm.step.agent.agent_control`, :func:`swarm.kinds._dispatch.hold_step`,
 :func:`swarm.step.referee.referee_tick` and :func:`swarm.step.world.world_tick`. A run is bit for bit
@@ -43,7 +44,7 @@ from swarm.step.agent import (
     agent_uwb,
     relative_nav,
 )
-from swarm.step.radio import radio_env, uwb_tick
+from swarm.step.radio import radio_env, uwb_errors_tick, uwb_tick
 from swarm.step.referee import NO_CONTACT, referee_tick
 from swarm.step.world import CAM_FEATURES, CAM_POSE, camera_frame, world_tick
 
@@ -80,7 +81,8 @@ def radio_arrays(net) -> tuple:
     :class:`swarm.step.radio.UwbNetwork`."""
     return (net.lever, net.anchors, net.drift, net.prm, net.next_anchor, net.noise, net.ui, net.env_lost,
             net.env_p, net.lost, net.anchor_id, net.range_m, net.outlier, net.tdma_slot, net.tdma_prm,
-            net.idle, net.collided, net.collisions)  # fmt: skip
+            net.idle, net.collided, net.collisions, net.airborne, net.err_state, net.err_offset, net.err_step,
+            net.err_noise, net.err_prm)  # fmt: skip
 
 
 def agent_arrays(a) -> tuple:
@@ -192,7 +194,8 @@ def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
     drop_w, nlos_w = W[17], W[18]
     gyro_out, ahrs_out = W[13], W[14]
     (lever, anchors, drift, uprm, next_anchor, unoise, ui, env_lost, env_p, lost, anchor_id, range_m,
-     outlier, tdma_slot, tdma_prm, idle, collided, collisions) = R  # fmt: skip
+     outlier, tdma_slot, tdma_prm, idle, collided, collisions, airborne, err_state, err_offset, err_step,
+     err_noise, err_prm) = R  # fmt: skip
     (AX, AP, AC, AB, PRMS, f_body, w_body, mass, plane, Hok, Hd2, Hmeta, last_vision, MP, t_agent,
      role, every, phase, vdone, tidx, TGT, G, GP, SW, DEC, DEC_n, EV, EV_n, ST, SP, CS, CP, REF, UC, ACT, SAT,
      ctl, MR, MQ) = A  # fmt: skip
@@ -231,6 +234,8 @@ def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
             uwb_tick(t, X, lever, anchors, drift, uprm, next_anchor, unoise, ui, env_lost, env_p, lost,
                      anchor_id, range_m, outlier, tdma_slot, tdma_prm, idle, collided,
                      collisions)  # fmt: skip
+            uwb_errors_tick(t, lost, anchor_id, range_m, outlier, airborne, err_state, err_offset, err_step,
+                            err_noise, ui, err_prm)  # fmt: skip
         has_ahrs = ahrs_enabled and j % ahrs_every == 0
         for v in range(n):
             agent_imu(AX[v], AP[v], AC[v], AB[v], PRMS[v], gyro_out[v], dt, f_body[v], mass[v], w_body[v],
