@@ -203,8 +203,9 @@ class HeightLog:
     """Its white noise [m]."""
     max_range_m: float = 3.0
     """Readings beyond are refused (the sensor's reach; past it a ToF sensor reports junk)."""
-    max_tilt_deg: float = 30.0
-    """Readings at a larger estimated tilt are refused (the beam leaves the flat ground of the model)."""
+    min_cos_tilt: float = 0.866
+    """Readings at an estimated tilt whose cosine is below this are refused (the beam leaves the flat
+    ground of the model; 0.866: 30 deg)."""
     ground_z_m: float | None = None
     """The ground's height in nav [m]; leave out to take the calibration position's height minus the static
     segment's median reading (the sensor's own offset included), else 0."""
@@ -216,8 +217,8 @@ class HeightLog:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ConfigError(f"height.{name} must be a finite number > 0, got {v!r}")
-        if not 0.0 < self.max_tilt_deg < 90.0:
-            raise ConfigError(f"height.max_tilt_deg must be in (0, 90), got {self.max_tilt_deg!r}")
+        if not 0.0 < self.min_cos_tilt <= 1.0:
+            raise ConfigError(f"height.min_cos_tilt must be in (0, 1], got {self.min_cos_tilt!r}")
         if not 0.5 < self.gate_probability < 1.0:
             raise ConfigError(f"height.gate_probability must be in (0.5, 1), got {self.gate_probability!r}")
 

@@ -379,7 +379,7 @@ def aux_streams(log: Log, f: ImuFilter, cal: StaticCalibration | None):
         hc = cfg.height
         ax[nb.AX_H_ON] = 1.0
         ax[nb.AX_H_SIGMA], ax[nb.AX_H_MAX] = hc.sigma_m, hc.max_range_m
-        ax[nb.AX_H_COS] = math.cos(math.radians(hc.max_tilt_deg))
+        ax[nb.AX_H_COS] = hc.min_cos_tilt
         ax[nb.AX_H_GROUND] = ground_height(log, cal)
         ax[nb.AX_H_GATE] = chi2.ppf(hc.gate_probability, 1)
         parts_t.append(log.height_t)
