@@ -79,6 +79,8 @@ def run_host(runs: dict[str, Callable[[], None]], stop: threading.Event) -> int:
     thread for all (:class:`agents.host.AgentHost`)."""
     import logging
 
+    from swarm.transport.stopping import SIGNAL_POLL_S
+
     failed: list[BaseException] = []
 
     def run_one(vid: str) -> None:
@@ -93,7 +95,8 @@ def run_host(runs: dict[str, Callable[[], None]], stop: threading.Event) -> int:
     for t in threads:
         t.start()
     for t in threads:
-        t.join()
+        while t.is_alive():  # in steps: this thread runs the stop signal's handler (swarm.transport.stopping)
+            t.join(SIGNAL_POLL_S)
     return 1 if failed else 0
 
 

@@ -29,7 +29,9 @@ What the host shares among its vehicles:
 
 Each vehicle keeps its own subscribers to its own sensors (and to its target's estimate, when the target is
 in another process), its publishers and its token. An exception in one vehicle's step stops the host, which
-exits 1: its supervisor restarts every vehicle it hosted, and they rejoin the run.
+exits 1: its supervisor restarts every vehicle it hosted, and they rejoin the run. A publication that fails
+because the host's session closed while it stops (a round still running on a Zenoh thread) only ends its
+rounds (:mod:`swarm.transport.stopping`).
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ from swarm.transport.messages import (
 )
 from swarm.transport.process import declare_reliable
 from swarm.transport.session import subscribe_decoded, watch_liveliness
+from swarm.transport.stopping import Stopping, wait_for_stop
 
 __all__ = ["IDLE_S", "SCAN_S", "AgentHost", "WakePlanner"]
 
@@ -81,6 +84,9 @@ class AgentHost:
             raise ValueError("the vehicles of one host share one condition and one ready set (cond=, ready=)")
         self.cond, self.ready = self.procs[0].assembler.cond, self.procs[0].assembler.ready
         self.session, self.keys, self.stop = session, keys, stop
+        self.stopping = Stopping(stop)  # one for its vehicles (the launcher's stopping event, a signal)
+        for p in self.procs:
+            p.stopping = self.stopping
         clock = {p.clock for p in self.procs}
         if len(clock) != 1:
             raise ValueError(f"the vehicles of one host share its clock, got {sorted(map(str, clock))}")
@@ -189,7 +195,7 @@ class AgentHost:
         try:
             ended = self._loop()
             if ended:
-                self.stop.wait()  # stay up (liveliness, dashboard) until told to stop
+                wait_for_stop(self.stop)  # stay up (liveliness, dashboard) until told to stop
         finally:
             self.shared_drops.flush()
             for p in self.procs:
@@ -219,8 +225,13 @@ class AgentHost:
                 self._kick.clear()
                 self._drain()
                 continue
-            with self._round_lock:
-                did = self._round()
+            try:
+                with self._round_lock:
+                    did = self._round()
+            except Exception as exc:
+                if not self.stopping.quiet(exc):  # (its session closing while it stops: no error)
+                    raise
+                break
             if not did:
                 with self.cond:
                     if not self.ready:
@@ -252,7 +263,8 @@ class AgentHost:
                     polled += 1
                     self.stop.wait(plan.poll_s())  # the control tick's imu not in yet
         except BaseException as exc:  # kept for the loop's thread to raise (the host exits 1)
-            self._failure = exc
+            if not self.stopping.quiet(exc):  # (its session closing while it stops: no error)
+                self._failure = exc
             self._kick.set()
 
     def on_news(self) -> None:
@@ -273,7 +285,8 @@ class AgentHost:
                 while self._live and self._round():
                     pass
             except BaseException as exc:
-                self._failure = exc
+                if not self.stopping.quiet(exc):  # (its session closing while it stops: no error)
+                    self._failure = exc
                 self._kick.set()
                 return
             finally:
@@ -312,8 +325,9 @@ class AgentHost:
                     p.fuse_late(late)  # free-running: before the tick that follows theirs
                 if inp is not None:
                     p.process(inp)
-            except Exception:
-                _LOG.exception("%s: agent failed at tick %s", p.id, "late" if inp is None else inp.tick)
+            except Exception as exc:
+                if not self.stopping.quiet(exc):
+                    _LOG.exception("%s: agent failed at tick %s", p.id, "late" if inp is None else inp.tick)
                 raise
             if self._commands and (i + 1 == len(batch) or _commands_last(batch[i + 1])):
                 self._send_commands()  # the last vehicle that commands on its tick is stepped
@@ -322,8 +336,9 @@ class AgentHost:
                 continue
             try:
                 p.flush()
-            except Exception:
-                _LOG.exception("%s: agent failed publishing its estimate of tick %d", p.id, inp.tick)
+            except Exception as exc:
+                if not self.stopping.quiet(exc):
+                    _LOG.exception("%s: agent failed publishing its estimate of tick %d", p.id, inp.tick)
                 raise
         now = time.monotonic()
         if self._ending or now >= self._scan_at:

@@ -134,8 +134,10 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
     from swarm.transport.messages import DropCounter, Event, Gnss, Imu, MessageError, Rangefinder, Uwb, Vision
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import declare_liveliness, subscribe_decoded
+    from swarm.transport.stopping import Stopping, wait_for_stop
 
     uid = uav.id
+    stopping = Stopping(stop)  # (the launcher's stopping event, a signal: swarm.transport.stopping)
     agent = LandingAgent(sc, seed, uav.index, policy)
     rates = Rates.of(sc)
     dt = sc.dt_s
@@ -176,6 +178,8 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         return handler
 
     def on_world_event(_key: str, msg: Event) -> None:
+        if stopping.hear(msg.kind):
+            return
         if msg.kind == "run_end":
             with cond:
                 state["ended"] = True
@@ -185,7 +189,12 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
             with cond:
                 again = [c for c in sent if isinstance(j, int) and c[0] >= j]
             for tick, key, payload in again:  # the world that had them is gone
-                pub[key].put(payload)
+                try:
+                    pub[key].put(payload)
+                except Exception as exc:
+                    if not stopping.quiet(exc):  # (its session closing while it stops: no error)
+                        raise
+                    return
                 _LOG.warning("%s: world resumed at tick %s: its command of tick %d sent again", uid, j, tick)
 
     def complete(k: int) -> bool:
@@ -264,7 +273,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         pub[key].put(payload)
         _LOG.info("%s: run ended: %s (%d ticks fused without a decision, behind the world)", uid,
                   agent.outcome()["final_mode"], skipped)  # fmt: skip
-        stop.wait()
+        wait_for_stop(stop)  # (in steps: a signal's handler must get to run, swarm.transport.stopping)
     if ckpt is not None:
         ckpt.close()
     token.undeclare()

@@ -26,7 +26,10 @@ Python thread woken for each: the same inputs for the same ticks, without a wake
 A restarted world (``world/event`` ``world_resumed`` at tick ``k``) publishes tick ``k``'s samples again:
 the assembler drops those the agent already has (counted ``stale`` or ``duplicates``), and an agent whose
 last command is of tick ``k`` (a control tick) sends it again, since the new world never received it.
-While the world is gone (its liveliness token went) the agent says so and waits: no sample, no tick.
+While the world is gone (its liveliness token went) the agent says so and waits: no sample, no tick. Once
+the swarm is stopping (its own SIGINT/SIGTERM, or the launcher's ``stopping`` event on ``world/event``), a
+peer's going is logged as a stop, not a loss, and a publication its closing session no longer takes is no
+error (:mod:`swarm.transport.stopping`).
 
 A restarted agent (``--rejoin``) joins the run in progress: it publishes zero-thrust HOLD commands while it
 re-initialises from its own sensors (the AHRS attitude, and its position by least squares on one range to
@@ -84,6 +87,7 @@ from swarm.transport.session import (
     subscribe_decoded,
     watch_liveliness,
 )
+from swarm.transport.stopping import Stopping, process_name
 
 _LOG = logging.getLogger("swarm.agent")
 
@@ -132,6 +136,8 @@ class AgentProcess:
             )
         self.sc, self.id, self.seed, self.policy = sc, vehicle_id, seed, policy
         self.session, self.keys, self.clock, self.stop = session, keys, clock, stop
+        # the swarm stops: a peer's going is no loss (an agent host gives its vehicles one, agents.host)
+        self.stopping = Stopping(stop)
         self.rejoin = rejoin
         spec = sc.vehicles[vehicle_id]
         self.chaser = spec.role == "chaser"
@@ -254,14 +260,20 @@ class AgentProcess:
 
     def _on_world_event(self, _key: str, msg: Event) -> None:
         """``world_resumed`` at tick ``k``: send ``command(k)`` again if it is the last one sent (the world
-        that got it is gone); a command not computed yet goes out as usual once tick ``k`` is processed."""
-        if msg.kind != "world_resumed":
+        that got it is gone); a command not computed yet goes out as usual once tick ``k`` is processed.
+        The launcher's ``stopping``: the swarm is stopping (:mod:`swarm.transport.stopping`)."""
+        if self.stopping.hear(msg.kind) or msg.kind != "world_resumed":
             return
         k = msg.data.get("tick")
         with self._command_lock:
             last = self._last_command
             if last is not None and last[0] == k:
-                self.pub_command.put(last[1])
+                try:
+                    self.pub_command.put(last[1])
+                except Exception as exc:
+                    if not self.stopping.quiet(exc):  # (its session closing while it stops: no error)
+                        raise
+                    return
                 self.resent += 1
         _LOG.warning(
             "%s: world resumed at tick %s%s", self.id, k,
@@ -269,21 +281,25 @@ class AgentProcess:
         )  # fmt: skip
 
     def _on_alive(self, role: str, pid: str, alive: bool) -> None:
+        """A peer this vehicle depends on joins or goes: the world, the mothership, its target. Gone, it is
+        lost (a warning), or stopped if the swarm is stopping (:mod:`swarm.transport.stopping`)."""
+        name = f"{self.id}: {process_name(role, pid)}"
         if role == "world":
             if alive:
-                _LOG.info("%s: world %s is alive", self.id, pid)
+                _LOG.info("%s is alive", name)
             else:
-                _LOG.warning("%s: world %s lost; no samples (no ticks) until it is back", self.id, pid)
+                self.stopping.gone(_LOG, name, "%s lost; no samples (no ticks) until it is back", name)
             return
         if role == "mothership":
             if not alive:
-                _LOG.warning("%s: mothership lost; flying without ranges until it is back", self.id)
+                self.stopping.gone(_LOG, name, "%s lost; flying without ranges until it is back", name)
             if self.clock.lockstep:
                 self.assembler.set_uwb_live(alive)
             return
         if role == "agent" and pid == self.target_id:
             if not alive:
-                _LOG.warning("%s: target %s lost; holding its last estimate", self.id, pid)
+                name = f"{self.id}: target {pid}"
+                self.stopping.gone(_LOG, name, "%s lost; holding its last estimate", name)
             if self.clock.lockstep:
                 self.assembler.set_target_live(alive)
 
@@ -587,7 +603,8 @@ class AgentProcess:
             if self._ended.is_set() and (self._done_through(self._end_tick) or
                                          now - self._waited_since >= END_DRAIN_S):  # fmt: skip
                 return True
-            if self.ticking() and now - self._waited_since > 5.0 and now - self._warned_at > 5.0:
+            stalled = now - self._waited_since > 5.0 and now - self._warned_at > 5.0
+            if self.ticking() and stalled and not self.stopping:  # (stopping: the world went first)
                 _LOG.warning(
                     "%s: tick %s still lacks %s",
                     self.id, self.assembler.next_expected, self.assembler.waiting_for(),

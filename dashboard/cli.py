@@ -5,8 +5,10 @@ Zenoh session; the scenario and the namespace are the recording's unless given).
 Once serving, it prints one line on stdout (flushed), ``dashboard listening on http://<host>:<port>``, so
 that a launcher or a test can wait for it and read the URL (with ``--port 0`` the OS picks the port;
 if the requested port is busy, Viser takes the next free one and the line says which). It runs until
-SIGINT or SIGTERM, then closes its Zenoh session and the Viser server and exits 0; 2 for bad input (a
-missing, truncated or corrupt recording: one line naming the file and the byte offset where reading stopped).
+SIGINT or SIGTERM, then closes its Zenoh session and the Viser server and exits 0 (started by ``swarm
+launch``, it leaves a SIGINT to the launcher, which stops it in the swarm's order:
+:mod:`swarm.transport.stopping`); 2 for bad input (a missing, truncated or corrupt recording: one line
+naming the file and the byte offset where reading stopped).
 
 ``--host`` defaults to ``localhost``: the dashboard can pause and reset the swarm, so it is not offered
 to the network unless asked (``--host 0.0.0.0``).
@@ -39,7 +41,6 @@ DESCRIPTION = (
     "FILE.mcap it plays a recording (swarm record, swarm launch --record) instead: time slider, "
     "play/pause and speed, no Zenoh."
 )
-_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def _agents(text: str) -> int:
@@ -180,15 +181,10 @@ def _serve(args: argparse.Namespace, stop: threading.Event | None, make) -> int:
     """Serve the app ``make()`` builds until ``stop`` (or a signal, module docstring)."""
     previous: dict[int, object] = {}
     if stop is None:
-        stop = threading.Event()
-        event = stop
+        from swarm.transport.stopping import StopFlag, install_stop_signals
 
-        def on_signal(signum: int, _frame: object) -> None:
-            _LOG.info("dashboard: %s, closing", signal.Signals(signum).name)
-            event.set()
-
-        for sig in _STOP_SIGNALS:
-            previous[sig] = signal.signal(sig, on_signal)
+        stop = StopFlag()
+        previous = install_stop_signals(stop, _LOG)
     try:
         try:
             app = make()

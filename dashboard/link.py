@@ -46,6 +46,7 @@ from swarm.transport.messages import (
     safe_decode,
 )
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
+from swarm.transport.stopping import STOPPING, process_name
 
 __all__ = ["LATEST_KINDS", "SwarmLink"]
 
@@ -100,6 +101,8 @@ class SwarmLink:
         self.state = state
         self.drops = drops
         self._stop = threading.Event()
+        # the launcher's stopping event (until the next run's start): a process's going is then a stop
+        self._stopping = threading.Event()
         # before the first subscription: a callback may run as soon as its subscriber is declared (a restarted
         # dashboard met the mothership's periodic anchors there: AttributeError in _on_anchors, logged)
         self._have_anchors = threading.Event()
@@ -219,6 +222,10 @@ class SwarmLink:
             self.state.on_message("event", parsed[1], msg)
 
     def _on_world_event(self, _key: str, msg: Event) -> None:
+        if msg.kind == STOPPING:  # (swarm.transport.stopping)
+            self._stopping.set()
+        elif msg.kind == "run_start":  # the next run's processes
+            self._stopping.clear()
         self.state.on_message("world_event", None, msg)
 
     def _on_anchors(self, _key: str, msg: Anchors) -> None:
@@ -228,7 +235,8 @@ class SwarmLink:
     def _on_liveliness(self, role: str, process_id: str, alive: bool) -> None:
         change = self.state.on_liveliness(role, process_id, alive)
         if change is not None:
-            _LOG.info("%s %s %s", role, process_id, change)
+            stopped = not alive and (self._stopping.is_set() or self._stop.is_set())
+            _LOG.info("%s %s", process_name(role, process_id), "stopped" if stopped else change)
 
     def _fetch_anchors(self, retry_s: float) -> None:
         key = self.keys.anchors()

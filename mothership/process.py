@@ -18,6 +18,9 @@
   ``nlos_probability``: the world's fault schedule, fixed, mode-triggered and run-time windows alike),
   and the radios apply it, as the in-process radio step does.
 - While the world is gone (its liveliness token went) it says so and serves nothing: no truth, no range.
+- A stop (its own SIGINT/SIGTERM, or the launcher's ``stopping`` event on ``world/event``) is no fault: the
+  world's going is then logged as a stop, and a slot's ranges that its closing session no longer takes are
+  not an error (:mod:`swarm.transport.stopping`).
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from swarm.transport.messages import (
     Bundle,
     Clock,
     DropCounter,
+    Event,
     Truth,
     TruthBatch,
     bundle_messages,
@@ -45,6 +49,7 @@ from swarm.transport.messages import (
 )
 from swarm.transport.process import PROCESS_NOISE_BLOCK, declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
+from swarm.transport.stopping import Stopping, process_name
 
 _LOG = logging.getLogger("swarm.mothership")
 
@@ -85,6 +90,7 @@ class MothershipProcess:
         self.slots = 0
         self.served_again = 0  # truth batches of slots already served (a resumed world's): ignored
         self._world_stopped = False  # the world's last Clock said "stopped": its run is over
+        self.stopping = Stopping(stop)  # the swarm stops: the world's going is no loss, a failed put no error
 
     def _on_truth_batch(self, key: str, msg: TruthBatch, out: dict | None = None) -> None:
         """A tick's truths of every vehicle (``world/truth``): each vehicle's, as its own key would have
@@ -106,9 +112,13 @@ class MothershipProcess:
         out: dict[str, list[tuple[str, bytes, int]]] = {}
         for batch in bundle_messages(msg, key, self.drops, ("TruthBatch",)):
             self._on_truth_batch(key, batch, out)  # type: ignore[arg-type]
-        for vid, entries in out.items():
-            for payload in pack_bundle(entries):
-                self.pub_bundle[vid].put(payload)
+        try:
+            for vid, entries in out.items():
+                for payload in pack_bundle(entries):
+                    self.pub_bundle[vid].put(payload)
+        except Exception as exc:
+            if not self.stopping.quiet(exc):  # (its session closing while it stops: no error)
+                raise
 
     def _serve(self, tick: int, truths, out: dict | None = None) -> None:
         """Tick ``tick``'s ``(vehicle, truth)`` pairs (an iterable, taken only on a UWB slot tick) into the
@@ -127,6 +137,8 @@ class MothershipProcess:
                 for vid, truth in truths:
                     self._take(vid, truth, out)
         except Exception as exc:  # a bug in the radio step: the process fails, its supervisor restarts it
+            if self.stopping.quiet(exc):  # its session closing while it stops: no error, nothing to restart
+                return
             _LOG.exception("UWB slot failed")
             self._failure = exc
 
@@ -154,7 +166,8 @@ class MothershipProcess:
         try:
             query.reply(self.keys.anchors(), encode(self.anchors_msg))
         except Exception as exc:  # a query must never kill the queryable's thread
-            _LOG.warning("anchors query not answered: %s", exc)
+            if not self.stopping.quiet(exc):
+                _LOG.warning("anchors query not answered: %s", exc)
 
     def _on_clock(self, _key: str, msg: Clock) -> None:
         # the world's clock says whether its going is the end of a run (it publishes "stopped" after
@@ -163,14 +176,18 @@ class MothershipProcess:
         if self._world_stopped:
             _LOG.debug("world stopped at tick %d", msg.tick)
 
+    def _on_world_event(self, _key: str, msg: Event) -> None:
+        self.stopping.hear(msg.kind)  # the launcher's stopping: the world's going is a stop
+
     def _on_alive(self, role: str, pid: str, alive: bool) -> None:
         if role == "world":
+            name = process_name(role, pid)
             if alive:
-                _LOG.info("world %s is alive", pid)
+                _LOG.info("%s is alive", name)
             elif self._world_stopped:
-                _LOG.info("world %s gone after the end of its run", pid)
+                _LOG.info("%s gone after the end of its run", name)
             else:
-                _LOG.warning("world %s lost; no truth, so no ranges, until it is back", pid)
+                self.stopping.gone(_LOG, name, "%s lost; no truth, so no ranges, until it is back", name)
 
     def _slot(self, k: int, truths: dict[str, Truth], out: dict | None = None) -> None:
         X = np.zeros((len(self.ids), 13))
@@ -214,6 +231,7 @@ class MothershipProcess:
         # a lockstep world's ticks up to its next awaited command in one message (docs/protocol.md, "Bundles")
         subscribe_decoded(self.session, k.world_bundle(), Bundle, self._on_bundle, self.drops)
         subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.drops)
+        subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.drops)
         watch_liveliness(self.session, k, self._on_alive, history=False)
         self._token = declare_liveliness(self.session, k, "mothership", "mothership")
         print_ready("mothership", "mothership")

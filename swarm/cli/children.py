@@ -8,6 +8,7 @@ import argparse
 import logging
 import os
 import threading
+import time
 from pathlib import Path
 
 from swarm.errors import ConfigError
@@ -221,6 +222,28 @@ class LauncherRecorder:
 def start_recorder(args: argparse.Namespace, session, keys) -> LauncherRecorder | None:
     """The launcher's recorder (``--record``), or None."""
     return None if args.record is None else LauncherRecorder(args, session, keys)
+
+
+def stop_swarm(sup, session, keys, why: str, t_s: float = 0.0, keep: tuple[str, ...] = ()) -> None:
+    """Stop the swarm's processes (but those named in ``keep``) in the order of
+    :mod:`swarm.transport.stopping`: the ``stopping`` event on ``world/event`` (``{"why": why}``, at swarm
+    time ``t_s``), :data:`~swarm.transport.stopping.ANNOUNCE_S` for it to be heard, then the world, then the
+    rest (:meth:`~swarm.cli.supervisor.Supervisor.stop_all`). ``session`` None (closed): no announcement."""
+    import zenoh
+
+    from swarm.transport.messages import Event, encode
+    from swarm.transport.stopping import ANNOUNCE_S, STOPPING
+
+    live = [c for c in sup.children.values() if c.running and c.name not in keep]
+    if live and session is not None:
+        try:
+            payload = encode(Event(max(0.0, t_s), STOPPING, {"why": why}))
+            session.put(keys.world_event(), payload, congestion_control=zenoh.CongestionControl.BLOCK,
+                        express=True)  # fmt: skip
+            time.sleep(ANNOUNCE_S)
+        except zenoh.ZError as exc:  # the launcher's session closing under it: stop them unannounced
+            _LOG.debug("stop not announced: %s", exc)
+    sup.stop_all(keep=keep, first=("world",))
 
 
 def checkpoint_root() -> Path:

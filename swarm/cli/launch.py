@@ -16,12 +16,16 @@ exponential backoff, at most ``--max-restarts`` times), and collects the run fro
 ``agent/*/event`` and ``agent/*/guidance``. The summary has ``swarm sim``'s fields per chaser (DESIGN.md
 section 8) and the restarts of each process. After the run: ``--until-docked`` exits; ``--repeat`` starts
 the next run with a new seed; otherwise the swarm stays up (for the dashboard) until Ctrl-C or
-``--timeout``. Ctrl-C, SIGTERM or the end stop every child: SIGTERM,
-then SIGKILL of its process group after a grace period. ``--cpu-latency 0`` holds a PM QoS request that
-no CPU take longer than 0 us to wake while the swarm runs (``swarm.cpu_latency``: processes woken every
-tick start on a warm CPU; needs root).
+``--timeout``. Ctrl-C, SIGTERM or the end stop every child in an order that no process mistakes for a
+failure (:mod:`swarm.transport.stopping`): a ``stopping`` event on ``world/event``, then the world, then
+the rest, each by SIGTERM, then SIGKILL of its process group after a grace period; a stop logs no error
+and no loss. ``--cpu-latency 0`` holds a PM QoS request that no CPU take longer than 0 us to wake while the
+swarm runs (``swarm.cpu_latency``: processes woken every tick start on a warm CPU; needs root).
 
-Exit status: 0 every chaser docked, 1 not (or the run failed), 2 bad input, 130 interrupted.
+Exit status: 0 every chaser docked, 1 not (or the run failed), 2 bad input, 130 interrupted (Ctrl-C or
+SIGTERM) before the run in progress ended, a ``--repeat``'s later run included; a stop after a run ended
+(the swarm held for the dashboard, or the pause between two ``--repeat`` runs) exits with that run's
+status.
 """
 
 from __future__ import annotations
@@ -52,12 +56,14 @@ from swarm.cli.children import (
     router_args,
     secure_router,
     start_recorder,
+    stop_swarm,
     swarm_processes,
     topology,
 )
 from swarm.errors import ConfigError, SwarmError
 from swarm.step.outcome import chaser_summary, run_summary
 from swarm.transport.checkpoint import EXIT_BAD_CHECKPOINT
+from swarm.transport.stopping import process_name
 
 _LOG = logging.getLogger("swarm.launch")
 HUNG_TICKS = 3
@@ -391,9 +397,11 @@ def _run(args: argparse.Namespace) -> int:
     endpoint = client_endpoint(listen[0])
     stop = threading.Event()
     interrupted = threading.Event()
+    why = ["the launcher's end"]  # what the stop announcement says (swarm.transport.stopping)
 
     def on_signal(signum: int, _frame: object) -> None:
-        _LOG.info("%s: stopping the swarm", signal.Signals(signum).name)
+        why[0] = signal.Signals(signum).name
+        _LOG.info("%s: stopping the swarm", why[0])
         interrupted.set()
         stop.set()
 
@@ -440,6 +448,7 @@ def _run(args: argparse.Namespace) -> int:
             try:
                 while True:  # one iteration per run
                     log = box[0]
+                    result = None  # (a run stopped before its end has none: exit 130, not a past run's)
                     args.checkpoint_dir = args.checkpoint_root / f"run-{next(runs)}"
                     args.checkpoint_dir.mkdir()
                     _start_run(args, sc, seed, endpoint, sup, Child)
@@ -469,17 +478,21 @@ def _run(args: argparse.Namespace) -> int:
                             seed = next_run_seed(end, seed)
                             if not asked:
                                 stop.wait(3.0)  # a moment to look at the docked pair
-                            sup.stop_all(keep=("dashboard",))
+                            if stop.is_set():  # Ctrl-C meanwhile: no next run
+                                break
+                            stop_swarm(sup, session, keys, "next run", log.t_s, keep=("dashboard",))
                             box[0] = RunLog(args.stall_s, args.hung_ticks)
                             continue
                         if not args.until_docked:
                             _hold(args, stop, wall0)
                     break
-                sup.stop_all()
+                stop_swarm(sup, session, keys, why[0], box[0].t_s)
                 _ = (_token, zenoh)
             finally:
+                # every process's last samples are in before the file is finished; announced while the
+                # session is open (a failure's way out too)
+                stop_swarm(sup, session, keys, why[0], box[0].t_s)
                 if recorder is not None:
-                    sup.stop_all()  # every process's last samples are in before the file is finished
                     recorder.close()
     finally:
         sup.stop_all()
@@ -584,7 +597,7 @@ def _supervise(
                     _LOG.error("the world is gone for good: the run cannot go on")
                     return "failed"
         elif role is not None and alive and role in ("agent", "world"):
-            _LOG.info("%s %s is alive", role, pid)
+            _LOG.info("%s is alive", process_name(role, pid))
         for c in sup.exited():
             code = c.popen.returncode
             if c.name == "world" and log.ended.is_set():

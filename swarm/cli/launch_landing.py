@@ -119,6 +119,7 @@ def run_landing_launch(args: argparse.Namespace) -> int:
         router_args,
         secure_router,
         start_recorder,
+        stop_swarm,
         swarm_processes,
         topology,
     )
@@ -150,7 +151,14 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     zargs = router_args(args, listen)
     endpoint = client_endpoint(listen[0])
     stop = threading.Event()
-    previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    why = ["the launcher's end"]  # what the stop announcement says (swarm.transport.stopping)
+
+    def on_signal(signum: int, _frame: object) -> None:
+        why[0] = signal.Signals(signum).name
+        _LOG.info("%s: stopping the swarm", why[0])
+        stop.set()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     cond = threading.Condition()
     got: dict = {"run_end": None, "summaries": {}}
     sup = Supervisor(max_restarts=args.max_restarts)
@@ -260,15 +268,17 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                             stop.wait(3.0)  # a moment to look at the landed UAVs
                         if stop.is_set():  # Ctrl-C meanwhile: no next run
                             break
-                        sup.stop_all(keep=("dashboard",))
+                        stop_swarm(sup, session, keys, "next run", keep=("dashboard",))
                         continue
                     if not args.headless and not args.until_docked and got["run_end"] is not None:
                         _hold(args, stop, wall0)
                     break
-                sup.stop_all()
+                stop_swarm(sup, session, keys, why[0])
             finally:
+                # every process's last samples are in before the file is finished; announced while the
+                # session is open (a failure's way out too)
+                stop_swarm(sup, session, keys, why[0])
                 if recorder is not None:
-                    sup.stop_all()  # every process's last samples are in before the file is finished
                     recorder.close()
     finally:
         sup.stop_all()

@@ -1,7 +1,9 @@
 """Child processes of ``swarm launch``: start, watch, restart with backoff, and stop, leaving nothing behind.
 
 Each child runs ``python -m <module> ...`` in its own session (process group), so a Ctrl-C in the terminal
-reaches only the launcher, which then stops the children in order; on Linux each child also gets
+reaches only the launcher, which then stops the children in order (:mod:`swarm.transport.stopping`: the
+world first, then the rest; a child that gets a SIGINT all the same leaves the stop to its launcher, whose
+pid it finds in :data:`~swarm.transport.stopping.LAUNCHER_ENV`); on Linux each child also gets
 ``PR_SET_PDEATHSIG = SIGKILL``, so even a launcher killed with SIGKILL takes its children with it. Stopping
 is SIGTERM to the child's group, then SIGKILL to the group after a grace period (a hung child included).
 """
@@ -18,6 +20,8 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+
+from swarm.transport.stopping import LAUNCHER_ENV
 
 _LOG = logging.getLogger("swarm.launch")
 
@@ -96,7 +100,7 @@ class Supervisor:
             bufsize=1,
             start_new_session=True,
             preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            env={**os.environ, "PYTHONUNBUFFERED": "1", LAUNCHER_ENV: str(os.getpid())},
         )
         child.next_start_s = None
         child.spoke = False
@@ -180,10 +184,17 @@ class Supervisor:
         except subprocess.TimeoutExpired:
             _LOG.error("%s (pid %d) survived SIGKILL for 5 s", child.name, child.popen.pid)
 
-    def stop_all(self, keep: tuple[str, ...] = ()) -> None:
-        """SIGTERM every child's group (but those named in ``keep``), wait up to ``grace_s``, then SIGKILL
-        the groups of the rest."""
+    def stop_all(self, keep: tuple[str, ...] = (), first: tuple[str, ...] = ()) -> None:
+        """Stop every child (but those named in ``keep``): those named in ``first`` before the others
+        (the world: :mod:`swarm.transport.stopping`), each batch by SIGTERM to its groups, up to ``grace_s``
+        to exit, then SIGKILL to the groups of the rest."""
         live = [c for c in self.children.values() if c.popen is not None and c.name not in keep]
+        head = [c for c in live if c.name in first]
+        for batch in (head, [c for c in live if c.name not in first]):
+            if batch:
+                self._stop(batch)
+
+    def _stop(self, live: list[Child]) -> None:
         for c in live:
             c.next_start_s = None
             try:

@@ -10,7 +10,8 @@ Once its subscriptions and liveliness token are declared, a process prints one l
 ``<role> <id> ready`` (flushed), for a launcher or a test to wait on; it logs to stderr. SIGINT and SIGTERM
 set a stop flag: the process finishes its current step, publishes what it owes (a world its ``run_end``),
 closes its Zenoh session (a callback subscriber left open hangs the interpreter at exit, DESIGN.md
-section 9) and exits 0.
+section 9) and exits 0; a child of a launcher leaves a SIGINT to the launcher, which stops the swarm in
+order (:mod:`swarm.transport.stopping`).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from swarm.stacks import enable_stack_dumps
 from swarm.transport.keys import Keys
 from swarm.transport.messages import CLOCK_EVERY
 from swarm.transport.session import add_zenoh_arguments, zenoh_args_from
+from swarm.transport.stopping import StopFlag
 
 __all__ = [
     "PROCESS_NOISE_BLOCK",
@@ -202,16 +204,11 @@ def print_ready(role: str, process_id: str) -> None:
 
 
 def install_stop_signals(stop: threading.Event) -> dict[int, object]:
-    """SIGINT and SIGTERM set ``stop`` (main thread only); returns the previous handlers."""
-    previous = {}
+    """SIGINT and SIGTERM set ``stop`` (main thread only; a launched child leaves a SIGINT to its launcher:
+    :func:`swarm.transport.stopping.install_stop_signals`); returns the previous handlers."""
+    from swarm.transport.stopping import install_stop_signals as install
 
-    def on_signal(signum: int, _frame: object) -> None:
-        _LOG.info("%s: stopping", signal.Signals(signum).name)
-        stop.set()
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        previous[sig] = signal.signal(sig, on_signal)
-    return previous
+    return install(stop, _LOG)
 
 
 def process_main(
@@ -234,7 +231,7 @@ def process_main(
         format=f"%(asctime)s %(levelname)s {prog}: %(message)s",
         stream=sys.stderr,
     )
-    stop = threading.Event()
+    stop = StopFlag()  # (its ``told``: the swarm is stopping, swarm.transport.stopping)
     previous = install_stop_signals(stop)
     try:
         with cpu_latency.hold(args.cpu_latency):

@@ -145,8 +145,13 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
             "put": (keys.agent_all("uwb"), keys.agent_all("bundle"), keys.mothership_uwb(), keys.anchors()),
             "declare_queryable": (keys.anchors(),),
             "reply": (keys.anchors(),),
-            # (a vehicle's truth: viewers')
-            "declare_subscriber": (keys.world_truth(), keys.world_bundle(), keys.world_clock()),
+            # (a vehicle's truth: viewers'; world/event: the launcher's stopping, swarm.transport.stopping)
+            "declare_subscriber": (
+                keys.world_truth(),
+                keys.world_bundle(),
+                keys.world_clock(),
+                keys.world_event(),
+            ),
             "liveliness_token": (f"{ns}/alive/mothership/*",),
             **watch,  # to say when the world is lost
         }

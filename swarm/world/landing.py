@@ -41,6 +41,9 @@ bit. An agent whose liveliness token comes back in a running lockstep run (a res
 own checkpoint: :mod:`agents.landing`) is sent its UAV's samples of the tick before and of the current tick
 again. A lost agent stops a lockstep world until it is back or ``--step-timeout`` passes; a free-running
 world ends the run (its UAV would fly on without a controller).
+
+SIGINT or SIGTERM ends the run before the next tick (``run_end`` ``stopped``) and the process exits 0; an
+agent that goes once the world stops is logged as a stop, not a loss (:mod:`swarm.transport.stopping`).
 """
 
 from __future__ import annotations
@@ -144,6 +147,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         watch_liveliness,
         zenoh_args_from,
     )
+    from swarm.transport.stopping import Stopping
 
     check_pace(args.clock, args.pace)
     if args.resume and args.checkpoint_dir is None:
@@ -162,6 +166,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         ckpt = checkpoint.CheckpointFile(checkpoint.checkpoint_path(args.checkpoint_dir), after)
     dt = sc.dt_s
     drops = DropCounter()
+    stopping = Stopping(stop)  # an agent that goes then is no loss (swarm.transport.stopping)
     cond = threading.Condition()
     commands: dict[tuple[str, int], Command] = {}
     alive: set[str] = set()
@@ -241,7 +246,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                 if up and now["running"] and pid in world.uavs:
                     back.add(pid)
                 elif not up and now["running"]:
-                    _LOG.warning("agent %s lost at tick %d", pid, now["k"])
+                    stopping.gone(_LOG, f"agent {pid}", "agent %s lost at tick %d", pid, now["k"])
                 cond.notify_all()
 
     with open_session(zenoh_args_from(args)) as session:
@@ -264,7 +269,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         with cond:
             while not set(ids) <= alive:
                 if stop.is_set():
-                    return 130
+                    return 0  # stopped before the run (a stop is no failure)
                 if time.monotonic() > deadline:
                     raise ConfigError(
                         f"agents not up after {args.start_timeout:g} s: {sorted(set(ids) - alive)}"
@@ -352,6 +357,9 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                     break
                 with cond:
                     gone = sorted(uid for uid in uids if uid not in alive)
+                if gone and stopping:  # the swarm is stopping: its agents go, no fault
+                    reason = "stopped"
+                    break
                 if gone:  # nobody flies these UAVs any more: the run ends (a lockstep world would time out)
                     reason = "agent_missing"
                     _LOG.error("tick %d: agent_missing (%s lost)", k, ", ".join(gone))
@@ -392,8 +400,9 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                     cond.wait(0.05)
                 got = {uid: commands.pop((uid, k), None) for uid in uids}
             if reason != "done":
-                missing = [u for u, c in got.items() if c is None]
-                _LOG.error("tick %d: %s (no command from %s)", k, reason, ", ".join(missing) or "-")
+                if reason == "agent_missing":  # (stopped: no fault)
+                    missing = [u for u, c in got.items() if c is None]
+                    _LOG.error("tick %d: %s (no command from %s)", k, reason, ", ".join(missing) or "-")
                 break
             for uid, cmd in got.items():
                 world.hold(uid, LandingCommand(k, cmd.actuators, LandingMode(cmd.mode)))
@@ -413,7 +422,8 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         _LOG.info("run ended (%s) at tick %d, %.1f s simulated in %.1f s", reason, k, k * dt, wall)
         time.sleep(0.2)  # let the last messages leave before the session closes
         _ = _token
-    return 0 if reason == "done" or reason in NEW_RUN_COMMANDS else 1  # (an end asked for is no failure)
+    # an end asked for (a new run, a stop) is no failure
+    return 0 if reason in ("done", "stopped") or reason in NEW_RUN_COMMANDS else 1
 
 
 def _owner(keys, key: str) -> str | None:

@@ -77,6 +77,7 @@ from swarm.transport.session import (
     subscribe_decoded,
     watch_liveliness,
 )
+from swarm.transport.stopping import Stopping, process_name, wait_for_stop
 
 _LOG = logging.getLogger("swarm.world")
 
@@ -129,6 +130,7 @@ class WorldProcess:
             stop,
         )
         self.pace = clock if not clock.lockstep else pace  # the wall clock the ticks keep to, if any
+        self.stopping = Stopping(stop)  # a peer's going is then a stop (swarm.transport.stopping)
         self.step_timeout_s = step_timeout_s
         self.start_timeout_s = start_timeout_s
         self.clock_every = max(1, int(clock_every))
@@ -338,7 +340,7 @@ class WorldProcess:
             if role == "mothership":
                 self._mothership = alive
                 if not alive:
-                    _LOG.warning("mothership %s lost", pid)
+                    self.stopping.gone(_LOG, process_name(role, pid), "%s lost", process_name(role, pid))
                 return
             if role != "agent" or pid not in self.world.index:
                 return
@@ -352,7 +354,8 @@ class WorldProcess:
             self._lost.append(pid)
             self._awaited.add(pid)
             self.barrier.set_live(self.barrier.live - {pid})
-        _LOG.warning("agent %s lost: its nozzles are closed; the world goes on without it", pid)
+        self.stopping.gone(_LOG, f"agent {pid}", "agent %s lost: its nozzles are closed; the world goes on "
+                           "without it", pid)  # fmt: skip
 
     def _on_control(self, _key: str, msg: RunControl) -> None:
         self._controls.put(msg)
@@ -874,7 +877,7 @@ class WorldProcess:
             _LOG.info("checkpoints: %d written, %.0f us each on average, %d bytes", self.ckpt_n,
                       1e6 * self.ckpt_s / self.ckpt_n, self.ckpt_bytes)  # fmt: skip
         self.drops.flush()
-        self.stop.wait()
+        wait_for_stop(self.stop)  # (in steps: a signal's handler must get to run, swarm.transport.stopping)
         if self._ckpt_file is not None:
             self._ckpt_file.close()
         return end

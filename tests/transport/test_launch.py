@@ -357,8 +357,8 @@ def _assert_world_restarted(text: str, killed_at: float) -> dict[str, float]:
     resumed, m = _stamp(text, r"WARNING swarm.launch: world resumed from its checkpoint at tick (\d+)")
     assert int(m.group(2)) > 0
     for who in ("chaser", "target"):  # the others say what they lost, and carry on
-        assert f"swarm agent: {who}: world world lost; no samples" in text, who
-    assert "swarm mothership: world world lost" in text
+        assert f"swarm agent: {who}: world lost; no samples" in text, who
+    assert "swarm mothership: world lost" in text
     # nobody else was lost or crashed
     assert not re.search(r"swarm.launch: (agent/\w+|mothership) lost", text), text
     assert "Traceback" not in text

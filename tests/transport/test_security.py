@@ -121,7 +121,8 @@ def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_
     want = {
         "world": {K.command(v) for v in VEHICLES} | {K.commands(v) for v in VEHICLES}
         | {K.run_control(), K.fault()},
-        "mothership": {K.world_truth(), K.world_bundle(), K.world_clock()},  # batches, not each vehicle's
+        # batches, not each vehicle's; world/event: the launcher's stopping
+        "mothership": {K.world_truth(), K.world_bundle(), K.world_clock(), K.world_event()},
         "agent-chaser": {K.imu("chaser"), K.uwb("chaser"), K.vision("chaser"), K.bundle("chaser")}
         | {K.world_clock()}
         | {K.estimate(v) for v in VEHICLES}
