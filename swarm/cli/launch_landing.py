@@ -45,6 +45,12 @@ seed end the run (``run_end``'s ``reason``, with the ``next_seed`` asked for): t
 world and the agents (not the dashboard) and starts the next run, with the same seed or the one asked for
 (else the seed after), each run's checkpoints in a directory of their own. ``--repeat`` does the same after
 every run (the seed after), as for a docking swarm; ``--json`` holds the last run's summary.
+
+Every stop (Ctrl-C, SIGTERM, the end, the next run) is the docking launcher's, in the same order
+(:mod:`swarm.transport.stopping`: ``stopping`` on ``world/event``, the world, then the rest), and logs no
+error and no loss. Exit status, as a docking launch's: 0 every UAV landed or aborted safely, 1 not (or the
+run failed), 2 bad input, 130 stopped before the run in progress ended; stopped after a run ended (held for
+the dashboard, or in the pause between two ``--repeat`` runs, which then starts no next run), that run's.
 """
 
 from __future__ import annotations
