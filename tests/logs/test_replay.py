@@ -102,7 +102,10 @@ def test_recovery_after_a_forced_divergence(flight):
     lost_resets = [e for e in lost.events if e["kind"] == "estimator_reset"]
     assert lost_resets[0]["action"].startswith("reported only")
     inside, e, _ = lost.errors()
-    assert np.median(np.linalg.norm(e[lost.t[inside] > 40.0], axis=1)) > 1.0
+    # (5 s after the fault, when the recovered filter is back under 0.1 m; a lone filter creeps back only
+    # over tens of seconds, as its offsets re-open)
+    t_lost = lost.t[inside]
+    assert np.median(np.linalg.norm(e[(t_lost > 35.0) & (t_lost < 40.0)], axis=1)) > 1.0
 
 
 def test_monte_carlo_nees_stays_inside_its_band(tmp_path):
