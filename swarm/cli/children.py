@@ -226,14 +226,17 @@ def start_recorder(args: argparse.Namespace, session, keys) -> LauncherRecorder 
 
 def stop_swarm(sup, session, keys, why: str, t_s: float = 0.0, keep: tuple[str, ...] = ()) -> None:
     """Stop the swarm's processes (but those named in ``keep``) in the order of
-    :mod:`swarm.transport.stopping`: the ``stopping`` event on ``world/event`` (``{"why": why}``, at swarm
-    time ``t_s``), :data:`~swarm.transport.stopping.ANNOUNCE_S` for it to be heard, then the world, then the
-    rest (:meth:`~swarm.cli.supervisor.Supervisor.stop_all`). ``session`` None (closed): no announcement."""
+    :mod:`swarm.transport.stopping`: those still starting at once (they are not in the swarm yet:
+    :meth:`~swarm.cli.supervisor.Supervisor.kill_starting`), the ``stopping`` event on ``world/event``
+    (``{"why": why}``, at swarm time ``t_s``), :data:`~swarm.transport.stopping.ANNOUNCE_S` for it to be
+    heard, then the world, then the rest (:meth:`~swarm.cli.supervisor.Supervisor.stop_all`). ``session``
+    None (closed): no announcement."""
     import zenoh
 
     from swarm.transport.messages import Event, encode
     from swarm.transport.stopping import ANNOUNCE_S, STOPPING
 
+    sup.kill_starting(keep)  # (not up yet: no token, nothing to lose; it would hear no announcement)
     live = [c for c in sup.children.values() if c.running and c.name not in keep]
     if live and session is not None:
         try:

@@ -184,6 +184,18 @@ class Supervisor:
         except subprocess.TimeoutExpired:
             _LOG.error("%s (pid %d) survived SIGKILL for 5 s", child.name, child.popen.pid)
 
+    def kill_starting(self, keep: tuple[str, ...] = ()) -> list[str]:
+        """SIGKILL every running child (but those named in ``keep``) that has not said it is ready yet (no
+        line on stdout: it is importing, or loading or compiling its kernels, and handles no signal until
+        that is done): it has no liveliness token and no run state yet, so nobody sees it go and it loses
+        nothing. Returns their names (each logged at INFO)."""
+        starting = [c for c in self.children.values() if c.running and not c.spoke and c.name not in keep]
+        for c in starting:
+            c.next_start_s = None
+            self._kill(c)
+            _LOG.info("%s was still starting: stopped", c.name)
+        return [c.name for c in starting]
+
     def stop_all(self, keep: tuple[str, ...] = (), first: tuple[str, ...] = ()) -> None:
         """Stop every child (but those named in ``keep``): those named in ``first`` before the others
         (the world: :mod:`swarm.transport.stopping`), each batch by SIGTERM to its groups, up to ``grace_s``
@@ -207,7 +219,10 @@ class Supervisor:
             try:
                 c.popen.wait(left)
             except subprocess.TimeoutExpired:
-                _LOG.warning("%s did not stop within %.1f s: killing it", c.name, self.grace_s)
+                if c.spoke:
+                    _LOG.warning("%s did not stop within %.1f s: killing it", c.name, self.grace_s)
+                else:  # still starting (its kernels loading or compiling: no signal handled meanwhile)
+                    _LOG.info("%s was still starting: stopped", c.name)
             self._kill(c)  # the group too: a grandchild must not outlive it
 
 

@@ -4,6 +4,8 @@ A stop is not a fault. When ``swarm launch`` stops a swarm (Ctrl-C, SIGTERM, the
 run of ``--repeat``), it does so in an order that no process can mistake for a failure
 (docs/protocol.md, "Stopping a swarm"):
 
+0. it kills the processes still starting (no ready line yet: no token, no run state, and no signal
+   handled while their kernels load);
 1. it announces the stop: a ``stopping`` :class:`~swarm.transport.messages.Event` on ``world/event``
    (``{"why": ...}``), which every process that watches a peer hears (the agents, the mothership, the
    dashboard);

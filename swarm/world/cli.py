@@ -79,7 +79,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     except checkpoint.CheckpointError as exc:
         print(f"swarm world: error: {exc}; not resuming", file=sys.stderr, flush=True)
         return checkpoint.EXIT_BAD_CHECKPOINT
-    return 0 if end["reason"] != "not_started" else 1
+    return 0 if end["reason"] != "not_started" or stop.is_set() else 1  # (a stop is no failure)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -1,6 +1,7 @@
-"""A stand-in child for ``Supervisor.stop_all``'s order test (``test_stopping.py``): ``python -m
+"""A stand-in child for ``Supervisor``'s stop tests (``test_stopping.py``): ``python -m
 tests.transport._stopper NAME FILE`` prints ``ready``, and on SIGTERM writes ``NAME term <time>`` to FILE,
-takes 0.3 s (a world ending its run), writes ``NAME exit <time>`` and exits 0."""
+takes 0.3 s (a world ending its run), writes ``NAME exit <time>`` and exits 0; with a third argument
+``starting`` it never says it is ready (a child still loading its kernels)."""
 
 from __future__ import annotations
 
@@ -21,7 +22,8 @@ def main() -> None:
         sys.exit(0)
 
     signal.signal(signal.SIGTERM, on_term)
-    print("ready", flush=True)
+    if sys.argv[3:] != ["starting"]:
+        print("ready", flush=True)
     while True:
         time.sleep(0.05)
 

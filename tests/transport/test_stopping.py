@@ -160,3 +160,26 @@ def test_the_launcher_stops_the_world_before_the_others_and_keeps_whom_it_is_tol
         events[(name, what)] = float(t)
     assert events[("world", "exit")] <= min(events[(n, "term")] for n in ("mothership", "agent/chaser"))
     assert ("dashboard", "term") in events  # stopped at last by the unrestricted stop_all
+
+
+@pytest.mark.timeout(60)
+def test_a_child_still_starting_is_stopped_at_once_and_a_ready_one_is_left_to_the_ordered_stop(
+    tmp_path, monkeypatch
+):
+    """``kill_starting``: a child that has not said it is ready (no liveliness token yet, no signal handled
+    while its kernels load) is killed at once, before the stop is announced; a ready one is not."""
+    monkeypatch.chdir(REPO)
+    path = tmp_path / "stops.txt"
+    sup = Supervisor(grace_s=5.0)
+    try:
+        sup.start(Child("world", ["tests.transport._stopper", "world", str(path), "starting"]))
+        sup.start(Child("agent/chaser", ["tests.transport._stopper", "agent/chaser", str(path)]))
+        deadline = time.monotonic() + 30
+        while not sup.children["agent/chaser"].spoke:
+            assert time.monotonic() < deadline, "the ready child did not start"
+            time.sleep(0.05)
+        assert sup.kill_starting() == ["world"]
+        assert not sup.children["world"].running and sup.children["agent/chaser"].running
+    finally:
+        sup.stop_all()
+    assert not path.exists() or "world" not in path.read_text()  # killed, not asked: no SIGTERM handled
