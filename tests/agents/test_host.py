@@ -619,3 +619,37 @@ def test_lockstep_and_agent_hosts_ignore_the_control_rate_wake():
         proc = AgentProcess(sc, "chaser", 0, "mdp", None, Keys("x"), ClockSpec.parse(clock),
                             threading.Event(), hosted=hosted, cond=cond, ready=set())  # fmt: skip
         assert not proc.wake_at_control, (clock, hosted)
+
+
+@pytest.mark.parametrize("stopping", [False, True])
+def test_a_round_whose_publication_the_closing_session_refuses_ends_quietly_once_stopping(stopping, caplog):
+    """A host of one steps its vehicle on a Zenoh thread: a publication into the session the main thread
+    closes meanwhile raises ``zenoh.ZError``. Once the swarm is stopping (here the launcher's ``stopping``
+    event heard) that ends the rounds with no error and no failure; in a running swarm it is the host's
+    failure, logged with its traceback (the host exits 1 and is restarted)."""
+    import logging
+    from types import SimpleNamespace
+
+    import zenoh
+
+    host, p = _host(["chaser"], load_scenario("docking"))
+    chaser = p["chaser"]
+    chaser._started.set()
+    chaser.assembler.poll_round = lambda _grace: ([], SimpleNamespace(tick=1), False)
+
+    def closed(_inp) -> None:
+        raise zenoh.ZError("session closed")
+
+    chaser.process = closed
+    host._live = [chaser]
+    host.ready.add(chaser.assembler)
+    if stopping:
+        assert host.stopping.hear("stopping")
+    with caplog.at_level(logging.DEBUG):
+        host._drain()
+    errors = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    if stopping:
+        assert host._failure is None and not errors
+    else:
+        assert isinstance(host._failure, zenoh.ZError)
+        assert [r.getMessage() for r in errors] == ["chaser: agent failed at tick 1"] and errors[0].exc_info

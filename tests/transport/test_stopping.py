@@ -183,3 +183,32 @@ def test_a_child_still_starting_is_stopped_at_once_and_a_ready_one_is_left_to_th
     finally:
         sup.stop_all()
     assert not path.exists() or "world" not in path.read_text()  # killed, not asked: no SIGTERM handled
+
+
+@pytest.mark.parametrize("stopping", [False, True])
+def test_a_slot_the_motherships_closing_session_refuses_is_no_failure_once_stopping(stopping, caplog):
+    """The issue's traceback: the mothership's UWB slot, served on the truths' Zenoh thread, published into
+    the session its main thread had just closed (``zenoh.ZError: session closed``). Once stopping, that is
+    a debug line and no failure; in a running swarm it is still the process's failure, logged with its
+    traceback (its supervisor restarts it)."""
+    from mothership.process import MothershipProcess
+    from swarm.scenario import load_scenario
+    from swarm.transport.keys import Keys
+
+    stop = threading.Event()
+    mp = MothershipProcess(load_scenario("docking"), 0, None, Keys("t"), stop)
+
+    def closed(*_args: object) -> None:
+        raise zenoh.ZError("session closed")
+
+    mp._take = closed  # (the slot's put into the closed session)
+    if stopping:
+        stop.set()
+    with caplog.at_level(logging.DEBUG):
+        mp._serve(mp.every, [("chaser", None)])
+    errors = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    if stopping:
+        assert mp._failure is None and not errors
+    else:
+        assert isinstance(mp._failure, zenoh.ZError)
+        assert [r.getMessage() for r in errors] == ["UWB slot failed"] and errors[0].exc_info
