@@ -44,8 +44,8 @@ N_PRM = 13
 # Optional extension, one pair per error state past the core 15 (range-error model, barometer offset):
 # PRM[N_PRM + 2 k] = the correlation time tau [s] of error state 15 + k (0: a random walk),
 # PRM[N_PRM + 2 k + 1] = its sigma (a random walk's density [unit/sqrt(s)], or a first-order Gauss-Markov
-# process's stationary standard deviation [unit]). Without the extension every such state is a random walk of density
-# PRM_SIG_RB (the per-anchor range biases of the first model).
+# process's stationary standard deviation [unit]). Without the extension every such state is a random walk
+# of density PRM_SIG_RB (the per-anchor range biases of the first model).
 
 # outcome of an update
 ACCEPTED, REJECTED, REFUSED = 0, 1, 2
@@ -372,14 +372,69 @@ def apply_scalar(X, P, work, nu, S):
     inject(X, P, dx)
 
 
+# ------------------------------------------------------------------------------------------------ TDoA
+
+
+@njit(cache=True)
+def tdoa_row(X, anchor_a, anchor_b, ia, ib, lever, H):
+    """A time difference of arrival as a distance difference, ``h = |t - a_b| - |t - a_a| + e_b - e_a``
+    (``t = p + R(q) l`` the tag; the Crazyflie's ``distanceDiff``, idB minus idA), with ``e`` an anchor's
+    range-error terms (``ia``, ``ib`` (3,) error indices or -1: its offset and Gauss-Markov term enter as a
+    difference; the common offset cancels, so index 0 is skipped), and its Jacobian row ``H``:
+    ``u_b - u_a`` on ``dp``, ``-((u_b - u_a)_body x l)`` on ``dtheta``, +1 on b's terms and -1 on a's (the
+    difference of two :func:`range_row3` rows; the TDoA measurement model of Ledergerber, Hamer & D'Andrea
+    2015, IROS, as the Crazyflie's ``mm_tdoa.c`` fuses it)."""
+    n = H.shape[0]
+    Hb = np.empty(n)
+    hb = range_row3(X, anchor_b, -1, ib[1], ib[2], lever, Hb)
+    ha = range_row3(X, anchor_a, -1, ia[1], ia[2], lever, H)
+    for k in range(n):
+        H[k] = Hb[k] - H[k]
+    return hb - ha
+
+
+@njit(cache=True)
+def update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, sigma, PRM, work, res):
+    """One distance difference ``z`` [m] with white noise ``sigma`` [m] (:func:`tdoa_row`): refused when not
+    finite, gated on its squared Mahalanobis distance (``PRM_GATE``), underweighted past the Huber threshold
+    as a range is, then the scalar update. ``res`` receives ``(outcome, d2, nu)``; returns the outcome."""
+    res[0], res[1], res[2] = REFUSED, 0.0, 0.0
+    if not (np.isfinite(z) and np.isfinite(sigma) and sigma > 0.0):
+        return REFUSED
+    n = P.shape[0]
+    H, b = work[0], work[1]
+    h = tdoa_row(X, anchor_a, anchor_b, ia, ib, PRM[PRM_LEVER : PRM_LEVER + 3], H)
+    hph = 0.0
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            if H[j] != 0.0:
+                s += P[i, j] * H[j]
+        b[i] = s
+        hph += H[i] * s
+    nu = z - h
+    r = sigma * sigma
+    d2 = nu * nu / (hph + r)
+    res[1], res[2] = d2, nu
+    if d2 > PRM[PRM_GATE]:
+        res[0] = REJECTED
+        return REJECTED
+    k = PRM[PRM_HUBER]
+    if k > 0.0 and d2 > k * k:
+        r *= math.sqrt(d2) / k
+    apply_scalar(X, P, work, nu, hph + r)
+    res[0] = ACCEPTED
+    return ACCEPTED
+
+
 # ------------------------------------------------------------------------------------------ log replay
 
 EV_DONE, EV_DIVERGED, EV_PAUSE = 0, 1, 2
 
 # ST (int64 state of a replay): cursors and counters
 (ST_I_IMU, ST_I_RNG, ST_I_OUT, ST_WIN_FILL, ST_WIN_POS, ST_HELD, ST_DROPPED, ST_IMU_REFUSED, ST_I_AUX,
- ST_N_PHASE) = range(10)  # fmt: skip
-N_ST = 10
+ ST_N_PHASE, ST_I_TDOA) = range(11)  # fmt: skip
+N_ST = 11
 
 # RS (anchors, N_RS): the range-error model's per-anchor robust state, float64
 RS_VAR = 0  # the white-noise variance in use [m^2] (the prior, then adapted in flight)
@@ -423,8 +478,8 @@ RP_NLOS_MAX_HELD = 19  # at most this many anchors held out as NLOS at once
 N_RP = 20
 
 # PH: flight-phase detector state
-PH_VIB, PH_A0, PH_A1, PH_A2, PH_HAVE, PH_AIR, PH_SINCE = range(7)
-N_PH = 7
+PH_VIB, PH_A0, PH_A1, PH_A2, PH_HAVE, PH_AIR, PH_SINCE, PH_PINNED = range(8)
+N_PH = 8  # PH_PINNED: 1 while the vehicle stands on its surveyed pad before its first take-off
 
 # aux samples (height.csv, baro.csv) and AUX parameters
 AUX_HEIGHT, AUX_BARO = 0, 1
@@ -576,6 +631,8 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
         return 0
     PH[PH_AIR] = 1.0 if air else 0.0
     PH[PH_SINCE] = -1.0
+    if air:
+        PH[PH_PINNED] = 0.0
     for a in range(ridx.shape[0]):
         i1 = ridx[a, 1]
         if i1 >= 0:
@@ -617,27 +674,35 @@ def fuse_aux(X, P, AX, kind, z, res):
 def replay(
     X, P, PRM, tf, t_stop, imu_t, imu_gyro, imu_acc, rng_t, rng_anchor, rng_z, anchors, ridx, RS, RP,
     aux_t, aux_kind, aux_z, AX, aux_outcome, PH, phase_t, phase_air,
+    tdoa_t, tdoa_a, tdoa_b, tdoa_z, tdoa_sigma, tdoa_counts, tdoa_d2, tdoa_outcome,
     ST, counts, win_rej, win_d2, win_w, win_all, nis_limit, reject_share_max, last_range, last_range_t,
     out_every, out_t, out_X, out_P, nis_t, nis_anchor, nis_d2, nis_outcome,
 ):  # fmt: skip
     """Run the filter over a log from the cursors in ``ST`` until its end (returns ``EV_DONE``), a
     divergence (``EV_DIVERGED``, the cursors left after the range that declared it, for the caller to
     recover and call again) or the first sample after ``t_stop`` (``EV_PAUSE``). Samples are processed in
-    time order (at one time: IMU, range, then height samples); an IMU sample is held over the interval that
-    follows it (zero-order hold), so the filter predicts to each sample's own time stamp. Ranges go through
-    :func:`fuse_range`, heights through :func:`fuse_aux`, and each IMU sample through the phase detector
-    (:func:`phase_step`; a change is written to ``phase_t``/``phase_air``)."""
-    n_imu, n_rng, n_aux = imu_t.shape[0], rng_t.shape[0], aux_t.shape[0]
+    time order (at one time: IMU, range, TDoA, then height samples); an IMU sample is held over the
+    interval that follows it (zero-order hold), so the filter predicts to each sample's own time stamp.
+    Ranges go through :func:`fuse_range`, distance differences through :func:`update_tdoa` (white noise
+    ``tdoa_sigma``; outcomes per anchor pair in ``tdoa_counts`` (M, M, 3); they enter the divergence
+    window as ranges do), heights through :func:`fuse_aux`, and each IMU sample through the phase detector
+    (:func:`phase_step`; a change is written to ``phase_t``/``phase_air``). While the vehicle stands on its
+    surveyed pad before its first take-off (``PH_PINNED``), gated samples stay out of the divergence
+    window: its position is known, so measurements that disagree are bad (a UWB tag on the ground, a TDoA
+    engine not yet in sync), not the estimate."""
+    n_imu, n_rng, n_aux, n_td = imu_t.shape[0], rng_t.shape[0], aux_t.shape[0], tdoa_t.shape[0]
     n = P.shape[0]
     work = np.empty((3, n))
     res = np.empty(4)
     tcur = tf[0]
-    while ST[ST_I_IMU] < n_imu or ST[ST_I_RNG] < n_rng or ST[ST_I_AUX] < n_aux:
-        i, j, q = ST[ST_I_IMU], ST[ST_I_RNG], ST[ST_I_AUX]
+    while ST[ST_I_IMU] < n_imu or ST[ST_I_RNG] < n_rng or ST[ST_I_AUX] < n_aux or ST[ST_I_TDOA] < n_td:
+        i, j, q, u = ST[ST_I_IMU], ST[ST_I_RNG], ST[ST_I_AUX], ST[ST_I_TDOA]
         kind = 0
         t = imu_t[i] if i < n_imu else np.inf
         if j < n_rng and rng_t[j] < t:
             kind, t = 1, rng_t[j]
+        if u < n_td and tdoa_t[u] < t:
+            kind, t = 3, tdoa_t[u]
         if q < n_aux and aux_t[q] < t:
             kind, t = 2, aux_t[q]
         if t > t_stop:
@@ -649,6 +714,8 @@ def replay(
                 ST[ST_I_IMU] += 1
             elif kind == 1:
                 ST[ST_I_RNG] += 1
+            elif kind == 3:
+                ST[ST_I_TDOA] += 1
             else:
                 ST[ST_I_AUX] += 1
             continue
@@ -682,6 +749,33 @@ def replay(
             ST[ST_I_AUX] += 1
             aux_outcome[q] = fuse_aux(X, P, AX, aux_kind[q], aux_z[q], res)
             continue
+        if kind == 3:
+            ST[ST_I_TDOA] += 1
+            a, b = tdoa_a[u], tdoa_b[u]
+            outcome = update_tdoa(X, P, anchors[a], anchors[b], ridx[a], ridx[b], tdoa_z[u], tdoa_sigma, PRM,
+                                  work, res)  # fmt: skip
+            tdoa_d2[u], tdoa_outcome[u] = res[1], outcome
+            tdoa_counts[a, b, outcome] += 1
+            if (
+                outcome != REFUSED
+                and PH[PH_PINNED] == 0.0
+                and window_push(
+                    win_rej,
+                    win_d2,
+                    win_w,
+                    win_all,
+                    ST,
+                    outcome,
+                    res[1],
+                    res[2],
+                    1.0,
+                    nis_limit,
+                    reject_share_max,
+                )
+            ):
+                tf[0] = tcur
+                return EV_DIVERGED
+            continue
         ST[ST_I_RNG] += 1
         a = rng_anchor[j]
         outcome = fuse_range(X, P, PRM, RP, anchors[a], ridx, a, rng_z[j], t, RS, work, res)
@@ -693,8 +787,22 @@ def replay(
             RS[a, RS_AIR_VAR_SUM] += RS[a, RS_VAR]
             RS[a, RS_AIR_N] += 1.0
         last_range[a], last_range_t[a] = rng_z[j], t
-        if res[3] >= 0.0 and window_push(
-            win_rej, win_d2, win_w, win_all, ST, outcome, res[1], res[2], res[3], nis_limit, reject_share_max
+        if (
+            res[3] >= 0.0
+            and PH[PH_PINNED] == 0.0
+            and window_push(
+                win_rej,
+                win_d2,
+                win_w,
+                win_all,
+                ST,
+                outcome,
+                res[1],
+                res[2],
+                res[3],
+                nis_limit,
+                reject_share_max,
+            )
         ):
             tf[0] = tcur
             return EV_DIVERGED

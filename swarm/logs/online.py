@@ -36,7 +36,7 @@ from swarm.errors import ConfigError
 from swarm.logs.reader import Log, LogConfig
 from swarm.logs.replay import _Window, aux_streams, build_filter, jump, recover, robust_state
 
-_IMU, _UWB, _HEIGHT, _BARO, _VISION = 0, 1, 2, 3, 4  # the order of samples of one time: the replay's
+_IMU, _UWB, _TDOA, _HEIGHT, _BARO, _VISION = 0, 1, 2, 3, 4, 5  # samples of one time in the replay's order
 
 
 @dataclass
@@ -88,6 +88,7 @@ class OnlineNavigator:
         self._vision_cov = np.diag(np.asarray(v.sigma_m, dtype=float) ** 2)
         self._vision_gate = float(chi2.ppf(v.gate_probability, 3))
         self.unknown_marker = 0
+        self.tdoa_refused = 0
         self.vision_counts = np.zeros(3, dtype=np.int64)
         """Detections accepted, rejected, refused."""
         self.dropped = 0
@@ -109,6 +110,20 @@ class OnlineNavigator:
                 self.unknown_anchor += 1
             return
         self._push(float(t_s), _UWB, (k, float(range_m)))
+
+    def tdoa(self, t_s: float, anchor_a: int, anchor_b: int, ddist_m: float) -> None:
+        """A distance difference ``|p - a_b| - |p - a_a|`` [m] (``tdoa.csv``); an unknown anchor, the same
+        anchor twice or a non-finite value is counted in ``unknown_anchor`` / ``tdoa_refused``, not fed."""
+        a, b = self._index.get(int(anchor_a)), self._index.get(int(anchor_b))
+        if a is None or b is None:
+            with self._lock:
+                self.unknown_anchor += 1
+            return
+        if a == b or not math.isfinite(ddist_m) or not self.config.tdoa.enabled:
+            with self._lock:
+                self.tdoa_refused += 1
+            return
+        self._push(float(t_s), _TDOA, (a, b, float(ddist_m)))
 
     def height(self, t_s: float, range_m: float) -> None:
         """A downward rangefinder's distance [m] (``height.csv``; NaN or None: no reading, not fed)."""
@@ -207,6 +222,7 @@ class OnlineNavigator:
         self._RS, self._RP, self._PH = robust_state(log, f, cal)
         self._AX = aux_streams(log, f, cal)[3]
         self.aux_counts = np.zeros((2, 3), dtype=np.int64)
+        self.tdoa_counts = np.zeros((len(self.anchors_nav), len(self.anchors_nav), 3), dtype=np.int64)
         """Height samples (rangefinder, barometer) accepted, rejected, refused."""
         self._limits = divergence_limits(prm.window, prm.divergence_alpha)
         m = len(self.anchors_nav)
@@ -252,6 +268,23 @@ class OnlineNavigator:
             if tick % self.config.output_every == 0:
                 self._estimate(t, tick)
             return
+        if kind == _TDOA:
+            a, b, z = data
+            w = self._win
+            outcome = nb.update_tdoa(
+                X, P, f.anchors[a], f.anchors[b], f.ridx[a], f.ridx[b], z, self.config.tdoa.sigma_m, prm,
+                self._work, self._res,
+            )  # fmt: skip
+            self.tdoa_counts[a, b, outcome] += 1
+            if outcome != nb.REFUSED and self._PH[nb.PH_PINNED] == 0.0 and nb.window_push(
+                w.rej, w.d2, w.w, w.all, self._ST, outcome, self._res[1], self._res[2], 1.0, self._limits,
+                self.config.estimator.reject_share_max,
+            ):  # fmt: skip
+                self.events.append(
+                    recover(f, self.config, t, w, self._last_range, self._last_range_t, self._RS)
+                )
+                w.clear(self._ST)
+            return
         if kind in (_HEIGHT, _BARO):
             aux = nb.AUX_HEIGHT if kind == _HEIGHT else nb.AUX_BARO
             outcome = nb.fuse_aux(X, P, self._AX, aux, data, self._res)
@@ -270,7 +303,7 @@ class OnlineNavigator:
         self._d2 = float(self._res[1])
         self._last_range[k], self._last_range_t[k] = z, t
         cfg, w = self.config, self._win
-        if self._res[3] >= 0.0 and nb.window_push(
+        if self._res[3] >= 0.0 and self._PH[nb.PH_PINNED] == 0.0 and nb.window_push(
             w.rej, w.d2, w.w, w.all, self._ST, outcome, self._res[1], self._res[2], self._res[3],
             self._limits,
             cfg.estimator.reject_share_max,

@@ -227,8 +227,10 @@ class HeightLog:
 class BaroLog:
     """``[baro]`` of log.toml: the barometric height of ``baro.csv`` (its offset is a filter state)."""
 
-    enabled: bool = True
-    """Fuse ``baro.csv`` when the log has one."""
+    enabled: bool = False
+    """Fuse ``baro.csv`` when the log has one. Off by default: on the UTIL Crazyflie TDoA flights the
+    barometer steps by ~2 m at take-off and then drifts ~0.17 m/s as it warms (docs/logs.md), which a
+    random-walk offset cannot follow; the range finder is the height sensor to trust."""
     sigma_m: float = 0.5
     """Its white noise [m] (a small quadrotor's barometer in its own prop wash)."""
     gate_probability: float = 0.9995
@@ -238,6 +240,21 @@ class BaroLog:
             raise ConfigError(f"baro.sigma_m must be a finite number > 0, got {self.sigma_m!r}")
         if not 0.5 < self.gate_probability < 1.0:
             raise ConfigError(f"baro.gate_probability must be in (0.5, 1), got {self.gate_probability!r}")
+
+
+@dataclass(frozen=True)
+class TdoaLog:
+    """``[tdoa]`` of log.toml: the distance differences of ``tdoa.csv``."""
+
+    enabled: bool = True
+    """Fuse ``tdoa.csv`` when the log has one."""
+    sigma_m: float = 0.15
+    """Their white noise [m] (the Crazyflie firmware's default measurement noise is 0.30 m for TDoA2 and
+    TDoA3 alike, tuned for a filter without range-error states)."""
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.sigma_m) and self.sigma_m > 0):
+            raise ConfigError(f"tdoa.sigma_m must be a finite number > 0, got {self.sigma_m!r}")
 
 
 @dataclass(frozen=True)
@@ -266,6 +283,7 @@ class LogConfig:
     phases: PhaseParams = field(default_factory=PhaseParams)
     height: HeightLog = HeightLog()
     baro: BaroLog = BaroLog()
+    tdoa: TdoaLog = TdoaLog()
     faults: Faults = Faults()
     output_every: int = 10
     """Write one estimate row every this many IMU samples (10: 100 Hz for a 1 kHz IMU)."""

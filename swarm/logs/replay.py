@@ -66,6 +66,8 @@ class ReplayResult:
     """Per height sample (``height.csv`` then ``baro.csv`` rows, in time order): its kind."""
     aux_outcome: np.ndarray | None = None
     """Its outcome: accepted, rejected, refused."""
+    tdoa: object | None = None
+    """With ``tdoa.csv``: the distance differences' outcomes (``_Tdoa``)."""
 
     # ------------------------------------------------------------------------------------- against truth
 
@@ -119,6 +121,8 @@ class ReplayResult:
             out["vision"] = self._vision_summary()
         if self.robust is not None:
             out["range_model"] = self._range_model_summary(ids)
+        if self.tdoa is not None:
+            out["tdoa"] = self.tdoa.summary(ids)
         if self.aux_kind is not None and len(self.aux_kind):
             out["height"] = {
                 name: {
@@ -286,6 +290,8 @@ def build_filter(log: Log) -> tuple[ImuFilter, StaticCalibration | None, np.ndar
         )
     if cfg.uwb.sigma_m is not None:
         sigma = np.full(m, cfg.uwb.sigma_m)
+    elif len(log.uwb_t) == 0:  # no two-way ranges (a TDoA flight): the sigma is never used
+        sigma = np.full(m, cfg.uwb.sigma_floor_m)
     elif cal is not None:
         sigma = cal.range_sigma.copy()
         known = np.isfinite(sigma)
@@ -320,7 +326,7 @@ def build_filter(log: Log) -> tuple[ImuFilter, StaticCalibration | None, np.ndar
         else:
             correction = rb  # constant biases, corrected before the filter
     surveyed = cal is not None and cal.position_surveyed and ini.position_m is None
-    calibrated = surveyed and cfg.calibration.range_bias
+    calibrated = surveyed and cfg.calibration.range_bias and bool(np.any(cal.range_count > 0))
     sigmas = (
         cfg.calibration.position_sigma_m if surveyed else ini.sigma_position_m,
         ini.sigma_velocity_m_s,
@@ -345,6 +351,10 @@ def build_filter(log: Log) -> tuple[ImuFilter, StaticCalibration | None, np.ndar
         sigma_common_m=cfg.calibration.range_bias_sigma_m if calibrated else ini.sigma_common_offset_m,
         baro=_has(log, "baro_t") and cfg.baro.enabled,
     )
+    if calibrated:  # an anchor without ranges in the static segment keeps the uncalibrated prior
+        for a in np.flatnonzero(cal.range_count == 0):
+            if f.layout.offset[a] >= 0:
+                f.P[0, f.layout.offset[a], f.layout.offset[a]] = ini.sigma_range_bias_m**2
     return f, cal, correction
 
 
@@ -428,6 +438,7 @@ def replay_log(log: Log) -> ReplayResult:
     uwb_t, uwb_a = np.ascontiguousarray(log.uwb_t), np.ascontiguousarray(log.uwb_anchor)
     aux_t, aux_kind, aux_z, AX = aux_streams(log, f, cal)
     aux_outcome = np.full(len(aux_t), -1, dtype=np.int64)
+    td = _Tdoa(log, m)
     RS, RP, PH = robust_state(log, f, cal)
     phase_t, phase_air = np.zeros(64), np.zeros(64, dtype=np.int64)
     faults = cfg.faults
@@ -440,7 +451,8 @@ def replay_log(log: Log) -> ReplayResult:
         t_vis = vision.next_t() if vision is not None and cfg.vision.enabled else math.inf
         ev = nb.replay(
             X, P, f.prm, tf, min(t_stop, t_vis), imu_t, gyro, acc, uwb_t, uwb_a, ranges, f.anchors, f.ridx,
-            RS, RP, aux_t, aux_kind, aux_z, AX, aux_outcome, PH, phase_t, phase_air, ST, f.counts,
+            RS, RP, aux_t, aux_kind, aux_z, AX, aux_outcome, PH, phase_t, phase_air,
+            td.t, td.a, td.b, td.z, cfg.tdoa.sigma_m, td.counts, td.d2, td.outcome, ST, f.counts,
             win.rej, win.d2, win.w, win.all, limits, prm.reject_share_max, last_range, last_range_t,
             every, out_t, out_X, out_P, nis_t, nis_anchor, nis_d2, nis_outcome,
         )  # fmt: skip
@@ -487,6 +499,7 @@ def replay_log(log: Log) -> ReplayResult:
     res.common_offset_m = res_common if f.layout.common >= 0 else None
     res.sigma_prior = f.sigma.copy()
     res.aux_kind, res.aux_outcome = aux_kind, aux_outcome
+    res.tdoa = td if len(td.t) else None
     return res
 
 
@@ -506,7 +519,52 @@ def robust_state(log: Log, f: ImuFilter, cal: StaticCalibration | None):
     )  # fmt: skip
     PH = np.zeros(nb.N_PH)
     PH[nb.PH_SINCE] = -1.0
+    # the vehicle starts on a known pad: a surveyed calibration position, or [initial] position_m
+    pinned = (cal is not None and cal.position_surveyed) or cfg.initial.position_m is not None
+    PH[nb.PH_PINNED] = float(pinned and cfg.phases.enabled)
     return RS, RP, PH
+
+
+class _Tdoa:
+    """``tdoa.csv`` for the compiled loop (empty arrays without one, or with ``[tdoa] enabled = false``), and
+    what the loop writes back: per row the squared distance and the outcome, per anchor pair the counts."""
+
+    def __init__(self, log: Log, m: int) -> None:
+        use = getattr(log, "tdoa_t", None) is not None and len(log.tdoa_t) and log.config.tdoa.enabled
+        self.t = np.ascontiguousarray(log.tdoa_t) if use else np.zeros(0)
+        self.a = np.ascontiguousarray(log.tdoa_a, dtype=np.int64) if use else np.zeros(0, np.int64)
+        self.b = np.ascontiguousarray(log.tdoa_b, dtype=np.int64) if use else np.zeros(0, np.int64)
+        self.z = np.ascontiguousarray(log.tdoa_ddist) if use else np.zeros(0)
+        self.counts = np.zeros((m, m, 3), dtype=np.int64)
+        self.d2 = np.full(len(self.t), np.nan)
+        self.outcome = np.full(len(self.t), -1, dtype=np.int64)
+
+    def summary(self, ids: list[str]) -> dict:
+        acc = self.outcome == nb.ACCEPTED
+        gated = (self.outcome == nb.ACCEPTED) | (self.outcome == nb.REJECTED)
+        lo1, hi1 = chi2.ppf([(1 - BAND) / 2, (1 + BAND) / 2], 1)
+        d2 = self.d2[acc]
+        c = self.counts
+        pairs = {}
+        for a, b in zip(*np.nonzero(c.sum(axis=2)), strict=True):
+            n_acc, n_rej, n_ref = (int(x) for x in c[a, b])
+            pairs[f"{ids[a]}-{ids[b]}"] = {
+                "accepted": n_acc,
+                "rejected": n_rej,
+                "refused": n_ref,
+                "rejected_share": n_rej / (n_acc + n_rej) if n_acc + n_rej else None,
+            }
+        return {
+            "measurements": len(self.t),
+            "accepted": int(acc.sum()),
+            "rejected": int(np.sum(self.outcome == nb.REJECTED)),
+            "rejected_share": float(np.sum(self.outcome == nb.REJECTED) / gated.sum())
+            if gated.any()
+            else None,
+            "nis_mean": float(d2.mean()) if len(d2) else None,
+            "nis_in_band_share": float(((d2 >= lo1) & (d2 <= hi1)).mean()) if len(d2) else None,
+            "by_pair": pairs,
+        }
 
 
 def _common(f: ImuFilter) -> float:

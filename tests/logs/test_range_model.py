@@ -144,7 +144,6 @@ def test_a_sustained_nlos_episode_moves_the_estimate_by_at_most_10_cm(tmp_path):
     estimate moves by <= 0.1 m against the same flight without the episode (same seed, same draws)."""
     clean = replay_log(read_log(_flight(tmp_path, "clean")))
     ep = replay_log(read_log(_flight(tmp_path, "ep", nlos_episode=(1, 20.0, 4.0, 0.3))))
-    inside, _, _ = ep.errors()
     moved = np.linalg.norm(ep.X[:, 0:3] - clean.X[:, 0:3], axis=1)
     during = (ep.t >= 20.0) & (ep.t < 26.0)
     assert moved[during].max() <= 0.10
@@ -194,12 +193,61 @@ def test_no_spurious_reset_in_healthy_flights(tmp_path, seed):
 
 
 def test_height_sensors_fix_the_weak_vertical_geometry(tmp_path):
-    """With a downward range finder and a barometer (height.csv, baro.csv) z improves on the anchors'
-    weak vertical geometry; each height sample is accounted for."""
+    """With a downward range finder and a barometer (height.csv, baro.csv; the barometer is off by default
+    and turned on here) z improves on the anchors' weak vertical geometry; each sample is accounted for."""
     d = _flight(tmp_path, "height", height_rate_hz=25.0, baro_rate_hz=50.0)
-    with_h = replay_log(read_log(d)).summary()
+    with_h = replay_log(read_log(d, {"baro.enabled": True})).summary()
     without = replay_log(read_log(d, {"height.enabled": False, "baro.enabled": False})).summary()
     assert with_h["rmse_axis_m"][2] < 0.7 * without["rmse_axis_m"][2]
     h = with_h["height"]
     assert h["rangefinder"]["accepted"] > 0.8 * h["rangefinder"]["samples"]
     assert h["barometer"]["accepted"] > 0.8 * h["barometer"]["samples"]
+
+
+@pytest.mark.parametrize("pair", [(0, 1), (2, 3), (3, 0)])
+def test_the_tdoa_jacobian_matches_finite_differences(pair):
+    """ddist = |t - a_b| - |t - a_a| + e_b - e_a: the difference of two range rows, the common offset
+    cancelled, each anchor's offset and Gauss-Markov term with +1 (b) and -1 (a)."""
+    f = _filter()
+    X, n = f.X[0], f.P.shape[1]
+    a, b = pair
+    lever = np.array(f.params.lever_arm_m)
+    H = np.empty(n)
+    h0 = nb.tdoa_row(X, ANCHORS[a], ANCHORS[b], f.ridx[a], f.ridx[b], lever, H)
+    eps = 1e-7
+    fd = np.empty(n)
+    for k in range(n):
+        dx = np.zeros(n)
+        dx[k] = eps
+        fd[k] = (
+            nb.tdoa_row(_plus(X, dx), ANCHORS[a], ANCHORS[b], f.ridx[a], f.ridx[b], lever, np.empty(n)) - h0
+        ) / eps
+    np.testing.assert_allclose(H, fd, atol=1e-6)
+    assert H[f.layout.common] == 0.0
+    assert H[f.ridx[b, 1]] == H[f.ridx[b, 2]] == 1.0 and H[f.ridx[a, 1]] == H[f.ridx[a, 2]] == -1.0
+    # and the value: the truth's distance difference plus the modelled errors
+    t = X[0:3] + rot.quat_rotate(X[6:10], lever)
+    e = X[f.ridx[b, 1] + 1] + X[f.ridx[b, 2] + 1] - X[f.ridx[a, 1] + 1] - X[f.ridx[a, 2] + 1]
+    assert h0 == pytest.approx(np.linalg.norm(t - ANCHORS[b]) - np.linalg.norm(t - ANCHORS[a]) + e, abs=1e-12)
+
+
+def test_a_tdoa_update_pulls_toward_the_measurement_and_a_gross_one_is_rejected():
+    f = _filter()
+    X, P = f.X[0], f.P[0]
+    work, res = np.empty((3, P.shape[0])), np.empty(4)
+    lever = np.array(f.params.lever_arm_m)
+    h = nb.tdoa_row(X, ANCHORS[0], ANCHORS[1], f.ridx[0], f.ridx[1], lever, np.empty(P.shape[0]))
+    assert (
+        nb.update_tdoa(X, P, ANCHORS[0], ANCHORS[1], f.ridx[0], f.ridx[1], h + 0.1, 0.1, f.prm, work, res)
+        == nb.ACCEPTED
+    )
+    h1 = nb.tdoa_row(X, ANCHORS[0], ANCHORS[1], f.ridx[0], f.ridx[1], lever, np.empty(P.shape[0]))
+    assert h < h1 < h + 0.1  # moved toward it, not past it
+    assert (
+        nb.update_tdoa(X, P, ANCHORS[0], ANCHORS[1], f.ridx[0], f.ridx[1], h1 + 50.0, 0.1, f.prm, work, res)
+        == nb.REJECTED
+    )
+    assert (
+        nb.update_tdoa(X, P, ANCHORS[0], ANCHORS[1], f.ridx[0], f.ridx[1], np.nan, 0.1, f.prm, work, res)
+        == nb.REFUSED
+    )
