@@ -13,6 +13,7 @@ read into their own fields (``docs/logs.md``).
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 from dataclasses import dataclass, field
@@ -407,7 +408,14 @@ def _table(
 ):
     """The columns as a float array (rows, len(columns)); a NaN or empty value in a ``nan_ok`` column skips
     the row (counted), anywhere else it is an error naming line and column. The columns of ``maybe`` that
-    the header has follow ``columns``."""
+    the header has follow ``columns``. A well-formed file is parsed by numpy in C (:func:`_fast_table`,
+    ~10x faster); anything it does not take goes through the row-by-row parser, which names the error."""
+    fast = _fast_table(path, columns, nan_ok, maybe)
+    if fast is not None:
+        out, lines, cols, n_skipped = fast
+        if n_skipped:
+            skipped[path.name] = skipped.get(path.name, 0) + n_skipped
+        return out, lines, cols
     got = _rows(path, columns, optional, maybe, allow_empty)
     if got is None:
         return None, None, None
@@ -438,6 +446,39 @@ def _table(
         lines[keep] = no
         keep += 1
     return out[:keep], lines[:keep], cols
+
+
+def _fast_table(path: Path, columns: tuple[str, ...], nan_ok: tuple[str, ...], maybe: tuple[str, ...]):
+    """:func:`_table` for a file without comments, blank lines, empty fields or anything but numbers past
+    its header, in one ``numpy.loadtxt`` call; ``None`` whenever the file is not that (then the careful
+    parser reads it and says what is wrong). A NaN in a ``nan_ok`` column skips the row, as there."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    head, sep, body = text.partition("\n")
+    if not sep or not body.strip() or "#" in text or ",," in body or "\n\n" in body.rstrip("\n"):
+        return None
+    header = [h.strip() for h in head.split(",")]
+    if any(c not in header for c in columns):
+        return None
+    columns = tuple(columns) + tuple(c for c in maybe if c in header)
+    cols = [header.index(c) for c in columns]
+    try:
+        data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2)
+    except ValueError:
+        return None
+    if data.shape[1] != len(header) or np.isinf(data[:, cols]).any():
+        return None  # a row of another width, or an infinity: the careful parser names it
+    out = np.ascontiguousarray(data[:, cols])
+    nan = np.isnan(out)
+    if nan.any():
+        ok = np.array([c in nan_ok for c in columns])
+        if nan[:, ~ok].any():
+            return None  # a NaN where none may be: the careful parser names it
+    keep = ~nan.any(axis=1)
+    lines = np.arange(2, len(out) + 2, dtype=np.int64)
+    return out[keep], lines[keep], cols, int((~keep).sum())
 
 
 def _ids(name: str, what: str, ids: np.ndarray, lines: np.ndarray, col: int):
