@@ -128,7 +128,7 @@ def _run(stand_in, log_dir, **cfg):
     c = pu.PeerConfig(**cfg)
     inp = pu.peer_inputs(lg, module, c)
     X0, P0 = pu.initial_state(lg, c, inp.t0_s)
-    eskf, _, rejected = pu.drive(module, inp, X0, P0)
+    eskf, _, _, rejected = pu.drive(module, inp, X0, P0)
     return module.CALLS, inp, eskf, rejected
 
 
