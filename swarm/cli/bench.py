@@ -13,6 +13,7 @@ import json
 import logging
 import math
 from collections.abc import Callable
+from pathlib import Path
 
 from swarm import cpu_latency
 from swarm.args import add_output_file
@@ -129,6 +130,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                             help="the tags share one UWB channel (uwb.tdma): each ranges once per TDMA "
                                  "frame, ~238/N times a second for N tags, not 50")  # fmt: skip
     _add_peer(benches)
+    _add_real_flights(benches)
 
 
 def _add_flags(p: argparse.ArgumentParser, default) -> None:
@@ -156,6 +158,32 @@ def run(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc.strerror}") from exc
         log.info("wrote %s", args.json)
+    return 0
+
+
+def _add_real_flights(benches: argparse._SubParsersAction) -> None:
+    """``swarm bench real-flights LOG...``: the filter on recorded flights with a truth (swarm/bench/
+    real_flights.py); not one of :data:`BENCHES` (it needs logs)."""
+    text = (
+        "the IMU-driven filter on recorded flights with a truth: the pad, heading and static segment read "
+        "off the truth, everything else the defaults (BENCHMARKS.md, Real flights)"
+    )
+    bp = benches.add_parser("real-flights", help=text, description=text)
+    bp.add_argument("logs", nargs="+", type=Path, metavar="LOG", help="log folders (swarm import output)")
+    bp.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a log.toml key for every flight (repeatable)")  # fmt: skip
+    add_output_file(bp, "--json", "write the rows as JSON")
+    bp.set_defaults(func=_real_flights)
+
+
+def _real_flights(args: argparse.Namespace) -> int:
+    from swarm.bench import real_flights
+    from swarm.config import parse_override
+
+    record, report = real_flights.run(args.logs, dict(parse_override(o) for o in args.overrides))
+    print(report)
+    if args.json is not None:
+        args.json.write_text(json.dumps(record, indent=1))
     return 0
 
 

@@ -397,7 +397,8 @@ def tdoa_row(X, anchor_a, anchor_b, ia, ib, lever, H):
 def update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, sigma, PRM, work, res):
     """One distance difference ``z`` [m] with white noise ``sigma`` [m] (:func:`tdoa_row`): refused when not
     finite, gated on its squared Mahalanobis distance (``PRM_GATE``), underweighted past the Huber threshold
-    as a range is, then the scalar update. ``res`` receives ``(outcome, d2, nu)``; returns the outcome."""
+    as a range is, then the scalar update. ``res`` receives ``(outcome, d2, nu, H P H^T)``; returns the
+    outcome."""
     res[0], res[1], res[2] = REFUSED, 0.0, 0.0
     if not (np.isfinite(z) and np.isfinite(sigma) and sigma > 0.0):
         return REFUSED
@@ -415,7 +416,7 @@ def update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, sigma, PRM, work, res):
     nu = z - h
     r = sigma * sigma
     d2 = nu * nu / (hph + r)
-    res[1], res[2] = d2, nu
+    res[1], res[2], res[3] = d2, nu, hph
     if d2 > PRM[PRM_GATE]:
         res[0] = REJECTED
         return REJECTED
@@ -425,6 +426,29 @@ def update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, sigma, PRM, work, res):
     apply_scalar(X, P, work, nu, hph + r)
     res[0] = ACCEPTED
     return ACCEPTED
+
+
+@njit(cache=True)
+def fuse_tdoa(X, P, PRM, RP, anchor_a, anchor_b, ia, ib, z, tv, res):
+    """One distance difference through :func:`update_tdoa` with the pair's adapted noise: ``tv`` (4,) is the
+    pair's ``(variance, E[nu^2], E[H P H^T], prior variance)`` (NaN means: none yet), adapted by covariance
+    matching on its accepted innovations as :func:`fuse_range` adapts a range's (``RP_ADAPT``), but only
+    upward from the prior, to ``RP_VAR_CEIL``: a TDoA pair's spread differs by anchors and grows in flight,
+    and its heavy tails would otherwise pull the estimate below the prior (measured: a divergence)."""
+    n = P.shape[0]
+    work = np.empty((3, n))
+    outcome = update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, math.sqrt(tv[0]), PRM, work, res)
+    if outcome == ACCEPTED and RP[RP_ADAPT] > 0.0:
+        al = RP[RP_ADAPT_ALPHA]
+        nu, hph = res[2], res[3]
+        if np.isfinite(tv[1]):
+            tv[1] += al * (nu * nu - tv[1])
+            tv[2] += al * (hph - tv[2])
+        else:
+            tv[1] = tv[0] + hph
+            tv[2] = hph
+        tv[0] = min(max(tv[1] - tv[2], tv[3]), RP[RP_VAR_CEIL])
+    return outcome
 
 
 # ------------------------------------------------------------------------------------------ log replay
@@ -479,7 +503,7 @@ N_RP = 20
 
 # PH: flight-phase detector state
 PH_VIB, PH_A0, PH_A1, PH_A2, PH_HAVE, PH_AIR, PH_SINCE, PH_PINNED = range(8)
-N_PH = 8  # PH_PINNED: 1 while the vehicle stands on its surveyed pad before its first take-off
+N_PH = 8  # PH_PINNED: 1 while the vehicle stands on the ground: on its known pad, or where it landed
 
 # aux samples (height.csv, baro.csv) and AUX parameters
 AUX_HEIGHT, AUX_BARO = 0, 1
@@ -631,8 +655,7 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
         return 0
     PH[PH_AIR] = 1.0 if air else 0.0
     PH[PH_SINCE] = -1.0
-    if air:
-        PH[PH_PINNED] = 0.0
+    PH[PH_PINNED] = 0.0 if air else 1.0
     for a in range(ridx.shape[0]):
         i1 = ridx[a, 1]
         if i1 >= 0:
@@ -674,7 +697,7 @@ def fuse_aux(X, P, AX, kind, z, res):
 def replay(
     X, P, PRM, tf, t_stop, imu_t, imu_gyro, imu_acc, rng_t, rng_anchor, rng_z, anchors, ridx, RS, RP,
     aux_t, aux_kind, aux_z, AX, aux_outcome, PH, phase_t, phase_air,
-    tdoa_t, tdoa_a, tdoa_b, tdoa_z, tdoa_sigma, tdoa_counts, tdoa_d2, tdoa_outcome,
+    tdoa_t, tdoa_a, tdoa_b, tdoa_z, TV, tdoa_counts, tdoa_d2, tdoa_outcome,
     ST, counts, win_rej, win_d2, win_w, win_all, nis_limit, reject_share_max, last_range, last_range_t,
     out_every, out_t, out_X, out_P, nis_t, nis_anchor, nis_d2, nis_outcome,
 ):  # fmt: skip
@@ -684,12 +707,13 @@ def replay(
     time order (at one time: IMU, range, TDoA, then height samples); an IMU sample is held over the
     interval that follows it (zero-order hold), so the filter predicts to each sample's own time stamp.
     Ranges go through :func:`fuse_range`, distance differences through :func:`update_tdoa` (white noise
-    ``tdoa_sigma``; outcomes per anchor pair in ``tdoa_counts`` (M, M, 3); they enter the divergence
+    per pair in ``TV`` (M, M, 3), :func:`fuse_tdoa`; outcomes per anchor pair in ``tdoa_counts`` (M, M, 3);
+    they enter the divergence
     window as ranges do), heights through :func:`fuse_aux`, and each IMU sample through the phase detector
-    (:func:`phase_step`; a change is written to ``phase_t``/``phase_air``). While the vehicle stands on its
-    surveyed pad before its first take-off (``PH_PINNED``), gated samples stay out of the divergence
-    window: its position is known, so measurements that disagree are bad (a UWB tag on the ground, a TDoA
-    engine not yet in sync), not the estimate."""
+    (:func:`phase_step`; a change is written to ``phase_t``/``phase_air``). While the vehicle stands on the
+    ground (``PH_PINNED``: on its known pad before its first take-off, or where it landed), gated samples
+    stay out of the divergence window: it stands still, so measurements that disagree are bad (a tag on
+    the ground, a TDoA engine not yet in sync), not the estimate."""
     n_imu, n_rng, n_aux, n_td = imu_t.shape[0], rng_t.shape[0], aux_t.shape[0], tdoa_t.shape[0]
     n = P.shape[0]
     work = np.empty((3, n))
@@ -752,8 +776,9 @@ def replay(
         if kind == 3:
             ST[ST_I_TDOA] += 1
             a, b = tdoa_a[u], tdoa_b[u]
-            outcome = update_tdoa(X, P, anchors[a], anchors[b], ridx[a], ridx[b], tdoa_z[u], tdoa_sigma, PRM,
-                                  work, res)  # fmt: skip
+            outcome = fuse_tdoa(
+                X, P, PRM, RP, anchors[a], anchors[b], ridx[a], ridx[b], tdoa_z[u], TV[a, b], res
+            )
             tdoa_d2[u], tdoa_outcome[u] = res[1], outcome
             tdoa_counts[a, b, outcome] += 1
             if (

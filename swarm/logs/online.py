@@ -34,7 +34,7 @@ from swarm.core import rotations as rot
 from swarm.core.imu_filter import ImuFilter, divergence_limits
 from swarm.errors import ConfigError
 from swarm.logs.reader import Log, LogConfig
-from swarm.logs.replay import _Window, aux_streams, build_filter, jump, recover, robust_state
+from swarm.logs.replay import _Window, aux_streams, build_filter, jump, recover, robust_state, tdoa_noise
 
 _IMU, _UWB, _TDOA, _HEIGHT, _BARO, _VISION = 0, 1, 2, 3, 4, 5  # samples of one time in the replay's order
 
@@ -223,6 +223,7 @@ class OnlineNavigator:
         self._AX = aux_streams(log, f, cal)[3]
         self.aux_counts = np.zeros((2, 3), dtype=np.int64)
         self.tdoa_counts = np.zeros((len(self.anchors_nav), len(self.anchors_nav), 3), dtype=np.int64)
+        self._TV = tdoa_noise(len(self.anchors_nav), self.config.tdoa.sigma_m)
         """Height samples (rangefinder, barometer) accepted, rejected, refused."""
         self._limits = divergence_limits(prm.window, prm.divergence_alpha)
         m = len(self.anchors_nav)
@@ -271,9 +272,9 @@ class OnlineNavigator:
         if kind == _TDOA:
             a, b, z = data
             w = self._win
-            outcome = nb.update_tdoa(
-                X, P, f.anchors[a], f.anchors[b], f.ridx[a], f.ridx[b], z, self.config.tdoa.sigma_m, prm,
-                self._work, self._res,
+            outcome = nb.fuse_tdoa(
+                X, P, prm, self._RP, f.anchors[a], f.anchors[b], f.ridx[a], f.ridx[b], z, self._TV[a, b],
+                self._res,
             )  # fmt: skip
             self.tdoa_counts[a, b, outcome] += 1
             if outcome != nb.REFUSED and self._PH[nb.PH_PINNED] == 0.0 and nb.window_push(

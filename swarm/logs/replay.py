@@ -452,7 +452,7 @@ def replay_log(log: Log) -> ReplayResult:
         ev = nb.replay(
             X, P, f.prm, tf, min(t_stop, t_vis), imu_t, gyro, acc, uwb_t, uwb_a, ranges, f.anchors, f.ridx,
             RS, RP, aux_t, aux_kind, aux_z, AX, aux_outcome, PH, phase_t, phase_air,
-            td.t, td.a, td.b, td.z, cfg.tdoa.sigma_m, td.counts, td.d2, td.outcome, ST, f.counts,
+            td.t, td.a, td.b, td.z, td.TV, td.counts, td.d2, td.outcome, ST, f.counts,
             win.rej, win.d2, win.w, win.all, limits, prm.reject_share_max, last_range, last_range_t,
             every, out_t, out_X, out_P, nis_t, nis_anchor, nis_d2, nis_outcome,
         )  # fmt: skip
@@ -525,6 +525,14 @@ def robust_state(log: Log, f: ImuFilter, cal: StaticCalibration | None):
     return RS, RP, PH
 
 
+def tdoa_noise(m: int, sigma_m: float) -> np.ndarray:
+    """Each anchor pair's noise state for :func:`swarm.core._imu_nb.fuse_tdoa`: the prior variance, no
+    running means yet."""
+    TV = np.full((m, m, 4), np.nan)
+    TV[:, :, 0] = TV[:, :, 3] = sigma_m**2
+    return TV
+
+
 class _Tdoa:
     """``tdoa.csv`` for the compiled loop (empty arrays without one, or with ``[tdoa] enabled = false``), and
     what the loop writes back: per row the squared distance and the outcome, per anchor pair the counts."""
@@ -536,6 +544,7 @@ class _Tdoa:
         self.b = np.ascontiguousarray(log.tdoa_b, dtype=np.int64) if use else np.zeros(0, np.int64)
         self.z = np.ascontiguousarray(log.tdoa_ddist) if use else np.zeros(0)
         self.counts = np.zeros((m, m, 3), dtype=np.int64)
+        self.TV = tdoa_noise(m, log.config.tdoa.sigma_m)
         self.d2 = np.full(len(self.t), np.nan)
         self.outcome = np.full(len(self.t), -1, dtype=np.int64)
 
@@ -564,6 +573,10 @@ class _Tdoa:
             "nis_mean": float(d2.mean()) if len(d2) else None,
             "nis_in_band_share": float(((d2 >= lo1) & (d2 <= hi1)).mean()) if len(d2) else None,
             "by_pair": pairs,
+            "sigma_by_pair_m": {
+                f"{ids[a]}-{ids[b]}": float(np.sqrt(self.TV[a, b, 0]))
+                for a, b in zip(*np.nonzero(c.sum(axis=2)), strict=True)
+            },
         }
 
 
