@@ -142,6 +142,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="HZ",
         help="add a barometer at HZ (baro.csv)",
     )
+    s.add_argument(
+        "--tdoa",
+        choices=("tdoa2", "tdoa3"),
+        default=None,
+        help="a passive tag on the Loco Positioning TDoA radio: tdoa.csv instead of two-way ranges (uwb.csv "
+        "without rows; with --profile its range errors, per anchor, as differences)",
+    )
+    s.add_argument(
+        "--tdoa-nlos",
+        dest="tdoa_nlos",
+        type=int,
+        default=None,
+        metavar="ANCHOR",
+        help="with --tdoa: this anchor's packets in flight are often long (all its pairs)",
+    )
     s.set_defaults(func=run_synth)
 
 
@@ -154,7 +169,11 @@ def run_synth(args: argparse.Namespace) -> int:
         vision_rate_hz=args.vision or 0.0,
         height_rate_hz=args.height or 0.0,
         baro_rate_hz=args.baro or 0.0,
+        tdoa=args.tdoa or "",
+        tdoa_nlos_anchor=args.tdoa_nlos,
     )
+    if args.tdoa_nlos is not None and not args.tdoa:
+        raise ConfigError("--tdoa-nlos needs --tdoa tdoa2|tdoa3")
     profile = None
     if args.profile is not None:
         from swarm.sensors.profile import load_profile
@@ -168,6 +187,7 @@ def run_synth(args: argparse.Namespace) -> int:
     make_log(args.out, args.seed, spec, profile)
     files = (
         "imu.csv, uwb.csv, anchors.csv, truth.csv, "
+        + ("tdoa.csv, " if args.tdoa else "")
         + ("vision.csv, markers.csv, " if args.vision else "")
         + ("height.csv, " if args.height else "")
         + ("baro.csv, " if args.baro else "")

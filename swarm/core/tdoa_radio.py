@@ -458,7 +458,8 @@ class TdoaRadio:
     errors, white noise: :data:`swarm.core._tdoa_nb.Z_N` normals a packet) from child ``1 + i``, so the
     channel does not depend on the number of tags and a tag's rows not on the others'."""
 
-    def __init__(self, params: TdoaParams, anchors_nav, n_tags: int, duration_s: float, seed: int = 0,
+    def __init__(self, params: TdoaParams, anchors_nav, n_tags: int, duration_s: float,
+                 seed: int | np.random.SeedSequence = 0,
                  errors: LinkErrors | None = None, nlos_anchor: int = -1, nlos_probability: float = 0.0,
                  nlos_excess_m: float = 0.0) -> None:  # fmt: skip
         self.params = params
@@ -467,7 +468,7 @@ class TdoaRadio:
         if m < 2:
             raise ConfigError(f"tdoa: at least 2 anchors are needed, got {m}")
         self.duration_s = float(duration_s)
-        ss = np.random.SeedSequence(int(seed))
+        ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(int(seed))
         kids = ss.spawn(1 + n_tags)
         self.channel = simulate_channel(params, m, duration_s, np.random.default_rng(kids[0]))
         self.rng = [np.random.default_rng(k) for k in kids[1:]]

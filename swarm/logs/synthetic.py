@@ -95,6 +95,14 @@ class SyntheticSpec:
     """The altitude of the nav origin the barometer reads (any constant) [m]."""
     baro_drift_m_rts: float = 0.01
     """The barometer's slow drift, a random walk [m/sqrt(s)] (weather, temperature)."""
+    tdoa: str = ""
+    """``"tdoa2"`` or ``"tdoa3"``: a passive tag on the Loco Positioning TDoA radio writes ``tdoa.csv``
+    (:mod:`swarm.logs.synth_tdoa`) and ``uwb.csv`` has no rows; empty: two-way ranging."""
+    tdoa_nlos_anchor: int | None = None
+    """With TDoA: this anchor's packets in flight are long (``nlos_probability``, ``nlos_excess_m``), so
+    are all its pairs (None: none)."""
+    tdoa_sigma_m: float | None = None
+    """With TDoA: the white noise of one difference [m] (None: sqrt(2) times the ranges' white sigma)."""
 
 
 ANCHORS = np.array(
@@ -276,6 +284,10 @@ def make_log(directory, seed: int = 0, spec: SyntheticSpec | None = None, profil
     if spec.blackout is not None:
         b_from, b_for = spec.blackout
         rows = rows[~((t_rng >= b_from) & (t_rng < b_from + b_for))]
+    if (
+        spec.tdoa
+    ):  # a passive tag: no two-way ranges (the draws above are kept: the rest of the log is the same)
+        rows = rows[:0]
     _write(d / "uwb.csv", "t_s,anchor_id,range_m", rows, ["%.6f", "%d", "%.6f"])
     _write(
         d / "anchors.csv",
@@ -289,6 +301,14 @@ def make_log(directory, seed: int = 0, spec: SyntheticSpec | None = None, profil
     _write(d / "truth.csv", "t_s,x_m,y_m,z_m,qx,qy,qz,qw", np.column_stack([t_truth, pt, qt]), "%.7f")
 
     extra_toml, baro_drift = _write_height_baro(d, seed, spec)
+    tdoa = None
+    if spec.tdoa:
+        from swarm.logs.reader import LogConfig
+        from swarm.logs.synth_tdoa import write_tdoa
+
+        tdoa = write_tdoa(d, seed, spec, profile, ANCHORS, b0, step, truth_at)
+        if "tdoa" in LogConfig.__dataclass_fields__:
+            extra_toml += f"\n[tdoa]\nsigma_m = {tdoa['sigma_m']:g}\n"
     vision_toml = ""
     outliers = np.zeros(0, dtype=np.int64)
     if spec.vision_rate_hz > 0:
@@ -340,6 +360,7 @@ sigma_range_bias_m = {max(spec.range_bias_step_m, 0.03) if uwb_p is None else ma
         "nlos_episodes": episodes,
         "range_outliers_t": t_rng[range_outliers & ~lost],
         "baro_drift_final_m": baro_drift,
+        "tdoa": tdoa,
     }
 
 
