@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from swarm.logs.cfusd import CF_TWR_SIGMA_M
 from swarm.logs.prior import _given
 from swarm.logs.reader import read_log
 from swarm.logs.replay import replay_log
@@ -54,6 +55,8 @@ def user_keys(log_dir: Path) -> dict[str, object]:
         keys.update({"calibration.until_s": round(until, 3), "calibration.position_m": p0})
     else:
         keys.update({"calibration.until_s": 0.0, "initial.position_m": p0})
+        if len(log.uwb_t):  # no segment to calibrate the ranges' noise: the Crazyflie firmware's
+            keys["uwb.sigma_m"] = CF_TWR_SIGMA_M
     return {k: v for k, v in keys.items() if k not in given}
 
 

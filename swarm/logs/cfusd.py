@@ -239,8 +239,9 @@ TOF_MAX_MM = 5000
 
 CF_TWR_SIGMA_M = 0.25
 """The range noise the Crazyflie firmware gives its own filter for a two-way range [m] (``dist.stdDev =
-0.25`` in ``lpsTwrTag.c``): written as ``[uwb] sigma_m`` of an imported TWR log, so that it replays as
-imported; a static start segment (``[calibration] until_s``) calibrates it per anchor instead."""
+0.25`` in ``lpsTwrTag.c``): suggested, commented out, as ``[uwb] sigma_m`` of an imported TWR log: a
+static start segment (``[calibration] until_s``) calibrates it per anchor, and an explicit ``sigma_m``
+would take its place (the replay refuses a log with neither, saying so)."""
 
 USED = {
     "estGyroscope": ("gyro.x", "gyro.y", "gyro.z"),
@@ -385,7 +386,8 @@ def import_cfusd(
     tables = ""
     if d is not None:
         tables = (
-            "[uwb]\n# the Crazyflie firmware's TWR range noise (lpsTwrTag.c); or set [calibration] until_s\n"
-            f"sigma_m = {CF_TWR_SIGMA_M}"
+            "[uwb]\n# a static start segment ([calibration] until_s, position_m) calibrates each anchor's noise;\n"
+            "# without one, the Crazyflie firmware's TWR range noise (lpsTwrTag.c):\n"
+            f"# sigma_m = {CF_TWR_SIGMA_M}"
         )
     return folder.finish(src.name, tables)
