@@ -386,7 +386,8 @@ def import_cfusd(
     tables = ""
     if d is not None:
         tables = (
-            "[uwb]\n# a static start segment ([calibration] until_s, position_m) calibrates each anchor's noise;\n"
+            "[uwb]\n# a static start segment ([calibration] until_s, position_m) calibrates each anchor's "
+            "noise;\n"
             "# without one, the Crazyflie firmware's TWR range noise (lpsTwrTag.c):\n"
             f"# sigma_m = {CF_TWR_SIGMA_M}"
         )
