@@ -663,7 +663,9 @@ class LandingAgent:
                 **sc.estimator.__dict__,
                 "lever_arm_m": tuple(sc.uwb.lever_arm_m),
                 "gravity_nav": (0.0, 0.0, -air.gravity_m_s2),
-                "range_bias": False,
+                "range_bias": False,  # the landing agent's kernels take no range-error model (yet)
+                "range_common_offset": False,
+                "range_gm": False,
                 "accel_noise": sc.imu.accel_noise,
                 "gyro_noise": sc.imu.gyro_noise,
             }
