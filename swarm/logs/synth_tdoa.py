@@ -16,7 +16,9 @@ range-error model of that anchor, which enters each difference as ``e_B - e_A``:
   ``spec.nlos_excess_m`` with probability ``spec.nlos_probability`` (so all its pairs are long as ``B``
   and short as ``A``);
 * white noise ``spec.tdoa_sigma_m`` a difference (None: sqrt(2) times the ranges' white sigma, the
-  difference of two such errors); packets a tag misses with probability ``spec.range_loss``.
+  difference of two such errors); packets a tag misses with probability ``spec.range_loss``;
+* a row longer than its two anchors' baseline is not written (the firmware's ``outlierFilterTdoa.c``
+  drops it, and the reader refuses it), counted in the returned ``beyond_baseline``.
 """
 
 from __future__ import annotations
@@ -92,6 +94,11 @@ def write_tdoa(d: Path, seed: int, spec, profile, anchors: np.ndarray, offsets, 
     # the synthetic model's biases step once airborne, as uwb.csv's
     t_air = spec.static_s if profile is not None else spec.static_s + spec.takeoff_s
     rows = radio.step_packets(0, tag, t >= t_air)
+    # no position has a difference longer than the two anchors' baseline: the firmware's outlier filter
+    # drops such rows (outlierFilterTdoa.c) and the reader refuses them (docs/logs.md)
+    a, b = rows[:, tr.ROW_A].astype(int), rows[:, tr.ROW_B].astype(int)
+    beyond = np.abs(rows[:, tr.ROW_DDIST]) > np.linalg.norm(anchors[a] - anchors[b], axis=1)
+    rows = rows[~beyond]
     np.savetxt(
         d / "tdoa.csv",
         rows[:, [tr.ROW_T, tr.ROW_A, tr.ROW_B, tr.ROW_DDIST]],
@@ -103,6 +110,7 @@ def write_tdoa(d: Path, seed: int, spec, profile, anchors: np.ndarray, offsets, 
     return {
         "mode": spec.tdoa,
         "counts": {k: int(v[0]) for k, v in radio.counts.items()},
+        "beyond_baseline": int(beyond.sum()),
         "sigma_m": params.sigma_m,
         "rows": rows,
         "nlos_anchor": None if nlos < 0 else nlos,
