@@ -77,6 +77,10 @@ BENCHES: dict[str, tuple[Callable[[bool], tuple[dict, str]], str]] = {
         _bench("swarm", presets=True),
         "the swarm at scale: CPU per vehicle per tick, late ticks, real-time factor, latency (--vehicles)",
     ),
+    "tdoa": (
+        _bench("tdoa", presets=True),
+        "TWR-TDMA vs TDoA3 for 2-128 vehicles: per-tag measurement rate, swarm replay's RMSE at that rate",
+    ),
 }
 """Bench name -> (runner taking ``quick``, one-line help)."""
 
