@@ -486,7 +486,6 @@ def _run(args: argparse.Namespace) -> int:
                         if not args.until_docked:
                             _hold(args, stop, wall0)
                     break
-                stop_swarm(sup, session, keys, why[0], box[0].t_s)
                 _ = (_token, zenoh)
             finally:
                 # every process's last samples are in before the file is finished; announced while the

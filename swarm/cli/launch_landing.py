@@ -279,7 +279,6 @@ def run_landing_launch(args: argparse.Namespace) -> int:
                     if not args.headless and not args.until_docked and got["run_end"] is not None:
                         _hold(args, stop, wall0)
                     break
-                stop_swarm(sup, session, keys, why[0])
             finally:
                 # every process's last samples are in before the file is finished; announced while the
                 # session is open (a failure's way out too)
