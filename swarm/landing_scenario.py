@@ -173,6 +173,11 @@ class LandingInitial:
     sigma_attitude_deg: float = 1.0
     sigma_accel_bias_m_s2: float = 0.02
     sigma_gyro_bias_rad_s: float = 0.002
+    sigma_range_offset_m: float = 0.1
+    """Prior of each anchor's range offset (``[estimator] range_bias``) [m]."""
+    sigma_common_offset_m: float = 0.5
+    """Prior of the offset common to every anchor (``[estimator] range_common_offset``) [m]: a Loco
+    Positioning tag's antenna delay reads ranges 0.2-0.4 m short."""
 
 
 @dataclass(frozen=True)

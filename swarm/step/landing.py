@@ -663,9 +663,6 @@ class LandingAgent:
                 **sc.estimator.__dict__,
                 "lever_arm_m": tuple(sc.uwb.lever_arm_m),
                 "gravity_nav": (0.0, 0.0, -air.gravity_m_s2),
-                "range_bias": False,  # the landing agent's kernels take no range-error model (yet)
-                "range_common_offset": False,
-                "range_gm": False,
                 "accel_noise": sc.imu.accel_noise,
                 "gyro_noise": sc.imu.gyro_noise,
             }
@@ -684,10 +681,11 @@ class LandingAgent:
                 math.radians(ini.sigma_attitude_deg),
                 ini.sigma_accel_bias_m_s2,
                 ini.sigma_gyro_bias_rad_s,
-                0.1,
+                ini.sigma_range_offset_m,
             ),
             accel_bias=st.accel_bias0,
             gyro_bias=st.gyro_bias0,
+            sigma_common_m=ini.sigma_common_offset_m,
         )
         cam = sc.camera
         self.cam_pos = np.asarray(cam.pos_body_m, float)
@@ -756,7 +754,7 @@ class LandingAgent:
         """The arrays of :func:`swarm.step.landing_nb.agent_fuse` after ``INP, CIDX, CPX``, in
         :func:`~swarm.step.landing_nb.run_landing_ticks`' order (the agent tuple)."""
         f = self.filt
-        return (self.POSE, f.X[0], f.P[0], self.AF, self.HELD, self.NIS, f.counts, f.anchors, f.bias_of,
+        return (self.POSE, f.X[0], f.P[0], self.AF, self.HELD, self.NIS, f.counts, f.anchors, f.ridx,
                 f.sigma, f.prm, f._work, f._res, self.AC, self.OBJ, self.IMG, self.VAR, self.T_OUT,
                 self.R_OUT, self.COV_OUT)  # fmt: skip
 

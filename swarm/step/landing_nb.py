@@ -294,7 +294,7 @@ def _nis_push(AF, NIS, x):
 
 
 @njit(cache=True)
-def agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchors, bias_of, sigma, prm, work, res,
+def agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchors, ridx, sigma, prm, work, res,
                AC, corners, CAM, OBJ, IMG, VAR, T_OUT, R_OUT, COV_OUT):  # fmt: skip
     """The filter's half of step 2 (:meth:`swarm.step.landing.LandingAgent.fuse`): the IMU sample (stamped
     ``t - dt``), the range, the fix, the rangefinder's distance and the pad's position in the camera, solved
@@ -316,7 +316,8 @@ def agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchors, bias_
         if t >= AF[AF_T]:
             _predict_to(X, P, AF, HELD, t, prm)
             a = int(INP[INP_ANCHOR])
-            out = inb.update_range_one(X, P, anchors[a], bias_of[a], INP[INP_RANGE], sigma[a], prm, work, res)
+            i0, i1, i2 = ridx[a, 0], ridx[a, 1], ridx[a, 2]  # the range-error model's terms (-1: off)
+            out = inb.update_range3(X, P, anchors[a], i0, i1, i2, INP[INP_RANGE], sigma[a], prm, work, res)
             counts[a, out] += 1
             AF[AF_LAST_D2] = res[1]
             if out != inb.REFUSED:
@@ -428,7 +429,7 @@ def run_landing_ticks(k, k1, world, agent, guid, ctl, Z, zpos, need, SER, SER_n,
     x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, INP, CIDX, CPX = world[:13]
     REP, VIB, RS, OFF, STEP, Z2, zpos2 = world[13:]
     errors = REP[rerr.RE_ON] != 0.0 or VIB[VIB_ACC] > 0.0 or VIB[VIB_GYRO] > 0.0
-    POSE, X, P, AF, HELD, NIS, counts, anchs, bias_of, sigma, prm, work, res, AC = agent[:14]
+    POSE, X, P, AF, HELD, NIS, counts, anchs, ridx, sigma, prm, work, res, AC = agent[:14]
     OBJ, IMG, VAR, T_OUT, R_OUT, COV_OUT = agent[14:]
     G, GP, REF, EV, EV_n, DEC, DEC_n = guid
     cs, cp, u, act = ctl
@@ -440,7 +441,7 @@ def run_landing_ticks(k, k1, world, agent, guid, ctl, Z, zpos, need, SER, SER_n,
         world_sample(k, x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, Z, zpos, INP, CIDX, CPX)
         if errors:
             world_errors(s, REP, VIB, RS, OFF, STEP, Z2, zpos2, INP)
-        agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchs, bias_of, sigma, prm, work, res,
+        agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchs, ridx, sigma, prm, work, res,
                    AC, corners, CAM, OBJ, IMG, VAR, T_OUT, R_OUT, COV_OUT)  # fmt: skip
         mode = agent_decide(INP, X, P, AF, NIS, G, GP, REF, EV, EV_n, DEC, DEC_n, cs, cp, u, act)
         if series_every > 0 and k % series_every == 0:
