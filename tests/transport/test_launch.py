@@ -477,10 +477,13 @@ def test_faults_injected_at_run_time_reach_the_world_and_the_radios(tmp_path, si
     ns = _ns()
     with Procs() as procs:
         out = tmp_path / "launch.json"
-        proc, endpoint = _launch(procs, ns, "--until-docked", json_path=out)
+        # paced at 10x real time: unpaced, a lockstep pair docks ~3.5 s in, a race with `swarm fault`'s own
+        # start (it lost 1 run in 4 before this wave, 2 in 4 under load); paced, the run lasts ~15 s and the
+        # pace changes nothing of a lockstep run's numbers
+        proc, endpoint = _launch(procs, ns, "--until-docked", "--pace", "scaled:10", json_path=out)
         proc.wait_for_line(r"^swarm up:", 120.0)
         # the command line once (it starts Python: ~1-2 s); the other two from this test's own session, at
-        # once, so that all three land while the run (~25 s of wall time) is under way
+        # once, so that all three land while the run is under way
         cmd = [sys.executable, "-m", "swarm.cli.main", "fault", "uwb_dropout", "--for", "5",
                "--namespace", ns, "--mode", "client", "--connect", endpoint]  # fmt: skip
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
