@@ -429,14 +429,12 @@ def update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, sigma, PRM, work, res):
 
 
 @njit(cache=True)
-def fuse_tdoa(X, P, PRM, RP, anchor_a, anchor_b, ia, ib, z, tv, res):
+def fuse_tdoa(X, P, PRM, RP, anchor_a, anchor_b, ia, ib, z, tv, work, res):
     """One distance difference through :func:`update_tdoa` with the pair's adapted noise: ``tv`` (4,) is the
     pair's ``(variance, E[nu^2], E[H P H^T], prior variance)`` (NaN means: none yet), adapted by covariance
     matching on its accepted innovations as :func:`fuse_range` adapts a range's (``RP_ADAPT``), but only
     upward from the prior, to ``RP_VAR_CEIL``: a TDoA pair's spread differs by anchors and grows in flight,
     and its heavy tails would otherwise pull the estimate below the prior (measured: a divergence)."""
-    n = P.shape[0]
-    work = np.empty((3, n))
     outcome = update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, math.sqrt(tv[0]), PRM, work, res)
     if outcome == ACCEPTED and RP[RP_ADAPT] > 0.0:
         al = RP[RP_ADAPT_ALPHA]
@@ -777,7 +775,7 @@ def replay(
             ST[ST_I_TDOA] += 1
             a, b = tdoa_a[u], tdoa_b[u]
             outcome = fuse_tdoa(
-                X, P, PRM, RP, anchors[a], anchors[b], ridx[a], ridx[b], tdoa_z[u], TV[a, b], res
+                X, P, PRM, RP, anchors[a], anchors[b], ridx[a], ridx[b], tdoa_z[u], TV[a, b], work, res
             )
             tdoa_d2[u], tdoa_outcome[u] = res[1], outcome
             tdoa_counts[a, b, outcome] += 1

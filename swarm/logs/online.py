@@ -274,7 +274,7 @@ class OnlineNavigator:
             w = self._win
             outcome = nb.fuse_tdoa(
                 X, P, prm, self._RP, f.anchors[a], f.anchors[b], f.ridx[a], f.ridx[b], z, self._TV[a, b],
-                self._res,
+                self._work, self._res,
             )  # fmt: skip
             self.tdoa_counts[a, b, outcome] += 1
             if outcome != nb.REFUSED and self._PH[nb.PH_PINNED] == 0.0 and nb.window_push(
