@@ -49,5 +49,6 @@ def test_the_row_reports_the_replay(flight):
     record, table = real_flights.run([d])
     row = record["flights"][0]
     assert row["mode"] == "twr" and row["resets"] == 0 and row["rmse_m"] < 0.10
+    assert 0.0 < row["rmse_airborne_m"] < 0.10  # the flight after the take-off, scored alone
     assert 0.0 < row["nees_in_band_share"] <= 1.0 and row["wall_per_60_s"] > 0
     assert d.name in table and "| twr |" in table
