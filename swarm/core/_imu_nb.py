@@ -497,11 +497,12 @@ RP_PHASES = 16  # 1: detect take-off and landing
 RP_REOPEN_BARO_VAR = 17  # variance added to the barometer offset at a phase change [m^2]
 RP_BARO_INDEX = 18  # the barometer offset's error index (-1: none)
 RP_NLOS_MAX_HELD = 19  # at most this many anchors held out as NLOS at once
-N_RP = 20
+RP_VIB_RATIO = 20  # landed when the vibration falls this many times below its level in flight
+N_RP = 21
 
 # PH: flight-phase detector state
-PH_VIB, PH_A0, PH_A1, PH_A2, PH_HAVE, PH_AIR, PH_SINCE, PH_PINNED = range(8)
-N_PH = 8  # PH_PINNED: 1 while the vehicle stands on the ground: on its known pad, or where it landed
+PH_VIB, PH_A0, PH_A1, PH_A2, PH_HAVE, PH_AIR, PH_SINCE, PH_PINNED, PH_AIR_VIB = range(9)
+N_PH = 9  # PH_PINNED: 1 while the vehicle stands on the ground: on its known pad, or where it landed
 
 # aux samples (height.csv, baro.csv) and AUX parameters
 AUX_HEIGHT, AUX_BARO = 0, 1
@@ -627,7 +628,10 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
     the specific force between samples (rotor vibration: ~0.01 m/s^2 standing, ~0.1 in flight on a small
     quadrotor, DESIGN.md sec. 11; low-passed with ``RP_VIB_TAU``) exceeds ``RP_VIB_THRESHOLD``, or the
     estimated height above the ground reference exceeds ``RP_TAKEOFF_HEIGHT``; a change holds for
-    ``RP_DWELL`` before it is declared (as PX4's land detector's hysteresis). At a change each anchor's
+    ``RP_DWELL`` before it is declared (as PX4's land detector's hysteresis). Landed, too, when the vibration
+    falls ``RP_VIB_RATIO`` times below its own level in flight (``PH_AIR_VIB``, a slow mean taken while
+    airborne): the rotors stopped, even where they spun already before the take-off so that the level on
+    the ground says nothing, and whatever the estimate's height. At a change each anchor's
     offset variance grows by ``RP_REOPEN_VAR``: the offsets move when the vehicle leaves or meets the
     ground (DESIGN.md sec. 11), a step a slow random walk cannot follow; so does a barometer's offset
     (``RP_REOPEN_BARO_VAR``)."""
@@ -638,11 +642,16 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
         g = 1.0 - math.exp(-dt / RP[RP_VIB_TAU])
         PH[PH_VIB] += g * ((d0 * d0 + d1 * d1 + d2 * d2) / 6.0 - PH[PH_VIB])  # per axis, diff var = 2 s^2
     PH[PH_A0], PH[PH_A1], PH[PH_A2], PH[PH_HAVE] = acc[0], acc[1], acc[2], 1.0
-    air = math.sqrt(PH[PH_VIB]) > RP[RP_VIB_THRESHOLD]
+    vib = math.sqrt(PH[PH_VIB])
+    air = vib > RP[RP_VIB_THRESHOLD]
     hmin = RP[RP_TAKEOFF_HEIGHT]
     if hmin > 0.0 and X[XP + 2] - RP[RP_GROUND_Z] > hmin:
         air = True
     now = PH[PH_AIR] > 0.0
+    if PH[PH_AIR_VIB] > 0.0 and vib * RP[RP_VIB_RATIO] < math.sqrt(PH[PH_AIR_VIB]):
+        air = False  # the rotors stopped (after a flight): whatever the estimate's height says
+    elif now and dt > 0.0:
+        PH[PH_AIR_VIB] += (1.0 - math.exp(-dt / (10.0 * RP[RP_VIB_TAU]))) * (PH[PH_VIB] - PH[PH_AIR_VIB])
     if air == now:
         PH[PH_SINCE] = -1.0
         return 0
@@ -654,6 +663,8 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
     PH[PH_AIR] = 1.0 if air else 0.0
     PH[PH_SINCE] = -1.0
     PH[PH_PINNED] = 0.0 if air else 1.0
+    if air:
+        PH[PH_AIR_VIB] = PH[PH_VIB]  # the flight's level starts from the take-off's
     for a in range(ridx.shape[0]):
         i1 = ridx[a, 1]
         if i1 >= 0:

@@ -187,8 +187,9 @@ class PhaseParams:
     """Time constant of the vibration level (RMS change of the specific force between samples) [s]."""
     vibration_ratio: float = 3.0
     """Airborne above this many times the vibration level standing still (the static segment's, else the
-    log's first second): a small quadrotor's rotors raise it ~10x (0.01 -> 0.1 m/s^2, DESIGN.md sec. 11);
-    relative, so that an IMU's own noise and sample rate do not matter."""
+    log's first second), and landed below its level in flight over this ratio (the rotors stopped): a small
+    quadrotor's rotors raise it ~10x (0.01 -> 0.1 m/s^2, DESIGN.md sec. 11); relative, so that an IMU's own
+    noise and sample rate do not matter."""
     takeoff_height_m: float = 0.3
     """Airborne, too, when the estimate is this high over the ground reference [m] (0: not used)."""
     dwell_s: float = 0.3
@@ -239,6 +240,7 @@ def robust_vector(
     rp[nb.RP_NLOS_MAX_S] = robust.nlos_max_s
     rp[nb.RP_VIB_TAU] = phases.vibration_tau_s
     rp[nb.RP_VIB_THRESHOLD] = phases.vibration_ratio * ground_vibration_m_s2
+    rp[nb.RP_VIB_RATIO] = phases.vibration_ratio
     rp[nb.RP_TAKEOFF_HEIGHT] = phases.takeoff_height_m
     rp[nb.RP_DWELL] = phases.dwell_s
     rp[nb.RP_REOPEN_VAR] = phases.reopen_sigma_m**2

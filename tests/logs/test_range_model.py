@@ -251,3 +251,38 @@ def test_a_tdoa_update_pulls_toward_the_measurement_and_a_gross_one_is_rejected(
         nb.update_tdoa(X, P, ANCHORS[0], ANCHORS[1], f.ridx[0], f.ridx[1], np.nan, 0.1, f.prm, work, res)
         == nb.REFUSED
     )
+
+
+def test_take_off_and_landing_are_seen_in_the_rotors_vibration_and_reopen_the_offsets():
+    """An IMU standing still (0.01 m/s^2 of white spread), then with the rotors' vibration (0.1, ten times:
+    DESIGN.md sec. 11) from 2 s to 7 s, then still again: take-off declared once the vibration level (0.1 s
+    low-pass) has held over 3x the ground's for the 0.3 s dwell, landing once it fell 3x under the flight's,
+    and at each each anchor's offset variance grows by the re-opening variance; the estimate's height is
+    never over the take-off height, so the vibration alone decides."""
+    from swarm.core.imu_filter import PhaseParams, RobustParams, robust_vector
+
+    f = _filter()
+    X, P = f.X[0], f.P[0]
+    X[2] = 0.0
+    rng = np.random.default_rng(0)
+    dt = 1e-3
+    t = np.arange(0.0, 10.0, dt)
+    spread = np.where((t >= 2.0) & (t < 7.0), 0.1, 0.01)
+    acc = np.array([0.0, 0.0, 9.81]) + rng.normal(size=(len(t), 3)) * spread[:, None]
+    phases = PhaseParams()
+    RP = robust_vector(RobustParams(), phases, 0.02, 0.0, -1, len(ANCHORS), 0.01)
+    PH = np.zeros(nb.N_PH)
+    PH[nb.PH_SINCE] = -1.0
+    changes = []
+    off = f.layout.offset
+    for k in range(len(t)):
+        before = P[off, off].copy()
+        ch = nb.phase_step(X, P, RP, PH, f.ridx, acc[k], dt if k else 0.0, t[k])
+        if ch:
+            changes.append((ch, t[k]))
+            np.testing.assert_allclose(P[off, off] - before, phases.reopen_sigma_m**2, rtol=1e-12)
+    assert [c for c, _ in changes] == [1, -1]
+    # declared within the low-pass's rise plus the dwell of each change (and never before it)
+    assert 2.0 + phases.dwell_s < changes[0][1] < 2.0 + phases.dwell_s + 0.3
+    assert 7.0 + phases.dwell_s < changes[1][1] < 7.0 + phases.dwell_s + 0.3
+    assert PH[nb.PH_PINNED] == 1.0  # landed: its samples stay out of the divergence test
