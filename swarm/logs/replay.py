@@ -648,18 +648,20 @@ class _Vision:
 
 def recover(f: ImuFilter, cfg, t: float, win: _Window, last_range, last_range_t, RS) -> dict:
     """After the divergence test fired at ``t``: the ``estimator_reset`` event, and the recovery of
-    ``[recovery] mode``. ``inflate`` adds the 90th percentile of the squared innovations of the window's
-    rejected ranges (of all its ranges when none was rejected; at most ``max_position_sigma_m`` squared:
-    a range's innovation is the position error projected on the anchor's direction, so the largest ones
-    measure the error, and a covariance too large costs only a few ranges' weight) to each axis of the
-    position covariance, and
-    ``sigma_velocity_m_s`` squared to the velocity's: what the ranges saw is how far the estimate may be,
-    and the estimate is kept, so a false alarm costs nothing but a few ranges' weight; then the
-    least-squares fix of the latest range to each anchor (soft-L1 against NLOS) is fused as one position
-    measurement with its covariance, so that a large error is not left to the linearised scalar updates
-    (the fix is not a reset: a consistent estimate barely moves). ``refix`` re-initialises the position from
-    the
-    latest range to each anchor (least squares) and zeroes the velocity. Both clear the NLOS holds."""
+    ``[recovery] mode``.
+
+    ``inflate`` adds the 90th percentile of the squared innovations of the window's rejected ranges (of all
+    its ranges when none was rejected; at most ``max_position_sigma_m`` squared: a range's innovation is
+    the position error projected on the anchor's direction, so the largest ones measure the error, and a
+    covariance too large costs only a few ranges' weight) to each axis of the position covariance, and
+    ``sigma_velocity_m_s`` squared to the velocity's. The estimate is kept, so a false alarm costs nothing
+    but a few ranges' weight. Then the least-squares fix of the latest range to each anchor (soft-L1
+    against NLOS; its covariance from the largest adapted range variance) is fused as one position
+    measurement, so that a large error is not left to the linearised scalar updates (the fix is not a
+    reset: a consistent estimate barely moves).
+
+    ``refix`` re-initialises the position from the latest range to each anchor (least squares) and zeroes
+    the velocity. Both clear the NLOS holds."""
     W = len(win.rej)
     rej = float(win.rej.sum())
     n_acc = W - int(rej)
@@ -705,7 +707,7 @@ def recover(f: ImuFilter, cfg, t: float, win: _Window, last_range, last_range_t,
             q = f.q_nav_body[0]
             lever_nav = rot.quat_rotate(q, np.asarray(cfg.estimator.lever_arm_m, dtype=float))
             p, jtj_inv = position_from_ranges(f.anchors, fresh, lever_nav, f.p_nav[0])
-            cov = jtj_inv * float(np.max(f.sigma) ** 2) + np.eye(3) * 1e-4
+            cov = jtj_inv * float(np.max(RS[:, nb.RS_VAR])) + np.eye(3) * 1e-4
             out = f.update_position(t, p, cov)
             event["fix"] = {"anchors": len(fresh), "position_m": p.tolist(), "outcome": int(out[0])}
         return event
