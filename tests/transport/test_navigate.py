@@ -21,7 +21,9 @@ def test_a_navigator_on_replayed_sensors_gives_the_offline_replay_bit_for_bit(tm
     d = tmp_path / "log"
     # a live feed carries no per-detection sigma: both sides use log.toml's vision.sigma_m
     # with a downward range finder too: height.csv goes over the wire as Rangefinder messages
-    spec = SyntheticSpec(duration_s=12.0, vision_rate_hz=15.0, vision_sigma_columns=False, height_rate_hz=25.0)
+    spec = SyntheticSpec(
+        duration_s=12.0, vision_rate_hz=15.0, vision_sigma_columns=False, height_rate_hz=25.0
+    )
     make_log(d, seed=5, spec=spec)
     fault = {"faults.jump_at_s": 9.0}  # a forced divergence: the event and the recovery go out too
     offline = replay_log(read_log(d, fault))
