@@ -40,7 +40,7 @@ from tests.transport.procs import Procs, free_port, loopback, wait_until
 STALL_S = 1.0  # --stall-s of the launched run: well under its --step-timeout, far above a paced tick (1 ms)
 STOPPED_S = 1.0  # how long the stopped agent host stays stopped after the stall is told
 PAUSED_S = 2.0  # how long the run is paused: twice --stall-s (a paused run is no stall)
-STALL_TOLD = r"the world's clock has stood at tick \d+ for [\d.]+ s in a running run"
+STALL_TOLD = r"the world's clock has stood at tick (\d+) for [\d.]+ s in a running run"
 """The launcher's line at a stall (on its stderr), before every process's stacks."""
 FAULT = ("camera_loss", 9.0, 3.0, ["uav1"])
 """A run-time fault sent to the launched swarm (as ``swarm fault`` does) as soon as its run starts: uav1's
@@ -83,7 +83,7 @@ def launched(tmp_path_factory):
             for sub in subs:
                 sub.undeclare()
             paused = _pause_and_resume(session, Keys(ns), proc)
-            _stop_a_host_past_the_stall(proc, ns)
+            paused["stalls_before_stop"] = _stop_a_host_past_the_stall(proc, ns)
             deadline = time.monotonic() + 3.0
             while time.monotonic() < deadline and proc.popen.poll() is None:
                 for key, payload in injected:
@@ -132,21 +132,25 @@ def _pause_and_resume(session, keys: Keys, proc) -> dict:
     return {"paused": at, "during": during, "resumed": again}
 
 
-def _stop_a_host_past_the_stall(proc, ns: str) -> None:
+def _stop_a_host_past_the_stall(proc, ns: str) -> int:
     """Stop (SIGSTOP) the agent host of uav1 and uav2 until the launcher tells the world's clock stood still
     past ``--stall-s``, and a little longer (every other process dumps its stacks meanwhile), then let it go
-    on: a hung process keeps its liveliness token, only the clock shows it."""
+    on: a hung process keeps its liveliness token, only the clock shows it. Returns the stalls told before
+    the stop (on a loaded machine the run's first tick can stand a second while the hosts warm up: told
+    too, as it should be, but not this stop's)."""
+    before = len(re.findall(STALL_TOLD, proc.output()))
     out = subprocess.run(["ps", "-ww", "-eo", "pid,args"], capture_output=True, text=True).stdout
     host = next(int(line.split()[0]) for line in out.splitlines()
                 if f"--namespace {ns}" in line and "agents.landing --id uav1,uav2" in line)  # fmt: skip
     os.kill(host, signal.SIGSTOP)
     try:
         deadline = time.monotonic() + 60.0
-        while not re.search(STALL_TOLD, proc.output()) and time.monotonic() < deadline:
+        while len(re.findall(STALL_TOLD, proc.output())) <= before and time.monotonic() < deadline:
             time.sleep(0.05)
         time.sleep(STOPPED_S)
     finally:
         os.kill(host, signal.SIGCONT)
+    return before
 
 
 def _garbage(keys, ids: list[str]) -> list[tuple[str, bytes]]:
@@ -201,8 +205,11 @@ def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
     # an agent host stopped (SIGSTOP) after the start: the world's clock stood still past --stall-s, told
     # once with the stacks of the launcher, the world (waiting for the stopped host's commands), the other
     # host and the stopped one once it went on; the run is still swarm sim's (below)
-    assert len(re.findall(STALL_TOLD, text)) == 1, text
-    dumps = text.split("in a running run: the stacks of the launcher", 1)[1]
+    told = [int(k) for k in re.findall(STALL_TOLD, text)]
+    before = paused["stalls_before_stop"]
+    assert len(told) - before == 1, text  # the stop told once, however long it lasted
+    assert all(k <= 2 for k in told[:before]), told  # any other only at the start, while the hosts warm up
+    dumps = text.split("in a running run: the stacks of the launcher", 1)[-1]
     assert re.search(r'swarm/world/landing\.py", line \d+ in ', dumps), dumps
     assert "agents/landing.py" in dumps and "swarm/cli/launch_landing.py" in dumps, dumps
     assert dumps.count("(most recent call first)") >= 4  # the launcher, the world, two agent hosts
