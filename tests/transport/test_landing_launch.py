@@ -37,9 +37,11 @@ from swarm.transport.messages import (
 from swarm.transport.session import ZenohArgs, open_session
 from tests.transport.procs import Procs, free_port, loopback, wait_until
 
-STALL_S = 1.0  # --stall-s of the launched run: well under its --step-timeout, far above a paced tick (1 ms)
+STALL_S = 2.0  # --stall-s of the launched run: well under its --step-timeout, far above a paced tick (1 ms)
+# and above the second a loaded machine's host can stand after its SIGCONT under the test's garbage flood
+# (1.0 s told a second stall at a fresh clone's make test, 2 runs in 7 across sessions)
 STOPPED_S = 1.0  # how long the stopped agent host stays stopped after the stall is told
-PAUSED_S = 2.0  # how long the run is paused: twice --stall-s (a paused run is no stall)
+PAUSED_S = 4.0  # how long the run is paused: twice --stall-s (a paused run is no stall)
 STALL_TOLD = r"the world's clock has stood at tick (\d+) for [\d.]+ s in a running run"
 """The launcher's line at a stall (on its stderr), before every process's stacks."""
 FAULT = ("camera_loss", 9.0, 3.0, ["uav1"])
@@ -136,8 +138,7 @@ def _stop_a_host_past_the_stall(proc, ns: str) -> int:
     """Stop (SIGSTOP) the agent host of uav1 and uav2 until the launcher tells the world's clock stood still
     past ``--stall-s``, and a little longer (every other process dumps its stacks meanwhile), then let it go
     on: a hung process keeps its liveliness token, only the clock shows it. Returns the stalls told before
-    the stop (on a loaded machine the run's first tick can stand a second while the hosts warm up: told
-    too, as it should be, but not this stop's)."""
+    the stop."""
     before = len(re.findall(STALL_TOLD, proc.output()))
     out = subprocess.run(["ps", "-ww", "-eo", "pid,args"], capture_output=True, text=True).stdout
     host = next(int(line.split()[0]) for line in out.splitlines()
@@ -205,11 +206,9 @@ def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
     # an agent host stopped (SIGSTOP) after the start: the world's clock stood still past --stall-s, told
     # once with the stacks of the launcher, the world (waiting for the stopped host's commands), the other
     # host and the stopped one once it went on; the run is still swarm sim's (below)
-    told = [int(k) for k in re.findall(STALL_TOLD, text)]
-    before = paused["stalls_before_stop"]
-    assert len(told) - before == 1, text  # the stop told once, however long it lasted
-    assert all(k <= 2 for k in told[:before]), told  # any other only at the start, while the hosts warm up
-    dumps = text.split("in a running run: the stacks of the launcher", 1)[-1]
+    assert paused["stalls_before_stop"] == 0, text
+    assert len(re.findall(STALL_TOLD, text)) == 1, text
+    dumps = text.split("in a running run: the stacks of the launcher", 1)[1]
     assert re.search(r'swarm/world/landing\.py", line \d+ in ', dumps), dumps
     assert "agents/landing.py" in dumps and "swarm/cli/launch_landing.py" in dumps, dumps
     assert dumps.count("(most recent call first)") >= 4  # the launcher, the world, two agent hosts
