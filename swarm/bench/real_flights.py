@@ -22,7 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from swarm.logs.cfusd import CF_TWR_SIGMA_M
-from swarm.logs.prior import _given
+from swarm.logs.prior import given_keys
 from swarm.logs.reader import read_log
 from swarm.logs.replay import replay_log
 
@@ -43,7 +43,7 @@ def user_keys(log_dir: Path) -> dict[str, object]:
     log = read_log(log_dir)
     if log.truth_t is None:
         raise ValueError(f"{log_dir}: no truth.csv: a real-flight benchmark needs one")
-    given = _given(Path(log_dir) / "log.toml")
+    given = given_keys(Path(log_dir) / "log.toml")
     p0 = [round(float(v), 4) for v in log.truth_p[0]]
     yaw = float(np.degrees(Rotation.from_quat(log.truth_q[0]).as_euler("ZYX")[0]))
     rise = np.flatnonzero(log.truth_p[:, 2] > log.truth_p[0, 2] + RISE_M)

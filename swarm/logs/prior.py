@@ -52,7 +52,7 @@ def profile_keys(profile: SensorProfile, calibrating: bool) -> dict[str, object]
     return keys
 
 
-def _given(toml: Path) -> set[str]:
+def given_keys(toml: Path) -> set[str]:
     """The dotted keys a log.toml gives (none without one)."""
     if not toml.is_file():
         return set()
@@ -76,7 +76,7 @@ def _given(toml: Path) -> set[str]:
 def with_profile(log_dir: Path, profile: SensorProfile, overrides: dict[str, object]) -> dict[str, object]:
     """``overrides`` (``--set``) completed with the profile's keys that neither log.toml nor they give."""
     toml = Path(log_dir) / "log.toml"
-    given = _given(toml) | set(overrides)
+    given = given_keys(toml) | set(overrides)
     calibrating = "calibration.until_s" in given or any(k.startswith("calibration.") for k in given)
     if calibrating:  # a static segment only if its length is not 0
         try:
