@@ -22,6 +22,18 @@ Array layout of one filter (all float64 unless said otherwise):
     ``[since_update_s, underweight_left, last_d2[N_TYPES]...]`` book-keeping.
 
 Parameter vector ``PRM`` (N_PRM,): see the ``PRM_*`` indices.
+
+Range-error model (optional; ``PRM`` extended to ``N_PRM_RE``, see ``PRM_RE_*``): the filter then also
+estimates, past the 9 core error states and in this order, a range offset common to every anchor, one offset
+per anchor and one first-order Gauss-Markov term per anchor (each part present or not), so that
+``range = ||p + R(q) P1 - a_j|| + c + b_j + g_j + v``. ``X`` grows to ``10 + M`` (nominal value of extra
+error state ``9 + k`` at ``X[10 + k]``) and ``P`` to ``9 + M``. This is the state augmentation of
+correlated measurement errors (Maybeck 1979, *Stochastic Models, Estimation and Control* vol. 1, sec. 6.7;
+Groves 2013, *Principles of GNSS, Inertial, and Multisensor Integrated Navigation Systems*, 2nd ed.,
+sec. 3.4.2 for the Gauss-Markov process and its exact discrete form), the same model as the IMU-driven filter
+(:mod:`swarm.core._imu_nb`). Tandem: the extra states belong to the translation filter (the range depends on
+them and on position), with full cross-covariance to position and velocity; the attitude filter is unchanged.
+Without the extension (``M = 0``) every kernel runs the arithmetic of before, unchanged.
 """
 
 from __future__ import annotations
@@ -61,6 +73,16 @@ PRM_UW_COUNT = 5  # number of accepted updates underweighted after such a span
 PRM_UW_RATIO = 6  # underweight only while tr(H P H^T) > ratio * tr(R)
 PRM_LEVER = 7  # 7:10 UWB tag lever arm P1 in the body frame [m]
 N_PRM = 10
+# range-error model extension (present when len(PRM) == N_PRM_RE)
+PRM_RE_ANCHORS = 10  # number of anchors A
+PRM_RE_COMMON = 11  # 1.0: one range offset common to every anchor (a tag's antenna delay)
+PRM_RE_OFFSET = 12  # 1.0: one range offset per anchor (an anchor's antenna delay, a fixed multipath)
+PRM_RE_GM = 13  # 1.0: one first-order Gauss-Markov term per anchor (slow multipath)
+PRM_RE_COMMON_RW = 14  # the common offset's random walk density [m/sqrt(s)]
+PRM_RE_OFFSET_RW = 15  # each anchor offset's random walk density [m/sqrt(s)]
+PRM_RE_GM_SIGMA = 16  # the Gauss-Markov term's stationary standard deviation [m]
+PRM_RE_GM_TAU = 17  # its correlation time [s]
+N_PRM_RE = 18
 
 STF_SINCE = 0
 STF_UW_LEFT = 1
@@ -103,6 +125,165 @@ def _sandwich(F, P):
             out[i, j] = s
             out[j, i] = s
     return out
+
+
+@njit(cache=True)
+def re_index(PRM, j):
+    """Error-state indices ``(common, offset, gm)`` of anchor ``j``'s range-error terms (-1: a part absent,
+    or ``j`` outside ``[0, A)``; the common offset does not depend on ``j``)."""
+    ic, io, ig = -1, -1, -1
+    if PRM.shape[0] < N_PRM_RE:
+        return ic, io, ig
+    a = int(PRM[PRM_RE_ANCHORS])
+    k = 9
+    if PRM[PRM_RE_COMMON] != 0.0:
+        ic = k
+        k += 1
+    if PRM[PRM_RE_OFFSET] != 0.0:
+        if 0 <= j < a:
+            io = k + j
+        k += a
+    if PRM[PRM_RE_GM] != 0.0 and 0 <= j < a:
+        ig = k + j
+    return ic, io, ig
+
+
+@njit(cache=True)
+def re_transition(PRM, k, dt):
+    """``(phi, q)`` of extra error state ``k`` (index ``>= 9``) over ``dt`` [s]: ``x <- phi x + w``,
+    ``w ~ N(0, q)``. A random walk of density ``s``: ``phi = 1``, ``q = s^2 dt``; a first-order Gauss-Markov
+    process of stationary sigma ``s`` and correlation time ``tau``: the exact discrete form
+    ``phi = exp(-dt / tau)``, ``q = s^2 (1 - phi^2)`` (Groves 2013 sec. 3.4.2; Maybeck 1979 sec. 4.11)."""
+    a = int(PRM[PRM_RE_ANCHORS])
+    i = k - 9
+    if PRM[PRM_RE_COMMON] != 0.0:
+        if i == 0:
+            return 1.0, PRM[PRM_RE_COMMON_RW] ** 2 * dt
+        i -= 1
+    if PRM[PRM_RE_OFFSET] != 0.0:
+        if i < a:
+            return 1.0, PRM[PRM_RE_OFFSET_RW] ** 2 * dt
+        i -= a
+    phi = np.exp(-dt / PRM[PRM_RE_GM_TAU])
+    return phi, PRM[PRM_RE_GM_SIGMA] ** 2 * (1.0 - phi * phi)
+
+
+@njit(cache=True)
+def _predict_extra(X, P, PRM, dt, f00, f01, f02, f10, f11, f12, f20, f21, f22):
+    """The extra states' share of the prediction: their nominal values ``x <- phi x``, and of
+    ``P <- F P F^T + Q`` (``F`` block-diagonal: the core's and
+    ``diag(phi)``), after the core blocks: the cross block with position and velocity picks up
+    ``dt`` times the velocity rows, compounded also the attitude rows turn by ``Phi``; every extra column
+    scales by its ``phi``, the extra block by ``phi_a phi_b``, plus ``q`` on its diagonal."""
+    n = P.shape[0]
+    tandem = PRM[PRM_TANDEM] != 0.0
+    for c in range(9, n):
+        phi, _ = re_transition(PRM, c, dt)
+        X[c + 1] *= phi  # the nominal value follows the same model (a Gauss-Markov term decays to zero)
+        for i in range(3):
+            P[i, c] += dt * P[3 + i, c]
+        if not tandem:
+            c0, c1, c2 = P[6, c], P[7, c], P[8, c]
+            P[6, c] = f00 * c0 + f01 * c1 + f02 * c2
+            P[7, c] = f10 * c0 + f11 * c1 + f12 * c2
+            P[8, c] = f20 * c0 + f21 * c1 + f22 * c2
+        for r in range(9):
+            P[r, c] *= phi
+            P[c, r] = P[r, c]
+    for a in range(9, n):
+        pa, qa = re_transition(PRM, a, dt)
+        for b in range(a, n):
+            pb, _ = re_transition(PRM, b, dt)
+            v = P[a, b] * pa * pb
+            P[a, b] = v
+            P[b, a] = v
+        P[a, a] += qa
+
+
+@njit(cache=True)
+def _estimated(PRM, n):
+    """Error-state indices the (translation) filter estimates: all ``n`` compounded; tandem the
+    translation ``0:6`` and the extra states ``9:n`` (the attitude filter is updated on its own)."""
+    if PRM[PRM_TANDEM] == 0.0:
+        return np.arange(n)
+    idx = np.empty(n - 3, dtype=np.int64)
+    for i in range(6):
+        idx[i] = i
+    for i in range(9, n):
+        idx[i - 3] = i
+    return idx
+
+
+@njit(cache=True)
+def _inject(X, P, idx, dx):
+    """Add the correction ``dx`` of the error states ``idx`` to the nominal state (an extra state ``k`` at
+    ``X[k + 1]``) and do the multiplicative attitude reset of its attitude part, if any."""
+    d0, d1, d2 = 0.0, 0.0, 0.0
+    for t in range(idx.shape[0]):
+        i = idx[t]
+        if i < 6:
+            X[i] += dx[t]
+        elif i < 9:
+            if i == 6:
+                d0 = dx[t]
+            elif i == 7:
+                d1 = dx[t]
+            else:
+                d2 = dx[t]
+        else:
+            X[i + 1] += dx[t]
+    _reset_attitude3(X, P, d0, d1, d2)
+
+
+@njit(cache=True)
+def _update_scalar_extra(X, P, ST_I, ST_F, PRM, kind, H, nu, r, gate):
+    """:func:`_update_scalar` for a filter with extra states (``H`` (n,), the full row): the gate, the
+    underweighting and the Joseph form ``P+ = P - K u^T - u K^T + (s + r') K K^T`` (``u = P H^T``,
+    ``s = H P H^T``, ``r'`` the noise plus, tandem, the attitude block's share) on the estimated indices."""
+    n = P.shape[0]
+    idx = _estimated(PRM, n)
+    m = idx.shape[0]
+    u = np.zeros(m)
+    for a in range(m):
+        acc = 0.0
+        for b in range(m):
+            acc += P[idx[a], idx[b]] * H[idx[b]]
+        u[a] = acc
+    s = 0.0
+    for a in range(m):
+        s += H[idx[a]] * u[a]
+    rr = r
+    if PRM[PRM_TANDEM] != 0.0:
+        for i in range(6, 9):
+            for k in range(6, 9):
+                rr += H[i] * P[i, k] * H[k]
+    S = s + rr
+    d2 = nu * nu / S
+    ST_F[STF_D2 + kind] = d2
+    if not (np.isfinite(d2) and S > 0.0):
+        ST_I[COUNT_REFUSED, kind] += 1
+        return ST_REFUSED_INVALID
+    if d2 > gate:
+        ST_I[COUNT_REJECTED, kind] += 1
+        return ST_REJECTED
+    Sg = S
+    if ST_F[STF_UW_LEFT] > 0.0 and PRM[PRM_UW_BETA] > 0.0 and s > PRM[PRM_UW_RATIO] * rr:
+        Sg = S + PRM[PRM_UW_BETA] * s
+    K = u / Sg
+    if not np.all(np.isfinite(K)):
+        ST_I[COUNT_REFUSED, kind] += 1
+        return ST_REFUSED_INVALID
+    for a in range(m):
+        for b in range(a, m):
+            v = P[idx[a], idx[b]] - K[a] * u[b] - u[a] * K[b] + S * K[a] * K[b]
+            P[idx[a], idx[b]] = v
+            P[idx[b], idx[a]] = v
+    _inject(X, P, idx, K * nu)
+    ST_I[COUNT_ACCEPTED, kind] += 1
+    ST_F[STF_SINCE] = 0.0
+    if ST_F[STF_UW_LEFT] > 0.0:
+        ST_F[STF_UW_LEFT] -= 1.0
+    return ST_ACCEPTED
 
 
 @njit(cache=True)
@@ -184,6 +365,8 @@ def predict_one(X, P, ST_I, ST_F, w_body, a_nav, dt, PRM):
     qa = PRM[PRM_ATT_PSD] * dt
     for i in range(3):
         P[6 + i, 6 + i] += qa
+    if P.shape[0] > 9:
+        _predict_extra(X, P, PRM, dt, f00, f01, f02, f10, f11, f12, f20, f21, f22)
     ST_F[STF_SINCE] += dt
     if PRM[PRM_UW_BETA] > 0.0 and ST_F[STF_SINCE] >= PRM[PRM_UW_GAP_S]:
         ST_F[STF_UW_LEFT] = PRM[PRM_UW_COUNT]
@@ -270,12 +453,12 @@ def _reset_attitude3(X, P, d0, d1, d2):
     X[6:10] = qnormalize(qmul(X[6:10], qexp(dth)))
     G = np.eye(3) - 0.5 * skew3(dth)
     tmp = np.empty(3)
-    for c in range(9):  # rows 6..8 <- G rows
+    for c in range(P.shape[0]):  # rows 6..8 <- G rows
         for i in range(3):
             tmp[i] = G[i, 0] * P[6, c] + G[i, 1] * P[7, c] + G[i, 2] * P[8, c]
         for i in range(3):
             P[6 + i, c] = tmp[i]
-    for rrow in range(9):  # columns 6..8 <- columns G^T
+    for rrow in range(P.shape[0]):  # columns 6..8 <- columns G^T
         for i in range(3):
             tmp[i] = P[rrow, 6] * G[i, 0] + P[rrow, 7] * G[i, 1] + P[rrow, 8] * G[i, 2]
         for i in range(3):
@@ -302,12 +485,12 @@ def _reset_attitude3_noalloc(X, P, d0, d1, d2):
     g01, g02 = 0.0 - 0.5 * (-d2), 0.0 - 0.5 * d1
     g10, g12 = 0.0 - 0.5 * d2, 0.0 - 0.5 * (-d0)
     g20, g21 = 0.0 - 0.5 * (-d1), 0.0 - 0.5 * d0
-    for c in range(9):  # rows 6..8 <- G rows
+    for c in range(P.shape[0]):  # rows 6..8 <- G rows
         p6, p7, p8 = P[6, c], P[7, c], P[8, c]
         P[6, c] = p6 + g01 * p7 + g02 * p8
         P[7, c] = g10 * p6 + p7 + g12 * p8
         P[8, c] = g20 * p6 + g21 * p7 + p8
-    for r in range(9):  # columns 6..8 <- columns G^T
+    for r in range(P.shape[0]):  # columns 6..8 <- columns G^T
         p6, p7, p8 = P[r, 6], P[r, 7], P[r, 8]
         P[r, 6] = p6 + p7 * g01 + p8 * g02
         P[r, 7] = p6 * g10 + p7 + p8 * g12
@@ -324,6 +507,9 @@ def constrain_plane_one(X, P, PRM, z0, sigma_z, sigma_vz):
     Not gated, not counted, and it leaves the underweighting book-keeping alone: it is a model of the
     vehicle, not a sensor. ``sigma_z == 0`` does nothing. Tandem: the translation filter only."""
     if not sigma_z > 0.0:
+        return
+    if P.shape[0] > 9:
+        _constrain_plane_extra(X, P, PRM, z0, sigma_z, sigma_vz)
         return
     n = 6 if PRM[PRM_TANDEM] != 0.0 else 9
     K = np.empty(9)
@@ -343,6 +529,28 @@ def constrain_plane_one(X, P, PRM, z0, sigma_z, sigma_vz):
             X[i] += K[i] * nu
         if n == 9:
             _reset_attitude3(X, P, K[6] * nu, K[7] * nu, K[8] * nu)
+
+
+@njit(cache=True)
+def _constrain_plane_extra(X, P, PRM, z0, sigma_z, sigma_vz):
+    """:func:`constrain_plane_one` for a filter with extra states (the estimated indices of
+    :func:`_estimated`)."""
+    idx = _estimated(PRM, P.shape[0])
+    m = idx.shape[0]
+    K = np.empty(m)
+    for c, target, sig in ((2, z0, sigma_z), (5, 0.0, sigma_vz)):
+        s = P[c, c] + sig * sig
+        if not (s > 0.0 and np.isfinite(s)):
+            continue
+        nu = target - X[c]
+        for a in range(m):
+            K[a] = P[idx[a], c] / s
+        for a in range(m):
+            for b in range(a, m):
+                v = P[idx[a], idx[b]] - K[a] * K[b] * s
+                P[idx[a], idx[b]] = v
+                P[idx[b], idx[a]] = v
+        _inject(X, P, idx, K * nu)
 
 
 @njit(cache=True)
@@ -432,6 +640,8 @@ def _update(X, P, ST_I, ST_F, PRM, kind, H, nu, R, gate, tandem_att):
     (zero columns of ``H``) is left untouched, and so is the attitude filter for a range
     (``tandem_att`` false): the range's attitude partials only enter the translation filter's noise.
     """
+    if P.shape[0] > 9:
+        return _update_extra(X, P, ST_I, ST_F, PRM, kind, H, nu, R, gate, tandem_att)
     if PRM[PRM_TANDEM] == 0.0:
         status, d2, dx, Pn = _kalman_block(P, H, nu, R, gate, ST_F, PRM)
         return _commit(X, P, ST_I, ST_F, kind, status, d2, dx, Pn)
@@ -464,6 +674,74 @@ def _update(X, P, ST_I, ST_F, PRM, kind, H, nu, R, gate, tandem_att):
     dx9[6:] = dxa
     Pn[6:, 6:] = Pan
     return _commit(X, P, ST_I, ST_F, kind, status, d2, dx9, Pn)
+
+
+@njit(cache=True)
+def _update_extra(X, P, ST_I, ST_F, PRM, kind, H9, nu, R, gate, tandem_att):
+    """:func:`_update` for a filter with extra states, which no vector measurement (vision, attitude)
+    depends on: ``H`` is ``H9`` with zero columns for them, and the (translation) filter estimates them
+    through their cross-covariance with position and velocity."""
+    n = P.shape[0]
+    m = H9.shape[0]
+    H = np.zeros((m, n))
+    H[:, :9] = H9
+    if PRM[PRM_TANDEM] == 0.0:
+        idx = np.arange(n)
+        status, d2, dx, Pn = _kalman_block(P, H, nu, R, gate, ST_F, PRM)
+        if status == ST_ACCEPTED:
+            P[:, :] = Pn
+            _inject(X, P, idx, dx)
+        return _commit_gated_or_accepted(ST_I, ST_F, kind, status, d2)
+    idx = _estimated(PRM, n)
+    Ht = np.ascontiguousarray(H[:, idx])
+    Ha = np.ascontiguousarray(H9[:, 6:])
+    Pt = np.empty((idx.shape[0], idx.shape[0]))
+    for a in range(idx.shape[0]):
+        for b in range(idx.shape[0]):
+            Pt[a, b] = P[idx[a], idx[b]]
+    Pa = P[6:9, 6:9].copy()
+    use_t = _all_nonzero(Ht)
+    use_a = tandem_att and _all_nonzero(Ha)
+    if use_t:
+        status, d2, dxt, Ptn = _kalman_block(Pt, Ht, nu, R + Ha @ Pa @ Ha.T, gate, ST_F, PRM)
+        if status != ST_ACCEPTED:
+            return _commit_gated_or_accepted(ST_I, ST_F, kind, status, d2)
+        dxa = np.zeros(3)
+        Pan = Pa
+        if use_a:
+            nu_a = nu - Ht @ dxt
+            status_a, _, dxa_, Pan_ = _kalman_block(Pa, Ha, nu_a, R + Ht @ Ptn @ Ht.T, np.inf, ST_F, PRM)
+            if status_a == ST_ACCEPTED:
+                dxa, Pan = dxa_, Pan_
+    else:
+        status, d2, dxa, Pan = _kalman_block(Pa, Ha, nu, R + Ht @ Pt @ Ht.T, gate, ST_F, PRM)
+        if status != ST_ACCEPTED:
+            return _commit_gated_or_accepted(ST_I, ST_F, kind, status, d2)
+        dxt = np.zeros(idx.shape[0])
+        Ptn = Pt
+    for a in range(idx.shape[0]):
+        for b in range(idx.shape[0]):
+            P[idx[a], idx[b]] = Ptn[a, b]
+    P[6:9, 6:9] = Pan
+    _inject(X, P, idx, dxt)
+    _reset_attitude3(X, P, dxa[0], dxa[1], dxa[2])
+    return _commit_gated_or_accepted(ST_I, ST_F, kind, status, d2)
+
+
+@njit(cache=True)
+def _commit_gated_or_accepted(ST_I, ST_F, kind, status, d2):
+    """The book-keeping of :func:`_commit` once the state has been written (or left alone)."""
+    ST_F[STF_D2 + kind] = d2
+    if status == ST_ACCEPTED:
+        ST_I[COUNT_ACCEPTED, kind] += 1
+        ST_F[STF_SINCE] = 0.0
+        if ST_F[STF_UW_LEFT] > 0.0:
+            ST_F[STF_UW_LEFT] -= 1.0
+    elif status == ST_REJECTED:
+        ST_I[COUNT_REJECTED, kind] += 1
+    else:
+        ST_I[COUNT_REFUSED, kind] += 1
+    return status
 
 
 @njit(cache=True)
@@ -520,11 +798,54 @@ def update_range_one(X, P, ST_I, ST_F, PRM, anchor_nav, z_m, sigma_m, gate):
     if z_m < 0.0 or sigma_m <= 0.0:
         ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
         return ST_REFUSED_INVALID
+    if P.shape[0] > 9:
+        return _update_range_extra(X, P, ST_I, ST_F, PRM, anchor_nav, -1, z_m, sigma_m, gate)
     h = _range_row(X, anchor_nav, PRM[PRM_LEVER : PRM_LEVER + 3], ST_F, STF_WORK + 18)
     if h == 0.0:
         ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
         return ST_REFUSED_INVALID
     return _update_scalar(X, P, ST_I, ST_F, PRM, TYPE_RANGE, z_m - h, sigma_m * sigma_m, gate)
+
+
+@njit(cache=True)
+def range_extra_model(X, PRM, anchor_nav, j):
+    """The range to anchor ``j`` at ``anchor_nav`` with the range-error model: ``h = ||p + R(q) P1 - a_j||
+    + c + b_j + g_j`` (the parts the filter has) and its Jacobian row ``H`` (``9 + M``,): the geometric
+    partials of :func:`range_model` and a 1 for each error term of anchor ``j``."""
+    H = np.zeros(X.shape[0] - 1)
+    h = _range_row(X, anchor_nav, PRM[PRM_LEVER : PRM_LEVER + 3], H, 0)
+    if h == 0.0:
+        return h, H
+    ic, io, ig = re_index(PRM, j)
+    for k in (ic, io, ig):
+        if k >= 0:
+            H[k] = 1.0
+            h += X[k + 1]
+    return h, H
+
+
+@njit(cache=True)
+def _update_range_extra(X, P, ST_I, ST_F, PRM, anchor_nav, j, z_m, sigma_m, gate):
+    h, H = range_extra_model(X, PRM, anchor_nav, j)
+    if h == 0.0:
+        ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
+        return ST_REFUSED_INVALID
+    return _update_scalar_extra(X, P, ST_I, ST_F, PRM, TYPE_RANGE, H, z_m - h, sigma_m * sigma_m, gate)
+
+
+@njit(cache=True)
+def update_range_anchor_one(X, P, ST_I, ST_F, PRM, anchor_nav, j, z_m, sigma_m, gate):
+    """:func:`update_range_one` for anchor index ``j``, whose range-error terms enter when the filter has
+    them (``P`` larger than 9 x 9); without them, exactly :func:`update_range_one`."""
+    if P.shape[0] == 9:
+        return update_range_one(X, P, ST_I, ST_F, PRM, anchor_nav, z_m, sigma_m, gate)
+    if not (np.isfinite(z_m) and np.isfinite(sigma_m) and _finite3(anchor_nav)):
+        ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
+        return ST_REFUSED_NONFINITE
+    if z_m < 0.0 or sigma_m <= 0.0:
+        ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
+        return ST_REFUSED_INVALID
+    return _update_range_extra(X, P, ST_I, ST_F, PRM, anchor_nav, j, z_m, sigma_m, gate)
 
 
 @njit(cache=True)
@@ -786,6 +1107,8 @@ def update_attitude_one(X, P, ST_I, ST_F, PRM, q_meas, cov_body, gate):
     the generic path whole.
     """
     kind = TYPE_ATTITUDE
+    if P.shape[0] > 9:  # extra states: the generic path (which updates their cross-covariance too)
+        return _update_attitude_generic(X, P, ST_I, ST_F, PRM, q_meas, cov_body, gate)
     if not (_all_finite(q_meas) and _all_finite(cov_body)):
         ST_I[COUNT_REFUSED, kind] += 1
         return ST_REFUSED_NONFINITE

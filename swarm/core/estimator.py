@@ -97,6 +97,24 @@ class EstimatorParams:
     """Camera optical centre in the body frame [m] (chaser's bottom, -z, face)."""
     q_body_cam: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
     """Camera-to-body rotation, scalar-last; the default turns the camera's +z (optical axis) to body -z."""
+    range_common_offset: bool = False
+    """Estimate one range offset common to every anchor (a tag's antenna delay; ``_ekf_nb`` module doc)."""
+    range_common_offset_rw: float = 0.001
+    """Its random walk density [m/sqrt(s)]."""
+    range_bias: bool = False
+    """Estimate one range offset per anchor (an anchor's antenna delay, a fixed multipath)."""
+    range_bias_rw: float = 0.002
+    """Each anchor offset's random walk density [m/sqrt(s)]."""
+    range_gm: bool = False
+    """Estimate one first-order Gauss-Markov term per anchor (slow, time-correlated multipath)."""
+    range_gm_sigma_m: float = 0.02
+    """The Gauss-Markov term's stationary standard deviation [m]."""
+    range_gm_tau_s: float = 1.0
+    """Its correlation time [s]."""
+    sigma_common_offset_m: float = 0.5
+    """Prior standard deviation of the common offset [m] (a Loco Positioning tag reads 0.2-0.4 m short)."""
+    sigma_range_offset_m: float = 0.1
+    """Prior standard deviation of each anchor's offset [m]."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "structure", Structure(self.structure))
@@ -109,6 +127,11 @@ class EstimatorParams:
             "underweight_gap_s",
             "underweight_ratio",
         )
+        positive = (*positive, "range_gm_tau_s", "sigma_common_offset_m", "sigma_range_offset_m")
+        nonneg = (*nonneg, "range_common_offset_rw", "range_bias_rw", "range_gm_sigma_m")
+        for name in ("range_common_offset", "range_bias", "range_gm"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"estimator.{name} must be true or false, got {getattr(self, name)!r}")
         for name in positive:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -132,9 +155,31 @@ class EstimatorParams:
         if abs(np.linalg.norm(self.q_body_cam) - 1.0) > 1e-6:
             raise ConfigError(f"estimator.q_body_cam must be a unit quaternion, got {self.q_body_cam!r}")
 
-    def param_vector(self) -> np.ndarray:
-        """The flat parameter vector the compiled kernels read (``_ekf_nb.PRM_*``)."""
-        prm = np.zeros(nb.N_PRM)
+    @property
+    def range_model(self) -> bool:
+        """True when any part of the range-error model is on."""
+        return self.range_common_offset or self.range_bias or self.range_gm
+
+    def n_extra(self, n_anchors: int) -> int:
+        """How many range-error states the filter carries with ``n_anchors`` anchors."""
+        if n_anchors <= 0:
+            return 0
+        return int(self.range_common_offset) + n_anchors * (int(self.range_bias) + int(self.range_gm))
+
+    def extra_sigmas(self, n_anchors: int) -> np.ndarray:
+        """Prior standard deviations of the range-error states, in their order (``_ekf_nb`` module doc):
+        the common offset's, each anchor offset's, each Gauss-Markov term's stationary sigma."""
+        if n_anchors <= 0:
+            return np.zeros(0)
+        out = [self.sigma_common_offset_m] if self.range_common_offset else []
+        out += [self.sigma_range_offset_m] * (n_anchors if self.range_bias else 0)
+        out += [self.range_gm_sigma_m] * (n_anchors if self.range_gm else 0)
+        return np.array(out, dtype=float)
+
+    def param_vector(self, n_anchors: int = 0) -> np.ndarray:
+        """The flat parameter vector the compiled kernels read (``_ekf_nb.PRM_*``), with the range-error
+        model's extension when it is on and there are anchors."""
+        prm = np.zeros(nb.N_PRM_RE if self.n_extra(n_anchors) else nb.N_PRM)
         prm[nb.PRM_TANDEM] = 1.0 if self.structure is Structure.TANDEM else 0.0
         prm[nb.PRM_ACCEL_PSD] = self.accel_psd_m2_s3
         prm[nb.PRM_ATT_PSD] = self.gyro_arw_rad_rts**2 + self.attitude_rw_extra_rad_rts**2
@@ -143,6 +188,15 @@ class EstimatorParams:
         prm[nb.PRM_UW_COUNT] = self.underweight_count
         prm[nb.PRM_UW_RATIO] = self.underweight_ratio
         prm[nb.PRM_LEVER : nb.PRM_LEVER + 3] = self.lever_arm_body_m
+        if prm.shape[0] == nb.N_PRM_RE:
+            prm[nb.PRM_RE_ANCHORS] = n_anchors
+            prm[nb.PRM_RE_COMMON] = float(self.range_common_offset)
+            prm[nb.PRM_RE_OFFSET] = float(self.range_bias)
+            prm[nb.PRM_RE_GM] = float(self.range_gm)
+            prm[nb.PRM_RE_COMMON_RW] = self.range_common_offset_rw
+            prm[nb.PRM_RE_OFFSET_RW] = self.range_bias_rw
+            prm[nb.PRM_RE_GM_SIGMA] = self.range_gm_sigma_m
+            prm[nb.PRM_RE_GM_TAU] = self.range_gm_tau_s
         return prm
 
 
@@ -182,14 +236,15 @@ def _mask(mask, n: int, all_true: np.ndarray) -> np.ndarray:
 class PoseEstimator:
     """A batch of ``n`` multiplicative EKFs (module docstring). Construct with :meth:`create`."""
 
-    def __init__(self, params: EstimatorParams, X: np.ndarray, P: np.ndarray) -> None:
+    def __init__(self, params: EstimatorParams, X: np.ndarray, P: np.ndarray, n_anchors: int = 0) -> None:
         self.params = params
         self.n = X.shape[0]
-        self.X = X  # (n, 10): p_nav, v_nav, q_nav_body
-        self.P = P  # (n, 9, 9)
+        self.n_anchors = n_anchors
+        self.X = X  # (n, 10 + M): p_nav, v_nav, q_nav_body, then M range-error states
+        self.P = P  # (n, 9 + M, 9 + M)
         self.counts = np.zeros((self.n, 3, nb.N_TYPES), dtype=np.int64)  # [accepted, rejected, refused]
         self.book = np.zeros((self.n, nb.N_STF))
-        self._prm = params.param_vector()
+        self._prm = params.param_vector(n_anchors)
         self._cam_pos = np.asarray(params.camera_pos_body_m, dtype=np.float64)
         self._q_bc = np.asarray(params.q_body_cam, dtype=np.float64)
         self._R_bc = np.ascontiguousarray(quat_to_matrix(self._q_bc))
@@ -207,10 +262,13 @@ class PoseEstimator:
         q_nav_body,
         cov0,
         n: int | None = None,
+        n_anchors: int = 0,
     ) -> PoseEstimator:
         """Filters initialised at position ``p_nav`` [m], velocity ``v_nav`` [m/s], attitude ``q_nav_body``
         and error covariance ``cov0`` (9x9, or its diagonal (9,), order ``(d_p, d_v, d_theta)``).
-        Each argument is one item or a batch; ``n`` defaults to the largest batch given (or 1)."""
+        Each argument is one item or a batch; ``n`` defaults to the largest batch given (or 1). With the
+        range-error model on (``params``) and ``n_anchors`` anchors, its states start at zero with the
+        prior of :meth:`EstimatorParams.extra_sigmas`, uncorrelated with the core."""
         shapes = [np.shape(a) for a in (p_nav, v_nav, q_nav_body)]
         if n is None:
             n = max([s[0] for s in shapes if len(s) == 2] + [1])
@@ -232,7 +290,15 @@ class PoseEstimator:
             P[:, :6, 6:] = 0.0
             P[:, 6:, :6] = 0.0
         X = np.ascontiguousarray(np.concatenate([p, v, q], axis=-1))
-        return cls(params, X, np.ascontiguousarray(P))
+        extra = params.extra_sigmas(n_anchors)
+        if extra.size:
+            m = extra.size
+            X = np.ascontiguousarray(np.concatenate([X, np.zeros((n, m))], axis=-1))
+            Pe = np.zeros((n, 9 + m, 9 + m))
+            Pe[:, :9, :9] = P
+            Pe[:, 9:, 9:] = np.diag(extra**2)
+            P = Pe
+        return cls(params, X, np.ascontiguousarray(P), n_anchors)
 
     # ---- state views -------------------------------------------------------------------------------
     @property

@@ -104,7 +104,9 @@ class VehicleAgent:
         self.control_phase = sc.control_phase(vehicle_id)
         self.control_dt = self.control_every * sc.dt_s
         est_params = sc.estimator_for(vehicle_id)
-        self.est = PoseEstimator.create(est_params, p0_nav, v0_nav, q0_nav_body, cov0)
+        self.est = PoseEstimator.create(
+            est_params, p0_nav, v0_nav, q0_nav_body, cov0, n_anchors=len(sc.anchors_m)
+        )
         self.controller = Controller(self.kind)
         self.camera = sc.camera_for(vehicle_id)
         self.anchors = np.asarray(sc.anchors_m, dtype=float)
@@ -210,8 +212,8 @@ class VehicleAgent:
             return int(UpdateStatus.SKIPPED)  # vision is the primary measurement near the target
         e = self.est
         return agent_uwb(
-            e.X[0], e.P[0], e.counts[0], e.book[0], e._prm, self.anchors[int(anchor_id)], float(range_m),
-            self._sigma_range, self._gate_1d, self.h_ok, self.h_d2, self.h_meta,
+            e.X[0], e.P[0], e.counts[0], e.book[0], e._prm, self.anchors[int(anchor_id)], int(anchor_id),
+            float(range_m), self._sigma_range, self._gate_1d, self.h_ok, self.h_d2, self.h_meta,
         )  # fmt: skip
 
     def on_vision(self, t_s: float, kind: str, data: np.ndarray) -> int:
@@ -275,7 +277,7 @@ class VehicleAgent:
     def published_cov(self) -> np.ndarray:
         """The 9 x 9 covariance this vehicle publishes: its filter's, with the position block in nav
         (:func:`absolute_cov_pos`: the target's uncertainty added while it navigates relative to it)."""
-        P = self.est.P[0].copy()
+        P = self.est.P[0, :9, :9].copy()
         absolute_cov_pos(self.est.P[0], self.TGT, self.role == "chaser" and self.relative_nav, P[:3, :3])
         return P
 
@@ -459,10 +461,13 @@ def agent_imu(
 
 
 @njit(cache=True)
-def agent_uwb(X, P, ST_I, ST_F, PRM, anchor_nav, range_m, sigma_m, gate1, h_ok, h_d2, h_meta):
-    """One UWB range of one filter; a gated outcome (accepted or rejected) enters the health ring:
-    accepted or not, and the squared Mahalanobis distance clipped at the gate (Algorithm 1's d)."""
-    status = nb.update_range_one(X, P, ST_I, ST_F, PRM, anchor_nav, range_m, sigma_m, gate1)
+def agent_uwb(X, P, ST_I, ST_F, PRM, anchor_nav, anchor_idx, range_m, sigma_m, gate1, h_ok, h_d2, h_meta):
+    """One UWB range of one filter to anchor ``anchor_idx`` at ``anchor_nav`` (its range-error terms enter
+    when the filter has them); a gated outcome (accepted or rejected) enters the health ring: accepted or
+    not, and the squared Mahalanobis distance clipped at the gate (Algorithm 1's d)."""
+    status = nb.update_range_anchor_one(
+        X, P, ST_I, ST_F, PRM, anchor_nav, anchor_idx, range_m, sigma_m, gate1
+    )
     if status == nb.ST_ACCEPTED or status == nb.ST_REJECTED:
         i = h_meta[1]
         h_ok[i] = status == nb.ST_ACCEPTED

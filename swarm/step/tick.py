@@ -244,8 +244,8 @@ def run_ticks(k0, k1, cfg, W, R, A, F, C, V, PC, SER, SER_n):
             if uwb_now and not lost[v]:
                 dock = docking_on_vision(REF[v, gnb.R_MODE], last_vision[v])
                 if uwb_with_vision or not relative_nav(t, last_vision[v], recent_s, dock):
-                    agent_uwb(AX[v], AP[v], AC[v], AB[v], PRMS[v], anchors[anchor_id[v]], range_m[v], sigma_r,
-                              gate1, Hok[v], Hd2[v], Hmeta[v])  # fmt: skip
+                    agent_uwb(AX[v], AP[v], AC[v], AB[v], PRMS[v], anchors[anchor_id[v]], anchor_id[v],
+                              range_m[v], sigma_r, gate1, Hok[v], Hd2[v], Hmeta[v])  # fmt: skip
         for c in range(n_pairs):
             if VF_ok[c]:
                 VF_ok[c] = False
