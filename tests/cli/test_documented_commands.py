@@ -1,6 +1,6 @@
-"""Every ``swarm`` command that README.md and BENCHMARKS.md tell a user to type still parses: each line of
-their fenced code blocks that starts with ``swarm`` (or ``.venv/bin/swarm``), and each command in a cell of
-a README table, through the CLI's own parser (``swarm.cli.main.build_parser``). Parsing only: nothing runs.
+"""Every ``swarm`` command that docs/usage.md and BENCHMARKS.md tell a user to type still parses: each line
+of their fenced code blocks that starts with ``swarm`` (or ``.venv/bin/swarm``), and each command in a cell
+of a table, through the CLI's own parser (``swarm.cli.main.build_parser``). Parsing only: nothing runs.
 A flag renamed or removed, a choice dropped or a value the flag now refuses makes the documented command
 fail here, with its file and line, instead of on a user's machine."""
 
@@ -17,7 +17,7 @@ import pytest
 from swarm.cli.main import build_parser
 
 ROOT = Path(__file__).resolve().parents[2]
-DOCUMENTS = ("README.md", "BENCHMARKS.md")
+DOCUMENTS = ("docs/usage.md", "BENCHMARKS.md")  # README.md is a tour: its commands are make targets
 _COMMAND = r"(?:\.venv/bin/)?swarm [a-z][a-z-]*"  # ``swarm`` and a subcommand's name
 _TABLE_COMMAND = re.compile(rf"`({_COMMAND} [^`]+)`")  # with arguments: not a command named in a sentence
 
