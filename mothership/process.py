@@ -32,6 +32,7 @@ import time
 import numpy as np
 import zenoh
 
+from swarm.errors import ConfigError
 from swarm.step.radio import UwbNetwork
 from swarm.transport.docking_wire import uwb_slot, uwb_slot_batch
 from swarm.transport.keys import Keys
@@ -71,6 +72,11 @@ class MothershipProcess:
         """``batch``: every vehicle's range of a slot sent in one ``mothership/uwb`` message (agent hosts,
         docs/protocol.md "Rates"), not one per vehicle. The world's truths come as ``world/truth``
         batches either way."""
+        if scenario.uwb.mode != "twr":
+            raise ConfigError(
+                f"uwb.mode = {scenario.uwb.mode!r} runs in swarm sim and swarm montecarlo only: no TDoA "
+                "message travels on the wire yet (docs/protocol.md); launch with uwb.mode = 'twr'"
+            )
         self.sc, self.seed, self.session, self.keys, self.stop = scenario, seed, session, keys, stop
         self.batch = batch
         self.anchors_every_s = anchors_every_s

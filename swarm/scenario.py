@@ -25,6 +25,7 @@ from swarm.core.faults import FaultParams
 from swarm.core.guidance import GuidanceParams, StationParams
 from swarm.core.mdp import FixedParams, MdpParams
 from swarm.core.sensors import AhrsParams, GyroParams, UwbParams
+from swarm.core.tdoa_radio import TdoaParams
 from swarm.errors import ConfigError
 from swarm.kinds import KINDS, KindsParams, VehicleKind
 from swarm.kinds.dispersions import DispersionParams
@@ -240,6 +241,10 @@ class Scenario:
     controller, sensor mounts, the kind's own dispersions."""
     gyro: GyroParams = field(default_factory=GyroParams)
     uwb: UwbParams = field(default_factory=UwbParams)
+    tdoa: TdoaParams = field(default_factory=TdoaParams)
+    """The TDoA radio's settings, used when ``uwb.mode`` is ``"tdoa2"`` or ``"tdoa3"`` (which then decides
+    the radio's mode; this table's ``mode`` is not read): packet rates, air time, losses, clocks, the white
+    noise of a difference."""
     ahrs: AhrsParams = field(default_factory=lambda: AhrsParams(enabled=True))
     """On: the hardware's VN-100 gives an attitude (paper sec. VI-A); the filter needs it to keep the
     target's and its own attitude good to the ~0.5 deg the 1 mm vision features demand."""

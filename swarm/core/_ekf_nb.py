@@ -849,6 +849,60 @@ def update_range_anchor_one(X, P, ST_I, ST_F, PRM, anchor_nav, j, z_m, sigma_m, 
 
 
 @njit(cache=True)
+def tdoa_model(X, PRM, anchor_a_nav, anchor_b_nav, ia, ib):
+    """A time difference of arrival as a distance difference, ``h = d_b - d_a`` with ``d_x = ||p + R(q) P1 -
+    a_x|| + b_x + g_x`` (the Crazyflie's ``distanceDiff``, idB minus idA; the common offset cancels), and its
+    Jacobian row ``H`` (``9 + M``,): the difference of the two range rows of :func:`range_extra_model`, i.e.
+    ``u_b - u_a`` on ``dp``, the attitude partials' difference on ``dtheta``, +1 on anchor b's error terms
+    and -1 on anchor a's (the TDoA measurement model of Ledergerber, Hamer & D'Andrea 2015, "A robot
+    self-localization system using one-way ultra-wideband communication", IROS, eq. 2, as the Crazyflie's
+    ``mm_tdoa.c`` fuses it). ``h`` is NaN when the tag sits on an anchor (no line of sight)."""
+    n = X.shape[0] - 1
+    H = np.zeros(n)
+    Hb = np.zeros(n)
+    lever = PRM[PRM_LEVER : PRM_LEVER + 3]
+    ha = _range_row(X, anchor_a_nav, lever, H, 0)
+    hb = _range_row(X, anchor_b_nav, lever, Hb, 0)
+    if ha == 0.0 or hb == 0.0:
+        return np.nan, H
+    for k in range(9):
+        H[k] = Hb[k] - H[k]
+    for sign, j in ((1.0, ib), (-1.0, ia)):
+        _, io, ig = re_index(PRM, j)
+        for k in (io, ig):
+            if k >= 0:
+                H[k] += sign
+                hb += sign * X[k + 1]
+    return hb - ha, H
+
+
+@njit(cache=True)
+def update_tdoa_one(X, P, ST_I, ST_F, PRM, anchor_a_nav, anchor_b_nav, ia, ib, z_m, sigma_m, gate):
+    """One distance difference ``z_m = d_b - d_a`` [m] with white noise ``sigma_m`` [m] (:func:`tdoa_model`):
+    refused when not finite, when ``ia == ib``, or when it is longer than the anchors' baseline (no geometry
+    gives it); gated and fused as a range is (:func:`_update_scalar`), and counted with the ranges
+    (``TYPE_RANGE``: both are the UWB measurement of the health ring)."""
+    if not (np.isfinite(z_m) and np.isfinite(sigma_m) and _finite3(anchor_a_nav) and _finite3(anchor_b_nav)):
+        ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
+        return ST_REFUSED_NONFINITE
+    base = 0.0
+    for k in range(3):
+        base += (anchor_b_nav[k] - anchor_a_nav[k]) ** 2
+    if ia == ib or sigma_m <= 0.0 or abs(z_m) > np.sqrt(base) + 3.0 * sigma_m:
+        ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
+        return ST_REFUSED_INVALID
+    h, H = tdoa_model(X, PRM, anchor_a_nav, anchor_b_nav, ia, ib)
+    if not np.isfinite(h):
+        ST_I[COUNT_REFUSED, TYPE_RANGE] += 1
+        return ST_REFUSED_INVALID
+    if P.shape[0] > 9:
+        return _update_scalar_extra(X, P, ST_I, ST_F, PRM, TYPE_RANGE, H, z_m - h, sigma_m * sigma_m, gate)
+    for k in range(9):
+        ST_F[STF_WORK + 18 + k] = H[k]
+    return _update_scalar(X, P, ST_I, ST_F, PRM, TYPE_RANGE, z_m - h, sigma_m * sigma_m, gate)
+
+
+@njit(cache=True)
 def camera_point_model(X, w_nav, cam_pos_body, R_body_cam):
     """A point ``w`` (frame ``c``) seen in the camera frame: ``f = R_bc^T (R(q)^T (w - p) - c_b)``.
 

@@ -73,6 +73,8 @@ class EstimatorParams:
     """``tandem`` (6 + 3 states) or ``compounded`` (9 states)."""
     sigma_range_m: float = 0.02
     """UWB range white-noise standard deviation [m] (paper sec. III)."""
+    sigma_tdoa_m: float = 0.05
+    """White-noise standard deviation of a TDoA distance difference [m] (``uwb.mode`` tdoa2/tdoa3)."""
     sigma_feature_m: float = 0.001
     """Feature-vector noise per axis in the camera frame [m] (paper sec. III, 1 mm)."""
     accel_psd_m2_s3: float = 1e-4
@@ -118,7 +120,7 @@ class EstimatorParams:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "structure", Structure(self.structure))
-        positive = ("sigma_range_m", "sigma_feature_m")
+        positive = ("sigma_range_m", "sigma_tdoa_m", "sigma_feature_m")
         nonneg = (
             "accel_psd_m2_s3",
             "gyro_arw_rad_rts",

@@ -169,6 +169,12 @@ class UwbParams:
     """UWB two-way ranging of one tag against fixed anchors, one anchor per exchange in round robin
     (paper sec. III, sec. VI-A: ~50 Hz, 2 cm), with switchable faults (paper sec. IV-D)."""
 
+    mode: str = "twr"
+    """``"twr"``: two-way ranging, one anchor per exchange (this class); ``"tdoa2"`` / ``"tdoa3"``: the
+    Loco Positioning TDoA radio (:class:`swarm.core.tdoa_radio.TdoaRadio`, the scenario's ``[tdoa]``
+    table): anchors transmit, tags only listen, and each UWB tick delivers every distance difference heard
+    since the last (the range-error options below apply per link; ``rate_hz`` is then only how often they
+    are handed over)."""
     rate_hz: float = 50.0
     """Exchanges per second [Hz]; each exchange ranges one anchor, so each anchor gets rate_hz / N."""
     sigma_m: float = 0.02
@@ -224,6 +230,8 @@ class UwbParams:
 
     def __post_init__(self) -> None:
         _check_positive("uwb", "rate_hz", self.rate_hz)
+        if self.mode not in ("twr", "tdoa2", "tdoa3"):
+            raise ConfigError(f"uwb.mode must be 'twr', 'tdoa2' or 'tdoa3', got {self.mode!r}")
         check_range_errors(self)
         if not isinstance(self.tdma, bool):
             raise ConfigError(f"uwb.tdma must be true or false, got {self.tdma!r}")

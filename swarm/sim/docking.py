@@ -28,7 +28,7 @@ from swarm.core.mdp import D_N, DECISION_STAGING
 from swarm.step.agent import ROLE_CHASER, AgentInputs, VehicleAgent
 from swarm.step.initial import initial_estimate
 from swarm.step.outcome import chaser_summary, run_summary
-from swarm.step.radio import UwbNetwork
+from swarm.step.radio import TdoaSample, UwbNetwork
 from swarm.step.referee import Referee
 from swarm.step.tick import (
     CONTACT,
@@ -117,7 +117,9 @@ class DockingSim:
         # would publish it: tap.start(sim), then per tick tap.world(sim, k, frames), tap.uwb(sim, k) and
         # tap.agent(sim, vid, k, command or None) of every vehicle, tap.keepout(cid, t, mode, range_m) and
         # tap.contact(cid, t, mode, contact) for the referee's verdicts, and tap.end(sim, k, reason, wall_s)
-        self.fast = fast and tap is None
+        # the TDoA radio (uwb.mode tdoa2/tdoa3) hands each tag a variable number of differences a tick: the
+        # per-tick path only (the compiled loop carries one range a tick)
+        self.fast = fast and tap is None and sc.uwb.mode == "twr"
         self.tap = tap
         self.world = World(sc, self.seed)  # draws and applies the run's dispersions, owns its faults
         self.dispersion = self.world.dispersion
@@ -273,11 +275,13 @@ class DockingSim:
                 for vid, agent in self.agents.items():
                     fr = frames[vid]
                     r = ranges.get(vid)
+                    tdoa = isinstance(r, TdoaSample)
                     inp = AgentInputs(
                         k, t, dt, fr.gyro_body, fr.q_ahrs_nav_body,
-                        None if r is None else (r.anchor_id, r.range_m),
+                        None if r is None or tdoa else (r.anchor_id, r.range_m),
                         None if fr.vision is None else (fr.vision_kind, fr.vision), targets.get(vid),
                         control=vid not in self.done,  # a docked chaser's filter runs on; it commands nothing
+                        tdoa=r.rows if tdoa else None,
                     )  # fmt: skip
                     cmd = agent.tick(inp)
                     if cmd is not None:

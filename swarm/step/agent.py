@@ -82,6 +82,10 @@ class AgentInputs:
     """A chaser's target estimate of tick ``k - 1``."""
     control: bool = True
     """False: take the inputs only, decide nothing (a chaser whose run is over)."""
+    tdoa: np.ndarray | None = None
+    """(K, 3) distance differences heard since the last UWB tick (``uwb.mode`` tdoa2/tdoa3): anchor ``A``,
+    anchor ``B``, ``d_B - d_A`` [m]; ``None`` without any."""
+    """False: take the inputs only, decide nothing (a chaser whose run is over)."""
 
 
 class VehicleAgent:
@@ -135,6 +139,7 @@ class VehicleAgent:
         self._sigma_feature = float(est_params.sigma_feature_m)
         self._ahrs_cov = np.radians(sc.ahrs.sigma_deg) ** 2 * np.eye(3)
         self._sigma_range = float(sc.estimator.sigma_range_m)
+        self._sigma_tdoa = float(sc.estimator.sigma_tdoa_m)
         # health windows of the recent ranges (a ring: [count, next]); see ``agent_uwb``
         self.h_ok = np.zeros(window, dtype=np.bool_)
         self.h_d2 = np.zeros(window)
@@ -171,6 +176,8 @@ class VehicleAgent:
             self.on_imu(inp.t_s, inp.dt_s, inp.gyro_body, inp.q_ahrs_nav_body)
         if inp.uwb is not None:
             self.on_uwb(*inp.uwb)
+        if inp.tdoa is not None:
+            self.on_tdoa(inp.tdoa)
         if inp.vision is not None:
             self.on_vision(inp.t_s, *inp.vision)
         return self.decide(inp.tick, inp.t_s) if inp.control else None
@@ -214,6 +221,21 @@ class VehicleAgent:
         return agent_uwb(
             e.X[0], e.P[0], e.counts[0], e.book[0], e._prm, self.anchors[int(anchor_id)], int(anchor_id),
             float(range_m), self._sigma_range, self._gate_1d, self.h_ok, self.h_d2, self.h_meta,
+        )  # fmt: skip
+
+    def on_tdoa(self, rows: np.ndarray) -> int:
+        """The distance differences ``rows`` (K, 3) (:class:`AgentInputs`), each fused as one scalar update
+        (:func:`swarm.core._ekf_nb.update_tdoa_one`) and entered in the health ring as a range is; skipped
+        near the target as ranges are. Returns how many were accepted."""
+        if not self.sc.agent.uwb_with_vision and self.relative_nav:
+            return 0
+        r = np.ascontiguousarray(rows, dtype=np.float64)
+        if r.ndim != 2 or r.shape[1] != 3:
+            return 0
+        e = self.est
+        return agent_tdoa(
+            e.X[0], e.P[0], e.counts[0], e.book[0], e._prm, self.anchors, r, self._sigma_tdoa, self._gate_1d,
+            self.h_ok, self.h_d2, self.h_meta,
         )  # fmt: skip
 
     def on_vision(self, t_s: float, kind: str, data: np.ndarray) -> int:
@@ -475,6 +497,32 @@ def agent_uwb(X, P, ST_I, ST_F, PRM, anchor_nav, anchor_idx, range_m, sigma_m, g
         h_meta[1] = (i + 1) % h_ok.shape[0]
         h_meta[0] = min(h_meta[0] + 1, h_ok.shape[0])
     return status
+
+
+@njit(cache=True)
+def agent_tdoa(X, P, ST_I, ST_F, PRM, anchors, rows, sigma_m, gate1, h_ok, h_d2, h_meta):
+    """The distance differences ``rows`` (K, 3) of one filter (:meth:`VehicleAgent.on_tdoa`): a row naming an
+    anchor the scenario does not have is refused and counted; each gated outcome enters the health ring as
+    :func:`agent_uwb`'s does. Returns the number accepted."""
+    m = anchors.shape[0]
+    accepted = 0
+    for k in range(rows.shape[0]):
+        fa, fb = rows[k, 0], rows[k, 1]
+        if not (0.0 <= fa < m and 0.0 <= fb < m and fa == int(fa) and fb == int(fb)):
+            ST_I[nb.COUNT_REFUSED, nb.TYPE_RANGE] += 1
+            continue
+        ia, ib = int(fa), int(fb)
+        z = rows[k, 2]
+        a, b = anchors[ia], anchors[ib]
+        status = nb.update_tdoa_one(X, P, ST_I, ST_F, PRM, a, b, ia, ib, z, sigma_m, gate1)
+        if status == nb.ST_ACCEPTED or status == nb.ST_REJECTED:
+            i = h_meta[1]
+            h_ok[i] = status == nb.ST_ACCEPTED
+            h_d2[i] = min(ST_F[nb.STF_D2 + nb.TYPE_RANGE], gate1)
+            h_meta[1] = (i + 1) % h_ok.shape[0]
+            h_meta[0] = min(h_meta[0] + 1, h_ok.shape[0])
+            accepted += status == nb.ST_ACCEPTED
+    return accepted
 
 
 @njit(cache=True)

@@ -13,13 +13,16 @@ schedule decides for every runner.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import numba
 import numpy as np
 
 from swarm.core import range_errors as re_
+from swarm.core import tdoa_radio as tr
 from swarm.core._rot_nb import qrotate
 from swarm.core.sensors import UwbRadio, UwbSample, uwb_exchange
-from swarm.step.streams import stream
+from swarm.step.streams import seed_sequence, stream
 
 NOISE_BLOCK = 1024
 """Exchanges of pre-drawn normals per radio; the ranges are the same for any block size
@@ -42,6 +45,20 @@ def radio_env(t_s, drop_w, nlos_w):
         if nlos_w[i, 0] <= t_s < nlos_w[i, 1] and nlos_w[i, 2] > p:
             p = nlos_w[i, 2]
     return lost, p
+
+
+@dataclass(frozen=True)
+class TdoaSample:
+    """The distance differences one tag heard since the last UWB tick (``uwb.mode`` tdoa2/tdoa3)."""
+
+    t_s: float
+    rows: np.ndarray
+    """(K, 3): anchor ``A``, anchor ``B``, ``d_B - d_A`` [m] (the Crazyflie's ``distanceDiff``), in the order
+    heard."""
+
+
+TDOA_MARGIN_S = 5.0
+"""The TDoA channel is simulated over the run's longest duration plus this [s]."""
 
 
 class UwbNetwork:
@@ -93,6 +110,17 @@ class UwbNetwork:
             self.err_offset = re_.draw_offsets(u, stream(seed, 0, "uwb_anchors"), m)
             self.err_rng = {vid: stream(seed, i, "uwb_errors") for i, vid in enumerate(self.ids)}
             self.err_step = np.array([re_.draw_steps(u, self.err_rng[v], m) for v in self.ids]).reshape(n, m)
+        # TDoA (uwb.mode tdoa2/tdoa3): one channel heard by every tag, its own streams ("tdoa"); the range
+        # errors of each link drawn as the TWR radios draw theirs
+        self.tdoa = None
+        if u.mode != "twr":
+            errors = None
+            if self.err_on:
+                errors = tr.LinkErrors(self.err_prm, self.err_offset, self.err_step)
+            params = replace(scenario.tdoa, mode=u.mode)
+            duration = float(scenario.sim.max_duration_s) + TDOA_MARGIN_S
+            ss = seed_sequence(seed, 0, "tdoa")
+            self.tdoa = tr.TdoaRadio(params, self.anchors, n, duration, ss, errors)
 
     def reserve_noise(self, exchanges: int) -> None:
         """Pre-draw the normals of the next ``exchanges`` exchanges of every radio (four each)."""
@@ -121,6 +149,8 @@ class UwbNetwork:
         if k % self.every:
             return {}
         X = np.ascontiguousarray([truth[v] for v in self.ids]) if isinstance(truth, dict) else truth
+        if self.tdoa is not None:
+            return self._tdoa_step(t_s, X, env_lost)
         self.env_lost[:] = False if env_lost is None else env_lost
         self.env_p[:] = 0.0 if env_p is None else env_p
         self.reserve_noise(1)
@@ -136,6 +166,19 @@ class UwbNetwork:
             vid: UwbSample(t_s, int(self.anchor_id[i]), float(self.range_m[i]), bool(self.outlier[i]))
             for i, vid in enumerate(self.ids)
             if not self.lost[i]
+        }
+
+    def _tdoa_step(self, t_s: float, X: np.ndarray, env_lost) -> dict[str, TdoaSample]:
+        """Each tag's distance differences of the packets sent up to ``t_s``, heard at its tag position
+        (truth position plus the lever arm turned by the truth attitude); a vehicle inside a dropout window
+        hears nothing (its rows are drawn and dropped, so the channel's draws do not depend on faults)."""
+        tags = np.array([X[i, 0:3] + qrotate(X[i, 6:10], self.lever[i]) for i in range(len(self.ids))])
+        rows = self.tdoa.step(t_s, tags, self.airborne)
+        lost = np.broadcast_to(np.asarray(False if env_lost is None else env_lost), (len(self.ids),))
+        return {
+            vid: TdoaSample(t_s, np.ascontiguousarray(rows[i][:, [tr.ROW_A, tr.ROW_B, tr.ROW_DDIST]]))
+            for i, vid in enumerate(self.ids)
+            if not lost[i] and len(rows[i])
         }
 
 

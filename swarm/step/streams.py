@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-STREAMS = ("init", "gyro", "ahrs", "camera", "uwb", "uwb_errors", "uwb_anchors")
+STREAMS = ("init", "gyro", "ahrs", "camera", "uwb", "uwb_errors", "uwb_anchors", "tdoa")
 """Appended only: a stream's index is part of its key, so a new name changes no existing stream."""
 
 
@@ -18,3 +18,9 @@ def stream(seed: int, vehicle_index: int, name: str) -> np.random.Generator:
     process that asks for them."""
     key = (int(vehicle_index), STREAMS.index(name))
     return np.random.default_rng(np.random.SeedSequence(entropy=int(seed), spawn_key=key))
+
+
+def seed_sequence(seed: int, vehicle_index: int, name: str) -> np.random.SeedSequence:
+    """The ``SeedSequence`` behind :func:`stream` (for a model that spawns its own children, as the TDoA
+    radio does)."""
+    return np.random.SeedSequence(entropy=int(seed), spawn_key=(int(vehicle_index), STREAMS.index(name)))

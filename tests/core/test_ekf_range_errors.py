@@ -259,3 +259,112 @@ def test_with_biased_anchors_the_model_keeps_the_covariance_honest_where_white_n
     assert sum(nees_w) > 55.0, nees_w
     assert sum(nees_m) < 55.0, nees_m
     assert np.median(err_m) < np.median(err_w), (err_m, err_w)
+
+
+# ---- TDoA: a distance difference between two anchors (issue 45) ------------------------------------------
+
+
+@pytest.mark.parametrize("model", [{}, FULL])
+def test_tdoa_jacobian_matches_central_differences_and_the_common_offset_cancels(model):
+    rng = np.random.default_rng(21)
+    params = EstimatorParams(structure="compounded", **model)
+    na = len(ANCHORS)
+    prm = params.param_vector(na)
+    for _ in range(20):
+        X, _ = _random(rng, params, na)
+        ia, ib = rng.choice(na, 2, replace=False)
+        h, H = nb.tdoa_model(X, prm, ANCHORS[ia], ANCHORS[ib], ia, ib)
+        tag = X[:3] + Rotation.from_quat(X[6:10]).apply(params.lever_arm_body_m)
+        geo = np.linalg.norm(tag - ANCHORS[ib]) - np.linalg.norm(tag - ANCHORS[ia])
+        if model:
+            _, io_b, ig_b = nb.re_index(prm, ib)
+            _, io_a, ig_a = nb.re_index(prm, ia)
+            geo += X[io_b + 1] + X[ig_b + 1] - X[io_a + 1] - X[ig_a + 1]
+            assert H[nb.re_index(prm, ia)[0]] == 0.0  # the common offset is in neither difference
+        assert h == pytest.approx(geo, rel=1e-12, abs=1e-12)
+        n, step = len(H), 1e-6
+        fd = np.zeros(n)
+        for i in range(n):
+            e = np.zeros(n)
+            e[i] = step
+            plus = nb.tdoa_model(_boxplus_ext(X, e), prm, ANCHORS[ia], ANCHORS[ib], ia, ib)[0]
+            minus = nb.tdoa_model(_boxplus_ext(X, -e), prm, ANCHORS[ia], ANCHORS[ib], ia, ib)[0]
+            fd[i] = (plus - minus) / (2 * step)
+        np.testing.assert_allclose(fd, H, atol=1e-7)
+
+
+@pytest.mark.parametrize("structure", ["compounded", "tandem"])
+def test_tdoa_update_is_the_joseph_update_of_the_joint_state(structure):
+    rng = np.random.default_rng(22)
+    params, na = _params(structure), len(ANCHORS)
+    prm = params.param_vector(na)
+    X, P = _random(rng, params, na)
+    ia, ib, sigma = 2, 6, 0.1
+    h, H = nb.tdoa_model(X, prm, ANCHORS[ia], ANCHORS[ib], ia, ib)
+    z = h - 0.05
+    X1, P1 = X.copy(), P.copy()
+    counts, book = np.zeros((3, nb.N_TYPES), dtype=np.int64), np.zeros(nb.N_STF)
+    st = nb.update_tdoa_one(X1, P1, counts, book, prm, ANCHORS[ia], ANCHORS[ib], ia, ib, z, sigma, np.inf)
+    assert st == nb.ST_ACCEPTED and counts[nb.COUNT_ACCEPTED, nb.TYPE_RANGE] == 1
+    n = len(P)
+    idx = np.arange(n) if structure == "compounded" else np.r_[0:6, 9:n]
+    r = sigma**2 + (H[6:9] @ P[6:9, 6:9] @ H[6:9] if structure == "tandem" else 0.0)
+    Pi, Hi = P[np.ix_(idx, idx)], H[idx]
+    S = Hi @ Pi @ Hi + r
+    K = Pi @ Hi / S
+    A = np.eye(len(idx)) - np.outer(K, Hi)
+    Pn = P.copy()
+    Pn[np.ix_(idx, idx)] = A @ Pi @ A.T + r * np.outer(K, K)
+    dx = np.zeros(n)
+    dx[idx] = K * (z - h)
+    G = np.eye(n)
+    G[6:9, 6:9] -= 0.5 * skew(dx[6:9])
+    np.testing.assert_allclose(X1, _boxplus_ext(X, dx), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(P1, G @ Pn @ G.T, rtol=1e-10, atol=1e-14)
+
+
+def test_tdoa_update_of_the_nine_state_filter_equals_the_extended_one_without_extras():
+    """Without the range-error model the 9-state kernel path gives what the general path gives."""
+    rng = np.random.default_rng(23)
+    X, P = _random(rng, EstimatorParams(structure="tandem"), 0)
+    prm = EstimatorParams(structure="tandem").param_vector(0)
+    ia, ib = 0, 3
+    h, H = nb.tdoa_model(X, prm, ANCHORS[ia], ANCHORS[ib], ia, ib)
+    X1, P1 = X.copy(), P.copy()
+    counts, book = np.zeros((3, nb.N_TYPES), dtype=np.int64), np.zeros(nb.N_STF)
+    nb.update_tdoa_one(X1, P1, counts, book, prm, ANCHORS[ia], ANCHORS[ib], ia, ib, h + 0.02, 0.05, np.inf)
+    X2, P2 = X.copy(), P.copy()
+    nb._update_scalar_extra(X2, P2, counts, book, prm, nb.TYPE_RANGE, H, 0.02, 0.05**2, np.inf)
+    np.testing.assert_allclose(X1, X2, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(P1, P2, rtol=1e-12, atol=1e-16)
+
+
+@pytest.mark.parametrize(
+    ("ia", "ib", "z", "status"),
+    [
+        (1, 1, 0.1, nb.ST_REFUSED_INVALID),
+        (0, 1, 50.0, nb.ST_REFUSED_INVALID),
+        (0, 1, np.nan, nb.ST_REFUSED_NONFINITE),
+    ],
+)
+def test_a_tdoa_with_the_same_anchor_twice_too_long_or_not_finite_is_refused_and_counted(ia, ib, z, status):
+    params = EstimatorParams()
+    est = PoseEstimator.create(params, np.zeros(3), np.zeros(3), [0, 0, 0, 1.0], np.full(9, 1e-2))
+    X0, P0 = est.X[0].copy(), est.P[0].copy()
+    st = nb.update_tdoa_one(
+        est.X[0],
+        est.P[0],
+        est.counts[0],
+        est.book[0],
+        est._prm,
+        ANCHORS[ia],
+        ANCHORS[ib],
+        ia,
+        ib,
+        z,
+        0.1,
+        9.0,
+    )
+    assert st == status and est.counts[0, nb.COUNT_REFUSED, nb.TYPE_RANGE] == 1
+    np.testing.assert_array_equal(est.X[0], X0)
+    np.testing.assert_array_equal(est.P[0], P0)
