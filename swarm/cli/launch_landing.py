@@ -26,7 +26,7 @@ UAV's late ticks.
 may publish and subscribe (:mod:`swarm.transport.security`, mission ``landing``), as for a docking swarm.
 
 A hung process keeps its liveliness token; the world's clock says it: when it stands at one tick for
-``--stall-s`` in a running run, the launcher writes every process's Python stacks (README, "A hung
+``--stall-s`` in a running run, the launcher writes every process's Python stacks (docs/usage.md, "A hung
 process"), as for a docking swarm, and ``--timeout`` does so before it stops an unfinished run.
 
 Run-time faults come from ``swarm fault`` (``camera_loss``, ``uwb_dropout``: :mod:`swarm.world.landing`).

@@ -177,8 +177,8 @@ class SwarmRecorder(ClockWatch):
     exchanges (``(t_s, range_m)``, ``None`` for a lost one).
 
     These subscriptions are declared before the clock's, and a client's declarations reach the router in
-    order (README, "Processes and topology"): once :meth:`wait_for` returns a clock, the router routes every
-    one of them to this session, so a fault published after that cannot pass unseen."""
+    order (docs/protocol.md, "Processes and topology"): once :meth:`wait_for` returns a clock, the router
+    routes every one of them to this session, so a fault published after that cannot pass unseen."""
 
     def __init__(
         self, endpoint: str, namespace: str, chasers: tuple[str, ...], zenoh_config: str | None = None

@@ -1,7 +1,7 @@
 """A clean stop of a launched swarm (issue 46): Ctrl-C ends a docking or a landing swarm, mid-run or after
 its run ended, with no line at WARNING or ERROR and no traceback in any process's output (every child logs
-to the launcher's stderr), the documented exit status (README, "Exit status": 130 for a run stopped before
-its end, else the run's own) and no process left behind.
+to the launcher's stderr), the documented exit status (docs/usage.md, "Exit status": 130 for a run stopped
+before its end, else the run's own) and no process left behind.
 
 A terminal's Ctrl-C reaches the launcher alone (each child runs in a session of its own); a mid-run stop
 here also sends SIGINT to every child's process group at the same instant, as a wrapper that forwards the
