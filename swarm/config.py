@@ -38,6 +38,14 @@ keys), else the dataclass's own default. Unknown keys are errors. Every error is
 mass_kg``, ``markers_nav[2][0]``) and quotes the bad value. A dataclass's own ``__post_init__`` error
 (``estimator.sigma_range_m must be ...``, by the project's convention) is re-rooted at the field's real
 path (``agents.a1.sigma_range_m must be ...``), or prefixed with the path if it does not follow it.
+
+``msgspec.convert`` (strict) checks the types and builds the dataclasses, calling their ``__post_init__``.
+What it does not do is a short walk over the tables before it (:func:`_prepare`): unknown keys (msgspec
+refuses them on its Structs only, a dataclass drops them silently), defaults from the enclosing default
+instance (msgspec knows the class defaults only), ``nan``/``inf`` (msgspec takes them) and ``3.0`` for an
+int (strict mode refuses it; lax mode would also take ``"3"`` and ``1`` for ``true``). Its errors name the
+path (``Expected `float`, got `str` - at `$.chaser.dynamics.mass_kg```) but not the bad value nor a
+dict's key (``$.agents[...]``): :func:`_explain` finds both and words them as above.
 """
 
 from __future__ import annotations
@@ -45,6 +53,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import enum
+import functools
 import math
 import numbers
 import os
@@ -56,6 +65,8 @@ import typing
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal, TypeVar, get_args, get_origin
+
+import msgspec
 
 from swarm.errors import ConfigError
 
@@ -79,9 +90,6 @@ _repr.maxlist = _repr.maxtuple = 8
 _repr.maxdict = 4
 _repr.maxlevel = 3
 
-# Modes of the one type-directed walk: build the dataclass, or produce plain data for JSON or TOML.
-_OBJ, _DATA, _TOML = "obj", "data", "toml"
-
 
 # ------------------------------------------------------------------------------------------- public API
 
@@ -95,14 +103,19 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], section: str = "") -> T:
     """
     if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
         raise TypeError(f"from_mapping needs a dataclass type, got {cls!r}")
-    return _walk(cls, data, section, None, _OBJ)
+    _schema(cls)  # every field type is one of the table's (msgspec would also take lists, sets, unions)
+    data = _prepare(cls, data, section, None)
+    try:
+        return msgspec.convert(data, cls, strict=True)
+    except msgspec.ValidationError as exc:
+        raise _explain(exc, cls, data, section) from exc
 
 
 def to_mapping(obj: Any) -> dict[str, Any]:
     """The inverse of :func:`from_mapping`: nested dicts of plain values (enums as their values, tuples as
     lists, None kept), ready for ``json.dump``; ``from_mapping(type(obj), to_mapping(obj)) == obj``."""
     _require_instance(obj)
-    return _walk(type(obj), obj, "", None, _DATA)
+    return _plain(obj, "", None, toml=False)
 
 
 def dump_toml(obj: Any) -> str:
@@ -113,7 +126,7 @@ def dump_toml(obj: Any) -> str:
     """
     _require_instance(obj)
     lines: list[str] = []
-    _emit_table(_walk(type(obj), obj, "", None, _TOML), [], lines)
+    _emit_table(_plain(obj, "", None, toml=True), [], lines)
     return "\n".join(lines) + "\n" if lines else ""
 
 
@@ -268,6 +281,10 @@ def apply_overrides(data: Mapping[str, Any], overrides: Mapping[str, object]) ->
 # ----------------------------------------------------------------------------------------------- schema
 
 _SCHEMAS: dict[type, dict[str, tuple[dataclasses.Field, Any]]] = {}
+_WORDS = {float: "a number", int: "an integer", bool: "true or false", str: "a string"}
+_AS_IS = frozenset({int, bool, str, _NONE_TYPE})  # what _prepare hands to msgspec as it is
+_MS_AT = re.compile(r" - at `\$([^`]*)`$")  # the path at the end of a msgspec.ValidationError
+_MS_STEP = re.compile(r"\.(\w+)|\[(\d+)\]|\[\.\.\.\]")
 
 
 def _schema(cls: type) -> dict[str, tuple[dataclasses.Field, Any]]:
@@ -290,26 +307,21 @@ def _schema(cls: type) -> dict[str, tuple[dataclasses.Field, Any]]:
     return schema
 
 
-def _optional_inner(tp: Any) -> Any:
-    """``X`` for ``X | None`` / ``Optional[X]``; None for any other type."""
-    if get_origin(tp) in (typing.Union, types.UnionType):
-        args = get_args(tp)
-        rest = [a for a in args if a is not _NONE_TYPE]
-        if len(args) == 2 and len(rest) == 1:
-            return rest[0]
-    return None
+@functools.cache
+def _shape(tp: Any) -> tuple[Any, Any, tuple]:
+    """``tp`` without ``| None`` (``X`` for ``X | None``), its origin (``dict``, ``tuple``, ``Literal`` or
+    None) and its arguments."""
+    args = get_args(tp)
+    if get_origin(tp) in (typing.Union, types.UnionType) and len(args) == 2 and _NONE_TYPE in args:
+        tp = args[0] if args[1] is _NONE_TYPE else args[1]
+    return tp, get_origin(tp), get_args(tp)
 
 
 def _check_type(tp: Any, where: str) -> None:
-    origin, args = get_origin(tp), get_args(tp)
-    if tp in (float, int, bool, str):
+    tp, origin, args = _shape(tp)
+    if tp in _WORDS or (isinstance(tp, type) and issubclass(tp, enum.Enum)):
         return
-    inner = _optional_inner(tp)
-    if inner is not None:
-        return _check_type(inner, where)
     if origin is Literal and args and all(isinstance(a, str | int | enum.Enum) for a in args):
-        return
-    if isinstance(tp, type) and issubclass(tp, enum.Enum):
         return
     if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         _schema(tp)
@@ -323,115 +335,147 @@ def _check_type(tp: Any, where: str) -> None:
     raise TypeError(f"{where}: unsupported field type {tp!r} (see the table in swarm.config)")
 
 
-# --------------------------------------------------------------------------------------- the typed walk
+# ------------------------------------------------------------------ before and after msgspec.convert
 
 
-def _walk(tp: Any, value: Any, path: str, base: Any, mode: str) -> Any:
-    """``value`` of field type ``tp`` at ``path``: built into the typed value (mode ``_OBJ``) or turned into
-    plain data (``_DATA``, ``_TOML``). ``base`` is the field's default instance for dataclass fields."""
-    inner = _optional_inner(tp)
-    if inner is not None:
-        if value is None:
-            if mode == _TOML:
-                raise ConfigError(f"{path}: None cannot be written to TOML, which has no null")
-            return None
-        return _walk(inner, value, path, base, mode)
-    if tp is float:
-        return _to_float(value, path)
-    if tp is int:
-        return _to_int(value, path)
-    if tp is bool:
-        if isinstance(value, bool):
-            return value
-        raise _bad(path, "true or false", value)
-    if tp is str:
+def _prepare(tp: Any, value: Any, path: str, base: Any) -> Any:
+    """``value`` of field type ``tp`` at ``path`` made ready for ``msgspec.convert``: a table's unknown
+    keys refused, its missing keys filled from ``base`` (the field's default instance, if any), floats
+    checked finite, an integral float for an int made an int, numpy scalars and enum members made plain
+    (strict msgspec takes exact builtin types). Copies; ``value`` is not changed."""
+    if type(value) in _AS_IS:
+        return value
+    tp, origin, args = _shape(tp)
+    if not isinstance(value, float | dict | list | tuple):
         if isinstance(value, str):
-            return value if type(value) is str else str.__str__(value)
-        raise _bad(path, "a string", value)
-    origin, args = get_origin(tp), get_args(tp)
-    if origin is Literal:
-        choice = _to_literal(args, value, path)
-        return choice.value if mode != _OBJ and isinstance(choice, enum.Enum) else choice
-    if isinstance(tp, type) and issubclass(tp, enum.Enum):
-        member = _to_enum(tp, value, path)
-        return member if mode == _OBJ else member.value
-    if dataclasses.is_dataclass(tp):
-        base = base if isinstance(base, tp) else None
-        if mode == _OBJ:
-            if isinstance(value, tp):
-                return value
-            if not isinstance(value, Mapping):
-                raise _bad(path, "a table", value)
-            return _build(tp, value, path, base)
-        if not isinstance(value, tp):
-            raise _bad(path, f"a {tp.__qualname__}", value)
-        return _unbuild(tp, value, path, base, mode)
-    if origin is tuple:
-        if not isinstance(value, list | tuple):
-            raise _bad(path, "an array", value)
-        if Ellipsis in args:
-            item_types = [args[0]] * len(value)
-        elif len(value) != len(args):
-            raise ConfigError(
-                f"{path}: expected an array of {len(args)} items, got {len(value)}: {_show(value)}"
-            )
-        else:
-            item_types = list(args)
-        pairs = enumerate(zip(item_types, value, strict=True))
-        items = (_walk(t, v, f"{path}[{i}]", None, mode) for i, (t, v) in pairs)
-        return tuple(items) if mode == _OBJ else list(items)
-    if origin is dict:
-        if not isinstance(value, Mapping):
-            raise _bad(path, "a table", value)
-        out = {}
-        for k, v in value.items():
-            if not isinstance(k, str):
-                raise ConfigError(f"{path}: keys must be strings, got {k!r}")
-            out[k] = _walk(args[1], v, _join(path, k), None, mode)
-        return out
-    raise TypeError(f"{path}: unsupported field type {tp!r}")
+            return str.__str__(value)
+        if isinstance(value, numbers.Real):
+            value = int(value) if isinstance(value, numbers.Integral) else float(value)
+    if isinstance(value, float):
+        if tp is float and not math.isfinite(value):
+            raise _bad(path, "a finite number", value)
+        if tp is not bool and isinstance(tp, type) and issubclass(tp, int) and value.is_integer():
+            return int(value)
+        return float(value)  # a numpy float64 is a float that strict msgspec refuses
+    if isinstance(value, Mapping):
+        if dataclasses.is_dataclass(tp):
+            return _prepare_table(tp, value, path, base if isinstance(base, tp) else None)
+        if origin is dict:
+            return {k: _prepare(args[1], v, _join(path, str(k)), None) for k, v in value.items()}
+    elif isinstance(value, list | tuple) and origin is tuple:
+        item_types = [args[0]] * len(value) if Ellipsis in args else args
+        if len(item_types) == len(value):  # else msgspec tells the length
+            pairs = enumerate(zip(item_types, value, strict=True))
+            return [_prepare(t, v, f"{path}[{i}]", None) for i, (t, v) in pairs]
+    return value
 
 
-def _build(cls: type, data: Mapping[str, Any], path: str, base: Any) -> Any:
-    """The dataclass ``cls`` from the table ``data``; missing keys keep ``base``'s values (if given) or the
-    class defaults; the dataclass's own validation errors get the path."""
+def _prepare_table(cls: type, data: Mapping[str, Any], path: str, base: Any) -> dict[str, Any]:
     schema = _schema(cls)
     unknown = [k for k in data if k not in schema]
     if unknown:
         raise _unknown_keys(path, unknown, list(schema))
-    kwargs = {}
+    out = {}
     for name, (f, tp) in schema.items():
-        where = _join(path, name)
-        if name not in data:
-            if base is None and _default(f) is dataclasses.MISSING:
-                raise ConfigError(f"{where}: missing (the field has no default)")
-            continue
-        value = data[name]
-        sub_base = None
-        if isinstance(value, Mapping):  # only a table can be built on top of a default instance
-            sub_base = getattr(base, name) if base is not None else _default(f)
-        kwargs[name] = _walk(tp, value, where, sub_base, _OBJ)
+        where = f"{path}.{name}" if path else name  # a field's name is a bare key
+        if name in data:
+            value = data[name]
+            sub_base = None
+            if isinstance(value, Mapping):  # only a table can be built on top of a default instance
+                sub_base = getattr(base, name) if base is not None else _default(f)
+            out[name] = _prepare(tp, value, where, sub_base)
+        elif base is not None:
+            out[name] = _prepare(tp, getattr(base, name), where, None)
+    return out
+
+
+def _explain(exc: msgspec.ValidationError, tp: Any, data: Any, path: str) -> ConfigError:
+    """msgspec's error on the prepared ``data`` of type ``tp`` worded as the other errors here: the dotted
+    path (a dict's key, which msgspec writes ``[...]``, is the first entry that fails alone), the bad
+    value, and a dataclass's own ``__post_init__`` message re-rooted at its path (:func:`_with_path`)."""
+    msg = str(exc)
+    at = _MS_AT.search(msg)
+    value = data
+    for step in _MS_STEP.finditer(at.group(1) if at else ""):
+        tp, _, args = _shape(tp)
+        name, index = step.groups()
+        if name is not None:
+            tp, value, path = _schema(tp)[name][1], value[name], _join(path, name)
+        elif index is not None:
+            i = int(index)
+            tp, value, path = args[0 if Ellipsis in args else i], value[i], f"{path}[{i}]"
+        else:
+            tp = args[1]
+            key = next((k for k, v in value.items() if not _converts(v, tp)), None)
+            if key is None:
+                path += "[...]"
+                break
+            value, path = value[key], _join(path, str(key))
+    tp = _shape(tp)[0]
+    if isinstance(exc.__cause__, ValueError | TypeError):  # msgspec wraps what __post_init__ raised
+        fields = _schema(tp) if dataclasses.is_dataclass(tp) else {}
+        return ConfigError(_with_path(path, str(exc.__cause__), fields))
+    head = msg[: at.start()] if at else msg
+    if head.startswith("Object missing required field `"):
+        return ConfigError(f"{_join(path, head.split('`')[1])}: missing (the field has no default)")
+    length = re.match(r"Expected `array` of length (\d+), got (\d+)", head)
+    if length:
+        return ConfigError(f"{path}: expected an array of {length[1]} items, got {length[2]}: {_show(value)}")
+    return _bad(path, _expected(tp), value)
+
+
+def _converts(value: Any, tp: Any) -> bool:
+    """Whether ``value`` converts to ``tp`` (strict, as :func:`from_mapping` converts)."""
     try:
-        return dataclasses.replace(base, **kwargs) if base is not None else cls(**kwargs)
-    except ValueError as exc:  # ConfigError included: the dataclass's own __post_init__ checks
-        raise ConfigError(_with_path(path, str(exc), schema)) from exc
+        msgspec.convert(value, tp, strict=True)
+    except msgspec.ValidationError:
+        return False
+    return True
 
 
-def _unbuild(cls: type, obj: Any, path: str, base: Any, mode: str) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for name, (f, tp) in _schema(cls).items():
-        where = _join(path, name)
-        value = getattr(obj, name)
-        default = getattr(base, name) if base is not None else _default(f)
-        if value is None and mode == _TOML:
-            if default is not None:
+def _expected(tp: Any) -> str:
+    """What a value of the (not optional) field type ``tp`` must be, in words."""
+    if tp in _WORDS:
+        return _WORDS[tp]
+    _, origin, args = _shape(tp)
+    if origin is Literal:
+        choices = [c.value if isinstance(c, enum.Enum) else c for c in args]
+    elif isinstance(tp, type) and issubclass(tp, enum.Enum):
+        choices = [m.value for m in tp]
+    else:
+        return "an array" if origin is tuple else "a table"
+    return f"one of {', '.join(_show(c) for c in choices)}"
+
+
+def _plain(value: Any, path: str, base: Any, toml: bool) -> Any:
+    """``value`` (a dataclass instance or a field's value at ``path``) as plain data: tables as dicts,
+    enums as their values, tuples as lists. For TOML (``toml``), None fields are left out (refused where
+    the default, ``base``'s value if given, is not None) and non-finite floats refused."""
+    if dataclasses.is_dataclass(value):
+        out: dict[str, Any] = {}
+        for name, (f, _) in _schema(type(value)).items():
+            v, where = getattr(value, name), _join(path, name)
+            default = getattr(base, name) if base is not None else _default(f)
+            if v is None and toml:
+                if default is None:
+                    continue
                 shown = "no default" if default is dataclasses.MISSING else f"the default {_show(default)}"
                 raise ConfigError(
                     f"{where}: None cannot be written to TOML (no null; omitting the key would load {shown})"
                 )
-            continue
-        out[name] = _walk(tp, value, where, default, mode)
-    return out
+            out[name] = _plain(v, where, default if type(default) is type(v) else None, toml)
+        return out
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, Mapping):
+        return {k: _plain(v, _join(path, k), None, toml) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v, f"{path}[{i}]", None, toml) for i, v in enumerate(value)]
+    if isinstance(value, float):
+        if toml and not math.isfinite(value):
+            raise _bad(path, "a finite number", value)
+        return float(value)
+    return value
 
 
 def _default(f: dataclasses.Field) -> Any:
@@ -440,63 +484,6 @@ def _default(f: dataclasses.Field) -> Any:
     if f.default_factory is not dataclasses.MISSING:
         return f.default_factory()
     return dataclasses.MISSING
-
-
-# ------------------------------------------------------------------------------------- scalar checks
-
-
-def _to_float(value: Any, path: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise _bad(path, "a number", value)
-    try:
-        f = float(value)
-    except OverflowError:
-        raise _bad(path, "a number within the float range", value) from None
-    if not math.isfinite(f):
-        raise _bad(path, "a finite number", value)
-    return f
-
-
-def _to_int(value: Any, path: str) -> int:
-    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
-        return int(value)
-    if (
-        isinstance(value, numbers.Real)
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-        and float(value).is_integer()
-    ):
-        return int(value)
-    raise _bad(path, "an integer", value)
-
-
-def _to_literal(choices: tuple, value: Any, path: str) -> Any:
-    for c in choices:
-        if isinstance(c, enum.Enum):
-            if value is c or (_same_kind(value, c.value) and value == c.value):
-                return c
-        elif _same_kind(value, c) and value == c:
-            return c
-    shown = ", ".join(_show(c.value if isinstance(c, enum.Enum) else c) for c in choices)
-    raise _bad(path, f"one of {shown}", value)
-
-
-def _to_enum(cls: type[enum.Enum], value: Any, path: str) -> enum.Enum:
-    if isinstance(value, cls):
-        return value
-    values = [m.value for m in cls]
-    if not isinstance(value, bool) or any(isinstance(v, bool) for v in values):
-        try:
-            return cls(value)
-        except (ValueError, TypeError):
-            pass
-    raise _bad(path, f"one of {', '.join(_show(v) for v in values)}", value)
-
-
-def _same_kind(value: Any, choice: Any) -> bool:
-    if isinstance(choice, bool) or isinstance(value, bool):
-        return isinstance(value, bool) and isinstance(choice, bool)
-    return isinstance(value, type(choice))
 
 
 # ------------------------------------------------------------------------------------------ messages

@@ -10,11 +10,13 @@ from __future__ import annotations
 import enum
 import json
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -111,6 +113,14 @@ class NonNoneOptional:
 class Gains:
     gains: dict[str, float] = field(default_factory=lambda: {"kp": 1.0})
     """Named scalar gains; the default is not empty."""
+
+
+@dataclass(frozen=True)
+class Crew:
+    members: dict[str, Required] = field(default_factory=dict)
+    """Named entries whose field has no default."""
+    squad: tuple[Dynamics, ...] = ()
+    """An array of tables (``[[squad]]``)."""
 
 
 @dataclass(frozen=True)
@@ -229,6 +239,12 @@ BAD_INPUTS = [
     ("[chaser.dynamics]\nmass_kg = -1", ["chaser.dynamics.mass_kg must be positive, got -1.0"]),
     ("[target.dynamics]\nmass_kg = 0", ["target.dynamics.mass_kg must be positive, got 0.0"]),
     ("[agents.a1]\ngain = -2", ["agents.a1: gain must be non-negative, got -2.0"]),
+    # strings are not numbers nor booleans (msgspec's lax mode would read these; the loader stays strict)
+    ('duration_s = "2.5"', ["duration_s: expected a number, got '2.5'"]),
+    ('seed = "3"', ["seed: expected an integer, got '3'"]),
+    ('verbose = "true"', ["verbose: expected true or false, got 'true'"]),
+    ("timeout_s = [1.0]", ["timeout_s: expected a number, got [1.0]"]),
+    ("target = 3", ["target: expected a table, got 3"]),
 ]
 
 
@@ -322,6 +338,70 @@ def test_an_invalid_value_in_a_file_gives_its_line_and_column(tmp_path, text, ma
     path.write_text(text, encoding="utf-8")
     with pytest.raises(ConfigError, match=rf"bad\.toml: {match}.* \(at line {line}, column {column}\)$"):
         load_toml(Toy, path)
+
+
+# ------------------------------------------------------- errors found by msgspec.convert keep the path
+
+
+def test_a_wrong_type_deep_in_a_named_entry_names_its_path_file_line_and_column(tmp_path: Path) -> None:
+    """msgspec writes a dict's key as ``[...]``; the message names the entry (the second one here)."""
+    path = tmp_path / "deep.toml"
+    path.write_text(
+        "[agents.a1]\ngain = 0.5\n\n[agents.a2]\ngain = 1.0\n"
+        "  markers_nav = [[0.0, 0.0, 0.1], [0.0, 'x', 0.0]]\n",
+        encoding="utf-8",
+    )
+    want = rf"^{re.escape(str(path))}: agents\.a2\.markers_nav\[1\]\[1\]: expected a number, got 'x'"
+    with pytest.raises(ConfigError, match=want + r" \(at line 6, column 3\)$"):
+        load_toml(Toy, path)
+
+
+def test_a_check_of_a_later_named_entry_is_rerooted_at_it(tmp_path: Path) -> None:
+    path = tmp_path / "deep.toml"
+    path.write_text("[agents.a1]\ngain = 0.5\n\n[agents.a2]\ngain = -1.0\n", encoding="utf-8")
+    with pytest.raises(
+        ConfigError, match=r": agents\.a2: gain must be non-negative, got -1\.0 \(at line 5, column 1\)$"
+    ):
+        load_toml(Toy, path)
+
+
+def test_a_missing_field_of_a_named_entry_is_named() -> None:
+    with pytest.raises(ConfigError, match=r"^members\.y\.label: missing \(the field has no default\)$"):
+        from_mapping(Crew, {"members": {"x": {"label": "a"}, "y": {}}})
+
+
+@pytest.mark.parametrize(
+    ("second", "message"),
+    [
+        ("mass_kg = 'x'", r"^squad\[1\]\.mass_kg: expected a number, got 'x'$"),
+        ("mass_kg = -1.0", r"^squad\[1\]\.mass_kg must be positive, got -1\.0$"),
+        ("inertia_kg_m2 = [1.0, 1.0]",
+         r"^squad\[1\]\.inertia_kg_m2: expected an array of 3 items, got 2: \[1\.0, 1\.0\]$"),
+    ],
+)  # fmt: skip
+def test_an_error_in_an_array_of_tables_names_the_item(second: str, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        from_mapping(Crew, tomllib.loads(f"[[squad]]\nmass_kg = 2.0\n\n[[squad]]\n{second}\n"))
+
+
+def test_an_override_deep_in_a_named_entry_is_named_with_the_override(scenario_file: Path) -> None:
+    with pytest.raises(ConfigError) as info:
+        load_toml(Toy, scenario_file, {"agents.a1.markers_nav": [[0.0, "x", 0.0]]})
+    msg = str(info.value)
+    assert msg.startswith("agents.a1.markers_nav[0][1]: expected a number, got 'x'")
+    assert msg.endswith("(value set by override agents.a1.markers_nav)")
+
+
+def test_numpy_scalars_and_enum_members_from_python_callers_load_as_plain_values() -> None:
+    """Strict msgspec takes exact builtin types only; a caller's numpy value loaded before and still does."""
+    face = enum.StrEnum("Face", {"PX": "+x"})
+    toy = from_mapping(
+        Toy,
+        {"duration_s": np.float64(2.5), "seed": np.int64(4), "face": face.PX, "chaser": {"name": Mode.SLOW}},
+    )
+    assert (toy.duration_s, toy.seed, toy.face, toy.chaser.name) == (2.5, 4, "+x", "slow")
+    assert type(toy.duration_s) is float and type(toy.seed) is int
+    assert type(toy.face) is str and type(toy.chaser.name) is str
 
 
 # --------------------------------------------------------------------------------------- overrides
