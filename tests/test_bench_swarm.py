@@ -193,7 +193,7 @@ def test_each_case_is_run_alternately_with_each_cpu_latency_and_the_report_says_
 
     def fake_case(v, c, span, n, stagger, tdma, t, w):
         assert held_during and held_during[-1] in (None, 0, 5)  # inside the request's block
-        assert w == "imu"  # (no --agent-wake: the default)
+        assert w is None  # (no --agent-wake: the launcher's plan)
         return {"vehicles": v, "per_process": n, "clock": c, "topology": "mesh",
                 "cpu_us_per_vehicle_tick": 1.0, "world_cpu_us_per_tick": 1.0, "late_tick_share": 0.0,
                 "realtime_factor": 1.0, "latency_p50_us": 1.0, "latency_p99_us": 2.0}  # fmt: skip

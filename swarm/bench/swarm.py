@@ -1,11 +1,15 @@
 """``swarm bench swarm``: how many vehicles the swarm runs on this machine (issue 13).
 
-For each case (number of vehicles, clock, topology), ``swarm launch docking --agents V/2`` (one process per
-vehicle) runs for a fixed simulated span while a probe, which joins the swarm as its processes do (a peer of
-a mesh, a client of the launcher's router in a star; ``--topology auto``, the launcher's default, resolved
-as the launcher resolves it), takes the first pair's ``estimate(k)`` (it decodes only the tick number)
-with the time it was published and the time its ``imu(k)`` was, which the agent attaches to it: every
-process of the case stamps what it publishes (Zenoh's timestamps, :data:`TIMESTAMPING`):
+For each case (number of vehicles, clock, topology), ``swarm launch docking --agents V/2`` runs for a fixed
+simulated span, laid out as the launcher lays it out without flags (its plan, ``swarm.cli.launch_plan``:
+the agent hosts, the staggered controller clocks and the agents' wake chosen from the vehicles and this
+machine's cores; the case records what it ran, ``per_process``, ``staggered``, ``agent_wake`` and which
+parts the plan chose, ``planned``) unless the bench's flags give a part, while a probe, which joins the
+swarm as its processes do (a peer of a mesh, a client of the launcher's router in a star; ``--topology
+auto``, the launcher's default, resolved as the launcher resolves it), takes the first pair's
+``estimate(k)`` (it decodes only the tick number) with the time it was published and the time its
+``imu(k)`` was, which the agent attaches to it: every process of the case stamps what it publishes (Zenoh's
+timestamps, :data:`TIMESTAMPING`):
 
 - **CPU per vehicle per tick**: the agents' own CPU time (each agent process reports it at the end of the
   run, ``cpu_s`` in the launch summary) over vehicles x ticks; the world's per tick beside it;
@@ -19,13 +23,13 @@ process of the case stamps what it publishes (Zenoh's timestamps, :data:`TIMESTA
   tick (``late_control_commands``), the stricter figure: a command one tick late makes one late tick of
   ten, but one late command of one;
 - **real-time factor**: simulated over wall time of the run (``run_end``);
-- **staggered** (``--stagger``): the vehicles' controller clocks spread over the control period
-  (``swarm.stagger_control``: vehicle ``m`` controls on ticks ``m % period``), instead of every vehicle
-  controlling on the same tick;
-- **agent wake** (``--agent-wake imu,control``): a free-running agent alone in its process wakes at each gyro
-  sample (``imu``, the default) or once per control period (``control``: ``agent.wake_at_control``, its
-  inputs taken from Zenoh's queues then), each case in each, alternately (``agent_wake`` in the JSON; ``ctl``
-  after the clock in the table);
+- **staggered** (``--stagger``; without it, the launcher's plan): the vehicles' controller clocks spread
+  over the control period (``swarm.stagger_control``: vehicle ``m`` controls on ticks ``m % period``),
+  instead of every vehicle controlling on the same tick;
+- **agent wake** (``--agent-wake imu,control``; without it, the launcher's plan): a free-running agent alone
+  in its process wakes at each gyro sample (``imu``) or once per control period (``control``:
+  ``agent.wake_at_control``, its inputs taken from Zenoh's queues then), each case in each, alternately
+  (``agent_wake`` in the JSON; ``ctl`` after the clock in the table);
 - **TDMA** (``--tdma``): the tags share one UWB channel (``uwb.tdma``, issue 13's Loco Positioning
   TWR-TDMA model): each ranges once per frame (~238/N ranges a second for N tags, against 50 each
   without), and the mothership sends a tag nothing on the slot ticks without its exchange;
@@ -71,11 +75,13 @@ import msgpack
 import numpy as np
 
 from swarm import cpu_latency
+from swarm.cli.launch_plan import available_cores
 from swarm.errors import ConfigError
 from swarm.transport.session import attached_imu_ns, free_loopback_endpoint, open_session, published_ns
 
-QUICK = {"vehicles": (2, 8), "clocks": ("lockstep", "realtime"), "span_s": 5.0, "per_process": (1,)}
-FULL = {"vehicles": (2, 8, 32), "clocks": ("lockstep", "realtime"), "span_s": 20.0, "per_process": (1,)}
+QUICK = {"vehicles": (2, 8), "clocks": ("lockstep", "realtime"), "span_s": 5.0, "per_process": (None,)}
+FULL = {"vehicles": (2, 8, 32), "clocks": ("lockstep", "realtime"), "span_s": 20.0, "per_process": (None,)}
+"""The presets; a ``per_process`` of None (and no ``stagger``, no ``agent_wakes``): the launcher's plan."""
 DT_S = 0.01  # the docking scenario's tick
 LAUNCH = [sys.executable, "-m", "swarm.cli.main", "launch"]
 """The launcher each case runs (its arguments follow)."""
@@ -100,14 +106,17 @@ def parse_vehicles(text: str) -> tuple[int, ...]:
     return values
 
 
-def parse_per_process(text: str) -> tuple[int, ...]:
-    """``--vehicles-per-process 1,8``: agent hosts of that many vehicles (1: one process per vehicle)."""
+def parse_per_process(text: str) -> tuple[int | None, ...]:
+    """``--vehicles-per-process 1,8,auto``: agent hosts of that many vehicles (1: one process per vehicle;
+    ``auto``, None: the launcher's plan)."""
     try:
-        values = tuple(int(v) for v in text.split(","))
+        values = tuple(None if v == "auto" else int(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if not values or any(v < 1 or v > 64 for v in values):
-        raise ConfigError(f"--vehicles-per-process must be integers in 1..64, comma-separated, got {text!r}")
+    if not values or any(v is not None and (v < 1 or v > 64) for v in values):
+        raise ConfigError(
+            f"--vehicles-per-process must be integers in 1..64 or auto, comma-separated, got {text!r}"
+        )
     return values
 
 
@@ -187,29 +196,38 @@ class LatencyProbe:
             self.delivered.append((vid, k, (arrival_ns - imu_ns) * 1e-9))
 
 
-def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagger: bool = False,
-          tdma: bool = False, topology: str = "auto", agent_wake: str = "imu") -> dict:  # fmt: skip
+def _case(vehicles: int, clock: str, span_s: float, per_process: int | None = None,
+          stagger: bool | None = None, tdma: bool = False, topology: str = "auto",
+          agent_wake: str | None = None) -> dict:  # fmt: skip
+    """One launch of the case; ``per_process``, ``stagger`` and ``agent_wake`` None: the launcher's plan's."""
     from swarm.cli.children import resolved, swarm_processes
+    from swarm.cli.launch_plan import STAGGER_KEY, WAKE_KEY, resolve_plan
 
     pairs = vehicles // 2
-    links = resolved(topology, swarm_processes(vehicles, per_process))
-    ns = f"benchswarm{os.getpid()}v{vehicles}p{per_process}{clock}{topology}"
+    sets = [f"{STAGGER_KEY}=true"] if stagger else []
+    if agent_wake is not None:
+        sets.append(f"{WAKE_KEY}={str(agent_wake == 'control').lower()}")
+    # the launcher's plan on this machine, as it will resolve it (the probe joins the topology it makes)
+    plan, _ = resolve_plan(vehicles, clock == "lockstep", per_process, sets)
+    links = resolved(topology, swarm_processes(vehicles, plan.vehicles_per_process))
+    ns = f"benchswarm{os.getpid()}v{vehicles}p{per_process or 'auto'}{clock}{topology}"
     endpoint = free_loopback_endpoint()
     # the launcher's stderr (its children's too) into a file: its last lines say why a launch failed
     with tempfile.TemporaryDirectory() as tmp, open(Path(tmp) / "launch.log", "w+") as log:
         out = Path(tmp) / "run.json"
         cmd = [*LAUNCH, "docking", "--headless", "--until-docked",
                "--agents", str(pairs), "--clock", clock, "--set", f"sim.max_duration_s={span_s}",
-               "--json", str(out), "--namespace", ns, "--listen", endpoint,
-               "--vehicles-per-process", str(per_process), "--topology", topology,
+               "--json", str(out), "--namespace", ns, "--listen", endpoint, "--topology", topology,
                *timestamping_args(tmp),
                "--timeout", f"{LAUNCH_START_S + LAUNCH_SLOWEST * span_s:g}"]  # fmt: skip
+        if per_process is not None:
+            cmd += ["--vehicles-per-process", str(per_process)]
         if stagger:
-            cmd += ["--set", "swarm.stagger_control=true"]
+            cmd += ["--set", f"{STAGGER_KEY}=true"]
         if tdma:
             cmd += ["--set", "uwb.tdma=true"]
-        if agent_wake == "control":
-            cmd += ["--set", "agent.wake_at_control=true"]
+        if agent_wake is not None:
+            cmd += ["--set", sets[-1]]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
         probe = LatencyProbe()
         up, listening = threading.Event(), threading.Event()
@@ -247,14 +265,16 @@ def _case(vehicles: int, clock: str, span_s: float, per_process: int = 1, stagge
     delivered = latency_split(probe.delivered, camera_every, cameras)
     late, stepped = late_share(clock, res.get("late_commands"))
     late_cmd, _ = late_share(clock, res.get("late_control_commands"))
+    ran = res.get("launch_plan") or plan.as_dict()  # what the launcher says it ran (the same plan)
     return {
         "vehicles": vehicles,
-        "per_process": per_process,
+        "per_process": ran["vehicles_per_process"],
         "clock": clock,
         "topology": links,
-        "staggered": stagger,
+        "staggered": ran["stagger_control"],
         "tdma": tdma,
-        "agent_wake": agent_wake,
+        "agent_wake": "control" if ran["wake_at_control"] else "imu",
+        "planned": ran["chosen"],  # the parts the launcher's plan chose (the others the bench's flags gave)
         "cpu_us_per_vehicle_tick": 1e6 * float(np.sum(agents)) / (len(agents) * ticks) if agents else None,
         "world_cpu_us_per_tick": 1e6 * cpu["world"] / ticks if cpu.get("world") is not None else None,
         "late_tick_share": late,
@@ -397,11 +417,11 @@ def parse_cpu_latencies(text: str) -> tuple[int | None, ...]:
 
 
 def run(preset: dict) -> dict:
-    stagger, tdma = bool(preset.get("stagger", False)), bool(preset.get("tdma", False))
+    stagger, tdma = preset.get("stagger") or None, bool(preset.get("tdma", False))  # (None: the plan's)
     specs = [(v, c, n, t, q, w) for c in preset["clocks"] for n in preset["per_process"]
-             for v in preset["vehicles"] if n <= v for t in preset.get("topologies", ("auto",))
-             for q in preset.get("cpu_latencies", (None,)) for w in preset.get("agent_wakes", ("imu",))
-             if w == "imu" or (c != "lockstep" and n == 1)]  # fmt: skip
+             for v in preset["vehicles"] if n is None or n <= v for t in preset.get("topologies", ("auto",))
+             for q in preset.get("cpu_latencies", (None,)) for w in preset.get("agent_wakes", (None,))
+             if w in (None, "imu") or (c != "lockstep" and n in (None, 1))]  # fmt: skip
     runs: dict[tuple, list[dict]] = {spec: [] for spec in specs}
     for _ in range(int(preset.get("repeat", 1))):  # round by round: a drift of the machine hits every case
         for v, c, n, t, q, w in specs:
@@ -413,7 +433,7 @@ def run(preset: dict) -> dict:
     return {
         "cases": [summarise(runs[spec]) for spec in specs],
         "span_s": preset["span_s"],
-        "cores": os.cpu_count(),
+        "cores": available_cores(),  # (the launcher's plan's: those this process may run on)
         "load_1min": os.getloadavg()[0],
         "cpu_idle": cpu_latency.idle_config(),  # what a process woken every tick pays: the VM's or laptop's
     }

@@ -116,8 +116,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                             help="hold a CPU wake-up latency request (swarm launch --cpu-latency) while "
                                  "each case runs: off (default), microseconds (0: idle CPUs poll) or "
                                  "several, each case run in each, alternately")  # fmt: skip
-            bp.add_argument("--vehicles-per-process", dest="per_process", default=None, metavar="N[,N]",
-                            help="agent hosts of N vehicles (default 1: a process per vehicle)")  # fmt: skip
+            bp.add_argument("--vehicles-per-process", dest="per_process", default=None, metavar="N|auto[,..]",
+                            help="agent hosts of N vehicles (1: a process per vehicle; default auto: "
+                                 "swarm launch's own plan for the vehicles and cores)")  # fmt: skip
             bp.add_argument("--span", type=float, default=None, metavar="S",
                             help="simulated seconds per case (default 20, 5 with --quick)")  # fmt: skip
             bp.add_argument("--repeat", type=int, default=None, metavar="N",
@@ -125,11 +126,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                  "spread (default 1)")  # fmt: skip
             bp.add_argument("--stagger", action="store_true", default=None,
                             help="stagger the vehicles' controller clocks (swarm.stagger_control): vehicle "
-                                 "m controls on ticks m %% period, not all on one tick")  # fmt: skip
+                                 "m controls on ticks m %% period, not all on one tick (default: swarm "
+                                 "launch's plan)")  # fmt: skip
             bp.add_argument("--agent-wake", dest="agent_wake", default=None, metavar="imu|control[,..]",
-                            help="a free-running agent alone in its process wakes at each gyro sample (imu, "
-                                 "the default) or once per control period (control: agent.wake_at_control); "
-                                 "both: each case in each, alternately")  # fmt: skip
+                            help="a free-running agent alone in its process wakes at each gyro sample (imu) "
+                                 "or once per control period (control: agent.wake_at_control); both: each "
+                                 "case in each, alternately (default: swarm launch's plan)")  # fmt: skip
             bp.add_argument("--tdma", action="store_true", default=None,
                             help="the tags share one UWB channel (uwb.tdma): each ranges once per TDMA "
                                  "frame, ~238/N times a second for N tags, not 50")  # fmt: skip

@@ -9,6 +9,12 @@ to one another (``--topology mesh``; ``auto``, the default, for a few processes)
 docs/protocol.md "Processes and topology" (why a chaser's subscription to its target's estimate is in
 place before the world announces the run, in either).
 
+How the vehicles' agents share processes (a process each, or agent hosts of several), whether their
+controller clocks are staggered and how a free-running agent wakes, the launcher chooses from the vehicle
+count and the cores it may run on, and logs its plan (``swarm.cli.launch_plan``: 32 vehicles on 2 cores run
+in four hosts of 8, staggered); ``--vehicles-per-process`` and ``--set swarm.stagger_control=...`` or
+``--set agent.wake_at_control=...`` override their part of it.
+
 It waits for every liveliness token (not for a time), supervises the children (an agent or the mothership
 whose token goes or that exits is reported lost and restarted with ``--rejoin``, the world with
 ``--resume`` from the checkpoint it writes every tick into a private directory of the launcher; each with
@@ -60,6 +66,7 @@ from swarm.cli.children import (
     swarm_processes,
     topology,
 )
+from swarm.cli.launch_plan import HOSTS_PER_CORE, PROCESS_EACH_PER_CORE, resolve_plan
 from swarm.errors import ConfigError, SwarmError
 from swarm.step.outcome import chaser_summary, run_summary
 from swarm.transport.checkpoint import EXIT_BAD_CHECKPOINT
@@ -126,10 +133,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "(default 3); a world restarts from its checkpoint of the last tick and the run goes on",
     )  # fmt: skip
     g.add_argument(
-        "--vehicles-per-process", type=count("--vehicles-per-process"), default=1, metavar="N",
+        "--vehicles-per-process", type=count("--vehicles-per-process"), default=None, metavar="N",
         help="agent hosts: N vehicles' agents in one process (one Zenoh session), as ROS 2 component "
         "containers host nodes; keys and liveliness stay per vehicle, a lost host restarts its vehicles "
-        "(default 1: one process per vehicle)",
+        f"(default: chosen from the vehicles and the cores, a process per vehicle up to "
+        f"{PROCESS_EACH_PER_CORE} vehicles per core, else {HOSTS_PER_CORE} hosts per core, as are the "
+        "staggered controller clocks and the agents' wake: swarm.cli.launch_plan; logged at the start)",
     )  # fmt: skip
     g.add_argument(
         "--pace", type=clock_arg, default=None, metavar="realtime|scaled:N",
@@ -360,6 +369,8 @@ def _run(args: argparse.Namespace) -> int:
     if is_landing_scenario(args.scenario):
         from swarm.cli.launch_landing import run_landing_launch
 
+        if args.vehicles_per_process is None:  # (a landing swarm has no automatic plan: a process per UAV)
+            args.vehicles_per_process = 1
         return run_landing_launch(args)
     from swarm.transport.process import check_pace
 
@@ -385,6 +396,9 @@ def _run(args: argparse.Namespace) -> int:
     )
 
     sc = scenario_from(args)
+    plan = _plan(args, sc)
+    if plan is not None:
+        sc = scenario_from(args)  # with the plan's overrides
     _hosts(args, sc)  # the agent processes' layout (swarm_processes counts it), checked before any start
     check_record(args)
     # the world, the mothership and the agent processes (mesh with --secure refused before anything starts)
@@ -465,6 +479,7 @@ def _run(args: argparse.Namespace) -> int:
                         result = summarize(sc, policy, seed, log, time.monotonic() - wall0)
                         result["restarts"] = {c.name: c.restarts for c in sup.children.values()}
                         result["world_resumed_at"] = [d.get("tick") for d in log.resumed]
+                        result["launch_plan"] = args.launch_plan
                         print_summary(result)
                         restarted = {n: r for n, r in result["restarts"].items() if r}
                         if restarted:
@@ -506,6 +521,20 @@ def _run(args: argparse.Namespace) -> int:
     if result is None:
         return 1
     return 0 if result["chasers"] and all(c["docked"] for c in result["chasers"].values()) else 1
+
+
+def _plan(args: argparse.Namespace, sc):
+    """The swarm's layout (:func:`swarm.cli.launch_plan.resolve_plan`): ``args.vehicles_per_process`` set,
+    the ``--set`` overrides of the parts the plan chose added to ``args.overrides`` (the children load the
+    scenario with them), the plan logged and kept for the summary (``args.launch_plan``). Returns the plan
+    when it added overrides (the launcher's scenario must be loaded again), else None."""
+    plan, extra = resolve_plan(len(sc.vehicles), args.clock.lockstep, args.vehicles_per_process,
+                               args.overrides, secure=bool(getattr(args, "secure", False)))  # fmt: skip
+    args.vehicles_per_process = plan.vehicles_per_process
+    args.overrides = [*args.overrides, *extra]
+    args.launch_plan = plan.as_dict()
+    _LOG.info("launch plan: %s", plan.describe())
+    return plan if extra else None
 
 
 def _start_run(args, sc, seed, endpoint, sup, Child):
