@@ -24,6 +24,8 @@ import math
 import numpy as np
 from numba import njit
 
+from swarm.core.mdp import a11_kernel, chain_kernel
+
 # ---- modes, in the order of swarm.core.landing.LandingMode ----------------------------------------------
 L_CRUISE, L_DEVIATE, L_DESCEND, L_FINAL, L_CLIMB, L_LANDED, L_ABORT = range(7)
 
@@ -140,23 +142,20 @@ def _decide(G, GP, t, p, r, d, sigma_h, DEC, DEC_n):
         if mode == L_CRUISE:
             footprint = GP[GP_GLIDE_H] * GP[GP_TAN_VIEW]
             rho = footprint / max(3.0 * sigma_h, 1e-9)
-            a11 = min(max((r / GP[GP_R_T]) * (1.0 / (1.0 + d)) * rho, 0.0), 1.0)
+            a11 = a11_kernel(r, GP[GP_R_T], d, rho)
             row[D_RHO], row[D_A11] = rho, a11
             if a11 <= GP[GP_A11_THR]:
                 G[G_R2] = r
                 switch = True
         else:
-            # paper Algorithm 1's [REORIENT, ALIGN] chain (swarm.core.mdp.reorient_align_probabilities)
-            a22 = min(max((r / G[G_R2]) * (1.0 / (1.0 + d)), 0.0), 1.0)
-            span = G[G_R2] - GP[GP_ACCEPT]
-            frac = (G[G_R2] - r) / span if span > 0.0 else 1.0
-            a32 = min(max((sigma_h / GP[GP_SIGMA_REF]) * frac, 0.0), 1.0)
-            a23, a33 = 1.0 - a22, 1.0 - a32
+            # paper Algorithm 1's [REORIENT, ALIGN] chain, the docking's kernel
+            a22, a23, a32, a33, pi1, pi2 = chain_kernel(
+                r, G[G_R2], d, sigma_h, GP[GP_SIGMA_REF], GP[GP_ACCEPT]
+            )
             row[D_A22], row[D_A23], row[D_A32], row[D_A33] = a22, a23, a32, a33
-            s = a23 + a32  # the stationary distribution (swarm.core.mdp.stationary_2state)
-            if s != 0.0:
-                row[D_PI1], row[D_PI2] = a32 / s, a23 / s
-                if a23 / s <= GP[GP_PI2_THR]:
+            if not np.isnan(pi2):
+                row[D_PI1], row[D_PI2] = pi1, pi2
+                if pi2 <= GP[GP_PI2_THR]:
                     G[G_R1] = r
             switch = r <= G[G_R1]
     row[D_R1], row[D_R2], row[D_SWITCHED] = G[G_R1], G[G_R2], 1.0 if switch else 0.0

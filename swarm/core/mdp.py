@@ -217,6 +217,32 @@ def stationary_2state(a12: float, a21: float) -> tuple[float, float] | None:
 # ------------------------------------------------------------------------------- Algorithm 1 probabilities
 
 
+@njit(cache=True)
+def a11_kernel(r, r_t, d, visibility):
+    """Algorithm 1's ``A11 = clip((r / r_t) (1 / (1 + d)) v, 0, 1)``, ``v`` the factor that says how ready
+    the vehicle is to leave the first mode: docking ``1 / ||q_e[1:3]||`` (:func:`approach_probability`),
+    landing the camera's footprint over ``3 sigma`` (:mod:`swarm.core.landing`). The one implementation
+    both missions' compiled guidance calls."""
+    return min(max((r / r_t) * (1.0 / (1.0 + d)) * visibility, 0.0), 1.0)
+
+
+@njit(cache=True)
+def chain_kernel(r, r2, d, sigma, sigma_ref, r_d):
+    """Algorithm 1's second chain and its stationary distribution (:func:`reorient_align_probabilities`,
+    :func:`stationary_2state`): ``(a22, a23, a32, a33, pi1, pi2)``, ``pi`` NaN when ``a23 + a32 = 0``. The
+    one implementation both missions' compiled guidance calls (landing: ``r_d`` the acceptance radius,
+    ``sigma_ref`` its reference sigma)."""
+    a22 = min(max((r / r2) * (1.0 / (1.0 + d)), 0.0), 1.0)
+    span = r2 - r_d
+    frac = (r2 - r) / span if span > 0.0 else 1.0
+    a32 = min(max((sigma / sigma_ref) * frac, 0.0), 1.0)
+    a23 = 1.0 - a22
+    s = a23 + a32  # stationary_2state(a23, a32): (pi1, pi2) = (a32, a23) / (a23 + a32)
+    if s == 0.0:
+        return a22, a23, a32, 1.0 - a32, np.nan, np.nan
+    return a22, a23, a32, 1.0 - a32, a32 / s, a23 / s
+
+
 def approach_probability(r_m: float, d: float, qe_vec_norm: float, r_t_m: float) -> float:
     """``A11`` of Algorithm 1: probability of staying in APPROACH, clipped into ``[0, 1]``.
 
@@ -258,12 +284,11 @@ def reorient_align_probabilities(
     Returns:
         Four floats, or four arrays of the broadcast shape.
     """
-    if all(type(x) is float for x in (r_m, r2_m, d, sigma_pos_max_m)):  # one decision: plain floats
-        a22s = min(max((r_m / r2_m) * (1.0 / (1.0 + d)), 0.0), 1.0)
-        span_s = r2_m - r_d_m
-        frac_s = (r2_m - r_m) / span_s if span_s > 0.0 else 1.0
-        a32s = min(max((sigma_pos_max_m / sigma_uwb_m) * frac_s, 0.0), 1.0)
-        return a22s, 1.0 - a22s, a32s, 1.0 - a32s
+    if all(type(x) is float for x in (r_m, r2_m, d, sigma_pos_max_m)):  # one decision: the compiled pass's
+        a22s, a23s, a32s, a33s, _, _ = chain_kernel(
+            r_m, r2_m, d, sigma_pos_max_m, float(sigma_uwb_m), float(r_d_m)
+        )
+        return a22s, a23s, a32s, a33s
     r, r2, dd, sp = np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (r_m, r2_m, d, sigma_pos_max_m))
     )
@@ -413,30 +438,20 @@ def mdp_pass(SW, t_s, r, d, qe_vec_norm, sigma_pos_max_m, row):
     r2 = SW[SW_R2]
     if r > r2:
         row[D_BRANCH] = BRANCH_A11
-        if qe_vec_norm == 0.0:
-            a11 = 1.0
-        else:
-            a11 = (r / SW[SW_RT]) * (1.0 / (1.0 + d)) * (1.0 / qe_vec_norm)
-            a11 = min(max(a11, 0.0), 1.0)
+        a11 = 1.0 if qe_vec_norm == 0.0 else a11_kernel(r, SW[SW_RT], d, 1.0 / qe_vec_norm)
         row[D_A11] = a11
         if a11 <= SW[SW_A11_THR]:
             SW[SW_R2] = r
             row[D_SWITCHED] = SWITCHED_R2
     else:
         row[D_BRANCH] = BRANCH_A22
-        a22 = min(max((r / r2) * (1.0 / (1.0 + d)), 0.0), 1.0)
-        span = r2 - SW[SW_RD]
-        frac = (r2 - r) / span if span > 0.0 else 1.0
-        a32 = min(max((sigma_pos_max_m / SW[SW_SIGMA_UWB]) * frac, 0.0), 1.0)
-        a23 = 1.0 - a22
+        a22, a23, a32, a33, pi1, pi2 = chain_kernel(r, r2, d, sigma_pos_max_m, SW[SW_SIGMA_UWB], SW[SW_RD])
         row[D_A22] = a22
         row[D_A23] = a23
         row[D_A32] = a32
-        row[D_A33] = 1.0 - a32
-        s = a23 + a32  # stationary_2state(a23, a32): (pi1, pi2) = (a32, a23) / (a23 + a32)
-        if s != 0.0:
-            pi2 = a23 / s
-            row[D_PI1] = a32 / s
+        row[D_A33] = a33
+        if not np.isnan(pi2):
+            row[D_PI1] = pi1
             row[D_PI2] = pi2
             if pi2 <= SW[SW_PI2_THR]:
                 SW[SW_R1] = r
