@@ -1,4 +1,4 @@
-"""The Viser web dashboard process (DESIGN.md section 6): ``python -m dashboard`` or ``swarm dashboard``.
+"""The Viser web dashboard process (docs/usage.md, "Dashboard"): ``python -m dashboard``, ``swarm dashboard``.
 
 It subscribes to a swarm over Zenoh and sends run controls, or plays an MCAP recording (``--open``); it
 never runs estimator or guidance code. Modules: :mod:`dashboard.mapping` (pure: messages to scene names,

@@ -7,7 +7,7 @@ latest-value topics (truth, estimate, guidance, vision of each vehicle, the worl
 ``world/vision`` batches of a swarm of agent hosts) are
 subscribed with a Zenoh ``RingChannel(1)``: Zenoh keeps only the newest sample of each key, in Rust, and
 calls no Python per sample; the render loop takes it with :meth:`SwarmLink.poll` once per frame and
-decodes only that one (DESIGN.md section 9: ``RingChannel(1)`` suits latest-value topics). So the
+decodes only that one (BENCHMARKS.md: ``RingChannel(1)`` suits latest-value topics). So the
 dashboard's cost follows its frame rate, not the swarm's tick rate. Topics where every sample counts,
 events (mode transitions, contact, loss; the run's and the UWB network's, faults applied or refused),
 anchors and liveliness, use callbacks
@@ -83,7 +83,7 @@ class SwarmLink:
     handle events, anchors and liveliness. ``send()`` publishes a RunControl and ``send_fault()`` a Fault
     (reliable, block: a user's click must reach the world and the mothership). The anchors are also asked for
     with ``get`` in a background thread until one reply comes (a ``get`` right after the mothership declares
-    its queryable can get no reply: DESIGN.md section 9), in case the dashboard starts after they were
+    its queryable can get no reply: BENCHMARKS.md), in case the dashboard starts after they were
     published.
     """
 

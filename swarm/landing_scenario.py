@@ -98,7 +98,7 @@ class LandingUwb:
     sigma_m: float = 0.10
     max_range_m: float = 15.0
     lever_arm_m: Vec3 = (0.0, 0.0, 0.05)
-    # The range errors of real flights (swarm.core.range_errors; DESIGN.md sec. 11): all off by default.
+    # The range errors of real flights (swarm.core.range_errors; docs/logs.md): all off by default.
     offset_m: float = 0.0
     """Common range offset [m] (an antenna delay: real Loco Positioning ranges read short, -0.17..-0.36)."""
     offset_spread_m: float = 0.0

@@ -2,7 +2,7 @@
 swarm/cli/bench.py).
 
 No timing is asserted (the machines are shared and noisy). What is checked: the JSON record has the
-DESIGN.md section 8 fields, positive and finite; FilterPy runs the same model as the compounded filter
+the bench's JSON fields, positive and finite; FilterPy runs the same model as the compounded filter
 (oracle: our compiled filter, to 1e-9), so the comparison is apples to apples; the "as executed" FLOP
 model counts what the kernels execute (oracle: the kernels' own Python source run on counting scalars);
 a missing FilterPy is reported, not raised.

@@ -139,7 +139,7 @@ def test_different_seed_gives_a_different_run(runs, policy):
     assert a["series"]["p_true_nav"] != b["series"]["p_true_nav"]
 
 
-# ---- (c) the summary: DESIGN.md section 8 ------------------------------------------------------------------
+# ---- (c) the summary: swarm/step/outcome.py ----------------------------------------------------------------
 
 CHASER_FIELDS = {
     "docked": bool,

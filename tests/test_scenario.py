@@ -133,7 +133,7 @@ def test_paper_numbers_are_in_the_docking_scenario():
     assert (sc.fixed.r2_m, sc.fixed.r1_m) == (0.8, 0.3)
     assert (sc.mdp.r1_init_m, sc.mdp.r2_init_m) == (0.1, 0.3)
     assert (sc.mdp.a11_threshold, sc.mdp.pi2_threshold) == (0.4, 0.6)
-    # hardware rates (paper sec. VI-A / DESIGN.md section 3): IMU 100 Hz, UWB 50 Hz, vision 20 Hz
+    # hardware rates (paper sec. VI-A): IMU 100 Hz, UWB 50 Hz, vision 20 Hz
     assert (sc.sim.imu_rate_hz, sc.uwb.rate_hz, sc.camera.rate_hz) == (100.0, 50.0, 20.0)
     assert sc.chasers == ["chaser"]
 

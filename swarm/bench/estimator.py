@@ -3,7 +3,7 @@
 Measured in one process, cases interleaved block by block so that machine noise hits them alike:
 
 * **API**: :class:`~swarm.core.estimator.PoseEstimator` with ``n = 1``, ``predict`` + ``update_range``
-  from Python, for the tandem and compounded structures (DESIGN.md section 8: ``tandem_us``,
+  from Python, for the tandem and compounded structures (the bench's JSON record: ``tandem_us``,
   ``compounded_us``).
 * **dispatch**: the compiled batch kernels (``_ekf_nb.predict_batch``, ``update_range_batch``) called
   directly from Python with ready-made arrays: what is left of the API once argument handling is gone.
@@ -463,7 +463,7 @@ def machine_info() -> dict:
 
 
 def run(config: BenchConfig = FULL) -> dict:
-    """Measure every case (module docstring) in this process; returns the JSON record (DESIGN.md sec. 8)."""
+    """Measure every case (module docstring) in this process; returns the JSON record."""
     load_before = _load_1m()
     base = EstimatorParams()
     params = {s: replace(base, structure=Structure(s)) for s in STRUCTURES}

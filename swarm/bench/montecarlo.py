@@ -1,4 +1,4 @@
-"""``swarm bench montecarlo``: wall time of paired campaigns (DESIGN.md section 7), 1 vs 2 workers and the
+"""``swarm bench montecarlo``: wall time of paired campaigns (BENCHMARKS.md), 1 vs 2 workers and the
 number of runs, against the issue-6 target of 500 runs x 2 policies in 30 s on this 2-core machine.
 
 Each case is a real :func:`swarm.montecarlo.campaign.run_campaign` of the paper's docking scenario (both

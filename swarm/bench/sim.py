@@ -1,4 +1,4 @@
-"""``swarm bench sim``: speed of one in-process docking of each vehicle kind (DESIGN.md section 7; issue
+"""``swarm bench sim``: speed of one in-process docking of each vehicle kind (BENCHMARKS.md; issue
 12's target: >= 500x real time on one core for both kinds).
 
 For each kind (:data:`BENCH_SCENARIOS`: the paper's cube docking, and the ground docking from a start that

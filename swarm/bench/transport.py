@@ -1,4 +1,4 @@
-"""``swarm bench transport``: the swarm over Zenoh on this machine (DESIGN.md section 7).
+"""``swarm bench transport``: the swarm over Zenoh on this machine (BENCHMARKS.md).
 
 Three measurements in one run, all between separate processes on loopback, in the launcher's two
 topologies (``swarm launch --topology``): a ``star`` of Zenoh clients of one router, so each message crosses

@@ -1,4 +1,4 @@
-"""``swarm bench [BENCH] [--quick] [--json FILE]``: the performance measurements of DESIGN.md section 7.
+"""``swarm bench [BENCH] [--quick] [--json FILE]``: the performance measurements of BENCHMARKS.md.
 
 Each bench lives in :mod:`swarm.bench` and returns a JSON-ready dict (section 8 names) and a printable
 report; this module only parses flags, prints, and writes the JSON. Without ``BENCH`` every bench runs

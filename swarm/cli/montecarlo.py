@@ -3,7 +3,7 @@
 Runs ``--runs`` paired runs of each ``--policy`` on ``--workers`` processes, or on an existing
 dask.distributed cluster with ``--dask tcp://HOST:8786``, saves them run by run in ``--out DIR`` (Ctrl-C
 keeps the finished runs, ``--resume DIR`` continues), then writes ``DIR/report.md`` with the statistics and
-figures; ``--json FILE`` gets the DESIGN.md section 8 record. The library entry point, which takes any
+figures; ``--json FILE`` gets the swarm/step/outcome.py record. The library entry point, which takes any
 ``concurrent.futures`` executor, is :func:`swarm.montecarlo.campaign.run_campaign`.
 """
 

@@ -1,9 +1,10 @@
 """``swarm router --listen ENDPOINT``: a Zenoh router for a swarm spread over several machines.
 
-A Python Zenoh session in router mode (DESIGN.md sections 4 and 9): clients that connect to it form a star
-instead of the full mesh peers gossip into; it routes, stamps timestamps and enforces whatever TLS,
-authentication and access control its ``--zenoh-config`` file sets. It costs one hop (measured peer to
-peer RTT 109 us, through the router 253 us). The standard ``zenohd`` is a drop-in replacement.
+A Python Zenoh session in router mode (docs/protocol.md, "Processes and topology"): clients that connect
+to it form a star instead of the full mesh peers gossip into; it routes, stamps timestamps and enforces
+whatever TLS, authentication and access control its ``--zenoh-config`` file sets. It costs one hop
+(measured peer to peer RTT 109 us, through the router 253 us). The standard ``zenohd`` is a drop-in
+replacement.
 
 Once listening it prints one line, ``router listening on <endpoint> ...``, on stdout (flushed), so that a
 launcher or a test can wait for it; it then runs until SIGINT or SIGTERM, closes its session and exits 0.

@@ -5,7 +5,7 @@ around the target decide the first two switches: ``r2`` (APPROACH -> REORIENT) a
 ALIGN). A switcher only *chooses* those radii; the guidance owns the modes and compares the range with them.
 
 * :class:`FixedSwitcher`: ``r2 = 0.8 m``, ``r1 = 0.3 m`` (paper section V-C, the worst case of Fig. 6).
-* :class:`MdpSwitcher`: paper Algorithm 1 (section V-B), transcribed as in DESIGN.md section 3. It starts
+* :class:`MdpSwitcher`: paper Algorithm 1 (section V-B), transcribed from the paper. It starts
   with aggressive radii (``r1 = 0.1``, ``r2 = 0.3``) and, once the range ``r`` is inside the activation radius
   ``r_t``, moves them outward to the current range when the transition probabilities say so::
 
@@ -22,7 +22,7 @@ ALIGN). A switcher only *chooses* those radii; the guidance owns the modes and c
   The paper's ``while`` is the guidance loop itself: :meth:`MdpSwitcher.evaluate` runs one pass of the
   body per call (one call per guidance step) and returns ``None`` when the loop condition is false.
   Every pass is recorded as a :class:`Decision` whose :meth:`Decision.as_dict` is the ``"decisions"``
-  record of DESIGN.md section 8.
+  record of swarm/core/decision_keys.py.
 
 Edge cases (Algorithm 1 is silent on them; each choice is tested):
 
@@ -347,7 +347,7 @@ def steady_state_probabilities(
 
 @dataclass(frozen=True)
 class Decision:
-    """One pass of Algorithm 1 with its inputs and outputs (DESIGN.md section 8 ``"decisions"``).
+    """One pass of Algorithm 1 with its inputs and outputs (a run summary's ``"decisions"``).
 
     Outputs a branch did not compute are ``None``. ``r1_m``/``r2_m`` are the radii *after* this pass.
     """
@@ -394,7 +394,7 @@ class Decision:
     """Human-readable account, e.g. ``"A11=0.3875 <= 0.4: reorient at r=0.62 m"``."""
 
     def as_dict(self, diagnostics: bool = False) -> dict[str, float | str | None]:
-        """The DESIGN.md section 8 record: exactly :data:`DECISION_KEYS`; with ``diagnostics`` also
+        """The decision record: exactly :data:`DECISION_KEYS`; with ``diagnostics`` also
         ``branch``, ``switched`` and ``reason``."""
         keys = (*DECISION_KEYS, "branch", "switched", "reason") if diagnostics else DECISION_KEYS
         return {k: getattr(self, k) for k in keys}  # the fields are plain values: no deep copy needed

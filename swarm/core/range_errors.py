@@ -1,4 +1,4 @@
-"""The range errors of real UWB flights, for the simulated radios (DESIGN.md sec. 11; the same model as the
+"""The range errors of real UWB flights, for the simulated radios (docs/logs.md; the same model as the
 synthetic log's, :mod:`swarm.logs.phenomena`, and as a sensor profile's, :mod:`swarm.sensors.profile`):
 
     range = |tag - anchor| + white + offset_anchor + [airborne] (step + gm + nlos) + [outlier] excess

@@ -206,7 +206,7 @@ class UwbParams:
     """Length of one TDMA slot [s] (Loco Positioning TWR-TDMA: ~4.2 ms per exchange)."""
     tdma_frame_slots: int = 0
     """Slots per TDMA frame, a power of two; 0: the smallest power of two >= the number of tags."""
-    # The range errors of real flights (swarm.core.range_errors; DESIGN.md sec. 11): all off by default.
+    # The range errors of real flights (swarm.core.range_errors; docs/logs.md): all off by default.
     offset_m: float = 0.0
     """Common range offset [m] (an antenna delay: real Loco Positioning ranges read short, -0.17..-0.36)."""
     offset_spread_m: float = 0.0

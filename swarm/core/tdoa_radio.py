@@ -307,7 +307,7 @@ def twr_tdma_rate_hz(
 ) -> float:
     """A tag's ranges per second with TWR over TDMA (:class:`swarm.core.sensors.UwbParams`, ``uwb.tdma``;
     :func:`swarm.step.radio.tdma_slots`): one exchange per frame of ``frame_slots`` (0: the smallest power
-    of two >= ``n_tags``) slots of ``slot_s``, at most ``rate_hz``: ~238/N for N tags (DESIGN.md sec. 10)."""
+    of two >= ``n_tags``) slots of ``slot_s``, at most ``rate_hz``: ~238/N for N tags (docs/logs.md)."""
     frame = frame_slots or 1 << max(0, (n_tags - 1).bit_length())
     return min(rate_hz, 1.0 / (frame * slot_s))
 

@@ -555,7 +555,7 @@ def allocate(wrench_body: ArrayLike, B: ArrayLike, max_thrust_n: float) -> Alloc
 
 
 def total_impulse(thrusts_n: ArrayLike, dt_s: ArrayLike) -> float:
-    """Total impulse [N s]: sum over samples and nozzles of ``|f| dt`` (DESIGN.md sec. 3, the paper's
+    """Total impulse [N s]: sum over samples and nozzles of ``|f| dt`` (the paper's
     Table II "total impulse").
 
     ``thrusts_n`` is a thrust history ``(T, n_nozzles)`` [N] (or one sample ``(n_nozzles,)``), each row

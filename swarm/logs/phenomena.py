@@ -1,5 +1,5 @@
 """What real Crazyflie flights show and the synthetic log of :mod:`swarm.logs.synthetic` adds when it is
-given a sensor profile (:class:`swarm.sensors.profile.SensorProfile`; DESIGN.md sec. 11, ``docs/logs.md``):
+given a sensor profile (:class:`swarm.sensors.profile.SensorProfile`; docs/logs.md, ``docs/logs.md``):
 
 * ranges (:func:`range_errors`): a common offset and per-anchor offsets (an antenna delay: real ranges
   read short by 0.17-0.36 m), a per-anchor step once airborne (the ground-to-air bias step), white noise of

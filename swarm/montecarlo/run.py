@@ -2,7 +2,7 @@
 
 :func:`run_one` is the task a campaign submits to its executor (a picklable top-level function): it runs
 :class:`swarm.sim.docking.DockingSim` with the run's seed and reduces the summary to flat columns: the
-DESIGN.md section 8 outcome, the entry time and range of each guidance mode, the distance flown in each,
+swarm/step/outcome.py outcome, the entry time and range of each guidance mode, the distance flown in each,
 Algorithm 1's record summarised, the initial truth and estimate error, and the drawn dispersions.
 """
 
@@ -85,7 +85,7 @@ FIELDS: dict[str, str] = {
     "sim_time_s": "float",
     "wall_s": "float",
 }
-"""``runs.csv`` columns (section 8 names where DESIGN.md has them) and their types."""
+"""``runs.csv`` columns (the names of swarm/step/outcome.py's summary where it has them) and their types."""
 
 
 def fields_for(scenario) -> dict[str, str]:

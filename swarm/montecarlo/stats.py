@@ -156,7 +156,7 @@ def summarize(
     wall_s: float | None = None,
     metrics: dict | None = None,
 ) -> dict:
-    """The ``swarm montecarlo --json`` record (DESIGN.md section 8), from the typed rows of ``runs.csv``;
+    """The ``swarm montecarlo --json`` record (swarm/step/outcome.py), from the typed rows of ``runs.csv``;
     ``metrics`` the Table II metrics (:func:`metrics_for` the campaign's scenario; the cube's by default),
     recorded under ``"metrics"``.
 

@@ -66,7 +66,7 @@ def _has_vision(frames) -> bool:
 
 @dataclass
 class ChaserOutcome:
-    """What happened to one chaser (DESIGN.md section 8 field names in its summary)."""
+    """What happened to one chaser (swarm/step/outcome.py field names in its summary)."""
 
     docked: bool = False
     collided: bool = False
@@ -497,6 +497,6 @@ class DockingSim:
 def run_docking(
     scenario, policy: str | None = None, seed: int = 0, record_series: bool = True, tap=None
 ) -> dict:
-    """Run one docking in-process and return its summary (DESIGN.md section 8 fields per chaser); ``tap``:
+    """Run one docking in-process and return its summary (swarm/step/outcome.py fields per chaser); ``tap``:
     :class:`DockingSim`'s (``swarm sim --mcap``)."""
     return DockingSim(scenario, policy, seed, record_series, tap=tap).run()

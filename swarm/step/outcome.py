@@ -1,4 +1,4 @@
-"""A run's outcome as every runner reports it (DESIGN.md section 8): ``swarm sim`` builds it from the
+"""A run's outcome as every runner reports it (swarm/step/outcome.py): ``swarm sim`` builds it from the
 objects it stepped, ``swarm launch`` from what the world's and the agents' events said; both through
 :func:`chaser_summary` and :func:`run_summary`, so the two report the same fields with the same meaning.
 

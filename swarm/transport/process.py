@@ -9,9 +9,9 @@ plus ``--namespace``, ``--clock`` and the Zenoh session flags of :mod:`swarm.tra
 Once its subscriptions and liveliness token are declared, a process prints one line on stdout,
 ``<role> <id> ready`` (flushed), for a launcher or a test to wait on; it logs to stderr. SIGINT and SIGTERM
 set a stop flag: the process finishes its current step, publishes what it owes (a world its ``run_end``),
-closes its Zenoh session (a callback subscriber left open hangs the interpreter at exit, DESIGN.md
-section 9) and exits 0; a child of a launcher leaves a SIGINT to the launcher, which stops the swarm in
-order (:mod:`swarm.transport.stopping`).
+closes its Zenoh session (a callback subscriber left open hangs the interpreter at exit:
+tests/transport/test_session.py) and exits 0; a child of a launcher leaves a SIGINT to the launcher,
+which stops the swarm in order (:mod:`swarm.transport.stopping`).
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ it is ready."""
 
 @dataclass(frozen=True)
 class ClockSpec:
-    """How the world's clock advances (``--clock``, DESIGN.md section 4).
+    """How the world's clock advances (``--clock``, docs/protocol.md).
 
     ``lockstep``: tick ``k + 1`` only once every live agent's command of tick ``k`` arrived (or a timeout
     passed): deterministic, as fast as the slowest agent. ``realtime``: one tick per ``dt`` of wall time.
@@ -182,7 +182,7 @@ def zenoh_args(args: argparse.Namespace):
 
 def declare_reliable(session: zenoh.Session, key: str, express: bool = True) -> zenoh.Publisher:
     """A reliable publisher that blocks rather than drops when congested (lockstep loses nothing);
-    ``express`` sends each sample at once instead of batching (lower latency, DESIGN.md section 9)."""
+    ``express`` sends each sample at once instead of batching (lower latency, BENCHMARKS.md)."""
     return session.declare_publisher(
         key,
         reliability=zenoh.Reliability.RELIABLE,

@@ -1,7 +1,7 @@
 """Zenoh sessions of the swarm: command-line flags, configuration, opening, and decoded subscriptions.
 
 Every process opens its session through this module, so that a user configures all of them the same way
-(DESIGN.md section 4, the zenoh-python examples' shared ``--mode/--connect/--listen/--config`` helper):
+(docs/protocol.md, the zenoh-python examples' shared ``--mode/--connect/--listen/--config`` helper):
 
 - on one machine, peers with explicit loopback endpoints (``--listen tcp/127.0.0.1:7447`` on one,
   ``--connect tcp/127.0.0.1:7447`` on the others);
@@ -12,7 +12,7 @@ Every process opens its session through this module, so that a user configures a
 Precedence: a flag given on the command line beats the file, the file beats this module's defaults
 (multicast scouting off, see :func:`make_config`), and those beat Zenoh's defaults.
 
-Measured here (DESIGN.md section 9 and this module's tests, eclipse-zenoh 1.10.2): multicast scouting adds
+Measured here (BENCHMARKS.md and this module's tests, eclipse-zenoh 1.10.2): multicast scouting adds
 0.5 s to every open and can join strangers, so it is off unless asked; a router also waits
 ``scouting/delay`` (0.5 s by default) at open for scouting answers that cannot come without multicast, so
 that delay is 0 when multicast scouting is off; peer and client sessions on loopback open in ~1-4 ms.
@@ -130,10 +130,10 @@ class ZenohArgs:
     authentication, access control, timeouts. ``None``: Zenoh's defaults."""
     multicast_scouting: bool = False
     """Find peers and routers by UDP multicast. Off unless asked (or enabled by the config file): it adds
-    0.5 s to every open and can join strangers' sessions (DESIGN.md section 9)."""
+    0.5 s to every open and can join strangers' sessions (BENCHMARKS.md)."""
     lease_ms: int | None = None
     """Link lease ``transport/link/tx/lease`` [ms]: a hung (not killed) process's liveliness tokens vanish
-    for its watchers after about this long. Set it on both ends (2000 gives ~1.5 s, DESIGN.md section 9).
+    for its watchers after about this long. Set it on both ends (2000 gives ~1.5 s, BENCHMARKS.md).
     ``None``: the config file's, else Zenoh's 10000."""
 
     def __post_init__(self) -> None:
@@ -582,7 +582,7 @@ class QueuedSubscriber:
 def declare_liveliness(
     session: zenoh.Session, keys: Keys, role: str, process_id: str
 ) -> zenoh.LivelinessToken:
-    """Declare this process's liveliness token ``<ns>/alive/<role>/<id>`` (DESIGN.md section 4).
+    """Declare this process's liveliness token ``<ns>/alive/<role>/<id>`` (docs/protocol.md).
 
     **Keep the returned token** (``token = declare_liveliness(...)``): Zenoh undeclares it as soon as
     Python drops it (measured; a callback subscriber, by contrast, lives until its session closes). It

@@ -33,7 +33,7 @@ from swarm.errors import ConfigError
 DESIGN_KEYS = {
     "t_s", "r_m", "d", "qe_vec_norm", "sigma_pos_max_m", "sigma_uwb_m", "r_t_m", "r_d_m",
     "A11", "A22", "A23", "A32", "A33", "pi1", "pi2", "r1_m", "r2_m",
-}  # fmt: skip  # copied by hand from DESIGN.md section 8, independent of DECISION_KEYS
+}  # fmt: skip  # written by hand from the paper's Algorithm 1, independent of DECISION_KEYS
 
 
 # ------------------------------------------------------------------------------------------- Algorithm 1

@@ -1,4 +1,4 @@
-"""The simulated radios learn real flights (swarm.core.range_errors, DESIGN.md sec. 11): the docking radio
+"""The simulated radios learn real flights (swarm.core.range_errors, docs/logs.md): the docking radio
 network (swarm.step.radio.UwbNetwork) and the landing world (swarm.step.landing.LandingWorld) range with
 per-anchor offsets, a take-off step, Gauss-Markov multipath and NLOS episodes, and the landing IMU vibrates
 in flight; each measured from the generated ranges against the truth. Off (the default), nothing changes;

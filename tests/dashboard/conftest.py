@@ -32,7 +32,7 @@ PACE = "realtime"  # the launched swarm's pace (launch_swarm): lockstep, never a
 START_TIMEOUT_S = 20.0  # a Python start with numpy, zenoh and viser (~1-2 s here) on a loaded 2-core machine
 ARTIFACTS = REPO / "artifacts"
 CHROMIUM_FLAGS = [
-    # DESIGN.md section 9: headless Chromium renders Viser's WebGL scene with software GL (SwiftShader);
+    # measured here: headless Chromium renders Viser's WebGL scene with software GL (SwiftShader);
     # never --disable-software-rasterizer, which kills WebGL.
     "--no-sandbox",
     "--disable-gpu",

@@ -3,7 +3,7 @@
 Oracles: Zenoh itself (the configuration read back with ``Config.get_json``; real sessions on loopback,
 free ports chosen at run time, multicast scouting off) and hand-written expectations. Every session is
 opened with ``with`` so that it is closed even when a test fails (a callback subscriber in an unclosed
-session hangs the interpreter at exit, DESIGN.md section 9).
+session hangs the interpreter at exit, measured here).
 """
 
 from __future__ import annotations
