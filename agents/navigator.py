@@ -3,9 +3,11 @@ or replayed sensors (``swarm replay DIR --zenoh``, a vehicle's drivers).
 
 It asks for the anchors (``<ns>/mothership/anchors``, a query, as an agent would ask the mothership), then
 subscribes ``<ns>/agent/<ID>/imu`` (an :class:`~swarm.transport.messages.Imu` with ``acc_body``: the
-specific force drives the filter), ``<ns>/agent/<ID>/uwb`` and ``<ns>/agent/<ID>/vision`` (``features``: a
-surveyed marker's position in the camera frame, fused with ``[vision]`` of log.toml and the ``markers.csv``
-beside it), runs :class:`swarm.logs.online.OnlineNavigator`
+specific force drives the filter), ``<ns>/agent/<ID>/uwb``, ``<ns>/agent/<ID>/rangefinder`` and
+``<ns>/agent/<ID>/barometer`` (fused as ``height.csv`` and ``baro.csv`` are, with ``[height]`` and
+``[baro]`` of log.toml: the barometer only with ``baro.enabled = true``) and ``<ns>/agent/<ID>/vision``
+(``features``: a surveyed marker's position in the camera frame, fused with ``[vision]`` of log.toml and
+the ``markers.csv`` beside it), runs :class:`swarm.logs.online.OnlineNavigator`
 (the replay's filter, calibration, divergence test and recovery, behind a reorder horizon of ``--delay``
 seconds of sensor time) and publishes an :class:`~swarm.transport.messages.Estimate` on
 ``<ns>/agent/<ID>/estimate`` for every ``output_every``-th IMU sample and an ``estimator_reset`` (or forced
@@ -96,7 +98,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     from swarm.logs.online import OnlineNavigator
     from swarm.logs.reader import LogConfig
     from swarm.transport.keys import Keys, check_id
-    from swarm.transport.messages import DropCounter, Event, Imu, Rangefinder, Uwb, Vision, encode
+    from swarm.transport.messages import Barometer, DropCounter, Event, Imu, Rangefinder, Uwb, Vision, encode
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import open_session, subscribe_decoded, zenoh_args_from
 
@@ -140,6 +142,11 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
             if m.range_m is not None:
                 nav.height(m.t_s, m.range_m)
 
+        def on_barometer(_key: str, m: Barometer) -> None:
+            last[0], last[1] = time.monotonic(), last[1] + 1
+            if m.height_m is not None:
+                nav.baro(m.t_s, m.height_m)
+
         def on_vision(key: str, m: Vision) -> None:
             last[0], last[1] = time.monotonic(), last[1] + 1
             if m.kind != "features":
@@ -153,10 +160,14 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
 
         pub_est = declare_reliable(session, keys.estimate(args.id))
         pub_ev = declare_reliable(session, keys.event(args.id), express=False)
-        subscribe_decoded(session, keys.imu(args.id), Imu, on_imu, drops)
         subscribe_decoded(session, keys.uwb(args.id), Uwb, on_uwb, drops)
         subscribe_decoded(session, keys.vision(args.id), Vision, on_vision, drops)
         subscribe_decoded(session, keys.rangefinder(args.id), Rangefinder, on_rangefinder, drops)
+        subscribe_decoded(session, keys.barometer(args.id), Barometer, on_barometer, drops)
+        # the IMU last: a feed that starts once its IMU subscriber matches (swarm replay --zenoh) then finds
+        # the others declared too (declarations travel in order on a link), and its first range finder and
+        # barometer readings, at the first IMU sample's time, are not lost
+        subscribe_decoded(session, keys.imu(args.id), Imu, on_imu, drops)
         print(f"navigator {args.id} ready", flush=True)
 
         def publish(final: bool = False) -> None:
@@ -179,11 +190,14 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     if args.series is not None:
         _write_series(args.series, nav.estimates)
     c = nav.f.counts if nav.f is not None else np.zeros((0, 3), dtype=np.int64)
+    aux = nav.aux_counts if nav.f is not None else np.zeros((2, 3), dtype=np.int64)  # [sensor, outcome]
     print(
         f"navigator {args.id}: {len(nav.estimates)} estimates, ranges accepted {int(c[:, 0].sum())} "
         f"rejected {int(c[:, 1].sum())}, dropped (older than the filter) {nav.dropped}, unknown anchor "
         f"{nav.unknown_anchor}, vision accepted {int(nav.vision_counts[0])} rejected "
-        f"{int(nav.vision_counts[1])}, unknown marker {nav.unknown_marker}, "
+        f"{int(nav.vision_counts[1])}, unknown marker {nav.unknown_marker}, rangefinder accepted "
+        f"{int(aux[0, 0])} rejected {int(aux[0, 1])}, barometer accepted {int(aux[1, 0])} rejected "
+        f"{int(aux[1, 1])}, "
         f"IMU without acc_body {no_acc[0]}, undecodable {drops.total}, events "
         f"{len(nav.events)}",
         flush=True,

@@ -133,8 +133,11 @@ class OnlineNavigator:
     def baro(self, t_s: float, height_m: float) -> None:
         """A barometric height [m] (``baro.csv``), any offset. The barometer's offset is a state of the
         filter only if a reading arrived before the filter started (as in a replay of a log with
-        ``baro.csv``); without it, readings are refused (counted in ``aux_counts``)."""
-        if height_m is not None and math.isfinite(height_m):
+        ``baro.csv``); without it, readings are refused (counted in ``aux_counts``). With
+        ``baro.enabled = false`` (the default) nothing is fed, as the replay leaves ``baro.csv`` out of its
+        stream: a refused reading would still split the IMU interval it falls in (a prediction to its time),
+        and the estimates would no longer be the replay's bit for bit."""
+        if height_m is not None and math.isfinite(height_m) and self.config.baro.enabled:
             self._push(float(t_s), _BARO, float(height_m))
 
     def vision(self, t_s: float, marker_id: int, xyz_cam) -> None:

@@ -22,8 +22,8 @@ ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")
 """An agent id, a role or any other single key chunk chosen by a user (``fullmatch``)."""
 
 AGENT_KINDS: tuple[str, ...] = (
-    "imu", "uwb", "vision", "gnss", "rangefinder", "estimate", "guidance", "command", "commands", "truth",
-    "event", "bundle",
+    "imu", "uwb", "vision", "gnss", "rangefinder", "barometer", "estimate", "guidance", "command", "commands",
+    "truth", "event", "bundle",
 )  # fmt: skip
 """The per-vehicle topics ``<ns>/agent/<id>/<kind>``."""
 
@@ -97,6 +97,11 @@ class Keys:
     def rangefinder(self, agent_id: str) -> str:
         """Distances to the ground of one vehicle's downward rangefinder: world or its driver -> agent."""
         return self._agent(agent_id, "rangefinder")
+
+    def barometer(self, agent_id: str) -> str:
+        """Barometric altitudes (any constant offset) of one vehicle's barometer: its driver or a log feed
+        -> agent."""
+        return self._agent(agent_id, "barometer")
 
     def estimate(self, agent_id: str) -> str:
         """Pose estimate of one vehicle: agent -> its chasers, dashboard."""

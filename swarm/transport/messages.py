@@ -60,6 +60,7 @@ __all__ = [
     "SCHEMA_VERSION",
     "VISION_KINDS",
     "Anchors",
+    "Barometer",
     "Bundle",
     "Clock",
     "Command",
@@ -829,6 +830,30 @@ class Rangefinder(Message):
         _set(
             self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
             range_m=_float(self.range_m, "range_m", lo=0.0, nullable=True),
+            sigma_m=_float(self.sigma_m, "sigma_m", positive=True),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class Barometer(Message):
+    """A barometric altimeter's reading of one vehicle: ``<ns>/agent/<id>/barometer`` (a log's ``baro.csv``;
+    PX4's ``vehicle_air_data.baro_alt_meter``, a Crazyflie's ``baro.asl``): the altitude, up, on the
+    sensor's own datum, so with any constant offset from the nav frame's height (a receiver estimates it)."""
+
+    tick: int
+    """Tick ``k`` of the reading (>= 0)."""
+    t_s: float
+    """Time of the reading [s] (>= 0)."""
+    height_m: float | None
+    """Barometric altitude, up, with any constant offset [m] (finite, any sign); ``None`` when the sensor
+    has no reading, so a lockstep agent knows not to wait."""
+    sigma_m: float
+    """The reading's standard deviation [m] (> 0), the sensor's claim."""
+
+    def __post_init__(self) -> None:
+        _set(
+            self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0),
+            height_m=_float(self.height_m, "height_m", nullable=True),
             sigma_m=_float(self.sigma_m, "sigma_m", positive=True),
         )  # fmt: skip
 
@@ -1659,6 +1684,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         VisionBatch,
         Gnss,
         Rangefinder,
+        Barometer,
         Estimate,
         Guidance,
         Command,
@@ -1676,7 +1702,8 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
 """Every message class by its wire ``"type"``."""
 
 MESSAGE_FOR_KIND: dict[str, type[Message]] = {
-    "imu": Imu, "uwb": Uwb, "vision": Vision, "gnss": Gnss, "rangefinder": Rangefinder, "estimate": Estimate,
+    "imu": Imu, "uwb": Uwb, "vision": Vision, "gnss": Gnss, "rangefinder": Rangefinder,
+    "barometer": Barometer, "estimate": Estimate,
     "guidance": Guidance,
     "command": Command,
     "commands": CommandBatch,

@@ -114,8 +114,8 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
     if mission == "landing" and name == "world":  # swarm.world.landing: every UAV's sensors, then its clock
         return {
             "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/uwb", "agent/*/gnss",
-                                                "agent/*/rangefinder", "agent/*/vision", "agent/*/truth",
-                                                "world/clock", "world/event")),
+                                                "agent/*/rangefinder", "agent/*/barometer", "agent/*/vision",
+                                                "agent/*/truth", "world/clock", "world/event")),
             "declare_subscriber": (keys.agent_all("command"), keys.run_control(), keys.fault()),
             "liveliness_token": (f"{ns}/alive/world/*",),
             **watch,
@@ -125,7 +125,7 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         return {
             "put": (keys.estimate(uid), keys.guidance(uid), keys.command(uid), keys.event(uid)),
             "declare_subscriber": (keys.imu(uid), keys.uwb(uid), keys.gnss(uid), keys.rangefinder(uid),
-                                   keys.vision(uid), keys.world_event()),
+                                   keys.barometer(uid), keys.vision(uid), keys.world_event()),
             "liveliness_token": (keys.alive("agent", uid),),
             **watch,
         }  # fmt: skip

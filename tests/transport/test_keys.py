@@ -13,8 +13,8 @@ from swarm.errors import ConfigError
 from swarm.transport.keys import AGENT_KINDS, ID_PATTERN, Keys, check_id
 
 EXPECTED_AGENT_KINDS = (
-    "imu", "uwb", "vision", "gnss", "rangefinder", "estimate", "guidance", "command", "commands", "truth",
-    "event", "bundle",
+    "imu", "uwb", "vision", "gnss", "rangefinder", "barometer", "estimate", "guidance", "command", "commands",
+    "truth", "event", "bundle",
 )  # fmt: skip
 
 
@@ -30,6 +30,7 @@ def test_every_key_string_matches_the_protocol_table(ns):
     assert k.truth("A9") == f"{ns}/agent/A9/truth"
     assert k.gnss("A9") == f"{ns}/agent/A9/gnss"
     assert k.rangefinder("A9") == f"{ns}/agent/A9/rangefinder"
+    assert k.barometer("A9") == f"{ns}/agent/A9/barometer"
     assert k.event("chaser") == f"{ns}/agent/chaser/event"
     assert k.world_clock() == f"{ns}/world/clock"
     assert k.world_imu() == f"{ns}/world/imu"

@@ -34,6 +34,7 @@ from swarm.transport.messages import (
     MESSAGE_TYPES,
     SCHEMA_VERSION,
     Anchors,
+    Barometer,
     Bundle,
     Clock,
     Command,
@@ -105,6 +106,7 @@ VALID = {
     Fault: Fault("nlos_burst", 5.0, 12.5, None, 0.3),
     Gnss: Gnss(9, 0.2, [1.0, -2.0, 8.0], np.diag([1.0, 1.0, 2.25])),
     Rangefinder: Rangefinder(10, 0.1, 4.2, 0.03),
+    Barometer: Barometer(11, 0.1, -3.25, 0.5),  # any offset: below the datum too
 }  # fmt: skip
 
 SILENT = logging.getLogger("tests.transport.silent")
@@ -286,6 +288,7 @@ STRATEGIES = {
     Anchors: marked(3).map(lambda m: Anchors(m[1], m[0])),
     Gnss: st.builds(Gnss, ticks, times, vec(3), covs.map(lambda c: c[0:3, 0:3])),
     Rangefinder: st.builds(Rangefinder, ticks, times, st.none() | nonneg, st.floats(1e-6, 1e3)),
+    Barometer: st.builds(Barometer, ticks, times, st.none() | finite, st.floats(1e-6, 1e3)),
     RunControl: st.builds(RunControl, st.sampled_from(msgs.RUN_COMMANDS), st.none() | ticks),
     Fault: st.one_of(
         st.builds(Fault, st.sampled_from(("uwb_dropout", "camera_loss")), st.floats(1e-3, 1e3),
@@ -408,6 +411,13 @@ CASES = [
     (Rangefinder, "range_m", NAN, "range_m: not finite"),
     (Rangefinder, "sigma_m", 0.0, "sigma_m: must be > 0"),
     (Rangefinder, "sigma_m", DELETE, "sigma_m: missing"),
+    (Barometer, "height_m", NAN, "height_m: not finite"),
+    (Barometer, "height_m", INF, "height_m: not finite"),
+    (Barometer, "height_m", "92.5", "height_m: expected a number or nil"),
+    (Barometer, "height_m", DELETE, "height_m: missing"),
+    (Barometer, "sigma_m", 0.0, "sigma_m: must be > 0"),
+    (Barometer, "sigma_m", None, "sigma_m: expected a number"),
+    (Barometer, "t_s", -0.1, "t_s: must be >= 0"),
     (Imu, "tick", -1, "tick: must be >= 0, got -1"),
     (Imu, "tick", 1.5, "tick: expected an integer"),
     (Imu, "tick", True, "tick: expected an integer"),

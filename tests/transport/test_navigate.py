@@ -1,6 +1,7 @@
-"""``swarm navigate``: the log replay's filter as a process, fed by ``swarm replay DIR --zenoh`` (IMU, ranges
-and marker detections) over real Zenoh on loopback, gives the offline replay's estimates bit for bit, and
-publishes them and its events on the vehicle's keys (counted by an independent subscriber)."""
+"""``swarm navigate``: the log replay's filter as a process, fed by ``swarm replay DIR --zenoh`` (IMU, ranges,
+marker detections, range finder and barometer) over real Zenoh on loopback, gives the offline replay's
+estimates bit for bit, and publishes them and its events on the vehicle's keys (counted by an independent
+subscriber)."""
 
 from __future__ import annotations
 
@@ -20,13 +21,19 @@ from tests.transport.procs import Inbox, Procs, free_port, loopback, wait_until
 def test_a_navigator_on_replayed_sensors_gives_the_offline_replay_bit_for_bit(tmp_path):
     d = tmp_path / "log"
     # a live feed carries no per-detection sigma: both sides use log.toml's vision.sigma_m
-    # with a downward range finder too: height.csv goes over the wire as Rangefinder messages
+    # with a downward range finder and a barometer too: height.csv and baro.csv go over the wire as
+    # Rangefinder and Barometer messages (the barometer is off by default: both sides switch it on)
     spec = SyntheticSpec(
-        duration_s=12.0, vision_rate_hz=15.0, vision_sigma_columns=False, height_rate_hz=25.0
+        duration_s=12.0,
+        vision_rate_hz=15.0,
+        vision_sigma_columns=False,
+        height_rate_hz=25.0,
+        baro_rate_hz=20.0,
     )
     make_log(d, seed=5, spec=spec)
-    fault = {"faults.jump_at_s": 9.0}  # a forced divergence: the event and the recovery go out too
-    offline = replay_log(read_log(d, fault))
+    # a forced divergence: the event and the recovery go out too
+    settings = {"faults.jump_at_s": 9.0, "baro.enabled": True}
+    offline = replay_log(read_log(d, settings))
     ns, endpoint = f"nav-{free_port()}", loopback(free_port())
     keys = Keys(ns)
     inbox = Inbox("estimate", "event")
@@ -37,8 +44,8 @@ def test_a_navigator_on_replayed_sensors_gives_the_offline_replay_bit_for_bit(tm
         # the navigator listens; the feed and the test's subscriber connect to it
         nav = procs.start(
             [sys.executable, "-m", "swarm.cli.main", "navigate", str(d / "log.toml"), "--id", "uav",
-             "--namespace", ns, "--set", "faults.jump_at_s=9.0", "--delay", "2.0", "--until-idle", "1.5",
-             "--series", str(series), "--listen", endpoint]
+             "--namespace", ns, "--set", "faults.jump_at_s=9.0", "--set", "baro.enabled=true",
+             "--delay", "2.0", "--until-idle", "1.5", "--series", str(series), "--listen", endpoint]
         )  # fmt: skip
         with open_session(ZenohArgs(mode="peer", connect=(endpoint,))) as session:
             session.declare_subscriber(keys.estimate("uav"), on("estimate", Estimate))
@@ -59,6 +66,15 @@ def test_a_navigator_on_replayed_sensors_gives_the_offline_replay_bit_for_bit(tm
     assert "Traceback" not in out and "dropped (older than the filter) 0" in out and "undecodable 0" in out
     v = offline.summary()["vision"]
     assert v["accepted"] > 0 and f"vision accepted {v['accepted']} rejected {v['rejected']}," in out
+    # both height sensors fused, each reading with the replay's outcome (a barometer reading the navigator
+    # never got, or one fed with the feature off, would change these counts and the estimates below)
+    h = offline.summary()["height"]
+    rf, baro = h["rangefinder"], h["barometer"]
+    assert baro["accepted"] > 0 and rf["accepted"] > 0
+    assert (
+        f"rangefinder accepted {rf['accepted']} rejected {rf['rejected']}, "
+        f"barometer accepted {baro['accepted']} rejected {baro['rejected']}," in out
+    ), out
     rows = np.loadtxt(series, delimiter=",", skiprows=1)
     # the same samples in the same order through the same kernels: equal to the last bit
     assert np.array_equal(rows[:, 0], offline.t)
