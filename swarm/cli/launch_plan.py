@@ -149,6 +149,9 @@ def auto_launch_plan(
         raise ConfigError(f"a launch plan needs a vehicle count >= 1, got {n_vehicles!r}")
     if isinstance(n_cores, bool) or not isinstance(n_cores, int) or n_cores < 1:
         raise ConfigError(f"a launch plan needs a core count >= 1, got {n_cores!r}")
+    if vehicles_per_process is not None and not 1 <= vehicles_per_process <= HOST_MAX_VEHICLES:
+        raise ConfigError(f"--vehicles-per-process must be an integer in 1..{HOST_MAX_VEHICLES}, "
+                          f"got {vehicles_per_process}")  # fmt: skip
     crowded = n_vehicles > PROCESS_EACH_PER_CORE * n_cores
     chosen = []
     if vehicles_per_process is None:

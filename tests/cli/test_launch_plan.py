@@ -78,6 +78,14 @@ def test_a_plan_for_no_vehicles_or_no_cores_is_refused_naming_the_value(vehicles
         auto_launch_plan(vehicles, cores)
 
 
+@pytest.mark.parametrize("per_process", [0, HOST_MAX_VEHICLES + 1])
+def test_the_users_hosts_out_of_bounds_are_refused_as_the_flag(per_process):
+    with pytest.raises(
+        ConfigError, match=rf"--vehicles-per-process must be an integer in 1\.\.64, got {per_process}"
+    ):
+        auto_launch_plan(8, 2, vehicles_per_process=per_process)
+
+
 def test_the_cores_are_those_this_process_may_run_on(monkeypatch):
     import os
 
