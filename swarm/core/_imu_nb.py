@@ -394,14 +394,9 @@ def tdoa_row(X, anchor_a, anchor_b, ia, ib, lever, H):
 
 
 @njit(cache=True)
-def update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, sigma, PRM, work, res):
-    """One distance difference ``z`` [m] with white noise ``sigma`` [m] (:func:`tdoa_row`): refused when not
-    finite, gated on its squared Mahalanobis distance (``PRM_GATE``), underweighted past the Huber threshold
-    as a range is, then the scalar update. ``res`` receives ``(outcome, d2, nu, H P H^T)``; returns the
-    outcome."""
-    res[0], res[1], res[2] = REFUSED, 0.0, 0.0
-    if not (np.isfinite(z) and np.isfinite(sigma) and sigma > 0.0):
-        return REFUSED
+def tdoa_innovation(X, P, anchor_a, anchor_b, ia, ib, PRM, work):
+    """The predicted distance difference of :func:`tdoa_row` and ``H P H^T``; leaves ``H`` in ``work[0]``
+    and ``P H^T`` in ``work[1]`` for :func:`apply_scalar`."""
     n = P.shape[0]
     H, b = work[0], work[1]
     h = tdoa_row(X, anchor_a, anchor_b, ia, ib, PRM[PRM_LEVER : PRM_LEVER + 3], H)
@@ -413,6 +408,19 @@ def update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, sigma, PRM, work, res):
                 s += P[i, j] * H[j]
         b[i] = s
         hph += H[i] * s
+    return h, hph
+
+
+@njit(cache=True)
+def update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, sigma, PRM, work, res):
+    """One distance difference ``z`` [m] with white noise ``sigma`` [m] (:func:`tdoa_row`): refused when not
+    finite, gated on its squared Mahalanobis distance (``PRM_GATE``), underweighted past the Huber threshold
+    as a range is, then the scalar update. ``res`` receives ``(outcome, d2, nu, H P H^T)``; returns the
+    outcome."""
+    res[0], res[1], res[2] = REFUSED, 0.0, 0.0
+    if not (np.isfinite(z) and np.isfinite(sigma) and sigma > 0.0):
+        return REFUSED
+    h, hph = tdoa_innovation(X, P, anchor_a, anchor_b, ia, ib, PRM, work)
     nu = z - h
     r = sigma * sigma
     d2 = nu * nu / (hph + r)
@@ -428,25 +436,108 @@ def update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, sigma, PRM, work, res):
     return ACCEPTED
 
 
+TV_VAR, TV_C2, TV_HPH, TV_PRIOR = range(4)
+N_TV = 4
+"""An anchor pair's noise state (``TV`` (M, M, N_TV)): the white variance in use [m^2], the exponentially
+weighted means of its accepted squared innovations and of their ``H P H^T`` (NaN: none yet), the prior."""
+
+
 @njit(cache=True)
-def fuse_tdoa(X, P, PRM, RP, anchor_a, anchor_b, ia, ib, z, tv, work, res):
-    """One distance difference through :func:`update_tdoa` with the pair's adapted noise: ``tv`` (4,) is the
-    pair's ``(variance, E[nu^2], E[H P H^T], prior variance)`` (NaN means: none yet), adapted by covariance
-    matching on its accepted innovations as :func:`fuse_range` adapts a range's (``RP_ADAPT``), but only
-    upward from the prior, to ``RP_VAR_CEIL``: a TDoA pair's spread differs by anchors and grows in flight,
-    and its heavy tails would otherwise pull the estimate below the prior (measured: a divergence)."""
-    outcome = update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, math.sqrt(tv[0]), PRM, work, res)
-    if outcome == ACCEPTED and RP[RP_ADAPT] > 0.0:
+def _ess_now(RS, x):
+    """Anchor ``x``'s current worth of one innovation (:func:`_ess_weight`), without a new one."""
+    if RS[x, RS_E2] > 0.0 and np.isfinite(RS[x, RS_EPREV]):
+        rho = min(max(RS[x, RS_EE] / RS[x, RS_E2], 0.0), 0.95)
+        return (1.0 - rho * rho) / (1.0 + rho * rho)
+    return 1.0
+
+
+@njit(cache=True)
+def _ess_weight(RS, RP, x, e):
+    """Anchor ``x``'s signed normalised innovation ``e`` into its lag-1 autocorrelation (weighted means of
+    ``e_k e_{k-1}`` and ``e_k^2`` in ``RS``); returns the worth ``(1 - rho^2) / (1 + rho^2)`` of one
+    innovation in the window test (the AR(1) effective sample size, Wilks 2011 sec. 5.2.4; Isserlis)."""
+    w = 1.0
+    ep = RS[x, RS_EPREV]
+    al = RP[RP_ADAPT_ALPHA]
+    if np.isfinite(ep):
+        RS[x, RS_EE] += al * (e * ep - RS[x, RS_EE])
+        RS[x, RS_E2] += al * (e * e - RS[x, RS_E2])
+        if RS[x, RS_E2] > 0.0:
+            rho = min(max(RS[x, RS_EE] / RS[x, RS_E2], 0.0), 0.95)
+            w = (1.0 - rho * rho) / (1.0 + rho * rho)
+    else:
+        RS[x, RS_E2] = e * e
+    RS[x, RS_EPREV] = e
+    return w
+
+
+@njit(cache=True)
+def fuse_tdoa(X, P, PRM, RP, anchors, ridx, a, b, z, t, TV, RS, work, res):
+    """One distance difference ``z`` [m] of anchors ``a`` and ``b`` (indices into ``anchors`` (M, 3) and
+    ``ridx``) at ``t`` [s] through the robust TDoA model; returns the outcome and leaves ``(outcome, d2, nu,
+    weight)`` in ``res`` (``weight``: its worth of an independent innovation in the window test, -1 held
+    out). Each anchor's error enters as a difference (:func:`tdoa_row`), so the anchor, not the pair, is
+    what goes wrong, and the range model's per-anchor state ``RS`` serves (a TDoA log has no ranges):
+
+    1. **NLOS** (``RP_NLOS``): each anchor's CUSUM (:func:`_nlos_cusum`, as :func:`fuse_range`) takes the
+       normalised innovation ``e = nu / sqrt(S)`` with its sign in the difference, ``+e`` for ``b`` and
+       ``-e`` for ``a``: an anchor whose packets come late (NLOS: always long) drives its own sum up in every
+       pair and the other anchors' down. Each increment is weighted by the anchor's worth of an independent
+       innovation (item 4): an anchor is in a quarter of 200-400 differences a second whose errors
+       correlate over half a second, and unweighted sums of them cross the threshold on the anchor's own
+       (modelled) slow error. A difference with a held anchor is held out (rejected, out of the window).
+    2. **Gate, Huber and update** as :func:`update_tdoa`, with the pair's white variance ``TV[a, b]``.
+    3. **Noise adaptation** (``RP_ADAPT``): covariance matching on the pair's accepted innovations as
+       :func:`fuse_range` adapts a range's, but only upward from the prior (``[tdoa] sigma_m``), to
+       ``RP_VAR_CEIL``: a pair's spread grows in flight, and the heavy tails would otherwise pull it below
+       the prior (measured: a divergence).
+    4. **Effective sample size** (``RP_ESS``): per anchor, the lag-1 autocorrelation of its signed ``e``;
+       a difference is worth the smaller of its two anchors' ``(1 - rho^2) / (1 + rho^2)``."""
+    tv = TV[a, b]
+    res[0], res[1], res[2], res[3] = REFUSED, 0.0, 0.0, 1.0
+    var = tv[TV_VAR]
+    if not (np.isfinite(z) and np.isfinite(var) and var > 0.0):
+        return REFUSED
+    h, hph = tdoa_innovation(X, P, anchors[a], anchors[b], ridx[a], ridx[b], PRM, work)
+    nu = z - h
+    S = hph + var
+    d2 = nu * nu / S
+    e = nu / math.sqrt(S)
+    res[1], res[2] = d2, nu
+    if RP[RP_NLOS] > 0.0:
+        wa, wb = 1.0, 1.0
+        if RP[RP_ESS] > 0.0:
+            wa, wb = _ess_now(RS, a), _ess_now(RS, b)
+        held_a = _nlos_cusum(RS, RP, P, a, -e, t, ridx[a, 1], wa)
+        held_b = _nlos_cusum(RS, RP, P, b, e, t, ridx[b, 1], wb)
+        if held_a or held_b:
+            if held_a:
+                RS[a, RS_NLOS_RANGES] += 1.0
+            if held_b:
+                RS[b, RS_NLOS_RANGES] += 1.0
+            res[0], res[3] = REJECTED, -1.0
+            return REJECTED
+    if d2 > PRM[PRM_GATE]:
+        res[0] = REJECTED
+        return REJECTED
+    if RP[RP_ESS] > 0.0:
+        res[3] = min(_ess_weight(RS, RP, a, -e), _ess_weight(RS, RP, b, e))
+    r = var
+    k = PRM[PRM_HUBER]
+    if k > 0.0 and d2 > k * k:
+        r *= math.sqrt(d2) / k
+    apply_scalar(X, P, work, nu, hph + r)
+    if RP[RP_ADAPT] > 0.0:
         al = RP[RP_ADAPT_ALPHA]
-        nu, hph = res[2], res[3]
-        if np.isfinite(tv[1]):
-            tv[1] += al * (nu * nu - tv[1])
-            tv[2] += al * (hph - tv[2])
+        if np.isfinite(tv[TV_C2]):
+            tv[TV_C2] += al * (nu * nu - tv[TV_C2])
+            tv[TV_HPH] += al * (hph - tv[TV_HPH])
         else:
-            tv[1] = tv[0] + hph
-            tv[2] = hph
-        tv[0] = min(max(tv[1] - tv[2], tv[3]), RP[RP_VAR_CEIL])
-    return outcome
+            tv[TV_C2] = tv[TV_VAR] + hph
+            tv[TV_HPH] = hph
+        tv[TV_VAR] = min(max(tv[TV_C2] - tv[TV_HPH], tv[TV_PRIOR]), RP[RP_VAR_CEIL])
+    res[0] = ACCEPTED
+    return ACCEPTED
 
 
 # ------------------------------------------------------------------------------------------ log replay
@@ -498,11 +589,36 @@ RP_REOPEN_BARO_VAR = 17  # variance added to the barometer offset at a phase cha
 RP_BARO_INDEX = 18  # the barometer offset's error index (-1: none)
 RP_NLOS_MAX_HELD = 19  # at most this many anchors held out as NLOS at once
 RP_VIB_RATIO = 20  # landed when the vibration falls this many times below its level in flight
-N_RP = 21
+RP_LAND_HEIGHT = 21  # touchdown: the estimate under this height over the ground reference [m] (0: off)
+RP_LAND_SPEED = 22  # touchdown: its speed under this [m/s]
+RP_DESCENT_SPEED = 23  # touchdown: after descending faster than this [m/s] ...
+RP_DESCENT_S = 24  # ... at most this long before [s]
+RP_CLIMB_ACCEL = 25  # take-off: the vertical specific force over gravity by this [m/s^2] (0: off)
+RP_G_NORM = 26  # the magnitude of gravity [m/s^2]
+RP_PIN_VEL_VAR = 27  # while pinned: variance of the zero-velocity pseudo-measurement [(m/s)^2] (0: no pin)
+RP_PIN_Z_VAR = 28  # while pinned: variance of the height pseudo-measurement at the ground reference [m^2]
+RP_PIN_PERIOD = 29  # while pinned: the pseudo-measurements at most this often [s]
+RP_VIB_ACCEL_K = 30  # accelerometer noise density added per axis: this times the axis' vibration [sqrt(s)]
+N_RP = 31
 
 # PH: flight-phase detector state
-PH_VIB, PH_A0, PH_A1, PH_A2, PH_HAVE, PH_AIR, PH_SINCE, PH_PINNED, PH_AIR_VIB = range(9)
-N_PH = 9  # PH_PINNED: 1 while the vehicle stands on the ground: on its known pad, or where it landed
+(PH_VIB, PH_A0, PH_A1, PH_A2, PH_HAVE, PH_AIR, PH_SINCE, PH_PINNED, PH_AIR_VIB, PH_DESC_T, PH_FZ, PH_PIN_T,
+ PH_VX, PH_VY, PH_VZ, PH_ARMED, PH_TOUCH, PH_CHANGE_T, PH_VIB_AIR_SEEN, PH_NEAR, PH_M0, PH_M1, PH_M2, PH_H0,
+ PH_H1, PH_H2) = range(26)  # fmt: skip
+N_PH = 26
+VIB_MEAN_TAU_S = 0.01
+"""The vibration's power is taken around the specific force's mean over this [s] (what changes faster than
+~16 Hz: rotor vibration, not the flight's own accelerations)."""
+# PH_PINNED: 1 while the vehicle stands on the ground: on its known pad, or where it landed. PH_DESC_T: the
+# last time the estimate descended faster than RP_DESCENT_SPEED [s]; PH_FZ: the low-passed vertical specific
+# force over gravity [m/s^2]; PH_PIN_T: the last pin's time [s]; PH_VX..PH_VZ: each body axis' vibration
+# power, the slow mean of the lag-1 product of the specific force's deviations from its VIB_MEAN_TAU_S mean
+# [(m/s^2)^2] (PH_M0..PH_M2 that mean, PH_H0..PH_H2 the previous deviation); PH_ARMED: 1 when a rise of the
+# vibration may declare a take-off (the rotors stood still since the landing, or the log began); PH_TOUCH: 1
+# if the last landing was a touchdown; PH_CHANGE_T: the last change's time [s]; PH_VIB_AIR_SEEN: 1 once the
+# vibration rose over its threshold in this flight (so that its fall means something); PH_NEAR: 1 while
+# airborne near the ground on the way down or just after the take-off (under RP_LAND_HEIGHT, within
+# RP_DESCENT_S of a descent or of the change)
 
 # aux samples (height.csv, baro.csv) and AUX parameters
 AUX_HEIGHT, AUX_BARO = 0, 1
@@ -520,6 +636,39 @@ def robust_init(RS, sigma):
         RS[a, RS_C2] = np.nan
         RS[a, RS_EPREV] = np.nan
         RS[a, RS_NLOS_SINCE] = -np.inf
+
+
+@njit(cache=True)
+def _nlos_cusum(RS, RP, P, a, e, t, i1, w=1.0):
+    """Anchor ``a``'s one-sided CUSUM of NLOS (:func:`fuse_range`, item 1) on the normalised innovation
+    ``e`` at ``t``, its increment weighted by ``w`` (the innovation's worth of an independent one);
+    ``i1`` its offset's error index (re-opened at an offset change). Returns whether the anchor is held out
+    now."""
+    if t < RS[a, RS_GRACE_UNTIL]:
+        RS[a, RS_CUSUM] = 0.0  # re-converging after a recovery: large innovations are the filter's
+        return False
+    hc = RP[RP_CUSUM_H]
+    c = RS[a, RS_CUSUM] + w * (min(e, RP[RP_CUSUM_CLIP]) - RP[RP_CUSUM_K])
+    c = min(max(c, 0.0), 2.0 * hc)
+    RS[a, RS_CUSUM] = c
+    if RS[a, RS_NLOS] > 0.0:
+        if c < 0.5 * hc:
+            RS[a, RS_NLOS] = 0.0
+        elif t - RS[a, RS_NLOS_SINCE] > RP[RP_NLOS_MAX_S]:
+            RS[a, RS_NLOS] = 0.0
+            RS[a, RS_CUSUM] = 0.0
+            RS[a, RS_STEPS] += 1.0
+            if i1 >= 0:
+                P[i1, i1] += RP[RP_REOPEN_VAR]
+    elif c > hc:
+        held = 0
+        for b in range(RS.shape[0]):
+            held += RS[b, RS_NLOS] > 0.0
+        if held < RP[RP_NLOS_MAX_HELD]:
+            RS[a, RS_NLOS] = 1.0
+            RS[a, RS_NLOS_SINCE] = t
+            RS[a, RS_EPISODES] += 1.0
+    return RS[a, RS_NLOS] > 0.0
 
 
 @njit(cache=True)
@@ -558,34 +707,10 @@ def fuse_range(X, P, PRM, RP, anchor_pos, ridx, a, z, t, RS, work, res):
     d2 = nu * nu / S
     e = nu / math.sqrt(S)
     res[1], res[2] = d2, nu
-    if RP[RP_NLOS] > 0.0 and t < RS[a, RS_GRACE_UNTIL]:
-        RS[a, RS_CUSUM] = 0.0  # re-converging after a recovery: large innovations are the filter's
-    elif RP[RP_NLOS] > 0.0:
-        hc = RP[RP_CUSUM_H]
-        c = RS[a, RS_CUSUM] + min(e, RP[RP_CUSUM_CLIP]) - RP[RP_CUSUM_K]
-        c = min(max(c, 0.0), 2.0 * hc)
-        RS[a, RS_CUSUM] = c
-        if RS[a, RS_NLOS] > 0.0:
-            if c < 0.5 * hc:
-                RS[a, RS_NLOS] = 0.0
-            elif t - RS[a, RS_NLOS_SINCE] > RP[RP_NLOS_MAX_S]:
-                RS[a, RS_NLOS] = 0.0
-                RS[a, RS_CUSUM] = 0.0
-                RS[a, RS_STEPS] += 1.0
-                if i1 >= 0:
-                    P[i1, i1] += RP[RP_REOPEN_VAR]
-        elif c > hc:
-            held = 0
-            for b in range(RS.shape[0]):
-                held += RS[b, RS_NLOS] > 0.0
-            if held < RP[RP_NLOS_MAX_HELD]:
-                RS[a, RS_NLOS] = 1.0
-                RS[a, RS_NLOS_SINCE] = t
-                RS[a, RS_EPISODES] += 1.0
-        if RS[a, RS_NLOS] > 0.0:
-            RS[a, RS_NLOS_RANGES] += 1.0
-            res[0], res[3] = REJECTED, -1.0
-            return REJECTED
+    if RP[RP_NLOS] > 0.0 and _nlos_cusum(RS, RP, P, a, e, t, i1):
+        RS[a, RS_NLOS_RANGES] += 1.0
+        res[0], res[3] = REJECTED, -1.0
+        return REJECTED
     if d2 > PRM[PRM_GATE]:
         res[0] = REJECTED
         return REJECTED
@@ -624,30 +749,87 @@ def fuse_range(X, P, PRM, RP, anchor_pos, ridx, a, z, t, RS, work, res):
 @njit(cache=True)
 def phase_step(X, P, RP, PH, ridx, acc, dt, t):
     """The flight-phase detector on one IMU sample (specific force ``acc`` [m/s^2], ``dt`` [s] since the
-    previous one); returns +1 at a take-off, -1 at a landing, 0 otherwise. Airborne when the RMS change of
-    the specific force between samples (rotor vibration: ~0.01 m/s^2 standing, ~0.1 in flight on a small
-    quadrotor, DESIGN.md sec. 11; low-passed with ``RP_VIB_TAU``) exceeds ``RP_VIB_THRESHOLD``, or the
-    estimated height above the ground reference exceeds ``RP_TAKEOFF_HEIGHT``; a change holds for
-    ``RP_DWELL`` before it is declared (as PX4's land detector's hysteresis). Landed, too, when the vibration
-    falls ``RP_VIB_RATIO`` times below its own level in flight (``PH_AIR_VIB``, a slow mean taken while
-    airborne): the rotors stopped, even where they spun already before the take-off so that the level on
-    the ground says nothing, and whatever the estimate's height. At a change each anchor's
-    offset variance grows by ``RP_REOPEN_VAR``: the offsets move when the vehicle leaves or meets the
-    ground (DESIGN.md sec. 11), a step a slow random walk cannot follow; so does a barometer's offset
-    (``RP_REOPEN_BARO_VAR``)."""
+    previous one); returns +1 at a take-off, -1 at a landing, 0 otherwise. A change holds for ``RP_DWELL``
+    before it is declared (as PX4's land detector's hysteresis).
+
+    **Take-off** (on the ground): the RMS change of the specific force between samples (rotor vibration:
+    ~0.01 m/s^2 standing, ~0.1 in flight on a small quadrotor, DESIGN.md sec. 11; low-passed with
+    ``RP_VIB_TAU``) rises over ``RP_VIB_THRESHOLD`` (only once it stood under it since the landing:
+    ``PH_ARMED``, so rotors still spinning after a touchdown are not a take-off); or the estimated height
+    above the ground reference exceeds ``RP_TAKEOFF_HEIGHT``; or the vertical specific force (body specific
+    force less the accelerometer bias, turned to nav), low-passed as the vibration, exceeds gravity by
+    ``RP_CLIMB_ACCEL``: the vehicle accelerates upward, the one sign of a lift-off a pinned estimate
+    (:func:`pin_step`) cannot hide (not in the ``RP_DESCENT_S`` after a change: the contact's jolt).
+
+    **Landing** (airborne): the vibration falls ``RP_VIB_RATIO`` times below its own level in flight
+    (``PH_AIR_VIB``, a slow mean taken while airborne: the rotors stopped, whatever the estimate's height);
+    or neither take-off sign of the first two holds, if the vibration rose over its threshold in this
+    flight (where the rotors spin from the log's first sample it tells nothing); or a **touchdown**: the
+    estimate, which descended faster than ``RP_DESCENT_SPEED`` at most ``RP_DESCENT_S`` ago, is within two
+    of its sigmas of ``RP_LAND_HEIGHT`` over the ground reference (it may stand on the ground) and its
+    vertical speed under ``RP_LAND_SPEED`` (a descent
+    stopped near the ground: the IMU's deceleration at the contact is in the estimate's velocity before any
+    radio measurement; PX4's land detector tests the vertical velocity the same way). After a touchdown
+    the vehicle is pinned (``PH_TOUCH``).
+
+    At a change each anchor's offset variance grows by ``RP_REOPEN_VAR``: the offsets move when the vehicle
+    leaves or meets the ground (DESIGN.md sec. 11), a step a slow random walk cannot follow; so does a
+    barometer's offset (``RP_REOPEN_BARO_VAR``). Each body axis' vibration variance is kept too (a slow
+    mean, ``PH_VX``..``PH_VZ``) for :func:`vibration_noise`: the lag-1 autocovariance of its deviations
+    from its own ``VIB_MEAN_TAU_S`` mean, which a white sensor noise leaves at zero (successive samples
+    independent) and the rotors' vibration, sampled many times a cycle, at its power."""
     if RP[RP_PHASES] <= 0.0:
         return 0
-    if PH[PH_HAVE] > 0.0 and dt > 0.0:
+    have = PH[PH_HAVE] > 0.0 and dt > 0.0
+    g = 0.0
+    if have:
         d0, d1, d2 = acc[0] - PH[PH_A0], acc[1] - PH[PH_A1], acc[2] - PH[PH_A2]
         g = 1.0 - math.exp(-dt / RP[RP_VIB_TAU])
         PH[PH_VIB] += g * ((d0 * d0 + d1 * d1 + d2 * d2) / 6.0 - PH[PH_VIB])  # per axis, diff var = 2 s^2
+        gs = 1.0 - math.exp(-dt / (10.0 * RP[RP_VIB_TAU]))
+        gm = 1.0 - math.exp(-dt / VIB_MEAN_TAU_S)
+        for i in range(3):
+            PH[PH_M0 + i] += gm * (acc[i] - PH[PH_M0 + i])
+            h = acc[i] - PH[PH_M0 + i]
+            PH[PH_VX + i] += gs * (h * PH[PH_H0 + i] - PH[PH_VX + i])
+            PH[PH_H0 + i] = h
+    elif PH[PH_HAVE] <= 0.0:
+        PH[PH_M0], PH[PH_M1], PH[PH_M2] = acc[0], acc[1], acc[2]
     PH[PH_A0], PH[PH_A1], PH[PH_A2], PH[PH_HAVE] = acc[0], acc[1], acc[2], 1.0
+    _, _, _, _, _, _, r20, r21, r22 = qmat9(X[XQ], X[XQ + 1], X[XQ + 2], X[XQ + 3])
+    fz = r20 * (acc[0] - X[XBA]) + r21 * (acc[1] - X[XBA + 1]) + r22 * (acc[2] - X[XBA + 2]) - RP[RP_G_NORM]
+    PH[PH_FZ] += g * (fz - PH[PH_FZ])
+    if X[XV + 2] < -RP[RP_DESCENT_SPEED]:
+        PH[PH_DESC_T] = t
     vib = math.sqrt(PH[PH_VIB])
-    air = vib > RP[RP_VIB_THRESHOLD]
-    hmin = RP[RP_TAKEOFF_HEIGHT]
-    if hmin > 0.0 and X[XP + 2] - RP[RP_GROUND_Z] > hmin:
-        air = True
     now = PH[PH_AIR] > 0.0
+    if not now and vib <= RP[RP_VIB_THRESHOLD]:
+        PH[PH_ARMED] = 1.0
+    height = X[XP + 2] - RP[RP_GROUND_Z]
+    hmin = RP[RP_TAKEOFF_HEIGHT]
+    high = hmin > 0.0 and height > hmin
+    shaking = vib > RP[RP_VIB_THRESHOLD]
+    if now and shaking:
+        PH[PH_VIB_AIR_SEEN] = 1.0
+    if now:  # quiet and low lands only where the vibration told the flight from the ground
+        air = shaking or high or PH[PH_VIB_AIR_SEEN] <= 0.0
+    else:
+        air = (shaking and PH[PH_ARMED] > 0.0) or high
+        if (
+            RP[RP_CLIMB_ACCEL] > 0.0
+            and PH[PH_FZ] > RP[RP_CLIMB_ACCEL]
+            and t - PH[PH_CHANGE_T] > RP[RP_DESCENT_S]  # not the contact's own jolt
+        ):
+            air = True
+    touch = False
+    sz = math.sqrt(max(P[EP + 2, EP + 2], 0.0))
+    low = RP[RP_LAND_HEIGHT] > 0.0 and height - 2.0 * sz < RP[RP_LAND_HEIGHT]
+    landing = t - PH[PH_DESC_T] <= RP[RP_DESCENT_S]
+    PH[PH_NEAR] = 1.0 if now and low and (landing or t - PH[PH_CHANGE_T] <= RP[RP_DESCENT_S]) else 0.0
+    if now and low and landing:
+        touch = abs(X[XV + 2]) < RP[RP_LAND_SPEED]
+    if touch:
+        air = False
     if PH[PH_AIR_VIB] > 0.0 and vib * RP[RP_VIB_RATIO] < math.sqrt(PH[PH_AIR_VIB]):
         air = False  # the rotors stopped (after a flight): whatever the estimate's height says
     elif now and dt > 0.0:
@@ -663,8 +845,15 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
     PH[PH_AIR] = 1.0 if air else 0.0
     PH[PH_SINCE] = -1.0
     PH[PH_PINNED] = 0.0 if air else 1.0
+    PH[PH_TOUCH] = 1.0 if touch else 0.0
+    PH[PH_CHANGE_T] = t
+    PH[PH_FZ] = 0.0
     if air:
         PH[PH_AIR_VIB] = PH[PH_VIB]  # the flight's level starts from the take-off's
+        PH[PH_ARMED] = 0.0
+        PH[PH_VIB_AIR_SEEN] = 1.0 if shaking else 0.0
+    elif vib > RP[RP_VIB_THRESHOLD]:
+        PH[PH_ARMED] = 0.0  # the rotors still spin: a take-off needs them to stop and start again
     for a in range(ridx.shape[0]):
         i1 = ridx[a, 1]
         if i1 >= 0:
@@ -673,6 +862,87 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
     if ib >= 0:  # the rotors' downwash moves a barometer's reading at take-off as much as a metre
         P[ib, ib] += RP[RP_REOPEN_BARO_VAR]
     return 1 if air else -1
+
+
+@njit(cache=True)
+def in_window(PH):
+    """Whether a gated sample enters the divergence test's window: not while the vehicle stands on the
+    ground (``PH_PINNED``: measurements that disagree there are bad, not the estimate), nor while a phase
+    change waits out its dwell, nor near the ground on the way down or just after the take-off
+    (``PH_NEAR``): there the radio goes bad (the UTIL TDoA logs: 0.4-0.6 m off under 0.2 m of height, ~3 m
+    on the ground), and the recovery would open the covariance to it."""
+    return PH[PH_PINNED] == 0.0 and PH[PH_SINCE] < 0.0 and PH[PH_NEAR] == 0.0
+
+
+@njit(cache=True)
+def pin_step(X, P, RP, PH, t, work):
+    """While the vehicle stands on the ground where it is known to stand (``PH_PINNED`` and ``PH_TOUCH``: on
+    its known pad before the take-off, or after a touchdown), at most every ``RP_PIN_PERIOD``: zero velocity
+    (variance ``RP_PIN_VEL_VAR`` per axis) and the height of the ground reference (``RP_PIN_Z_VAR``; 0: not
+    used) as scalar pseudo-measurements. A zero-velocity update (Foxlin 2005, the pedestrian ZUPT; PX4's EKF2
+    fuses a zero velocity when landed without aiding): a vehicle standing cannot move, so the IMU's errors
+    and the biases are observed, and the covariance stays as tight as the pad is known, which holds the
+    radio measurements that disagree out at the gate. The height: a touchdown is declared only near the
+    ground reference's height (:func:`phase_step`), and the vehicle stands on that ground. Not while a
+    take-off waits out its dwell or the vertical specific force says it climbs."""
+    if RP[RP_PIN_VEL_VAR] <= 0.0 or PH[PH_PINNED] <= 0.0 or PH[PH_TOUCH] <= 0.0:
+        return
+    if PH[PH_SINCE] >= 0.0 or (RP[RP_CLIMB_ACCEL] > 0.0 and PH[PH_FZ] > RP[RP_CLIMB_ACCEL]):
+        return  # a take-off may be under way: the IMU alone says how far it went
+    if t - PH[PH_PIN_T] < RP[RP_PIN_PERIOD]:
+        return
+    PH[PH_PIN_T] = t
+    n = P.shape[0]
+    b = work[1]
+    for k in range(4):
+        if k < 3:
+            idx, nu, var = EV + k, -X[XV + k], RP[RP_PIN_VEL_VAR]
+        else:
+            idx, nu, var = EP + 2, RP[RP_GROUND_Z] - X[XP + 2], RP[RP_PIN_Z_VAR]
+            if var <= 0.0:
+                break
+        for i in range(n):
+            b[i] = P[i, idx]
+        apply_scalar(X, P, work, nu, P[idx, idx] + var)
+
+
+@njit(cache=True)
+def predict_step(X, P, gyro, acc, dt, PRM, RP, PH):
+    """:func:`predict_one` and the vibration's accelerometer noise (:func:`vibration_noise`) over ``dt``: the
+    prediction of the replay loop, its vision pauses and the live navigator. Returns predict_one's."""
+    ok = predict_one(X, P, gyro, acc, dt, PRM)
+    if ok:
+        vibration_noise(X, P, RP, PH, dt)
+    return ok
+
+
+@njit(cache=True)
+def vibration_noise(X, P, RP, PH, dt):
+    """The accelerometer noise the rotors' vibration adds over ``dt`` [s]: per body axis a white density of
+    ``RP_VIB_ACCEL_K`` times that axis' vibration power (``PH_VX``..``PH_VZ``, :func:`phase_step`), turned to
+    nav, ``R diag(q) R^T dt`` on the velocity block (``Q_i``'s ``V_i`` of Sola
+    2017 sec. 5.4.3, per axis). A vibrating MEMS accelerometer does not average its vibration out: the
+    rectified part (clipping, its nonlinearity: IEEE Std 1293-1998 annex, vibration rectification) is a slow
+    error that grows with the vibration's power (measured on the development TDoA flights, docs/logs.md)."""
+    k = RP[RP_VIB_ACCEL_K]
+    if k <= 0.0 or dt <= 0.0:
+        return
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = qmat9(X[XQ], X[XQ + 1], X[XQ + 2], X[XQ + 3])
+    k2 = k * k * dt
+    v0, v1, v2 = max(PH[PH_VX], 0.0), max(PH[PH_VY], 0.0), max(PH[PH_VZ], 0.0)
+    q0, q1, q2 = k2 * v0 * v0, k2 * v1 * v1, k2 * v2 * v2
+    P[EV, EV] += r00 * r00 * q0 + r01 * r01 * q1 + r02 * r02 * q2
+    P[EV + 1, EV + 1] += r10 * r10 * q0 + r11 * r11 * q1 + r12 * r12 * q2
+    P[EV + 2, EV + 2] += r20 * r20 * q0 + r21 * r21 * q1 + r22 * r22 * q2
+    c01 = r00 * r10 * q0 + r01 * r11 * q1 + r02 * r12 * q2
+    c02 = r00 * r20 * q0 + r01 * r21 * q1 + r02 * r22 * q2
+    c12 = r10 * r20 * q0 + r11 * r21 * q1 + r12 * r22 * q2
+    P[EV, EV + 1] += c01
+    P[EV + 1, EV] += c01
+    P[EV, EV + 2] += c02
+    P[EV + 2, EV] += c02
+    P[EV + 1, EV + 2] += c12
+    P[EV + 2, EV + 1] += c12
 
 
 @njit(cache=True)
@@ -710,19 +980,21 @@ def replay(
     ST, counts, win_rej, win_d2, win_w, win_all, nis_limit, reject_share_max, last_range, last_range_t,
     out_every, out_t, out_X, out_P, nis_t, nis_anchor, nis_d2, nis_outcome,
 ):  # fmt: skip
-    """Run the filter over a log from the cursors in ``ST`` until its end (returns ``EV_DONE``), a
-    divergence (``EV_DIVERGED``, the cursors left after the range that declared it, for the caller to
-    recover and call again) or the first sample after ``t_stop`` (``EV_PAUSE``). Samples are processed in
-    time order (at one time: IMU, range, TDoA, then height samples); an IMU sample is held over the
-    interval that follows it (zero-order hold), so the filter predicts to each sample's own time stamp.
-    Ranges go through :func:`fuse_range`, distance differences through :func:`update_tdoa` (white noise
-    per pair in ``TV`` (M, M, 3), :func:`fuse_tdoa`; outcomes per anchor pair in ``tdoa_counts`` (M, M, 3);
-    they enter the divergence
-    window as ranges do), heights through :func:`fuse_aux`, and each IMU sample through the phase detector
-    (:func:`phase_step`; a change is written to ``phase_t``/``phase_air``). While the vehicle stands on the
-    ground (``PH_PINNED``: on its known pad before its first take-off, or where it landed), gated samples
-    stay out of the divergence window: it stands still, so measurements that disagree are bad (a tag on
-    the ground, a TDoA engine not yet in sync), not the estimate."""
+    """Run the filter over a log from the cursors in ``ST`` until its end (returns ``EV_DONE``), a divergence
+    (``EV_DIVERGED``, the cursors left after the range that declared it, for the caller to recover and call
+    again) or the first sample after ``t_stop`` (``EV_PAUSE``). Samples are processed in time order (at one
+    time: IMU, range, TDoA, then height samples); an IMU sample is held over the interval that follows it
+    (zero-order hold), so the filter predicts to each sample's own time stamp. Ranges go through
+    :func:`fuse_range`, distance differences through :func:`fuse_tdoa` (white noise per pair in ``TV`` (M, M,
+    N_TV), the per-anchor NLOS and correlation state in ``RS``; outcomes per anchor pair in ``tdoa_counts``
+    (M, M, 3); they enter the divergence window as ranges do), heights through :func:`fuse_aux`, and each IMU
+    sample through the phase detector (:func:`phase_step`; a change is written to ``phase_t``/``phase_air``: 1
+    a take-off, 0 a landing, -1 a touchdown) and the pin (:func:`pin_step`); each prediction adds the
+    vibration's accelerometer noise (:func:`predict_step`). While the vehicle stands on the ground
+    (``PH_PINNED``: on its known pad before its first take-off, or where it landed) or a phase change waits
+    out its dwell, gated samples stay out of the divergence window (:func:`in_window`): it stands still, so
+    measurements that disagree are bad (a tag on the ground, a TDoA engine not yet in sync), not the
+    estimate."""
     n_imu, n_rng, n_aux, n_td = imu_t.shape[0], rng_t.shape[0], aux_t.shape[0], tdoa_t.shape[0]
     n = P.shape[0]
     work = np.empty((3, n))
@@ -755,7 +1027,7 @@ def replay(
         dt = t - tcur
         if ST[ST_HELD] >= 0:
             h = ST[ST_HELD]
-            if not predict_one(X, P, imu_gyro[h], imu_acc[h], dt, PRM):
+            if not predict_step(X, P, imu_gyro[h], imu_acc[h], dt, PRM, RP, PH):
                 ST[ST_IMU_REFUSED] += 1
         tcur = t
         if kind == 0:
@@ -767,8 +1039,9 @@ def replay(
             )
             if ch != 0 and ST[ST_N_PHASE] < phase_t.shape[0]:
                 phase_t[ST[ST_N_PHASE]] = t
-                phase_air[ST[ST_N_PHASE]] = 1 if ch > 0 else 0
+                phase_air[ST[ST_N_PHASE]] = 1 if ch > 0 else (-1 if PH[PH_TOUCH] > 0.0 else 0)
                 ST[ST_N_PHASE] += 1
+            pin_step(X, P, RP, PH, t, work)
             if i % out_every == 0 and ST[ST_I_OUT] < out_t.shape[0]:
                 o = ST[ST_I_OUT]
                 out_t[o] = t
@@ -785,14 +1058,13 @@ def replay(
         if kind == 3:
             ST[ST_I_TDOA] += 1
             a, b = tdoa_a[u], tdoa_b[u]
-            outcome = fuse_tdoa(
-                X, P, PRM, RP, anchors[a], anchors[b], ridx[a], ridx[b], tdoa_z[u], TV[a, b], work, res
-            )
+            outcome = fuse_tdoa(X, P, PRM, RP, anchors, ridx, a, b, tdoa_z[u], t, TV, RS, work, res)
             tdoa_d2[u], tdoa_outcome[u] = res[1], outcome
             tdoa_counts[a, b, outcome] += 1
             if (
                 outcome != REFUSED
-                and PH[PH_PINNED] == 0.0
+                and res[3] >= 0.0
+                and in_window(PH)
                 and window_push(
                     win_rej,
                     win_d2,
@@ -802,7 +1074,7 @@ def replay(
                     outcome,
                     res[1],
                     res[2],
-                    1.0,
+                    res[3],
                     nis_limit,
                     reject_share_max,
                 )
@@ -823,7 +1095,7 @@ def replay(
         last_range[a], last_range_t[a] = rng_z[j], t
         if (
             res[3] >= 0.0
-            and PH[PH_PINNED] == 0.0
+            and in_window(PH)
             and window_push(
                 win_rej,
                 win_d2,

@@ -70,6 +70,15 @@ class ImuFilterParams:
     ``real-crazyflie`` profile (NEES 4.6); 0.05 m made both conservative (NEES ~1), 0.01 m overconfident."""
     range_gm_tau_s: float = 1.0
     """Its correlation time [s] (0.5-2 s held on real flights)."""
+    accel_vibration_k: float = 0.8
+    """Accelerometer noise the rotors' vibration adds: per body axis a white density of this times that
+    axis' vibration power (the lag-1 autocovariance of the specific force around its 10 ms mean, a slow
+    mean: zero for a white sensor noise) [s^2.5/m] (0: none; :func:`swarm.core._imu_nb.vibration_noise`).
+    The error a vibrating accelerometer rectifies grows with the vibration's power (a second-order
+    nonlinearity: IEEE Std 1293-1998 annex). 0.8: the development TDoA flights (power 0.05-0.27 (m/s^2)^2,
+    0.9-2.0 on the faulty accelerometer of 0425 traj1-16: 0.04-0.2 and 0.7-1.6 m/s^2/sqrt(Hz), where their
+    accelerometers' errors against the truth's acceleration measured 0.1-0.2 and 0.7-0.8) and the
+    development hover (0.02-0.04: 0.01-0.03, beside its measured 0.02-0.04)."""
     baro_offset_rw: float = 0.01
     """The barometer offset's random walk [m/sqrt(s)] (a state only when a log has ``baro.csv``)."""
     gravity_nav: tuple[float, float, float] = (0.0, 0.0, -9.81)
@@ -90,7 +99,8 @@ class ImuFilterParams:
 
     def __post_init__(self) -> None:
         for name in ("accel_noise", "gyro_noise", "accel_bias_rw", "gyro_bias_rw", "range_bias_rw",
-                     "range_common_offset_rw", "range_gm_sigma_m", "baro_offset_rw"):  # fmt: skip
+                     "range_common_offset_rw", "range_gm_sigma_m", "baro_offset_rw",
+                     "accel_vibration_k"):  # fmt: skip
             v = getattr(self, name)
             if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0.0):
                 raise ConfigError(f"estimator.{name} must be a finite number >= 0, got {v!r}")
@@ -200,13 +210,42 @@ class PhaseParams:
     measured at take-off on real anchors, DESIGN.md sec. 11)."""
     reopen_baro_sigma_m: float = 1.0
     """Standard deviation added to the barometer's offset at a change [m] (rotor downwash)."""
+    land_height_m: float = 0.15
+    """Touchdown: a descent stopped under this height over the ground reference [m], less two sigmas of the
+    estimate's height, is a landing (0: no touchdown rule): the landing gear's play and the pad's survey;
+    the sigmas, because without a range finder the radio's height is off by 0.2-0.5 m at the ground (the
+    UTIL TDoA logs' last half metre). A hover this low is not a touchdown unless it follows a descent."""
+    land_speed_m_s: float = 0.3
+    """Touchdown: the estimate's vertical speed under this [m/s] (the contact stops the vehicle; the IMU
+    sees it)."""
+    descent_speed_m_s: float = 0.35
+    """Touchdown: after the estimate descended faster than this [m/s] (a Crazyflie lands at 0.4-0.8 m/s; a
+    hover's estimate wanders at up to 0.2 m/s without a range finder) ..."""
+    descent_s: float = 1.0
+    """... at most this long before [s]; and no take-off by the climb this long after a change (the
+    contact's jolt)."""
+    climb_accel_m_s2: float = 0.3
+    """Take-off from the ground: the vertical specific force over gravity by this [m/s^2] (low-passed as the
+    vibration, held for the dwell; 0: not used). A lift-off accelerates at 0.2-0.9 m/s^2 (UTIL flights); on
+    the ground, rotors spinning, it spreads ~0.1 m/s^2."""
+    pin_velocity_sigma_m_s: float = 0.02
+    """While standing where it is known to stand (the pad before take-off, or after a touchdown): a zero
+    velocity of this sigma per axis every ``pin_period_s`` (0: no pin)."""
+    pin_height_sigma_m: float = 0.0
+    """With it, the height of the ground reference with this sigma [m] (0: velocity only, the default: on
+    the development hover a height pin at the pad's surveyed height took its NEES band share from 89 % to
+    84 %, and the TDoA flights gain nothing from it)."""
+    pin_period_s: float = 0.01
+    """The pin's pseudo-measurements at most this often [s]."""
 
     def __post_init__(self) -> None:
-        for name in ("vibration_tau_s", "vibration_ratio", "dwell_s"):
+        for name in ("vibration_tau_s", "vibration_ratio", "dwell_s", "descent_s", "pin_period_s"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and np.isfinite(v) and v > 0.0):
                 raise ConfigError(f"phases.{name} must be a finite number > 0, got {v!r}")
-        for name in ("takeoff_height_m", "reopen_sigma_m", "reopen_baro_sigma_m"):
+        for name in ("takeoff_height_m", "reopen_sigma_m", "reopen_baro_sigma_m", "land_height_m",
+                     "land_speed_m_s", "descent_speed_m_s", "climb_accel_m_s2", "pin_velocity_sigma_m_s",
+                     "pin_height_sigma_m"):  # fmt: skip
             v = getattr(self, name)
             if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0.0):
                 raise ConfigError(f"phases.{name} must be a finite number >= 0, got {v!r}")
@@ -220,10 +259,23 @@ def robust_vector(
     baro_index: int = -1,
     n_anchors: int = 8,
     ground_vibration_m_s2: float = np.inf,
+    accel_vibration_k: float = 0.0,
+    g_norm_m_s2: float = 9.81,
 ):
     """The kernels' ``RP`` vector (:mod:`swarm.core._imu_nb`, ``RP_*``); ``ground_vibration_m_s2`` is the
-    vibration level standing still (:func:`vibration_level`; infinite: not used)."""
+    vibration level standing still (:func:`vibration_level`; infinite: not used); ``accel_vibration_k``
+    the estimator's (:attr:`ImuFilterParams.accel_vibration_k`), ``g_norm_m_s2`` gravity's magnitude."""
     rp = np.zeros(nb.N_RP)
+    rp[nb.RP_LAND_HEIGHT] = phases.land_height_m
+    rp[nb.RP_LAND_SPEED] = phases.land_speed_m_s
+    rp[nb.RP_DESCENT_SPEED] = phases.descent_speed_m_s
+    rp[nb.RP_DESCENT_S] = phases.descent_s
+    rp[nb.RP_CLIMB_ACCEL] = phases.climb_accel_m_s2
+    rp[nb.RP_G_NORM] = g_norm_m_s2
+    rp[nb.RP_PIN_VEL_VAR] = phases.pin_velocity_sigma_m_s**2
+    rp[nb.RP_PIN_Z_VAR] = phases.pin_height_sigma_m**2
+    rp[nb.RP_PIN_PERIOD] = phases.pin_period_s
+    rp[nb.RP_VIB_ACCEL_K] = accel_vibration_k
     rp[nb.RP_NLOS_MAX_HELD] = max(1, int(robust.nlos_max_held_share * n_anchors))
     rp[nb.RP_REOPEN_BARO_VAR] = phases.reopen_baro_sigma_m**2
     rp[nb.RP_BARO_INDEX] = baro_index

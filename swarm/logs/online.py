@@ -34,7 +34,16 @@ from swarm.core import rotations as rot
 from swarm.core.imu_filter import ImuFilter, divergence_limits
 from swarm.errors import ConfigError
 from swarm.logs.reader import Log, LogConfig
-from swarm.logs.replay import _Window, aux_streams, build_filter, jump, recover, robust_state, tdoa_noise
+from swarm.logs.replay import (
+    _Window,
+    aux_streams,
+    build_filter,
+    jump,
+    phase_event,
+    recover,
+    robust_state,
+    tdoa_noise,
+)
 
 _IMU, _UWB, _TDOA, _HEIGHT, _BARO, _VISION = 0, 1, 2, 3, 4, 5  # samples of one time in the replay's order
 
@@ -212,6 +221,8 @@ class OnlineNavigator:
         )
         log.height_t, log.height_range = np.array([s[0] for s in hgt]), np.array([s[3] for s in hgt])
         log.baro_t, log.baro_height = np.array([s[0] for s in bar]), np.array([s[3] for s in bar])
+        # a TDoA log's range-error model (replay.is_tdoa) when distance differences came before the start
+        log.tdoa_t = np.array([s[0] for s in self._kept if s[1] == _TDOA])
         f, cal, self._correction = build_filter(log)
         self.f = f
         prm = self.config.estimator
@@ -249,7 +260,8 @@ class OnlineNavigator:
             return
         X, P, prm = self.X, self.P, self.f.prm
         if kind == _VISION:  # swarm.logs.replay._Vision.update: predict only over a positive interval
-            if self._held and t > self.t and not nb.predict_one(X, P, self._gyro, self._acc, t - self.t, prm):
+            RP, PH, dt = self._RP, self._PH, t - self.t
+            if self._held and dt > 0.0 and not nb.predict_step(X, P, self._gyro, self._acc, dt, prm, RP, PH):
                 self.imu_refused += 1
             self.t = t
             m, xyz = data
@@ -258,7 +270,8 @@ class OnlineNavigator:
             outcome = nb.update_pad_one(X, P, marker, self._cam, self._R_bc, xyz, self._vision_cov, gate, res)
             self.vision_counts[outcome] += 1
             return
-        if self._held and not nb.predict_one(X, P, self._gyro, self._acc, t - self.t, prm):
+        RP, PH = self._RP, self._PH
+        if self._held and not nb.predict_step(X, P, self._gyro, self._acc, t - self.t, prm, RP, PH):
             self.imu_refused += 1
         self.t = t
         f = self.f
@@ -268,7 +281,9 @@ class OnlineNavigator:
             self._gyro, self._acc, self._held, self._held_t = g, a, True, t
             ch = nb.phase_step(X, P, self._RP, self._PH, f.ridx, a, dt, t)
             if ch != 0:
-                self.events.append({"t_s": float(t), "kind": "takeoff" if ch > 0 else "landing"})
+                touch = ch < 0 and self._PH[nb.PH_TOUCH] > 0.0
+                self.events.append(phase_event(float(t), 1 if ch > 0 else (-1 if touch else 0)))
+            nb.pin_step(X, P, self._RP, self._PH, t, self._work)
             if tick % self.config.output_every == 0:
                 self._estimate(t, tick)
             return
@@ -276,13 +291,12 @@ class OnlineNavigator:
             a, b, z = data
             w = self._win
             outcome = nb.fuse_tdoa(
-                X, P, prm, self._RP, f.anchors[a], f.anchors[b], f.ridx[a], f.ridx[b], z, self._TV[a, b],
-                self._work, self._res,
-            )  # fmt: skip
+                X, P, prm, self._RP, f.anchors, f.ridx, a, b, z, t, self._TV, self._RS, self._work, self._res
+            )
             self.tdoa_counts[a, b, outcome] += 1
-            if outcome != nb.REFUSED and self._PH[nb.PH_PINNED] == 0.0 and nb.window_push(
-                w.rej, w.d2, w.w, w.all, self._ST, outcome, self._res[1], self._res[2], 1.0, self._limits,
-                self.config.estimator.reject_share_max,
+            if outcome != nb.REFUSED and self._res[3] >= 0.0 and nb.in_window(self._PH) and nb.window_push(
+                w.rej, w.d2, w.w, w.all, self._ST, outcome, self._res[1], self._res[2], self._res[3],
+                self._limits, self.config.estimator.reject_share_max,
             ):  # fmt: skip
                 self.events.append(
                     recover(f, self.config, t, w, self._last_range, self._last_range_t, self._RS)
@@ -307,7 +321,7 @@ class OnlineNavigator:
         self._d2 = float(self._res[1])
         self._last_range[k], self._last_range_t[k] = z, t
         cfg, w = self.config, self._win
-        if self._res[3] >= 0.0 and self._PH[nb.PH_PINNED] == 0.0 and nb.window_push(
+        if self._res[3] >= 0.0 and nb.in_window(self._PH) and nb.window_push(
             w.rej, w.d2, w.w, w.all, self._ST, outcome, self._res[1], self._res[2], self._res[3],
             self._limits,
             cfg.estimator.reject_share_max,

@@ -249,13 +249,35 @@ class TdoaLog:
 
     enabled: bool = True
     """Fuse ``tdoa.csv`` when the log has one."""
-    sigma_m: float = 0.3
-    """Their white noise [m]: the Crazyflie firmware's default for TDoA2 and TDoA3 alike; the development
-    TDoA2 flights' residuals spread 0.2-0.5 m per pair (1.4826 MAD)."""
+    sigma_m: float = 0.1
+    """Their white noise [m], each pair's prior (adapted upward in flight). The development TDoA flights'
+    residuals against the truth spread 0.2-0.5 m per pair (1.4826 MAD), but almost all of it is each
+    anchor's slow error (``gm_sigma_m``): two rows of one pair within 60 ms differ by 0.07 m RMS / sqrt(2)
+    (the white part; the Crazyflie firmware's 0.3 m takes all of it as white)."""
+    gm_sigma_m: float = 0.15
+    """A TDoA log's per-anchor Gauss-Markov range error (``[estimator] range_gm`` with this stationary
+    sigma [m], in place of ``range_gm_sigma_m``): each anchor's error as its differences carry it, 0.1-0.3 m
+    per anchor on the development flights (0.2 s bins of their residuals solved for one error per anchor)."""
+    gm_tau_s: float = 0.5
+    """Its correlation time [s] (those anchor errors correlate 0.5-0.8 at 0.2 s, 0.3-0.5 at 0.4 s, 0.1-0.3
+    at 1 s), in place of ``range_gm_tau_s``."""
+    cusum_k: float = 2.0
+    """A TDoA log's NLOS CUSUM allowance on the normalised innovation (in place of ``[robust] cusum_k``):
+    each anchor's modelled slow error moves the innovations of its differences by 1-2 of their sigmas for
+    half a second at a time, 200-400 of them a second; with 1.0 clean anchors were held out 20-30 % of the
+    time on the development flights, with 2.0 an anchor whose packets come 0.8 m late is held in ~0.1 s."""
+    offset_sigma_m: float = 0.1
+    """A TDoA log's prior sigma of each anchor's offset [m] (in place of ``[initial] sigma_range_bias_m``):
+    only their differences enter, so only their spread matters (0.076 m over the development hover's
+    anchors; 0.05-0.15 m on the TDoA flights); the common offset cancels and is not a state."""
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.sigma_m) and self.sigma_m > 0):
             raise ConfigError(f"tdoa.sigma_m must be a finite number > 0, got {self.sigma_m!r}")
+        for name in ("gm_sigma_m", "gm_tau_s", "offset_sigma_m", "cusum_k"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ConfigError(f"tdoa.{name} must be a finite number > 0, got {v!r}")
 
 
 @dataclass(frozen=True)

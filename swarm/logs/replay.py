@@ -8,6 +8,7 @@ band, the NIS of the ranges against theirs, and the rejections per anchor (``doc
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -274,6 +275,9 @@ def build_filter(log: Log) -> tuple[ImuFilter, StaticCalibration | None, np.ndar
     cfg = log.config
     prm = cfg.estimator
     ini = cfg.initial
+    if is_tdoa(log):
+        prm = tdoa_estimator(cfg)
+        ini = dataclasses.replace(ini, sigma_range_bias_m=cfg.tdoa.offset_sigma_m)
     g = np.asarray(prm.gravity_nav, dtype=float)
     yaw = math.radians(ini.yaw_deg)
     m = len(log.anchors_nav)
@@ -356,6 +360,23 @@ def build_filter(log: Log) -> tuple[ImuFilter, StaticCalibration | None, np.ndar
             if f.layout.offset[a] >= 0:
                 f.P[0, f.layout.offset[a], f.layout.offset[a]] = ini.sigma_range_bias_m**2
     return f, cal, correction
+
+
+def is_tdoa(log: Log) -> bool:
+    """A TDoA log: ``tdoa.csv`` fused and no two-way ranges. Its range-error model is ``[tdoa]``'s
+    (:func:`tdoa_estimator`)."""
+    return _has(log, "tdoa_t") and log.config.tdoa.enabled and len(log.uwb_t) == 0
+
+
+def tdoa_estimator(cfg):
+    """The estimator of a TDoA log: the per-anchor Gauss-Markov term of ``[tdoa] gm_sigma_m`` and
+    ``gm_tau_s``, and no common offset (every distance difference cancels it: a state nothing observes)."""
+    return dataclasses.replace(
+        cfg.estimator,
+        range_gm_sigma_m=cfg.tdoa.gm_sigma_m,
+        range_gm_tau_s=cfg.tdoa.gm_tau_s,
+        range_common_offset=False,
+    )
 
 
 def _has(log: Log, name: str) -> bool:
@@ -459,7 +480,7 @@ def replay_log(log: Log) -> ReplayResult:
         if ev == nb.EV_DONE:
             break
         if ev == nb.EV_PAUSE and t_vis <= t_stop:  # a detection of vision.csv is next
-            vision.update(X, P, f.prm, tf, ST, gyro, acc)
+            vision.update(X, P, f.prm, tf, ST, gyro, acc, RP, PH)
             continue
         if ev == nb.EV_PAUSE:  # the forced divergence of [faults]
             events.append(jump(X, P, faults, float(tf[0])))
@@ -470,7 +491,7 @@ def replay_log(log: Log) -> ReplayResult:
     wall = time.perf_counter() - t0
     k = int(ST[nb.ST_I_OUT])
     for j in range(int(ST[nb.ST_N_PHASE])):
-        events.append({"t_s": float(phase_t[j]), "kind": "takeoff" if phase_air[j] else "landing"})
+        events.append(phase_event(float(phase_t[j]), int(phase_air[j])))
     events.sort(key=lambda e: e["t_s"])
     res = ReplayResult(
         log,
@@ -515,21 +536,34 @@ def robust_state(log: Log, f: ImuFilter, cal: StaticCalibration | None):
     still = log.imu_t < (cal.until_s if cal is not None else log.imu_t[0] + 1.0)
     RP = robust_vector(
         cfg.robust, cfg.phases, cfg.uwb.sigma_floor_m, ground, f.layout.baro, len(f.anchors),
-        vibration_level(log.acc[still]),
+        vibration_level(log.acc[still]), cfg.estimator.accel_vibration_k,
+        float(np.linalg.norm(cfg.estimator.gravity_nav)),
     )  # fmt: skip
+    if is_tdoa(log):
+        RP[nb.RP_CUSUM_K] = cfg.tdoa.cusum_k
     PH = np.zeros(nb.N_PH)
     PH[nb.PH_SINCE] = -1.0
+    PH[nb.PH_DESC_T] = PH[nb.PH_PIN_T] = PH[nb.PH_CHANGE_T] = -np.inf
+    PH[nb.PH_ARMED] = 1.0
     # the vehicle starts on a known pad: a surveyed calibration position, or [initial] position_m
     pinned = (cal is not None and cal.position_surveyed) or cfg.initial.position_m is not None
-    PH[nb.PH_PINNED] = float(pinned and cfg.phases.enabled)
+    PH[nb.PH_PINNED] = PH[nb.PH_TOUCH] = float(pinned and cfg.phases.enabled)
     return RS, RP, PH
+
+
+def phase_event(t: float, change: int) -> dict:
+    """A flight-phase change as a report event: ``change`` 1 a take-off, 0 a landing, -1 a touchdown (a
+    landing after which the vehicle is pinned, :func:`swarm.core._imu_nb.pin_step`)."""
+    if change > 0:
+        return {"t_s": t, "kind": "takeoff"}
+    return {"t_s": t, "kind": "landing", "touchdown": change < 0}
 
 
 def tdoa_noise(m: int, sigma_m: float) -> np.ndarray:
     """Each anchor pair's noise state for :func:`swarm.core._imu_nb.fuse_tdoa`: the prior variance, no
     running means yet."""
-    TV = np.full((m, m, 4), np.nan)
-    TV[:, :, 0] = TV[:, :, 3] = sigma_m**2
+    TV = np.full((m, m, nb.N_TV), np.nan)
+    TV[:, :, nb.TV_VAR] = TV[:, :, nb.TV_PRIOR] = sigma_m**2
     return TV
 
 
@@ -627,7 +661,7 @@ class _Vision:
     def next_t(self) -> float:
         return float(self.log.vision_t[self.k]) if self.k < len(self.log.vision_t) else math.inf
 
-    def update(self, X, P, prm, tf, ST, gyro, acc) -> None:
+    def update(self, X, P, prm, tf, ST, gyro, acc, RP, PH) -> None:
         lg, k = self.log, self.k
         self.k += 1
         t = float(lg.vision_t[k])
@@ -635,7 +669,7 @@ class _Vision:
             ST[nb.ST_DROPPED] += 1
             return
         h = int(ST[nb.ST_HELD])
-        if h >= 0 and t > tf[0] and not nb.predict_one(X, P, gyro[h], acc[h], t - tf[0], prm):
+        if h >= 0 and t > tf[0] and not nb.predict_step(X, P, gyro[h], acc[h], t - tf[0], prm, RP, PH):
             ST[nb.ST_IMU_REFUSED] += 1
         tf[0] = t
         cov = np.diag(lg.vision_sigma[k] ** 2)

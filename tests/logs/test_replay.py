@@ -34,7 +34,13 @@ def test_replay_is_accurate_and_consistent_on_a_realistic_log(flight):
     assert max(s["rmse_axis_m"]) < 0.08
     # a consistent filter's position NEES averages 3; one run's mean lies well inside [1, 6]
     assert 1.0 < s["nees_mean"] < 6.0
-    assert s["nees_in_band_share"] > 0.85  # 95 % nominal, minus the static start where the error is ~0
+    # 95 % nominal, counted in flight: on the pad the pinned estimate does not move from the surveyed
+    # position (zero-velocity pin, docs/logs.md), so its NEES sits under the band's lower end there
+    inside, e, _ = r.errors()
+    flying = r.t[inside] > s["events"][0]["t_s"]
+    nees = np.einsum("ni,ni->n", e, np.linalg.solve(r.P[inside, :3, :3], e[..., None])[..., 0])[flying]
+    lo, hi = s["nees_band"]
+    assert np.mean((nees >= lo) & (nees <= hi)) > 0.85
     assert 0.7 < s["nis_mean"] < 1.5  # accepted ranges' NIS: chi-square(1) mean 1, gate-truncated
     assert [e["kind"] for e in s["events"]] == ["takeoff"]  # no false divergence on a healthy flight
     # the synthetic vehicle leaves the pad at 5 s; its IMU has no rotor vibration, so the take-off is seen

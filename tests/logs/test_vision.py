@@ -47,8 +47,13 @@ def test_vision_makes_the_estimate_better_and_stays_consistent(seen):
     # linearisation and the gate's truncation
     assert 2.0 < v["nis_mean"] < 4.0
     assert v["nis_in_band_share"] > 0.9  # 95 % nominal
-    # the position stays consistent with vision: NEES averages 3
-    assert 1.0 < s["nees_mean"] < 6.0 and s["nees_in_band_share"] > 0.85
+    # the position stays consistent with vision: NEES averages 3, inside its 95 % band in flight (on the pad
+    # the pinned estimate does not move from the surveyed position, so its NEES sits under the band there)
+    inside, e, _ = r.errors()
+    flying = r.t[inside] > s["events"][0]["t_s"]
+    nees = np.einsum("ni,ni->n", e, np.linalg.solve(r.P[inside, :3, :3], e[..., None])[..., 0])[flying]
+    lo, hi = s["nees_band"]
+    assert 1.0 < s["nees_mean"] < 6.0 and np.mean((nees >= lo) & (nees <= hi)) > 0.85
     assert [e["kind"] for e in s["events"]] == ["takeoff"]  # no false divergence
 
 
