@@ -754,8 +754,9 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
 
     **Take-off** (on the ground): the RMS change of the specific force between samples (rotor vibration:
     ~0.01 m/s^2 standing, ~0.1 in flight on a small quadrotor, DESIGN.md sec. 11; low-passed with
-    ``RP_VIB_TAU``) rises over ``RP_VIB_THRESHOLD`` (only once it stood under it since the landing:
-    ``PH_ARMED``, so rotors still spinning after a touchdown are not a take-off); or the estimated height
+    ``RP_VIB_TAU``) rises over ``RP_VIB_THRESHOLD`` (after a landing only once the rotors stopped,
+    ``RP_VIB_RATIO`` under the flight's level: ``PH_ARMED``; rotors spinning on, or cut with a jolt, are not
+    a take-off); or the estimated height
     above the ground reference exceeds ``RP_TAKEOFF_HEIGHT``; or the vertical specific force (body specific
     force less the accelerometer bias, turned to nav), low-passed as the vibration, exceeds gravity by
     ``RP_CLIMB_ACCEL``: the vehicle accelerates upward, the one sign of a lift-off a pinned estimate
@@ -803,7 +804,8 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
         PH[PH_DESC_T] = t
     vib = math.sqrt(PH[PH_VIB])
     now = PH[PH_AIR] > 0.0
-    if not now and vib <= RP[RP_VIB_THRESHOLD]:
+    stopped = PH[PH_AIR_VIB] > 0.0 and vib * RP[RP_VIB_RATIO] < math.sqrt(PH[PH_AIR_VIB])
+    if not now and vib <= RP[RP_VIB_THRESHOLD] and (stopped or PH[PH_AIR_VIB] <= 0.0):
         PH[PH_ARMED] = 1.0
     height = X[XP + 2] - RP[RP_GROUND_Z]
     hmin = RP[RP_TAKEOFF_HEIGHT]
@@ -830,7 +832,7 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
         touch = abs(X[XV + 2]) < RP[RP_LAND_SPEED]
     if touch:
         air = False
-    if PH[PH_AIR_VIB] > 0.0 and vib * RP[RP_VIB_RATIO] < math.sqrt(PH[PH_AIR_VIB]):
+    if stopped:
         air = False  # the rotors stopped (after a flight): whatever the estimate's height says
     elif now and dt > 0.0:
         PH[PH_AIR_VIB] += (1.0 - math.exp(-dt / (10.0 * RP[RP_VIB_TAU]))) * (PH[PH_VIB] - PH[PH_AIR_VIB])
@@ -845,15 +847,13 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
     PH[PH_AIR] = 1.0 if air else 0.0
     PH[PH_SINCE] = -1.0
     PH[PH_PINNED] = 0.0 if air else 1.0
-    PH[PH_TOUCH] = 1.0 if touch else 0.0
+    PH[PH_TOUCH] = 2.0 if touch else 0.0
     PH[PH_CHANGE_T] = t
     PH[PH_FZ] = 0.0
+    PH[PH_ARMED] = 0.0  # after a landing, a take-off by the vibration needs the rotors to stop first
     if air:
         PH[PH_AIR_VIB] = PH[PH_VIB]  # the flight's level starts from the take-off's
-        PH[PH_ARMED] = 0.0
         PH[PH_VIB_AIR_SEEN] = 1.0 if shaking else 0.0
-    elif vib > RP[RP_VIB_THRESHOLD]:
-        PH[PH_ARMED] = 0.0  # the rotors still spin: a take-off needs them to stop and start again
     for a in range(ridx.shape[0]):
         i1 = ridx[a, 1]
         if i1 >= 0:
@@ -876,10 +876,11 @@ def in_window(PH):
 
 @njit(cache=True)
 def pin_step(X, P, RP, PH, t, work):
-    """While the vehicle stands on the ground where it is known to stand (``PH_PINNED`` and ``PH_TOUCH``: on
-    its known pad before the take-off, or after a touchdown), at most every ``RP_PIN_PERIOD``: zero velocity
-    (variance ``RP_PIN_VEL_VAR`` per axis) and the height of the ground reference (``RP_PIN_Z_VAR``; 0: not
-    used) as scalar pseudo-measurements. A zero-velocity update (Foxlin 2005, the pedestrian ZUPT; PX4's EKF2
+    """While the vehicle stands on the ground where it is known to stand (``PH_PINNED`` and ``PH_TOUCH``: 1
+    on its known pad before the take-off, 2 after a touchdown), at most every ``RP_PIN_PERIOD``: zero
+    velocity (variance ``RP_PIN_VEL_VAR`` per axis) and, after a touchdown, the height of the ground
+    reference (``RP_PIN_Z_VAR``; 0: not used; on the pad the estimate starts at its surveyed height) as
+    scalar pseudo-measurements. A zero-velocity update (Foxlin 2005, the pedestrian ZUPT; PX4's EKF2
     fuses a zero velocity when landed without aiding): a vehicle standing cannot move, so the IMU's errors
     and the biases are observed, and the covariance stays as tight as the pad is known, which holds the
     radio measurements that disagree out at the gate. The height: a touchdown is declared only near the
@@ -899,7 +900,7 @@ def pin_step(X, P, RP, PH, t, work):
             idx, nu, var = EV + k, -X[XV + k], RP[RP_PIN_VEL_VAR]
         else:
             idx, nu, var = EP + 2, RP[RP_GROUND_Z] - X[XP + 2], RP[RP_PIN_Z_VAR]
-            if var <= 0.0:
+            if var <= 0.0 or PH[PH_TOUCH] < 2.0:
                 break
         for i in range(n):
             b[i] = P[i, idx]
