@@ -48,6 +48,7 @@ from swarm.transport.messages import (
     DropCounter,
     Event,
     ImuBatch,
+    TdoaBatch,
     UwbBatch,
     VisionBatch,
     batch_rows,
@@ -142,13 +143,13 @@ class AgentHost:
             self.on_news()
 
     def _on_batch(
-        self, key: str, msg: ImuBatch | UwbBatch | VisionBatch, published_ns: int | None = None
+        self, key: str, msg: ImuBatch | UwbBatch | TdoaBatch | VisionBatch, published_ns: int | None = None
     ) -> None:
         """The world's imu (``world/imu``) or camera frames (``world/vision``), or the mothership's ranges
-        (``mothership/uwb``), of every vehicle, sent for agent hosts (``--batch``): each hosted vehicle's
-        row, as its own key would have brought it (a host of one steps it here,
-        :meth:`AgentProcess._on_sensor`; an imu with the batch's publication stamp); a frame that does not
-        decode is counted (:attr:`shared_drops`) and loses no other vehicle's."""
+        (``mothership/uwb``; differences: ``mothership/tdoa``), of every vehicle, sent for agent hosts
+        (``--batch``): each hosted vehicle's row, as its own key would have brought it (a host of one steps
+        it here, :meth:`AgentProcess._on_sensor`; an imu with the batch's publication stamp); a frame that
+        does not decode is counted (:attr:`shared_drops`) and loses no other vehicle's."""
         for vid, sample in batch_rows(msg, key, self.shared_drops, self._by_id):
             self._by_id[vid]._on_sensor(key, sample, published_ns)
 
@@ -187,6 +188,9 @@ class AgentHost:
                           direct=direct, stamped=True)  # fmt: skip
         subscribe_decoded(self.session, k.mothership_uwb(), UwbBatch, self._on_batch, self.shared_drops,
                           direct=direct)  # fmt: skip
+        if any(p.tdoa for p in self.procs):  # uwb.mode tdoa2/tdoa3: a slot's differences (mothership/tdoa)
+            subscribe_decoded(self.session, k.mothership_tdoa(), TdoaBatch, self._on_batch, self.shared_drops,
+                              direct=direct)  # fmt: skip
         subscribe_decoded(self.session, k.world_vision(), VisionBatch, self._on_batch, self.shared_drops,
                           direct=direct)  # fmt: skip
         subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.shared_drops)

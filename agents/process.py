@@ -33,7 +33,9 @@ error (:mod:`swarm.transport.stopping`).
 
 A restarted agent (``--rejoin``) joins the run in progress: it publishes zero-thrust HOLD commands while it
 re-initialises from its own sensors (the AHRS attitude, and its position by least squares on one range to
-each anchor, :func:`swarm.core.ranging.position_from_ranges`), then flies again from that estimate.
+each anchor, :func:`swarm.core.ranging.position_from_ranges`), then flies again from that estimate. On a
+TDoA radio (``uwb.mode`` tdoa2/tdoa3: distance differences on ``agent/<id>/tdoa``, no ranges) it does not
+re-initialise: it logs why and holds (:meth:`AgentProcess._collect_init`).
 """
 
 from __future__ import annotations
@@ -73,6 +75,7 @@ from swarm.transport.messages import (
     Estimate,
     Event,
     Imu,
+    Tdoa,
     Uwb,
     Vision,
     bundle_messages,
@@ -100,7 +103,7 @@ samples may come after the stopped clock, on other subscribers' threads, or all 
 and gives up on them after this long without a complete tick [s]."""
 
 
-_SENSOR_TYPES = ("Imu", "Uwb", "Vision")
+_SENSOR_TYPES = ("Imu", "Uwb", "Tdoa", "Vision")
 """The entries of a bundle an agent takes: its own sensors' samples."""
 
 
@@ -153,8 +156,11 @@ class AgentProcess:
             ready=set() if ready is None else ready,
             target_reads=target_reads(sc, vehicle_id) if self.chaser else None,
             late_ticks=None if clock.lockstep else round(sc.agent.late_fusion_s / sc.dt_s),
-            uwb_slots=exchange_ticks(sc, vehicle_id),  # a TDMA channel: ranges on the tag's slots only
+            # a TDMA channel: ranges on the tag's slots only; a TDoA tag transmits nothing: every slot's tdoa
+            uwb_slots=exchange_ticks(sc, vehicle_id) if sc.uwb.mode == "twr" else None,
         )  # fmt: skip
+        self.tdoa = sc.uwb.mode != "twr"  # uwb.mode tdoa2/tdoa3: a Tdoa on agent/<id>/tdoa, no Uwb
+        self._tdoa_init_refused = False  # a rejoining agent on a TDoA radio said it holds (_collect_init)
         self.estimate_reads = estimate_reads(sc, vehicle_id)  # the ticks whose estimate goes out
         if rejoin:
             # who is alive is not known yet: wait for nobody until the liveliness history says (a mothership
@@ -431,8 +437,19 @@ class AgentProcess:
 
     # ------------------------------------------------------------------------------ re-initialisation
 
-    def _collect_init(self, imu: Imu | None, uwb: Uwb | None) -> bool:
-        """Gather the AHRS attitude and ranges; build the agent once there is one range per anchor."""
+    def _collect_init(self, imu: Imu | None, uwb: Uwb | Tdoa | None) -> bool:
+        """Gather the AHRS attitude and ranges; build the agent once there is one range per anchor. On a
+        TDoA radio (``uwb.mode`` tdoa2/tdoa3) there are no ranges, and this agent does not re-initialise
+        from distance differences (a position from differences alone needs a multilateration this process
+        does not carry, and a wrong fix would fly): it says so once and holds (zero thrust, HOLD)."""
+        if self.tdoa:
+            if not self._tdoa_init_refused:
+                self._tdoa_init_refused = True
+                _LOG.error(
+                    "%s: cannot re-initialise on uwb.mode = %r (no ranges; no re-initialisation from "
+                    "distance differences alone): holding with zero thrust", self.id, self.sc.uwb.mode,
+                )  # fmt: skip
+            return False
         if imu is not None and imu.q_ahrs_nav_body is not None:
             self._init_q = imu.q_ahrs_nav_body
         if uwb is not None and uwb.range_m is not None and uwb.anchor_id < len(self.sc.anchors_m):
@@ -488,9 +505,10 @@ class AgentProcess:
         cmd = self.agent.tick(AgentInputs(
             k, t, gap * self.dt,
             None if imu is None else imu.gyro_body, None if imu is None else imu.q_ahrs_nav_body,
-            None if uwb is None or uwb.range_m is None else (uwb.anchor_id, uwb.range_m),
+            None if not isinstance(uwb, Uwb) or uwb.range_m is None else (uwb.anchor_id, uwb.range_m),
             None if vis is None or not vis.seen else (vis.kind, vis.data),
             None if te is None or not self.chaser else _target(te), control=not early,
+            tdoa=uwb.rows() if isinstance(uwb, Tdoa) and uwb.anchor_a else None,
         ))  # fmt: skip
         if early:
             self._publish_estimate(k)
@@ -512,6 +530,11 @@ class AgentProcess:
                     self._collect_init(None, m)
                 elif m.range_m is not None:
                     self.agent.on_uwb(m.anchor_id, m.range_m)
+            elif isinstance(m, Tdoa):
+                if self.agent is None:
+                    self._collect_init(None, m)
+                elif m.anchor_a:
+                    self.agent.on_tdoa(m.rows())
             elif self.agent is not None and self.chaser and m.seen:
                 self.agent.on_vision(m.tick * self.dt, m.kind, m.data)
 
@@ -554,7 +577,10 @@ class AgentProcess:
         else:
             subscribe_decoded(self.session, k.imu(self.id), Imu, self._on_sensor, self.drops, direct=d,
                               stamped=True)  # fmt: skip
-        subscribe(k.uwb(self.id), Uwb, self._on_sensor)
+        if self.tdoa:  # uwb.mode tdoa2/tdoa3: the tag's distance differences, one Tdoa a slot
+            subscribe(k.tdoa(self.id), Tdoa, self._on_sensor)
+        else:
+            subscribe(k.uwb(self.id), Uwb, self._on_sensor)
         if self.clock.lockstep:  # a lockstep world's (and mothership's) ticks in one message each
             subscribe_decoded(self.session, k.bundle(self.id), Bundle, self._on_bundle, self.drops, direct=d,
                               stamped=True)  # fmt: skip

@@ -6,7 +6,10 @@
   the sensor model of :mod:`swarm.core.sensors`). From the world's ``truth`` of every vehicle at a UWB
   slot tick ``k`` it publishes one ``uwb(k)`` per vehicle, with ``range_m`` nil when the reply was lost, so
   a lockstep agent knows not to wait; on a TDMA channel (``uwb.tdma``) only for the tags whose slot came in
-  that tick (an idle tag's agent expects none: :func:`swarm.step.radio.exchange_ticks`). It takes the
+  that tick (an idle tag's agent expects none: :func:`swarm.step.radio.exchange_ticks`). With ``uwb.mode``
+  tdoa2/tdoa3 it publishes instead one ``Tdoa`` per vehicle and slot on ``agent/<id>/tdoa`` (the
+  differences its tag heard since the last slot, possibly none), ``TdoaBatch`` messages on
+  ``mothership/tdoa`` for agent hosts, ``Tdoa`` entries in a lockstep bundle. It takes the
   truths of a tick as one ``TruthBatch`` on ``world/truth``; for agent hosts (``--batch``) it sends a
   slot's ranges as one ``UwbBatch`` on ``mothership/uwb``. A lockstep world's truths of several ticks
   come as one ``Bundle`` on ``world/bundle``; the ranges of its slots then leave as one ``Bundle`` per
@@ -32,9 +35,8 @@ import time
 import numpy as np
 import zenoh
 
-from swarm.errors import ConfigError
 from swarm.step.radio import UwbNetwork
-from swarm.transport.docking_wire import uwb_slot, uwb_slot_batch
+from swarm.transport.docking_wire import tdoa_slot, tdoa_slot_batch, uwb_slot, uwb_slot_batch
 from swarm.transport.keys import Keys
 from swarm.transport.messages import (
     Anchors,
@@ -72,11 +74,6 @@ class MothershipProcess:
         """``batch``: every vehicle's range of a slot sent in one ``mothership/uwb`` message (agent hosts,
         docs/protocol.md "Rates"), not one per vehicle. The world's truths come as ``world/truth``
         batches either way."""
-        if scenario.uwb.mode != "twr":
-            raise ConfigError(
-                f"uwb.mode = {scenario.uwb.mode!r} runs in swarm sim and swarm montecarlo only: no TDoA "
-                "message travels on the wire yet (docs/protocol.md); launch with uwb.mode = 'twr'"
-            )
         self.sc, self.seed, self.session, self.keys, self.stop = scenario, seed, session, keys, stop
         self.batch = batch
         self.anchors_every_s = anchors_every_s
@@ -205,7 +202,9 @@ class MothershipProcess:
             lost[i], p_nlos[i] = m.uwb_lost, m.nlos_probability
         t = k * self.sc.dt_s
         self.network.step(k, t, X, lost, p_nlos)
-        if out is not None:  # a bundle's slot: the ranges go out with the bundle's others
+        if self.network.tdoa is not None:
+            self._tdoa_slot(k, t, out)
+        elif out is not None:  # a bundle's slot: the ranges go out with the bundle's others
             for vid, payload in uwb_slot(self.network, self.ids, k, t):
                 out.setdefault(vid, []).append(("Uwb", payload, k))
         elif self.batch:
@@ -217,6 +216,19 @@ class MothershipProcess:
                 self.pub_uwb[vid].put(payload)
         self.slots += 1
 
+    def _tdoa_slot(self, k: int, t: float, out: dict | None) -> None:
+        """``uwb.mode`` tdoa2/tdoa3: each vehicle's distance differences of the slot, one ``Tdoa`` each
+        (none heard: no rows), on ``agent/<id>/tdoa``, in its bundle, or in ``mothership/tdoa`` batches."""
+        if out is not None:
+            for vid, payload in tdoa_slot(self.network, self.ids, k, t):
+                out.setdefault(vid, []).append(("Tdoa", payload, k))
+        elif self.batch:
+            for payload in tdoa_slot_batch(self.network, self.ids, k, t):
+                self.pub_tdoa_batch.put(payload)
+        else:
+            for vid, payload in tdoa_slot(self.network, self.ids, k, t):
+                self.pub_tdoa[vid].put(payload)
+
     def run(self) -> None:
         k = self.keys
         X = np.zeros((len(self.ids), 13))
@@ -226,6 +238,10 @@ class MothershipProcess:
         # a slot's ranges are a burst: batched beyond one pair (docs/protocol.md, "QoS")
         self.pub_uwb = {v: declare_reliable(self.session, k.uwb(v), len(self.ids) <= 2) for v in self.ids}
         self.pub_uwb_batch = declare_reliable(self.session, k.mothership_uwb(), len(self.ids) <= 2)
+        if self.network.tdoa is not None:  # uwb.mode tdoa2/tdoa3: differences, not ranges
+            n = len(self.ids)
+            self.pub_tdoa = {v: declare_reliable(self.session, k.tdoa(v), n <= 2) for v in self.ids}
+            self.pub_tdoa_batch = declare_reliable(self.session, k.mothership_tdoa(), len(self.ids) <= 2)
         self.pub_bundle = {
             v: declare_reliable(self.session, k.bundle(v), len(self.ids) <= 2) for v in self.ids
         }

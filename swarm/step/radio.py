@@ -113,6 +113,7 @@ class UwbNetwork:
         # TDoA (uwb.mode tdoa2/tdoa3): one channel heard by every tag, its own streams ("tdoa"); the range
         # errors of each link drawn as the TWR radios draw theirs
         self.tdoa = None
+        self.heard: dict[str, TdoaSample] = {}  # each tag's differences of the last TDoA slot (_tdoa_step)
         if u.mode != "twr":
             errors = None
             if self.err_on:
@@ -175,11 +176,14 @@ class UwbNetwork:
         tags = np.array([X[i, 0:3] + qrotate(X[i, 6:10], self.lever[i]) for i in range(len(self.ids))])
         rows = self.tdoa.step(t_s, tags, self.airborne)
         lost = np.broadcast_to(np.asarray(False if env_lost is None else env_lost), (len(self.ids),))
-        return {
+        # kept for the mothership's messages (swarm.transport.docking_wire.tdoa_slot), as the TWR radios'
+        # ranges are kept in range_m
+        self.heard = {
             vid: TdoaSample(t_s, np.ascontiguousarray(rows[i][:, [tr.ROW_A, tr.ROW_B, tr.ROW_DDIST]]))
             for i, vid in enumerate(self.ids)
             if not lost[i] and len(rows[i])
         }
+        return self.heard
 
 
 def tdma_slots(scenario) -> tuple[np.ndarray, int]:

@@ -16,6 +16,7 @@ from swarm.transport.messages import (
     Event,
     Guidance,
     ImuBatch,
+    TdoaBatch,
     UwbBatch,
     VisionBatch,
     decode,
@@ -23,6 +24,7 @@ from swarm.transport.messages import (
     encode_command,
     encode_estimate,
     encode_imu,
+    encode_tdoa,
     encode_truth,
     encode_truth_batch,
     encode_uwb,
@@ -206,6 +208,24 @@ def uwb_slot_batch(network, ids: list[str], k: int, t: float) -> bytes | None:
                            tuple(ranges[i] for i in rows)))  # fmt: skip
 
 
+_NO_ROWS = np.zeros((0, 3))
+
+
+def tdoa_slot(network, ids: list[str], k: int, t: float) -> list[tuple[str, bytes]]:
+    """The mothership's distance differences of slot tick ``k`` after ``network.step`` (``uwb.mode``
+    tdoa2/tdoa3): ``(vehicle, payload)``, one :class:`~swarm.transport.messages.Tdoa` per vehicle, every
+    slot, with no rows for a tag that heard none (or is inside a dropout), so a lockstep agent knows the
+    slot is complete."""
+    heard = network.heard
+    return [(vid, encode_tdoa(k, t, heard[vid].rows if vid in heard else _NO_ROWS)) for vid in ids]
+
+
+def tdoa_slot_batch(network, ids: list[str], k: int, t: float) -> list[bytes]:
+    """:func:`tdoa_slot`'s messages in as few :class:`~swarm.transport.messages.TdoaBatch` messages as keep
+    each within the payload cap (agent hosts)."""
+    return pack_entries(tdoa_slot(network, ids, k, t), lambda vids, blobs: TdoaBatch(k, t, vids, blobs))
+
+
 def filter_counts(agent) -> dict[str, int]:
     """The filter's cumulative update counters ``<kind>_<outcome>``, the non-zero ones (an absent counter is
     zero: a dozen zeros per tick would cost every receiver their validation)."""
@@ -329,6 +349,10 @@ class DockingTap:
     def uwb(self, sim, k: int) -> None:
         """The mothership's ranges of slot tick ``k`` (after the network's step)."""
         if k == 0 or k % sim.network.every:
+            return
+        if sim.network.tdoa is not None:  # uwb.mode tdoa2/tdoa3: the differences on agent/<id>/tdoa
+            for vid, payload in tdoa_slot(sim.network, self._ids, k, k * sim.sc.dt_s):
+                self._write(self.keys.tdoa(vid), payload)
             return
         for vid, payload in uwb_slot(sim.network, self._ids, k, k * sim.sc.dt_s):
             self._write(self.keys.uwb(vid), payload)

@@ -2,7 +2,8 @@
 
 DESIGN.md section 4: one namespace per swarm (default ``tpods``) so that two swarms can share a router.
 Per-vehicle topics are ``<ns>/agent/<id>/<kind>``; the rest are ``<ns>/world/clock``, ``<ns>/world/imu``,
-``<ns>/world/truth``, ``<ns>/world/bundle``, ``<ns>/mothership/uwb``, ``<ns>/mothership/anchors``,
+``<ns>/world/truth``, ``<ns>/world/bundle``, ``<ns>/mothership/uwb``, ``<ns>/mothership/tdoa``,
+``<ns>/mothership/anchors``,
 ``<ns>/control/run``, ``<ns>/control/fault`` and the liveliness tokens ``<ns>/alive/<role>/<id>``.
 Agent ids and roles are single key chunks of ``[A-Za-z0-9_-]`` (1 to 64 characters), so that no id can
 smuggle a ``/`` or a wildcard into a key. ``docs/protocol.md`` lists every key with its publisher,
@@ -22,8 +23,8 @@ ID_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")
 """An agent id, a role or any other single key chunk chosen by a user (``fullmatch``)."""
 
 AGENT_KINDS: tuple[str, ...] = (
-    "imu", "uwb", "vision", "gnss", "rangefinder", "barometer", "estimate", "guidance", "command", "commands",
-    "truth", "event", "bundle",
+    "imu", "uwb", "tdoa", "vision", "gnss", "rangefinder", "barometer", "estimate", "guidance", "command",
+    "commands", "truth", "event", "bundle",
 )  # fmt: skip
 """The per-vehicle topics ``<ns>/agent/<id>/<kind>``."""
 
@@ -39,6 +40,7 @@ _FIXED = {
     ("world", "bundle"): "world_bundle",
     ("mothership", "anchors"): "anchors",
     ("mothership", "uwb"): "mothership_uwb",
+    ("mothership", "tdoa"): "mothership_tdoa",
     ("control", "run"): "run_control",
     ("control", "fault"): "fault",
 }
@@ -85,6 +87,11 @@ class Keys:
     def uwb(self, agent_id: str) -> str:
         """UWB ranges of one vehicle's tag: mothership or UWB driver -> agent."""
         return self._agent(agent_id, "uwb")
+
+    def tdoa(self, agent_id: str) -> str:
+        """TDoA distance differences heard by one vehicle's tag (``uwb.mode`` tdoa2/tdoa3, a ``Tdoa`` a UWB
+        slot): mothership or UWB driver -> agent."""
+        return self._agent(agent_id, "tdoa")
 
     def vision(self, agent_id: str) -> str:
         """Camera observations of the target's markers: world or camera driver -> agent."""
@@ -180,6 +187,11 @@ class Keys:
         serving agent hosts -> agents (each takes its own entry)."""
         return f"{self.namespace}/mothership/uwb"
 
+    def mothership_tdoa(self) -> str:
+        """Every vehicle's distance differences of one UWB slot in one message (``TdoaBatch``): a simulated
+        TDoA radio serving agent hosts -> agents (each takes its own entry)."""
+        return f"{self.namespace}/mothership/tdoa"
+
     def anchors(self) -> str:
         """Anchor ids and positions: mothership (publisher and queryable) -> agents, dashboard."""
         return f"{self.namespace}/mothership/anchors"
@@ -218,8 +230,8 @@ class Keys:
     def parse(self, key: object) -> tuple[str, str | None] | None:
         """Inverse of the builders: ``(kind, agent_id)`` for ``<ns>/agent/<id>/<kind>``; ``(name, None)``
         for a swarm-wide key, named by its builder (``world_clock``, ``world_event``, ``world_imu``,
-        ``world_vision``, ``world_truth``, ``world_bundle``, ``anchors``, ``mothership_uwb``, ``run_control``,
-        ``fault``);
+        ``world_vision``, ``world_truth``, ``world_bundle``, ``anchors``, ``mothership_uwb``,
+        ``mothership_tdoa``, ``run_control``, ``fault``);
         ``("alive", process_id)`` for a liveliness token (its role: :meth:`parse_alive`). ``None`` for a
         key outside this namespace, a wildcard or anything this protocol does not define. ``key`` may be a
         ``str`` or any object whose ``str()`` is the key (a Zenoh ``KeyExpr``)."""

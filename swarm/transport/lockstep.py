@@ -3,7 +3,8 @@
 ``docs/protocol.md`` section "Clocks and lockstep" is the contract, and
 :meth:`swarm.sim.docking.DockingSim.run` the in-process tick order it reproduces:
 
-- an agent processes tick ``k`` once it has ``imu(k)``, ``uwb(k)`` on its UWB slots
+- an agent processes tick ``k`` once it has ``imu(k)``, ``uwb(k)`` (or ``tdoa(k)``, ``uwb.mode``
+  tdoa2/tdoa3) on its UWB slots
   (``k % uwb_every == 0``; on a TDMA channel only those with its tag's exchange), ``vision(k)`` on its
   camera slots (``k % vision_every == 0``; the camera reports every frame, with zero markers when it saw
   none) and, for a chaser, its target's ``estimate(k - 1)``
@@ -31,7 +32,7 @@ from dataclasses import dataclass
 
 from swarm.errors import ConfigError
 from swarm.transport.keys import check_id
-from swarm.transport.messages import Command, Estimate, Imu, Message, Uwb, Vision
+from swarm.transport.messages import Command, Estimate, Imu, Message, Tdoa, Uwb, Vision
 
 __all__ = ["AgentTickAssembler", "CommandBarrier", "TickInputs"]
 
@@ -107,8 +108,9 @@ class TickInputs:
     """``imu(k)``: gyro (+ AHRS) sample; ``None`` at tick 0 (no sample yet)."""
     vision: Vision | None = None
     """``vision(k)`` on camera slots (possibly with zero markers), else ``None``."""
-    uwb: Uwb | None = None
-    """``uwb(k)`` on UWB slots (``range_m`` ``None`` when the reply was lost), else ``None``."""
+    uwb: Uwb | Tdoa | None = None
+    """``uwb(k)`` on UWB slots (``range_m`` ``None`` when the reply was lost), else ``None``; with
+    ``uwb.mode`` tdoa2/tdoa3, ``tdoa(k)`` (its distance differences, possibly none) in its place."""
     target_estimate: Estimate | None = None
     """For a chaser, its target's estimate of tick ``k - 1`` (of tick 0 at tick 0); while the target is
     lost, its latest estimate (held), ``None`` if there never was one. ``None`` for a non-chaser."""
@@ -119,7 +121,7 @@ class _Frame:
 
     def __init__(self) -> None:
         self.imu: Imu | None = None
-        self.uwb: Uwb | None = None
+        self.uwb: Uwb | Tdoa | None = None  # a Tdoa on a TDoA radio (it takes the range's place)
         self.vision: Vision | None = None
         self.t_imu = 0.0  # when the imu arrived (time.monotonic): a free-running tick's grace starts then
 
@@ -210,7 +212,7 @@ class AgentTickAssembler:
         with self._cond:
             if isinstance(msg, Estimate):
                 kept = self._add_estimate(msg, source_id)
-            elif isinstance(msg, Imu | Uwb | Vision):
+            elif isinstance(msg, Imu | Uwb | Tdoa | Vision):
                 kept = self._add_sensor(msg, source_id)
             else:
                 self._counts["unexpected"] += 1
@@ -257,19 +259,19 @@ class AgentTickAssembler:
             del self._estimates[min(self._estimates)]
         return True
 
-    def _add_sensor(self, msg: Imu | Uwb | Vision, source_id: str | None) -> bool:
+    def _add_sensor(self, msg: Imu | Uwb | Tdoa | Vision, source_id: str | None) -> bool:
         k = msg.tick
         if source_id is not None and source_id != self.agent_id:
             self._counts["unexpected"] += 1
             return False
-        if isinstance(msg, Uwb) and not self._uwb_tick(k):
+        if isinstance(msg, Uwb | Tdoa) and not self._uwb_tick(k):
             self._counts["unexpected"] += 1
             return False
         if isinstance(msg, Vision) and (self.vision_every is None or k == 0 or k % self.vision_every):
             self._counts["unexpected"] += 1
             return False
         why = self._window(k)
-        if why == "stale" and isinstance(msg, Uwb) and self._uwb_live and self._uwb_from < 0:
+        if why == "stale" and isinstance(msg, Uwb | Tdoa) and self._uwb_live and self._uwb_from < 0:
             # the mothership (back, or found by a joining agent) serves its slots in tick order: its first
             # range came after its tick was taken without one, so every tick from the next waits for its
             # range (else each later range could lose the same race: a lockstep world's ticks come in a
@@ -292,7 +294,7 @@ class AgentTickAssembler:
         frame = self._frames.get(k)
         if frame is None:
             frame = self._frames[k] = _Frame()
-        slot = "imu" if isinstance(msg, Imu) else ("uwb" if isinstance(msg, Uwb) else "vision")
+        slot = "imu" if isinstance(msg, Imu) else ("uwb" if isinstance(msg, Uwb | Tdoa) else "vision")
         if getattr(frame, slot) is not None:
             self._counts["duplicates"] += 1
             return False
@@ -303,10 +305,11 @@ class AgentTickAssembler:
             self._uwb_from = k
         return True
 
-    def _add_late(self, msg: Uwb | Vision) -> bool:
-        """A range or frame of tick ``k``, taken already without it (late fusion, ``_cond`` held)."""
+    def _add_late(self, msg: Uwb | Tdoa | Vision) -> bool:
+        """A range (or differences) or frame of tick ``k``, taken already without it (late fusion,
+        ``_cond`` held)."""
         had = self._taken[msg.tick]
-        slot = "uwb" if isinstance(msg, Uwb) else "vision"
+        slot = "uwb" if isinstance(msg, Uwb | Tdoa) else "vision"
         if slot in had:
             self._counts["duplicates"] += 1
             return False

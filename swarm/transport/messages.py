@@ -51,6 +51,7 @@ __all__ = [
     "MAX_BATCH",
     "MAX_ITEMS",
     "MAX_PAYLOAD_BYTES",
+    "MAX_TDOA_ROWS",
     "MESSAGE_FOR_KIND",
     "MESSAGE_TYPES",
     "MODES",
@@ -76,6 +77,8 @@ __all__ = [
     "Message",
     "Rangefinder",
     "RunControl",
+    "Tdoa",
+    "TdoaBatch",
     "Truth",
     "TruthBatch",
     "Uwb",
@@ -89,6 +92,7 @@ __all__ = [
     "encode_command",
     "encode_estimate",
     "encode_imu",
+    "encode_tdoa",
     "encode_truth",
     "encode_truth_batch",
     "encode_uwb",
@@ -782,6 +786,109 @@ class UwbBatch(_Batch):
         return _checked(Uwb, values)
 
 
+MAX_TDOA_ROWS = 1024
+"""Most distance differences in one :class:`Tdoa` (a tag hears at most ~400 packets a second, the Loco
+Positioning system's cap, so a UWB slot of 10 Hz or faster carries ~40)."""
+
+
+def _anchor_list(value: object, name: str) -> tuple[int, ...]:
+    """Anchor ids (0 to 2**31 - 1, repeats allowed), at most :data:`MAX_TDOA_ROWS`."""
+    if not isinstance(value, list | tuple):
+        raise MessageError(f"{name}: expected an array of anchor ids, got {_show(value)}")
+    if len(value) > MAX_TDOA_ROWS:
+        raise MessageError(f"{name}: {len(value)} entries, more than the {MAX_TDOA_ROWS} allowed")
+    if all(type(v) is int and 0 <= v <= _MAX_ID for v in value):
+        return tuple(value)
+    return tuple(_int(v, f"{name}[{i}]", 0, _MAX_ID) for i, v in enumerate(value))
+
+
+@dataclass(frozen=True, eq=False)
+class Tdoa(Message):
+    """The TDoA distance differences one vehicle's tag heard since the previous UWB slot (``uwb.mode``
+    tdoa2/tdoa3: anchors transmit, the tag only listens): ``<ns>/agent/<id>/tdoa``. Row ``i`` is the
+    difference ``ddist_m[i] = d(tag, anchor_b[i]) - d(tag, anchor_a[i])`` (the Crazyflie's
+    ``distanceDiff``, in the order heard). One message per UWB slot, with no rows when the tag heard none,
+    so a lockstep agent knows not to wait (as :class:`Uwb` with ``range_m`` nil)."""
+
+    tick: int
+    """Tick ``k`` of the UWB slot (>= 0)."""
+    t_s: float
+    """Time of the slot [s] (>= 0): the rows are those heard up to it."""
+    anchor_a: tuple[int, ...] = ()
+    """Each row's first anchor, an id of the :class:`Anchors` message (0 to 2**31 - 1)."""
+    anchor_b: tuple[int, ...] = ()
+    """Each row's second anchor, never the row's ``anchor_a``."""
+    ddist_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Each row's distance difference (N,) [m], finite, any sign; the three fields have one entry per row,
+    0 to :data:`MAX_TDOA_ROWS`."""
+
+    def __post_init__(self) -> None:
+        a, b = _anchor_list(self.anchor_a, "anchor_a"), _anchor_list(self.anchor_b, "anchor_b")
+        dd = _array(self.ddist_m, "ddist_m", (None,), max_rows=MAX_TDOA_ROWS)
+        if len(b) != len(a):
+            raise MessageError(f"anchor_b: {len(b)} entries for {len(a)} in anchor_a")
+        if dd.shape[0] != len(a):
+            raise MessageError(f"ddist_m: {dd.shape[0]} entries for {len(a)} in anchor_a")
+        for i, (ia, ib) in enumerate(zip(a, b, strict=True)):
+            if ia == ib:
+                raise MessageError(f"anchor_b[{i}]: the same anchor as anchor_a[{i}] ({ia})")
+        _set(self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0), anchor_a=a, anchor_b=b,
+             ddist_m=dd)  # fmt: skip
+
+    def rows(self) -> np.ndarray:
+        """The differences as the agent step takes them (:attr:`swarm.step.agent.AgentInputs.tdoa`): (N, 3)
+        float64, anchor ``A``, anchor ``B``, ``ddist_m``."""
+        out = np.empty((len(self.anchor_a), 3))
+        out[:, 0], out[:, 1], out[:, 2] = self.anchor_a, self.anchor_b, self.ddist_m
+        return out
+
+
+def encode_tdoa(tick: int, t_s: float, rows: np.ndarray) -> bytes:
+    """``encode(Tdoa(...))`` of ``rows`` (N, 3) (anchor ``A``, anchor ``B``, ``ddist_m``: the radio step's
+    :class:`swarm.step.radio.TdoaSample` rows, whose anchor columns hold whole numbers)."""
+    r = np.asarray(rows, dtype=np.float64).reshape(-1, 3)
+    a = tuple(int(x) for x in r[:, 0].tolist()) if np.all(r[:, 0] == np.round(r[:, 0])) else r[:, 0].tolist()
+    b = tuple(int(x) for x in r[:, 1].tolist()) if np.all(r[:, 1] == np.round(r[:, 1])) else r[:, 1].tolist()
+    return encode(Tdoa(tick, t_s, a, b, np.ascontiguousarray(r[:, 2])))
+
+
+@dataclass(frozen=True, eq=False)
+class TdoaBatch(_Batch):
+    """The :class:`Tdoa` messages of many vehicles in one UWB slot, in one message: ``<ns>/mothership/tdoa``,
+    sent by a simulated radio network that serves agent hosts instead of one ``agent/<id>/tdoa`` per
+    vehicle (docs/protocol.md, "Rates"). A tag's count of rows varies, so each entry is the message as its
+    own key would carry it (the msgpack bytes of a :class:`Tdoa`), as in a :class:`VisionBatch`."""
+
+    tick: int
+    """Tick ``k`` of the slot (>= 0), every entry's."""
+    t_s: float
+    """Time of the slot [s] (>= 0), every entry's."""
+    ids: tuple[str, ...]
+    """The vehicles, distinct, 1 to :data:`MAX_BATCH`: entry ``i`` of ``differences`` is ``ids[i]``'s."""
+    differences: tuple[bytes, ...]
+    """Each vehicle's encoded :class:`Tdoa` (msgpack bin), one per id; the whole message stays within
+    :data:`MAX_PAYLOAD_BYTES`."""
+
+    def __post_init__(self) -> None:
+        ids = _vehicle_ids(self.ids, "ids", 1)
+        blobs = _blobs(_per_id(self.differences, "differences", ids), "differences", "Tdoa")
+        _set(self, tick=_int(self.tick, "tick"), t_s=_float(self.t_s, "t_s", lo=0.0), ids=ids,
+             differences=blobs)  # fmt: skip
+
+    def sample(self, vid: str, row: int | None = None) -> Tdoa | None:
+        """Vehicle ``vid``'s :class:`Tdoa`, decoded and checked as its own key's would be, ``None`` when the
+        batch has none; MessageError naming the entry (``differences[3]: ...``) for one that does not
+        decode, or whose tick or time is not the batch's."""
+        row = self._row(vid, row)
+        if row is None:
+            return None
+        msg = _entry(self.differences, "differences", row, Tdoa)
+        if msg.tick != self.tick or msg.t_s != self.t_s:
+            raise MessageError(f"differences[{row}]: tick {msg.tick} at {msg.t_s} s in the batch of tick "
+                               f"{self.tick} at {self.t_s} s")  # fmt: skip
+        return msg
+
+
 def _per_id(value: object, name: str, ids: tuple) -> list | tuple:
     if not isinstance(value, list | tuple):
         raise MessageError(f"{name}: expected an array, got {_show(value)}")
@@ -1065,7 +1172,7 @@ class CommandBatch(_Batch):
         return None if row is None else _entry(self.commands, "commands", row, Command)
 
 
-BUNDLE_TYPES: tuple[str, ...] = ("Imu", "Uwb", "Vision", "TruthBatch")
+BUNDLE_TYPES: tuple[str, ...] = ("Imu", "Uwb", "Vision", "TruthBatch", "Tdoa")
 """The messages a :class:`Bundle` may carry: a lockstep tick's samples (docs/protocol.md, "Bundles")."""
 
 
@@ -1680,6 +1787,8 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         ImuBatch,
         Uwb,
         UwbBatch,
+        Tdoa,
+        TdoaBatch,
         Vision,
         VisionBatch,
         Gnss,
@@ -1702,13 +1811,14 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
 """Every message class by its wire ``"type"``."""
 
 MESSAGE_FOR_KIND: dict[str, type[Message]] = {
-    "imu": Imu, "uwb": Uwb, "vision": Vision, "gnss": Gnss, "rangefinder": Rangefinder,
+    "imu": Imu, "uwb": Uwb, "tdoa": Tdoa, "vision": Vision, "gnss": Gnss, "rangefinder": Rangefinder,
     "barometer": Barometer, "estimate": Estimate,
     "guidance": Guidance,
     "command": Command,
     "commands": CommandBatch,
     "truth": Truth, "event": Event, "world_clock": Clock, "world_event": Event, "world_imu": ImuBatch,
     "world_vision": VisionBatch, "anchors": Anchors, "mothership_uwb": UwbBatch, "world_truth": TruthBatch,
+    "mothership_tdoa": TdoaBatch,
     "run_control": RunControl, "fault": Fault, "bundle": Bundle, "world_bundle": Bundle,
 }  # fmt: skip
 """The message carried by each key kind of :meth:`swarm.transport.keys.Keys.parse`."""

@@ -11,7 +11,8 @@ each link to an identity by the common name (CN) of the certificate it presented
   ``agent/*/bundle`` and ``world/bundle`` (a lockstep world's ticks in one message), ``world/clock``,
   ``world/event``, and ``agent/*/event`` (contact, collision and keep-out events on the chaser's key);
 - ``mothership``: ``agent/*/uwb`` (and ``mothership/uwb``, a slot's ranges in one message for agent hosts;
-  ``agent/*/bundle``, a lockstep bundle's ranges) and ``mothership/anchors`` (a publication, a queryable,
+  ``agent/*/bundle``, a lockstep bundle's ranges), ``agent/*/tdoa`` and ``mothership/tdoa`` (the same for a
+  TDoA radio's distance differences) and ``mothership/anchors`` (a publication, a queryable,
   its replies);
 - ``agent-<id>``: ``agent/<id>/estimate|guidance|command|event`` only;
 - ``dashboard``: the operator's controls only, ``control/run`` (pause, resume, reset, new seed) and
@@ -142,7 +143,14 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         }  # fmt: skip
     if name == "mothership":
         return {
-            "put": (keys.agent_all("uwb"), keys.agent_all("bundle"), keys.mothership_uwb(), keys.anchors()),
+            "put": (
+                keys.agent_all("uwb"),
+                keys.agent_all("tdoa"),
+                keys.agent_all("bundle"),
+                keys.mothership_uwb(),
+                keys.mothership_tdoa(),
+                keys.anchors(),
+            ),
             "declare_queryable": (keys.anchors(),),
             "reply": (keys.anchors(),),
             # (a vehicle's truth: viewers'; world/event: the launcher's stopping, swarm.transport.stopping)
@@ -176,9 +184,10 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         return {
             "put": (keys.estimate(vid), keys.guidance(vid), keys.command(vid), keys.commands(vid),
                     keys.event(vid)),
-            "declare_subscriber": (keys.imu(vid), keys.uwb(vid), keys.vision(vid), keys.bundle(vid),
-                                   keys.agent_all("estimate"),
+            "declare_subscriber": (keys.imu(vid), keys.uwb(vid), keys.tdoa(vid), keys.vision(vid),
+                                   keys.bundle(vid), keys.agent_all("estimate"),
                                    keys.world_imu(), keys.world_vision(), keys.mothership_uwb(),
+                                   keys.mothership_tdoa(),
                                    keys.world_clock(), keys.world_event()),  # world_resumed
             "liveliness_token": (keys.alive("agent", vid),),
             **watch,

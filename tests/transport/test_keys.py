@@ -13,8 +13,8 @@ from swarm.errors import ConfigError
 from swarm.transport.keys import AGENT_KINDS, ID_PATTERN, Keys, check_id
 
 EXPECTED_AGENT_KINDS = (
-    "imu", "uwb", "vision", "gnss", "rangefinder", "barometer", "estimate", "guidance", "command", "commands",
-    "truth", "event", "bundle",
+    "imu", "uwb", "tdoa", "vision", "gnss", "rangefinder", "barometer", "estimate", "guidance", "command",
+    "commands", "truth", "event", "bundle",
 )  # fmt: skip
 
 
@@ -36,6 +36,8 @@ def test_every_key_string_matches_the_protocol_table(ns):
     assert k.world_imu() == f"{ns}/world/imu"
     assert k.world_vision() == f"{ns}/world/vision"
     assert k.mothership_uwb() == f"{ns}/mothership/uwb"
+    assert k.tdoa("chaser") == f"{ns}/agent/chaser/tdoa"
+    assert k.mothership_tdoa() == f"{ns}/mothership/tdoa"
     assert k.world_truth() == f"{ns}/world/truth"
     assert k.bundle("c_1") == f"{ns}/agent/c_1/bundle"
     assert k.world_bundle() == f"{ns}/world/bundle"

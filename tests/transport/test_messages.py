@@ -49,6 +49,8 @@ from swarm.transport.messages import (
     ImuBatch,
     Rangefinder,
     RunControl,
+    Tdoa,
+    TdoaBatch,
     Truth,
     TruthBatch,
     Uwb,
@@ -57,6 +59,7 @@ from swarm.transport.messages import (
     VisionBatch,
     decode,
     encode,
+    encode_tdoa,
     safe_decode,
 )
 
@@ -107,6 +110,11 @@ VALID = {
     Gnss: Gnss(9, 0.2, [1.0, -2.0, 8.0], np.diag([1.0, 1.0, 2.25])),
     Rangefinder: Rangefinder(10, 0.1, 4.2, 0.03),
     Barometer: Barometer(11, 0.1, -3.25, 0.5),  # any offset: below the datum too
+    Tdoa: Tdoa(12, 0.1, (0, 2, 7), (1, 5, 3), [0.25, -1.5, 0.0]),  # d_B - d_A: any sign
+    TdoaBatch: TdoaBatch(12, 0.1, ("chaser0", "target0"), (
+        encode(Tdoa(12, 0.1, (0, 2), (1, 5), [0.25, -1.5])),
+        encode(Tdoa(12, 0.1)),  # a tag that heard nothing this slot: no rows, still a message
+    )),
 }  # fmt: skip
 
 SILENT = logging.getLogger("tests.transport.silent")
@@ -229,7 +237,26 @@ STRATEGIES_COMMAND = st.builds(
     st.none() | vec(3),
 )
 
+
+@st.composite
+def tdoas(draw, k=None, t=None):
+    n = draw(st.integers(0, 12))
+    a = draw(st.lists(st.integers(0, 2**31 - 1), min_size=n, max_size=n))
+    b = [draw(st.integers(0, 2**31 - 1).filter(lambda x, y=y: x != y)) for y in a]
+    dd = draw(arrays(np.float64, n, elements=finite))
+    return Tdoa(draw(ticks) if k is None else k, draw(times) if t is None else t, tuple(a), tuple(b), dd)
+
+
+@st.composite
+def tdoa_batches(draw):
+    vids = tuple(draw(st.lists(ids, min_size=1, max_size=4, unique=True)))
+    k, t = draw(ticks), draw(times)
+    return TdoaBatch(k, t, vids, tuple(encode(draw(tdoas(k, t))) for _ in vids))
+
+
 STRATEGIES = {
+    Tdoa: tdoas(),
+    TdoaBatch: tdoa_batches(),
     Imu: st.builds(Imu, ticks, times, st.floats(1e-6, 10.0), vec(3), st.none() | quats, st.none() | vec(3)),
     ImuBatch: imu_batches(),
     Uwb: st.builds(Uwb, ticks, times, st.integers(0, 2**31 - 1), st.none() | nonneg),
@@ -407,6 +434,26 @@ for _ in range(8):
 
 # (class, field path, bad value, expected start of the error message); DELETE removes the key
 CASES = [
+    (Tdoa, "ddist_m", [0.25, NAN, 0.0], "ddist_m: not finite"),
+    (Tdoa, "ddist_m", array_map([0.25, INF, 0.0]), "ddist_m: not finite"),
+    (Tdoa, "ddist_m", [0.25, -1.5], "ddist_m: 2 entries for 3 in anchor_a"),
+    (Tdoa, "ddist_m", [[0.25], [-1.5], [0.0]], "ddist_m: nested deeper"),
+    (Tdoa, "ddist_m", DELETE, "ddist_m: 0 entries for 3 in anchor_a"),  # (a default: no rows)
+    (Tdoa, "anchor_a", [0, 2], "anchor_b: 3 entries for 2 in anchor_a"),
+    (Tdoa, "anchor_a", [0, -2, 7], "anchor_a[1]: must be >= 0"),
+    (Tdoa, "anchor_a", [0, 2**31, 7], "anchor_a[1]: must be <="),
+    (Tdoa, "anchor_a", [0, 2.0, 7], "anchor_a[1]: expected an integer"),
+    (Tdoa, "anchor_a", [0, True, 7], "anchor_a[1]: expected an integer"),
+    (Tdoa, "anchor_a", "027", "anchor_a: expected an array of anchor ids"),
+    (Tdoa, "anchor_b", [1, 5], "anchor_b: 2 entries for 3 in anchor_a"),
+    (Tdoa, "anchor_b", [1, 2, 3], "anchor_b[1]: the same anchor as anchor_a[1] (2)"),
+    (Tdoa, "anchor_b", [1, None, 3], "anchor_b[1]: expected an integer"),
+    (Tdoa, "tick", -1, "tick: must be >= 0"),
+    (Tdoa, "t_s", NAN, "t_s: not finite"),
+    (TdoaBatch, "ids", ["chaser0"], "differences: 2 entries for 1 ids"),
+    (TdoaBatch, "ids", ["chaser0", "chaser0"], "ids: duplicate ids"),
+    (TdoaBatch, "differences", [b"\x80", "text"], "differences[1]: expected the bytes of a Tdoa message"),
+    (TdoaBatch, "tick", -1, "tick: must be >= 0"),
     (Rangefinder, "range_m", -0.1, "range_m: must be >= 0"),
     (Rangefinder, "range_m", NAN, "range_m: not finite"),
     (Rangefinder, "sigma_m", 0.0, "sigma_m: must be > 0"),
@@ -876,6 +923,7 @@ def test_every_key_kind_maps_to_a_message():
         "world_imu",
         "anchors",
         "mothership_uwb",
+        "mothership_tdoa",
         "world_truth",
         "world_bundle",
         "run_control",
@@ -1540,3 +1588,45 @@ def test_the_next_runs_seed_is_the_one_asked_for_else_the_same_after_a_reset_and
     assert next_run_seed({"reason": "new_seed", "next_seed": 11}, 4) == 11
     assert next_run_seed({"reason": "reset", "next_seed": 0}, 4) == 0  # a seed 0 asked for is kept
     assert next_run_seed({"reason": "done"}, 4) == 5  # --repeat
+
+
+# ------------------------------------------------------------------------------------------------ TDoA
+
+
+def test_tdoa_rows_round_trip_bit_for_bit_and_no_rows_is_a_message():
+    """The radio step's rows (K, 3) (anchor A, anchor B, d_B - d_A) come out of ``Tdoa.rows`` as they went
+    into :func:`encode_tdoa`, bit for bit (launch == sim rests on it), and a slot with none is a message
+    with no rows (so a lockstep agent knows not to wait)."""
+    rng = np.random.default_rng(7)
+    rows = np.column_stack([rng.integers(0, 8, 40), rng.integers(0, 8, 40), rng.normal(0.0, 1.0, 40)])
+    rows = rows[rows[:, 0] != rows[:, 1]].astype(np.float64)
+    got = decode(encode_tdoa(5, 0.05, rows), Tdoa)
+    assert got.tick == 5 and got.anchor_a == tuple(int(a) for a in rows[:, 0])
+    assert got.rows().tobytes() == rows.tobytes()
+    empty = decode(encode_tdoa(6, 0.06, np.zeros((0, 3))), Tdoa)
+    assert empty.anchor_a == () and empty.rows().shape == (0, 3)
+
+
+def test_a_tdoa_row_with_a_fractional_anchor_is_refused():
+    with pytest.raises(MessageError, match=r"^anchor_a\[0\]: expected an integer"):
+        encode_tdoa(1, 0.0, np.array([[0.5, 1.0, 0.2]]))
+
+
+def test_more_than_the_tdoa_row_cap_is_refused():
+    n = msgs.MAX_TDOA_ROWS + 1
+    with pytest.raises(MessageError, match=r"^anchor_a: 1025 entries, more than the 1024 allowed"):
+        Tdoa(1, 0.0, (0,) * n, (1,) * n, np.zeros(n))
+
+
+def test_a_tdoa_batch_entry_of_another_tick_is_refused_naming_it():
+    batch = TdoaBatch(3, 0.03, ("a", "b"), (encode(Tdoa(3, 0.03)), encode(Tdoa(4, 0.04))))
+    assert batch.sample("a") == Tdoa(3, 0.03)
+    with pytest.raises(MessageError, match=r"^differences\[1\]: tick 4"):
+        batch.sample("b")
+
+
+def test_the_twr_range_bytes_are_unchanged_by_tdoa():
+    """TDoA travels in its own message on its own key: a ``Uwb`` is the same bytes as before it."""
+    assert encode(Uwb(2, 0.02, 1, 1.5)) == pack(
+        {"v": SCHEMA_VERSION, "type": "Uwb", "tick": 2, "t_s": 0.02, "anchor_id": 1, "range_m": 1.5}
+    )

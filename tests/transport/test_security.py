@@ -51,8 +51,8 @@ MAY_PUT = {
     "world": {K.imu(v) for v in VEHICLES} | {K.vision(v) for v in VEHICLES} | {K.truth(v) for v in VEHICLES}
     | {K.event(v) for v in VEHICLES} | {K.bundle(v) for v in VEHICLES}
     | {K.world_imu(), K.world_vision(), K.world_truth(), K.world_bundle(), K.world_clock(), K.world_event()},
-    "mothership": {K.uwb(v) for v in VEHICLES} | {K.bundle(v) for v in VEHICLES}
-    | {K.mothership_uwb(), K.anchors()},
+    "mothership": {K.uwb(v) for v in VEHICLES} | {K.tdoa(v) for v in VEHICLES}
+    | {K.bundle(v) for v in VEHICLES} | {K.mothership_uwb(), K.mothership_tdoa(), K.anchors()},
     "agent-chaser": {K.estimate("chaser"), K.guidance("chaser"), K.command("chaser"), K.commands("chaser"),
                      K.event("chaser")},
     "agent-target": {K.estimate("target"), K.guidance("target"), K.command("target"), K.commands("target"),
@@ -62,7 +62,7 @@ MAY_PUT = {
 }  # fmt: skip
 ALL_KEYS = sorted({getattr(K, kind)(v) for kind in AGENT_KINDS for v in VEHICLES}
                   | {K.world_clock(), K.world_event(), K.world_imu(), K.world_vision(), K.world_truth(),
-                     K.world_bundle(), K.anchors(), K.mothership_uwb(), K.run_control(),
+                     K.world_bundle(), K.anchors(), K.mothership_uwb(), K.mothership_tdoa(), K.run_control(),
                      K.fault()})  # fmt: skip
 
 
@@ -123,10 +123,11 @@ def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_
         | {K.run_control(), K.fault()},
         # batches, not each vehicle's; world/event: the launcher's stopping
         "mothership": {K.world_truth(), K.world_bundle(), K.world_clock(), K.world_event()},
-        "agent-chaser": {K.imu("chaser"), K.uwb("chaser"), K.vision("chaser"), K.bundle("chaser")}
+        "agent-chaser": {K.imu("chaser"), K.uwb("chaser"), K.tdoa("chaser"), K.vision("chaser"),
+                         K.bundle("chaser")}
         | {K.world_clock()}
         | {K.estimate(v) for v in VEHICLES}
-        | {K.world_imu(), K.world_vision(), K.mothership_uwb(), K.world_event()},
+        | {K.world_imu(), K.world_vision(), K.mothership_uwb(), K.mothership_tdoa(), K.world_event()},
         "dashboard": set(ALL_KEYS),
         "launcher": {K.world_event(), K.world_clock()} | {K.event(v) for v in VEHICLES}
         | {K.guidance(v) for v in VEHICLES},
