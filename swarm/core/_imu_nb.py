@@ -472,7 +472,7 @@ def _ess_weight(RS, RP, x, e):
 
 
 @njit(cache=True)
-def fuse_tdoa(X, P, PRM, RP, anchors, ridx, a, b, z, t, TV, RS, work, res):
+def fuse_tdoa(X, P, PRM, RP, anchors, ridx, a, b, z, t, TV, RS, work, res, pinned=False):
     """One distance difference ``z`` [m] of anchors ``a`` and ``b`` (indices into ``anchors`` (M, 3) and
     ``ridx``) at ``t`` [s] through the robust TDoA model; returns the outcome and leaves ``(outcome, d2, nu,
     weight)`` in ``res`` (``weight``: its worth of an independent innovation in the window test, -1 held
@@ -492,7 +492,12 @@ def fuse_tdoa(X, P, PRM, RP, anchors, ridx, a, b, z, t, TV, RS, work, res):
        ``RP_VAR_CEIL``: a pair's spread grows in flight, and the heavy tails would otherwise pull it below
        the prior (measured: a divergence).
     4. **Effective sample size** (``RP_ESS``): per anchor, the lag-1 autocorrelation of its signed ``e``;
-       a difference is worth the smaller of its two anchors' ``(1 - rho^2) / (1 + rho^2)``."""
+       a difference is worth the smaller of its two anchors' ``(1 - rho^2) / (1 + rho^2)``.
+
+    While the vehicle is ``pinned`` on the ground (:func:`pin_step`) every difference is held out, refused
+    (its squared distance still reported): a TDoA tag on the ground hears the anchors 1-3 m off (the UTIL
+    logs, before the take-off and after the touchdown), consistently enough that the gate passes some and
+    they move a standing estimate; the pad or the touchdown point is known better."""
     tv = TV[a, b]
     res[0], res[1], res[2], res[3] = REFUSED, 0.0, 0.0, 1.0
     var = tv[TV_VAR]
@@ -504,6 +509,9 @@ def fuse_tdoa(X, P, PRM, RP, anchors, ridx, a, b, z, t, TV, RS, work, res):
     d2 = nu * nu / S
     e = nu / math.sqrt(S)
     res[1], res[2] = d2, nu
+    if pinned:
+        res[0], res[3] = REFUSED, -1.0
+        return REFUSED
     if RP[RP_NLOS] > 0.0:
         wa, wb = 1.0, 1.0
         if RP[RP_ESS] > 0.0:
@@ -1059,7 +1067,8 @@ def replay(
         if kind == 3:
             ST[ST_I_TDOA] += 1
             a, b = tdoa_a[u], tdoa_b[u]
-            outcome = fuse_tdoa(X, P, PRM, RP, anchors, ridx, a, b, tdoa_z[u], t, TV, RS, work, res)
+            pinned = PH[PH_PINNED] > 0.0 and PH[PH_TOUCH] > 0.0
+            outcome = fuse_tdoa(X, P, PRM, RP, anchors, ridx, a, b, tdoa_z[u], t, TV, RS, work, res, pinned)
             tdoa_d2[u], tdoa_outcome[u] = res[1], outcome
             tdoa_counts[a, b, outcome] += 1
             if (

@@ -197,7 +197,9 @@ class OnlineNavigator:
         if cfg.calibration.until_s <= 0 and cfg.initial.position_m is None:
             first = next((s[0] for s in self._kept if s[1] == _UWB), None)
             return first is not None and t > first + 1.0  # the first second of ranges (replay's fix)
-        return any(s[1] == _IMU for s in self._kept)
+        # an IMU sample, and a radio sample: whether it is a range or a distance difference sets the range-
+        # error model (swarm.logs.replay.is_tdoa), as the replay sets it from the log's files
+        return any(s[1] == _IMU for s in self._kept) and any(s[1] in (_UWB, _TDOA) for s in self._kept)
 
     def _start(self) -> None:
         """Build the filter from the kept samples as the replay builds it from a log, then process them."""
@@ -290,9 +292,12 @@ class OnlineNavigator:
         if kind == _TDOA:
             a, b, z = data
             w = self._win
+            PH = self._PH
+            pinned = PH[nb.PH_PINNED] > 0.0 and PH[nb.PH_TOUCH] > 0.0
             outcome = nb.fuse_tdoa(
-                X, P, prm, self._RP, f.anchors, f.ridx, a, b, z, t, self._TV, self._RS, self._work, self._res
-            )
+                X, P, prm, self._RP, f.anchors, f.ridx, a, b, z, t, self._TV, self._RS, self._work, self._res,
+                pinned,
+            )  # fmt: skip
             self.tdoa_counts[a, b, outcome] += 1
             if outcome != nb.REFUSED and self._res[3] >= 0.0 and nb.in_window(self._PH) and nb.window_push(
                 w.rej, w.d2, w.w, w.all, self._ST, outcome, self._res[1], self._res[2], self._res[3],
