@@ -28,7 +28,7 @@ PROCESS_EACH_PER_CORE = 4
 """A process per vehicle while the swarm has at most this many vehicles per core (8 on 2 cores), agent hosts
 beyond. Measured free-running on 2 cores shared with other work (``swarm bench swarm --clock realtime
 --span 20``, BENCHMARKS.md, "Defaults that hold"): 8 vehicles a process each 0.16 % late ticks, 16 a
-process each 4.6 %, 32 a process each 8-13 % (three runs), where 16 in two hosts of 8 were late 0.40 % and
+process each 4.6 %, 32 a process each 8-14 % (five runs), where 16 in two hosts of 8 were late 0.40 % and
 32 in four hosts of 8 0.07-0.17 % (four runs). A process per vehicle costs ~300 us of CPU per vehicle per
 tick (its own interpreter, Zenoh session and wake at every gyro sample), a vehicle in a host of 8
 ~90-110 us, of 64 ~40 us."""
@@ -132,9 +132,11 @@ def auto_launch_plan(
       with ``secure``: a host would need every hosted vehicle's identity); beyond, :data:`HOSTS_PER_CORE`
       agent hosts per core (more when a host would take over :data:`HOST_MAX_VEHICLES`), the vehicles
       shared evenly: 32 vehicles on 2 cores are four hosts of 8, 128 four of 32. A process per vehicle
-      wakes every one of them at every gyro sample; on two cores 32 such processes were late 8-13 % of
-      their ticks, four hosts of 8 0.07-0.17 %. Lockstep takes the same hosts (its run is the same, in
-      fewer processes: faster);
+      wakes every one of them at every gyro sample; on two cores 32 such processes were late 8-14 % of
+      their ticks, four hosts of 8 0.00-0.99 % (nine runs, six of them beside other jobs). 128 vehicles
+      in four hosts of 32 need 0.78 of the two cores: 0.00-0.22 % late on an otherwise idle machine,
+      0.4-17 % beside other jobs. Lockstep takes the same hosts (its run is the same, in fewer processes:
+      faster);
     - **stagger**: free-running, whenever the swarm is beyond a process per vehicle on each core's share
       (hosts, or many processes of one): an agent host steps its vehicles on one thread, and 16 vehicles
       controlling on one tick need that tick's CPU 16 times over (``swarm.stagger_control``). Never in
@@ -142,8 +144,9 @@ def auto_launch_plan(
       control ticks), nor for a small swarm of a process each, which holds real time without it;
     - **wake**: at each gyro sample, except for free-running processes of one vehicle beyond the
       hosts' threshold (the user asked for a process each, or ``secure``): then twice per control period
-      (``agent.wake_at_control``), ~5 times fewer wakes (32 vehicles a process each, staggered: 0.14-0.97 %
-      late with it in four runs, 1.0-2.7 % without in three, once 79 % with it in the issue's two runs).
+      (``agent.wake_at_control``), ~5 times fewer wakes (32 vehicles a process each, staggered: 0.14-1.52 %
+      late with it in six runs, 1.0-2.7 % without in three; the issue saw 4.7 and 79 % with it): the best
+      a process each does here, not reliably under 1 %.
     """
     if isinstance(n_vehicles, bool) or not isinstance(n_vehicles, int) or n_vehicles < 1:
         raise ConfigError(f"a launch plan needs a vehicle count >= 1, got {n_vehicles!r}")
