@@ -105,3 +105,30 @@ def test_a_lockstep_launch_on_tdoa3_equals_the_in_process_run(tmp_path):
     assert len(got_estimates) > 0.9 * len(tap.by_tick)
     for k, payload in got_estimates.items():
         assert payload == tap.by_tick[k], k
+
+
+def test_a_rejoining_agent_on_tdoa_refuses_to_reinitialise_and_holds(caplog):
+    """A restarted agent re-initialises from one range per anchor; a TDoA tag has none, and this agent
+    does not multilaterate from differences: it says so (once) and stays without a filter (HOLD, zero
+    thrust), whatever differences come, in its tick or late."""
+    import logging
+    import threading
+
+    import numpy as np
+
+    from agents.process import AgentProcess
+    from swarm.transport.messages import Imu, Tdoa
+    from swarm.transport.process import ClockSpec
+
+    sc = load_scenario("docking", {"uwb.mode": "tdoa3", "anchors_m": CUBE})
+    proc = AgentProcess(sc, "chaser", SEED, "mdp", None, Keys("t"), ClockSpec.parse("lockstep"),
+                        threading.Event(), rejoin=True)  # fmt: skip
+    imu = Imu(5, 0.05, 0.01, np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]))
+    rows = Tdoa(5, 0.05, tuple(range(7)), tuple(range(1, 8)), np.full(7, 0.1))
+    with caplog.at_level(logging.ERROR, logger="swarm.agent"):
+        for _ in range(3):
+            assert not proc._collect_init(imu, rows)
+        proc.fuse_late([rows])
+    assert proc.agent is None
+    said = [r.getMessage() for r in caplog.records if "cannot re-initialise" in r.getMessage()]
+    assert len(said) == 1 and "tdoa3" in said[0], said
