@@ -227,7 +227,9 @@ class PhaseParams:
     climb_accel_m_s2: float = 0.3
     """Take-off from the ground: the vertical specific force over gravity by this [m/s^2] (low-passed as the
     vibration, held for the dwell; 0: not used). A lift-off accelerates at 0.2-0.9 m/s^2 (UTIL flights); on
-    the ground, rotors spinning, it spreads ~0.1 m/s^2."""
+    the ground, rotors spinning, it spreads ~0.1 m/s^2. Without it, a vehicle pinned on its pad whose rotors
+    spin from the log's first sample and which has no range finder takes off only by the estimate's
+    height, which the pin holds down: set ``pin_velocity_sigma_m_s = 0`` too."""
     pin_velocity_sigma_m_s: float = 0.02
     """While standing where it is known to stand (the pad before take-off, or after a touchdown): a zero
     velocity of this sigma per axis every ``pin_period_s`` (0: no pin)."""
