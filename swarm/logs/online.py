@@ -135,8 +135,9 @@ class OnlineNavigator:
         self._push(float(t_s), _TDOA, (a, b, float(ddist_m)))
 
     def height(self, t_s: float, range_m: float) -> None:
-        """A downward rangefinder's distance [m] (``height.csv``; NaN or None: no reading, not fed)."""
-        if range_m is not None and math.isfinite(range_m):
+        """A downward rangefinder's distance [m] (``height.csv``; NaN or None: no reading, not fed). With
+        ``height.enabled = false`` nothing is fed, as the replay leaves ``height.csv`` out (:meth:`baro`)."""
+        if range_m is not None and math.isfinite(range_m) and self.config.height.enabled:
             self._push(float(t_s), _HEIGHT, float(range_m))
 
     def baro(self, t_s: float, height_m: float) -> None:

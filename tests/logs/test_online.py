@@ -192,3 +192,26 @@ def test_a_tdoa_flight_fed_in_time_order_gives_the_replay_bit_for_bit(tmp_path):
     ]
     assert np.mean([v["rejected_share"] for v in nlos]) > 3 * np.mean([v["rejected_share"] for v in clear])
     assert s["rmse_m"] < 0.15
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_range_finder_readings_are_fused_as_the_replay_fuses_them_or_not_at_all(tmp_path, enabled):
+    """``height.csv`` through the live navigator equals the replay bit for bit with ``height.enabled`` on,
+    and off: a disabled range finder's readings are not fed at all (a refused reading would still split the
+    IMU interval it falls in, and the estimates would differ from the replay's)."""
+    d = tmp_path / "h"
+    make_log(d, seed=4, spec=SyntheticSpec(duration_s=12.0, height_rate_hz=25.0))
+    log = read_log(d, {"height.enabled": enabled})
+    r = replay_log(log)
+    order = _samples(log)
+    heights = zip(log.height_t, log.height_range, strict=True)
+    order += [(float(t), 2, (float(t), float(z))) for t, z in heights]
+    order.sort(key=lambda s: (s[0], s[1]))
+    nav = OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, 0.05)
+    for n, (_, kind, args) in enumerate(order):
+        (nav.imu, nav.uwb, nav.height)[kind](*args)
+        if n % 97 == 0:
+            nav.drain()
+    nav.drain(final=True)
+    _same(nav, r)
+    assert (nav.aux_counts[0].sum() > 0) == enabled
