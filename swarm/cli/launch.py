@@ -19,8 +19,9 @@ It waits for every liveliness token (not for a time), supervises the children (a
 whose token goes or that exits is reported lost and restarted with ``--rejoin``, the world with
 ``--resume`` from the checkpoint it writes every tick into a private directory of the launcher; each with
 exponential backoff, at most ``--max-restarts`` times), and collects the run from ``world/event``,
-``agent/*/event`` and ``agent/*/guidance``. The summary has ``swarm sim``'s fields per chaser (DESIGN.md
-section 8) and the restarts of each process. After the run: ``--until-docked`` exits; ``--repeat`` starts
+``agent/*/event`` and ``agent/*/guidance``. The summary has ``swarm sim``'s fields per chaser
+(swarm/step/outcome.py) and the restarts of each process. After the run: ``--until-docked`` exits;
+``--repeat`` starts
 the next run with a new seed; otherwise the swarm stays up (for the dashboard) until Ctrl-C or
 ``--timeout``. Ctrl-C, SIGTERM or the end stop every child in an order that no process mistakes for a
 failure (:mod:`swarm.transport.stopping`): a ``stopping`` event on ``world/event``, then the world, then
@@ -102,7 +103,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--headless", action="store_true", help="do not start the dashboard")
     g.add_argument(
         "--secure", action="store_true",
-        help="mutual TLS and Zenoh access control, with certificates made at run time (README: Security)",
+        help="mutual TLS and Zenoh access control, certificates made at run time (docs/usage.md: Security)",
     )  # fmt: skip
     g.add_argument(
         "--topology", choices=TOPOLOGIES, default="auto",
@@ -119,7 +120,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--timeout", type=positive_float("--timeout"), default=None, metavar="S", help="wall-time limit [s]"
     )
-    add_output_file(g, "--json", "write the summary (DESIGN.md sec. 8)")
+    add_output_file(g, "--json", "write the summary (swarm/step/outcome.py)")
     g.add_argument(
         "--record",
         type=Path,

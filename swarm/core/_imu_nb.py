@@ -761,7 +761,7 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
     before it is declared (as PX4's land detector's hysteresis).
 
     **Take-off** (on the ground): the RMS change of the specific force between samples (rotor vibration:
-    ~0.01 m/s^2 standing, ~0.1 in flight on a small quadrotor, DESIGN.md sec. 11; low-passed with
+    ~0.01 m/s^2 standing, ~0.1 in flight on a small quadrotor, docs/logs.md; low-passed with
     ``RP_VIB_TAU``) rises over ``RP_VIB_THRESHOLD`` (after a landing only once the rotors stopped,
     ``RP_VIB_RATIO`` under the flight's level: ``PH_ARMED``; rotors spinning on, or cut with a jolt, are not
     a take-off); or the estimated height
@@ -782,7 +782,7 @@ def phase_step(X, P, RP, PH, ridx, acc, dt, t):
     the vehicle is pinned (``PH_TOUCH``).
 
     At a change each anchor's offset variance grows by ``RP_REOPEN_VAR``: the offsets move when the vehicle
-    leaves or meets the ground (DESIGN.md sec. 11), a step a slow random walk cannot follow; so does a
+    leaves or meets the ground (docs/logs.md), a step a slow random walk cannot follow; so does a
     barometer's offset (``RP_REOPEN_BARO_VAR``). Each body axis' vibration variance is kept too (a slow
     mean, ``PH_VX``..``PH_VZ``) for :func:`vibration_noise`: the lag-1 autocovariance of its deviations
     from its own ``VIB_MEAN_TAU_S`` mean, which a white sensor noise leaves at zero (successive samples

@@ -1,5 +1,5 @@
-"""The keys of one Algorithm 1 decision record (DESIGN.md section 8), in a module light enough for the
-wire codec to import (no numba, no scipy: ``tests/transport/test_messages.py``)."""
+"""The keys of one Algorithm 1 decision record (a run summary's ``"decisions"``), in a module light enough
+for the wire codec to import (no numba, no scipy: ``tests/transport/test_messages.py``)."""
 
 from __future__ import annotations
 
@@ -22,4 +22,4 @@ DECISION_KEYS: tuple[str, ...] = (
     "r1_m",
     "r2_m",
 )
-"""Keys of one ``"decisions"`` record, DESIGN.md section 8, in that order."""
+"""Keys of one ``"decisions"`` record, in that order."""

@@ -63,7 +63,7 @@ class ImuFilterParams:
     """Its random walk [m/sqrt(s)]."""
     range_gm: bool = True
     """A first-order Gauss-Markov range error per anchor (time-correlated multipath; real ranges correlate
-    0.3-0.84 at 0.1 s and 0.06-0.44 at 1 s, DESIGN.md sec. 11)."""
+    0.3-0.84 at 0.1 s and 0.06-0.44 at 1 s, docs/logs.md)."""
     range_gm_sigma_m: float = 0.02
     """Its stationary standard deviation [m]: the least correlated part; the white part adapts in flight
     (``[robust] adapt``). 0.02 m held on the development hover (NEES 2.2) and on a synthetic flight of the
@@ -198,7 +198,7 @@ class PhaseParams:
     vibration_ratio: float = 3.0
     """Airborne above this many times the vibration level standing still (the static segment's, else the
     log's first second), and landed below its level in flight over this ratio (the rotors stopped): a small
-    quadrotor's rotors raise it ~10x (0.01 -> 0.1 m/s^2, DESIGN.md sec. 11); relative, so that an IMU's own
+    quadrotor's rotors raise it ~10x (0.01 -> 0.1 m/s^2, docs/logs.md); relative, so that an IMU's own
     noise and sample rate do not matter."""
     takeoff_height_m: float = 0.3
     """Airborne, too, when the estimate is this high over the ground reference [m] (0: not used)."""
@@ -207,7 +207,7 @@ class PhaseParams:
     offsets had stepped: one reset in 20 synthetic profile flights; 0.3 s and 0.1 s: none)."""
     reopen_sigma_m: float = 0.1
     """Standard deviation added to each anchor's offset at a change [m] (steps of -0.02 to +0.36 m were
-    measured at take-off on real anchors, DESIGN.md sec. 11)."""
+    measured at take-off on real anchors, docs/logs.md)."""
     reopen_baro_sigma_m: float = 1.0
     """Standard deviation added to the barometer's offset at a change [m] (rotor downwash)."""
     land_height_m: float = 0.15

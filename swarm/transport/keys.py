@@ -1,6 +1,6 @@
 """Every Zenoh key expression of the swarm, built in one place under a configurable namespace.
 
-DESIGN.md section 4: one namespace per swarm (default ``tpods``) so that two swarms can share a router.
+docs/protocol.md: one namespace per swarm (default ``tpods``) so that two swarms can share a router.
 Per-vehicle topics are ``<ns>/agent/<id>/<kind>``; the rest are ``<ns>/world/clock``, ``<ns>/world/imu``,
 ``<ns>/world/truth``, ``<ns>/world/bundle``, ``<ns>/mothership/uwb``, ``<ns>/mothership/tdoa``,
 ``<ns>/mothership/anchors``,

@@ -4,7 +4,7 @@ Wire format (``docs/protocol.md`` is the reference for drivers and other languag
 Zenoh sample, ``{"v": SCHEMA_VERSION, "type": "<class name>", "<field>": <value>, ...}`` with the field
 names of the dataclasses below. Floats may arrive as msgpack ints; integers must be ints; tuples are
 arrays; a numpy array is the map ``{"dtype": "<f8", "shape": [...], "data": <bin>}`` of its raw C-order
-bytes (DESIGN.md section 9: 2-3 us per array where ``tolist`` of 1000 x 3 costs ~300 us), and plain nested
+bytes (measured here: 2-3 us per array where ``tolist`` of 1000 x 3 costs ~300 us), and plain nested
 arrays of numbers are accepted too, so a client in any language can send lists. A field with a default
 may be left out (its default applies); unknown keys are ignored, so a newer sender can add fields
 without breaking an older receiver. A change that breaks old readers bumps :data:`SCHEMA_VERSION`.
@@ -1403,7 +1403,7 @@ class Guidance(Message):
     r_t_m: float | None = None
     """Radius below which Algorithm 1 runs [m] (>= 0); ``None`` for a vehicle without a switcher."""
     decision: dict[str, float | None] | None = None
-    """Latest Algorithm 1 pass: exactly the 17 DESIGN.md section 8 keys
+    """Latest Algorithm 1 pass: exactly the 17 keys of swarm/core/decision_keys.py
     (``swarm.core.decision_keys.DECISION_KEYS``), numbers >= 0, ``A11 A22 A23 A32 A33 pi1 pi2``
     probabilities in [0, 1] or ``None`` where the branch did not compute them; other keys are dropped.
     ``None`` when no pass happened yet (or the fixed policy)."""

@@ -29,7 +29,7 @@ connects but can do nothing; a session without a valid certificate cannot connec
 The rules filter what the router *receives* (``flows: ["ingress"]``); what it forwards to a known
 identity (``egress``) is allowed within the namespace, since what a process receives is already bounded
 by the subscriptions it was allowed to declare. A subscriber declared wider than its allowed key expression
-is refused (DESIGN.md section 9), so every process subscribes within its keys. The router's own session
+is refused (measured here), so every process subscribes within its keys. The router's own session
 (the launcher) is not a remote link: the ACL does not filter it.
 
 :class:`SecureMaterial` makes a throwaway CA and one certificate per identity at run time with the
@@ -38,7 +38,7 @@ is refused (DESIGN.md section 9), so every process subscribes within its keys. T
 configuration per identity (``<identity>.json5``) into a private temporary directory (mode 0700, outside
 the source tree) and removes that directory when closed. Nothing of it is ever committed. In production,
 issue the same common names from your own CA and give each process its configuration with
-``--zenoh-config`` (README, "Security"); ``python -m swarm.transport.security DIR`` writes a template.
+``--zenoh-config`` (docs/usage.md, "Security"); ``python -m swarm.transport.security DIR`` writes a template.
 """
 
 from __future__ import annotations
@@ -333,7 +333,7 @@ def router_config(directory: Path, name: str, acl: dict) -> dict:
 def secure_listen(listen: Sequence[str] | None, zenoh_config: str | None, free_port: int) -> list[str]:
     """The router's listen endpoints for ``swarm launch --secure``: ``listen`` if given (each must be
     ``tls/...``), else ``tls/127.0.0.1:<free_port>``. ConfigError if ``--zenoh-config`` is also given
-    (the secure configuration is generated: give your own per process instead, README "Security")."""
+    (the secure configuration is generated: give your own per process instead, docs/usage.md "Security")."""
     if zenoh_config:
         raise ConfigError(
             "--secure and --zenoh-config cannot be used together: --secure generates each process's Zenoh "

@@ -255,7 +255,7 @@ def test_a_tdoa_update_pulls_toward_the_measurement_and_a_gross_one_is_rejected(
 
 def test_take_off_and_landing_are_seen_in_the_rotors_vibration_and_reopen_the_offsets():
     """An IMU standing still (0.01 m/s^2 of white spread), then with the rotors' vibration (0.1, ten times:
-    DESIGN.md sec. 11) from 2 s to 7 s, then still again: take-off declared once the vibration level (0.1 s
+    docs/logs.md) from 2 s to 7 s, then still again: take-off declared once the vibration level (0.1 s
     low-pass) has held over 3x the ground's for the 0.3 s dwell, landing once it fell 3x under the flight's,
     and at each each anchor's offset variance grows by the re-opening variance; the estimate's height is
     never over the take-off height, so the vibration alone decides."""

@@ -1,5 +1,5 @@
 """The synthetic log with a sensor profile (swarm.logs.synthetic, swarm.logs.phenomena): each phenomenon of
-real Crazyflie flights (DESIGN.md sec. 11) switched on alone is in the written files with its parameters,
+real Crazyflie flights (docs/logs.md) switched on alone is in the written files with its parameters,
 measured from the CSV files against the truth; the others stay off, and switching one on changes no other
 sample."""
 

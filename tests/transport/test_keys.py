@@ -1,6 +1,6 @@
 """Tests for swarm.transport.keys: every key expression, its inverse, and namespace / id validation.
 
-Oracle: the key table of DESIGN.md section 4 and docs/protocol.md, written out by hand below.
+Oracle: the key table of docs/protocol.md, written out by hand below.
 """
 
 from __future__ import annotations

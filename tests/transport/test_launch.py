@@ -73,7 +73,7 @@ def _ns() -> str:
 
 
 def _assert_same_run(got: dict, want: dict) -> None:
-    """A launched chaser's summary is ``swarm sim``'s, bit for bit, field by field (DESIGN.md section 8)."""
+    """A launched chaser's summary is ``swarm sim``'s, bit for bit, field by field (swarm/step/outcome.py)."""
     assert got["docked"] and want["docked"]
     fields = ("docking_time_s", "total_impulse_ns", "position_error_m", "attitude_error_rad", "r1_m", "r2_m",
               "keepout_violated", "closest_approach_m", "final_mode", "modes", "decisions",
@@ -231,7 +231,7 @@ def test_a_hung_agent_is_told_with_its_stacks_killed_and_restarted_and_the_run_g
 
 def test_killed_dashboard_agent_and_mothership_are_restarted_and_the_run_goes_on(tmp_path):
     """Every process of the swarm but the world is SIGKILLed in turn during one lockstep run (one launch
-    serves the three, DESIGN.md section 9: launches are the costly tests):
+    serves the three, measured here: launches are the costly tests):
 
     - the dashboard: the launcher says so, starts it again on the same port and the page serves again;
     - the chaser's agent: seen lost within a second (its liveliness token), restarted, re-initialised from

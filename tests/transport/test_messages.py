@@ -67,7 +67,7 @@ NAN, INF = math.nan, math.inf
 Q = [0.0, 0.0, 0.0, 1.0]
 PROBS = {"A11", "A22", "A23", "A32", "A33", "pi1", "pi2"}
 DECISION = {k: (None if k in {"A32", "A33", "pi1", "pi2"} else 0.5) for k in DECISION_KEYS}
-ANCHORS_MS = [[1.0, -0.2, 0.5], [1.0, 0.2, -0.5], [-1.0, 0.2, -0.5], [-1.0, -0.2, 0.5]]  # DESIGN.md sec. 3
+ANCHORS_MS = [[1.0, -0.2, 0.5], [1.0, 0.2, -0.5], [-1.0, 0.2, -0.5], [-1.0, -0.2, 0.5]]  # the paper, sec. III
 
 VALID = {
     Imu: Imu(1, 0.01, 0.01, [0.1, 0.2, 0.3], Q),
