@@ -197,6 +197,7 @@ def _count_in_python(monkeypatch) -> None:
         "_finite3",
         "_range_row",
         "_update_scalar",
+        "_gate_scalar",
         "_reset_attitude",
         "_reset_attitude3",
     ):

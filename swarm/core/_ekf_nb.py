@@ -257,18 +257,9 @@ def _update_scalar_extra(X, P, ST_I, ST_F, PRM, kind, H, nu, r, gate):
         for i in range(6, 9):
             for k in range(6, 9):
                 rr += H[i] * P[i, k] * H[k]
-    S = s + rr
-    d2 = nu * nu / S
-    ST_F[STF_D2 + kind] = d2
-    if not (np.isfinite(d2) and S > 0.0):
-        ST_I[COUNT_REFUSED, kind] += 1
-        return ST_REFUSED_INVALID
-    if d2 > gate:
-        ST_I[COUNT_REJECTED, kind] += 1
-        return ST_REJECTED
-    Sg = S
-    if ST_F[STF_UW_LEFT] > 0.0 and PRM[PRM_UW_BETA] > 0.0 and s > PRM[PRM_UW_RATIO] * rr:
-        Sg = S + PRM[PRM_UW_BETA] * s
+    status, S, Sg = _gate_scalar(ST_I, ST_F, PRM, kind, nu, s, rr, gate)
+    if status != ST_ACCEPTED:
+        return status
     K = u / Sg
     if not np.all(np.isfinite(K)):
         ST_I[COUNT_REFUSED, kind] += 1
@@ -375,6 +366,27 @@ def predict_one(X, P, ST_I, ST_F, w_body, a_nav, dt, PRM):
 
 
 @njit(cache=True)
+def _gate_scalar(ST_I, ST_F, PRM, kind, nu, s, rr, gate):
+    """The gate of a scalar update with ``s = H P H^T`` and noise ``rr``: ``S = s + rr``, the squared
+    Mahalanobis distance ``d2 = nu^2 / S`` booked, refused when not finite, rejected past ``gate``
+    (counted); else ``(ST_ACCEPTED, S, Sg)`` with ``Sg`` the underweighted ``S`` the gain divides by
+    (:func:`_kalman_block`). One rule for :func:`_update_scalar` and :func:`_update_scalar_extra`."""
+    S = s + rr
+    d2 = nu * nu / S
+    ST_F[STF_D2 + kind] = d2
+    if not (np.isfinite(d2) and S > 0.0):
+        ST_I[COUNT_REFUSED, kind] += 1
+        return ST_REFUSED_INVALID, S, S
+    if d2 > gate:
+        ST_I[COUNT_REJECTED, kind] += 1
+        return ST_REJECTED, S, S
+    Sg = S
+    if ST_F[STF_UW_LEFT] > 0.0 and PRM[PRM_UW_BETA] > 0.0 and s > PRM[PRM_UW_RATIO] * rr:
+        Sg = S + PRM[PRM_UW_BETA] * s
+    return ST_ACCEPTED, S, Sg
+
+
+@njit(cache=True)
 def _update_scalar(X, P, ST_I, ST_F, PRM, kind, nu, r, gate):
     """One scalar measurement ``z = h(x) + v``, ``v ~ N(0, r)``, Jacobian row ``H`` (9,): the same update
     as :func:`_update` (gate, underweighting, Joseph form, reset) in O(n^2) without temporaries.
@@ -402,18 +414,9 @@ def _update_scalar(X, P, ST_I, ST_F, PRM, kind, nu, r, gate):
         for i in range(6, 9):
             for k in range(6, 9):
                 rr += ST_F[HO + i] * P[i, k] * ST_F[HO + k]
-    S = s + rr
-    d2 = nu * nu / S
-    ST_F[STF_D2 + kind] = d2
-    if not (np.isfinite(d2) and S > 0.0):
-        ST_I[COUNT_REFUSED, kind] += 1
-        return ST_REFUSED_INVALID
-    if d2 > gate:
-        ST_I[COUNT_REJECTED, kind] += 1
-        return ST_REJECTED
-    Sg = S
-    if ST_F[STF_UW_LEFT] > 0.0 and PRM[PRM_UW_BETA] > 0.0 and s > PRM[PRM_UW_RATIO] * rr:
-        Sg = S + PRM[PRM_UW_BETA] * s
+    status, _, Sg = _gate_scalar(ST_I, ST_F, PRM, kind, nu, s, rr, gate)
+    if status != ST_ACCEPTED:
+        return status
     for i in range(n):
         ST_F[KO + i] = ST_F[U + i] / Sg
         if not np.isfinite(ST_F[KO + i]):  # S > 0 and finite P make this unreachable short of overflow

@@ -490,13 +490,20 @@ def agent_uwb(X, P, ST_I, ST_F, PRM, anchor_nav, anchor_idx, range_m, sigma_m, g
     status = nb.update_range_anchor_one(
         X, P, ST_I, ST_F, PRM, anchor_nav, anchor_idx, range_m, sigma_m, gate1
     )
+    health_push(status, ST_F, gate1, h_ok, h_d2, h_meta)
+    return status
+
+
+@njit(cache=True)
+def health_push(status, ST_F, gate1, h_ok, h_d2, h_meta):
+    """A gated UWB outcome (accepted or rejected; a refusal is not one) into the health ring: accepted or
+    not, and its squared Mahalanobis distance clipped at the gate (Algorithm 1's d)."""
     if status == nb.ST_ACCEPTED or status == nb.ST_REJECTED:
         i = h_meta[1]
         h_ok[i] = status == nb.ST_ACCEPTED
         h_d2[i] = min(ST_F[nb.STF_D2 + nb.TYPE_RANGE], gate1)
         h_meta[1] = (i + 1) % h_ok.shape[0]
         h_meta[0] = min(h_meta[0] + 1, h_ok.shape[0])
-    return status
 
 
 @njit(cache=True)
@@ -515,13 +522,8 @@ def agent_tdoa(X, P, ST_I, ST_F, PRM, anchors, rows, sigma_m, gate1, h_ok, h_d2,
         z = rows[k, 2]
         a, b = anchors[ia], anchors[ib]
         status = nb.update_tdoa_one(X, P, ST_I, ST_F, PRM, a, b, ia, ib, z, sigma_m, gate1)
-        if status == nb.ST_ACCEPTED or status == nb.ST_REJECTED:
-            i = h_meta[1]
-            h_ok[i] = status == nb.ST_ACCEPTED
-            h_d2[i] = min(ST_F[nb.STF_D2 + nb.TYPE_RANGE], gate1)
-            h_meta[1] = (i + 1) % h_ok.shape[0]
-            h_meta[0] = min(h_meta[0] + 1, h_ok.shape[0])
-            accepted += status == nb.ST_ACCEPTED
+        health_push(status, ST_F, gate1, h_ok, h_d2, h_meta)
+        accepted += status == nb.ST_ACCEPTED
     return accepted
 
 
