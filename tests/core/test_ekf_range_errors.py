@@ -149,10 +149,20 @@ def test_range_update_is_the_joseph_update_of_the_joint_state(structure):
     counts, book = np.zeros((3, nb.N_TYPES), dtype=np.int64), np.zeros(nb.N_STF)
     st = nb.update_range_anchor_one(X1, P1, counts, book, prm, ANCHORS[j], j, z, sigma, np.inf)
     assert st == nb.ST_ACCEPTED
+    Xn, Pn, S = _joseph_reference(structure, X, P, H, z - h, sigma)
+    np.testing.assert_allclose(X1, Xn, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(P1, Pn, rtol=1e-10, atol=1e-14)
+    assert book[nb.STF_D2 + nb.TYPE_RANGE] == pytest.approx((z - h) ** 2 / S, rel=1e-12)
+
+
+def _joseph_reference(structure, X, P, H, nu, sigma):
+    """The textbook scalar update of the joint state (numpy): ``(X+, P+, S)``. Compounded: every state;
+    tandem: the translation and extra states, with the attitude filter's uncertainty as extra noise (the
+    consider treatment). Joseph form, then the multiplicative attitude reset."""
     n = len(P)
     idx = np.arange(n) if structure == "compounded" else np.r_[0:6, 9:n]
     r = sigma**2
-    if structure == "tandem":  # the attitude filter's uncertainty as extra noise (consider)
+    if structure == "tandem":
         r += H[6:9] @ P[6:9, 6:9] @ H[6:9]
     Pi, Hi = P[np.ix_(idx, idx)], H[idx]
     S = Hi @ Pi @ Hi + r
@@ -161,14 +171,10 @@ def test_range_update_is_the_joseph_update_of_the_joint_state(structure):
     Pn = P.copy()
     Pn[np.ix_(idx, idx)] = A @ Pi @ A.T + r * np.outer(K, K)
     dx = np.zeros(n)
-    dx[idx] = K * (z - h)
-    Xn = _boxplus_ext(X, dx)
+    dx[idx] = K * nu
     G = np.eye(n)
     G[6:9, 6:9] -= 0.5 * skew(dx[6:9])
-    Pn = G @ Pn @ G.T
-    np.testing.assert_allclose(X1, Xn, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(P1, Pn, rtol=1e-10, atol=1e-14)
-    assert book[nb.STF_D2 + nb.TYPE_RANGE] == pytest.approx((z - h) ** 2 / S, rel=1e-12)
+    return _boxplus_ext(X, dx), G @ Pn @ G.T, S
 
 
 @pytest.mark.parametrize("structure", ["compounded", "tandem"])
@@ -306,21 +312,9 @@ def test_tdoa_update_is_the_joseph_update_of_the_joint_state(structure):
     counts, book = np.zeros((3, nb.N_TYPES), dtype=np.int64), np.zeros(nb.N_STF)
     st = nb.update_tdoa_one(X1, P1, counts, book, prm, ANCHORS[ia], ANCHORS[ib], ia, ib, z, sigma, np.inf)
     assert st == nb.ST_ACCEPTED and counts[nb.COUNT_ACCEPTED, nb.TYPE_RANGE] == 1
-    n = len(P)
-    idx = np.arange(n) if structure == "compounded" else np.r_[0:6, 9:n]
-    r = sigma**2 + (H[6:9] @ P[6:9, 6:9] @ H[6:9] if structure == "tandem" else 0.0)
-    Pi, Hi = P[np.ix_(idx, idx)], H[idx]
-    S = Hi @ Pi @ Hi + r
-    K = Pi @ Hi / S
-    A = np.eye(len(idx)) - np.outer(K, Hi)
-    Pn = P.copy()
-    Pn[np.ix_(idx, idx)] = A @ Pi @ A.T + r * np.outer(K, K)
-    dx = np.zeros(n)
-    dx[idx] = K * (z - h)
-    G = np.eye(n)
-    G[6:9, 6:9] -= 0.5 * skew(dx[6:9])
-    np.testing.assert_allclose(X1, _boxplus_ext(X, dx), rtol=0, atol=1e-12)
-    np.testing.assert_allclose(P1, G @ Pn @ G.T, rtol=1e-10, atol=1e-14)
+    Xn, Pn, _ = _joseph_reference(structure, X, P, H, z - h, sigma)
+    np.testing.assert_allclose(X1, Xn, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(P1, Pn, rtol=1e-10, atol=1e-14)
 
 
 def test_tdoa_update_of_the_nine_state_filter_equals_the_extended_one_without_extras():
