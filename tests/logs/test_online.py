@@ -11,6 +11,7 @@ from swarm.logs.online import OnlineNavigator
 from swarm.logs.reader import read_log
 from swarm.logs.replay import replay_log
 from swarm.logs.synthetic import SyntheticSpec, make_log
+from tests.logs.feed import feed, in_time_order
 
 
 @pytest.fixture(scope="module")
@@ -21,24 +22,11 @@ def flight(tmp_path_factory):
 
 
 def _samples(log):
-    """The log's samples as the feed sends them: (t, kind, args), IMU first at equal times."""
-    out = [(float(t), 0, (float(t), i, log.gyro[i], log.acc[i])) for i, t in enumerate(log.imu_t)]
-    out += [
-        (float(t), 1, (float(t), int(log.anchor_ids[a]), float(z)))
-        for t, a, z in zip(log.uwb_t, log.uwb_anchor, log.uwb_range, strict=True)
-    ]
-    out.sort(key=lambda s: (s[0], s[1]))
-    return out
+    return in_time_order(log, "imu", "uwb")
 
 
 def _run(log, order, delay_s=0.05, drain_every=97):
-    nav = OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, delay_s)
-    for n, (_, kind, args) in enumerate(order):
-        (nav.imu if kind == 0 else nav.uwb)(*args)
-        if n % drain_every == 0:
-            nav.drain()
-    nav.drain(final=True)
-    return nav
+    return feed(OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, delay_s), order, drain_every)
 
 
 def _same(nav, r):
@@ -68,7 +56,7 @@ def test_two_streams_out_of_order_within_the_horizon_change_nothing(flight):
     rng = np.random.default_rng(0)
     # each UWB sample arrives up to 40 ms (of sensor time) late against the IMU stream: inside a 50 ms
     # horizon every sample is still processed in time order
-    late = [(s[0] + (rng.uniform(0, 0.04) if s[1] == 1 else 0.0), s) for s in order]
+    late = [(s[0] + (rng.uniform(0, 0.04) if s[1] == "uwb" else 0.0), s) for s in order]
     late.sort(key=lambda x: x[0])
     nav = _run(log, [s for _, s in late], delay_s=0.05)
     _same(nav, replay_log(log))
@@ -114,23 +102,12 @@ def seen(tmp_path_factory):
 
 
 def _with_vision(log):
-    order = _samples(log)
-    order += [
-        (float(t), 2, (float(t), int(log.marker_ids[m]), xyz))
-        for t, m, xyz in zip(log.vision_t, log.vision_marker, log.vision_xyz, strict=True)
-    ]
-    order.sort(key=lambda s: (s[0], s[1]))  # at one time: IMU, range, then the detection (the replay's order)
-    return order
+    return in_time_order(log, "imu", "uwb", "vision")
 
 
 def _run_v(log, order):
     nav = OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, 0.05, log.marker_ids, log.markers_nav)
-    for n, (_, kind, args) in enumerate(order):
-        (nav.imu, nav.uwb, nav.vision)[kind](*args)
-        if n % 97 == 0:
-            nav.drain()
-    nav.drain(final=True)
-    return nav
+    return feed(nav, order)
 
 
 def test_marker_detections_are_fused_as_the_replay_fuses_them(seen):
@@ -165,19 +142,9 @@ def test_a_tdoa_flight_fed_in_time_order_gives_the_replay_bit_for_bit(tmp_path):
     make_log(d, seed=2, spec=SyntheticSpec(duration_s=15.0, tdoa="tdoa3", tdoa_nlos_anchor=3))
     log = read_log(d)
     r = replay_log(log)
-    out = [(float(t), 0, (float(t), i, log.gyro[i], log.acc[i])) for i, t in enumerate(log.imu_t)]
-    ids = log.anchor_ids
-    out += [
-        (float(t), 2, (float(t), int(ids[a]), int(ids[b]), float(z)))
-        for t, a, b, z in zip(log.tdoa_t, log.tdoa_a, log.tdoa_b, log.tdoa_ddist, strict=True)
-    ]
-    out.sort(key=lambda s: (s[0], s[1]))
-    nav = OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, 0.05)
-    for n, (_, kind, args) in enumerate(out):
-        (nav.imu if kind == 0 else nav.tdoa)(*args)
-        if n % 97 == 0:
-            nav.drain()
-    nav.drain(final=True)
+    nav = feed(
+        OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, 0.05), in_time_order(log, "imu", "tdoa")
+    )
     _same(nav, r)
     assert np.array_equal(nav.tdoa_counts, r.tdoa.counts)
     s = r.summary()
@@ -203,15 +170,9 @@ def test_range_finder_readings_are_fused_as_the_replay_fuses_them_or_not_at_all(
     make_log(d, seed=4, spec=SyntheticSpec(duration_s=12.0, height_rate_hz=25.0))
     log = read_log(d, {"height.enabled": enabled})
     r = replay_log(log)
-    order = _samples(log)
-    heights = zip(log.height_t, log.height_range, strict=True)
-    order += [(float(t), 2, (float(t), float(z))) for t, z in heights]
-    order.sort(key=lambda s: (s[0], s[1]))
-    nav = OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, 0.05)
-    for n, (_, kind, args) in enumerate(order):
-        (nav.imu, nav.uwb, nav.height)[kind](*args)
-        if n % 97 == 0:
-            nav.drain()
-    nav.drain(final=True)
+    nav = feed(
+        OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, 0.05),
+        in_time_order(log, "imu", "uwb", "height"),
+    )
     _same(nav, r)
     assert (nav.aux_counts[0].sum() > 0) == enabled

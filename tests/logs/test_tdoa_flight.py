@@ -18,6 +18,7 @@ from swarm.core.imu_filter import PhaseParams, RobustParams, robust_vector
 from swarm.logs.online import OnlineNavigator
 from swarm.logs.reader import read_log
 from swarm.logs.replay import build_filter, replay_log
+from tests.logs.feed import feed, in_time_order
 
 RATE_HZ = 500.0
 PAD = np.array([0.0, 0.0, 0.03])
@@ -168,19 +169,9 @@ def test_the_live_navigator_pins_and_lands_as_the_replay_does(landing):
     # the navigator wants a range sigma without a calibration segment; a TDoA log never uses it
     log = read_log(d, {"uwb.sigma_m": 0.1})
     r = replay_log(log)
-    out = [(float(t), 0, (float(t), i, log.gyro[i], log.acc[i])) for i, t in enumerate(log.imu_t)]
-    ids = log.anchor_ids
-    out += [
-        (float(t), 2, (float(t), int(ids[a]), int(ids[b]), float(z)))
-        for t, a, b, z in zip(log.tdoa_t, log.tdoa_a, log.tdoa_b, log.tdoa_ddist, strict=True)
-    ]
-    out.sort(key=lambda s: (s[0], s[1]))
-    nav = OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, 0.05)
-    for n, (_, kind, args) in enumerate(out):
-        (nav.imu if kind == 0 else nav.tdoa)(*args)
-        if n % 97 == 0:
-            nav.drain()
-    nav.drain(final=True)
+    nav = feed(
+        OnlineNavigator(log.config, log.anchor_ids, log.anchors_nav, 0.05), in_time_order(log, "imu", "tdoa")
+    )
     X = np.array([e.X for e in nav.estimates])
     P = np.array([e.P9 for e in nav.estimates])
     assert np.array_equal(X, r.X) and np.array_equal(P, r.P)
