@@ -345,11 +345,7 @@ def update_range3(X, P, anchor, i0, i1, i2, z, sigma, PRM, work, out):
     if d2 > PRM[PRM_GATE]:
         out[0] = REJECTED
         return REJECTED
-    k = PRM[PRM_HUBER]
-    if k > 0.0 and d2 > k * k:
-        r *= math.sqrt(d2) / k
-        S = hph + r
-    apply_scalar(X, P, work, nu, S)
+    huber_apply(X, P, work, nu, hph, r, d2, PRM[PRM_HUBER])
     out[0] = ACCEPTED
     return ACCEPTED
 
@@ -370,6 +366,17 @@ def apply_scalar(X, P, work, nu, S):
         for j in range(n):
             P[i, j] -= (bi * b[j]) * inv_s
     inject(X, P, dx)
+
+
+@njit(cache=True)
+def huber_apply(X, P, work, nu, hph, r, d2, k):
+    """:func:`apply_scalar` with the measurement variance ``r`` [m^2] inflated by ``sqrt(d2) / k`` when the
+    squared Mahalanobis distance ``d2`` passes ``k^2`` (``k`` 0: off): the Huber M-estimator's weight
+    ``k / |e|`` as a variance (Huber 1964, the M-estimator as an iteratively reweighted Kalman update): an
+    outlier that passes the gate pulls with a bounded influence."""
+    if k > 0.0 and d2 > k * k:
+        r *= math.sqrt(d2) / k
+    apply_scalar(X, P, work, nu, hph + r)
 
 
 # ------------------------------------------------------------------------------------------------ TDoA
@@ -428,10 +435,7 @@ def update_tdoa(X, P, anchor_a, anchor_b, ia, ib, z, sigma, PRM, work, res):
     if d2 > PRM[PRM_GATE]:
         res[0] = REJECTED
         return REJECTED
-    k = PRM[PRM_HUBER]
-    if k > 0.0 and d2 > k * k:
-        r *= math.sqrt(d2) / k
-    apply_scalar(X, P, work, nu, hph + r)
+    huber_apply(X, P, work, nu, hph, r, d2, PRM[PRM_HUBER])
     res[0] = ACCEPTED
     return ACCEPTED
 
@@ -531,19 +535,9 @@ def fuse_tdoa(X, P, PRM, RP, anchors, ridx, a, b, z, t, TV, RS, work, res, pinne
     if RP[RP_ESS] > 0.0:
         res[3] = min(_ess_weight(RS, RP, a, -e), _ess_weight(RS, RP, b, e))
     r = var
-    k = PRM[PRM_HUBER]
-    if k > 0.0 and d2 > k * k:
-        r *= math.sqrt(d2) / k
-    apply_scalar(X, P, work, nu, hph + r)
-    if RP[RP_ADAPT] > 0.0:
-        al = RP[RP_ADAPT_ALPHA]
-        if np.isfinite(tv[TV_C2]):
-            tv[TV_C2] += al * (nu * nu - tv[TV_C2])
-            tv[TV_HPH] += al * (hph - tv[TV_HPH])
-        else:
-            tv[TV_C2] = tv[TV_VAR] + hph
-            tv[TV_HPH] = hph
-        tv[TV_VAR] = min(max(tv[TV_C2] - tv[TV_HPH], tv[TV_PRIOR]), RP[RP_VAR_CEIL])
+    huber_apply(X, P, work, nu, hph, r, d2, PRM[PRM_HUBER])
+    if RP[RP_ADAPT] > 0.0:  # upward only: the prior is the floor
+        match_noise(tv, TV_VAR, TV_C2, TV_HPH, nu, hph, RP[RP_ADAPT_ALPHA], tv[TV_PRIOR], RP[RP_VAR_CEIL])
     res[0] = ACCEPTED
     return ACCEPTED
 
@@ -633,6 +627,23 @@ AUX_HEIGHT, AUX_BARO = 0, 1
 (AX_H_SIGMA, AX_H_GROUND, AX_H_COS, AX_H_MAX, AX_H_GATE, AX_B_SIGMA, AX_B_INDEX, AX_B_GATE, AX_H_ON,
  AX_B_ON) = range(10)  # fmt: skip
 N_AX = 10
+
+
+@njit(cache=True)
+def match_noise(v, i_var, i_c2, i_hph, nu, hph, alpha, floor, ceil):
+    """Covariance matching of one accepted scalar innovation ``nu`` (``H P H^T`` = ``hph``) into the noise
+    state ``v`` (an anchor's ``RS`` row or a pair's ``TV`` cell): exponentially weighted means (weight
+    ``alpha``) of ``nu^2`` (``v[i_c2]``, NaN: none yet, then it starts from the variance in use plus
+    ``hph``) and of ``hph`` (``v[i_hph]``), and the variance ``v[i_var] = E[nu^2] - E[H P H^T]`` clipped
+    into ``[floor, ceil]`` (Mehra 1972; Mohamed & Schwarz 1999, eq. 20-21; the window of Myers & Tapley
+    1976). :func:`fuse_range` floors it at ``RP_VAR_FLOOR``, :func:`fuse_tdoa` at the pair's prior."""
+    if np.isfinite(v[i_c2]):
+        v[i_c2] += alpha * (nu * nu - v[i_c2])
+        v[i_hph] += alpha * (hph - v[i_hph])
+    else:
+        v[i_c2] = v[i_var] + hph
+        v[i_hph] = hph
+    v[i_var] = min(max(v[i_c2] - v[i_hph], floor), ceil)
 
 
 @njit(cache=True)
@@ -737,19 +748,11 @@ def fuse_range(X, P, PRM, RP, anchor_pos, ridx, a, z, t, RS, work, res):
         RS[a, RS_EPREV] = e
     res[3] = w
     r = var
-    k = PRM[PRM_HUBER]
-    if k > 0.0 and d2 > k * k:
-        r *= math.sqrt(d2) / k
-    apply_scalar(X, P, work, nu, hph + r)
+    huber_apply(X, P, work, nu, hph, r, d2, PRM[PRM_HUBER])
     if RP[RP_ADAPT] > 0.0:
-        al = RP[RP_ADAPT_ALPHA]
-        if np.isfinite(RS[a, RS_C2]):
-            RS[a, RS_C2] += al * (nu * nu - RS[a, RS_C2])
-            RS[a, RS_HPH] += al * (hph - RS[a, RS_HPH])
-        else:  # the first accepted range: start from the prior
-            RS[a, RS_C2] = var + hph
-            RS[a, RS_HPH] = hph
-        RS[a, RS_VAR] = min(max(RS[a, RS_C2] - RS[a, RS_HPH], RP[RP_VAR_FLOOR]), RP[RP_VAR_CEIL])
+        match_noise(
+            RS[a], RS_VAR, RS_C2, RS_HPH, nu, hph, RP[RP_ADAPT_ALPHA], RP[RP_VAR_FLOOR], RP[RP_VAR_CEIL]
+        )
     res[0] = ACCEPTED
     return ACCEPTED
 
@@ -1071,24 +1074,7 @@ def replay(
             outcome = fuse_tdoa(X, P, PRM, RP, anchors, ridx, a, b, tdoa_z[u], t, TV, RS, work, res, pinned)
             tdoa_d2[u], tdoa_outcome[u] = res[1], outcome
             tdoa_counts[a, b, outcome] += 1
-            if (
-                outcome != REFUSED
-                and res[3] >= 0.0
-                and in_window(PH)
-                and window_push(
-                    win_rej,
-                    win_d2,
-                    win_w,
-                    win_all,
-                    ST,
-                    outcome,
-                    res[1],
-                    res[2],
-                    res[3],
-                    nis_limit,
-                    reject_share_max,
-                )
-            ):
+            if window_gated(PH, res, win_rej, win_d2, win_w, win_all, ST, nis_limit, reject_share_max):
                 tf[0] = tcur
                 return EV_DIVERGED
             continue
@@ -1103,23 +1089,7 @@ def replay(
             RS[a, RS_AIR_VAR_SUM] += RS[a, RS_VAR]
             RS[a, RS_AIR_N] += 1.0
         last_range[a], last_range_t[a] = rng_z[j], t
-        if (
-            res[3] >= 0.0
-            and in_window(PH)
-            and window_push(
-                win_rej,
-                win_d2,
-                win_w,
-                win_all,
-                ST,
-                outcome,
-                res[1],
-                res[2],
-                res[3],
-                nis_limit,
-                reject_share_max,
-            )
-        ):
+        if window_gated(PH, res, win_rej, win_d2, win_w, win_all, ST, nis_limit, reject_share_max):
             tf[0] = tcur
             return EV_DIVERGED
     tf[0] = tcur
@@ -1156,6 +1126,19 @@ def window_push(win_rej, win_d2, win_w, win_all, ST, outcome, d2, nu, w, nis_lim
     n_acc = W - int(rej)
     n_eff = min(max(int(sw + 1e-9), 1), n_acc) if n_acc > 0 else 0
     return rej / W > reject_share_max or (n_acc > 0 and s / n_acc > nis_limit[n_eff])
+
+
+@njit(cache=True)
+def window_gated(PH, res, win_rej, win_d2, win_w, win_all, ST, nis_limit, reject_share_max):
+    """The outcome that :func:`fuse_range` or :func:`fuse_tdoa` left in ``res`` into the divergence window
+    (:func:`window_push`) when it counts: not refused, not held out (weight -1), in the phase the window
+    watches (:func:`in_window`). True if the window now declares the filter inconsistent. Shared by
+    :func:`replay` and the live navigator."""
+    if res[0] == REFUSED or res[3] < 0.0 or not in_window(PH):
+        return False
+    return window_push(
+        win_rej, win_d2, win_w, win_all, ST, int(res[0]), res[1], res[2], res[3], nis_limit, reject_share_max
+    )
 
 
 # ------------------------------------------------------------------------------------------- batches

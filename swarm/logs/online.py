@@ -292,7 +292,6 @@ class OnlineNavigator:
             return
         if kind == _TDOA:
             a, b, z = data
-            w = self._win
             PH = self._PH
             pinned = PH[nb.PH_PINNED] > 0.0 and PH[nb.PH_TOUCH] > 0.0
             outcome = nb.fuse_tdoa(
@@ -300,14 +299,7 @@ class OnlineNavigator:
                 pinned,
             )  # fmt: skip
             self.tdoa_counts[a, b, outcome] += 1
-            if outcome != nb.REFUSED and self._res[3] >= 0.0 and nb.in_window(self._PH) and nb.window_push(
-                w.rej, w.d2, w.w, w.all, self._ST, outcome, self._res[1], self._res[2], self._res[3],
-                self._limits, self.config.estimator.reject_share_max,
-            ):  # fmt: skip
-                self.events.append(
-                    recover(f, self.config, t, w, self._last_range, self._last_range_t, self._RS)
-                )
-                w.clear(self._ST)
+            self._window(t)
             return
         if kind in (_HEIGHT, _BARO):
             aux = nb.AUX_HEIGHT if kind == _HEIGHT else nb.AUX_BARO
@@ -326,13 +318,17 @@ class OnlineNavigator:
             RS[k, nb.RS_AIR_N] += 1.0
         self._d2 = float(self._res[1])
         self._last_range[k], self._last_range_t[k] = z, t
-        cfg, w = self.config, self._win
-        if self._res[3] >= 0.0 and nb.in_window(self._PH) and nb.window_push(
-            w.rej, w.d2, w.w, w.all, self._ST, outcome, self._res[1], self._res[2], self._res[3],
-            self._limits,
-            cfg.estimator.reject_share_max,
-        ):  # fmt: skip
-            self.events.append(recover(f, cfg, t, w, self._last_range, self._last_range_t, RS))
+        self._window(t)
+
+    def _window(self, t: float) -> None:
+        """The last range or difference (in ``_res``) into the divergence window; a recovery when it
+        declares the filter inconsistent (:func:`swarm.core._imu_nb.window_gated`, as the replay)."""
+        w = self._win
+        limit = self.config.estimator.reject_share_max
+        if nb.window_gated(self._PH, self._res, w.rej, w.d2, w.w, w.all, self._ST, self._limits, limit):
+            self.events.append(
+                recover(self.f, self.config, t, w, self._last_range, self._last_range_t, self._RS)
+            )
             w.clear(self._ST)
 
     def _jump(self) -> None:
