@@ -202,6 +202,65 @@ class LandingDispersions:
 
 
 @dataclass(frozen=True)
+class LandingPlatform:
+    """``[platform]``: the moving-platform landing (``landing-moving.toml``): the pad rides a ground robot
+    that drives ``waypoints_m`` at ``speed_m_s`` (a kinematic path follower, :mod:`swarm.core.platform_path`)
+    and shares its estimate of the pad with the UAV. The deck is at the ground's height (the quadrotor's
+    contact with the ground is its contact with the deck); after the touchdown the UAV stays where it
+    touched (the deck carrying it is not modelled): a landing is judged at the touchdown, on the pad
+    (within ``pad_tolerance_m`` of the pad's centre) and slower than ``touchdown_speed_m_s`` relative to it.
+    ``pad.position_m``'s height is the deck's; its x, y are the path's (``start_arc_m``)."""
+
+    enabled: bool = False
+    """False: a pad that stands still (``[pad]``), the other keys unused."""
+    id: str = "robot"
+    """The robot's id: it shares its estimate on ``<ns>/agent/<id>/estimate`` (docs/protocol.md)."""
+    waypoints_m: tuple[tuple[float, float], ...] = ()
+    """The path's waypoints (nav x, y) [m], at least two, no two consecutive alike."""
+    closed: bool = True
+    """The robot drives back from the last waypoint to the first and on (False: it stops at the last)."""
+    speed_m_s: float = 0.3
+    """The robot's constant speed along the path [m/s]."""
+    start_arc_m: float = 0.0
+    """Where on the path the robot is at t = 0, as a distance along it [m]; with ``[dispersions]`` enabled
+    (a closed path), drawn uniform over the path's length instead."""
+    share_estimate: bool = True
+    """The robot shares its pad estimate (position, velocity); False: the UAV knows only where the pad was at
+    t = 0 (a baseline that shows what the shared estimate buys)."""
+    share_rate_hz: float = 10.0
+    """How often the robot shares its estimate [Hz]; the UAV extrapolates it with its velocity in between."""
+    share_sigma_m: float = 0.05
+    """The shared position's error, white, per axis [m] (the robot's stated estimate noise; the UAV adds
+    its variance to the camera's)."""
+    share_sigma_m_s: float = 0.02
+    """The shared velocity's error, white, per axis [m/s]."""
+    touchdown_speed_m_s: float = 0.5
+    """A touchdown is a landing only this slow (horizontal speed relative to the deck) [m/s]."""
+
+    def __post_init__(self) -> None:
+        if not self.enabled:
+            return
+        if not (isinstance(self.id, str) and ID_PATTERN.match(self.id)):
+            raise ConfigError(f"platform.id must be 1-64 letters, digits, '_' or '-', got {self.id!r}")
+        w = self.waypoints_m
+        if len(w) < 2:
+            got = [list(p) for p in w]
+            raise ConfigError(f"platform.waypoints_m must list at least two waypoints, got {got!r}")
+        for i, (a, b) in enumerate(zip(w, w[1:] + (w[:1] if self.closed else ()), strict=False)):
+            if not all(math.isfinite(v) for v in (*a, *b)):
+                raise ConfigError(f"platform.waypoints_m[{i}] must be finite, got {list(a)!r}")
+            if tuple(a) == tuple(b):
+                raise ConfigError(
+                    f"platform.waypoints_m[{i}] and the next are the same point {list(a)!r} (a segment of "
+                    "no length has no heading)"
+                )
+        _check_positive(self, ("speed_m_s", "share_rate_hz", "share_sigma_m", "share_sigma_m_s",
+                               "touchdown_speed_m_s"), "platform.")  # fmt: skip
+        if not (math.isfinite(self.start_arc_m) and self.start_arc_m >= 0):
+            raise ConfigError(f"platform.start_arc_m must be a finite number >= 0, got {self.start_arc_m!r}")
+
+
+@dataclass(frozen=True)
 class LandingKinds:
     quadrotor: QuadrotorParams = field(default_factory=QuadrotorParams)
 
@@ -272,6 +331,8 @@ class LandingScenario:
     kinds: LandingKinds = LandingKinds()
     fleet: tuple[FleetUav, ...] = ()
     """Several UAVs, each with its pad (``landing-swarm.toml``); empty: the one ``[vehicle]`` on ``[pad]``."""
+    platform: LandingPlatform = LandingPlatform()
+    """The pad on a moving ground robot (``landing-moving.toml``); disabled: a pad that stands still."""
     sensors: SensorsSpec = field(default_factory=SensorsSpec)
     """A sensor profile whose numbers fill the ``[uwb]`` and ``[imu]`` options the file leaves out
     (:mod:`swarm.sensors.options`); read when the file is loaded."""
@@ -280,6 +341,10 @@ class LandingScenario:
         """The run's UAVs in order (index 0 draws the one-UAV scenario's random streams)."""
         if not self.fleet:
             v, p = self.vehicle, self.pad
+            if self.platform.enabled:  # the pad where the robot is at t = 0
+                x, y, _, _, yaw = platform_pose(self, self.platform.start_arc_m, 0.0)
+                pad_m, pad_yaw = (x, y, p.position_m[2]), p.yaw_deg + math.degrees(yaw)
+                return [Uav(0, "uav", v.start_m, v.yaw_deg, pad_m, pad_yaw)]
             return [Uav(0, "uav", v.start_m, v.yaw_deg, p.position_m, p.yaw_deg)]
         return [Uav(i, f.id, f.start_m, f.yaw_deg, f.pad_m, f.pad_yaw_deg) for i, f in enumerate(self.fleet)]
 
@@ -291,6 +356,8 @@ class LandingScenario:
         pads = [tuple(f.pad_m) for f in self.fleet]
         if len(set(pads)) != len(pads):
             raise ConfigError("fleet: two UAVs share a pad; give each its own pad_m")
+        if self.platform.enabled and self.fleet:
+            raise ConfigError("platform: a moving pad carries one UAV's pad; leave [[fleet]] out")
         if self.mission != "landing":
             raise ConfigError(f"mission must be 'landing' for a landing scenario, got {self.mission!r}")
         if self.policy not in ("fixed", "mdp"):
@@ -298,6 +365,22 @@ class LandingScenario:
         if not (math.isfinite(self.dt_s) and 0 < self.dt_s <= 0.02):
             raise ConfigError(f"dt_s must be in (0, 0.02], got {self.dt_s!r}")
         _check_positive(self, ("end_after_landed_s", "abort_hold_tolerance_m", "abort_hold_speed_m_s"))
+
+
+def platform_path(sc: LandingScenario):
+    """The robot's compiled path (:func:`swarm.core.platform_path.path_row`), or None without a platform."""
+    from swarm.core.platform_path import path_row
+
+    p = sc.platform
+    return path_row(p.waypoints_m, p.closed, p.speed_m_s) if p.enabled else None
+
+
+def platform_pose(sc: LandingScenario, start_arc_m: float, t_s: float) -> tuple[float, ...]:
+    """The robot's ``(x, y, vx, vy, yaw)`` at ``t_s`` [s] from ``start_arc_m`` [m]
+    (:mod:`swarm.core.platform_path`)."""
+    from swarm.core.platform_path import path_pose
+
+    return tuple(float(v) for v in path_pose(platform_path(sc), start_arc_m, t_s))
 
 
 def _scenario_path(name_or_path) -> Path:

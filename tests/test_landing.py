@@ -257,6 +257,7 @@ def _without_wall(r: dict) -> dict:
         ("landing", {**NOMINAL, **LOST_3S}, "fixed", 0),
         ("landing", {**NOMINAL, "faults.pad_hidden_always": True}, "mdp", 0),  # the abort
         ("landing-swarm", {}, "mdp", 3),  # four UAVs, each on its own stream
+        ("landing-moving", {"platform.speed_m_s": 0.6}, "fixed", 2),  # the pad on a moving robot
     ],
 )
 def test_the_compiled_landing_is_the_tick_by_tick_landing_to_the_bit(scenario, overrides, policy, seed):

@@ -13,6 +13,10 @@ Layouts (indices into float64 arrays; an absent time as NaN):
 
 * ``G`` (:data:`G_N`,) the guidance state; ``GP`` (:data:`GP_N`,) its parameters
   (:func:`swarm.core.landing.guidance_row`).
+* A moving pad (``GP_MOVING``): the caller moves ``GP_PAD`` and ``GP_GLIDE_END`` to the pad's estimate
+  every tick and sets its velocity ``GP_PAD_V``; the references that chase the pad (the glide, the
+  viewpoint above the pad, the descents) add that velocity (a feedforward: a target moving at ``v`` is
+  otherwise followed ``v / gain`` behind), and the viewpoint moves with the pad.
 * ``REF`` (:data:`REF_N`,) the reference: position and velocity (nav); its acceleration is zero and its
   heading the identity.
 """
@@ -48,7 +52,9 @@ G_N = 16
  GP_R_T, GP_A11_THR, GP_PI2_THR, GP_SIGMA_REF, GP_MDP, GP_TAN_VIEW, GP_GEAR) = range(23)  # fmt: skip
 GP_PAD = 23  # 23:26 the pad (nav)
 GP_GLIDE_END = 26  # 26:29 the glide's end, glide_end_height_m above the pad
-GP_N = 29
+GP_MOVING = 29  # a moving pad (swarm.landing_scenario.LandingPlatform): GP_PAD follows its estimate
+GP_PAD_V = 30  # 30:33 the moving pad's estimated velocity (nav), fed forward (module docstring)
+GP_N = 33
 
 # ---- reference REF ---------------------------------------------------------------------------------------
 R_P = 0
@@ -109,6 +115,15 @@ def _toward(p, gx, gy, gz, speed, gain, REF):
     REF[R_V] = dx / dist * s
     REF[R_V + 1] = dy / dist * s
     REF[R_V + 2] = dz / dist * s
+
+
+@njit(cache=True)
+def _follow(GP, REF):
+    """A moving pad's velocity added to a pad-relative reference (module docstring; nothing for a pad that
+    stands still)."""
+    if GP[GP_MOVING] != 0.0:
+        REF[R_V] += GP[GP_PAD_V]
+        REF[R_V + 1] += GP[GP_PAD_V + 1]
 
 
 @njit(cache=True)
@@ -207,8 +222,12 @@ def landing_step(G, GP, t, p, v, sigma_h, d, pad_seen_s, REF, EV, EV_n, DEC, DEC
             else:
                 pz = GP[GP_PAD + 2] + GP[GP_GEAR]
                 _toward(p, GP[GP_PAD], GP[GP_PAD + 1], pz, GP[GP_DESCEND_V], 0.8, REF)
+            _follow(GP, REF)
             return
         if m == L_DEVIATE:
+            if GP[GP_MOVING] != 0.0:  # the viewpoint stays above the moving pad
+                G[G_VIEW] = GP[GP_PAD]
+                G[G_VIEW + 1] = GP[GP_PAD + 1]
             if seen and _decide(G, GP, t, p, r, d, sigma_h, DEC, DEC_n):
                 _switch(G, t, L_DESCEND, RS_DESCEND, r, 0.0, 0.0, p, EV, EV_n)
                 continue
@@ -224,6 +243,7 @@ def landing_step(G, GP, t, p, v, sigma_h, d, pad_seen_s, REF, EV, EV_n, DEC, DEC
             else:
                 G[G_AT_VIEW] = np.nan
             _toward(p, G[G_VIEW], G[G_VIEW + 1], G[G_VIEW + 2], GP[GP_CRUISE_V], 0.8, REF)
+            _follow(GP, REF)
             return
         if m == L_DESCEND:
             if height <= GP[GP_FINAL_H]:
@@ -240,6 +260,7 @@ def landing_step(G, GP, t, p, v, sigma_h, d, pad_seen_s, REF, EV, EV_n, DEC, DEC
                 vy *= GP[GP_CRUISE_V] / n
             REF[R_V], REF[R_V + 1] = vx, vy
             REF[R_V + 2] = -GP[GP_DESCEND_V] if r <= GP[GP_ACCEPT] else 0.0
+            _follow(GP, REF)
             return
         if m == L_FINAL:
             if height <= GP[GP_TOUCH_H] and abs(v[2]) <= GP[GP_TOUCH_V]:
@@ -253,6 +274,7 @@ def landing_step(G, GP, t, p, v, sigma_h, d, pad_seen_s, REF, EV, EV_n, DEC, DEC
             REF[R_V] = (GP[GP_PAD] - p[0]) * 1.0
             REF[R_V + 1] = (GP[GP_PAD + 1] - p[1]) * 1.0
             REF[R_V + 2] = -GP[GP_FINAL_V]
+            _follow(GP, REF)
             return
         if m == L_CLIMB:
             if p[2] >= G[G_CLIMB] - 0.1:

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from swarm.core import _landing_nb as gnb
 from swarm.core import range_errors as rerr
 from swarm.core import rotations as rot
 from swarm.core._pad_nb import camera_vector
@@ -40,10 +41,11 @@ from swarm.core.imu_filter import ImuFilter, ImuFilterParams, chi2_gate
 from swarm.core.landing import MODES, LandingGuidance, LandingMode
 from swarm.core.mdp import nan_to_none
 from swarm.core.pad_vision import Renderer, detect, estimate_pose, make_detector
+from swarm.core.platform_path import PATH_HEAD, path_length_m
 from swarm.kinds.quadrotor import control as qc
 from swarm.kinds.quadrotor import control_row, truth_row
 from swarm.kinds.quadrotor import dynamics as qd
-from swarm.landing_scenario import LandingScenario, Uav
+from swarm.landing_scenario import LandingScenario, Uav, platform_path, platform_pose
 from swarm.step import landing_nb as lnb
 
 GATE_PROBABILITY = 0.9995
@@ -76,6 +78,10 @@ class LandingSetup:
     gyro_bias0: np.ndarray
     rng: np.random.Generator
     """The sensors' stream, after the draws above."""
+    arc0_m: float = 0.0
+    """A moving pad: where on its path the robot starts [m] (``[platform]``; drawn with the dispersions)."""
+    pad_v: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """A moving pad's velocity at t = 0 (nav) [m/s]; ``pad`` and ``q_nav_pad`` are its pose then."""
 
 
 def landing_setup(sc: LandingScenario, seed: int, index: int) -> LandingSetup:
@@ -100,7 +106,17 @@ def landing_setup(sc: LandingScenario, seed: int, index: int) -> LandingSetup:
     bg0 = bg + rng.normal(0, ini.sigma_gyro_bias_rad_s, 3)
     pad = np.asarray(uav.pad_m, float)
     q_nav_pad = rot.rotvec_exp(np.array([0.0, 0.0, math.radians(uav.pad_yaw_deg)]))
-    return LandingSetup(uav, start, yaw, pad, q_nav_pad, uwb_range, ba, bg, p0, q0, ba0, bg0, rng)
+    st = LandingSetup(uav, start, yaw, pad, q_nav_pad, uwb_range, ba, bg, p0, q0, ba0, bg0, rng)
+    pf = sc.platform
+    if pf.enabled:  # the robot's pose at t = 0, from where it starts on its path
+        st.arc0_m = pf.start_arc_m
+        if disp.enabled and pf.closed:
+            st.arc0_m = float(drng.uniform(0.0, path_length_m(platform_path(sc))))
+        x, y, vx, vy, heading = platform_pose(sc, st.arc0_m, 0.0)
+        st.pad = np.array([x, y, sc.pad.position_m[2]])
+        st.pad_v = np.array([vx, vy, 0.0])
+        st.q_nav_pad = rot.rotvec_exp(np.array([0.0, 0.0, heading + math.radians(sc.pad.yaw_deg)]))
+    return st
 
 
 def anchors_of(sc: LandingScenario) -> np.ndarray:
@@ -157,6 +173,9 @@ class LandingInputs:
     """The downward distance [m] on a rangefinder tick (None: none, or no reading: out of reach, tilted)."""
     camera: tuple[np.ndarray, np.ndarray] | None = None
     """On a camera tick: the detected marker ids (n,) and their corners (n, 4, 2) [px] (n = 0: nothing)."""
+    pad: np.ndarray | None = None
+    """A moving pad, on a share tick: the robot's estimate, position (3,) [m] and velocity (3,) [m/s] (nav),
+    as one (6,) array."""
 
 
 @dataclass
@@ -378,6 +397,9 @@ class _Truth:
         self.WC[lnb.WC_R_NAV_PAD : lnb.WC_R_NAV_PAD + 9] = rot.quat_to_matrix(setup.q_nav_pad).ravel()
         self.WC[lnb.WC_CAM_OFF : lnb.WC_CAM_OFF + 2] = np.nan
         self.WC[lnb.WC_UWB_OFF : lnb.WC_UWB_OFF + 2] = np.nan
+        self.WC[lnb.WC_ARC0] = setup.arc0_m
+        self.WC[lnb.WC_PAD_V : lnb.WC_PAD_V + 3] = setup.pad_v
+        self.WSC[lnb.WSC_TD_T] = np.nan
         self.noise = NoiseStream(setup.rng)
         self.render_rng = render_rng
         # the range errors and vibration of real flights (swarm.core.range_errors), drawn from the UAV's own
@@ -446,6 +468,12 @@ def world_row(sc: LandingScenario) -> np.ndarray:
         (lnb.WP_GROUND_Z, sc.kinds.quadrotor.airframe.ground_z_m),
     ):  # fmt: skip
         WP[i] = float(v)
+    pf = sc.platform
+    if pf.enabled:
+        WP[lnb.WP_PLATFORM], WP[lnb.WP_SHARE_ON] = 1.0, float(pf.share_estimate)
+        WP[lnb.WP_SHARE_RATE] = max(1, round(1.0 / (pf.share_rate_hz * sc.dt_s)))
+        WP[lnb.WP_SHARE_SIGMA_P], WP[lnb.WP_SHARE_SIGMA_V] = pf.share_sigma_m, pf.share_sigma_m_s
+        WP[lnb.WP_PAD_YAW] = math.radians(sc.pad.yaw_deg)
     WP[lnb.WP_GNSS_SIGMA : lnb.WP_GNSS_SIGMA + 3] = sc.gnss.sigma_m
     WP[lnb.WP_CAM_POS : lnb.WP_CAM_POS + 3] = sc.camera.pos_body_m
     WP[lnb.WP_LEVER : lnb.WP_LEVER + 3] = sc.uwb.lever_arm_m
@@ -471,7 +499,10 @@ class LandingWorld:
         self.corners = np.ascontiguousarray(self.board.corners)
         self.CAM = camera_vector(cam.intrinsics)
         n_markers = len(self.corners)
-        self.draws = lnb.draws_per_tick(n_markers)
+        pf = sc.platform
+        self.draws = lnb.draws_per_tick(n_markers, pf.enabled and pf.share_estimate)
+        self.PATH = platform_path(sc) if pf.enabled else np.zeros(PATH_HEAD)
+        """A moving pad's path (:mod:`swarm.core.platform_path`; unused otherwise)."""
         self.err_prm = rerr.range_error_vector(sc.uwb, sc.uwb.outlier_probability, sc.uwb.outlier_excess_m)
         self.vib = np.zeros(lnb.VIB_N)
         self.vib[lnb.VIB_ACC] = sc.imu.vibration_accel_m_s2
@@ -509,7 +540,7 @@ class LandingWorld:
         :func:`~swarm.step.landing_nb.run_landing_ticks`' order."""
         return (u.x, u.s, u.held, self.kp, u.WSC, u.WC, self.WP, self.anchors, self.corners, self.CAM, u.INP,
                 u.CIDX, u.CPX, self.err_prm, self.vib, u.ERR_RS, u.ERR_OFF, u.ERR_STEP, u.errs.Z,
-                u.errs.pos)  # fmt: skip
+                u.errs.pos, self.PATH)  # fmt: skip
 
     def ensure_draws(self, u: _Truth) -> None:
         """At least a tick's draws left in each of the UAV's buffers."""
@@ -519,6 +550,7 @@ class LandingWorld:
 
     def _step_one(self, u: _Truth, k: int) -> LandingInputs:
         self.ensure_draws(u)
+        lnb.world_platform(k, u.x, u.WSC, u.WC, self.WP, self.PATH, u.noise.Z, u.noise.pos, u.INP)
         lnb.world_sample(k, *self.arrays(u)[:10], u.noise.Z, u.noise.pos, u.INP, u.CIDX, u.CPX)
         if self.errors_on:
             lnb.world_errors(u.s, self.err_prm, self.vib, u.ERR_RS, u.ERR_OFF, u.ERR_STEP, u.errs.Z,
@@ -594,7 +626,7 @@ class LandingWorld:
         """The world's half of a UAV's summary: where and how it ended."""
         u = self.uavs[uav_id]
         on_ground = u.s[qd.S_GROUND] != 0.0
-        return {
+        out = {
             "on_ground": bool(on_ground),
             "error_m": float(np.linalg.norm(u.x[0:2] - u.setup.pad[0:2])),
             "energy_j": float(u.energy_j),
@@ -602,6 +634,16 @@ class LandingWorld:
             "start_m": [float(v) for v in u.setup.start],
             "uwb_range_m": u.setup.uwb_range_m,
         }
+        if self.sc.platform.enabled:  # a moving pad: judged at the touchdown, relative to the deck
+            W = u.WSC
+            touched = not math.isnan(W[lnb.WSC_TD_T])
+            pad_now = u.WC[lnb.WC_PAD : lnb.WC_PAD + 2]
+            out["error_m"] = float(W[lnb.WSC_TD_ERR] if touched else np.linalg.norm(u.x[0:2] - pad_now))
+            for key, i in (("touchdown_t_s", lnb.WSC_TD_T), ("touchdown_rel_speed_m_s", lnb.WSC_TD_REL_V),
+                           ("touchdown_vz_m_s", lnb.WSC_TD_VZ)):  # fmt: skip
+                out[key] = float(W[i]) if touched else None
+            out["platform_start_arc_m"] = u.setup.arc0_m
+        return out
 
 
 def inputs_of(INP: np.ndarray, CIDX: np.ndarray, CPX: np.ndarray, board) -> LandingInputs:
@@ -615,6 +657,8 @@ def inputs_of(INP: np.ndarray, CIDX: np.ndarray, CPX: np.ndarray, board) -> Land
         inp.gnss = INP[lnb.INP_GNSS : lnb.INP_GNSS + 3].copy()
     if INP[lnb.INP_HAS_RF] and not math.isnan(INP[lnb.INP_RF]):
         inp.rangefinder = float(INP[lnb.INP_RF])
+    if INP[lnb.INP_HAS_PAD]:
+        inp.pad = INP[lnb.INP_PAD_P : lnb.INP_PAD_P + 6].copy()
     if INP[lnb.INP_CAM] == lnb.CAM_MARKERS:
         n = int(INP[lnb.INP_N_MARKERS])
         inp.camera = (board.markers[0][CIDX[:n]].astype(np.int64), CPX[:n].copy())
@@ -714,6 +758,15 @@ class LandingAgent:
         for i in (lnb.AF_PAD_SEEN, lnb.AF_LANDED_T, lnb.AF_LAST_D2, lnb.AF_LAST_PAD_D2):
             self.AF[i] = np.nan
         self.AF[lnb.AF_P_EST : lnb.AF_P_EST + 3] = st.p0
+        if sc.platform.enabled:  # a moving pad: its pose at t = 0 (told before take-off), then shared
+            self.AC[lnb.AC_PLATFORM], self.AC[lnb.AC_SHARE_VAR] = 1.0, sc.platform.share_sigma_m**2
+            self.AF[lnb.AF_SHARE_T] = 0.0
+            self.AF[lnb.AF_SHARE_P : lnb.AF_SHARE_P + 3] = st.pad
+            self.AF[lnb.AF_SHARE_V : lnb.AF_SHARE_V + 3] = st.pad_v
+            self.AF[lnb.AF_PAD_EST : lnb.AF_PAD_EST + 3] = st.pad
+            GP = self.guidance.GP
+            GP[gnb.GP_MOVING] = 1.0
+            GP[gnb.GP_PAD_V : gnb.GP_PAD_V + 3] = st.pad_v
         self.HELD, self.NIS = np.zeros((2, 3)), np.zeros(self.NIS_WINDOW)
         self.INP, self.POSE = np.zeros(lnb.INP_N), np.zeros(lnb.POSE_N)
         self.CIDX, self.CPX = np.zeros(m, dtype=np.int64), np.zeros((m, 4, 2))
@@ -740,6 +793,13 @@ class LandingAgent:
     def p_est(self) -> np.ndarray:
         """The estimate the last decision used."""
         return self.AF[lnb.AF_P_EST : lnb.AF_P_EST + 3].copy()
+
+    @property
+    def pad_est(self) -> np.ndarray:
+        """The pad the guidance targets: the surveyed pad, or a moving pad's estimate (the robot's)."""
+        if self.AC[lnb.AC_PLATFORM]:
+            return self.AF[lnb.AF_PAD_EST : lnb.AF_PAD_EST + 3].copy()
+        return self.setup.pad
 
     @property
     def sigma_h(self) -> float:
@@ -784,6 +844,9 @@ class LandingAgent:
         I[lnb.INP_RF] = np.nan
         if inp.rangefinder is not None:
             I[lnb.INP_HAS_RF], I[lnb.INP_RF] = 1.0, inp.rangefinder
+        if inp.pad is not None:
+            I[lnb.INP_HAS_PAD] = 1.0
+            I[lnb.INP_PAD_P : lnb.INP_PAD_P + 6] = inp.pad
         if inp.camera is None or not len(inp.camera[0]):
             return
         ids, corners = inp.camera
@@ -861,7 +924,14 @@ def landing_summary(sc: LandingScenario, policy: str, seed: int, world_half: dic
     where it ended) and the agent's (:meth:`LandingAgent.outcome`), in process or gathered over Zenoh."""
     w, a = world_half, agent_half
     landed = bool(a["final_mode"] == "LANDED" and w["on_ground"])
-    return {
+    moving = {}
+    if sc.platform.enabled:  # the deck's rule: on the pad and slow enough relative to it at the touchdown
+        rel = w.get("touchdown_rel_speed_m_s")
+        landed = landed and rel is not None and rel <= sc.platform.touchdown_speed_m_s
+        moving = {k: w.get(k) for k in ("touchdown_t_s", "touchdown_rel_speed_m_s", "touchdown_vz_m_s",
+                                        "platform_start_arc_m")}  # fmt: skip
+        moving["platform_speed_m_s"] = sc.platform.speed_m_s
+    return moving | {
         "scenario": sc.name,
         "policy": policy,
         "seed": seed,

@@ -33,6 +33,7 @@ from numba import njit
 
 from swarm.core import _imu_nb as inb
 from swarm.core import _landing_nb as lnb
+from swarm.core import platform_path as pp
 from swarm.core import range_errors as rerr
 from swarm.core._pad_nb import corner_frame_nb, pack_frame_nb
 from swarm.core._pnp_nb import solve_pose_nb
@@ -48,7 +49,10 @@ WP_GNSS_SIGMA = 18  # 18:21
 WP_CAM_POS = 21  # 21:24 the camera, body frame [m]
 WP_LEVER = 24  # 24:27 the UWB tag, body frame [m]
 WP_RF_ON, WP_RF_RATE, WP_RF_SIGMA, WP_RF_MIN, WP_RF_MAX, WP_RF_COS_TILT, WP_GROUND_Z = range(27, 34)
-WP_N = 34
+# a moving pad (swarm.landing_scenario.LandingPlatform): on, the robot shares its estimate, every how many
+# ticks, its position's and velocity's sigmas, the board's heading on the deck [rad]
+WP_PLATFORM, WP_SHARE_ON, WP_SHARE_RATE, WP_SHARE_SIGMA_P, WP_SHARE_SIGMA_V, WP_PAD_YAW = range(34, 40)
+WP_N = 40
 
 # ---- one UAV's world constants WC -------------------------------------------------------------------------
 WC_BA = 0  # 0:3 accelerometer bias
@@ -58,11 +62,17 @@ WC_UWB_RANGE = 9  # the anchors' reach [m]
 WC_R_NAV_PAD = 10  # 10:19 the pad's attitude, row-major
 WC_CAM_OFF = 19  # 19:21 a run-time camera loss: the pad hidden in [from, until) [s] (NaN: none)
 WC_UWB_OFF = 21  # 21:23 a run-time UWB dropout: every reply lost in [from, until) [s] (NaN: none)
-WC_N = 23
+WC_ARC0 = 23  # a moving pad: where on its path the robot starts [m]; WC_PAD, WC_R_NAV_PAD follow it
+WC_PAD_V = 24  # 24:27 a moving pad's velocity (nav) [m/s]
+WC_N = 27
 
 # ---- one UAV's world state WSC ----------------------------------------------------------------------------
 WSC_NEXT_ANCHOR, WSC_ENERGY, WSC_FRAMES, WSC_LANDED_T, WSC_DONE, WSC_END_K = range(6)
-WSC_N = 6
+# a moving pad: the touchdown (the first tick on the ground: time, horizontal distance to the pad's centre,
+# horizontal speed relative to the pad, vertical speed) and the UAV's velocity before the tick
+WSC_TD_T, WSC_TD_ERR, WSC_TD_REL_V, WSC_TD_VZ = range(6, 10)
+WSC_PREV_V = 10  # 10:13
+WSC_N = 13
 
 # ---- one tick's samples INP -------------------------------------------------------------------------------
 INP_K, INP_T = 0, 1
@@ -76,7 +86,10 @@ INP_T_CAM = 17  # 17:20 the pad in the camera (CAM_RENDER)
 INP_R_CAM_PAD = 20  # 20:29 row-major (CAM_RENDER)
 INP_HAS_RF = 29  # a rangefinder tick
 INP_RF = 30  # its distance [m] (NaN: no reading, out of reach or too tilted)
-INP_N = 31
+INP_HAS_PAD = 31  # a moving pad's robot shares its estimate this tick
+INP_PAD_P = 32  # 32:35 the shared position of the pad (nav) [m]
+INP_PAD_V = 35  # 35:38 its velocity (nav) [m/s]
+INP_N = 38
 CAM_NONE, CAM_MARKERS, CAM_RENDER, CAM_POSE = 0.0, 1.0, 2.0, 3.0
 """CAM_POSE (agent side): the pad's pose is already solved (``POSE``), by OpenCV on a rendered image."""
 
@@ -87,13 +100,19 @@ AC_CAM_POS = 5  # 5:8
 AC_R_BC = 8  # 8:17 camera to body, row-major
 AC_GNSS_COV = 17  # 17:26 row-major
 AC_RF_SIGMA, AC_GROUND_Z, AC_GATE1, AC_RF_COS_TILT = 26, 27, 28, 29
-AC_N = 30
+AC_PLATFORM = 30  # a moving pad: the pad is the robot's shared estimate (AF_PAD_EST), not AC_PAD
+AC_SHARE_VAR = 31  # the shared position's variance [m^2], added to the camera's
+AC_N = 32
 
 # ---- an agent's state AF ----------------------------------------------------------------------------------
 (AF_T, AF_HELD, AF_DROPPED, AF_IMU_REFUSED, AF_PAD_SEEN, AF_DETECTIONS, AF_LANDED_T, AF_NIS_N, AF_NIS_HEAD,
  AF_SIGMA_H, AF_LAST_D2, AF_LAST_PAD_D2) = range(12)  # fmt: skip
 AF_P_EST = 12  # 12:15 the estimate the last decision used
-AF_N = 15
+AF_SHARE_T = 15  # a moving pad: the time of the last shared estimate [s]
+AF_SHARE_P = 16  # 16:19 its position (nav) [m]
+AF_SHARE_V = 19  # 19:22 its velocity (nav) [m/s]
+AF_PAD_EST = 22  # 22:25 the pad now: the shared position extrapolated with the shared velocity
+AF_N = 25
 
 # ---- a series sample, a row of SER (in process only) ------------------------------------------------------
 SER_T, SER_PTRUE, SER_PEST, SER_SIGMA, SER_MODE, SER_SEEN = 0, 1, 4, 7, 8, 9
@@ -126,10 +145,10 @@ VIB_N = 2
 """``VIB``: the IMU's vibration in flight, accelerometer [m/s^2] and gyro [rad/s] standard deviations."""
 
 
-def draws_per_tick(n_markers: int) -> int:
+def draws_per_tick(n_markers: int, share: bool = False) -> int:
     """The most standard normals one tick takes: IMU (6), range (1), fix (3), rangefinder (1), each marker's
-    corners (8)."""
-    return 11 + 8 * n_markers
+    corners (8), and a moving pad's shared estimate (6) when the robot shares it."""
+    return 11 + 8 * n_markers + (6 if share else 0)
 
 
 @njit(cache=True)
@@ -232,6 +251,36 @@ def world_sample(k, x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, Z, zpos,
 
 
 @njit(cache=True)
+def world_platform(k, x, WSC, WC, WP, PATH, Z, zpos, INP):
+    """Before :func:`world_sample` of tick ``k``, a moving pad (nothing otherwise, ``WP_PLATFORM`` 0): the
+    UAV's velocity before the tick is kept (the touchdown's, :func:`world_hold`), the pad moves to the
+    robot's pose at ``t = k dt`` on its path (:func:`swarm.core.platform_path.path_pose_nb`: ``WC_PAD``,
+    ``WC_PAD_V``, ``WC_R_NAV_PAD`` a turn about nav z by the robot's heading plus the board's), and on a
+    share tick the robot's estimate of it goes into ``INP``: the true position and velocity plus white
+    noise of the stated sigmas, 6 draws from ``Z`` at ``zpos[0]``."""
+    INP[INP_HAS_PAD] = 0.0
+    if WP[WP_PLATFORM] == 0.0:
+        return
+    t = k * WP[WP_DT]
+    WSC[WSC_PREV_V : WSC_PREV_V + 3] = x[3:6]
+    pose = np.empty(pp.POSE_N)
+    pp.path_pose_nb(PATH, WC[WC_ARC0], t, pose)
+    WC[WC_PAD], WC[WC_PAD + 1] = pose[pp.POSE_X], pose[pp.POSE_Y]
+    WC[WC_PAD_V], WC[WC_PAD_V + 1], WC[WC_PAD_V + 2] = pose[pp.POSE_VX], pose[pp.POSE_VY], 0.0
+    heading = pose[pp.POSE_YAW] + WP[WP_PAD_YAW]
+    c, sn = math.cos(heading), math.sin(heading)
+    R = WC[WC_R_NAV_PAD : WC_R_NAV_PAD + 9]
+    R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8] = c, -sn, 0.0, sn, c, 0.0, 0.0, 0.0, 1.0
+    if WP[WP_SHARE_ON] != 0.0 and k % int(WP[WP_SHARE_RATE]) == 0:
+        i = zpos[0]
+        INP[INP_HAS_PAD] = 1.0
+        for j in range(3):
+            INP[INP_PAD_P + j] = WC[WC_PAD + j] + WP[WP_SHARE_SIGMA_P] * Z[i + j]
+            INP[INP_PAD_V + j] = WC[WC_PAD_V + j] + WP[WP_SHARE_SIGMA_V] * Z[i + 3 + j]
+        zpos[0] = i + 6
+
+
+@njit(cache=True)
 def world_errors(s, REP, VIB, RS, OFF, STEP, Z2, zpos2, INP):
     """After :func:`world_sample`, what real flights add to its samples (:mod:`swarm.core.range_errors`),
     from the UAV's own draws ``Z2`` at ``zpos2[0]`` (nothing drawn when off): in flight (``s``: the
@@ -263,6 +312,12 @@ def world_hold(u, mode, k, x, s, held, kp, WSC, WC, WP):
     abort."""
     qd.quadrotor_hold(u, s, held, kp)
     t = k * WP[WP_DT]
+    if WP[WP_PLATFORM] != 0.0 and s[qd.S_GROUND] != 0.0 and math.isnan(WSC[WSC_TD_T]):
+        # a moving pad's touchdown: where, and how fast relative to the deck, the skids met it
+        ex, ey = x[0] - WC[WC_PAD], x[1] - WC[WC_PAD + 1]
+        rx, ry = WSC[WSC_PREV_V] - WC[WC_PAD_V], WSC[WSC_PREV_V + 1] - WC[WC_PAD_V + 1]
+        WSC[WSC_TD_T], WSC[WSC_TD_ERR] = t, math.sqrt(ex * ex + ey * ey)
+        WSC[WSC_TD_REL_V], WSC[WSC_TD_VZ] = math.sqrt(rx * rx + ry * ry), -WSC[WSC_PREV_V + 2]
     if mode == lnb.L_LANDED and math.isnan(WSC[WSC_LANDED_T]):
         WSC[WSC_LANDED_T] = t
     done = not math.isnan(WSC[WSC_LANDED_T]) and t - WSC[WSC_LANDED_T] >= WP[WP_END_AFTER]
@@ -302,6 +357,13 @@ def agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchors, ridx,
     A sample older than the filter's time is dropped and counted, as :class:`swarm.core.imu_filter.ImuFilter`
     does."""
     t = INP[INP_T]
+    if AC[AC_PLATFORM] != 0.0:  # a moving pad: the robot's latest shared estimate, extrapolated to t
+        if INP[INP_HAS_PAD] != 0.0:
+            AF[AF_SHARE_T] = t
+            AF[AF_SHARE_P : AF_SHARE_P + 3] = INP[INP_PAD_P : INP_PAD_P + 3]
+            AF[AF_SHARE_V : AF_SHARE_V + 3] = INP[INP_PAD_V : INP_PAD_V + 3]
+        for j in range(3):
+            AF[AF_PAD_EST + j] = AF[AF_SHARE_P + j] + AF[AF_SHARE_V + j] * (t - AF[AF_SHARE_T])
     # the IMU sample's stamp, (k - 1) dt: the same product as the previous tick's t = k dt, so a measurement
     # fused at that t never makes the filter drop this sample (k dt - dt can round below (k - 1) dt)
     ts = (INP[INP_K] - 1.0) * AC[AC_DT]
@@ -355,6 +417,10 @@ def agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchors, ridx,
             R_bc = AC[AC_R_BC : AC_R_BC + 9].reshape(3, 3)
             cov = np.ascontiguousarray(COV_OUT[0:3, 0:3])
             pad, cam_pos = AC[AC_PAD : AC_PAD + 3], AC[AC_CAM_POS : AC_CAM_POS + 3]
+            if AC[AC_PLATFORM] != 0.0:  # relative to the moving pad, known as well as the robot says
+                pad = AF[AF_PAD_EST : AF_PAD_EST + 3]
+                for j in range(3):
+                    cov[j, j] += AC[AC_SHARE_VAR]
             out = inb.update_pad_one(X, P, pad, cam_pos, R_bc, T_OUT, cov, AC[AC_GATE3], res)
             AF[AF_LAST_PAD_D2] = res[1]
             if out == inb.ACCEPTED:
@@ -385,6 +451,12 @@ def agent_decide(INP, X, P, AF, NIS, G, GP, REF, EV, EV_n, DEC, DEC_n, cs, cp, u
         for i in range(n):
             acc += NIS[i]
         d = math.sqrt(acc / n)
+    if GP[lnb.GP_MOVING] != 0.0:  # the guidance's pad is the moving pad's estimate (agent_fuse)
+        for j in range(3):
+            GP[lnb.GP_PAD + j] = AF[AF_PAD_EST + j]
+            GP[lnb.GP_GLIDE_END + j] = AF[AF_PAD_EST + j]
+            GP[lnb.GP_PAD_V + j] = AF[AF_SHARE_V + j]
+        GP[lnb.GP_GLIDE_END + 2] += GP[lnb.GP_GLIDE_H]
     lnb.landing_step(G, GP, t, p, v, sigma_h, d, AF[AF_PAD_SEEN], REF, EV, EV_n, DEC, DEC_n)
     mode = G[lnb.G_MODE]
     if mode == lnb.L_LANDED:
@@ -421,13 +493,13 @@ def series_sample(SER, SER_n, t, p_true, AF, mode):
 
 @njit(cache=True)
 def run_landing_ticks(k, k1, world, agent, guid, ctl, Z, zpos, need, SER, SER_n, series_every):
-    """Ticks ``k .. k1 - 1`` of one UAV (module docstring), each :func:`world_sample` (and
-    :func:`world_errors` when the scenario has them), :func:`agent_fuse`,
+    """Ticks ``k .. k1 - 1`` of one UAV (module docstring), each :func:`world_platform`,
+    :func:`world_sample` (and :func:`world_errors` when the scenario has them), :func:`agent_fuse`,
     :func:`agent_decide`, :func:`world_hold` and, every ``series_every`` ticks (0: never), a series sample.
     Returns ``(RUN_*, k)``: done (or ``k1`` reached), or the tick at which ``Z`` needs ``need`` more draws or
     a record buffer may overflow (nothing of that tick done)."""
     x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, INP, CIDX, CPX = world[:13]
-    REP, VIB, RS, OFF, STEP, Z2, zpos2 = world[13:]
+    REP, VIB, RS, OFF, STEP, Z2, zpos2, PATH = world[13:]
     errors = REP[rerr.RE_ON] != 0.0 or VIB[VIB_ACC] > 0.0 or VIB[VIB_GYRO] > 0.0
     POSE, X, P, AF, HELD, NIS, counts, anchs, ridx, sigma, prm, work, res, AC = agent[:14]
     OBJ, IMG, VAR, T_OUT, R_OUT, COV_OUT = agent[14:]
@@ -438,6 +510,7 @@ def run_landing_ticks(k, k1, world, agent, guid, ctl, Z, zpos, need, SER, SER_n,
             return RUN_NOISE, k
         if EV_n[0] + 4 > EV.shape[0] or DEC_n[0] + 4 > DEC.shape[0] or SER_n[0] + 1 > SER.shape[0]:
             return RUN_DRAIN, k
+        world_platform(k, x, WSC, WC, WP, PATH, Z, zpos, INP)
         world_sample(k, x, s, held, kp, WSC, WC, WP, anchors, corners, CAM, Z, zpos, INP, CIDX, CPX)
         if errors:
             world_errors(s, REP, VIB, RS, OFF, STEP, Z2, zpos2, INP)
