@@ -9,7 +9,8 @@ tables and plots, which cost more, at their own lower rates (``DashboardParams``
 1.1.1, 2 shared cores under load, one browser connected): 16 pairs (32 vehicles) cost ~14 ms per frame
 (median; decoding the newest samples included), so ~20 frames/s; one pair ~2 ms, 30 frames/s.
 
-Scene (paper Fig. 1): the mothership's outline and UWB anchors; each vehicle's true pose (a box in its
+Scene (paper Fig. 1): the mothership's outline and UWB anchors (on a TDoA radio each labelled with its
+packets a second as the tags hear them, :mod:`dashboard.radio`); each vehicle's true pose (a box in its
 mode's colour, axes, label) and estimated pose (a wireframe box and axes), the 3-sigma position
 covariance ellipsoid of the estimate, trails of both; each chaser's camera FOV cone, coloured by whether
 its markers are in view; around each chaser's target its switch spheres ``r_t``, ``r2``, ``r1``, which
@@ -31,7 +32,7 @@ import numpy as np
 import viser
 import zenoh
 
-from dashboard import kinds, mapping, panels
+from dashboard import kinds, mapping, panels, radio
 from dashboard import nodes as scene_nodes
 from dashboard.faults import DOCKING, LANDING, FaultPanel
 from dashboard.landing import LandingSceneView, frame_landing_scene, uav_vehicles
@@ -74,9 +75,14 @@ class DashboardParams:
     """Smallest spacing of trail points [m] (doubles at each thinning)."""
     series_cap: int = 600
     """Most samples per plotted time series."""
+    rate_window_s: float = 2.0
+    """The Radio panel's sliding window [s of swarm time]: the anchors' and the tags' rates are averaged
+    over it (:mod:`dashboard.radio`; a TDoA3 anchor sends every 20-50 ms, so ~40-100 packets a window)."""
 
     def __post_init__(self) -> None:
-        for name in ("max_hz", "trail_hz", "panel_hz", "plot_hz", "n_sigma", "vision_recent_s"):
+        positive = ("max_hz", "trail_hz", "panel_hz", "plot_hz", "n_sigma", "vision_recent_s")
+        positive += ("rate_window_s",)
+        for name in positive:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
                 raise ConfigError(f"dashboard.{name} must be a positive finite number, got {v!r}")
@@ -180,6 +186,7 @@ class SceneView:
         self.show_trails = True
         self._anchors_version: int | None = None
         self._anchor_nodes: list[object] = []
+        self._anchor_labels: dict[int, viser.LabelHandle] = {}
         self._run: int | None = None
         self._outline = None
 
@@ -187,6 +194,7 @@ class SceneView:
         for node in self._anchor_nodes:
             node.remove()  # type: ignore[attr-defined]
         self._anchor_nodes = []
+        self._anchor_labels = {}
         scene = self.server.scene
         segments = mapping.mothership_outline(positions)
         if self._outline is None:
@@ -202,12 +210,24 @@ class SceneView:
                 )
             )
             label = f"{mapping.anchor_node(anchor_id)}/label"  # a child: removed with its anchor
-            scene.add_label(label, f"anchor {anchor_id}", position=(0, 0, 0.06))
+            text = f"anchor {anchor_id}"
+            self._anchor_labels[anchor_id] = scene.add_label(label, text, position=(0, 0, 0.06))
+
+    def _label_anchors(self, rates: radio.RadioSnap) -> None:
+        """On a TDoA radio, each anchor's label says its packets a second (the best tag's)."""
+        if rates.mode == "twr":
+            return
+        heard = rates.anchor_hz()
+        for anchor_id, label in self._anchor_labels.items():
+            hz = heard.get(anchor_id)
+            _set(label, "text", f"anchor {anchor_id}" + ("" if hz is None else f" · {hz:.0f}/s"))
 
     def update(self, snap: Snapshot, trails_due: bool) -> None:
         if snap.anchors_version != self._anchors_version:
             self._anchors_version = snap.anchors_version
             self._draw_anchors(*snap.anchors)
+        if snap.radio is not None:
+            self._label_anchors(snap.radio)
         new_run = snap.run != self._run
         self._run = snap.run
         for agent_id, a in snap.agents.items():
@@ -287,8 +307,9 @@ class SceneView:
 
 
 class GuiView:
-    """The control panel: run status and controls, agents table, the selected chaser's decision panel and
-    plots, the event log, the Faults panel (:class:`~dashboard.faults.FaultPanel`), and view settings.
+    """The control panel: run status and controls, agents table, the radio's rates (:mod:`dashboard.radio`),
+    the selected chaser's decision panel and plots, the event log, the Faults panel
+    (:class:`~dashboard.faults.FaultPanel`), and view settings.
 
     With ``link=None`` (a recording's playback, ``player`` given) nothing commands a swarm: the Playback
     folder (:class:`~dashboard.playback.PlaybackPanel`) replaces the run controls, and the Faults panel only
@@ -330,6 +351,8 @@ class GuiView:
                 self.sent = gui.add_markdown("")
         with gui.add_folder("Agents"):
             self.table = gui.add_markdown("no agents yet")
+        with gui.add_folder("Radio"):
+            self.radio = gui.add_markdown(radio.radio_markdown(None))
         with gui.add_folder("UAV" if landing is not None else "Chaser"):
             options = chasers or ["-"]
             label = "uav" if landing is not None else "chaser"
@@ -424,6 +447,8 @@ class GuiView:
             self.chaser.options = sorted(
                 {c for c in known if c != "-"} | set(chasers), key=panels.natural_key
             )
+        if snap.radio is not None:
+            _set(self.radio, "content", radio.radio_markdown(snap.radio, panels.natural_key))
         selected = snap.agents.get(self.chaser.value)
         if self.landing is not None:
             text = panels.landing_uav_markdown(self.chaser.value, selected, self.pads)
@@ -491,6 +516,7 @@ class DashboardApp:
         else:
             vehicles = {k: (v.role, v.target) for k, v in sc.vehicles.items()}
             anchors = np.array(sc.anchors_m, dtype=float)
+        uwb_mode = getattr(sc.uwb, "mode", "twr")  # a landing radio ranges (two-way) only
 
         def make_state() -> SwarmState:
             return SwarmState(
@@ -499,6 +525,8 @@ class DashboardApp:
                 trail_cap=self.params.trail_cap,
                 trail_step_m=self.params.trail_step_m,
                 series_cap=self.params.series_cap,
+                uwb_mode=uwb_mode,
+                rate_window_s=self.params.rate_window_s,
             )
 
         self.state = make_state()
@@ -511,7 +539,9 @@ class DashboardApp:
         try:
             self.server.gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
             if session is not None:
-                self.link = SwarmLink(session, keys, self.state, self.drops, process_id=process_id)
+                self.link = SwarmLink(
+                    session, keys, self.state, self.drops, process_id=process_id, tdoa=uwb_mode != "twr"
+                )
             self.scene: SceneView | LandingSceneView
             if landing is not None:
                 frame_landing_scene(self.server, landing)
@@ -556,10 +586,11 @@ class DashboardApp:
         else:
             assert self.link is not None
             self.link.poll()
-        snap = self.state.snapshot(self.scene.trail_versions())
+        panels_due = self._panels.due()
+        snap = self.state.snapshot(self.scene.trail_versions(), radio=panels_due)
         with self.server.atomic():
             self.scene.update(snap, self._trails.due())
-            if self._panels.due():
+            if panels_due:
                 self.gui.update_panels(snap, self.drops.total)
             if self._plots.due():
                 self.gui.update_plots(snap)

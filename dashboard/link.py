@@ -10,7 +10,9 @@ calls no Python per sample; the render loop takes it with :meth:`SwarmLink.poll`
 decodes only that one (BENCHMARKS.md: ``RingChannel(1)`` suits latest-value topics). So the
 dashboard's cost follows its frame rate, not the swarm's tick rate. Topics where every sample counts,
 events (mode transitions, contact, loss; the run's and the UWB network's, faults applied or refused),
-anchors and liveliness, use callbacks
+anchors, liveliness and, on a TDoA radio, the tags' distance differences (``agent/<id>/tdoa``, the
+``mothership/tdoa`` batches and the ``Tdoa`` entries of lockstep bundles: the radio's rates count every
+slot, :mod:`dashboard.radio`) use callbacks
 (:func:`~swarm.transport.session.subscribe_decoded`, :func:`~swarm.transport.session.watch_liveliness`).
 
 Every payload is decoded with :func:`~swarm.transport.messages.safe_decode`: an invalid one is counted
@@ -37,6 +39,8 @@ from swarm.transport.messages import (
     Guidance,
     Message,
     RunControl,
+    Tdoa,
+    TdoaBatch,
     Truth,
     Vision,
     VisionBatch,
@@ -84,7 +88,8 @@ class SwarmLink:
     (reliable, block: a user's click must reach the world and the mothership). The anchors are also asked for
     with ``get`` in a background thread until one reply comes (a ``get`` right after the mothership declares
     its queryable can get no reply: BENCHMARKS.md), in case the dashboard starts after they were
-    published.
+    published. With ``tdoa`` (the scenario's ``uwb.mode`` is tdoa2/tdoa3) every ``Tdoa`` goes to the store,
+    however it travels.
     """
 
     def __init__(
@@ -95,6 +100,7 @@ class SwarmLink:
         drops: DropCounter,
         process_id: str = "dashboard",
         anchors_retry_s: float = 1.0,
+        tdoa: bool = False,
     ) -> None:
         self.session = session
         self.keys = keys
@@ -120,6 +126,10 @@ class SwarmLink:
         subscribe_decoded(session, keys.agent_all("event"), Event, self._on_event, drops)
         subscribe_decoded(session, keys.world_event(), Event, self._on_world_event, drops)
         subscribe_decoded(session, keys.anchors(), Anchors, self._on_anchors, drops)
+        if tdoa:  # every slot counts (a lockstep bundle's too: the newest-only rings above serve the frames)
+            subscribe_decoded(session, keys.agent_all("tdoa"), Tdoa, self._on_tdoa, drops)
+            subscribe_decoded(session, keys.mothership_tdoa(), TdoaBatch, self._on_tdoa_batch, drops)
+            subscribe_decoded(session, keys.agent_all("bundle"), Bundle, self._on_bundle_tdoa, drops)
         watch_liveliness(session, keys, self._on_liveliness)
         self._run_pub = _control_publisher(session, keys.run_control())
         self._fault_pub = _control_publisher(session, keys.fault())
@@ -220,6 +230,23 @@ class SwarmLink:
         parsed = self.keys.parse(key)
         if parsed is not None and parsed[1] is not None:
             self.state.on_message("event", parsed[1], msg)
+
+    def _on_tdoa(self, key: str, msg: Tdoa) -> None:
+        parsed = self.keys.parse(key)
+        if parsed is not None and parsed[1] is not None:
+            self.state.on_message("tdoa", parsed[1], msg)
+
+    def _on_tdoa_batch(self, key: str, batch: TdoaBatch) -> None:
+        for vid, msg in batch_rows(batch, key, self.drops):
+            self.state.on_message("tdoa", vid, msg)
+
+    def _on_bundle_tdoa(self, key: str, bundle: Bundle) -> None:
+        if "Tdoa" not in bundle.types:  # the world's bundles of this vehicle (imu, vision)
+            return
+        parsed = self.keys.parse(key)
+        if parsed is not None and parsed[1] is not None:
+            for msg in bundle_messages(bundle, key, self.drops, ("Tdoa",)):
+                self.state.on_message("tdoa", parsed[1], msg)
 
     def _on_world_event(self, _key: str, msg: Event) -> None:
         if msg.kind == STOPPING:  # (swarm.transport.stopping)

@@ -2,11 +2,12 @@
 series, events and liveliness, in one thread-safe store (:class:`SwarmState`), plus the bounded buffers
 and the pacing logic the render loop uses. No Viser, no Zenoh.
 
-Writers are Zenoh callback threads (events, anchors, liveliness) and the render thread (the latest truth,
-estimate, guidance, vision and clock samples, polled from ring channels); the render thread reads a
-:class:`Snapshot` once per frame. Every buffer is bounded, so memory stays flat over an hour-long run:
-trails and series keep at most ``cap`` samples, thinning the whole history by half when full
-(:class:`Trail`, :class:`Series`); the event log and mode timelines are fixed-length deques.
+Writers are Zenoh callback threads (events, anchors, liveliness, every TDoA slot) and the render thread
+(the latest truth, estimate, guidance, vision and clock samples, polled from ring channels); the render
+thread reads a :class:`Snapshot` once per frame. Every buffer is bounded, so memory stays flat over an
+hour-long run: trails and series keep at most ``cap`` samples, thinning the whole history by half when full
+(:class:`Trail`, :class:`Series`); the event log and mode timelines are fixed-length deques; the radio's
+rates keep a window of swarm time (:mod:`dashboard.radio`).
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from swarm.transport.messages import Anchors, Clock, Estimate, Event, Guidance, Message, Truth, Vision
+from dashboard.radio import RadioRates, RadioSnap
+from swarm.transport.messages import Anchors, Clock, Estimate, Event, Guidance, Message, Tdoa, Truth, Vision
 
 __all__ = [
     "AgentSnap",
@@ -287,11 +289,15 @@ class Snapshot:
     clock_mode: str | None = None
     """The world's clock (``lockstep``, ``realtime``, ``scaled:N``) from its latest ``run_start``; None
     before the dashboard saw one."""
+    radio: RadioSnap | None = None
+    """The radio's rates (:mod:`dashboard.radio`), when the frame asked for them (the panels' frames)."""
 
 
 class SwarmState:
     """Thread-safe latest-value store of the swarm (module docstring). ``vehicles`` maps each scenario
-    vehicle id to ``(role, target)``; vehicles not in it are added as they appear (role ``?``)."""
+    vehicle id to ``(role, target)``; vehicles not in it are added as they appear (role ``?``).
+    ``uwb_mode`` (the scenario's ``uwb.mode``) and ``rate_window_s`` set the radio's rates
+    (:class:`~dashboard.radio.RadioRates`)."""
 
     def __init__(
         self,
@@ -303,6 +309,8 @@ class SwarmState:
         events_cap: int = 100,
         faults_cap: int = 20,
         max_agents: int = 256,
+        uwb_mode: str = "twr",
+        rate_window_s: float = 2.0,
     ) -> None:
         self._lock = threading.Lock()
         self._trail = (trail_cap, trail_step_m)
@@ -323,6 +331,7 @@ class SwarmState:
         self._faults: deque[tuple[str, Event]] = deque(maxlen=faults_cap)
         self._faults_version = 0
         self.clock_mode: str | None = None
+        self.radio = RadioRates(uwb_mode, rate_window_s, max_agents)
 
     def _add(self, agent_id: str, role: str, target: str | None) -> AgentView | None:
         if agent_id in self.agents:
@@ -368,6 +377,14 @@ class SwarmState:
                 view.estimate_trail.clear()
             view.estimate = msg
             view.estimate_trail.add(msg.p_nav)
+            self.radio.on_counts(agent_id, msg.t_s, msg.counts)
+
+    def on_tdoa(self, agent_id: str, msg: Tdoa) -> None:
+        """A tag's distance differences of one UWB slot (every one heard counts: the anchors' and the tags'
+        rates, :class:`~dashboard.radio.RadioRates`)."""
+        with self._lock:
+            if self._add(agent_id, "?", None) is not None:
+                self.radio.on_tdoa(agent_id, msg)
 
     def on_guidance(self, agent_id: str, msg: Guidance) -> None:
         with self._lock:
@@ -426,6 +443,7 @@ class SwarmState:
                 self.run += 1
                 for view in self.agents.values():
                     view.clear_run()
+                self.radio.clear()
             self.clock = msg
             return new
 
@@ -453,11 +471,11 @@ class SwarmState:
 
     def on_message(self, kind: str, agent_id: str | None, msg: Message) -> bool:
         """One decoded message into the store, by the kind of its key
-        (:meth:`swarm.transport.keys.Keys.parse`: ``truth``, ``estimate``, ``guidance``, ``vision`` and
-        ``event`` of vehicle ``agent_id``; ``world_event``, ``world_clock``, ``anchors``): the one entry point
-        of the live link (:mod:`dashboard.link`) and of a recording's playback (:mod:`dashboard.playback`),
-        so that playback shows what live shows. Other kinds are ignored. True if the message is a clock that
-        starts a new run."""
+        (:meth:`swarm.transport.keys.Keys.parse`: ``truth``, ``estimate``, ``guidance``, ``vision``,
+        ``tdoa`` and ``event`` of vehicle ``agent_id``; ``world_event``, ``world_clock``, ``anchors``): the
+        one entry point of the live link (:mod:`dashboard.link`) and of a recording's playback
+        (:mod:`dashboard.playback`), so that playback shows what live shows. Other kinds are ignored. True if
+        the message is a clock that starts a new run."""
         if agent_id is not None:
             if kind == "truth":
                 self.on_truth(agent_id, msg)  # type: ignore[arg-type]
@@ -467,6 +485,8 @@ class SwarmState:
                 self.on_guidance(agent_id, msg)  # type: ignore[arg-type]
             elif kind == "vision":
                 self.on_vision(agent_id, msg)  # type: ignore[arg-type]
+            elif kind == "tdoa":
+                self.on_tdoa(agent_id, msg)  # type: ignore[arg-type]
             elif kind == "event":
                 self.on_event(agent_id, msg)  # type: ignore[arg-type]
         elif kind == "world_clock":
@@ -497,9 +517,12 @@ class SwarmState:
 
     # ---------------------------------------------------------------------------------- reader
 
-    def snapshot(self, trail_versions: Mapping[str, tuple[int, int]] | None = None) -> Snapshot:
+    def snapshot(
+        self, trail_versions: Mapping[str, tuple[int, int]] | None = None, radio: bool = False
+    ) -> Snapshot:
         """A consistent copy for one frame. Trails are copied only for vehicles whose ``(truth, estimate)``
-        trail versions differ from ``trail_versions`` (what the caller last drew)."""
+        trail versions differ from ``trail_versions`` (what the caller last drew); the radio's rates only
+        with ``radio`` (a panel frame)."""
         seen = trail_versions or {}
         with self._lock:
             agents = {}
@@ -537,6 +560,7 @@ class SwarmState:
                 faults=tuple(self._faults),
                 faults_version=self._faults_version,
                 clock_mode=self.clock_mode,
+                radio=self.radio.snapshot(self._anchors[0]) if radio else None,
             )
 
 

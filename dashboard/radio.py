@@ -1,0 +1,299 @@
+"""The UWB radio's rates as the dashboard measures them on the wire (issue 45, item 5): on a TDoA radio
+(``uwb.mode`` tdoa2/tdoa3) each anchor's packets a second and each tag's distance differences a second; on
+either radio each tag's measurements the filter accepted a second and the share it rejected. Over a sliding
+window of swarm time (the messages' ``t_s``, so a lockstep run faster or slower than the wall clock reads
+the radio's true rates). Pure: no Viser, no Zenoh; :class:`~dashboard.state.SwarmState` holds one
+:class:`RadioRates` under its lock and the panel draws :func:`radio_markdown`.
+
+What is on the wire, and so what is measured:
+
+- A tag's ``Tdoa`` of a UWB slot holds the differences it formed since its previous slot, one row per
+  packet of anchor ``B`` it received and matched (``anchor_b``: the sender). Its differences a second are
+  the rows of the window's slots over the time they cover (:class:`SlotWindow`). A packet lost to a
+  collision, missed by the tag or left unmatched makes no row, so an anchor's rate as one tag hears it is a
+  lower bound of the anchor's transmissions; every tag hears the same packets, so the anchor's rate shown
+  is the best tag's (and the mean over tags beside it). The rates are not the configuration's: a
+  collision or a dropout shows.
+- An agent's ``Estimate.counts`` are its filter's cumulative counters; a distance difference is fused as a
+  range is, under ``range_accepted`` / ``range_rejected`` / ``range_refused`` (:func:`swarm.step.agent.
+  agent_tdoa`), so the tag's accepted rate and rejected share come from their increase over the window
+  (:class:`CounterWindow`); on a TWR radio their sum is the tag's ranges a second (the filter's: ranges
+  skipped while the chaser navigates on vision near its target are not counted, as it does not count
+  them).
+
+The window (both kinds): the samples from the newest one at or before ``t_n - window_s`` (the base) to the
+newest, ``t_n``; a rate is what came after the base over ``t_n - t_0``. A sample earlier than the newest
+(a new run) or a counter that went down (a restarted agent) starts the window again.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+from swarm.transport.messages import Tdoa
+
+__all__ = [
+    "AnchorRate",
+    "CounterWindow",
+    "RadioRates",
+    "RadioSnap",
+    "SlotWindow",
+    "TagRate",
+    "radio_markdown",
+]
+
+COUNTERS = ("range_accepted", "range_rejected", "range_refused")
+"""The ``Estimate.counts`` entries the tag rates come from (a TDoA difference is counted as a range)."""
+
+
+def _trim(samples: deque, window_s: float) -> None:
+    """Drop the oldest samples while the second oldest is at or before ``t_n - window_s`` (module docstring:
+    the base is the newest sample at or before the window's start)."""
+    start = samples[-1][0] - window_s
+    while len(samples) >= 2 and samples[1][0] <= start:
+        samples.popleft()
+
+
+class SlotWindow:
+    """The rows a tag heard in its UWB slots (one ``Tdoa`` each, with its ``t_s`` and the count of rows per
+    sender anchor), over a window of ``window_s`` of swarm time, at most ``cap`` slots.
+
+    ``rate(j) = sum_{k=1..n} c_k(j) / (t_n - t_0)``: the rows of the slots after the base ``t_0`` cover
+    exactly ``(t_0, t_n]`` (each slot's rows were heard since the previous slot)."""
+
+    def __init__(self, window_s: float, cap: int = 4096) -> None:
+        self.window_s = float(window_s)
+        self._slots: deque[tuple[float, dict[int, int]]] = deque(maxlen=cap)
+        self._sum: dict[int, int] = {}  # rows per anchor over every slot kept, the base's included
+
+    def clear(self) -> None:
+        self._slots.clear()
+        self._sum = {}
+
+    def add(self, t_s: float, senders: Iterable[int]) -> None:
+        """One slot at ``t_s`` [s] whose rows had these sender anchors (``Tdoa.anchor_b``)."""
+        if self._slots and t_s < self._slots[-1][0]:
+            self.clear()
+        counts: dict[int, int] = {}
+        for j in senders:
+            counts[j] = counts.get(j, 0) + 1
+        if len(self._slots) == self._slots.maxlen:
+            self._forget(self._slots[0][1])
+        self._slots.append((float(t_s), counts))
+        for j, n in counts.items():
+            self._sum[j] = self._sum.get(j, 0) + n
+        start = self._slots[-1][0] - self.window_s
+        while len(self._slots) >= 2 and self._slots[1][0] <= start:
+            self._forget(self._slots.popleft()[1])
+
+    def _forget(self, counts: dict[int, int]) -> None:
+        for j, n in counts.items():
+            left = self._sum[j] - n
+            if left:
+                self._sum[j] = left
+            else:
+                del self._sum[j]
+
+    def span_s(self) -> float:
+        """``t_n - t_0`` [s]: 0 before two slots."""
+        return self._slots[-1][0] - self._slots[0][0] if len(self._slots) >= 2 else 0.0
+
+    def rates_hz(self) -> dict[int, float] | None:
+        """Rows a second per sender anchor (anchors not heard in the window absent); None before two slots
+        at different times."""
+        span = self.span_s()
+        if span <= 0.0:
+            return None
+        base = self._slots[0][1]
+        out = {j: (n - base.get(j, 0)) / span for j, n in self._sum.items()}
+        return {j: r for j, r in out.items() if r > 0.0}
+
+    def total_hz(self) -> float | None:
+        """All rows a second (the tag's differences a second); None before two slots."""
+        rates = self.rates_hz()
+        return None if rates is None else sum(rates.values())
+
+
+class CounterWindow:
+    """Cumulative counters sampled now and then (an agent's ``Estimate.counts``, the newest one each frame)
+    over a window of ``window_s`` of swarm time: ``rate_i = (v_n,i - v_0,i) / (t_n - t_0)``. A sample at the
+    newest's time replaces it; one earlier, or with a counter lower than the newest's, starts again."""
+
+    def __init__(self, window_s: float, cap: int = 4096) -> None:
+        self.window_s = float(window_s)
+        self._samples: deque[tuple[float, tuple[int, ...]]] = deque(maxlen=cap)
+
+    def clear(self) -> None:
+        self._samples.clear()
+
+    def add(self, t_s: float, values: tuple[int, ...]) -> None:
+        s = self._samples
+        if s:
+            t_last, v_last = s[-1]
+            if t_s < t_last or any(v < w for v, w in zip(values, v_last, strict=True)):
+                s.clear()
+            elif t_s == t_last:
+                s.pop()
+        s.append((float(t_s), tuple(values)))
+        _trim(s, self.window_s)
+
+    def deltas(self) -> tuple[float, tuple[int, ...]] | None:
+        """``(t_n - t_0, v_n - v_0)``; None before two samples at different times."""
+        s = self._samples
+        if len(s) < 2 or s[-1][0] <= s[0][0]:
+            return None
+        (t0, v0), (t1, v1) = s[0], s[-1]
+        return t1 - t0, tuple(b - a for a, b in zip(v0, v1, strict=True))
+
+
+@dataclass(frozen=True)
+class AnchorRate:
+    """One anchor's packets as the tags heard them (TDoA only)."""
+
+    anchor: int
+    best_hz: float
+    """Rows a second naming it the sender, the best tag's: a lower bound of its transmissions a second."""
+    mean_hz: float
+    """The same, the mean over the tags with a window (0 for a tag that did not hear it)."""
+    tags: int
+    """Tags that heard it in their window."""
+
+
+@dataclass(frozen=True)
+class TagRate:
+    """One tag's measurements a second (None: not measured yet)."""
+
+    tag: str
+    heard_hz: float | None
+    """Distance differences a second on the wire (TDoA); on a TWR radio the filter's ranges a second
+    (accepted, rejected and refused)."""
+    accepted_hz: float | None
+    """Measurements the filter accepted a second."""
+    rejected_share: float | None
+    """Rejected over accepted plus rejected in the window; None when none was gated."""
+    span_s: float | None = None
+    """The time the TDoA rows were counted over [s] (``t_n - t_0``, :class:`SlotWindow`)."""
+
+
+@dataclass(frozen=True)
+class RadioSnap:
+    """The rates of one frame (:meth:`RadioRates.snapshot`)."""
+
+    mode: str
+    """``twr``, ``tdoa2`` or ``tdoa3``."""
+    window_s: float
+    anchors: tuple[AnchorRate, ...]
+    """Every anchor, in id order; empty on a TWR radio, and before a tag's window holds two slots."""
+    tags: tuple[TagRate, ...]
+    """Every tag seen, in the order first seen."""
+
+    def anchor_hz(self) -> dict[int, float]:
+        """``anchor -> best_hz``."""
+        return {a.anchor: a.best_hz for a in self.anchors}
+
+
+class RadioRates:
+    """The rates of one swarm (module docstring): :meth:`on_tdoa` for every ``Tdoa`` heard, :meth:`on_counts`
+    for each estimate's counters, :meth:`snapshot` for the panel. Not thread-safe (the store's lock)."""
+
+    def __init__(self, mode: str, window_s: float = 2.0, max_tags: int = 256) -> None:
+        if not (math.isfinite(window_s) and window_s > 0):
+            raise ValueError(f"rate window must be a positive finite number of seconds, got {window_s!r}")
+        self.mode = mode
+        self.window_s = float(window_s)
+        self.max_tags = max_tags
+        self._slots: dict[str, SlotWindow] = {}
+        self._counts: dict[str, CounterWindow] = {}
+
+    @property
+    def tdoa(self) -> bool:
+        return self.mode != "twr"
+
+    def _tag(self, table: dict, tag: str, make) -> object | None:
+        w = table.get(tag)
+        if w is None and len(table) < self.max_tags:
+            w = table[tag] = make(self.window_s)
+        return w
+
+    def on_tdoa(self, tag: str, msg: Tdoa) -> None:
+        w = self._tag(self._slots, tag, SlotWindow)
+        if w is not None:
+            w.add(msg.t_s, msg.anchor_b)
+
+    def on_counts(self, tag: str, t_s: float, counts: Mapping[str, int]) -> None:
+        w = self._tag(self._counts, tag, CounterWindow)
+        if w is not None:
+            w.add(t_s, tuple(int(counts.get(name, 0)) for name in COUNTERS))
+
+    def clear(self) -> None:
+        """A new run: every window starts again."""
+        for w in (*self._slots.values(), *self._counts.values()):
+            w.clear()
+
+    def snapshot(self, anchor_ids: Iterable[int]) -> RadioSnap:
+        """The rates now, for the anchors ``anchor_ids`` (those of the ``Anchors`` message)."""
+        per_tag = {tag: w.rates_hz() for tag, w in self._slots.items()}
+        measured = [r for r in per_tag.values() if r is not None]
+        anchors = []
+        if measured:  # (a TDoA radio: only Tdoa messages fill the slot windows)
+            for j in sorted(anchor_ids):
+                heard = [r.get(j, 0.0) for r in measured]
+                anchors.append(
+                    AnchorRate(
+                        anchor=j,
+                        best_hz=max(heard, default=0.0),
+                        mean_hz=sum(heard) / len(heard) if heard else 0.0,
+                        tags=sum(1 for h in heard if h > 0.0),
+                    )
+                )
+        tags = []
+        for tag in dict.fromkeys([*self._slots, *self._counts]):
+            heard_hz = accepted_hz = share = span = None
+            rates = per_tag.get(tag)
+            if rates is not None:
+                heard_hz, span = sum(rates.values()), self._slots[tag].span_s()
+            cw = self._counts.get(tag)
+            d = cw.deltas() if cw is not None else None
+            if d is not None:
+                span, (acc, rej, ref) = d
+                accepted_hz = acc / span
+                share = rej / (acc + rej) if acc + rej else None
+                if not self.tdoa:
+                    heard_hz = (acc + rej + ref) / span
+            tags.append(TagRate(tag, heard_hz, accepted_hz, share, span))
+        return RadioSnap(self.mode, self.window_s, tuple(anchors), tuple(tags))
+
+
+_DASH = "–"
+
+
+def _hz(value: float | None) -> str:
+    return _DASH if value is None else f"{value:.1f}"
+
+
+def radio_markdown(snap: RadioSnap | None, order=None) -> str:
+    """The Radio panel: on a TDoA radio a table of the anchors (packets a second heard by the best tag, the
+    mean per tag, the tags that heard it) and one of the tags (differences a second, accepted a second,
+    rejected share); on a TWR radio the tags' table only, with ranges a second. ``order``: a sort key of
+    the tags (the dashboard's natural order)."""
+    if snap is None:
+        return "no radio rates yet"
+    head = f"**{snap.mode.upper()}** · per second of swarm time, over the last {snap.window_s:g} s"
+    lines = [head, ""]
+    if snap.anchors:
+        lines += ["| anchor | packets/s (best tag) | per tag (mean) | tags |", "|---|---|---|---|"]
+        lines += [f"| {a.anchor} | {a.best_hz:.1f} | {a.mean_hz:.1f} | {a.tags} |" for a in snap.anchors]
+        lines.append("")
+    elif snap.mode != "twr":
+        lines += ["no distance differences yet", ""]
+    heard = "differences/s" if snap.mode != "twr" else "ranges/s"
+    lines += [f"| tag | {heard} | accepted/s | rejected |", "|---|---|---|---|"]
+    for t in sorted(snap.tags, key=(lambda t: order(t.tag)) if order else (lambda t: t.tag)):
+        share = _DASH if t.rejected_share is None else f"{100.0 * t.rejected_share:.0f} %"
+        lines.append(f"| {t.tag} | {_hz(t.heard_hz)} | {_hz(t.accepted_hz)} | {share} |")
+    if not snap.tags:
+        lines.append(f"| {_DASH} | {_DASH} | {_DASH} | {_DASH} |")
+    return "\n".join(lines)
