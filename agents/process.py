@@ -33,9 +33,9 @@ error (:mod:`swarm.transport.stopping`).
 
 A restarted agent (``--rejoin``) joins the run in progress: it publishes zero-thrust HOLD commands while it
 re-initialises from its own sensors (the AHRS attitude, and its position by least squares on one range to
-each anchor, :func:`swarm.core.ranging.position_from_ranges`), then flies again from that estimate. On a
-TDoA radio (``uwb.mode`` tdoa2/tdoa3: distance differences on ``agent/<id>/tdoa``, no ranges) it does not
-re-initialise: it logs why and holds (:meth:`AgentProcess._collect_init`).
+each anchor, :func:`swarm.core.ranging.position_from_ranges`; on a TDoA radio, ``uwb.mode`` tdoa2/tdoa3, by
+multilateration on its last distance differences, :func:`swarm.core.ranging.position_from_tdoa`), then
+flies again from that estimate (:meth:`AgentProcess._collect_init`).
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ from collections.abc import Callable
 import numpy as np
 
 from swarm.core import rotations as rot
-from swarm.core.ranging import position_from_ranges
+from swarm.core.ranging import position_from_ranges, position_from_tdoa
 from swarm.errors import ConfigError
 from swarm.scenario import Scenario
 from swarm.step.agent import AgentInputs, TargetEstimate, VehicleAgent
@@ -160,7 +160,6 @@ class AgentProcess:
             uwb_slots=exchange_ticks(sc, vehicle_id) if sc.uwb.mode == "twr" else None,
         )  # fmt: skip
         self.tdoa = sc.uwb.mode != "twr"  # uwb.mode tdoa2/tdoa3: a Tdoa on agent/<id>/tdoa, no Uwb
-        self._tdoa_init_refused = False  # a rejoining agent on a TDoA radio said it holds (_collect_init)
         self.estimate_reads = estimate_reads(sc, vehicle_id)  # the ticks whose estimate goes out
         if rejoin:
             # who is alive is not known yet: wait for nobody until the liveliness history says (a mothership
@@ -181,6 +180,7 @@ class AgentProcess:
         self._ended = threading.Event()
         self._end_tick = 0
         self._init_ranges: dict[int, float] = {}
+        self._init_rows = np.empty((0, 3))  # a rejoining TDoA tag's last differences (_collect_init)
         self._init_q: np.ndarray | None = None
         self._last_decision_t: float | None = None
         self.ticks = 0
@@ -438,35 +438,45 @@ class AgentProcess:
     # ------------------------------------------------------------------------------ re-initialisation
 
     def _collect_init(self, imu: Imu | None, uwb: Uwb | Tdoa | None) -> bool:
-        """Gather the AHRS attitude and ranges; build the agent once there is one range per anchor. On a
-        TDoA radio (``uwb.mode`` tdoa2/tdoa3) there are no ranges, and this agent does not re-initialise
-        from distance differences (a position from differences alone needs a multilateration this process
-        does not carry, and a wrong fix would fly): it says so once and holds (zero thrust, HOLD)."""
-        if self.tdoa:
-            if not self._tdoa_init_refused:
-                self._tdoa_init_refused = True
-                _LOG.error(
-                    "%s: cannot re-initialise on uwb.mode = %r (no ranges; no re-initialisation from "
-                    "distance differences alone): holding with zero thrust", self.id, self.sc.uwb.mode,
-                )  # fmt: skip
-            return False
+        """Gather the AHRS attitude and ranges (one per anchor), or on a TDoA radio (``uwb.mode``
+        tdoa2/tdoa3) distance differences (``agent.reinit_tdoa_rows`` of them, naming every anchor: a
+        multilateration, :func:`swarm.core.ranging.position_from_tdoa`); build the agent from the fix,
+        its covariance the fix's own (an anchor layout that leaves a direction nearly unseen gives a large
+        one, and the chaser holds on it)."""
         if imu is not None and imu.q_ahrs_nav_body is not None:
             self._init_q = imu.q_ahrs_nav_body
-        if uwb is not None and uwb.range_m is not None and uwb.anchor_id < len(self.sc.anchors_m):
-            self._init_ranges[uwb.anchor_id] = uwb.range_m
-        if self._init_q is None or len(self._init_ranges) < len(self.sc.anchors_m):
-            return False
         sc = self.sc
+        n_anchors = len(sc.anchors_m)
+        if self.tdoa:
+            if isinstance(uwb, Tdoa) and len(uwb.anchor_a):
+                # a row naming an unknown anchor, or one twice, is skipped (as the filter skips it)
+                r = uwb.rows()
+                a, b = r[:, 0], r[:, 1]
+                ok = (a != b) & (a >= 0) & (a < n_anchors) & (b >= 0) & (b < n_anchors) & np.isfinite(r[:, 2])
+                self._init_rows = np.vstack([self._init_rows, r[ok]])[-sc.agent.reinit_tdoa_rows :]
+            heard = np.union1d(self._init_rows[:, 0], self._init_rows[:, 1])
+            if (
+                self._init_q is None
+                or len(self._init_rows) < sc.agent.reinit_tdoa_rows
+                or len(heard) < n_anchors
+            ):
+                return False
+        elif uwb is not None and uwb.range_m is not None and uwb.anchor_id < n_anchors:
+            self._init_ranges[uwb.anchor_id] = uwb.range_m
+        if self._init_q is None or (not self.tdoa and len(self._init_ranges) < n_anchors):
+            return False
         lever_body = np.asarray(sc.kind(self.id).mounts.tag_lever_arm_body_m, dtype=float)
         lever_nav = rot.quat_rotate(self._init_q, lever_body)
-        p0, JtJ_inv = position_from_ranges(
-            np.asarray(sc.anchors_m, dtype=float),
-            self._init_ranges,
-            lever_nav,
-            sc.vehicles[self.id].position_m,
-        )
+        anchors = np.asarray(sc.anchors_m, dtype=float)
+        guess = sc.vehicles[self.id].position_m
+        if self.tdoa:
+            p0, JtJ_inv = position_from_tdoa(anchors, self._init_rows, lever_nav, guess)
+            sigma = sc.estimator.sigma_tdoa_m
+        else:
+            p0, JtJ_inv = position_from_ranges(anchors, self._init_ranges, lever_nav, guess)
+            sigma = sc.estimator.sigma_range_m
         sig = sc.initial.sigmas
-        var_pos = max(float(np.max(np.diag(JtJ_inv))) * sc.estimator.sigma_range_m**2, sig[0] ** 2)
+        var_pos = max(float(np.max(np.diag(JtJ_inv))) * sigma**2, sig[0] ** 2)
         var_vel = max(sig[3] ** 2, sc.guidance.approach_speed_m_s**2)  # moving at up to the approach speed
         var_att = max(np.radians(sc.ahrs.sigma_deg) ** 2, sig[6] ** 2)
         cov0 = np.array([var_pos] * 3 + [var_vel] * 3 + [var_att] * 3)

@@ -142,6 +142,10 @@ class AgentParams:
     Fusing a 30 ms old range at the current state errs by the distance flown meanwhile (0.6 mm at
     2 cm/s, against a range noise of centimetres). 0: none fused late. Lockstep and in-process runs wait
     for every sample of a tick and do not use it."""
+    reinit_tdoa_rows: int = 64
+    """A restarted agent on a TDoA radio (``uwb.mode`` tdoa2/tdoa3) re-initialises by multilateration over
+    its last this many distance differences, once it has them and they name every anchor (~0.2 s of a
+    TDoA3 tag's ~320 a second: the vehicle moves millimetres meanwhile; fewer rows, a noisier fix)."""
     wake_at_control: bool = False
     """A free-running agent alone in its process wakes twice per control period instead of at every gyro
     sample (as a ROS 2 node whose timers drain its subscriptions' queues): just after the tick before its
@@ -162,6 +166,10 @@ class AgentParams:
                 raise ConfigError(f"agent.{name} must be a positive number, got {v!r}")
         if not (np.isfinite(self.late_fusion_s) and self.late_fusion_s >= 0):
             raise ConfigError(f"agent.late_fusion_s must be a number >= 0, got {self.late_fusion_s!r}")
+        if not (isinstance(self.reinit_tdoa_rows, int) and self.reinit_tdoa_rows >= 4):
+            raise ConfigError(
+                f"agent.reinit_tdoa_rows must be an integer >= 4, got {self.reinit_tdoa_rows!r}"
+            )
         if not isinstance(self.wake_at_control, bool):
             raise ConfigError(f"agent.wake_at_control must be true or false, got {self.wake_at_control!r}")
         if not (np.isfinite(self.wake_margin_s) and 0 < self.wake_margin_s <= 0.1):

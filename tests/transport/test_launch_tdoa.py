@@ -9,9 +9,12 @@ from __future__ import annotations
 import itertools
 import json
 import sys
+import threading
 import time
 import uuid
 import warnings
+
+import pytest
 
 from swarm.scenario import load_scenario
 from swarm.sim.docking import run_docking
@@ -107,28 +110,57 @@ def test_a_lockstep_launch_on_tdoa3_equals_the_in_process_run(tmp_path):
         assert payload == tap.by_tick[k], k
 
 
-def test_a_rejoining_agent_on_tdoa_refuses_to_reinitialise_and_holds(caplog):
-    """A restarted agent re-initialises from one range per anchor; a TDoA tag has none, and this agent
-    does not multilaterate from differences: it says so (once) and stays without a filter (HOLD, zero
-    thrust), whatever differences come, in its tick or late."""
-    import logging
-    import threading
-
+@pytest.mark.parametrize("layout", ["cube", "paper"])
+def test_a_rejoining_agent_on_tdoa_reinitialises_by_multilateration(layout):
+    """A restarted agent on a TDoA radio has no ranges: it holds (no agent) until it has
+    ``agent.reinit_tdoa_rows`` differences naming every anchor, then multilaterates
+    (swarm.core.ranging.position_from_tdoa) and flies from the fix, its covariance the fix's. On the
+    eight-anchor cube the fix is within centimetres; the paper's four anchors hardly see y in differences,
+    so the restarted filter reports metres and the chaser holds on it."""
     import numpy as np
 
     from agents.process import AgentProcess
-    from swarm.transport.messages import Imu, Tdoa
+    from swarm.core import rotations as rot
+    from swarm.transport.messages import Event, Imu, Tdoa, decode
     from swarm.transport.process import ClockSpec
 
-    sc = load_scenario("docking", {"uwb.mode": "tdoa3", "anchors_m": CUBE})
+    overrides = {"uwb.mode": "tdoa3"} | ({"anchors_m": CUBE} if layout == "cube" else {})
+    sc = load_scenario("docking", overrides)
     proc = AgentProcess(sc, "chaser", SEED, "mdp", None, Keys("t"), ClockSpec.parse("lockstep"),
                         threading.Event(), rejoin=True)  # fmt: skip
-    imu = Imu(5, 0.05, 0.01, np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]))
-    rows = Tdoa(5, 0.05, tuple(range(7)), tuple(range(1, 8)), np.full(7, 0.1))
-    with caplog.at_level(logging.ERROR, logger="swarm.agent"):
-        for _ in range(3):
-            assert not proc._collect_init(imu, rows)
-        proc.fuse_late([rows])
-    assert proc.agent is None
-    said = [r.getMessage() for r in caplog.records if "cannot re-initialise" in r.getMessage()]
-    assert len(said) == 1 and "tdoa3" in said[0], said
+    sent = []
+    proc.pub_event = type("Pub", (), {"put": staticmethod(sent.append)})  # no session: keep what it says
+    anchors = np.asarray(sc.anchors_m, dtype=float)
+    q = np.array([0.0, 0.0, 0.0, 1.0])
+    lever = rot.quat_rotate(q, np.asarray(sc.kind("chaser").mounts.tag_lever_arm_body_m, dtype=float))
+    p_true = np.asarray(sc.vehicles["chaser"].position_m, dtype=float) + np.array([0.10, -0.05, 0.02])
+    rng = np.random.default_rng(SEED)
+    sigma = sc.estimator.sigma_tdoa_m
+    n = len(anchors)
+    imu = Imu(5, 0.05, 0.01, np.zeros(3), q)
+    # a row the filter skips is skipped here too: an unknown anchor (a bad packet must neither stop the
+    # process nor enter the fix; a row naming one anchor twice is refused by the message's own check)
+    junk = Tdoa(4, 0.03, (0, 99), (1, 3), np.array([5.0, 0.1]))
+    assert not proc._collect_init(imu, junk)
+    assert len(proc._init_rows) == 1
+    for k in range(40):  # six differences a tick, as a TDoA3 tag on 8 anchors hears ~300 a second
+        a = rng.integers(0, n, 6)
+        b = (a + rng.integers(1, n, 6)) % n
+        d = np.linalg.norm(p_true + lever - anchors[b], axis=1) - np.linalg.norm(
+            p_true + lever - anchors[a], axis=1
+        )
+        msg = Tdoa(5 + k, 0.05 + 0.02 * k, tuple(a.tolist()), tuple(b.tolist()), d + rng.normal(0, sigma, 6))
+        if proc._collect_init(imu, msg):
+            break
+        assert proc.agent is None  # holds while the differences do not yet name every anchor
+    assert proc.agent is not None and k >= 1  # one tick's six differences cannot name every anchor
+    p0 = proc.agent.est.X[0][:3]
+    var = np.diag(proc.agent.est.P[0])[:3]
+    (event,) = [decode(m, Event) for m in sent]
+    assert event.kind == "restarted" and np.allclose(event.data["p_nav"], p0)
+    if layout == "cube":
+        # 64 differences of sigma 5 cm: the fix's own sigma is ~2 cm per axis (tests/core/test_ranging.py)
+        assert np.linalg.norm(p0 - p_true) < 0.1
+        assert np.all(var < 0.01)
+    else:
+        assert np.all(np.sqrt(var) > 1.0)  # metres: the chaser's guidance holds on such an estimate
