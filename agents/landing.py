@@ -1,7 +1,9 @@
 """The landing agent process (``python -m agents.landing SCENARIO --id UAV``; started by ``swarm launch`` for
 a landing scenario): one UAV's on-board software, the agent step of :mod:`swarm.step.landing`, over Zenoh.
 
-It subscribes its UAV's ``imu``, ``uwb``, ``gnss``, ``rangefinder`` and ``vision`` and the world's events,
+It subscribes its UAV's ``imu``, ``uwb``, ``gnss``, ``rangefinder`` and ``vision`` (and, for a moving pad,
+the robot's shared ``estimate`` on ``agent/<platform.id>/estimate``, waited for on its share ticks) and the
+world's events,
 declares its liveliness, and runs tick by tick in lockstep: once tick ``k``'s samples are all in (the IMU
 every tick, a range, a fix, a distance and a camera frame on their ticks, as the scenario's rates say, so
 nothing is waited for that will not come), it fuses them, decides, and publishes its ``command`` (rotor speeds
@@ -131,7 +133,17 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
     fused, not decided on. ``resume``: its checkpoint (module docstring)."""
     from swarm.step.landing import LandingAgent, LandingInputs, Rates
     from swarm.transport import landing_wire as wire
-    from swarm.transport.messages import DropCounter, Event, Gnss, Imu, MessageError, Rangefinder, Uwb, Vision
+    from swarm.transport.messages import (
+        DropCounter,
+        Estimate,
+        Event,
+        Gnss,
+        Imu,
+        MessageError,
+        Rangefinder,
+        Uwb,
+        Vision,
+    )
     from swarm.transport.process import declare_reliable
     from swarm.transport.session import declare_liveliness, subscribe_decoded
     from swarm.transport.stopping import Stopping, wait_for_stop
@@ -142,7 +154,8 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
     rates = Rates.of(sc)
     dt = sc.dt_s
     cond = threading.Condition()
-    inbox: dict[str, dict[int, object]] = {"imu": {}, "uwb": {}, "gnss": {}, "rangefinder": {}, "vision": {}}
+    inbox: dict[str, dict[int, object]] = {"imu": {}, "uwb": {}, "gnss": {}, "rangefinder": {}, "vision": {},
+                                           "pad": {}}  # fmt: skip
     state = {"k": 1, "ended": False}
     sent: deque = deque(maxlen=2)  # the last two commands sent, (tick, key, payload): sent again on a restart
     drops = DropCounter()
@@ -159,6 +172,8 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
             return msg.p_nav
         if kind == "rangefinder":
             return msg.range_m
+        if kind == "pad":
+            return wire.pad_input(msg)
         if msg.acc_body is None:
             raise MessageError("acc_body: an IMU sample without the specific force cannot drive this filter")
         return msg.gyro_body, msg.acc_body
@@ -204,6 +219,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
             and (not rates.gnss_tick(sc, k) or k in inbox["gnss"])
             and (not rates.rangefinder_tick(sc, k) or k in inbox["rangefinder"])
             and (not rates.camera_tick(k) or k in inbox["vision"])
+            and (not rates.share_tick(sc, k) or k in inbox["pad"])
         )
 
     def inputs(k: int) -> LandingInputs:
@@ -213,6 +229,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         inp.gnss = inbox["gnss"].pop(k, None)
         inp.rangefinder = inbox["rangefinder"].pop(k, None)
         inp.camera = inbox["vision"].pop(k, None)
+        inp.pad = inbox["pad"].pop(k, None)
         return inp
 
     pub = {getattr(keys, kind)(uid): declare_reliable(session, getattr(keys, kind)(uid))
@@ -225,6 +242,8 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         ("vision", Vision),
     ):
         subscribe_decoded(session, getattr(keys, kind)(uid), cls, on_sample(kind), drops)
+    if sc.platform.enabled and sc.platform.share_estimate:  # the moving pad's robot's shared estimate
+        subscribe_decoded(session, keys.estimate(sc.platform.id), Estimate, on_sample("pad"), drops)
     n_modes = skipped = 0
     ckpt = None if resume is None else resume.file()
     if resume is not None and resume.state is not None:  # warm from the checkpoint: the tick after it next

@@ -29,17 +29,19 @@ def launch_listen(args: argparse.Namespace) -> list[str]:
     return list(args.listen) if args.listen else [free_loopback_endpoint()]
 
 
-def secure_router(args: argparse.Namespace, keys, vehicle_ids, listen: list[str], zargs, mission: str):
+def secure_router(args: argparse.Namespace, keys, vehicle_ids, listen: list[str], zargs, mission: str,
+                  platforms=()):  # fmt: skip
     """``--secure``: the swarm's certificates and Zenoh configurations (``args.secure_material``, whose
     ``close`` the launcher owes), and the router's session arguments with the launcher's configuration (the
-    access control list of ``mission``). Without ``--secure``: ``zargs`` as they are."""
+    access control list of ``mission``; ``platforms``: a landing swarm's moving pads' robots,
+    :func:`swarm.transport.security.rights`). Without ``--secure``: ``zargs`` as they are."""
     if not getattr(args, "secure", False):
         return zargs
     from dataclasses import replace
 
     from swarm.transport.security import SecureMaterial
 
-    args.secure_material = SecureMaterial(keys, vehicle_ids, listen, mission=mission)
+    args.secure_material = SecureMaterial(keys, vehicle_ids, listen, mission=mission, platforms=platforms)
     print(f"swarm secure: certificates and Zenoh configs in {args.secure_material.directory} "
           "(removed at exit)", flush=True)  # fmt: skip
     return replace(zargs, config_file=str(args.secure_material.config_file("launcher")))

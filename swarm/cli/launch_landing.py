@@ -176,7 +176,8 @@ def run_landing_launch(args: argparse.Namespace) -> int:
     restarts = args.max_restarts > 0  # (--max-restarts 0: no restart, so no checkpoint written either)
     restart_agents = restarts and args.clock.lockstep  # (free-running, a lost agent ends the run: docstring)
     try:
-        zargs = secure_router(args, keys, ids, listen, zargs, "landing")
+        platforms = (sc.platform.id,) if sc.platform.enabled and sc.platform.share_estimate else ()
+        zargs = secure_router(args, keys, ids, listen, zargs, "landing", platforms)
         with open_session(zargs, lean=True) as session:  # its own swarm's paced ticks
             print(
                 f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",

@@ -131,6 +131,8 @@ class Rates:
     uwb: int
     gnss: int
     rangefinder: int
+    share: int = 1
+    """A moving pad's robot shares its estimate (``[platform]``)."""
 
     @classmethod
     def of(cls, sc: LandingScenario) -> Rates:
@@ -140,6 +142,7 @@ class Rates:
             max(1, round(1.0 / (sc.uwb.rate_hz * dt))),
             max(1, round(1.0 / (sc.gnss.rate_hz * dt))),
             max(1, round(1.0 / (sc.rangefinder.rate_hz * dt))),
+            max(1, round(1.0 / (sc.platform.share_rate_hz * dt))),
         )
 
     def uwb_tick(self, sc: LandingScenario, k: int) -> bool:
@@ -153,6 +156,9 @@ class Rates:
 
     def camera_tick(self, k: int) -> bool:
         return k % self.camera == 0
+
+    def share_tick(self, sc: LandingScenario, k: int) -> bool:
+        return bool(sc.platform.enabled and sc.platform.share_estimate and k % self.share == 0)
 
 
 @dataclass
@@ -471,7 +477,7 @@ def world_row(sc: LandingScenario) -> np.ndarray:
     pf = sc.platform
     if pf.enabled:
         WP[lnb.WP_PLATFORM], WP[lnb.WP_SHARE_ON] = 1.0, float(pf.share_estimate)
-        WP[lnb.WP_SHARE_RATE] = max(1, round(1.0 / (pf.share_rate_hz * sc.dt_s)))
+        WP[lnb.WP_SHARE_RATE] = rates.share
         WP[lnb.WP_SHARE_SIGMA_P], WP[lnb.WP_SHARE_SIGMA_V] = pf.share_sigma_m, pf.share_sigma_m_s
         WP[lnb.WP_PAD_YAW] = math.radians(sc.pad.yaw_deg)
     WP[lnb.WP_GNSS_SIGMA : lnb.WP_GNSS_SIGMA + 3] = sc.gnss.sigma_m

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarm.core import rotations as rot
+from swarm.step import landing_nb as lnb
 from swarm.transport.keys import Keys
 from swarm.transport.messages import (
     CLOCK_EVERY,
@@ -33,8 +35,9 @@ Wire = list[tuple[str, bytes]]
 
 def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int, clock_every: int = CLOCK_EVERY) -> Wire:
     """The world's tick ``k``: per UAV ``imu``, ``uwb`` (a UWB tick), ``gnss`` (a fix), ``rangefinder`` (a
-    rangefinder tick), ``vision`` (a camera tick: the pad's corners as pixels) and ``truth``; then, every
-    ``clock_every`` ticks, the clock."""
+    rangefinder tick), ``vision`` (a camera tick: the pad's corners as pixels) and ``truth``; a moving pad's
+    robot's shared estimate on its share ticks (:func:`platform_estimate`); then, every ``clock_every``
+    ticks, the clock."""
     sc, dt = world.sc, world.sc.dt_s
     t = k * dt
     out: Wire = []
@@ -57,9 +60,29 @@ def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int, clock_every: 
         u = world.uavs[uid]
         x = u.x
         out.append((keys.truth(uid), encode(Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], u.energy_j))))
+        if inp.pad is not None:
+            out.append(platform_estimate(keys, world, uid, k, inp.pad))
     if k % clock_every == 0:
         out.append(running_clock(keys, k, dt, seed))
     return out
+
+
+def platform_estimate(keys: Keys, world, uid: str, k: int, pad: np.ndarray) -> tuple[str, bytes]:
+    """A moving pad's robot shares its estimate of the pad (``[platform]``): an ``Estimate`` on
+    ``<ns>/agent/<platform.id>/estimate`` (docs/protocol.md), its position and velocity the tick's shared
+    ones (``pad``, (6,)), its attitude the robot's heading, its covariance the stated sigmas' (the attitude
+    block zero: the UAV does not use it)."""
+    pf, t = world.sc.platform, k * world.sc.dt_s
+    R = world.uavs[uid].WC[lnb.WC_R_NAV_PAD : lnb.WC_R_NAV_PAD + 9].reshape(3, 3)
+    cov = np.diag([pf.share_sigma_m**2] * 3 + [pf.share_sigma_m_s**2] * 3 + [0.0] * 3)
+    q = rot.matrix_to_quat(R)
+    msg = estimate_message(k, t, pad[0:3], pad[3:6], q, cov, pf.share_sigma_m, 0.0, 0.0, {})
+    return keys.estimate(pf.id), encode(msg)
+
+
+def pad_input(msg: Estimate) -> np.ndarray:
+    """A robot's shared ``Estimate`` as the agent step's moving pad (position and velocity, (6,))."""
+    return np.concatenate([msg.p_nav, msg.v_nav])
 
 
 def running_clock(keys: Keys, k: int, dt: float, seed: int) -> tuple[str, bytes]:
@@ -102,7 +125,7 @@ def agent_tick(keys: Keys, uid: str, agent, cmd, n_modes: int) -> tuple[Wire, in
     mode = str(cmd.mode)
     out: Wire = [(keys.command(uid), encode(Command(k, t, cmd.u, mode)))]
     out.append((keys.estimate(uid), encode(_estimate(agent, k, t))))
-    dist = float(np.linalg.norm(agent.p_est[:2] - agent.setup.pad[:2]))
+    dist = float(np.linalg.norm(agent.p_est[:2] - agent.pad_est[:2]))
     modes = agent.guidance.modes
     reason = str(modes[-1]["reason"])[:1024] if modes else ""
     out.append((keys.guidance(uid), encode(Guidance(k, t, mode, dist, reason=reason))))

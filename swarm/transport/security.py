@@ -103,10 +103,14 @@ MISSIONS: tuple[str, ...] = ("docking", "landing")
 (a landing world that also sends the ranges and the GNSS fixes, no mothership, landing agents)."""
 
 
-def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[str, ...]]:
+def rights(
+    keys: Keys, name: str, mission: str = "docking", platforms: Sequence[str] = ()
+) -> dict[str, tuple[str, ...]]:
     """What identity ``name`` may send to the router in a ``mission`` swarm: ACL message kind -> key
     expressions (wildcards included, so a rule on ``<ns>/agent/*/imu`` covers every vehicle). Kinds not
-    listed are denied. ConfigError for a name that is not a swarm identity or an unknown mission."""
+    listed are denied. ConfigError for a name that is not a swarm identity or an unknown mission.
+    ``platforms``: a landing swarm's moving pads' robots (``[platform] id``), simulated by the world, which
+    puts each one's shared ``estimate`` that the landing agents read."""
     if mission not in MISSIONS:
         raise ConfigError(f"mission must be one of {', '.join(MISSIONS)}, got {mission!r}")
     ns = keys.namespace
@@ -116,7 +120,8 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         return {
             "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/uwb", "agent/*/gnss",
                                                 "agent/*/rangefinder", "agent/*/barometer", "agent/*/vision",
-                                                "agent/*/truth", "world/clock", "world/event")),
+                                                "agent/*/truth", "world/clock", "world/event"))
+            + tuple(keys.estimate(p) for p in platforms),
             "declare_subscriber": (keys.agent_all("command"), keys.run_control(), keys.fault()),
             "liveliness_token": (f"{ns}/alive/world/*",),
             **watch,
@@ -126,7 +131,8 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
         return {
             "put": (keys.estimate(uid), keys.guidance(uid), keys.command(uid), keys.event(uid)),
             "declare_subscriber": (keys.imu(uid), keys.uwb(uid), keys.gnss(uid), keys.rangefinder(uid),
-                                   keys.barometer(uid), keys.vision(uid), keys.world_event()),
+                                   keys.barometer(uid), keys.vision(uid), keys.world_event(),
+                                   *(keys.estimate(p) for p in platforms)),
             "liveliness_token": (keys.alive("agent", uid),),
             **watch,
         }  # fmt: skip
@@ -195,11 +201,13 @@ def rights(keys: Keys, name: str, mission: str = "docking") -> dict[str, tuple[s
     raise ConfigError(f"security identity must be one of {', '.join(ROLES)} or agent-<id>, got {name!r}")
 
 
-def access_control(keys: Keys, names: Sequence[str], mission: str = "docking") -> dict:
+def access_control(
+    keys: Keys, names: Sequence[str], mission: str = "docking", platforms: Sequence[str] = ()
+) -> dict:
     """Zenoh's ``access_control`` configuration section (for the router) that gives each identity in
     ``names`` exactly its :func:`rights` (in a ``mission`` swarm) on what the router receives, lets the
     router forward anything within the namespace to them, and denies everything else, including every
-    message of a certificate whose common name is not in ``names``."""
+    message of a certificate whose common name is not in ``names``. ``platforms``: :func:`rights`'."""
     names = tuple(dict.fromkeys(names))
     rules: list[dict] = [{
         "id": "forward", "permission": "allow", "flows": ["egress"], "messages": list(ACL_MESSAGES),
@@ -209,7 +217,7 @@ def access_control(keys: Keys, names: Sequence[str], mission: str = "docking") -
     policies: list[dict] = [{"id": "forward", "rules": ["forward"], "subjects": ["swarm"]}]
     for name in names:
         own = []
-        for kind, key_exprs in rights(keys, name, mission).items():
+        for kind, key_exprs in rights(keys, name, mission, platforms).items():
             rule_id = f"{name}:{kind}"
             rules.append({
                 "id": rule_id, "permission": "allow", "flows": ["ingress"], "messages": [kind],
@@ -367,7 +375,12 @@ class SecureMaterial:
     ConfigError if the temporary directory would be inside the source tree (``TMPDIR`` pointing there)."""
 
     def __init__(
-        self, keys: Keys, vehicle_ids: Iterable[str], listen: Iterable[str] = (), mission: str = "docking"
+        self,
+        keys: Keys,
+        vehicle_ids: Iterable[str],
+        listen: Iterable[str] = (),
+        mission: str = "docking",
+        platforms: Sequence[str] = (),
     ) -> None:
         self.keys = keys
         self.names = identities(vehicle_ids)
@@ -381,7 +394,7 @@ class SecureMaterial:
                 )
             os.chmod(self.directory, 0o700)
             make_ca(self.directory)
-            acl = access_control(keys, self.names, mission)
+            acl = access_control(keys, self.names, mission, platforms)
             for name in self.names:
                 issue_certificate(self.directory, name, self.hosts)
                 config = router_config(self.directory, name, acl) if name == "launcher" else None

@@ -395,18 +395,35 @@ def test_a_free_running_landing_world_keeps_the_wall_clock_and_a_stalled_agent_c
     assert late["uav2"] <= 1.5 * stalled_ticks + max(others), late
 
 
-def test_a_secure_landing_swarm_lands_as_swarm_sim_with_every_process_on_its_own_certificate(tmp_path):
+MOVING_KEYS = ("touchdown_t_s", "touchdown_rel_speed_m_s", "touchdown_vz_m_s", "platform_start_arc_m")
+"""What a moving pad's summary adds (swarm.step.landing.landing_summary): judged at the touchdown."""
+
+
+@pytest.mark.parametrize(
+    "scenario, overrides",
+    [
+        ("landing-swarm", ()),
+        # the moving-platform landing (issue 44's third mission): the robot's shared estimate goes out on
+        # agent/robot/estimate from the world, under the access control, and the UAV waits for it on its share
+        # ticks: a right missing would stall the run, a sample missed or altered would change it
+        ("landing-moving", ("--set", "platform.speed_m_s=0.6")),
+    ],
+)
+def test_a_secure_landing_swarm_lands_as_swarm_sim_with_every_process_on_its_own_certificate(
+    tmp_path, scenario, overrides
+):
     """``--secure``: mutual TLS and the router's access control (mission ``landing``: the landing world sends
     every UAV's sensors, each landing agent its own command, estimate, guidance and events); the lockstep
     run still equals ``swarm sim`` (a right missing would stall it), a client without the swarm's
     certificate cannot connect, and the certificates are gone after the run."""
     from agents.landing import warm_up
+    from swarm.config import parse_override
 
-    sc = load_landing("landing-swarm")
+    sc = load_landing(scenario, dict(parse_override(o) for o in overrides[1::2]))
     warm_up(sc, 0, 0, sc.policy)
     ns, out = f"secland-{free_port()}", tmp_path / "secure.json"
-    args = [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--headless", "--secure",
-            "--seed", "0", "--namespace", ns, "--json", str(out), "--timeout", "400"]  # fmt: skip
+    args = [sys.executable, "-m", "swarm.cli.main", "launch", scenario, "--headless", "--secure",
+            "--seed", "0", "--namespace", ns, "--json", str(out), "--timeout", "400", *overrides]  # fmt: skip
     with Procs() as procs:
         proc = procs.start(args)
         d = Path(
@@ -423,10 +440,12 @@ def test_a_secure_landing_swarm_lands_as_swarm_sim_with_every_process_on_its_own
     assert "Traceback" not in text
     got = json.loads(out.read_text())
     want = run_landing_fleet(sc, seed=0, record_series=False)
+    moving = MOVING_KEYS if sc.platform.enabled else ()
     for uid, w in want["uavs"].items():
         g = got["uavs"][uid]
-        for key in ("landed", "landing_error_m", "landing_time_s", "energy_j", "modes"):
+        for key in ("landed", "landing_error_m", "landing_time_s", "energy_j", "modes", *moving):
             assert g[key] == w[key], (uid, key)
+        assert g["landed"], uid
     assert not d.exists()  # the launcher removed its certificates and keys
 
 

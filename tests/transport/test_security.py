@@ -172,6 +172,14 @@ def test_a_landing_swarms_world_also_sends_ranges_and_fixes_and_its_agents_read_
         for v in VEHICLES
         for key in (K.uwb(v), K.gnss(v), K.rangefinder(v), K.barometer(v))
     )
+    # a moving pad's robot (swarm/scenarios/landing-moving.toml): the world puts its shared estimate, an
+    # agent reads it; neither gains another vehicle's estimate
+    moving = access_control(K, identities(VEHICLES), "landing", platforms=("robot",))
+    extra = {K.estimate("robot")}
+    assert {key for key in [*keys, *extra] if _may(moving, "world", "put", key)} == world_puts | extra
+    assert {key for key in [*keys, *extra] if _may(moving, "agent-chaser", "declare_subscriber", key)} == (
+        reads | extra
+    )
     with pytest.raises(ConfigError, match="mission must be one of docking, landing, got 'orbit'"):
         rights(K, "world", "orbit")
 
