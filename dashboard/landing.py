@@ -6,7 +6,10 @@ the world's clock and events: docs/protocol.md, "Processes and topology"), store
 :class:`~dashboard.state.SwarmState`. What differs is drawn here:
 
 - each pad: a white square of the ArUco board's size (``[pad]`` ``board``) with its markers in black and
-  an arrow along the pad's x axis (its heading), at the UAV's ``pad_m`` turned by ``pad_yaw_deg``;
+  an arrow along the pad's x axis (its heading), at the UAV's ``pad_m`` turned by ``pad_yaw_deg``; a
+  moving pad (``[platform]``, ``landing-moving``) where its robot's shared estimate puts it (the robot's
+  ``Estimate`` on ``agent/<platform.id>/estimate``: position and heading), the robot itself not drawn as a
+  vehicle;
 - the UWB anchors around the pads (from the scenario: a landing swarm has no mothership to ask);
 - every UAV as a quadrotor (:func:`dashboard.kinds.draw_quadrotor`) in its guidance mode's colour, drawn
   :data:`DRAW_SCALE` times its size (a 0.45 m airframe would be a few pixels in a 60 m scene), its label,
@@ -149,12 +152,12 @@ def frame_landing_scene(server: viser.ViserServer, sc: LandingScenario) -> None:
     server.initial_camera.look_at = tuple(centre)
 
 
-def _draw_pad(scene: viser.SceneApi, uav: Uav, board: PadBoardParams) -> None:
+def _draw_pad(scene: viser.SceneApi, uav: Uav, board: PadBoardParams):
     """A pad (module docstring) under ``/pads/<uav>``: the board's square with a margin, its markers, the
-    heading arrow and a label."""
+    heading arrow and a label; its frame's handle (a moving pad's moves)."""
     name = f"/pads/{check_id(uav.id)}"
-    scene.add_frame(name, show_axes=False, position=tuple(float(x) for x in uav.pad_m),
-                    wxyz=pad_wxyz(uav.pad_yaw_deg))  # fmt: skip
+    frame = scene.add_frame(name, show_axes=False, position=tuple(float(x) for x in uav.pad_m),
+                            wxyz=pad_wxyz(uav.pad_yaw_deg))  # fmt: skip
     half = board.half_extent_m
     side = 2.0 * half + 0.2
     scene.add_box(f"{name}/board", color=PAD_COLOR, dimensions=(side, side, 0.02), position=(0.0, 0.0, 0.01))
@@ -167,6 +170,7 @@ def _draw_pad(scene: viser.SceneApi, uav: Uav, board: PadBoardParams) -> None:
                       [[tip, 0.0, 0.03], [tip - 0.2, -0.12, 0.03]]])  # fmt: skip
     scene.add_line_segments(f"{name}/heading", arrow, (192, 57, 43), thickness=3.0, thickness_units="screen")
     scene.add_label(f"{name}/label", f"pad {uav.id}", position=(0.0, -half - 0.3, 0.05))
+    return frame
 
 
 class _UavNodes:
@@ -231,8 +235,13 @@ class LandingSceneView:
         self._anchors_version: int | None = None
         self._anchor_nodes: list[object] = []
         self._run: int | None = None
-        for u in self.uavs.values():
-            _draw_pad(server.scene, u, sc.pad.board)
+        self.pad_frames = {u.id: _draw_pad(server.scene, u, sc.pad.board) for u in self.uavs.values()}
+        pf = sc.platform
+        self.platform_id = pf.id if pf.enabled else None
+        """A moving pad's robot: its estimate moves the (one) pad, it is not drawn as a UAV."""
+        self.pad_now: dict[str, np.ndarray] = {}
+        """Each moving pad where its robot's latest estimate puts it (nav) [m]."""
+        self._platform_msg: object = None
 
     def _draw_anchors(self, ids: tuple[int, ...], positions: np.ndarray) -> None:
         for node in self._anchor_nodes:
@@ -252,14 +261,32 @@ class LandingSceneView:
             self._draw_anchors(*snap.anchors)
         new_run = snap.run != self._run
         self._run = snap.run
+        robot = snap.agents.get(self.platform_id) if self.platform_id is not None else None
+        if robot is not None:  # first: the UAVs' frustums look for the pad where it is now
+            self._move_pad(robot)
         for agent_id, a in snap.agents.items():
+            if agent_id == self.platform_id:
+                continue
             nodes = self.nodes.get(agent_id)
             if nodes is None:
                 nodes = self.nodes[agent_id] = _UavNodes(self.server.scene, a, self.sc)
             self._update_uav(nodes, a, trails_due or new_run)
 
+    def _move_pad(self, a: AgentSnap) -> None:
+        """The moving pad to its robot's latest estimate: the position at the deck's height, the heading."""
+        msg = a.estimate
+        if msg is None or msg is self._platform_msg:
+            return
+        self._platform_msg = msg
+        for uid, frame in self.pad_frames.items():  # (a moving pad carries the one UAV's pad)
+            p = np.array([msg.p_nav[0], msg.p_nav[1], self.uavs[uid].pad_m[2]])
+            self.pad_now[uid] = p
+            frame.position = tuple(float(x) for x in p)
+            frame.wxyz = mapping.wxyz_from_xyzw(msg.q_nav_body)
+
     def invalidate(self) -> None:
         """Push everything again at the next frame (a playback's backward seek)."""
+        self._platform_msg = None
         self._anchors_version = None
         self._run = None
         for nodes in list(self.nodes.values()):
@@ -281,8 +308,9 @@ class LandingSceneView:
         scene_nodes.update_estimate(nodes, a, self.n_sigma, trails_due)
         if a.truth is not None and uav is not None:
             cam = self.sc.camera
-            in_image = pad_pixel(a.truth.p_nav, a.truth.q_nav_body, np.asarray(uav.pad_m, float),
-                                 np.asarray(cam.pos_body_m, float), cam.intrinsics) is not None  # fmt: skip
+            pad = self.pad_now.get(uav.id, np.asarray(uav.pad_m, float))
+            in_image = pad_pixel(a.truth.p_nav, a.truth.q_nav_body, pad, np.asarray(cam.pos_body_m, float),
+                                 cam.intrinsics) is not None  # fmt: skip
             state = frustum_state(a.vision_rows, in_image)
             depth = round(frustum_depth(a.truth.p_nav[2], uav.pad_m[2]), 2)
             key = (state, depth)

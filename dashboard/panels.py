@@ -101,6 +101,8 @@ def landing_table(snap: Snapshot, pads: Mapping[str, Sequence[float]]) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     for agent_id in sorted(snap.agents, key=natural_key):
+        if agent_id not in pads:  # (a moving pad's robot shares its estimate: not a UAV)
+            continue
         a = snap.agents[agent_id]
         g = a.guidance
         cells = (

@@ -199,3 +199,30 @@ def test_a_landing_recording_is_drawn_with_its_landing_scenario(tmp_path, sc):
         assert app.scene.nodes["uav1"].fov.color != FOV_COLORS["seen"]
     finally:
         app.close()
+
+
+def test_a_moving_pad_is_drawn_where_its_robot_s_estimate_puts_it_and_the_robot_is_no_uav():
+    """landing-moving: the robot's shared Estimate (agent/robot/estimate) moves the pad's frame (position at
+    the deck's height, the robot's heading); the frustum's pad is that one (the UAV above the moved pad sees
+    it in its image, where the pad started it would not); the robot gets no UAV nodes and no table row."""
+    sc = load_landing("landing-moving")
+    server = MagicMock()
+    for method in ("add_frame", "add_mesh_simple", "add_icosphere", "add_line_segments", "add_box"):
+        getattr(server.scene, method).side_effect = lambda *a, **k: MagicMock()
+    view = landing.LandingSceneView(server, sc, DashboardParams())
+    state = SwarmState(landing.uav_vehicles(sc), np.asarray(sc.uwb.anchors_m))
+    yaw = math.radians(30.0)
+    q = np.array([0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])
+    cov = np.diag([0.0025] * 3 + [0.0004] * 3 + [0.0] * 3)
+    moved = np.array([-3.0, 5.0, 0.4])  # 11 m from where the pad started, (7, -5)
+    state.on_message("estimate", "robot", Estimate(100, 1.0, moved, np.array([-0.6, 0, 0]), q, cov, 0.05, 0.0,
+                                                   0.0, {}))  # fmt: skip
+    state.on_message("truth", "uav", _truth([-3.0, 5.0, 4.0]))  # 4 m above the moved pad
+    view.update(state.snapshot(), trails_due=True)
+    frame = view.pad_frames["uav"]
+    assert frame.position == (-3.0, 5.0, 0.0)  # the deck's height, not the estimate's z
+    np.testing.assert_allclose(frame.wxyz, [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+    assert set(view.nodes) == {"uav"}
+    assert view.nodes["uav"].fov.color == FOV_COLORS["in_cone"]  # the moved pad in the image, no frame yet
+    pads = {u.id: u.pad_m for u in sc.uavs()}
+    assert "robot" not in panels.landing_table(state.snapshot(), pads)
