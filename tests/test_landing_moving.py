@@ -185,3 +185,22 @@ def test_a_platform_with_a_fleet_is_refused(tmp_path):
     path.write_text(text + '\n[[fleet]]\nid = "a"\nstart_m = [1.0, 1.0, 5.0]\npad_m = [0.0, 0.0, 0.0]\n')
     with pytest.raises(ConfigError, match=r"two\.toml.*platform: a moving pad carries one UAV's pad"):
         load_landing(path)
+
+
+def test_the_committed_moving_platform_campaign_reproduces_run_by_run():
+    """docs/results/landing-moving-0.6-200-seed0 was written by `swarm montecarlo landing-moving --runs 200
+    --set platform.speed_m_s=0.6`: its first runs, flown again from their seeds with its scenario.toml, give
+    the same rows (touchdown included)."""
+    import csv
+    from pathlib import Path
+
+    d = Path(__file__).resolve().parents[1] / "docs" / "results" / "landing-moving-0.6-200-seed0"
+    rows = [r for r in csv.DictReader((d / "runs.csv").open()) if int(r["run"]) < 2]
+    sc = load_landing(d / "scenario.toml")
+    assert len(rows) == 4 and sc.platform.speed_m_s == 0.6
+    for row in rows:
+        r = run_landing(sc, row["policy"], int(row["seed"]), record_series=False)
+        assert str(r["landed"]) == row["landed"]
+        for key in ("energy_j", "landing_time_s", "landing_error_m", "touchdown_rel_speed_m_s",
+                    "platform_start_arc_m"):  # fmt: skip
+            assert repr(float(r[key])) == row[key] or str(r[key]) == row[key], key
