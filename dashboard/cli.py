@@ -111,9 +111,8 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     line) until SIGINT or SIGTERM, whose handlers it installs and restores. Returns 0 after a clean close;
     ConfigError / SwarmError for bad input or a session that cannot open."""
     from dashboard.app import DashboardApp, DashboardParams
-    from swarm.args import load_from_args
     from swarm.errors import ConfigError
-    from swarm.landing_scenario import is_landing_scenario
+    from swarm.missions import mission_of
     from swarm.transport.keys import Keys, check_id
     from swarm.transport.session import open_session, zenoh_args_from
 
@@ -126,32 +125,17 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     keys = Keys(args.namespace)
     if args.scenario is None:
         args.scenario = "docking"
-    if is_landing_scenario(args.scenario):
-        sc = _landing(args)
-    else:
-        sc = load_from_args(args).with_pairs(args.agents or 1)
+    sc = mission_of(args.scenario).dashboard_scenario(args)
     zargs = zenoh_args_from(args)
     with open_session(zargs) as session:
         make = lambda: DashboardApp(sc, session, keys, args.host, args.port, params, args.process_id)  # noqa: E731
         return _serve(args, stop, make)
 
 
-def _landing(args: argparse.Namespace, name=None):
-    """The landing scenario ``name`` (default ``args.scenario``) with ``--set``; its UAVs are listed in the
-    file (``[[fleet]]``), so ``--agents`` other than 1 is refused."""
-    from swarm.config import parse_override
-    from swarm.errors import ConfigError
-    from swarm.landing_scenario import load_landing
-
-    if args.agents not in (None, 1):
-        raise ConfigError("--agents: a landing scenario lists its UAVs ([[fleet]] in the file)")
-    return load_landing(name or args.scenario, dict(parse_override(o) for o in args.overrides))
-
-
 def _playback_app(args: argparse.Namespace, params):
     """The DashboardApp of ``--open FILE.mcap``: the recording, its scenario, no Zenoh session."""
     from dashboard.app import DashboardApp
-    from dashboard.playback import load_recording, scenario_of
+    from dashboard.playback import load_recording, recorded_mission, scenario_of
     from swarm.config import parse_override
     from swarm.errors import ConfigError
     from swarm.transport.keys import Keys
@@ -163,11 +147,7 @@ def _playback_app(args: argparse.Namespace, params):
     recording = load_recording(args.recording, default_namespace=args.namespace)
     overrides = dict(parse_override(text) for text in args.overrides)
     sc = scenario_of(recording, args.scenario, overrides)
-    if args.agents is not None:
-        if not hasattr(sc, "with_pairs"):
-            _landing(args, sc.name)  # refuses --agents other than 1
-        else:
-            sc = sc.with_pairs(args.agents)
+    sc = recorded_mission(recording, args.scenario).with_agents(sc, args.agents)
     span_s = recording.end_s - recording.start_s
     _LOG.info(
         "playing %s: %d messages over %.2f s of swarm time, scenario %s, namespace %s",

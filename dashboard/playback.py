@@ -42,6 +42,7 @@ from pathlib import Path
 
 from dashboard.state import SwarmState
 from swarm.errors import ConfigError, LogError
+from swarm.missions import DEFAULT_MISSION, MISSIONS, Mission, mission_of
 from swarm.transport.keys import Keys
 from swarm.transport.messages import (
     MESSAGE_FOR_KIND,
@@ -60,6 +61,7 @@ __all__ = [
     "Recording",
     "Timeline",
     "load_recording",
+    "recorded_mission",
     "scenario_of",
 ]
 
@@ -174,23 +176,34 @@ def load_recording(path: str | Path, default_namespace: str = "tpods") -> Record
     return Recording(p, ns, tuple(items), tuple(times), metadata, drops.total)
 
 
+def recorded_mission(recording: Recording, scenario: str | None) -> Mission:
+    """The mission to draw ``recording`` as: ``scenario``'s (a name or TOML file) if given, else the one
+    its ``run_start`` names, else its recorded scenario's (:func:`swarm.missions.mission_of`). ConfigError
+    for a recorded mission that is not registered."""
+    recorded = recording.metadata.get("run_start", {}).get("mission")
+    if scenario is None and recorded is not None:
+        if recorded not in MISSIONS:
+            raise ConfigError(
+                f"{recording.path}: its run_start says mission = {recorded!r}, not a registered mission; "
+                f"registered: {', '.join(sorted(MISSIONS))}"
+            )
+        return MISSIONS[recorded]
+    return mission_of(scenario or recording.scenario_name or DEFAULT_MISSION)
+
+
 def scenario_of(recording: Recording, scenario: str | None, overrides: dict | None = None):
     """The scenario to draw ``recording`` with: ``scenario`` (a name or TOML file) if given, else the one
-    its ``run_start`` names (``docking`` if it has none, with a warning); a docking one copied into as many
-    pairs as the recorded vehicles are (``swarm launch --agents N``), a landing one
-    (:class:`~swarm.landing_scenario.LandingScenario`: the file says ``mission = "landing"``, or the
-    recording's ``run_start`` does) as it is. ConfigError if the recorded name is not a bundled
-    scenario (a TOML file of the user's: pass it)."""
-    from swarm.landing_scenario import is_landing_scenario, load_landing
-    from swarm.scenario import load_scenario
-
+    its ``run_start`` names (``docking`` if it has none, with a warning), loaded by its mission
+    (:func:`recorded_mission`, :meth:`swarm.missions.Mission.playback_scenario`: a docking one is copied
+    into as many pairs as the recorded vehicles are, ``swarm launch --agents N``). ConfigError if the
+    recorded name is not a bundled scenario (a TOML file of the user's: pass it)."""
     name = scenario or recording.scenario_name
     if name is None:
         _LOG.warning("%s has no run_start (recorded after the run started): drawn as docking", recording.path)
-        name = "docking"
-    landing = is_landing_scenario(name) or (scenario is None and recording.mission == "landing")
+        name = DEFAULT_MISSION
     try:
-        sc = load_landing(name, overrides) if landing else load_scenario(name, overrides)
+        mission = recorded_mission(recording, scenario)
+        return mission.playback_scenario(name, overrides, recording.vehicle_ids)
     except ConfigError as exc:
         if scenario is None:
             raise ConfigError(
@@ -198,18 +211,6 @@ def scenario_of(recording: Recording, scenario: str | None, overrides: dict | No
                 f"swarm dashboard SCENARIO --open {recording.path}"
             ) from None
         raise
-    if landing:  # its UAVs are the file's ([[fleet]]): nothing to copy
-        return sc
-    ids = recording.vehicle_ids
-    if ids is None or set(ids) == set(sc.vehicles):
-        return sc
-    per_pair = len(sc.vehicles)
-    if per_pair and len(ids) % per_pair == 0 and 1 < len(ids) // per_pair <= 64:
-        copies = sc.with_pairs(len(ids) // per_pair)
-        if set(copies.vehicles) == set(ids):
-            return copies
-    _LOG.warning("the recording's vehicles %s are not the scenario's %s", list(ids), list(sc.vehicles))
-    return sc
 
 
 class Timeline:

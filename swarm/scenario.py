@@ -548,6 +548,8 @@ def load_scenario(name_or_path: str | Path, overrides: dict | None = None) -> Sc
         path = SCENARIO_DIR / f"{name_or_path}.toml"
 
     def migrate(data: dict, name: str) -> dict:
+        if data.get("mission") == "docking":  # the default mission, said (swarm.missions.mission_of)
+            del data["mission"]
         return apply_sensor_profile(migrate_legacy(data, name), name, "docking", overrides)
 
     return load_toml(Scenario, path, overrides=overrides, migrate=migrate, migrate_key=migrate_override_key)

@@ -51,6 +51,15 @@ def test_an_in_process_runner_importing_zenoh_breaks_the_purity_contract(tmp_pat
     assert "swarm.sim.plot -> zenoh" in r.stdout, r.stdout
 
 
+def test_a_mission_importing_another_mission_breaks_the_independence_contract(tmp_path):
+    _copy_tree(tmp_path)
+    victim = tmp_path / "swarm" / "missions" / "docking.py"
+    victim.write_text(victim.read_text() + "\nfrom swarm.missions import landing  # noqa: E402,F401\n")
+    r = _lint(tmp_path)
+    assert r.returncode != 0, r.stdout
+    assert "swarm.missions.docking -> swarm.missions.landing" in r.stdout, r.stdout
+
+
 def _cycles(graph, modules: list[str]) -> list[list[str]]:
     """Strongly connected components of more than one module (Tarjan 1972, iterative)."""
     succ = {m: sorted(x for x in graph.find_modules_directly_imported_by(m) if x in modules) for m in modules}

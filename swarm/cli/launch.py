@@ -365,14 +365,15 @@ def _run(args: argparse.Namespace) -> int:
 
     zenoh.try_init_log_from_env()  # RUST_LOG=...: Zenoh's own log (its ACL decisions: access_control=trace)
 
-    from swarm.landing_scenario import is_landing_scenario
+    from swarm.missions import mission_of
 
-    if is_landing_scenario(args.scenario):
-        from swarm.cli.launch_landing import run_landing_launch
+    return mission_of(args.scenario).run_launch(args)
 
-        if args.vehicles_per_process is None:  # (a landing swarm has no automatic plan: a process per UAV)
-            args.vehicles_per_process = 1
-        return run_landing_launch(args)
+
+def run_docking(args: argparse.Namespace) -> int:
+    """``swarm launch`` of a docking scenario (:class:`swarm.missions.docking.DockingMission`)."""
+    import zenoh
+
     from swarm.transport.process import check_pace
 
     check_pace(args.clock, args.pace)

@@ -116,9 +116,11 @@ def _write_json(path: Path | None, res: dict) -> None:
     print(f"  summary written to {path}")
 
 
-def _run_landing(args: argparse.Namespace) -> int:
+def run_landing(args: argparse.Namespace) -> int:
+    """``swarm sim`` of a landing scenario (:class:`swarm.missions.landing.LandingMission`)."""
     from swarm.config import parse_override
-    from swarm.sim.landing import load_landing, run_landing, run_landing_fleet
+    from swarm.sim import landing
+    from swarm.sim.landing import load_landing, run_landing_fleet
 
     if args.agents != 1:
         raise ConfigError(
@@ -134,7 +136,7 @@ def _run_landing(args: argparse.Namespace) -> int:
 
         tap = McapTap(args.mcap, args.seed, args.namespace)
     if not sc.fleet and tap is None:
-        res = run_landing(sc, args.policy, args.seed, record_series=record)
+        res = landing.run_landing(sc, args.policy, args.seed, record_series=record)
         print_landing(res)
         _write_json(args.json, res)
         return 0 if res["landed"] or res["aborted"] else 1
@@ -156,11 +158,37 @@ def _run_landing(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from swarm.sim.docking import run_docking
-    from swarm.sim.landing import is_landing_scenario
+    """``swarm sim SCENARIO``: the scenario's mission runs it (:func:`swarm.missions.mission_of`)."""
+    from swarm.missions import mission_of
 
-    if is_landing_scenario(args.scenario):
-        return _run_landing(args)
+    return mission_of(args.scenario).run_sim(args)
+
+
+def run_mission(args: argparse.Namespace) -> int:
+    """``swarm sim`` of a mission that gives only ``run_one`` (:data:`swarm.missions.GENERIC_SIM`): one
+    run, its summary printed (and written by ``--json``); exit 0 if it reached its goal."""
+    from swarm.missions import mission_of, overrides_of
+
+    mission = mission_of(args.scenario)
+    for flag, value in (("--plot", args.plot), ("--mcap", args.mcap)):
+        if value is not None:
+            raise ConfigError(f"{flag}: mission {mission.name!r} gives a summary, no trajectory or recording")
+    sc = mission.with_agents(mission.load(args.scenario, overrides_of(args)), args.agents)
+    res = mission.run_one(sc, args.policy, args.seed)
+    policy = res.get("policy", args.policy)
+    print(f"scenario {args.scenario}  mission {mission.name}  policy {policy}  seed {args.seed}")
+    print(f"  {mission.success_key:<18}{res[mission.success_key]}")
+    for key in mission.summary_metrics:
+        v = res.get(key)
+        print(f"  {key:<18}{_fmt(v) if isinstance(v, float) or v is None else v}")
+    _write_json(args.json, res)
+    return 0 if res[mission.success_key] else 1
+
+
+def run_docking(args: argparse.Namespace) -> int:
+    """``swarm sim`` of a docking scenario (:class:`swarm.missions.docking.DockingMission`)."""
+    from swarm.sim import docking
+
     sc = load_from_args(args).with_pairs(args.agents)
     tap = None
     if args.mcap is not None:
@@ -168,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
 
         tap = DockingTap(args.mcap, args.seed, args.namespace)
     record = not args.no_series or args.plot is not None or args.json is not None
-    res = run_docking(sc, args.policy, args.seed, record_series=record, tap=tap)
+    res = docking.run_docking(sc, args.policy, args.seed, record_series=record, tap=tap)
     if tap is not None:
         print(f"  wrote {args.mcap}: {sum(tap.sink.counts.values())} messages on {len(tap.sink.counts)} keys")
     print_summary(res)

@@ -1,0 +1,68 @@
+"""Docking (paper Fig. 5, Table II, Fig. 8): a chaser docks with its target. The default mission: a
+scenario file without a ``mission`` key is a docking one (:class:`swarm.scenario.Scenario`)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+
+from swarm.missions.base import Mission
+
+_LOG = logging.getLogger(__name__)
+
+
+class DockingMission(Mission):
+    """The docking stack's runners: ``swarm/sim/docking.py``, the processes of ``swarm/cli/launch.py``,
+    the campaign of ``swarm/montecarlo/campaign.py``."""
+
+    name = "docking"
+    success_key = "docked"
+    summary_metrics = ("docking_time_s", "position_error_m", "attitude_error_rad", "effort")
+    fault_menu = ("uwb_dropout", "nlos_burst", "camera_loss", "gyro_bias_step", "sensor_delay")
+    sim_entry = "swarm.cli.sim:run_docking"
+    launch_entry = "swarm.cli.launch:run_docking"
+    montecarlo_entry = "swarm.cli.montecarlo:run_docking"
+
+    def scenario_keys(self) -> frozenset[str]:
+        """The top-level keys of a docking file: the fields of Scenario and the keys of the format before
+        vehicle kinds (:data:`swarm.scenario.LEGACY_KEYS`), which it still reads."""
+        from dataclasses import fields
+
+        from swarm.scenario import LEGACY_KEYS, Scenario
+
+        return frozenset(f.name for f in fields(Scenario)) | {old[0] for old in LEGACY_KEYS}
+
+    def load(self, scenario: str | Path, overrides: dict | None = None):
+        from swarm.scenario import load_scenario
+
+        return load_scenario(scenario, overrides)
+
+    def campaign_metrics(self) -> tuple[str, ...]:
+        """The paper's Table II metrics (:data:`swarm.montecarlo.stats.METRICS`; the impulse is the
+        chaser kind's effort in a campaign of another kind)."""
+        from swarm.montecarlo.stats import METRICS
+
+        return tuple(METRICS)
+
+    def with_agents(self, scenario, agents: int | None):
+        """The scenario's vehicles copied ``agents`` times (:meth:`swarm.scenario.Scenario.with_pairs`)."""
+        return scenario if agents is None else scenario.with_pairs(agents)
+
+    def playback_scenario(
+        self, scenario: str | Path, overrides: dict | None, vehicle_ids: Sequence[str] | None
+    ):
+        """The scenario, copied into as many pairs as the recorded vehicles are (``swarm launch --agents
+        N``); as it is, with a warning, when they do not match a copy of it."""
+        sc = self.load(scenario, overrides)
+        if vehicle_ids is None or set(vehicle_ids) == set(sc.vehicles):
+            return sc
+        per_pair = len(sc.vehicles)
+        n = len(vehicle_ids) // per_pair if per_pair else 0
+        if per_pair and len(vehicle_ids) % per_pair == 0 and 1 < n <= 64:
+            copies = sc.with_pairs(n)
+            if set(copies.vehicles) == set(vehicle_ids):
+                return copies
+        ids, own = list(vehicle_ids), list(sc.vehicles)
+        _LOG.warning("the recording's vehicles %s are not the scenario's %s", ids, own)
+        return sc
