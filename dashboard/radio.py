@@ -23,14 +23,16 @@ What is on the wire, and so what is measured:
 
 The window (both kinds): the samples from the newest one at or before ``t_n - window_s`` (the base) to the
 newest, ``t_n``; a rate is what came after the base over ``t_n - t_0``. A sample earlier than the newest
-(a new run) or a counter that went down (a restarted agent) starts the window again.
+(a new run) or a counter that went down (a restarted agent) starts the window again. A tag's differences a
+second are counted over its accepted rate's window (the estimates' ``t_0``, ``t_n``) when the slots kept
+reach it, so that the two compare (accepted <= heard); the anchors' over their own.
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from swarm.transport.messages import Tdoa
@@ -58,63 +60,75 @@ def _trim(samples: deque, window_s: float) -> None:
 
 
 class SlotWindow:
-    """The rows a tag heard in its UWB slots (one ``Tdoa`` each, with its ``t_s`` and the count of rows per
-    sender anchor), over a window of ``window_s`` of swarm time, at most ``cap`` slots.
+    """The rows a tag heard in its UWB slots (one ``Tdoa`` each: its ``t_s`` and the senders of its rows,
+    ``anchor_b``) over a window of ``window_s`` of swarm time; the slots of the last ``keep_s`` (default
+    ``2 window_s``) are kept, at most ``cap``, so that :meth:`rows_in` can count over another window.
 
-    ``rate(j) = sum_{k=1..n} c_k(j) / (t_n - t_0)``: the rows of the slots after the base ``t_0`` cover
-    exactly ``(t_0, t_n]`` (each slot's rows were heard since the previous slot)."""
+    ``rate(j) = (C_n(j) - C_0(j)) / (t_n - t_0)``, ``C_k(j)`` the rows of anchor ``j`` up to slot ``k``
+    (cumulative), slot 0 the base: the rows of the slots after it cover exactly ``(t_0, t_n]`` (each slot's
+    rows were heard since the previous slot)."""
 
-    def __init__(self, window_s: float, cap: int = 4096) -> None:
+    def __init__(self, window_s: float, keep_s: float | None = None, cap: int = 8192) -> None:
         self.window_s = float(window_s)
-        self._slots: deque[tuple[float, dict[int, int]]] = deque(maxlen=cap)
-        self._sum: dict[int, int] = {}  # rows per anchor over every slot kept, the base's included
+        self.keep_s = max(float(keep_s if keep_s is not None else 2.0 * window_s), self.window_s)
+        # (t_s, rows per anchor up to this slot, rows up to this slot); a slot without rows shares the dict
+        self._slots: deque[tuple[float, dict[int, int], int]] = deque(maxlen=cap)
+        self._cum: dict[int, int] = {}
+        self._total = 0
 
     def clear(self) -> None:
         self._slots.clear()
-        self._sum = {}
+        self._cum, self._total = {}, 0
 
-    def add(self, t_s: float, senders: Iterable[int]) -> None:
+    def add(self, t_s: float, senders: Sequence[int]) -> None:
         """One slot at ``t_s`` [s] whose rows had these sender anchors (``Tdoa.anchor_b``)."""
         if self._slots and t_s < self._slots[-1][0]:
             self.clear()
-        counts: dict[int, int] = {}
-        for j in senders:
-            counts[j] = counts.get(j, 0) + 1
-        if len(self._slots) == self._slots.maxlen:
-            self._forget(self._slots[0][1])
-        self._slots.append((float(t_s), counts))
-        for j, n in counts.items():
-            self._sum[j] = self._sum.get(j, 0) + n
-        start = self._slots[-1][0] - self.window_s
-        while len(self._slots) >= 2 and self._slots[1][0] <= start:
-            self._forget(self._slots.popleft()[1])
+        if len(senders):
+            cum = dict(self._cum)
+            for j in senders:
+                cum[j] = cum.get(j, 0) + 1
+            self._cum, self._total = cum, self._total + len(senders)
+        self._slots.append((float(t_s), self._cum, self._total))
+        _trim(self._slots, self.keep_s)
 
-    def _forget(self, counts: dict[int, int]) -> None:
-        for j, n in counts.items():
-            left = self._sum[j] - n
-            if left:
-                self._sum[j] = left
-            else:
-                del self._sum[j]
+    def _at_or_before(self, t_s: float) -> tuple[float, dict[int, int], int] | None:
+        """The newest slot at or before ``t_s``; None if every slot kept is later."""
+        for slot in reversed(self._slots):
+            if slot[0] <= t_s:
+                return slot
+        return None
+
+    def _base(self) -> tuple[float, dict[int, int], int]:
+        return self._at_or_before(self._slots[-1][0] - self.window_s) or self._slots[0]
 
     def span_s(self) -> float:
         """``t_n - t_0`` [s]: 0 before two slots."""
-        return self._slots[-1][0] - self._slots[0][0] if len(self._slots) >= 2 else 0.0
+        return self._slots[-1][0] - self._base()[0] if self._slots else 0.0
 
     def rates_hz(self) -> dict[int, float] | None:
         """Rows a second per sender anchor (anchors not heard in the window absent); None before two slots
         at different times."""
-        span = self.span_s()
-        if span <= 0.0:
+        if not self._slots:
             return None
-        base = self._slots[0][1]
-        out = {j: (n - base.get(j, 0)) / span for j, n in self._sum.items()}
+        (t0, c0, _), (t1, c1, _) = self._base(), self._slots[-1]
+        if t1 <= t0:
+            return None
+        out = {j: (n - c0.get(j, 0)) / (t1 - t0) for j, n in c1.items()}
         return {j: r for j, r in out.items() if r > 0.0}
 
     def total_hz(self) -> float | None:
         """All rows a second (the tag's differences a second); None before two slots."""
         rates = self.rates_hz()
         return None if rates is None else sum(rates.values())
+
+    def rows_in(self, t_a: float, t_b: float) -> int | None:
+        """The rows of the slots in ``(t_a, t_b]``; None when the slots kept do not reach back to ``t_a``
+        or the slot of ``t_b`` has not come yet (a count would miss rows)."""
+        if not self._slots or t_b > self._slots[-1][0]:
+            return None
+        a, b = self._at_or_before(t_a), self._at_or_before(t_b)
+        return None if a is None or b is None else b[2] - a[2]
 
 
 class CounterWindow:
@@ -140,13 +154,13 @@ class CounterWindow:
         s.append((float(t_s), tuple(values)))
         _trim(s, self.window_s)
 
-    def deltas(self) -> tuple[float, tuple[int, ...]] | None:
-        """``(t_n - t_0, v_n - v_0)``; None before two samples at different times."""
+    def deltas(self) -> tuple[float, float, tuple[int, ...]] | None:
+        """``(t_0, t_n, v_n - v_0)``; None before two samples at different times."""
         s = self._samples
         if len(s) < 2 or s[-1][0] <= s[0][0]:
             return None
         (t0, v0), (t1, v1) = s[0], s[-1]
-        return t1 - t0, tuple(b - a for a, b in zip(v0, v1, strict=True))
+        return t0, t1, tuple(b - a for a, b in zip(v0, v1, strict=True))
 
 
 @dataclass(frozen=True)
@@ -175,7 +189,8 @@ class TagRate:
     rejected_share: float | None
     """Rejected over accepted plus rejected in the window; None when none was gated."""
     span_s: float | None = None
-    """The time the TDoA rows were counted over [s] (``t_n - t_0``, :class:`SlotWindow`)."""
+    """The time the TDoA rows were counted over [s] (``t_n - t_0``: the accepted rate's window when the slots
+    kept reach it, else the slots' own)."""
 
 
 @dataclass(frozen=True)
@@ -258,11 +273,15 @@ class RadioRates:
             cw = self._counts.get(tag)
             d = cw.deltas() if cw is not None else None
             if d is not None:
-                span, (acc, rej, ref) = d
-                accepted_hz = acc / span
+                t0, t1, (acc, rej, ref) = d
+                accepted_hz = acc / (t1 - t0)
                 share = rej / (acc + rej) if acc + rej else None
                 if not self.tdoa:
-                    heard_hz = (acc + rej + ref) / span
+                    heard_hz = (acc + rej + ref) / (t1 - t0)
+                elif rates is not None:  # heard over the accepted rate's window when the slots reach it
+                    rows = self._slots[tag].rows_in(t0, t1)
+                    if rows is not None:
+                        heard_hz, span = rows / (t1 - t0), t1 - t0
             tags.append(TagRate(tag, heard_hz, accepted_hz, share, span))
         return RadioSnap(self.mode, self.window_s, tuple(anchors), tuple(tags))
 

@@ -54,6 +54,11 @@ def test_slot_window_counts_the_rows_after_its_base_over_the_time_they_cover() -
     # starts at 0.7: the base is the newest slot at or before it, 0.5; after it 5 rows over 1.2 s
     assert w.span_s() == pytest.approx(1.2, abs=APPROX)
     assert w.rates_hz() == pytest.approx({1: 2 / 1.2, 2: 2 / 1.2, 3: 1 / 1.2}, abs=APPROX)
+    # over another window: the rows of the slots in (t_a, t_b] (kept: the last 2 s, 2 x the window)
+    assert w.rows_in(0.0, 1.0) == 4 and w.rows_in(0.2, 1.5) == 5 and w.rows_in(0.5, 1.7) == 5
+    assert w.rows_in(0.0, 1.8) is None  # the slot of 1.8 has not come: its rows would be missing
+    w.add(2.6, [])
+    assert w.rows_in(0.4, 2.6) is None  # no slot kept at or before 0.4 (0.5 is the oldest)
 
 
 def test_slot_window_at_a_steady_rate_reads_that_rate_and_restarts_when_time_goes_back() -> None:
@@ -77,14 +82,12 @@ def test_counter_window_divides_the_counters_increase_by_the_span() -> None:
     w.add(1.0, (30, 5, 1))
     w.add(1.3, (40, 5, 1))
     # starts at 0.3: base 0.0 (the newest sample at or before it)
-    span, d = w.deltas()
-    assert span == pytest.approx(1.3, abs=APPROX) and d == (40, 5, 1)
+    assert w.deltas() == (0.0, 1.3, (40, 5, 1))
     w.add(2.0, (60, 10, 1))
     # starts at 1.0: base 1.0
-    span, d = w.deltas()
-    assert span == pytest.approx(1.0, abs=APPROX) and d == (30, 5, 0)
+    assert w.deltas() == (1.0, 2.0, (30, 5, 0))
     w.add(2.0, (61, 10, 1))  # the same time again: replaces the newest
-    assert w.deltas()[1] == (31, 5, 0)
+    assert w.deltas() == (1.0, 2.0, (31, 5, 0))
     w.add(2.5, (3, 0, 0))  # a counter went down (the agent restarted): a new window
     assert w.deltas() is None
 
@@ -114,6 +117,23 @@ def test_tdoa_rates_per_anchor_are_the_best_tags_and_per_tag_the_filters_accepte
     text = radio_markdown(snap)
     assert "| 0 | 50.0 | 40.0 | 2 |" in text and "| 3 | 0.0 | 0.0 | 0 |" in text
     assert "| a | 60.0 | 300.0 | 17 % |" in text and "differences/s" in text
+
+
+def test_a_tags_differences_are_counted_over_its_accepted_rates_window_when_the_slots_reach_it() -> None:
+    """Slots every 0.1 s up to 2 s, ten rows each up to 1.0 s and five after; the estimates (sampled once a
+    frame) at 0.5 and 1.5 s: the differences a second are those of (0.5, 1.5], 5 x 10 + 5 x 5 = 75 in 1 s,
+    as the 75 accepted, not the slot window's (1.0, 2.0] (50/s). An estimate later than the newest slot (its
+    rows not all here): the slot window's rate."""
+    r = RadioRates("tdoa3", window_s=1.0)
+    for k in range(21):
+        r.on_tdoa("a", _tdoa(0.1 * k, [0] * (10 if k <= 10 else 5)))
+    r.on_counts("a", 0.5, {"range_accepted": 100})
+    r.on_counts("a", 1.5, {"range_accepted": 175})
+    (tag,) = r.snapshot((0, 1, 2, 3)).tags
+    assert (tag.heard_hz, tag.accepted_hz, tag.span_s) == pytest.approx((75.0, 75.0, 1.0), abs=1e-9)
+    r.on_counts("a", 2.5, {"range_accepted": 225})  # window (1.5, 2.5]: 50 accepted a second
+    (tag,) = r.snapshot((0, 1, 2, 3)).tags
+    assert (tag.heard_hz, tag.accepted_hz, tag.span_s) == pytest.approx((50.0, 50.0, 1.0), abs=1e-9)
 
 
 def test_twr_rates_are_each_tags_ranges_from_its_filters_counters() -> None:
