@@ -89,25 +89,30 @@ def describe(values) -> dict:
     return {"n": n, "mean": mean, "std": std, "ci95": [mean - half, mean + half]}
 
 
-def success(rows: list[dict]) -> dict:
-    """Docked fraction with its exact (Clopper-Pearson) 95 % interval."""
+def success(rows: list[dict], key: str = "docked") -> dict:
+    """How many of ``rows`` reached the goal (``row[key]``: ``docked``, ``landed``), with the exact
+    (Clopper-Pearson) 95 % interval of the rate: ``{"n", key, "rate", "ci95"}``."""
     n = len(rows)
-    k = sum(1 for r in rows if r["docked"])
+    k = sum(1 for r in rows if r[key])
     if n == 0:
-        return {"n": 0, "docked": 0, "rate": None, "ci95": None}
+        return {"n": 0, key: 0, "rate": None, "ci95": None}
     ci = stats.binomtest(k, n).proportion_ci(CONFIDENCE, method="exact")
-    return {"n": n, "docked": k, "rate": k / n, "ci95": [float(ci.low), float(ci.high)]}
+    return {"n": n, key: k, "rate": k / n, "ci95": [float(ci.low), float(ci.high)]}
 
 
-def paired(rows: list[dict], base: str, other: str, metric: str) -> dict:
-    """``other - base`` of ``metric`` run by run (same run index and chaser), over the runs both docked."""
-    by = {(r["run"], r["chaser"], r["policy"]): r for r in rows}
+def paired(rows: list[dict], base: str, other: str, metric: str, key: str = "docked") -> dict:
+    """``other - base`` of ``metric`` run by run (same run index and, where rows have one, the same
+    ``chaser``), over the runs both reached the goal (``row[key]``), in run order: the mean difference, its
+    t interval (:func:`describe`), relative to the ``base`` mean, the two-sided paired t-test
+    (``scipy.stats.ttest_rel``) and Wilcoxon signed-rank test (``scipy.stats.wilcoxon``). The one paired
+    comparison of every mission's campaign."""
+    by = {(r["run"], r.get("chaser"), r["policy"]): r for r in rows}
     a, b = [], []
     for (run, chaser, pol), r in sorted(by.items()):
         if pol != base:
             continue
         s = by.get((run, chaser, other))
-        if s is None or not (r["docked"] and s["docked"]):
+        if s is None or not (r[key] and s[key]):
             continue
         if r[metric] is None or s[metric] is None:
             continue
