@@ -14,7 +14,7 @@ import json
 import logging
 from pathlib import Path
 
-from swarm.args import add_output_file, add_scenario_args, load_from_args, seed
+from swarm.args import add_output_file, add_scenario_args, seed
 from swarm.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -72,43 +72,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run_landing(args: argparse.Namespace) -> int:
-    """``swarm montecarlo`` of a landing scenario (:class:`swarm.missions.landing.LandingMission`)."""
-    from swarm.config import parse_override
-    from swarm.montecarlo.landing import run_landing_campaign
-    from swarm.montecarlo.report import finite_or_null
-    from swarm.sim.landing import load_landing
-
-    for flag, value in (("--resume", args.resume), ("--dask", args.dask)):
-        if value is not None:
-            raise ConfigError(f"{flag}: not available for a landing campaign yet (run it again instead)")
-    if args.workers is not None and args.workers < 1:
-        raise ConfigError(f"--workers must be a positive integer, got {args.workers}")
-    sc = load_landing(args.scenario, dict(parse_override(text) for text in args.overrides))
-    if sc.fleet:
-        raise ConfigError(
-            f"{args.scenario}: a landing campaign flies one UAV per run, this scenario has a [[fleet]] of "
-            f"{len(sc.fleet)}; run it with `swarm sim` or `swarm launch`, or campaign on `landing`"
-        )
-    runs = 500 if args.runs is None else args.runs
-    if runs < 1:
-        raise ConfigError(f"--runs must be a positive integer, got {runs}")
-    seed = 0 if args.seed is None else args.seed
-    policies = tuple(args.policies) if args.policies else ("fixed", "mdp")
-    for p in policies:
-        if p not in ("fixed", "mdp"):
-            raise ConfigError(f"--policy must be fixed or mdp, got {p!r}")
-    out = args.out if args.out is not None else Path(f"mc-{sc.name}-seed{seed}")
-    rec = run_landing_campaign(sc, runs, seed, policies, out, args.workers, progress=not args.no_progress)
-    for p, s in rec["policies"].items():
-        ld = s["landed"]
-        print(
-            f"{p:<6} landed {ld['k']}/{ld['n']}, aborted {s['aborted']}, off the pad {s['landed_off_pad']}; "
-            f"energy {s['energy_j']['mean']:.0f} J, time {s['landing_time_s']['mean']:.2f} s"
-        )
-    print(f"report: {out / 'report.md'}")
-    if args.json is not None:
-        args.json.write_text(json.dumps(finite_or_null(rec), indent=1) + "\n")
-    return 0
+    """``swarm montecarlo`` of a landing scenario: the shared campaign (:func:`campaign`)."""
+    return campaign(args, "landing")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -157,11 +122,19 @@ def run_mission(args: argparse.Namespace) -> int:
 
 
 def run_docking(args: argparse.Namespace) -> int:
-    """``swarm montecarlo`` of a docking scenario (:class:`swarm.missions.docking.DockingMission`)."""
-    from swarm.montecarlo.campaign import CampaignSpec, read_manifest, run_campaign
-    from swarm.montecarlo.report import finite_or_null, write_report
+    """``swarm montecarlo`` of a docking scenario: the shared campaign (:func:`campaign`)."""
+    return campaign(args, "docking")
 
-    sc = load_from_args(args)
+
+def campaign(args: argparse.Namespace, mission: str) -> int:
+    """The paired campaign of ``mission``'s scenario (:data:`swarm.montecarlo.campaign.CAMPAIGNS`): the
+    same flags, directory, resume and ``--dask`` for every mission; the mission's report and summary."""
+    from swarm.config import parse_override
+    from swarm.montecarlo.campaign import CAMPAIGNS, CampaignSpec, read_manifest, run_campaign
+    from swarm.montecarlo.report import finite_or_null
+
+    plan = CAMPAIGNS[mission]
+    sc = plan.entry("load")(args.scenario, dict(parse_override(text) for text in args.overrides))
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers must be a positive integer, got {args.workers}")
     if args.resume is not None:
@@ -179,7 +152,7 @@ def run_docking(args: argparse.Namespace) -> int:
         seed = 0 if args.seed is None else args.seed
         policies = tuple(args.policies) if args.policies else ("fixed", "mdp")
         out = args.out if args.out is not None else Path(f"mc-{sc.name}-seed{seed}")
-    spec = CampaignSpec(sc, policies, runs, seed)
+    spec = CampaignSpec(sc, policies, runs, seed, plan)
     if args.dask is not None:
         if args.workers is not None:
             raise ConfigError("--workers and --dask: choose one (the cluster has its own workers)")
@@ -205,15 +178,8 @@ def run_docking(args: argparse.Namespace) -> int:
             f"swarm montecarlo {args.scenario} --resume {out}"
         )
         return 130
-    wall = outcome.wall_s if outcome.done > outcome.done_before else None
-    rec = write_report(out, wall_s=wall, figures=not args.no_figures)
-    _print(rec)
-    if sc.faults.enabled:  # outcome classes and NEES outside the dropouts (swarm.montecarlo.faults)
-        from swarm.montecarlo.campaign import read_runs, read_trajectories
-        from swarm.montecarlo.faults import fault_summary, format_summary
-
-        rec["faults"] = fault_summary(read_runs(out), read_trajectories(out))
-        print(format_summary(rec["faults"]))
+    rec = plan.entry("report")(out, figures=not args.no_figures)
+    print(plan.entry("summary")(rec))
     print(f"report: {out / 'report.md'}")
     if args.json is not None:
         try:
@@ -222,27 +188,3 @@ def run_docking(args: argparse.Namespace) -> int:
             raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc.strerror or exc}") from None
         print(f"statistics written to {args.json}")
     return 0 if not outcome.failures else 1
-
-
-def _print(rec: dict) -> None:
-    metrics = rec["metrics"]
-    print(f"{rec['runs']} runs per policy" + (f", {rec['wall_s']:.1f} s wall" if rec.get("wall_s") else ""))
-    for pol, p in rec["policies"].items():
-        parts = [f"docked {p['docked']}/{p['n_runs']}"]
-        for m, (lab, unit, scale, dig) in metrics.items():
-            d = p[m]
-            if d["mean"] is not None:
-                parts.append(f"{lab} {d['mean'] * scale:.{dig}f} {unit}")
-        print(f"  {pol:<6} " + ", ".join(parts))
-    if "paired" in rec:
-        base, other = rec["paired_policies"]
-        for m in ("docking_time_s", list(metrics)[-1]):  # the time and the kind's effort
-            d = rec["paired"][m]
-            if d["mean_diff"] is None:
-                continue
-            ci = d["ci95"] or [float("nan")] * 2
-            p = d["p_value"]
-            print(
-                f"  {other} - {base} {m}: {d['mean_diff']:+.4g} [{ci[0]:+.4g}, {ci[1]:+.4g}] "
-                f"({100 * d['relative']:+.1f} %), paired t p = {p if p is None else f'{p:.2g}'}"
-            )

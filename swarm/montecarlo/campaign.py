@@ -1,14 +1,18 @@
-"""Paired Monte Carlo campaigns of a docking scenario (paper section V-C, Table II) on any executor.
+"""Paired Monte Carlo campaigns of any mission's scenario (paper section V-C, Table II; VI-B) on any executor.
+
+The runner is the same for every mission; a mission gives only its :class:`CampaignMission`: how to load
+its scenario, how to fly one seeded run of one policy and reduce it to ``runs.csv`` rows, which columns
+those rows have, and how to write its report from the directory (:data:`CAMPAIGNS`: docking, landing).
 
 Design:
 
 * **Paired runs.** Run ``i`` of every policy uses the same seed, :func:`run_seed` ``(root, i)``, an integer
   derived from the root seed with ``SeedSequence.spawn``; every random quantity of a run (initial
   estimate errors, sensor noise, the ``[dispersions]`` of :mod:`swarm.kinds.dispersions`) is drawn
-  from that seed inside :class:`swarm.sim.docking.DockingSim`, whatever the policy. So the policies see the
+  from that seed inside the mission's simulator, whatever the policy. So the policies see the
   same dispersions run by run and their difference is a paired comparison; and ``swarm sim
   DIR/scenario.toml --policy P --seed S`` re-runs any single run exactly.
-* **Any executor.** The runs are tasks of one picklable function, :func:`run_one`, submitted to a
+* **Any executor.** The runs are tasks of one picklable function, the mission's ``run_one``, submitted to a
   :class:`concurrent.futures.Executor`: a :class:`~concurrent.futures.ProcessPoolExecutor` with
   ``workers`` processes by default, or one the caller brings, e.g. from a ``dask.distributed`` cluster::
 
@@ -17,24 +21,29 @@ Design:
       run_campaign(spec, "mc-out", executor=client.get_executor())
 
   (the workers need this package installed; an executor passed in is not shut down).
-* **Saved run by run.** ``DIR/runs.csv`` gets one row per (run, policy, chaser) as it finishes, with the
-  trajectory in ``DIR/trajectories.jsonl``; ``DIR/campaign.json`` holds the root seed, the seed rule and
-  the policies, ``DIR/scenario.toml`` the scenario as run. An interrupted campaign (Ctrl-C) keeps every
-  finished run; ``resume=True`` runs only what is missing, after checking that the scenario, seed and
-  policies are those of ``DIR``.
+* **Saved run by run.** ``DIR/runs.csv`` gets the rows of each (run, policy) as it finishes (one per
+  vehicle that the mission reports), with the trajectories in ``DIR/trajectories.jsonl``;
+  ``DIR/campaign.json`` holds the mission, the root seed, the seed rule and the policies (and, once runs
+  are done, the wall time and workers of the last session), ``DIR/scenario.toml`` the scenario as run. An
+  interrupted or killed campaign keeps every finished run; ``resume=True`` runs only what is missing,
+  after checking that the mission, scenario, seed and policies are those of ``DIR``. When every run is
+  done, both files are rewritten in run order (policies in their order), so a campaign's files do not
+  depend on which run finished first, on how many workers, nor on an interruption.
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
 import csv
+import importlib
 import json
 import logging
 import math
 import os
+import pkgutil
 import signal
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,7 +51,6 @@ import numpy as np
 
 from swarm.config import dump_toml, to_mapping
 from swarm.errors import ConfigError
-from swarm.montecarlo.run import fields_for, run_one
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +72,73 @@ def run_seed(root_seed: int, run: int) -> int:
     return int(child.generate_state(1)[0])
 
 
+# -------------------------------------------------------------------------------------- what a mission gives
+
+
+@dataclass(frozen=True)
+class CampaignMission:
+    """What the runner asks of a mission: beside its name, functions named ``"package.module:function"``
+    and imported when called (so the registry imports no simulator, and ``run_one`` pickles by reference)."""
+
+    name: str
+    """The mission (``campaign.json``'s ``mission``): ``docking``, ``landing``."""
+    load: str
+    """``(scenario, overrides=None) -> scenario``: a scenario file or bundled name, ``--set`` applied; a
+    ConfigError for one the campaign cannot run. Reads ``DIR/scenario.toml`` back too."""
+    columns: str
+    """``(scenario) -> {column: type}``: the ``runs.csv`` columns (types: ``int``, ``float``, ``bool``,
+    ``str``; ``float?`` may be empty). Every row has ``run`` and ``policy``."""
+    run_one: str
+    """``(scenario, policy, run, seed, trajectory_period_s) -> (rows, trajectories)``: run ``run`` of
+    ``policy`` flown from ``seed``, in a worker; each trajectory is a JSON object with ``run`` and
+    ``policy``."""
+    report: str
+    """``(out_dir, figures=True) -> record``: the report written from the directory's files alone."""
+    summary: str
+    """``(record) -> str``: what ``swarm montecarlo`` prints of the record."""
+    preload: str = ""
+    """A module imported in the parent before a local pool forks (loaded and compiled once)."""
+
+    def entry(self, what: str) -> Callable:
+        """The function field ``what`` names."""
+        return pkgutil.resolve_name(getattr(self, what))
+
+
+CAMPAIGNS: dict[str, CampaignMission] = {
+    "docking": CampaignMission(
+        name="docking",
+        load="swarm.scenario:load_scenario",
+        columns="swarm.montecarlo.run:fields_for",
+        run_one="swarm.montecarlo.run:run_one",
+        report="swarm.montecarlo.report:campaign_report",
+        summary="swarm.montecarlo.report:summary_text",
+        preload="swarm.sim.docking",
+    ),
+    "landing": CampaignMission(
+        name="landing",
+        load="swarm.montecarlo.landing:load_campaign_scenario",
+        columns="swarm.montecarlo.landing:columns",
+        run_one="swarm.montecarlo.landing:run_one",
+        report="swarm.montecarlo.landing:write_report",
+        summary="swarm.montecarlo.landing:summary_text",
+        preload="swarm.sim.landing",
+    ),
+}
+"""The campaign of each mission, by the name ``campaign.json`` records (a directory without one is a
+docking campaign, as before missions)."""
+
+
+def mission_of_dir(out_dir: Path) -> CampaignMission:
+    """The campaign mission of the directory ``out_dir`` (its ``campaign.json``)."""
+    name = read_manifest(out_dir).get("mission", "docking")
+    try:
+        return CAMPAIGNS[name]
+    except KeyError:
+        raise ConfigError(
+            f"{Path(out_dir) / MANIFEST}: mission {name!r} has no campaign here; known: {sorted(CAMPAIGNS)}"
+        ) from None
+
+
 # ------------------------------------------------------------------------------------------- the campaign
 
 
@@ -75,6 +150,8 @@ class CampaignSpec:
     policies: tuple[str, ...] = POLICIES
     runs: int = 500
     root_seed: int = 0
+    mission: CampaignMission = CAMPAIGNS["docking"]
+    """Whose scenario it is (:data:`CAMPAIGNS`)."""
 
     def __post_init__(self) -> None:
         if not (isinstance(self.runs, int) and self.runs >= 1):
@@ -102,6 +179,8 @@ class CampaignOutcome:
     done: int
     """Tasks in the directory now."""
     wall_s: float
+    workers: int | None = None
+    """Processes of the runner's own pool; None for an executor passed in."""
     interrupted: bool = False
     failures: list[str] = field(default_factory=list)
 
@@ -135,10 +214,14 @@ def _prepare_dir(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
     scen = to_mapping(spec.scenario)
     if resume:
         man = read_manifest(out_dir)
+        was = man.get("mission", "docking")
+        if was != spec.mission.name:
+            raise ConfigError(
+                f"--resume {str(out_dir)!r}: a {was} campaign, the scenario given is a {spec.mission.name} "
+                f"one; resume with {str(out_dir / SCENARIO_FILE)!r}"
+            )
         try:
-            from swarm.scenario import load_scenario
-
-            saved = to_mapping(load_scenario(out_dir / SCENARIO_FILE))
+            saved = to_mapping(spec.mission.entry("load")(out_dir / SCENARIO_FILE))
         except ConfigError as exc:
             raise ConfigError(f"--resume {str(out_dir)!r}: cannot load its {SCENARIO_FILE}: {exc}") from None
         diff = _differences(saved, scen)
@@ -171,6 +254,7 @@ def _prepare_dir(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
             raise ConfigError(f"--out {str(out_dir)!r}: cannot create it: {exc.strerror or exc}") from None
         (out_dir / SCENARIO_FILE).write_text(dump_toml(spec.scenario))
         man = {
+            "mission": spec.mission.name,
             "scenario": spec.scenario.name,
             "root_seed": spec.root_seed,
             "seed_rule": SEED_RULE,
@@ -200,22 +284,21 @@ def _format(value) -> str:
     if value is None:
         return ""
     if isinstance(value, float):
-        return repr(value)  # shortest text that reads back to the same float
+        return repr(float(value))  # shortest text that reads back to the same float (numpy's too)
     return str(value)
 
 
-def read_runs(out_dir: Path, scenario=None) -> list[dict]:
-    """The typed rows of ``DIR/runs.csv`` (the columns of :func:`swarm.montecarlo.run.fields_for` the
-    campaign's scenario, ``DIR/scenario.toml`` unless given), in file order. A last line cut short (a
-    campaign killed mid-write) is dropped; any other malformed line is an error."""
+def read_runs(out_dir: Path, scenario=None, mission: CampaignMission | None = None) -> list[dict]:
+    """The typed rows of ``DIR/runs.csv`` (the mission's ``columns`` of the campaign's scenario,
+    ``DIR/scenario.toml`` unless given; the mission ``DIR/campaign.json``'s unless given), in file order.
+    A last line cut short (a campaign killed mid-write) is dropped; any other malformed line is an error."""
     path = Path(out_dir) / RUNS_FILE
-    if scenario is None and path.exists():
-        from swarm.scenario import load_scenario
-
-        scenario = load_scenario(Path(out_dir) / SCENARIO_FILE)
-    fields = fields_for(scenario) if scenario is not None else {}
     if not path.exists():
         return []
+    mission = mission if mission is not None else mission_of_dir(out_dir)
+    if scenario is None:
+        scenario = mission.entry("load")(Path(out_dir) / SCENARIO_FILE)
+    fields = mission.entry("columns")(scenario)
     text = path.read_text()
     lines = text.splitlines(keepends=True)
     if lines and not lines[-1].endswith("\n"):
@@ -291,7 +374,7 @@ def run_campaign(
     """Run (or finish) a campaign into ``out_dir`` (module docstring); see :class:`CampaignOutcome`.
 
     Args:
-        spec: scenario, policies, number of runs, root seed.
+        spec: mission, scenario, policies, number of runs, root seed.
         out_dir: campaign directory: created (must be empty or absent), or continued with ``resume``.
         executor: where the runs go; default a ProcessPoolExecutor with ``workers`` processes.
         workers: processes of the default executor (default: the cores available).
@@ -310,21 +393,24 @@ def run_campaign(
     runs_path, traj_path = out_dir / RUNS_FILE, out_dir / TRAJ_FILE
     _truncate_partial_line(runs_path)
     _truncate_partial_line(traj_path)
-    fields = fields_for(spec.scenario)
-    done_keys = {(r["run"], r["policy"]) for r in read_runs(out_dir, spec.scenario)}
+    fields = spec.mission.entry("columns")(spec.scenario)
+    run_one = spec.mission.entry("run_one")
+    done_keys = {(r["run"], r["policy"]) for r in read_runs(out_dir, spec.scenario, spec.mission)}
     todo = [
         (i, p) for i in range(runs) for p in spec.policies if (i, p) not in done_keys
     ]  # paired runs side by side: an interrupted campaign leaves few unpaired runs
     total = runs * len(spec.policies)
     done_before = total - len(todo)
-    outcome = CampaignOutcome(out_dir, total, done_before, done_before, 0.0)
+    own = executor is None
+    outcome = CampaignOutcome(
+        out_dir, total, done_before, done_before, 0.0, (workers or default_workers()) if own else None
+    )
     if not todo:
         return outcome
-    own = executor is None
     if own:
-        import swarm.sim.docking  # noqa: F401  loaded (and compiled) once here, inherited by forked workers
-
-        executor = cf.ProcessPoolExecutor(max_workers=workers or default_workers(), initializer=_init_worker)
+        if spec.mission.preload:  # loaded (and compiled) once here, inherited by forked workers
+            importlib.import_module(spec.mission.preload)
+        executor = cf.ProcessPoolExecutor(max_workers=outcome.workers, initializer=_init_worker)
     new_file = not runs_path.exists() or runs_path.stat().st_size == 0
     t0 = time.perf_counter()
     bar = _progress(total, done_before, progress)
@@ -356,11 +442,8 @@ def run_campaign(
 
         try:
             for i, p in todo:
-                futures[
-                    executor.submit(
-                        run_one, spec.scenario, p, i, run_seed(spec.root_seed, i), trajectory_period_s
-                    )
-                ] = (i, p)
+                seed = run_seed(spec.root_seed, i)
+                futures[executor.submit(run_one, spec.scenario, p, i, seed, trajectory_period_s)] = (i, p)
             for fut in cf.as_completed(futures):
                 harvest(fut)
         except KeyboardInterrupt:
@@ -377,7 +460,43 @@ def run_campaign(
             if own:
                 executor.shutdown(wait=True, cancel_futures=True)
     outcome.wall_s = time.perf_counter() - t0
+    man = read_manifest(out_dir)
+    man["wall_s"], man["workers"] = outcome.wall_s, outcome.workers  # this session's, for the report
+    (out_dir / MANIFEST).write_text(json.dumps(man, indent=1) + "\n")
+    if outcome.done == total:
+        _in_run_order(out_dir, spec.policies)
     return outcome
+
+
+def _in_run_order(out_dir: Path, policies: tuple[str, ...]) -> None:
+    """Rewrite a finished campaign's ``runs.csv`` and ``trajectories.jsonl`` in run order, the policies in
+    their order (each line's text kept; a task's own lines keep theirs). Of trajectory lines written twice
+    (a run redone after a kill that came between its trajectory and its row) the last is kept."""
+    order = {p: k for k, p in enumerate(policies)}
+    runs_path, traj_path = out_dir / RUNS_FILE, out_dir / TRAJ_FILE
+    header, *lines = runs_path.read_bytes().decode().splitlines(keepends=True)  # the csv module's \r\n kept
+    names = next(csv.reader([header]))
+    i_run, i_pol = names.index("run"), names.index("policy")
+    cells = list(csv.reader(lines))
+    rows = sorted(zip(cells, lines, strict=True), key=lambda cl: (int(cl[0][i_run]), order[cl[0][i_pol]]))
+    _replace(runs_path, header + "".join(line for _, line in rows))
+    if traj_path.exists():
+        last: dict[tuple, tuple[dict, str]] = {}
+        for line in traj_path.read_bytes().decode().splitlines(keepends=True):
+            try:
+                tr = json.loads(line)
+            except json.JSONDecodeError:
+                continue  # as read_trajectories
+            last[(tr["run"], tr["policy"], tr.get("chaser"))] = (tr, line)
+        ordered = sorted(last.values(), key=lambda tl: (tl[0]["run"], order[tl[0]["policy"]]))
+        _replace(traj_path, "".join(line for _, line in ordered))
+
+
+def _replace(path: Path, text: str) -> None:
+    """Write ``path`` whole or not at all (a kill leaves the old file)."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(text.encode())
+    os.replace(tmp, path)
 
 
 def _progress(total: int, initial: int, enabled: bool):

@@ -1,70 +1,100 @@
-"""``swarm montecarlo landing``: a paired campaign of the UAV landing (issue 15; paper Figs. 9-10).
+"""The landing's campaign (issue 15; paper Figs. 9-10): what :mod:`swarm.montecarlo.campaign` asks of it.
 
-Run ``r`` of every policy flies from the same seed (:func:`swarm.montecarlo.campaign.run_seed`), so the
-same start, IMU biases, anchor reach and noise: the policies are compared run by run (paired differences,
-``t`` and Wilcoxon tests, as the docking campaign). Rows go to ``runs.csv`` as they finish, the decimated
-trajectories to ``trajectories.jsonl``; ``report.md`` has the table, the paired differences, what they mean,
-and the figures: trajectories coloured by mode (Fig. 9), landing error and energy distributions (Fig. 10)
-and the deviation points against the navigation quality.
+The campaign runner is the docking one (resume, ``--dask``, ``campaign.json``, rows as they finish); the
+landing gives its :class:`~swarm.montecarlo.campaign.CampaignMission`: its scenario (one UAV per run: a
+``[[fleet]]`` is refused), one seeded run reduced to a ``runs.csv`` row (:data:`COLUMNS`; a moving pad
+adds :data:`PLATFORM_COLUMNS`) and a trajectory, and ``report.md`` with ``stats.json``: the table, the
+paired differences (:func:`swarm.montecarlo.stats.paired`, the docking campaign's), what they mean, and the
+figures: trajectories coloured by mode (Fig. 9), landing error and energy distributions (Fig. 10) and the
+deviation points against the navigation quality.
 """
 
 from __future__ import annotations
 
-import csv
 import json
-import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
-from swarm.montecarlo.campaign import default_workers, run_seed
-from swarm.montecarlo.stats import CONFIDENCE, describe
-
-COLUMNS = (
-    "run",
-    "seed",
-    "policy",
-    "landed",
-    "aborted",
-    "landed_off_pad",
-    "landing_error_m",
-    "landing_time_s",
-    "energy_j",
-    "deviation_distance_m",
-    "retries",
-    "sim_time_s",
-    "start_x_m",
-    "start_y_m",
-    "start_z_m",
-    "uwb_range_m",
+from swarm.errors import ConfigError
+from swarm.montecarlo.campaign import (
+    CAMPAIGNS,
+    SCENARIO_FILE,
+    read_manifest,
+    read_runs,
+    read_trajectories,
 )
+from swarm.montecarlo.stats import describe, paired, success
+
+COLUMNS: dict[str, str] = {
+    "run": "int",
+    "seed": "int",
+    "policy": "str",
+    "landed": "bool",
+    "aborted": "bool",
+    "landed_off_pad": "bool",
+    "landing_error_m": "float?",
+    "landing_time_s": "float?",
+    "energy_j": "float",
+    "deviation_distance_m": "float?",
+    "retries": "int",
+    "sim_time_s": "float",
+    "start_x_m": "float",
+    "start_y_m": "float",
+    "start_z_m": "float",
+    "uwb_range_m": "float?",
+}
+"""``runs.csv`` columns (the run summary's names, :func:`swarm.step.landing.landing_summary`) and types."""
+PLATFORM_COLUMNS: dict[str, str] = {
+    "touchdown_rel_speed_m_s": "float?",
+    "touchdown_vz_m_s": "float?",
+    "platform_start_arc_m": "float?",
+    "platform_speed_m_s": "float",
+}
+"""The columns a scenario with a moving pad (``[platform] enabled``) adds."""
 MODES = ("CRUISE", "DEVIATE", "DESCEND", "FINAL", "CLIMB", "LANDED", "ABORT")
+METRICS = ("energy_j", "landing_time_s", "landing_error_m", "deviation_distance_m")
+PAIRED_KEYS = ("n", "mean_diff", "ci95", "relative", "p_value", "wilcoxon_p_value")
+"""What ``stats.json`` keeps of :func:`swarm.montecarlo.stats.paired` (its format since issue 15)."""
 
 
-def _one(args) -> tuple[dict, dict]:
-    sc, policy, run, seed = args
+def _moving(sc) -> bool:
+    return bool(getattr(getattr(sc, "platform", None), "enabled", False))  # a scenario without [platform]
+
+
+def load_campaign_scenario(scenario, overrides: dict | None = None):
+    """The landing scenario ``scenario`` (a file or a bundled name) with ``overrides``; a ConfigError for a
+    ``[[fleet]]``, since a campaign flies one UAV per run."""
+    from swarm.landing_scenario import load_landing
+
+    sc = load_landing(scenario, overrides)
+    if sc.fleet:
+        raise ConfigError(
+            f"{scenario}: a landing campaign flies one UAV per run, this scenario has a [[fleet]] of "
+            f"{len(sc.fleet)}; run it with `swarm sim` or `swarm launch`, or campaign on `landing`"
+        )
+    return sc
+
+
+def columns(sc) -> dict[str, str]:
+    """The ``runs.csv`` columns of a campaign of ``sc``."""
+    return COLUMNS | PLATFORM_COLUMNS if _moving(sc) else dict(COLUMNS)
+
+
+def run_one(sc, policy: str, run: int, seed: int, trajectory_period_s: float = 1.0):
+    """Run ``run`` of ``policy`` from ``seed``: ``([row], [trajectory])``, the trajectory sampled every
+    ``trajectory_period_s`` (positions to the millimetre, the mode as an index into :data:`MODES`)."""
     from swarm.sim.landing import run_landing
+    from swarm.step.landing_nb import SERIES_EVERY
 
     r = run_landing(sc, policy, seed, record_series=True)
     row = {"run": run, "seed": seed, "policy": policy}
-    for k in (
-        "landed",
-        "aborted",
-        "landed_off_pad",
-        "landing_error_m",
-        "landing_time_s",
-        "energy_j",
-        "deviation_distance_m",
-        "retries",
-        "sim_time_s",
-        "uwb_range_m",
-    ):
-        row[k] = r[k]
+    for k in columns(sc):
+        if k in r:
+            row[k] = r[k]
     row["start_x_m"], row["start_y_m"], row["start_z_m"] = r["start_m"]
     s = r["series"]
-    step = 10  # the series is at 10 Hz: keep 1 Hz
+    step = max(1, round(trajectory_period_s / (SERIES_EVERY * sc.dt_s)))
     traj = {
         "run": run,
         "policy": policy,
@@ -73,118 +103,33 @@ def _one(args) -> tuple[dict, dict]:
         "mode": [MODES.index(m) for m in s["mode"][::step]],
         "sigma_h_m": [round(v, 4) for v in s["sigma_h_m"][::step]],
     }
-    return row, traj
-
-
-def run_landing_campaign(
-    sc,
-    runs: int,
-    root_seed: int,
-    policies: tuple[str, ...],
-    out_dir: Path,
-    workers: int | None = None,
-    progress: bool = True,
-) -> dict:
-    """Run the campaign into ``out_dir`` (module docstring); returns the statistics of ``report.md``."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    jobs = [(sc, p, r, run_seed(root_seed, r)) for r in range(runs) for p in policies]
-    rows, trajs = [], []
-    t0 = time.perf_counter()
-    workers = workers or default_workers()
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(jobs), unit="run", desc="landing campaign")
-    with (
-        open(out_dir / "runs.csv", "w", newline="") as fh_rows,
-        open(out_dir / "trajectories.jsonl", "w") as fh_t,
-    ):
-        w = csv.DictWriter(fh_rows, fieldnames=COLUMNS)
-        w.writeheader()
-        if workers == 1:
-            results = map(_one, jobs)
-            pool = None
-        else:
-            pool = ProcessPoolExecutor(workers)
-            results = pool.map(_one, jobs, chunksize=4)
-        try:
-            for row, traj in results:
-                w.writerow(row)
-                fh_rows.flush()
-                fh_t.write(json.dumps(traj) + "\n")
-                rows.append(row)
-                trajs.append(traj)
-                if bar is not None:
-                    bar.update(1)
-        finally:
-            if pool is not None:
-                pool.shutdown()
-            if bar is not None:
-                bar.close()
-    wall = time.perf_counter() - t0
-    rec = summarize(rows, policies)
-    rec.update(
-        {"scenario": sc.name, "runs": runs, "root_seed": root_seed, "wall_s": wall, "workers": workers}
-    )
-    write_report(out_dir, rec, rows, trajs, policies, sc)
-    return rec
-
-
-def _rate(k: int, n: int) -> dict:
-    if n == 0:
-        return {"n": 0, "k": 0, "rate": None, "ci95": None}
-    ci = stats.binomtest(k, n).proportion_ci(CONFIDENCE, method="exact")
-    return {"n": n, "k": k, "rate": k / n, "ci95": [float(ci.low), float(ci.high)]}
-
-
-def _paired(rows: list[dict], base: str, other: str, metric: str) -> dict:
-    by = {(r["run"], r["policy"]): r for r in rows}
-    a, b = [], []
-    for (run, pol), r in sorted(by.items()):
-        if pol != base:
-            continue
-        s = by.get((run, other))
-        if s is None or not (r["landed"] and s["landed"]) or r[metric] is None or s[metric] is None:
-            continue
-        a.append(float(r[metric]))
-        b.append(float(s[metric]))
-    diff = np.asarray(b) - np.asarray(a)
-    d = describe(diff)
-    out = {
-        "n": d["n"],
-        "mean_diff": d["mean"],
-        "ci95": d["ci95"],
-        "relative": d["mean"] / float(np.mean(a)) if d["n"] and np.mean(a) else None,
-        "p_value": None,
-        "wilcoxon_p_value": None,
-    }
-    if d["n"] >= 2 and np.any(diff != diff[0]):
-        out["p_value"] = float(stats.ttest_rel(b, a).pvalue)
-    if d["n"] >= 2 and np.any(diff != 0):
-        out["wilcoxon_p_value"] = float(stats.wilcoxon(diff).pvalue)
-    return out
-
-
-METRICS = ("energy_j", "landing_time_s", "landing_error_m", "deviation_distance_m")
+    return [row], [traj]
 
 
 def summarize(rows: list[dict], policies: tuple[str, ...]) -> dict:
+    """The statistics of ``stats.json`` from the typed rows: per policy the landed rate, the counts and
+    :data:`METRICS` over the landed runs; the paired differences of the other policies against the first,
+    also split by the anchors' reach (the navigation quality)."""
     rec: dict = {"policies": {}, "paired": {}}
     for p in policies:
         rs = [r for r in rows if r["policy"] == p]
         landed = [r for r in rs if r["landed"]]
+        s = success(rs, "landed")
         rec["policies"][p] = {
-            "landed": _rate(len(landed), len(rs)),
+            "landed": {"n": s["n"], "k": s["landed"], "rate": s["rate"], "ci95": s["ci95"]},
             "aborted": sum(1 for r in rs if r["aborted"]),
             "landed_off_pad": sum(1 for r in rs if r["landed_off_pad"]),
             "retried": sum(1 for r in rs if r["retries"]),
             **{m: describe([r[m] for r in landed if r[m] is not None]) for m in METRICS},
         }
+
+    def pair(sub: list[dict], other: str, m: str) -> dict:
+        d = paired(sub, policies[0], other, m, key="landed")
+        return {k: d[k] for k in PAIRED_KEYS}
+
     base = policies[0]
     for other in policies[1:]:
-        rec["paired"][f"{other}-{base}"] = {m: _paired(rows, base, other, m) for m in METRICS[:3]}
+        rec["paired"][f"{other}-{base}"] = {m: pair(rows, other, m) for m in METRICS[:3]}
     # by navigation quality: the anchors' reach against the distance at which the fixed rule deviates plus
     # the glide's height, split at the middle of the dispersion's interval
     reach = [r["uwb_range_m"] for r in rows if r.get("uwb_range_m") is not None]
@@ -199,9 +144,39 @@ def summarize(rows: list[dict], policies: tuple[str, ...]) -> dict:
             sub_rows = [r for r in rows if keep(r)]
             for other in policies[1:]:
                 rec["paired_by_reach"][f"{name}:{other}-{base}"] = {
-                    m: _paired(sub_rows, base, other, m) for m in ("energy_j", "landing_time_s")
+                    m: pair(sub_rows, other, m) for m in ("energy_j", "landing_time_s")
                 }
     return rec
+
+
+def write_report(out_dir: str | Path, figures: bool = True) -> dict:
+    """Write ``report.md``, ``stats.json`` (and the figures) from the campaign directory's files; return
+    the statistics."""
+    out_dir = Path(out_dir)
+    man = read_manifest(out_dir)
+    policies = tuple(man["policies"])
+    sc = load_campaign_scenario(out_dir / SCENARIO_FILE)
+    order = {p: k for k, p in enumerate(policies)}
+    rows = sorted(read_runs(out_dir, sc, CAMPAIGNS["landing"]), key=lambda r: (r["run"], order[r["policy"]]))
+    trajs = sorted(read_trajectories(out_dir), key=lambda t: (t["run"], order[t["policy"]]))
+    rec = summarize(rows, policies)
+    rec.update({"scenario": sc.name, "runs": int(man["runs"]), "root_seed": man["root_seed"],
+                "wall_s": man.get("wall_s"), "workers": man.get("workers")})  # fmt: skip
+    _write(out_dir, rec, rows, trajs, policies, sc, figures)
+    return rec
+
+
+def summary_text(rec: dict) -> str:
+    """What ``swarm montecarlo`` prints of a landing campaign's statistics."""
+    lines = []
+    for p, s in rec["policies"].items():
+        ld = s["landed"]
+        energy, time_s = s["energy_j"]["mean"], s["landing_time_s"]["mean"]
+        lines.append(
+            f"{p:<6} landed {ld['k']}/{ld['n']}, aborted {s['aborted']}, off the pad {s['landed_off_pad']}"
+            + ("" if energy is None else f"; energy {energy:.0f} J, time {time_s:.2f} s")
+        )
+    return "\n".join(lines)
 
 
 def _fmt(d: dict, digits: int = 2) -> str:
@@ -209,6 +184,14 @@ def _fmt(d: dict, digits: int = 2) -> str:
         return "-"
     ci = d.get("ci95")
     return f"{d['mean']:.{digits}f}" + (f" [{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]" if ci else "")
+
+
+def _wall(rec: dict) -> str:
+    """How long the campaign's last session took and where: ``13.0 s on 2 workers``."""
+    where = "on a cluster" if rec["workers"] is None else f"on {rec['workers']} workers"
+    return (
+        f"{rec['wall_s']:.1f} s {where}" if rec["wall_s"] is not None else f"(wall time not recorded) {where}"
+    )
 
 
 def _verdict(p: dict, metric: str, unit: str) -> str:
@@ -225,15 +208,15 @@ def _verdict(p: dict, metric: str, unit: str) -> str:
     return f"{metric}: {p['mean_diff']:+.3g} {unit}{rel}, 95 % CI [{lo:+.3g}, {hi:+.3g}]: {word}"
 
 
-def write_report(
-    out_dir: Path, rec: dict, rows: list[dict], trajs: list[dict], policies, sc, figures: bool = True
+def _write(
+    out_dir: Path, rec: dict, rows: list[dict], trajs: list[dict], policies, sc, figures: bool
 ) -> None:
     lines = [
         f"# Landing campaign: {rec['scenario']}, {rec['runs']} paired runs, root seed {rec['root_seed']}",
         "",
     ]
     lines.append(
-        f"{len(rows)} runs in {rec['wall_s']:.1f} s on {rec['workers']} workers. Dispersions: start "
+        f"{len(rows)} runs in {_wall(rec)}. Dispersions: start "
         f"position sigma {list(sc.dispersions.start_sigma_m)} m, anchor reach uniform in "
         f"{list(sc.dispersions.uwb_range_m)} m, IMU biases, initial estimate errors, sensor noise."
     )

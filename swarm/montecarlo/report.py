@@ -65,6 +65,52 @@ def write_report(out_dir: str | Path, wall_s: float | None = None, figures: bool
     return rec
 
 
+def campaign_report(out_dir: str | Path, figures: bool = True) -> dict:
+    """The docking campaign's report (:class:`~swarm.montecarlo.campaign.CampaignMission`):
+    :func:`write_report`, and for a scenario with ``[faults]`` the outcome classes and NEES of
+    :mod:`swarm.montecarlo.faults` added to the returned record under ``faults`` (not to ``report.json``)."""
+    from swarm.montecarlo.faults import fault_summary
+    from swarm.scenario import load_scenario
+
+    rec = write_report(out_dir, figures=figures)
+    if load_scenario(Path(out_dir) / SCENARIO_FILE).faults.enabled:
+        rec["faults"] = fault_summary(read_runs(out_dir), read_trajectories(out_dir))
+    return rec
+
+
+def summary_text(rec: dict) -> str:
+    """What ``swarm montecarlo`` prints of a docking campaign's record: per policy the docked count and
+    the Table II means, the paired differences of time and effort, and the faults' table if any."""
+    from swarm.montecarlo.faults import format_summary
+
+    metrics = rec["metrics"]
+    lines = [
+        f"{rec['runs']} runs per policy" + (f", {rec['wall_s']:.1f} s wall" if rec.get("wall_s") else "")
+    ]
+    for pol, p in rec["policies"].items():
+        parts = [f"docked {p['docked']}/{p['n_runs']}"]
+        for m, (lab, unit, scale, dig) in metrics.items():
+            d = p[m]
+            if d["mean"] is not None:
+                parts.append(f"{lab} {d['mean'] * scale:.{dig}f} {unit}")
+        lines.append(f"  {pol:<6} " + ", ".join(parts))
+    if "paired" in rec:
+        base, other = rec["paired_policies"]
+        for m in ("docking_time_s", list(metrics)[-1]):  # the time and the kind's effort
+            d = rec["paired"][m]
+            if d["mean_diff"] is None:
+                continue
+            ci = d["ci95"] or [float("nan")] * 2
+            p = d["p_value"]
+            lines.append(
+                f"  {other} - {base} {m}: {d['mean_diff']:+.4g} [{ci[0]:+.4g}, {ci[1]:+.4g}] "
+                f"({100 * d['relative']:+.1f} %), paired t p = {p if p is None else f'{p:.2g}'}"
+            )
+    if "faults" in rec:
+        lines.append(format_summary(rec["faults"]))
+    return "\n".join(lines)
+
+
 # ------------------------------------------------------------------------------------------------ markdown
 
 
