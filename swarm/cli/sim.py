@@ -84,6 +84,9 @@ def print_landing(res: dict) -> None:
     )
     print(f"  {status}")
     print(f"    landing error     {_fmt(res['landing_error_m'], ' cm', 100.0, 1)}")
+    if "touchdown_rel_speed_m_s" in res:  # a moving pad (landing-moving): judged at the touchdown
+        rel = _fmt(res["touchdown_rel_speed_m_s"], " m/s", digits=2)
+        print(f"    touchdown         {rel} relative to the pad (robot at {res['platform_speed_m_s']:g} m/s)")
     print(f"    landing time      {_fmt(res['landing_time_s'], ' s', digits=2)}")
     print(
         f"    energy            {_fmt(res['energy_j'], ' J', digits=0)} "
