@@ -1,7 +1,8 @@
 """The landing agent process (``python -m agents.landing SCENARIO --id UAV``; started by ``swarm launch`` for
 a landing scenario): one UAV's on-board software, the agent step of :mod:`swarm.step.landing`, over Zenoh.
 
-It subscribes its UAV's ``imu``, ``uwb``, ``gnss``, ``rangefinder`` and ``vision`` (and, for a moving pad,
+It subscribes its UAV's ``imu``, ``uwb`` (``tdoa`` on a TDoA radio), ``gnss``, ``rangefinder`` and ``vision``
+(and, for a moving pad,
 the robot's shared ``estimate`` on ``agent/<platform.id>/estimate``, waited for on its share ticks) and the
 world's events,
 declares its liveliness, and runs tick by tick in lockstep: once tick ``k``'s samples are all in (the IMU
@@ -141,6 +142,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         Imu,
         MessageError,
         Rangefinder,
+        Tdoa,
         Uwb,
         Vision,
     )
@@ -155,7 +157,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
     dt = sc.dt_s
     cond = threading.Condition()
     inbox: dict[str, dict[int, object]] = {"imu": {}, "uwb": {}, "gnss": {}, "rangefinder": {}, "vision": {},
-                                           "pad": {}}  # fmt: skip
+                                           "pad": {}, "tdoa": {}}  # fmt: skip
     state = {"k": 1, "ended": False}
     sent: deque = deque(maxlen=2)  # the last two commands sent, (tick, key, payload): sent again on a restart
     drops = DropCounter()
@@ -168,6 +170,8 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
             return wire.camera_frame(msg)
         if kind == "uwb":
             return wire.range_input(msg, n_anchors)
+        if kind == "tdoa":
+            return wire.tdoa_input(msg)
         if kind == "gnss":
             return msg.p_nav
         if kind == "rangefinder":
@@ -216,6 +220,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         return (
             k in inbox["imu"]
             and (not rates.uwb_tick(sc, k) or k in inbox["uwb"])
+            and (not rates.tdoa_tick(sc, k) or k in inbox["tdoa"])
             and (not rates.gnss_tick(sc, k) or k in inbox["gnss"])
             and (not rates.rangefinder_tick(sc, k) or k in inbox["rangefinder"])
             and (not rates.camera_tick(k) or k in inbox["vision"])
@@ -230,6 +235,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         inp.rangefinder = inbox["rangefinder"].pop(k, None)
         inp.camera = inbox["vision"].pop(k, None)
         inp.pad = inbox["pad"].pop(k, None)
+        inp.tdoa = inbox["tdoa"].pop(k, None)
         return inp
 
     pub = {getattr(keys, kind)(uid): declare_reliable(session, getattr(keys, kind)(uid))
@@ -242,6 +248,8 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
         ("vision", Vision),
     ):
         subscribe_decoded(session, getattr(keys, kind)(uid), cls, on_sample(kind), drops)
+    if sc.uwb.mode != "twr":  # a TDoA radio's differences, a Tdoa every UWB tick
+        subscribe_decoded(session, keys.tdoa(uid), Tdoa, on_sample("tdoa"), drops)
     if sc.platform.enabled and sc.platform.share_estimate:  # the moving pad's robot's shared estimate
         subscribe_decoded(session, keys.estimate(sc.platform.id), Estimate, on_sample("pad"), drops)
     n_modes = skipped = 0

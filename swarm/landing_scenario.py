@@ -11,10 +11,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from swarm.config import load_toml
-from swarm.core.imu_filter import ImuFilterParams
+from swarm.core.imu_filter import ImuFilterParams, RobustParams
 from swarm.core.landing import LandingGuidanceParams
 from swarm.core.pad_vision import PadBoardParams, PadCameraParams
 from swarm.core.range_errors import check_range_errors
+from swarm.core.tdoa_radio import TdoaParams
 from swarm.errors import ConfigError
 from swarm.kinds.quadrotor import QuadrotorParams
 from swarm.sensors.options import SensorsSpec, apply_sensor_profile
@@ -93,6 +94,12 @@ class LandingUwb:
     """``[uwb]``: anchors around the pad, ranged round-robin, only within ``max_range_m``."""
 
     enabled: bool = True
+    mode: str = "twr"
+    """``"twr"``: two-way ranging, one anchor per UWB tick (``rate_hz``, ``sigma_m``); ``"tdoa2"`` /
+    ``"tdoa3"``: the Loco Positioning TDoA radio of the docking swarm (:class:`swarm.core.tdoa_radio.
+    TdoaRadio`, the scenario's ``[tdoa]`` table): the anchors transmit, each UAV's tag only listens and
+    hands its filter the distance differences it heard since the last UWB tick, only those whose two anchors
+    are within ``max_range_m`` (the dispersed reach) of it."""
     anchors_m: tuple[Vec3, ...] = ((6.0, 6.0, 0.3), (-6.0, 6.0, 0.3), (-6.0, -6.0, 0.3), (6.0, -6.0, 2.5))
     rate_hz: float = 40.0
     sigma_m: float = 0.10
@@ -124,6 +131,8 @@ class LandingUwb:
 
     def __post_init__(self) -> None:
         check_range_errors(self)
+        if self.mode not in ("twr", "tdoa2", "tdoa3"):
+            raise ConfigError(f"uwb.mode must be 'twr', 'tdoa2' or 'tdoa3', got {self.mode!r}")
         if not (isinstance(self.outlier_probability, int | float) and 0.0 <= self.outlier_probability <= 1.0):
             raise ConfigError(f"uwb.outlier_probability must be in [0, 1], got {self.outlier_probability!r}")
         _check_positive(self, ("outlier_excess_m",), "uwb.")
@@ -333,6 +342,15 @@ class LandingScenario:
     """Several UAVs, each with its pad (``landing-swarm.toml``); empty: the one ``[vehicle]`` on ``[pad]``."""
     platform: LandingPlatform = LandingPlatform()
     """The pad on a moving ground robot (``landing-moving.toml``); disabled: a pad that stands still."""
+    tdoa: TdoaParams = field(default_factory=TdoaParams)
+    """The TDoA radio (``[tdoa]``, the docking scenario's table), used when ``uwb.mode`` is ``"tdoa2"`` or
+    ``"tdoa3"`` (which then decides its ``mode``); its ``sigma_m`` is also the filter's prior on a
+    difference's white noise."""
+    robust: RobustParams = field(default_factory=lambda: RobustParams(cusum_k=2.0))
+    """The robust TDoA update of log replay (``[robust]`` of log.toml; :func:`swarm.core._imu_nb.fuse_tdoa`:
+    per-anchor NLOS CUSUM, per-pair noise adaptation, effective sample size), used on a TDoA radio; its
+    CUSUM allowance 2.0 as a TDoA log's (:attr:`swarm.logs.reader.TdoaLog.cusum_k`: an anchor is in a
+    quarter of the differences, 1.0 holds clean anchors out)."""
     sensors: SensorsSpec = field(default_factory=SensorsSpec)
     """A sensor profile whose numbers fill the ``[uwb]`` and ``[imu]`` options the file leaves out
     (:mod:`swarm.sensors.options`); read when the file is loaded."""
@@ -365,6 +383,9 @@ class LandingScenario:
         if not (math.isfinite(self.dt_s) and 0 < self.dt_s <= 0.02):
             raise ConfigError(f"dt_s must be in (0, 0.02], got {self.dt_s!r}")
         _check_positive(self, ("end_after_landed_s", "abort_hold_tolerance_m", "abort_hold_speed_m_s"))
+        if self.uwb.mode != "twr" and self.uwb.enabled and len(self.uwb.anchors_m) < 2:
+            n = len(self.uwb.anchors_m)
+            raise ConfigError(f"uwb.anchors_m: uwb.mode {self.uwb.mode!r} needs at least 2 anchors, got {n}")
 
 
 def platform_path(sc: LandingScenario):

@@ -49,9 +49,12 @@ def run_landing_fleet(
     would publish it: ``tap.start(world, policy)``, then per tick ``tap.world(k, world, inputs)`` and
     ``tap.agent(uid, agent, command)`` for each UAV, and ``tap.end(world, agents, k, wall_s)``.
 
-    With the corner-projection camera and no tap, each UAV flies in compiled code (:func:`fly_compiled`);
-    otherwise, or with ``compiled=False``, tick by tick on the objects the processes run, with the same
-    result to the bit. ``faults``: ``(kind, start_s, duration_s, uav_ids)`` windows opened on the world before
+    With the corner-projection camera, two-way ranging and no tap, each UAV flies in compiled code
+    (:func:`fly_compiled`); otherwise, or with ``compiled=False``, tick by tick on the objects the processes
+    run, with the same result to the bit. A TDoA radio (``uwb.mode`` tdoa2/tdoa3) always runs tick by tick:
+    it hands a tag a varying number of differences a tick, from one channel every tag shares, which the
+    compiled per-UAV loop does not carry (as the docking simulation's fast path does not). ``faults``:
+    ``(kind, start_s, duration_s, uav_ids)`` windows opened on the world before
     the run (:meth:`~swarm.step.landing.LandingWorld.add_fault`), as a run-time ``swarm fault`` does in a
     launched swarm."""
     policy = policy or sc.policy
@@ -67,7 +70,7 @@ def run_landing_fleet(
     if tap is not None:
         tap.start(world, policy)
     t0_wall = time.perf_counter()
-    if compiled and tap is None and sc.camera.mode == "corners":
+    if compiled and tap is None and sc.camera.mode == "corners" and sc.uwb.mode == "twr":
         k = max(fly_compiled(world, agents[u.id], u.id, n_ticks, record_series) for u in uavs)
     else:
         k = 0

@@ -29,15 +29,18 @@ import io
 import math
 import pickle
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from swarm.core import _imu_nb as inb
 from swarm.core import _landing_nb as gnb
 from swarm.core import range_errors as rerr
 from swarm.core import rotations as rot
+from swarm.core import tdoa_radio as tr
 from swarm.core._pad_nb import camera_vector
-from swarm.core.imu_filter import ImuFilter, ImuFilterParams, chi2_gate
+from swarm.core._rot_nb import qrotate
+from swarm.core.imu_filter import ImuFilter, ImuFilterParams, PhaseParams, chi2_gate, robust_vector
 from swarm.core.landing import MODES, LandingGuidance, LandingMode
 from swarm.core.mdp import nan_to_none
 from swarm.core.pad_vision import Renderer, detect, estimate_pose, make_detector
@@ -146,7 +149,13 @@ class Rates:
         )
 
     def uwb_tick(self, sc: LandingScenario, k: int) -> bool:
-        return bool(sc.uwb.enabled and len(sc.uwb.anchors_m) and k % self.uwb == 0)
+        """A two-way range (``uwb.mode = "twr"``) this tick."""
+        return bool(sc.uwb.mode == "twr" and sc.uwb.enabled and len(sc.uwb.anchors_m) and k % self.uwb == 0)
+
+    def tdoa_tick(self, sc: LandingScenario, k: int) -> bool:
+        """A TDoA radio (``uwb.mode`` tdoa2/tdoa3) hands each tag the differences it heard since the last
+        one (on the UWB ticks, ``uwb.rate_hz``)."""
+        return bool(sc.uwb.mode != "twr" and sc.uwb.enabled and k % self.uwb == 0)
 
     def gnss_tick(self, sc: LandingScenario, k: int) -> bool:
         return bool(sc.gnss.enabled and k % self.gnss == 0)
@@ -182,6 +191,9 @@ class LandingInputs:
     pad: np.ndarray | None = None
     """A moving pad, on a share tick: the robot's estimate, position (3,) [m] and velocity (3,) [m/s] (nav),
     as one (6,) array."""
+    tdoa: np.ndarray | None = None
+    """A TDoA radio, on a UWB tick: the differences heard since the last one, (K, 3) anchor ``A``, anchor
+    ``B``, ``d_B - d_A`` [m] (:class:`swarm.step.radio.TdoaSample`'s rows; K may be 0)."""
 
 
 @dataclass
@@ -271,6 +283,10 @@ class FixedNoise:
             self.Z[: len(self._carry)] = self._carry
             self.Z[len(self._carry) :] = self.rng.standard_normal(len(self.Z) - len(self._carry))
         self.pos[0] = int(st["pos"])
+
+
+TDOA_KEY = "~tdoa"
+"""A world snapshot's entry of the TDoA radio's state (not a UAV id: ``~`` is not allowed in one)."""
 
 
 class SnapshotError(ValueError):
@@ -461,7 +477,8 @@ def world_row(sc: LandingScenario) -> np.ndarray:
         (lnb.WP_DT, sc.dt_s), (lnb.WP_G, sc.kinds.quadrotor.airframe.gravity_m_s2),
         (lnb.WP_ACC_NOISE, sc.imu.accel_noise), (lnb.WP_GYRO_NOISE, sc.imu.gyro_noise),
         (lnb.WP_UWB_SIGMA, sc.uwb.sigma_m), (lnb.WP_RATE_CAM, rates.camera), (lnb.WP_RATE_UWB, rates.uwb),
-        (lnb.WP_RATE_GNSS, rates.gnss), (lnb.WP_UWB_ON, sc.uwb.enabled and len(sc.uwb.anchors_m) > 0),
+        (lnb.WP_RATE_GNSS, rates.gnss),
+        (lnb.WP_UWB_ON, sc.uwb.mode == "twr" and sc.uwb.enabled and len(sc.uwb.anchors_m) > 0),
         (lnb.WP_GNSS_ON, sc.gnss.enabled), (lnb.WP_HIDDEN_ALWAYS, f.pad_hidden_always),
         (lnb.WP_HIDDEN_FROM, math.nan if f.pad_hidden_from_s is None else f.pad_hidden_from_s),
         (lnb.WP_HIDDEN_FOR, f.pad_hidden_for_s), (lnb.WP_CORNERS, sc.camera.mode == "corners"),
@@ -533,13 +550,60 @@ class LandingWorld:
             errors = _Errors(sc.uwb, offsets, np.random.default_rng(_seeds(seed, u.index, 18)),
                              NoiseStream.BLOCK if self.errors_on else 0)  # fmt: skip
             self.uavs[u.id] = _Truth(st, x, s, held, n_markers, render_rng, errors)
+        self.tdoa = self._tdoa_radio(sc, seed, offsets) if sc.uwb.mode != "twr" and sc.uwb.enabled else None
+        """The TDoA radio (``uwb.mode`` tdoa2/tdoa3; None on two-way ranging): one channel every UAV's tag
+        hears (:meth:`_tdoa_step`)."""
+
+    TDOA_MARGIN_S = 5.0
+    """The TDoA channel is simulated over ``max_duration_s`` plus this [s] (as the docking radio's)."""
+
+    def _tdoa_radio(self, sc: LandingScenario, seed: int, offsets: np.ndarray) -> tr.TdoaRadio:
+        """The docking swarm's TDoA radio (:class:`swarm.core.tdoa_radio.TdoaRadio`, ``[tdoa]``) for the
+        landing's anchors, one tag per UAV in the scenario's order, its own stream (``[seed, 20]``: the
+        channel, then each tag's); the range errors of each tag-anchor link from the TWR model's draws (the
+        anchors' offsets, each UAV's take-off steps), so that they enter the differences per anchor."""
+        errors = None
+        if self.err_prm[rerr.RE_ON]:
+            steps = np.array([u.ERR_STEP for u in self.uavs.values()]).reshape(len(self.uavs), -1)
+            errors = tr.LinkErrors(self.err_prm, offsets, steps)
+        params = replace(sc.tdoa, mode=sc.uwb.mode)
+        duration = sc.max_duration_s + self.TDOA_MARGIN_S
+        ss = np.random.SeedSequence([seed, 20])
+        return tr.TdoaRadio(params, self.anchors, len(self.uavs), duration, ss, errors)
+
+    def _tdoa_step(self, k: int, inputs: dict[str, LandingInputs]) -> None:
+        """A UWB tick of the TDoA radio: the packets sent up to ``t = k dt``, heard by every UAV's tag at its
+        position (the truth plus the lever arm turned by the attitude, after the tick's step) and airborne
+        flag (:meth:`swarm.core.tdoa_radio.TdoaRadio.step`, every tag, so that no tag's draws depend on
+        which UAVs are done); each active UAV's rows of anchors both within its reach (``WC_UWB_RANGE``),
+        none inside a ``uwb_dropout`` window, in ``inputs[id].tdoa``. An anchor out of reach is taken out
+        after the tag's engine (whose clock correction of it goes on as if heard: a simplification)."""
+        t = k * self.sc.dt_s
+        lever = np.asarray(self.sc.uwb.lever_arm_m, float)
+        U = list(self.uavs.values())
+        tags = np.array([u.x[0:3] + qrotate(u.x[6:10], lever) for u in U])
+        airborne = np.array([u.s[qd.S_GROUND] == 0.0 for u in U])
+        rows = self.tdoa.step(t, tags, airborne)
+        for i, (uid, u) in enumerate(self.uavs.items()):
+            if uid not in inputs:
+                continue
+            r = rows[i]
+            a, b = r[:, tr.ROW_A].astype(np.int64), r[:, tr.ROW_B].astype(np.int64)
+            near = np.linalg.norm(self.anchors - tags[i], axis=1) <= u.WC[lnb.WC_UWB_RANGE]
+            keep = near[a] & near[b]
+            if u.WC[lnb.WC_UWB_OFF] <= t < u.WC[lnb.WC_UWB_OFF + 1]:  # a dropout (False with NaN)
+                keep[:] = False
+            inputs[uid].tdoa = np.ascontiguousarray(r[keep][:, [tr.ROW_A, tr.ROW_B, tr.ROW_DDIST]])
 
     def active(self) -> list[str]:
         return [i for i, u in self.uavs.items() if not u.done]
 
     def step(self, k: int) -> dict[str, LandingInputs]:
-        """Step 1 of the tick for every UAV not done."""
-        return {i: self._step_one(u, k) for i, u in self.uavs.items() if not u.done}
+        """Step 1 of the tick for every UAV not done (and, on a TDoA radio's UWB tick, its differences)."""
+        out = {i: self._step_one(u, k) for i, u in self.uavs.items() if not u.done}
+        if self.tdoa is not None and out and self.rates.tdoa_tick(self.sc, k):
+            self._tdoa_step(k, out)
+        return out
 
     def arrays(self, u: _Truth) -> tuple:
         """The arrays of :func:`swarm.step.landing_nb.world_sample` (after ``k``, without the draws), in
@@ -611,15 +675,28 @@ class LandingWorld:
         if self.errors_on:  # (only then: a snapshot without them is the one of before)
             for uid, u in self.uavs.items():
                 snap[uid]["errs"] = u.errs.state()
+        if self.tdoa is not None:  # the tags' engines and draws (the channel is the seed's)
+            r = self.tdoa
+            snap[TDOA_KEY] = {"ts": r.ts.copy(), "tc": r.tc.copy(), "link": r.link.copy(), "k": r.k,
+                              "rng": [g.bit_generator.state for g in r.rng]}  # fmt: skip
         return snap
 
     def restore(self, snap: dict) -> None:
         """A :meth:`snapshot` into this world (built from the same scenario and seed); :class:`SnapshotError`
         if it is another world's."""
+        radio = snap.get(TDOA_KEY)
+        snap = {k: v for k, v in snap.items() if k != TDOA_KEY}
         if set(snap) != set(self.uavs):
             raise SnapshotError(
                 f"the snapshot's UAVs {sorted(snap)} are not this world's {sorted(self.uavs)}"
             )
+        if (radio is None) != (self.tdoa is None):
+            raise SnapshotError("the snapshot's radio is not this world's (uwb.mode)")
+        if radio is not None:
+            r = self.tdoa
+            r.ts[...], r.tc[...], r.link[...], r.k = radio["ts"], radio["tc"], radio["link"], radio["k"]
+            for g, st in zip(r.rng, radio["rng"], strict=True):
+                g.bit_generator.state = st
         for uid, u in self.uavs.items():
             s = snap[uid]
             restore_state({"u": u}, s["state"])
@@ -737,6 +814,18 @@ class LandingAgent:
             gyro_bias=st.gyro_bias0,
             sigma_common_m=ini.sigma_common_offset_m,
         )
+        # a TDoA radio (uwb.mode tdoa2/tdoa3): the robust update of log replay (lnb.agent_tdoa), each pair's
+        # noise from [tdoa] sigma_m (adapted upward), each anchor's NLOS state, per-pair outcome counts
+        m, sig = len(self.filt.anchors), sc.tdoa.sigma_m
+        self.TV = np.full((m, m, inb.N_TV), np.nan)
+        self.TV[:, :, inb.TV_VAR] = self.TV[:, :, inb.TV_PRIOR] = sig**2
+        self.RS = np.zeros((m, inb.N_RS))
+        inb.robust_init(self.RS, np.full(m, sig))
+        self.RP = robust_vector(sc.robust, PhaseParams(enabled=False), sig, air.ground_z_m, -1, m,
+                                g_norm_m_s2=air.gravity_m_s2)  # fmt: skip
+        self.TC = np.zeros((m, m, 3), dtype=np.int64)
+        self.TSKIP = np.zeros(1, dtype=np.int64)
+        self.TRES = np.zeros(4)
         cam = sc.camera
         self.cam_pos = np.asarray(cam.pos_body_m, float)
         half_fov = math.atan(min(cam.intrinsics.cx_px, cam.intrinsics.cy_px) / cam.intrinsics.fx_px)
@@ -875,6 +964,12 @@ class LandingAgent:
         self._load(inp)
         a = self.arrays()
         lnb.agent_fuse(self.INP, self.CIDX, self.CPX, *a[:14], self.corners, self.CAM, *a[14:])
+        if inp.tdoa is not None:
+            f = self.filt
+            rows = np.ascontiguousarray(inp.tdoa, dtype=float).reshape(-1, 3)
+            lnb.agent_tdoa(self.INP, rows, f.X[0], f.P[0], self.AF, self.HELD, self.NIS, f.prm, self.RP,
+                           f.anchors, f.ridx, self.TV, self.RS, self.TC, self.TSKIP, f._work,
+                           self.TRES)  # fmt: skip
 
     def decide(self, inp: LandingInputs, truth_p=None) -> LandingCommand:
         """The guidance and control half of a tick, on the filter's estimate after :meth:`fuse`."""
@@ -908,12 +1003,22 @@ class LandingAgent:
         g.decisions, g.modes = _Records.load(snap["records"], 0), _Records.load(snap["records"], 1)
         self._records = (_Records(0), _Records(1))
 
+    def tdoa_counts(self) -> dict[str, int]:
+        """The TDoA differences fused so far (:func:`swarm.step.landing_nb.agent_tdoa`): accepted, rejected
+        (gated or an anchor held out as NLOS), refused, and skipped (naming an anchor the scenario does not
+        have)."""
+        c = self.TC.sum(axis=(0, 1))
+        return {"tdoa_accepted": int(c[inb.ACCEPTED]), "tdoa_rejected": int(c[inb.REJECTED]),
+                "tdoa_refused": int(c[inb.REFUSED]), "tdoa_skipped": int(self.TSKIP[0])}  # fmt: skip
+
     def outcome(self) -> dict:
-        """The agent's half of a UAV's summary: modes, decisions, deviation, detections."""
+        """The agent's half of a UAV's summary: modes, decisions, deviation, detections (and on a TDoA radio
+        :meth:`tdoa_counts`)."""
         g = self.guidance
         dev = g.deviation_point
         pad = self.setup.pad
-        return {
+        tdoa = self.tdoa_counts() if self.sc.uwb.mode != "twr" else {}
+        return tdoa | {
             "final_mode": str(g.mode),
             "landing_time_s": float(self.landed_t) if self.landed_t is not None else None,
             "deviation_distance_m": float(np.linalg.norm(dev[:2] - pad[:2])) if dev is not None else None,
@@ -924,17 +1029,21 @@ class LandingAgent:
         }
 
 
+TDOA_COUNTS = ("tdoa_accepted", "tdoa_rejected", "tdoa_refused", "tdoa_skipped")
+"""What a TDoA landing's summary adds (:meth:`LandingAgent.tdoa_counts`)."""
+
+
 def landing_summary(sc: LandingScenario, policy: str, seed: int, world_half: dict, agent_half: dict,
                     end_k: int, wall: float) -> dict:  # fmt: skip
     """One UAV's summary (``swarm sim landing --json``) from the world's half (:meth:`LandingWorld.outcome`:
     where it ended) and the agent's (:meth:`LandingAgent.outcome`), in process or gathered over Zenoh."""
     w, a = world_half, agent_half
     landed = bool(a["final_mode"] == "LANDED" and w["on_ground"])
-    moving = {}
+    moving = {k: a[k] for k in TDOA_COUNTS if k in a}
     if sc.platform.enabled:  # the deck's rule: on the pad and slow enough relative to it at the touchdown
         rel = w.get("touchdown_rel_speed_m_s")
         landed = landed and rel is not None and rel <= sc.platform.touchdown_speed_m_s
-        moving = {k: w.get(k) for k in ("touchdown_t_s", "touchdown_rel_speed_m_s", "touchdown_vz_m_s",
+        moving |= {k: w.get(k) for k in ("touchdown_t_s", "touchdown_rel_speed_m_s", "touchdown_vz_m_s",
                                         "platform_start_arc_m")}  # fmt: skip
         moving["platform_speed_m_s"] = sc.platform.speed_m_s
     return moving | {

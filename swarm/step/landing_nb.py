@@ -432,6 +432,39 @@ def agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchors, ridx,
 
 
 @njit(cache=True)
+def agent_tdoa(INP, rows, X, P, AF, HELD, NIS, prm, RP, anchors, ridx, TV, RS, TC, SKIP, work, res):
+    """A TDoA radio's differences of tick ``k`` (``uwb.mode`` tdoa2/tdoa3; after :func:`agent_fuse`, at the
+    same ``t``): ``rows`` (K, 3) anchor ``A``, anchor ``B``, ``d_B - d_A`` [m], each fused in the order heard
+    as log replay fuses ``tdoa.csv`` (:func:`swarm.core._imu_nb.fuse_tdoa`: the measurement model and
+    Jacobian of Ledergerber, Hamer & D'Andrea 2015 as :func:`swarm.core._imu_nb.tdoa_row` has it, per-anchor
+    offsets entering as differences, the NLOS CUSUM per anchor, the gate, Huber, the pair's noise
+    ``TV``). Its outcome is counted per pair in ``TC`` (M, M, 3) and its squared distance goes to the
+    consistency ring and ``AF_LAST_D2`` as a range's does. A row naming an anchor the scenario does not
+    have (or the same anchor twice, or a difference that is not finite) is skipped and counted in
+    ``SKIP[0]``, never fused. Rows older than the filter's time are dropped (``AF_DROPPED``, once)."""
+    if rows.shape[0] == 0:
+        return
+    t = INP[INP_T]
+    if t < AF[AF_T]:
+        AF[AF_DROPPED] += 1.0
+        return
+    _predict_to(X, P, AF, HELD, t, prm)
+    m = anchors.shape[0]
+    for k in range(rows.shape[0]):
+        fa, fb, z = rows[k, 0], rows[k, 1], rows[k, 2]
+        if not (0.0 <= fa < m and 0.0 <= fb < m and fa == math.floor(fa) and fb == math.floor(fb)
+                and fa != fb and np.isfinite(z)):  # fmt: skip
+            SKIP[0] += 1
+            continue
+        a, b = int(fa), int(fb)
+        out = inb.fuse_tdoa(X, P, prm, RP, anchors, ridx, a, b, z, t, TV, RS, work, res)
+        TC[a, b, out] += 1
+        AF[AF_LAST_D2] = res[1]
+        if out != inb.REFUSED:
+            _nis_push(AF, NIS, res[1])
+
+
+@njit(cache=True)
 def agent_decide(INP, X, P, AF, NIS, G, GP, REF, EV, EV_n, DEC, DEC_n, cs, cp, u, act):
     """The guidance and control half of step 2 (:meth:`swarm.step.landing.LandingAgent.decide`), on the
     filter's estimate: the horizontal sigma (the larger eigenvalue of the 2 x 2 position block), the

@@ -22,10 +22,12 @@ from swarm.transport.messages import (
     Imu,
     MessageError,
     Rangefinder,
+    Tdoa,
     Truth,
     Uwb,
     Vision,
     encode,
+    encode_tdoa,
     estimate_message,
 )
 
@@ -34,7 +36,8 @@ Wire = list[tuple[str, bytes]]
 
 
 def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int, clock_every: int = CLOCK_EVERY) -> Wire:
-    """The world's tick ``k``: per UAV ``imu``, ``uwb`` (a UWB tick), ``gnss`` (a fix), ``rangefinder`` (a
+    """The world's tick ``k``: per UAV ``imu``, ``uwb`` (a UWB tick; on a TDoA radio a ``tdoa`` instead: the
+    differences heard since the last, none in it when there were none), ``gnss`` (a fix), ``rangefinder`` (a
     rangefinder tick), ``vision`` (a camera tick: the pad's corners as pixels) and ``truth``; a moving pad's
     robot's shared estimate on its share ticks (:func:`platform_estimate`); then, every ``clock_every``
     ticks, the clock."""
@@ -46,6 +49,9 @@ def world_tick(keys: Keys, world, k: int, inputs: dict, seed: int, clock_every: 
         if world.rates.uwb_tick(sc, k):
             a, z = inp.uwb if inp.uwb is not None else (world.uavs[uid].next_anchor - 1, None)
             out.append((keys.uwb(uid), encode(Uwb(k, t, int(a) % len(world.anchors), z))))
+        elif world.rates.tdoa_tick(sc, k):
+            rows = inp.tdoa if inp.tdoa is not None else np.zeros((0, 3))
+            out.append((keys.tdoa(uid), encode_tdoa(k, t, rows)))
         if inp.gnss is not None:
             out.append((keys.gnss(uid), encode(Gnss(k, t, inp.gnss, world.gnss_cov))))
         if world.rates.rangefinder_tick(sc, k):
@@ -110,6 +116,12 @@ def camera_frame(msg: Vision) -> tuple[np.ndarray, np.ndarray]:
     return quads[:, 0] // 4, msg.data.reshape(-1, 4, 2)
 
 
+def tdoa_input(msg: Tdoa) -> np.ndarray:
+    """A ``Tdoa`` as the agent step's differences (K, 3) (:attr:`swarm.step.landing.LandingInputs.tdoa`); a
+    row naming an anchor the scenario does not have is the agent step's to skip and count."""
+    return msg.rows()
+
+
 def range_input(msg: Uwb, n_anchors: int) -> tuple[int, float] | None:
     """A ``Uwb`` as the agent step's ``(anchor index, range)`` (None: no reply in this slot). MessageError for
     an anchor the scenario does not have."""
@@ -140,9 +152,11 @@ def _estimate(agent, k: int, t: float) -> Estimate:
     P = f.P[0, 0:9, 0:9]
     d2 = agent.last_d2  # the latest range's (none before the first)
     d = float(np.sqrt(d2)) if d2 is not None else 0.0
-    counts = {
-        f"range_{w}": int(f.counts[:, i].sum()) for i, w in enumerate(("accepted", "rejected", "refused"))
-    }
+    # a TDoA difference counts as a range (the dashboard's accepted rate), one naming no anchor as refused
+    tc = agent.TC.sum(axis=(0, 1))
+    tc[2] += agent.TSKIP[0]
+    outcomes = ("accepted", "rejected", "refused")
+    counts = {f"range_{w}": int(f.counts[:, i].sum() + tc[i]) for i, w in enumerate(outcomes)}
     sigma = float(np.sqrt(np.max(np.diag(P)[0:3])))
     return estimate_message(k, t, f.p_nav[0], f.v_nav[0], f.q_nav_body[0], P, sigma, d, 0.0, counts)
 

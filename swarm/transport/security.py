@@ -118,7 +118,7 @@ def rights(
     watch = {"declare_liveliness_subscriber": alive, "liveliness_query": alive}
     if mission == "landing" and name == "world":  # swarm.world.landing: every UAV's sensors, then its clock
         return {
-            "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/uwb", "agent/*/gnss",
+            "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/uwb", "agent/*/tdoa", "agent/*/gnss",
                                                 "agent/*/rangefinder", "agent/*/barometer", "agent/*/vision",
                                                 "agent/*/truth", "world/clock", "world/event"))
             + tuple(keys.estimate(p) for p in platforms),
@@ -130,8 +130,9 @@ def rights(
         uid = check_id(name[len("agent-") :], "agent id of identity")
         return {
             "put": (keys.estimate(uid), keys.guidance(uid), keys.command(uid), keys.event(uid)),
-            "declare_subscriber": (keys.imu(uid), keys.uwb(uid), keys.gnss(uid), keys.rangefinder(uid),
-                                   keys.barometer(uid), keys.vision(uid), keys.world_event(),
+            "declare_subscriber": (keys.imu(uid), keys.uwb(uid), keys.tdoa(uid), keys.gnss(uid),
+                                   keys.rangefinder(uid), keys.barometer(uid), keys.vision(uid),
+                                   keys.world_event(),
                                    *(keys.estimate(p) for p in platforms)),
             "liveliness_token": (keys.alive("agent", uid),),
             **watch,

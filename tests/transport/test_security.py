@@ -142,17 +142,17 @@ def test_each_identity_may_subscribe_to_what_its_process_reads_and_agents_never_
 
 def test_a_landing_swarms_world_also_sends_ranges_and_fixes_and_its_agents_read_their_own(material):
     """Mission ``landing`` (``swarm launch landing-swarm --secure``): the landing world puts every UAV's
-    imu, uwb, gnss, rangefinder, barometer, vision and truth (it is its own radio network: there is no
-    mothership) and reads the commands, the faults and the run controls; a landing agent reads its own
-    sensors, gnss included, never another UAV's, and puts what a docking agent puts; a docking world may put
-    neither ranges nor fixes."""
+    imu, uwb (or tdoa, on a TDoA radio), gnss, rangefinder, barometer, vision and truth (it is its own
+    radio network: there is no mothership) and reads the commands, the faults and the run controls; a
+    landing agent reads its own sensors, gnss included, never another UAV's, and puts what a docking agent
+    puts; a docking world may put neither ranges nor fixes."""
     from swarm.transport.security import access_control, identities, rights
 
     acl = access_control(K, identities(VEHICLES), "landing")
     keys = sorted(set(ALL_KEYS) | {K.gnss(v) for v in VEHICLES} | {K.rangefinder(v) for v in VEHICLES}
                   | {K.barometer(v) for v in VEHICLES})  # fmt: skip
     world_puts = {key for key in keys if _may(acl, "world", "put", key)}
-    sensors = ("imu", "uwb", "gnss", "rangefinder", "barometer", "vision", "truth")
+    sensors = ("imu", "uwb", "tdoa", "gnss", "rangefinder", "barometer", "vision", "truth")
     assert world_puts == {getattr(K, kind)(v) for kind in sensors for v in VEHICLES} | {
         K.world_clock(),
         K.world_event(),
@@ -161,7 +161,7 @@ def test_a_landing_swarms_world_also_sends_ranges_and_fixes_and_its_agents_read_
         K.command(v) for v in VEHICLES
     } | {K.fault(), K.run_control()}  # and the run-time faults (swarm fault), pause and resume
     reads = {key for key in keys if _may(acl, "agent-chaser", "declare_subscriber", key)}
-    own = (K.imu, K.uwb, K.gnss, K.rangefinder, K.barometer, K.vision)
+    own = (K.imu, K.uwb, K.tdoa, K.gnss, K.rangefinder, K.barometer, K.vision)
     assert reads == {key("chaser") for key in own} | {K.world_event()}
     # what a docking agent puts, but the commands batch (a landing host sends each UAV's on its own key)
     landing_puts = MAY_PUT["agent-chaser"] - {K.commands("chaser")}
