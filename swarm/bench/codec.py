@@ -3,10 +3,10 @@
 For each message type of the hot path (``swarm/transport/messages.py``): building it in Python (its
 constructor's checks), :func:`~swarm.transport.messages.encode`, the sender's fast path where the world, the
 mothership or an agent has one (``encode_imu``, ``encode_uwb``, ``encode_vision``, ``encode_estimate``,
-``encode_command``, ``encode_truth``), and decoding its payload by the msgspec fast path (what every
-receiver runs) and by the reference checks alone (what it ran before issue 13, and still runs for a payload
-the fast path leaves to it). Times are medians of repeated blocks, so a burst of load on a shared machine
-moves them less than a mean; the ratio of the two decodes is measured in one run.
+``encode_command``, ``encode_truth``), and decoding its payload by the msgspec decoding (what every
+receiver runs: the message's declaration is its decoder) and by the reference checks alone (what it runs for
+a payload the msgspec decoding leaves to it). Times are medians of repeated blocks, so a burst of load on a
+shared machine moves them less than a mean; the ratio of the two decodes is measured in one run.
 """
 
 from __future__ import annotations
@@ -113,15 +113,13 @@ def _us(fn, repeat: int, number: int) -> float:
 
 
 def run(preset: dict) -> dict:
-    from dataclasses import fields
-
     from swarm.transport import messages as m
 
     encoders = fast_encoders()
     rows = []
     for msg in examples():
         cls, payload = type(msg), m.encode(msg)
-        kwargs = {f.name: getattr(msg, f.name) for f in fields(msg)}
+        kwargs = {name: getattr(msg, name) for name in msg.__struct_fields__}
         assert m._decode_fast(payload, cls) == msg  # the fast path takes it: what is timed is what runs
         r, n = preset["repeat"], preset["number"]
         fast = encoders.get(cls.__name__)

@@ -7,7 +7,6 @@ messages, and the core's own enums for the mirrored constants.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import re
@@ -17,6 +16,7 @@ import threading
 from pathlib import Path
 
 import msgpack
+import msgspec
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -25,6 +25,7 @@ from hypothesis.extra.numpy import arrays
 
 from swarm.core.mdp import DECISION_KEYS
 from swarm.errors import ConfigError, MessageError
+from swarm.transport import declared
 from swarm.transport import messages as msgs
 from swarm.transport.keys import ID_PATTERN
 from swarm.transport.messages import (
@@ -223,7 +224,7 @@ def imu_batches(draw):
 def vision_batches(draw):
     vids = tuple(draw(st.lists(ids, min_size=1, max_size=4, unique=True)))
     k, t = draw(ticks), draw(times)
-    frames = tuple(encode(dataclasses.replace(draw(visions()), tick=k, t_s=t)) for _ in vids)
+    frames = tuple(encode(msgspec.structs.replace(draw(visions()), tick=k, t_s=t)) for _ in vids)
     return VisionBatch(k, t, vids, frames)
 
 
@@ -351,7 +352,7 @@ def test_round_trip_gives_the_message_back(cls, data):
 def test_arrays_sent_as_plain_lists_decode_to_the_same_message(cls, data):
     msg = data.draw(STRATEGIES[cls])
     as_lists = {"v": SCHEMA_VERSION, "type": cls.__name__}
-    for f in dataclasses.fields(msg):
+    for f in msgspec.structs.fields(msg):
         value = getattr(msg, f.name)
         as_lists[f.name] = value.tolist() if isinstance(value, np.ndarray) else value
     assert decode(pack(as_lists), cls) == msg
@@ -380,7 +381,7 @@ def test_any_int_or_float_dtype_and_byte_order_decodes_to_float64(dtype):
 def test_decoded_arrays_are_writable_float64_copies(cls):
     payload = encode(VALID[cls])
     msg = decode(payload, cls)
-    for f in dataclasses.fields(msg):
+    for f in msgspec.structs.fields(msg):
         a = getattr(msg, f.name)
         if isinstance(a, np.ndarray):
             assert a.dtype == np.float64 and a.flags.writeable and a.flags.owndata, f.name
@@ -444,7 +445,7 @@ CASES = [
     (Tdoa, "anchor_a", [0, 2**31, 7], "anchor_a[1]: must be <="),
     (Tdoa, "anchor_a", [0, 2.0, 7], "anchor_a[1]: expected an integer"),
     (Tdoa, "anchor_a", [0, True, 7], "anchor_a[1]: expected an integer"),
-    (Tdoa, "anchor_a", "027", "anchor_a: expected an array of anchor ids"),
+    (Tdoa, "anchor_a", "027", "anchor_a: expected an array"),
     (Tdoa, "anchor_b", [1, 5], "anchor_b: 2 entries for 3 in anchor_a"),
     (Tdoa, "anchor_b", [1, 2, 3], "anchor_b[1]: the same anchor as anchor_a[1] (2)"),
     (Tdoa, "anchor_b", [1, None, 3], "anchor_b[1]: expected an integer"),
@@ -573,6 +574,7 @@ CASES = [
     (CommandBatch, "ids", [], "ids: 0 entries, expected 1 to 256"),
     (CommandBatch, "ids", ["chaser0", "chaser0"], "ids: duplicate ids"),
     (CommandBatch, "ids", ["chaser0"], "commands: 2 entries for 1 ids"),
+    (CommandBatch, "ids", [[], "target0"], "ids[0]: expected a string"),  # unhashable: no cache lookup
     (CommandBatch, "commands", [b"\x80", 7], "commands[1]: expected the bytes of a Command message"),
     (VisionBatch, "ids", [], "ids: 0 entries, expected 1 to 256"),
     (VisionBatch, "ids", ["chaser0", "chaser0"], "ids: duplicate ids"),
@@ -641,7 +643,7 @@ def test_decoding_a_bad_field_raises_message_error_naming_it(case):
 @pytest.mark.parametrize("case", [c for c in CASES if c[2] is not DELETE], ids=_case_id)
 def test_building_a_bad_message_in_python_raises_the_same_error(case):
     cls, path, bad, expected = case
-    kwargs = {f.name: getattr(VALID[cls], f.name) for f in dataclasses.fields(cls)}
+    kwargs = {f.name: getattr(VALID[cls], f.name) for f in msgspec.structs.fields(cls)}
     with pytest.raises(MessageError) as exc:
         cls(**_mutated(kwargs, path, bad))
     assert str(exc.value).startswith(expected), str(exc.value)
@@ -670,7 +672,7 @@ def test_pixels_need_two_columns():
 def test_covariance_asymmetry_within_the_relative_tolerance_is_accepted():
     p = np.eye(9)
     p[0, 1] = 1e-12  # 1e-12 <= 1e-9 * max|P| = 1e-9
-    kwargs = {f.name: getattr(VALID[Estimate], f.name) for f in dataclasses.fields(Estimate)}
+    kwargs = {f.name: getattr(VALID[Estimate], f.name) for f in msgspec.structs.fields(Estimate)}
     assert Estimate(**{**kwargs, "cov": p}).cov[0, 1] == 1e-12
 
 
@@ -776,7 +778,7 @@ def test_arbitrary_msgpack_structures_are_dropped_and_counted(obj, cls):
 def envelopes(draw):
     """The right ``v`` and ``type`` with arbitrary values for some of the fields: mostly invalid."""
     cls = draw(st.sampled_from(ALL))
-    names = [f.name for f in dataclasses.fields(cls)]
+    names = [f.name for f in msgspec.structs.fields(cls)]
     body = draw(st.fixed_dictionaries({}, optional={n: msgpack_values for n in names}))
     return cls, {"v": SCHEMA_VERSION, "type": cls.__name__, **body}
 
@@ -996,7 +998,7 @@ def test_a_bad_pose_frame_is_refused_on_the_wire_and_in_python(data, ids, expect
 def _plain_fields(obj: dict, cls) -> dict:
     """The fields of a message decoded with plain ``msgpack`` and numpy, as any client would."""
     out = {}
-    for f in dataclasses.fields(cls):
+    for f in msgspec.structs.fields(cls):
         value = obj[f.name]
         if isinstance(value, dict) and set(value) == {"dtype", "shape", "data"}:
             value = np.frombuffer(value["data"], value["dtype"]).reshape(value["shape"])
@@ -1011,7 +1013,7 @@ def test_every_message_type_decodes_with_plain_msgpack(cls, data):
     obj = msgpack.unpackb(encode(msg), raw=False)
     assert obj["v"] == SCHEMA_VERSION and obj["type"] == cls.__name__
     plain = _plain_fields(obj, cls)
-    for f in dataclasses.fields(cls):
+    for f in msgspec.structs.fields(cls):
         mine, theirs = getattr(msg, f.name), plain[f.name]
         if isinstance(mine, np.ndarray):
             assert isinstance(theirs, np.ndarray) and np.array_equal(mine, theirs), f.name
@@ -1022,17 +1024,11 @@ def test_every_message_type_decodes_with_plain_msgpack(cls, data):
     assert cls(**plain) == msg  # and the plain decoding builds the same message
 
 
-FAST = [cls for cls in ALL if cls in msgs._FAST]
-
-
-def test_the_fast_path_covers_the_messages_of_every_tick():
-    assert set(FAST) == {
-        Imu, ImuBatch, Uwb, UwbBatch, Vision, VisionBatch, Estimate, Guidance, Command, CommandBatch, Truth,
-        TruthBatch, Bundle, Clock,
-    }  # fmt: skip
+FAST = ALL  # msgspec decodes every message: its declaration is its decoder
 
 
 @pytest.mark.parametrize("cls", FAST, ids=lambda c: c.__name__)
+@settings(suppress_health_check=[HealthCheck.too_slow])  # (the Tdoa and batch strategies draw a lot)
 @given(data=st.data())
 def test_the_fast_path_takes_every_message_this_codec_writes(cls, data):
     msg = data.draw(STRATEGIES[cls])
@@ -1073,7 +1069,7 @@ def arrays_at_edges(draw, shape=None):
 def mutated(draw):
     cls = draw(st.sampled_from(FAST))
     obj = wire(draw(STRATEGIES[cls]))
-    for name in draw(st.lists(st.sampled_from([f.name for f in dataclasses.fields(cls)] + ["v", "type"]),
+    for name in draw(st.lists(st.sampled_from([f.name for f in msgspec.structs.fields(cls)] + ["v", "type"]),
                               min_size=1, max_size=3)):  # fmt: skip
         old = obj.get(name)
         shape = old["shape"] if isinstance(old, dict) and "shape" in old else None  # an array field's
@@ -1123,43 +1119,42 @@ def estimates_at_edges(draw):
 
 @pytest.fixture(scope="module")
 def compiled_checks():
-    """The compiled checks, loaded (numba: some 0.4 s the first time, outside hypothesis' deadline)."""
-    msgs._estimate_arrays(np.zeros(3), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.eye(9))
-    return msgs._ESTIMATE_ARRAYS
+    """The compiled covariance check, loaded (numba: ~0.4 s the first time, outside hypothesis' deadline)."""
+    declared.load_compiled()
+    return declared._COV_KERNEL
 
 
 @pytest.mark.parametrize("compiled", [False, True], ids=["numpy checks", "compiled checks"])
 @settings(max_examples=400, suppress_health_check=[HealthCheck.too_slow])
 @given(case=estimates_at_edges())
-def test_an_estimate_decodes_the_same_with_the_compiled_array_checks_or_without(
+def test_an_estimate_decodes_the_same_with_the_compiled_covariance_check_or_without(
     compiled_checks, compiled, case
 ):
-    """A process that encodes estimates has the compiled array checks loaded (``_codec_nb``), and its
-    decoder then checks an estimate's four arrays in one call (a chaser decodes its target's on its imu's
+    """A process that encodes estimates has the compiled covariance check loaded (``_codec_nb``), and its
+    decoder then checks an estimate's covariance in one call (a chaser decodes its target's on its imu's
     path); one that never encodes (a viewer) keeps numpy's checks. Either way the fast path takes exactly
     what the reference accepts, to the same message, and leaves the rest to it."""
     msg, obj = case
-    loaded = compiled_checks
     payload = pack(obj)
     try:
-        msgs._ESTIMATE_ARRAYS = loaded if compiled else None
+        declared._COV_KERNEL = compiled_checks if compiled else None
         fast = msgs._decode_fast(payload, Estimate)
     finally:
-        msgs._ESTIMATE_ARRAYS = loaded
+        declared._COV_KERNEL = compiled_checks
     reference = _left_to_the_reference_unless_it_agrees(fast, payload, Estimate)
     if reference is not None and obj == wire(msg):  # as written: the fast path takes it
         assert fast == msg
 
 
-def test_with_the_compiled_checks_loaded_a_plain_estimate_skips_numpys(monkeypatch):
-    """The compiled checks, not numpy's, decide a plain estimate once loaded (else the test above would
-    test one path twice); numpy's still decide one they do not call plain (here: off symmetry)."""
+def test_with_the_compiled_check_loaded_a_plain_covariance_skips_numpys(monkeypatch):
+    """The compiled check, not numpy's, decides a plain covariance once loaded (else the test above would
+    test one path twice); numpy's still decides one it does not call plain (here: off symmetry)."""
     rng = np.random.default_rng(3)
     args = _estimate_args(rng)
-    payload = msgs.encode_estimate(*args)  # (loads the compiled checks)
-    assert msgs._ESTIMATE_ARRAYS is not None
+    payload = msgs.encode_estimate(*args)  # (loads the compiled check)
+    assert declared._COV_KERNEL is not None
     with monkeypatch.context() as m:
-        m.setattr(msgs, "_covariance", lambda p, name: pytest.fail("numpy's covariance check ran"))
+        m.setattr(declared, "check_covariance", lambda p, name: pytest.fail("numpy's covariance check ran"))
         got = msgs._decode_fast(payload, Estimate)
     assert got is not None and np.array_equal(got.cov, args[5]) and got.tick == args[0]
     obj = msgpack.unpackb(payload)
@@ -1204,12 +1199,14 @@ def _same(args):
 
 
 def _through_the_fast_path(monkeypatch, fast, reference, make, rng, n=200):
-    """``n`` seeded cases of ``make(rng)``, each given the message's bytes by ``fast`` with the module's
-    ``encode`` (every fast path's fallback) failing meanwhile: the fast path, not the fallback, gave them."""
-    with monkeypatch.context() as m:
-        m.setattr(msgs, "encode", lambda msg: pytest.fail(f"{type(msg).__name__} took the reference path"))
-        for _ in range(n):
-            assert _same_as(fast, reference, make(rng)) is not None
+    """``n`` seeded cases of ``make(rng)``, each given the message's bytes by ``fast``, and the sender's
+    arrays left as they were (the fast path checks them without a copy, and must not change them)."""
+    for _ in range(n):
+        args = make(rng)
+        before = [a.copy() if isinstance(a, np.ndarray) else a for a in args]
+        assert _same_as(fast, reference, args) is not None
+        for a, b in zip(args, before, strict=True):
+            assert not isinstance(a, np.ndarray) or np.array_equal(a, b)
 
 
 def _decided_as_the_message(fast, reference, make, rng, variants, accepted):
@@ -1275,7 +1272,7 @@ def test_estimate_and_payload_gives_what_a_receiver_decodes():
         msg, payload = estimate_and_payload(*args)
         assert payload == _same(args)
         want = decode(payload, Estimate)
-        for f in dataclasses.fields(Estimate):
+        for f in msgspec.structs.fields(Estimate):
             got, exp = getattr(msg, f.name), getattr(want, f.name)
             if isinstance(exp, np.ndarray):
                 assert got.dtype == exp.dtype and got.shape == exp.shape and np.array_equal(got, exp), f.name
