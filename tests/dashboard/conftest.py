@@ -96,6 +96,7 @@ def launch_swarm(
     secure: bool = False,
     timeout_s: float | None = None,
     scenario: str = "docking",
+    sets: tuple[str, ...] = (),
 ) -> LaunchedSwarm:
     """``swarm launch SCENARIO --agents PAIRS`` (lockstep, paced at real time) with its dashboard on a
     free port (module docstring). The pace leaves the cores to the browser: a lockstep swarm stepping as
@@ -103,7 +104,7 @@ def launch_swarm(
     a tenth of the docking scenario's speed so that the run lasts longer than the browser tests, and the
     run may last 1000 simulated seconds. ``secure``: ``--secure`` (mutual TLS and Zenoh's ACL, certificates
     made by the launcher; its router listens on a free TLS port); ``timeout_s``: the launcher's
-    ``--timeout``."""
+    ``--timeout``; ``sets``: more ``--set`` overrides (``uwb.mode=tdoa3``)."""
     namespace = new_namespace("dash")
     listen = [] if secure else ["--listen", loopback(free_port())]
     extra = (["--secure"] if secure else []) + ([] if timeout_s is None else ["--timeout", str(timeout_s)])
@@ -111,7 +112,8 @@ def launch_swarm(
         [sys.executable, "-m", "swarm.cli.main", "launch", scenario, "--agents", str(pairs),
          "--clock", "lockstep", "--pace", PACE, "--dashboard-port", "0", "--namespace", namespace, *listen,
          *extra,
-         "--set", "guidance.approach_speed_m_s=0.002", "--set", "sim.max_duration_s=1000"]
+         "--set", "guidance.approach_speed_m_s=0.002", "--set", "sim.max_duration_s=1000",
+         *(arg for o in sets for arg in ("--set", o))]
     )  # fmt: skip
     config = None
     if secure:
