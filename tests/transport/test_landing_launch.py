@@ -21,6 +21,7 @@ import pytest
 from swarm.errors import SwarmError
 from swarm.landing_scenario import load_landing
 from swarm.sim.landing import run_landing_fleet
+from swarm.step.landing import TDOA_COUNTS
 from swarm.transport.keys import Keys
 from swarm.transport.messages import (
     CLOCK_EVERY,
@@ -402,7 +403,10 @@ MOVING_KEYS = ("touchdown_t_s", "touchdown_rel_speed_m_s", "touchdown_vz_m_s", "
 @pytest.mark.parametrize(
     "scenario, overrides",
     [
-        ("landing-swarm", ()),
+        # on the TDoA3 radio (issue 45; two-way ranging is the launched fixture's above): each UAV's
+        # differences go out on agent/<id>/tdoa under the access control, a Tdoa every UWB tick that the
+        # agent waits for; a right missing would stall the run, a row missed or altered would change it
+        ("landing-swarm", ("--set", "uwb.mode=tdoa3")),
         # the moving-platform landing (issue 44's third mission): the robot's shared estimate goes out on
         # agent/robot/estimate from the world, under the access control, and the UAV waits for it on its share
         # ticks: a right missing would stall the run, a sample missed or altered would change it
@@ -441,11 +445,14 @@ def test_a_secure_landing_swarm_lands_as_swarm_sim_with_every_process_on_its_own
     got = json.loads(out.read_text())
     want = run_landing_fleet(sc, seed=0, record_series=False)
     moving = MOVING_KEYS if sc.platform.enabled else ()
+    tdoa = TDOA_COUNTS if sc.uwb.mode != "twr" else ()
     for uid, w in want["uavs"].items():
         g = got["uavs"][uid]
-        for key in ("landed", "landing_error_m", "landing_time_s", "energy_j", "modes", *moving):
+        for key in ("landed", "landing_error_m", "landing_time_s", "energy_j", "modes", *moving, *tdoa):
             assert g[key] == w[key], (uid, key)
         assert g["landed"], uid
+    if tdoa:  # every UAV heard and fused differences (none skipped: the world names only its anchors)
+        assert all(g["tdoa_accepted"] > 0 and g["tdoa_skipped"] == 0 for g in got["uavs"].values()), got
     assert not d.exists()  # the launcher removed its certificates and keys
 
 
@@ -454,15 +461,16 @@ def test_new_seed_ends_the_run_and_the_launcher_starts_the_next_which_is_swarm_s
     landing world ends the run (``run_end`` reason ``new_seed``, ``next_seed`` 7); the launcher stops the
     world and the agent and starts a run of seed 7, which with ``--until-docked`` is the last: its summary
     equals ``swarm sim landing --seed 7``. Paced at scaled:5 so that the first run is still on when the
-    control comes (one landing: ~15 s simulated)."""
+    control comes (one landing: ~15 s simulated). On the TDoA3 radio (issue 45: ``swarm launch landing --set
+    uwb.mode=tdoa3`` == ``swarm sim``; the swarm's is the secure test's)."""
     from agents.landing import warm_up
 
-    sc = load_landing("landing")
+    sc = load_landing("landing", {"uwb.mode": "tdoa3"})
     warm_up(sc, 0, 0, sc.policy)
     ns, out, endpoint = f"newseed-{free_port()}", tmp_path / "run.json", loopback(free_port())
     args = [sys.executable, "-m", "swarm.cli.main", "launch", "landing", "--headless", "--until-docked",
             "--seed", "0", "--namespace", ns, "--listen", endpoint, "--json", str(out), "--pace", "scaled:5",
-            "--timeout", "400"]  # fmt: skip
+            "--set", "uwb.mode=tdoa3", "--timeout", "400"]  # fmt: skip
     with Procs() as procs:
         proc = procs.start(args)
         proc.wait_for_line(r"^swarm up: .*, seed 0, ", 300.0)
@@ -489,7 +497,7 @@ def test_new_seed_ends_the_run_and_the_launcher_starts_the_next_which_is_swarm_s
     for uid, w in want["uavs"].items():
         g = got["uavs"][uid]
         for key in ("landed", "landing_error_m", "energy_j", "landing_time_s", "final_mode", "retries",
-                    "pad_frames", "deviation_distance_m", "sim_time_s", "start_m"):  # fmt: skip
+                    "pad_frames", "deviation_distance_m", "sim_time_s", "start_m", *TDOA_COUNTS):  # fmt: skip
             assert g[key] == w[key], (uid, key, g[key], w[key])
         assert g["modes"] == w["modes"], uid
 
