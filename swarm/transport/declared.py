@@ -486,6 +486,7 @@ class Message(msgspec.Struct, frozen=True, eq=False, gc=False):
 
     _prefix: typing.ClassVar[bytes] = b""
     _decoder: typing.ClassVar[Any] = None
+    _fields: typing.ClassVar[tuple[tuple[str, bool], ...]] = ()
 
     def __post_init__(self) -> None:
         self._check()  # the checks :func:`declare` generated for the class
@@ -687,6 +688,9 @@ def declare(cls: type[M]) -> type[M]:
         "type"
     ) + msgpack.packb(cls.__name__, use_bin_type=True)  # fmt: skip
     cls._decoder = msgspec.msgpack.Decoder(cls)
+    cls._fields = tuple(
+        (f.name, f.required) for f in msgspec.structs.fields(cls)
+    )  # (fields() evaluates hints)
     return cls
 
 
@@ -785,9 +789,9 @@ def decode_reference(data: bytes | bytearray, expected: type[M]) -> M:
     if obj.get("type") != name:
         raise MessageError(f"type: expected {name!r}, got {show(obj.get('type'))}")
     kwargs = {}
-    for f in msgspec.structs.fields(expected):
-        if f.name in obj:
-            kwargs[f.name] = obj[f.name]
-        elif f.required:
-            raise MessageError(f"{f.name}: missing")
+    for name, required in expected._fields:
+        if name in obj:
+            kwargs[name] = obj[name]
+        elif required:
+            raise MessageError(f"{name}: missing")
     return expected(**kwargs)
