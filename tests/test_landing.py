@@ -97,25 +97,17 @@ def test_the_rendered_camera_lands_as_well():
     assert r["landed"] and r["landing_error_m"] <= sc.pad_tolerance_m and r["pad_detections"] > 50
 
 
-def test_swarm_sim_landing_writes_the_json(tmp_path):
+def test_swarm_sim_landing_writes_the_json(tmp_path, capsys):
+    # in this process (swarm.cli.main.main, what `python -m swarm` runs): its kernels are loaded already,
+    # a started Python would load them again (~5 s of CPU)
+    from swarm.cli.main import main
+
     out = tmp_path / "landing.json"
-    args = [
-        sys.executable,
-        "-m",
-        "swarm.cli.main",
-        "sim",
-        "landing",
-        "--seed",
-        "1",
-        "--json",
-        str(out),
-        "--set",
-        "dispersions.enabled=false",
-    ]
-    p = subprocess.run(args, capture_output=True, text=True, timeout=300)
-    assert p.returncode == 0, p.stderr
+    rc = main(["sim", "landing", "--seed", "1", "--json", str(out), "--set", "dispersions.enabled=false"])
+    stdout, stderr = capsys.readouterr()
+    assert rc == 0, stderr
     res = json.loads(out.read_text())
-    assert res["landed"] and "LANDED" in p.stdout and res["policy"] == "mdp"
+    assert res["landed"] and "LANDED" in stdout and res["policy"] == "mdp"
 
 
 def test_a_bad_landing_scenario_names_the_field():
@@ -204,31 +196,20 @@ def test_a_fleet_s_uavs_fly_their_own_streams_and_the_scenario_refuses_shared_pa
         (["docking", "--mcap", "/no/such/dir/run.mcap"], "--mcap: no such directory"),
     ],
 )
-def test_swarm_sim_mcap_refuses_what_it_cannot_write(args, expected):
-    r = subprocess.run(
-        [sys.executable, "-m", "swarm", "sim", *args], capture_output=True, text=True, timeout=120
-    )
-    assert r.returncode == 2 and expected in r.stderr, r.stderr
+def test_swarm_sim_mcap_refuses_what_it_cannot_write(args, expected, capsys):
+    from swarm.cli.main import main  # in this process: a started Python costs ~1.6 s of CPU
+
+    rc = main(["sim", *args])
+    err = capsys.readouterr().err
+    assert rc == 2 and expected in err, err
 
 
-def test_a_landing_campaign_refuses_a_fleet_rather_than_fly_only_its_first_uav(tmp_path):
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "swarm",
-            "montecarlo",
-            "landing-swarm",
-            "--runs",
-            "2",
-            "--out",
-            str(tmp_path / "o"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert r.returncode == 2 and "a landing campaign flies one UAV per run" in r.stderr, r.stderr
+def test_a_landing_campaign_refuses_a_fleet_rather_than_fly_only_its_first_uav(tmp_path, capsys):
+    from swarm.cli.main import main  # in this process: a started Python costs ~1.6 s of CPU
+
+    rc = main(["montecarlo", "landing-swarm", "--runs", "2", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "a landing campaign flies one UAV per run" in err, err
     assert not (tmp_path / "o").exists()
 
 
