@@ -23,7 +23,9 @@ What is on the wire, and so what is measured:
 
 The window (both kinds): the samples from the newest one at or before ``t_n - window_s`` (the base) to the
 newest, ``t_n``; a rate is what came after the base over ``t_n - t_0``. A sample earlier than the newest
-(a new run) or a counter that went down (a restarted agent) starts the window again. A tag's differences a
+(a new run) or a counter that went down (a restarted agent) starts the window again; a window whose newest
+sample is more than ``window_s`` older than the world's clock is stale (a tag, or the radio, that went
+silent: its last rates would read as current) and reads as not measured. A tag's differences a
 second are counted over its accepted rate's window (the estimates' ``t_0``, ``t_n``) when the slots kept
 reach it, so that the two compare (accepted <= heard); the anchors' over their own.
 """
@@ -102,6 +104,10 @@ class SlotWindow:
     def _base(self) -> tuple[float, dict[int, int], int]:
         return self._at_or_before(self._slots[-1][0] - self.window_s) or self._slots[0]
 
+    def newest_s(self) -> float | None:
+        """``t_n`` [s], None before a slot."""
+        return self._slots[-1][0] if self._slots else None
+
     def span_s(self) -> float:
         """``t_n - t_0`` [s]: 0 before two slots."""
         return self._slots[-1][0] - self._base()[0] if self._slots else 0.0
@@ -153,6 +159,10 @@ class CounterWindow:
                 s.pop()
         s.append((float(t_s), tuple(values)))
         _trim(s, self.window_s)
+
+    def newest_s(self) -> float | None:
+        """``t_n`` [s], None before a sample."""
+        return self._samples[-1][0] if self._samples else None
 
     def deltas(self) -> tuple[float, float, tuple[int, ...]] | None:
         """``(t_0, t_n, v_n - v_0)``; None before two samples at different times."""
@@ -248,9 +258,15 @@ class RadioRates:
         for w in (*self._slots.values(), *self._counts.values()):
             w.clear()
 
-    def snapshot(self, anchor_ids: Iterable[int]) -> RadioSnap:
-        """The rates now, for the anchors ``anchor_ids`` (those of the ``Anchors`` message)."""
-        per_tag = {tag: w.rates_hz() for tag, w in self._slots.items()}
+    def snapshot(self, anchor_ids: Iterable[int], now_s: float | None = None) -> RadioSnap:
+        """The rates now, for the anchors ``anchor_ids`` (those of the ``Anchors`` message); ``now_s`` the
+        world's clock [s], if known (stale windows, module docstring)."""
+
+        def fresh(w: SlotWindow | CounterWindow) -> bool:
+            t = w.newest_s()
+            return t is not None and (now_s is None or t >= now_s - self.window_s)
+
+        per_tag = {tag: w.rates_hz() if fresh(w) else None for tag, w in self._slots.items()}
         measured = [r for r in per_tag.values() if r is not None]
         anchors = []
         if measured:  # (a TDoA radio: only Tdoa messages fill the slot windows)
@@ -271,7 +287,7 @@ class RadioRates:
             if rates is not None:
                 heard_hz, span = sum(rates.values()), self._slots[tag].span_s()
             cw = self._counts.get(tag)
-            d = cw.deltas() if cw is not None else None
+            d = cw.deltas() if cw is not None and fresh(cw) else None
             if d is not None:
                 t0, t1, (acc, rej, ref) = d
                 accepted_hz = acc / (t1 - t0)

@@ -525,6 +525,7 @@ class SwarmState:
         with ``radio`` (a panel frame)."""
         seen = trail_versions or {}
         with self._lock:
+            now = self.clock.t_s if self.clock is not None else None
             agents = {}
             for agent_id, v in self.agents.items():
                 versions = (v.truth_trail.version, v.estimate_trail.version)
@@ -560,7 +561,7 @@ class SwarmState:
                 faults=tuple(self._faults),
                 faults_version=self._faults_version,
                 clock_mode=self.clock_mode,
-                radio=self.radio.snapshot(self._anchors[0]) if radio else None,
+                radio=self.radio.snapshot(self._anchors[0], now) if radio else None,
             )
 
 

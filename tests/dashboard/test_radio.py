@@ -152,6 +152,20 @@ def test_twr_rates_are_each_tags_ranges_from_its_filters_counters() -> None:
     assert "ranges/s" in text and "| chaser | 45.0 | 40.0 | 11 % |" in text and "packets/s" not in text
 
 
+def test_a_tag_silent_for_longer_than_the_window_reads_as_not_measured() -> None:
+    """A tag whose slots and estimates stopped at 1 s (its agent, or the radio, gone): at the world's 2.5 s
+    its rates would read as current; they read as not measured once the clock is a window (1 s) past them."""
+    r = RadioRates("tdoa3", window_s=1.0)
+    for k in range(11):
+        r.on_tdoa("a", _tdoa(0.1 * k, [0]))
+    r.on_counts("a", 0.0, {})
+    r.on_counts("a", 1.0, {"range_accepted": 10})
+    (tag,) = r.snapshot((0, 1), now_s=2.0).tags  # 1 s behind the clock: still the window's
+    assert (tag.heard_hz, tag.accepted_hz) == pytest.approx((10.0, 10.0))
+    snap = r.snapshot((0, 1), now_s=2.5)
+    assert snap.anchors == () and (snap.tags[0].heard_hz, snap.tags[0].accepted_hz) == (None, None)
+
+
 def test_a_tdoa_panel_before_any_slot_says_so_instead_of_zero_rates() -> None:
     snap = RadioRates("tdoa2").snapshot((0, 1))
     assert snap.anchors == () and "no distance differences yet" in radio_markdown(snap)
