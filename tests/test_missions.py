@@ -173,6 +173,19 @@ def test_the_campaign_metrics_are_the_campaign_runners():
     assert MISSIONS["landing"].campaign_metrics() == tuple(landing.METRICS)
 
 
+def test_the_summary_metrics_are_what_a_run_of_each_mission_reports():
+    """A short run of each stack (a few simulated seconds: the goal is not reached, the fields exist)."""
+    from swarm.sim.docking import run_docking
+    from swarm.sim.landing import run_landing
+
+    docking, landing = MISSIONS["docking"], MISSIONS["landing"]
+    res = run_docking(docking.load("docking", {"sim.max_duration_s": 2.0}), seed=0, record_series=False)
+    entry = res["chasers"]["chaser"]  # docking's summary fields are each chaser's
+    assert {docking.success_key, *docking.summary_metrics} <= set(entry), sorted(entry)
+    res = run_landing(landing.load("landing", {"max_duration_s": 2.0}), seed=0, record_series=False)
+    assert {landing.success_key, *landing.summary_metrics} <= set(res), sorted(res)
+
+
 # ------------------------------------------------------------------------------------- the toy, run
 
 

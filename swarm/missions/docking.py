@@ -17,6 +17,7 @@ class DockingMission(Mission):
     the campaign of ``swarm/montecarlo/campaign.py``."""
 
     name = "docking"
+    # the summary's fields are each chaser's (summary["chasers"][id], swarm/step/outcome.py)
     success_key = "docked"
     summary_metrics = ("docking_time_s", "position_error_m", "attitude_error_rad", "effort")
     fault_menu = ("uwb_dropout", "nlos_burst", "camera_loss", "gyro_bias_step", "sensor_delay")
