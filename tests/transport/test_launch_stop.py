@@ -140,18 +140,40 @@ def test_a_docking_swarm_stopped_mid_run_by_sigint_to_every_process_stops_quietl
 def test_a_docking_swarm_held_after_its_run_stops_quietly_at_the_terminals_ctrl_c():
     """Headless, no ``--until-docked``: the run docks and the swarm stays up; Ctrl-C as a terminal sends it
     (SIGINT to the launcher's process group, which holds the launcher alone) stops every process in order,
-    quietly, and the exit status is the run's: 0, docked."""
+    quietly, and the exit status is the run's: 0, docked. The same launch (launches are the suite's costly
+    tests; this one was ``test_launch.py``'s SIGINT test) also shows, while the swarm is held up:
+
+    - the default topology is a mesh: each of the swarm's processes (world, mothership, agents) has a
+      direct link to every other, besides its link to the launcher's router;
+    - ``--cpu-latency 0`` holds the kernel's CPU latency bound at 0 while the swarm runs, and no longer."""
+    from tests.transport.test_launch import DEVICE, _direct_links, _machine_cpu_latency, _tcp_sockets
+
     ns = _ns()
+    before = _machine_cpu_latency()
+    # root: granted; else the launcher warns (tests/test_cpu_latency.py), which a clean stop may not print
+    latency = ["--cpu-latency", "0"] if os.access(DEVICE, os.W_OK) else []
     try:
         with Procs() as procs:
-            proc, _ = _launch(procs, "docking", ns, "--seed", "1", "--headless")
+            proc, endpoint = _launch(procs, "docking", ns, "--seed", "1", "--headless", *latency)
             proc.wait_for_line(r"^run over; the swarm stays up until Ctrl-C", UP_S)
-            time.sleep(0.5)
+            if latency:
+                assert _machine_cpu_latency() == 0
+            names = {"swarm.world": "world", "-m mothership": "mothership", "--id chaser": "chaser",
+                     "--id target": "target"}  # fmt: skip
+            pids = {name: pid for pid, line in _processes(ns) for k, name in names.items() if k in line}
+            assert sorted(pids) == sorted(names.values()), _processes(ns)
+            router_port = int(endpoint.rpartition(":")[2])
+            for name, pid in pids.items():  # each still has its link to the router, its rendezvous
+                assert any(remote == router_port for _, remote in _tcp_sockets(pid)["links"]), name
+            want = {frozenset((a, b)) for a in pids for b in pids if a < b}
+            # the links come up from the router's gossip within milliseconds of each process's start
+            wait_until(lambda: _direct_links(pids) >= want, 10.0, "a direct link between every two processes")
             os.killpg(proc.pgid, signal.SIGINT)
             rc = proc.wait(STOP_S)
         text = _assert_clean_stop(proc, ns, rc, 0)
     finally:
         _kill_leftovers(ns)
+    assert _machine_cpu_latency() == before  # the request went with the launcher
     assert "the launcher stops the swarm, this process in its turn" not in text  # no child got the SIGINT
     assert "swarm world: SIGTERM: stopping" in text
     assert "swarm agent: chaser: world stopped (the swarm is stopping)" in text, text
