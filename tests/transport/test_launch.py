@@ -576,37 +576,6 @@ def _machine_cpu_latency() -> int | None:
         os.close(fd)
 
 
-def test_sigint_to_the_launcher_leaves_no_child_behind():
-    """Also: the default topology is a mesh, in which each of the swarm's processes (world, mothership,
-    agents) has a direct link to every other, besides its link to the launcher's router; and
-    ``--cpu-latency 0`` holds the kernel's CPU latency bound at 0 while the swarm runs, and no longer."""
-    ns = _ns()
-    before = _machine_cpu_latency()
-    with Procs() as procs:
-        proc, endpoint = _launch(procs, ns, "--cpu-latency", "0")
-        proc.wait_for_line(r"^swarm up:", 120.0)
-        if os.access(DEVICE, os.W_OK):  # root: granted (else a warning: tests/test_cpu_latency.py)
-            assert _machine_cpu_latency() == 0
-        assert len(_children(ns)) >= 4  # world, mothership, two agents (and the launcher)
-        names = {"swarm.world": "world", "-m mothership": "mothership", "--id chaser": "chaser",
-                 "--id target": "target"}  # fmt: skip
-        pids = {
-            name: int(line.split()[0]) for line in _children(ns) for k, name in names.items() if k in line
-        }
-        assert sorted(pids) == sorted(names.values()), _children(ns)
-        router_port = int(endpoint.rpartition(":")[2])
-        for name, pid in pids.items():  # each still has its link to the router, its rendezvous
-            assert any(remote == router_port for _, remote in _tcp_sockets(pid)["links"]), name
-        want = {frozenset((a, b)) for a in pids for b in pids if a < b}
-        # the links come up from the router's gossip within milliseconds of each process's start: by "swarm
-        # up" (every liveliness token seen) they are, but allow for a slow machine
-        wait_until(lambda: _direct_links(pids) >= want, 10.0, "a direct link between every two processes")
-        proc.signal(signal.SIGINT)
-        assert proc.wait(30.0) == 130, proc.output()
-        wait_until(lambda: not _children(ns), 5.0, f"every process of {ns} to be gone: {_children(ns)}")
-    assert _machine_cpu_latency() == before  # the request went with the launcher
-
-
 VPP = "--vehicles-per-process"
 BAD_FLAGS = [
     (["--clock", "fast"], "--clock must be lockstep, realtime or scaled:N"),
