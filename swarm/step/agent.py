@@ -44,8 +44,8 @@ class TargetEstimate:
 
 
 @dataclass
-class Command:
-    """Output of one control step."""
+class ControlOutput:
+    """Output of one control step (the wire's message is :class:`swarm.transport.messages.Command`)."""
 
     t_s: float
     u: np.ndarray
@@ -146,7 +146,7 @@ class VehicleAgent:
         self.h_meta = np.zeros(2, dtype=np.int64)
         self._last_vision_s = -np.inf
         self.mode = self.guidance.mode
-        self.last_command: Command | None = None
+        self.last_command: ControlOutput | None = None
         self.t_s = 0.0
         # the compiled control step's arrays (agent_control); a role's unused ones are placeholders
         self.role_code = ROLE_CHASER if self.role == "chaser" else ROLE_TARGET
@@ -167,7 +167,7 @@ class VehicleAgent:
         self.dock_speed = float(sc.guidance.dock_speed_m_s)
 
     # ---- the one step ---------------------------------------------------------------------------
-    def tick(self, inp: AgentInputs) -> Command | None:
+    def tick(self, inp: AgentInputs) -> ControlOutput | None:
         """Tick ``inp.tick`` (module docstring): the inputs in order, then control on a control tick.
         Returns the new command on control ticks, else ``None`` (the last one is held)."""
         if inp.target is not None and self.role == "chaser":
@@ -182,7 +182,7 @@ class VehicleAgent:
             self.on_vision(inp.t_s, *inp.vision)
         return self.decide(inp.tick, inp.t_s) if inp.control else None
 
-    def decide(self, tick: int, t_s: float) -> Command | None:
+    def decide(self, tick: int, t_s: float) -> ControlOutput | None:
         """Guidance and control on tick ``tick`` if it is a control tick (its new command), else ``None``:
         the second half of :meth:`tick`, for a runner that publishes the estimate between the two (a
         free-running agent process)."""
@@ -346,7 +346,7 @@ class VehicleAgent:
     def rejection_fraction(self) -> float:
         return window_stats(self.h_ok, self.h_d2, self.h_meta)[1]
 
-    def control(self, t_s: float, dt_s: float) -> Command:
+    def control(self, t_s: float, dt_s: float) -> ControlOutput:
         """Guidance, switcher and the kind's controller on the current estimate (the compiled
         :func:`agent_control`); returns the command."""
         est = self.est
@@ -360,15 +360,15 @@ class VehicleAgent:
         )  # fmt: skip
         return self.command_of(t_s, saturated, sw is not None and int(self.DEC_n[0]) > staged)
 
-    def command_of(self, t_s: float, saturated: bool, decided: bool = False) -> Command:
-        """The :class:`Command` of the compiled step's outputs (``REF``, ``U``, ``ACT``): its mode switches
-        and Algorithm 1 pass (``decided``) put into records."""
+    def command_of(self, t_s: float, saturated: bool, decided: bool = False) -> ControlOutput:
+        """The :class:`ControlOutput` of the compiled step's outputs (``REF``, ``U``, ``ACT``): its mode
+        switches and Algorithm 1 pass (``decided``) put into records."""
         events = self.guidance.drain_events() if self.role_code == ROLE_CHASER else []
         decision = self.switcher.drain() if decided else None
         ref = reference_of(self.REF, events, decision)
         self.mode = ref.mode
         act = self.controller._actuation(self.U, self.ACT, saturated)
-        cmd = Command(
+        cmd = ControlOutput(
             float(t_s), act.u, act.force_body_n, act.torque_body_nm, act.saturated, ref, list(events)
         )
         self.last_command = cmd
