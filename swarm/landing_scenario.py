@@ -410,17 +410,6 @@ def _scenario_path(name_or_path) -> Path:
     return SCENARIO_DIR / f"{name_or_path}.toml" if not path.suffix and not path.exists() else path
 
 
-def is_landing_scenario(name_or_path) -> bool:
-    """Whether a scenario (a file, or a bundled one by name) is a landing one (``mission = "landing"``)."""
-    import tomllib
-
-    try:
-        with open(_scenario_path(name_or_path), "rb") as fh:
-            return tomllib.load(fh).get("mission") == "landing"
-    except (OSError, tomllib.TOMLDecodeError):
-        return False
-
-
 def load_landing(name_or_path, overrides: dict | None = None) -> LandingScenario:
     def migrate(data: dict, name: str) -> dict:
         return apply_sensor_profile(data, name, "landing", overrides)

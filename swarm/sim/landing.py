@@ -20,7 +20,6 @@ from swarm.landing_scenario import (  # noqa: F401  (the scenario's names, where
     SCENARIO_DIR,
     FleetUav,
     LandingScenario,
-    is_landing_scenario,
     load_landing,
 )
 from swarm.step import landing_nb as lnb
