@@ -199,6 +199,7 @@ def _nested_numbers(value: list | tuple, name: str, ndim: int) -> np.ndarray:
 
 
 _F64 = np.dtype(np.float64)
+_NATIVE_F8 = np.dtype("<f8") == _F64  # a little-endian machine: float64 bytes are the wire's as they are
 
 
 def _finite(a: np.ndarray) -> bool:
@@ -304,7 +305,7 @@ UNIT_LO, UNIT_HI = (1.0 - QUAT_NORM_TOL) ** 2, (1.0 + QUAT_NORM_TOL) ** 2
 def check_units(q: np.ndarray, name: str) -> np.ndarray:
     """Rows of ``q`` (finite, ``(M, 4)``), each a unit quaternion within :data:`QUAT_NORM_TOL`."""
     n2 = (q * q).sum(axis=1)
-    if ((n2 >= UNIT_LO) & (n2 <= UNIT_HI)).all():
+    if n2.size == 0 or (n2.min() >= UNIT_LO and n2.max() <= UNIT_HI):
         return q
     norms = np.sqrt(n2)
     i = int(np.flatnonzero(np.abs(norms - 1.0) > QUAT_NORM_TOL)[0])
@@ -395,14 +396,22 @@ class Arr:
         shape, max_rows, unit, cov, more = self.shape, self.max_rows, self.unit, self.cov, self.more
         fixed = None not in shape
         rows = not fixed and shape[0] is None and None not in shape[1:]  # (N, 3), (N,): rows of a fixed shape
-        tail, flat = shape[1:], len(shape) == 1
+        tail, flat, plain, ndim = shape[1:], len(shape) == 1, not unit and not cov, len(shape)
+        free = all(e is None for e in shape)  # (N, M): any sizes up to max_rows
+        want, nbytes = list(shape), 8 * math.prod(shape) if fixed else 0  # type: ignore[arg-type]
 
         def check(v: Any, name: str, mode: int) -> np.ndarray:
-            if mode == DECODE and type(v) is WireArray:
-                a = from_wire(v, shape, max_rows)
+            if type(v) is WireArray and mode == DECODE:
+                if fixed and v.shape == want and len(v.data) == nbytes and _NATIVE_F8:
+                    a = np.frombuffer(v.data, _F64)  # a writable copy next, never a view of the payload
+                    a = a.copy() if flat else a.reshape(shape).copy()
+                else:
+                    a = from_wire(v, shape, max_rows)
             elif type(v) is np.ndarray and v.dtype == _F64 and (
-                v.shape == shape if fixed else rows and v.shape[1:] == tail and v.ndim == len(shape)
-                and v.shape[0] <= max_rows
+                v.shape == shape if fixed else v.ndim == ndim and (
+                    max(v.shape) <= max_rows if free
+                    else rows and v.shape[1:] == tail and v.shape[0] <= max_rows
+                )
             ):  # fmt: skip
                 a = v if mode == SEND else v.copy()
             else:
@@ -410,6 +419,8 @@ class Arr:
             if a.size <= 64:
                 values = a.tolist() if flat else a.ravel().tolist()
                 if math.isfinite(sum(values)):  # a NaN or an infinity carries through the sum
+                    if plain:
+                        return a
                     if unit is True and abs(math.hypot(*values) - 1.0) <= 0.5 * QUAT_NORM_TOL:
                         return a  # clearly a unit quaternion: no rounding of the norm crosses the margin
                     if not cov:
@@ -423,7 +434,7 @@ class Arr:
                 if mode == DECODE:
                     raise Defer
                 raise MessageError(f"{name}: not finite")
-            return more(a, name)
+            return a if plain else more(a, name)
 
         return check
 
@@ -487,6 +498,7 @@ class Message(msgspec.Struct, frozen=True, eq=False, gc=False):
     _prefix: typing.ClassVar[bytes] = b""
     _decoder: typing.ClassVar[Any] = None
     _fields: typing.ClassVar[tuple[tuple[str, bool], ...]] = ()
+    _envelope: typing.ClassVar[bytes] = b""
 
     def __post_init__(self) -> None:
         self._check()  # the checks :func:`declare` generated for the class
@@ -687,6 +699,7 @@ def declare(cls: type[M]) -> type[M]:
     cls._prefix = bytes([0x80 | n]) + msgpack.packb("v") + msgpack.packb(SCHEMA_VERSION) + msgpack.packb(
         "type"
     ) + msgpack.packb(cls.__name__, use_bin_type=True)  # fmt: skip
+    cls._envelope = cls._prefix[1:]  # the "v" and "type" entries, after the map's header
     cls._decoder = msgspec.msgpack.Decoder(cls)
     cls._fields = tuple(
         (f.name, f.required) for f in msgspec.structs.fields(cls)
@@ -695,9 +708,6 @@ def declare(cls: type[M]) -> type[M]:
 
 
 # ------------------------------------------------------------------------------------------ codec
-
-
-_NATIVE_F8 = np.dtype("<f8") == _F64  # a little-endian machine: float64 bytes are the wire's as they are
 
 
 def _enc_hook(value: object) -> object:
@@ -758,8 +768,8 @@ def decode_fast(data: bytes | bytearray, expected: type[M]) -> M | None:
     """The message in ``data`` if msgspec takes it as it is, else ``None`` (the reference decides). It takes
     the envelope as this codec writes it (``v`` then ``type`` first) and the arrays as float64 maps; any
     other form the protocol allows, and any failed check, is left to :func:`decode_reference`."""
-    prefix = expected._prefix
-    if data[1 : len(prefix)] != prefix[1:] or not 0x80 <= data[0] <= 0x8F:
+    envelope = expected._envelope
+    if data[1 : len(envelope) + 1] != envelope or not 0x80 <= data[0] <= 0x8F:
         return None
     MODE.mode = DECODE
     try:

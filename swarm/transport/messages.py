@@ -1007,13 +1007,12 @@ class TruthBatch(_Batch):
             if a.shape[0] != n:
                 raise MessageError(f"{name}: expected shape {(n, *a.shape[1:])}, got {a.shape}")
         _per_id(self, self.ids, "uwb_lost")
-        if (self.effort < 0.0).any():
-            i = int(np.flatnonzero(self.effort < 0.0)[0])
-            raise MessageError(f"effort[{i}]: must be >= 0, got {self.effort[i]}")
-        nlos = self.nlos_probability
-        bad = (nlos < 0.0) | (nlos > 1.0)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
+        effort, nlos = self.effort, self.nlos_probability
+        if effort.min() < 0.0:
+            i = int(np.flatnonzero(effort < 0.0)[0])
+            raise MessageError(f"effort[{i}]: must be >= 0, got {effort[i]}")
+        if nlos.min() < 0.0 or nlos.max() > 1.0:
+            i = int(np.flatnonzero((nlos < 0.0) | (nlos > 1.0))[0])
             raise MessageError(f"nlos_probability[{i}]: must be in [0, 1], got {nlos[i]}")
 
     def sample(self, vid: str, row: int | None = None) -> Truth | None:
