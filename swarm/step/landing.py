@@ -824,6 +824,7 @@ class LandingAgent:
         self.RP = robust_vector(sc.robust, PhaseParams(enabled=False), sig, air.ground_z_m, -1, m,
                                 g_norm_m_s2=air.gravity_m_s2)  # fmt: skip
         self.TC = np.zeros((m, m, 3), dtype=np.int64)
+        self.TD2 = np.zeros((m, m))
         self.TSKIP = np.zeros(1, dtype=np.int64)
         self.TRES = np.zeros(4)
         cam = sc.camera
@@ -968,7 +969,7 @@ class LandingAgent:
             f = self.filt
             rows = np.ascontiguousarray(inp.tdoa, dtype=float).reshape(-1, 3)
             lnb.agent_tdoa(self.INP, rows, f.X[0], f.P[0], self.AF, self.HELD, self.NIS, f.prm, self.RP,
-                           f.anchors, f.ridx, self.TV, self.RS, self.TC, self.TSKIP, f._work,
+                           f.anchors, f.ridx, self.TV, self.RS, self.TC, self.TD2, self.TSKIP, f._work,
                            self.TRES)  # fmt: skip
 
     def decide(self, inp: LandingInputs, truth_p=None) -> LandingCommand:
@@ -1003,13 +1004,21 @@ class LandingAgent:
         g.decisions, g.modes = _Records.load(snap["records"], 0), _Records.load(snap["records"], 1)
         self._records = (_Records(0), _Records(1))
 
-    def tdoa_counts(self) -> dict[str, int]:
+    def tdoa_counts(self) -> dict:
         """The TDoA differences fused so far (:func:`swarm.step.landing_nb.agent_tdoa`): accepted, rejected
         (gated or an anchor held out as NLOS), refused, and skipped (naming an anchor the scenario does not
-        have)."""
+        have); ``tdoa_pairs``: per anchor pair heard (``"A-B"``, anchor indices) its counts, rejected share
+        and the mean NIS of its accepted rows (1 for a consistent filter)."""
         c = self.TC.sum(axis=(0, 1))
+        pairs = {}
+        for a, b in zip(*np.nonzero(self.TC.sum(axis=2)), strict=True):
+            acc, rej, ref = (int(x) for x in self.TC[a, b])
+            pairs[f"{a}-{b}"] = {"accepted": acc, "rejected": rej, "refused": ref,
+                                 "rejected_share": rej / (acc + rej) if acc + rej else None,
+                                 "nis_mean": float(self.TD2[a, b] / acc) if acc else None}  # fmt: skip
         return {"tdoa_accepted": int(c[inb.ACCEPTED]), "tdoa_rejected": int(c[inb.REJECTED]),
-                "tdoa_refused": int(c[inb.REFUSED]), "tdoa_skipped": int(self.TSKIP[0])}  # fmt: skip
+                "tdoa_refused": int(c[inb.REFUSED]), "tdoa_skipped": int(self.TSKIP[0]),
+                "tdoa_pairs": pairs}  # fmt: skip
 
     def outcome(self) -> dict:
         """The agent's half of a UAV's summary: modes, decisions, deviation, detections (and on a TDoA radio
@@ -1029,7 +1038,7 @@ class LandingAgent:
         }
 
 
-TDOA_COUNTS = ("tdoa_accepted", "tdoa_rejected", "tdoa_refused", "tdoa_skipped")
+TDOA_COUNTS = ("tdoa_accepted", "tdoa_rejected", "tdoa_refused", "tdoa_skipped", "tdoa_pairs")
 """What a TDoA landing's summary adds (:meth:`LandingAgent.tdoa_counts`)."""
 
 

@@ -432,14 +432,15 @@ def agent_fuse(INP, CIDX, CPX, POSE, X, P, AF, HELD, NIS, counts, anchors, ridx,
 
 
 @njit(cache=True)
-def agent_tdoa(INP, rows, X, P, AF, HELD, NIS, prm, RP, anchors, ridx, TV, RS, TC, SKIP, work, res):
+def agent_tdoa(INP, rows, X, P, AF, HELD, NIS, prm, RP, anchors, ridx, TV, RS, TC, TD2, SKIP, work, res):
     """A TDoA radio's differences of tick ``k`` (``uwb.mode`` tdoa2/tdoa3; after :func:`agent_fuse`, at the
     same ``t``): ``rows`` (K, 3) anchor ``A``, anchor ``B``, ``d_B - d_A`` [m], each fused in the order heard
     as log replay fuses ``tdoa.csv`` (:func:`swarm.core._imu_nb.fuse_tdoa`: the measurement model and
     Jacobian of Ledergerber, Hamer & D'Andrea 2015 as :func:`swarm.core._imu_nb.tdoa_row` has it, per-anchor
     offsets entering as differences, the NLOS CUSUM per anchor, the gate, Huber, the pair's noise
-    ``TV``). Its outcome is counted per pair in ``TC`` (M, M, 3) and its squared distance goes to the
-    consistency ring and ``AF_LAST_D2`` as a range's does. A row naming an anchor the scenario does not
+    ``TV``). Its outcome is counted per pair in ``TC`` (M, M, 3), an accepted one's squared Mahalanobis
+    distance (NIS) summed per pair in ``TD2`` (M, M), and its squared distance goes to the consistency ring
+    and ``AF_LAST_D2`` as a range's does. A row naming an anchor the scenario does not
     have (or the same anchor twice, or a difference that is not finite) is skipped and counted in
     ``SKIP[0]``, never fused. Rows older than the filter's time are dropped (``AF_DROPPED``, once)."""
     if rows.shape[0] == 0:
@@ -459,6 +460,8 @@ def agent_tdoa(INP, rows, X, P, AF, HELD, NIS, prm, RP, anchors, ridx, TV, RS, T
         a, b = int(fa), int(fb)
         out = inb.fuse_tdoa(X, P, prm, RP, anchors, ridx, a, b, z, t, TV, RS, work, res)
         TC[a, b, out] += 1
+        if out == inb.ACCEPTED:
+            TD2[a, b] += res[1]
         AF[AF_LAST_D2] = res[1]
         if out != inb.REFUSED:
             _nis_push(AF, NIS, res[1])
