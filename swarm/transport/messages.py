@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 import math
+import sys
 import threading
 import time
 from collections.abc import Callable, Container, Sequence
@@ -203,6 +204,7 @@ Name = Annotated[str, msgspec.Meta(pattern=_ID, max_length=MAX_NAME)]
 """A vehicle's or a counter's id, ``[A-Za-z0-9_-]{1,64}``."""
 _DECISION_PROBABILITIES = frozenset({"A11", "A22", "A23", "A32", "A33", "pi1", "pi2"})
 _PROBABILITY_SLACK = 1e-9  # clipped probabilities; stationary ones come from a linear solve
+_F64_MAX = sys.float_info.max
 
 
 # ------------------------------------------------------------------------- checks types cannot say
@@ -296,6 +298,18 @@ def _decision(value: object, name: str) -> dict[str, float | None] | None:
         return None
     if not isinstance(value, dict):
         raise MessageError(f"{name}: expected a map or nil, got {show(value)}")
+    out = {}
+    for k in DECISION_KEYS:  # the common case: plain floats in range (nil for a probability), no call each
+        v = value.get(k)
+        prob = k in _DECISION_PROBABILITIES
+        if type(v) is float and 0.0 <= v <= (1.0 + _PROBABILITY_SLACK if prob else _F64_MAX):
+            out[k] = v
+        elif v is None and prob and k in value:
+            out[k] = None
+        else:
+            break
+    else:
+        return out
     out = {}
     for k in DECISION_KEYS:
         if k not in value:
