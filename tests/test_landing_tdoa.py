@@ -5,6 +5,8 @@ and the wire carries them as ``Tdoa`` (launch == sim: tests/transport/test_landi
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -58,22 +60,24 @@ def test_twr_landings_carry_no_tdoa_counts_and_twr_is_the_default():
 
 def test_each_uavs_rows_name_only_anchors_in_its_reach_and_do_not_depend_on_the_other_uavs():
     """The landing swarm on TDoA3: every row's two anchors are within the UAV's reach of its tag (rows of
-    the others are taken out); a UAV's rows are the same whether the other UAVs fly or are done (each tag
-    has its own draws, the channel is shared: tags never transmit)."""
+    the others are taken out); a UAV's rows are the same in a fleet of 4 tags as alone in a fleet of 1, and
+    whether the others fly or are done (each tag has its own draws, the channel is shared: tags never
+    transmit, so they do not change the anchors' packets)."""
     sc = load_landing("landing-swarm", {"uwb.mode": "tdoa3", "dispersions.enabled": False})
-    world = LandingWorld(sc, 3)
-    agents = {u.id: LandingAgent(sc, 3, u.index, sc.policy) for u in sc.uavs()}
-    got: dict = {}
-    _fly(world, agents, 1, 301, got)
     first = sc.uavs()[0].id
-    alone = LandingWorld(sc, 3)
-    for uid in alone.uavs:
-        alone.uavs[uid].done = uid != first
-    ag = {first: LandingAgent(sc, 3, 0, sc.policy)}
-    solo: dict = {}
-    _fly(alone, ag, 1, 301, solo)
-    assert len(got[first]) == len(solo[first]) == 150  # every UWB tick (50 Hz), rows or none
-    assert all(np.array_equal(a, b) for a, b in zip(got[first], solo[first], strict=True))
+    runs = []
+    for fleet_sc, fly in ((sc, None), (sc, first), (replace(sc, fleet=sc.fleet[:1]), None)):
+        world = LandingWorld(fleet_sc, 3)
+        for uid in world.uavs:
+            world.uavs[uid].done = fly is not None and uid != fly
+        agents = {u.id: LandingAgent(fleet_sc, 3, u.index, sc.policy) for u in fleet_sc.uavs()}
+        got: dict = {}
+        _fly(world, agents, 1, 301, got)
+        runs.append(got[first])
+    assert world.tdoa.n_tags == 1 and len(runs[0]) == 150  # every UWB tick (50 Hz), rows or none
+    for other in runs[1:]:
+        assert all(np.array_equal(a, b) for a, b in zip(runs[0], other, strict=True))
+    got = {first: runs[0]}
     # rows only of pairs of the anchors within 30 m of a start 20-25 m out (3 of 7 at first; 192 rows here)
     assert sum(len(r) for r in got[first]) > 100
     # the reach: with the default 15 m the far starts hear nothing at first
@@ -173,3 +177,26 @@ def test_a_tdoa_landing_needs_two_anchors_and_a_known_mode():
     with pytest.raises(ConfigError, match="needs at least 2 anchors, got 1"):
         load_landing("landing", {"uwb.mode": "tdoa3", "uwb.anchors_m": [[0.0, 0.0, 1.0]]})
     assert tr.TdoaParams().mode == "tdoa3"
+
+
+def test_the_range_errors_reach_the_differences_per_anchor_and_a_dropout_empties_them():
+    """The TWR model's per-anchor offsets (one draw for the fleet) and each UAV's take-off steps are the TDoA
+    radio's link errors (so they enter as differences, :mod:`swarm.core.tdoa_radio`); a ``uwb_dropout``
+    window leaves a UAV's Tdoa without rows (still sent: the agent does not wait)."""
+    over = {"uwb.mode": "tdoa3", "uwb.offset_spread_m": 0.1, "uwb.takeoff_bias_step_m": 0.05,
+            "uwb.max_range_m": 40.0, "dispersions.enabled": False}  # fmt: skip
+    sc = load_landing("landing-swarm", over)
+    world = LandingWorld(sc, 0)
+    u = list(world.uavs.values())
+    errs = world.tdoa.errors
+    assert np.any(errs.offset_m != 0.0) and np.array_equal(errs.offset_m, u[0].ERR_OFF)
+    assert np.array_equal(errs.step_m, np.array([v.ERR_STEP for v in u]))
+    world.add_fault("uwb_dropout", 0.5, 0.3, [u_.id for u_ in sc.uavs()[:1]])
+    first, second = sc.uavs()[0].id, sc.uavs()[1].id
+    rows = {first: [], second: []}
+    for k in range(1, 100):  # (no agents: the rotors hold the hover speed the world starts with)
+        for uid, inp in world.step(k).items():
+            if inp.tdoa is not None and uid in rows and 0.5 <= k * sc.dt_s < 0.8:
+                rows[uid].append(len(inp.tdoa))
+    assert len(rows[first]) == 15 and sum(rows[first]) == 0  # every UWB tick of the window, no rows
+    assert sum(rows[second]) > 0
