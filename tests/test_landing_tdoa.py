@@ -200,3 +200,24 @@ def test_the_range_errors_reach_the_differences_per_anchor_and_a_dropout_empties
                 rows[uid].append(len(inp.tdoa))
     assert len(rows[first]) == 15 and sum(rows[first]) == 0  # every UWB tick of the window, no rows
     assert sum(rows[second]) > 0
+
+
+def test_a_tdoa_message_naming_an_unknown_anchor_decodes_and_its_row_is_skipped_by_the_agent():
+    """On the wire a ``Tdoa`` names anchors by id (any 0 to 2**31 - 1: the message does not know the
+    scenario); the landing agent skips and counts the row naming anchor 7 of a 4-anchor scenario and fuses
+    the other."""
+    from swarm.transport.messages import encode_tdoa
+
+    sc = load_landing("landing", {"uwb.mode": "tdoa3", "uwb.max_range_m": 40.0, "dispersions.enabled": False})
+    world, agent = LandingWorld(sc, 0), LandingAgent(sc, 0, 0, "mdp")
+    for k in range(1, 60):
+        world.hold("uav", agent.tick(world.step(k)["uav"]))
+    inp = world.step(60)["uav"]
+    msg = decode(encode_tdoa(60, 0.6, np.array([[0.0, 7.0, 1.5], [0.0, 1.0, 0.2]])), Tdoa)
+    inp.tdoa = wire.tdoa_input(msg)
+    before = agent.tdoa_counts()
+    agent.tick(inp)
+    after = agent.tdoa_counts()
+    assert after["tdoa_skipped"] == before["tdoa_skipped"] + 1
+    n = sum(after[k] - before[k] for k in ("tdoa_accepted", "tdoa_rejected", "tdoa_refused"))
+    assert n == 1 and np.all(np.isfinite(agent.filt.X))
