@@ -8,13 +8,16 @@ Per tick ``k`` (``t = k dt``), for each UAV not done:
 1. **world** (:meth:`LandingWorld.step`): the truth advances by ``dt`` under the held command, then the
    sensors of tick ``k`` sample, in this order, from the UAV's own random stream: the IMU (the mean specific
    force and rate over ``(t - dt, t]``, stamped ``t - dt``, with biases and white noise), the UWB range to the
-   next anchor (a UWB tick, within the anchors' reach), the GNSS fix (a GNSS tick), the rangefinder's
-   distance to the ground (a rangefinder tick, within its reach and tilt), and the camera (a camera
-   tick): the pad's marker corners in pixels, by corner projection with pixel noise or by rendering the
-   image and detecting the ArUco markers in it; none when the pad is hidden or behind the camera.
+   next anchor (a UWB tick, within the anchors' reach; on a TDoA radio, ``uwb.mode`` tdoa2/tdoa3, each UAV's
+   distance differences heard since the last UWB tick instead, :meth:`LandingWorld._tdoa_step`), the GNSS
+   fix (a GNSS tick), the rangefinder's distance to the ground (a rangefinder tick, within its reach and
+   tilt), and the camera (a camera tick): the pad's marker corners in pixels, by corner projection with
+   pixel noise or by rendering the image and detecting the ArUco markers in it; none when the pad is hidden
+   or behind the camera.
 2. **agent** (:meth:`LandingAgent.tick`): the IMU-driven filter takes the IMU sample, the range, the fix, the
-   rangefinder's distance and the pad's pose from PnP of the corners; the guidance (fixed deviation or
-   Algorithm 1) and the quadrotor controller give the rotor speeds, or the idle command once landed.
+   rangefinder's distance and the pad's pose from PnP of the corners, then the TDoA differences
+   (:func:`swarm.step.landing_nb.agent_tdoa`); the guidance (fixed deviation or Algorithm 1) and the
+   quadrotor controller give the rotor speeds, or the idle command once landed.
 3. **world** (:meth:`LandingWorld.hold`): the rotors take the command; the UAV's run is over once it has
    been landed for ``end_after_landed_s``, or hovers at the abort height after an abort
    (:func:`swarm.step.landing_nb.world_hold`).

@@ -3,11 +3,13 @@ landing scenario): the world step of :mod:`swarm.step.landing` for every UAV, ov
 
 Per tick ``k``, for every UAV not done: the truth steps, then the tick's samples go out on the UAV's keys
 (``docs/protocol.md``): an ``Imu`` with ``acc_body`` (stamped ``t - dt``), on a UWB tick a ``Uwb`` (the
-anchor's index; ``range_m`` nil when the anchor is out of reach), on a GNSS tick a ``Gnss``, on a camera tick
-a ``Vision`` of kind ``pixels`` (target ``pad-<uav>``, face ``+z``, every corner of every detected marker: row
-``4 m + c`` is corner ``c`` of marker ``m``; none when the pad is not in view), and a ``Truth``; then, every
-``--clock-every`` ticks (10), ``world/clock`` (also at the run's start and on a resume). The world waits for
-each such UAV's ``Command`` of tick ``k`` (its mode one of the landing modes), holds it, and steps on. When
+anchor's index; ``range_m`` nil when the anchor is out of reach; with ``uwb.mode`` tdoa2/tdoa3 a ``Tdoa`` on
+``agent/<id>/tdoa`` instead: the differences heard since the last, possibly none), on a GNSS tick a
+``Gnss``, on a camera tick a ``Vision`` of kind ``pixels`` (target ``pad-<uav>``, face ``+z``, every corner
+of every detected marker: row ``4 m + c`` is corner ``c`` of marker ``m``; none when the pad is not in
+view), and a ``Truth``; then, every ``--clock-every`` ticks (10), ``world/clock`` (also at the run's start
+and on a resume). The world waits for each such UAV's ``Command`` of tick ``k`` (its mode one of the
+landing modes), holds it, and steps on. When
 every UAV is done (landed for a second, or hovering at the abort height) it publishes ``run_end`` on
 ``world/event`` with each UAV's outcome and a ``stopped`` clock, and exits 0. It waits for every UAV's agent
 (liveliness ``alive/agent/<id>``) before the first tick. It takes run-time faults on ``control/fault``
