@@ -23,6 +23,7 @@ from hypothesis import strategies as st
 
 from swarm.config import apply_overrides, dump_toml, from_mapping, load_toml, parse_override, to_mapping
 from swarm.errors import ConfigError
+from tests.budget import examples
 
 # ------------------------------------------------------------------------------------- toy scenario
 
@@ -561,13 +562,13 @@ _toys = st.builds(
 )
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(_toys)
 def test_dump_toml_then_load_gives_back_the_object(toy: Toy) -> None:
     assert from_mapping(Toy, tomllib.loads(dump_toml(toy))) == toy
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=examples(100), deadline=None)
 @given(_toys)
 def test_to_mapping_then_from_mapping_gives_back_the_object(toy: Toy) -> None:
     assert from_mapping(Toy, json.loads(json.dumps(to_mapping(toy)))) == toy

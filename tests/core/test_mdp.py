@@ -29,6 +29,7 @@ from swarm.core.mdp import (
     steady_state_probabilities,
 )
 from swarm.errors import ConfigError
+from tests.budget import examples
 
 DESIGN_KEYS = {
     "t_s", "r_m", "d", "qe_vec_norm", "sigma_pos_max_m", "sigma_uwb_m", "r_t_m", "r_d_m",
@@ -327,7 +328,7 @@ def stochastic_matrices(draw: st.DrawFn) -> np.ndarray:
     return A / A.sum(axis=1, keepdims=True)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(stochastic_matrices())
 def test_stationary_distribution_is_invariant_and_normalised(A):
     pi = stationary_distribution(A)
@@ -336,7 +337,7 @@ def test_stationary_distribution_is_invariant_and_normalised(A):
     np.testing.assert_allclose(pi @ A, pi, atol=1e-10)
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=examples(100), deadline=None)
 @given(stochastic_matrices())
 def test_stationary_distribution_matches_scipy_eigenvector(A):
     w, vl = scipy.linalg.eig(A, left=True, right=False)

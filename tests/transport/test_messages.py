@@ -63,6 +63,7 @@ from swarm.transport.messages import (
     encode_tdoa,
     safe_decode,
 )
+from tests.budget import examples
 
 NAN, INF = math.nan, math.inf
 Q = [0.0, 0.0, 0.0, 1.0]
@@ -750,7 +751,7 @@ def test_building_from_numpy_scalars_and_enums_gives_plain_python_values():
 # ------------------------------------------------------------------------------------- safe_decode
 
 
-@settings(max_examples=300)
+@settings(max_examples=examples(300))
 @given(st.binary(max_size=512), st.sampled_from(ALL))
 def test_arbitrary_bytes_never_raise_from_safe_decode_and_are_counted(payload, cls):
     counter = DropCounter(logger=SILENT)
@@ -766,7 +767,7 @@ msgpack_values = st.recursive(
 )  # fmt: skip
 
 
-@settings(max_examples=300)
+@settings(max_examples=examples(300))
 @given(msgpack_values, st.sampled_from(ALL))
 def test_arbitrary_msgpack_structures_are_dropped_and_counted(obj, cls):
     counter = DropCounter(logger=SILENT)
@@ -783,7 +784,7 @@ def envelopes(draw):
     return cls, {"v": SCHEMA_VERSION, "type": cls.__name__, **body}
 
 
-@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(300), suppress_health_check=[HealthCheck.too_slow])
 @given(envelopes())
 def test_well_formed_envelopes_with_arbitrary_fields_decode_or_are_counted(case):
     cls, obj = case
@@ -1083,7 +1084,7 @@ def mutated(draw):
     return cls, obj
 
 
-@settings(max_examples=1000, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(1000), suppress_health_check=[HealthCheck.too_slow])
 @given(mutated())
 def test_the_fast_path_never_accepts_what_the_reference_refuses(case):
     """The fast path (msgspec) only ever takes a payload the reference checks accept, to the same message;
@@ -1125,7 +1126,7 @@ def compiled_checks():
 
 
 @pytest.mark.parametrize("compiled", [False, True], ids=["numpy checks", "compiled checks"])
-@settings(max_examples=400, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(400), suppress_health_check=[HealthCheck.too_slow])
 @given(case=estimates_at_edges())
 def test_an_estimate_decodes_the_same_with_the_compiled_covariance_check_or_without(
     compiled_checks, compiled, case
