@@ -38,6 +38,7 @@ from swarm.landing_scenario import load_landing
 from swarm.step.landing import LandingWorld
 from swarm.transport.recording import read_recording
 from tests.dashboard.conftest import ARTIFACTS, START_TIMEOUT_S, choose, fill_number, new_namespace
+from tests.dashboard.pinhole import project
 from tests.dashboard.test_browser import MIN_SCENE_VARIANCE, SCENE_REGION, UI_TIMEOUT_MS
 from tests.dashboard.test_browser_playback import _seek, _steady_screenshot, _window
 from tests.transport.procs import Proc, Procs, free_port, loopback
@@ -178,18 +179,8 @@ def _camera() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _project(p_nav: np.ndarray) -> tuple[int, int]:
-    """Pixel (column, row) of ``p_nav`` [m]: a pinhole at the initial camera, Viser's default vertical field
-    of view (75 deg) and up direction (+z), over the whole page."""
-    eye, look_at = _camera()
-    forward = (look_at - eye) / np.linalg.norm(look_at - eye)
-    right = np.cross(forward, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-    v = np.asarray(p_nav) - eye
-    f_px = (HEIGHT / 2) / np.tan(np.radians(75.0) / 2)
-    return round(WIDTH / 2 + f_px * (v @ right) / (v @ forward)), round(
-        HEIGHT / 2 - f_px * (v @ up) / (v @ forward)
-    )
+    """Pixel (column, row) of ``p_nav`` [m] through the initial camera (tests/dashboard/pinhole.py)."""
+    return project(*_camera(), p_nav, WIDTH, HEIGHT)
 
 
 def _recorded_positions(recording: Path, namespace: str, t_s: float) -> dict[str, np.ndarray]:

@@ -23,6 +23,7 @@ from swarm.sim.landing import run_landing_fleet
 from swarm.transport.landing_wire import McapTap
 from swarm.transport.recording import read_recording
 from tests.dashboard.conftest import ARTIFACTS, START_TIMEOUT_S
+from tests.dashboard.pinhole import project
 from tests.dashboard.test_browser import MIN_SCENE_VARIANCE, SCENE_REGION, UI_TIMEOUT_MS
 from tests.dashboard.test_browser_playback import _seek, _steady_screenshot, _window
 from tests.transport.procs import Procs
@@ -36,20 +37,11 @@ MIN_MOVED = (
 
 
 def _project(sc, p_nav: np.ndarray) -> tuple[int, int]:
-    """Pixel (column, row) of ``p_nav`` [m] through the dashboard's initial camera of ``sc`` (its own code),
-    Viser's default vertical field of view (75 deg) and up direction (+z), over the whole page."""
+    """Pixel (column, row) of ``p_nav`` [m] through the dashboard's initial camera of ``sc`` (its own code;
+    tests/dashboard/pinhole.py)."""
     server = SimpleNamespace(scene=MagicMock(), initial_camera=SimpleNamespace())
     frame_landing_scene(server, sc)
-    eye, look_at = np.array(server.initial_camera.position), np.array(server.initial_camera.look_at)
-    forward = (look_at - eye) / np.linalg.norm(look_at - eye)
-    right = np.cross(forward, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-    v = np.asarray(p_nav) - eye
-    f_px = (HEIGHT / 2) / np.tan(np.radians(75.0) / 2)
-    return round(WIDTH / 2 + f_px * (v @ right) / (v @ forward)), round(
-        HEIGHT / 2 - f_px * (v @ up) / (v @ forward)
-    )
+    return project(server.initial_camera.position, server.initial_camera.look_at, p_nav, WIDTH, HEIGHT)
 
 
 def _shared_pad(path, t_s: float) -> np.ndarray:
