@@ -14,6 +14,7 @@ import pytest
 
 from swarm.cpu_latency import DEVICE
 from swarm.scenario import load_scenario
+from tests.inprocess import swarm_exit_status
 
 
 def test_bench_swarm_measures_a_launched_swarm(tmp_path):
@@ -230,12 +231,7 @@ def test_each_case_is_run_alternately_with_each_cpu_latency_and_the_report_says_
 def test_bad_bench_swarm_flags_give_one_clear_error(flags, expect, capsys):
     # in this process (swarm.cli.main.main, what `python -m swarm.cli.main` runs): a started Python costs
     # ~1.6 s of CPU, nine of them ~15 s of the suite
-    from swarm.cli.main import main
-
-    try:
-        rc = main(["bench", "swarm", *flags])
-    except SystemExit as exc:  # argparse's own refusals
-        rc = exc.code
+    rc = swarm_exit_status(["bench", "swarm", *flags])
     err = capsys.readouterr().err
     assert rc == 2, err
     assert expect in err and "Traceback" not in err

@@ -36,6 +36,7 @@ from swarm.transport.messages import (
     encode,
 )
 from swarm.transport.session import ZenohArgs, open_session
+from tests.inprocess import swarm_exit_status
 from tests.transport.procs import Procs, free_port, loopback, wait_until
 
 STALL_S = 2.0  # --stall-s of the launched run: well under its --step-timeout, far above a paced tick (1 ms)
@@ -521,12 +522,7 @@ def test_new_seed_ends_the_run_and_the_launcher_starts_the_next_which_is_swarm_s
 )
 def test_what_a_landing_launch_does_not_do_yet_is_refused_before_anything_starts(extra, expected, capsys):
     # in this process (swarm.cli.main.main): a started Python costs ~1.6 s of CPU
-    from swarm.cli.main import main
-
-    try:
-        rc = main(["launch", "landing-swarm", *extra])
-    except SystemExit as exc:  # argparse's own refusals
-        rc = exc.code
+    rc = swarm_exit_status(["launch", "landing-swarm", *extra])
     err = capsys.readouterr().err
     assert rc == 2 and expected in err, err
 

@@ -29,6 +29,7 @@ from swarm.cpu_latency import DEVICE
 from swarm.scenario import load_scenario
 from swarm.sim.docking import run_docking
 from swarm.transport.session import ZenohArgs, open_session
+from tests.inprocess import swarm_exit_status
 from tests.transport.procs import Procs, free_port, loopback, wait_until
 
 SEED = 1
@@ -602,13 +603,8 @@ def test_bad_launch_flags_give_one_clear_error(capsys):
     made the one line); the first case also through a started ``python -m swarm.cli.main``, for the exit
     status and the missing traceback of the real entry point (a Python start each cost ~1.5 s, 12 of them
     ~20 s of the suite)."""
-    from swarm.cli.main import main
-
     for flags, expect in BAD_FLAGS:
-        try:
-            rc = main(["launch", "docking", "--headless", *flags])
-        except SystemExit as exc:  # argparse's own refusals
-            rc = exc.code
+        rc = swarm_exit_status(["launch", "docking", "--headless", *flags])
         err = capsys.readouterr().err
         assert rc == 2, (flags, err)
         assert expect in err, (flags, err)
