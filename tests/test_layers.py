@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parent.parent
 PACKAGES = ("swarm", "agents", "mothership", "dashboard")
 LINT = Path(sys.executable).with_name("lint-imports")
@@ -33,31 +35,26 @@ def test_the_tree_keeps_its_import_layers():
     assert "0 broken" in r.stdout, r.stdout
 
 
-def test_a_core_module_importing_the_transport_breaks_the_layers(tmp_path):
+@pytest.mark.parametrize(
+    ("victim", "line", "broken"),
+    [
+        # a core module importing the transport breaks the layers
+        ("swarm/core/rotations.py", "from swarm.transport import keys  # noqa: E402",
+         "swarm.core.rotations -> swarm.transport.keys"),
+        # an in-process runner importing zenoh breaks the purity contract
+        ("swarm/sim/plot.py", "import zenoh  # noqa: E402", "swarm.sim.plot -> zenoh"),
+        # a mission importing another mission breaks the independence contract
+        ("swarm/missions/docking.py", "from swarm.missions import landing  # noqa: E402,F401",
+         "swarm.missions.docking -> swarm.missions.landing"),
+    ],
+)  # fmt: skip
+def test_an_import_across_a_contract_breaks_it(tmp_path, victim, line, broken):
     _copy_tree(tmp_path)
-    victim = tmp_path / "swarm" / "core" / "rotations.py"
-    victim.write_text(victim.read_text() + "\nfrom swarm.transport import keys  # noqa: E402\n")
+    path = tmp_path / victim
+    path.write_text(path.read_text() + f"\n{line}\n")
     r = _lint(tmp_path)
     assert r.returncode != 0, r.stdout
-    assert "swarm.core.rotations -> swarm.transport.keys" in r.stdout, r.stdout
-
-
-def test_an_in_process_runner_importing_zenoh_breaks_the_purity_contract(tmp_path):
-    _copy_tree(tmp_path)
-    victim = tmp_path / "swarm" / "sim" / "plot.py"
-    victim.write_text(victim.read_text() + "\nimport zenoh  # noqa: E402\n")
-    r = _lint(tmp_path)
-    assert r.returncode != 0, r.stdout
-    assert "swarm.sim.plot -> zenoh" in r.stdout, r.stdout
-
-
-def test_a_mission_importing_another_mission_breaks_the_independence_contract(tmp_path):
-    _copy_tree(tmp_path)
-    victim = tmp_path / "swarm" / "missions" / "docking.py"
-    victim.write_text(victim.read_text() + "\nfrom swarm.missions import landing  # noqa: E402,F401\n")
-    r = _lint(tmp_path)
-    assert r.returncode != 0, r.stdout
-    assert "swarm.missions.docking -> swarm.missions.landing" in r.stdout, r.stdout
+    assert broken in r.stdout, r.stdout
 
 
 def _cycles(graph, modules: list[str]) -> list[list[str]]:
