@@ -11,7 +11,8 @@ from hypothesis import settings
 import swarm  # noqa: F401  (first: it pins numpy's BLAS kernels before any test module imports numpy)
 from tests.budget import FULL_ENV, examples
 
-pytest_plugins = ["tests.hard_timeout"]  # the last resort against a hang no signal reaches
+# the last resort against a hang no signal reaches; who runs beside whom under `pytest -n 2` (make test)
+pytest_plugins = ["tests.hard_timeout", "tests.xdist_turns"]
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -197,6 +197,7 @@ def test_lockstep_launch_equals_the_in_process_run_even_under_garbage_on_every_k
     assert sent > 1000
 
 
+@pytest.mark.alone  # its restarts race the wall clock: no test beside it under xdist (tests/xdist_turns.py)
 def test_a_hung_agent_is_told_with_its_stacks_killed_and_restarted_and_the_run_goes_on(tmp_path):
     """A hung agent keeps its liveliness token, so nothing else tells the launcher. Here the chaser's agent
     is stopped (SIGSTOP) for good in a lockstep run: the world steps on without its command after each
@@ -230,6 +231,7 @@ def test_a_hung_agent_is_told_with_its_stacks_killed_and_restarted_and_the_run_g
     assert not c["keepout_violated"]
 
 
+@pytest.mark.alone  # its restarts race the wall clock: no test beside it under xdist (tests/xdist_turns.py)
 def test_killed_dashboard_agent_and_mothership_are_restarted_and_the_run_goes_on(tmp_path):
     """Every process of the swarm but the world is SIGKILLed in turn during one lockstep run (one launch
     serves the three, measured here: launches are the costly tests):
@@ -302,6 +304,7 @@ def test_killed_dashboard_agent_and_mothership_are_restarted_and_the_run_goes_on
     assert not c["keepout_violated"]
 
 
+@pytest.mark.alone  # its restarts race the wall clock: no test beside it under xdist (tests/xdist_turns.py)
 def test_a_killed_agent_host_restarts_its_vehicles_and_the_run_goes_on(tmp_path):
     """``--vehicles-per-process 2``: both vehicles' agents in one host process (one Zenoh session), their
     keys and liveliness tokens per vehicle. SIGKILLed mid-run (lockstep), the host is seen lost through its
@@ -399,6 +402,7 @@ NEAR = "vehicles.chaser.position_m=[0.7, 1.7, 0.7]"
 simulated time instead of ~112 (a free-running launch takes its simulated time over wall time)."""
 
 
+@pytest.mark.alone  # its restarts race the wall clock: no test beside it under xdist (tests/xdist_turns.py)
 def test_a_free_running_swarm_takes_delayed_samples_and_a_killed_world_and_ends_safely(tmp_path):
     """A free-running clock (scaled:2; at scaled:4 a loaded 2-core CI machine could not keep up with the
     five processes, the agents' commands came late, and the run showed that overload rather than what is
