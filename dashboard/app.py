@@ -516,7 +516,9 @@ class DashboardApp:
         else:
             vehicles = {k: (v.role, v.target) for k, v in sc.vehicles.items()}
             anchors = np.array(sc.anchors_m, dtype=float)
-        uwb_mode = getattr(sc.uwb, "mode", "twr")  # a landing radio ranges (two-way) only
+        uwb_mode = sc.uwb.mode
+        if recording is not None and uwb_mode == "twr":  # a recorded TDoA run drawn with its bundled scenario
+            uwb_mode = recording.uwb_mode or "twr"
 
         def make_state() -> SwarmState:
             return SwarmState(

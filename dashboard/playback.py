@@ -3,10 +3,11 @@
 A recording (:func:`swarm.transport.recording.read_recording`) holds every message of a swarm's namespace,
 byte for byte on its key, with log time = swarm time. :func:`load_recording` decodes, once, the messages of
 the keys the live dashboard subscribes to (each vehicle's truth, estimate, guidance, vision and events, the
-world's clock and events, the anchors) with the same :func:`~swarm.transport.messages.safe_decode`, and
-:class:`Timeline` feeds them to a :class:`~dashboard.state.SwarmState` through
-:meth:`~dashboard.state.SwarmState.on_message`, the entry point the live link uses: the scene and the panels
-are drawn from the same store by the same code, so playback shows what live showed.
+world's clock and events, the anchors, a TDoA radio's distance differences: :data:`DASHBOARD_KINDS`) with
+the same :func:`~swarm.transport.messages.safe_decode`, and :class:`Timeline` feeds them to a
+:class:`~dashboard.state.SwarmState` through :meth:`~dashboard.state.SwarmState.on_message`, the entry
+point the live link uses: the scene and the panels are drawn from the same store by the same code, so
+playback shows what live showed.
 
 The state at time ``t`` is every message of log time ``<= t`` applied in log-time order. Forward (playing,
 or a seek ahead) only the messages in between are applied. Backward (or forward past a checkpoint), the store
@@ -46,10 +47,13 @@ from swarm.missions import DEFAULT_MISSION, MISSIONS, Mission, mission_of
 from swarm.transport.keys import Keys
 from swarm.transport.messages import (
     MESSAGE_FOR_KIND,
+    Bundle,
     DropCounter,
     Message,
+    TdoaBatch,
     VisionBatch,
     batch_rows,
+    bundle_messages,
     safe_decode,
 )
 
@@ -78,11 +82,18 @@ DASHBOARD_KINDS = frozenset(
         "world_event",
         "world_clock",
         "anchors",
+        "tdoa",
+        "mothership_tdoa",
+        "bundle",
     }
 )
 """The key kinds (:meth:`swarm.transport.keys.Keys.parse`) the dashboard draws; the others (imu, uwb,
 command, controls) are skipped. A ``world_vision`` batch (a swarm of agent hosts) is read as its frames,
-each a ``vision`` of its vehicle, as the live dashboard reads it."""
+each a ``vision`` of its vehicle, as the live dashboard reads it. A TDoA radio's distance differences
+(``uwb.mode`` tdoa2/tdoa3: the Radio panel's rates, :mod:`dashboard.radio`) are read however they travelled,
+as :class:`dashboard.link.SwarmLink` takes them: each ``tdoa`` of a vehicle, each entry of a
+``mothership_tdoa`` batch (agent hosts), each ``Tdoa`` entry of a vehicle's lockstep ``bundle`` (a bundle's
+other entries, imu and vision, are skipped), every one a ``tdoa`` item at its message's log time."""
 
 SPEEDS: dict[str, float] = {"0.5x": 0.5, "1x": 1.0, "2x": 2.0, "5x": 5.0, "10x": 10.0, "50x": 50.0}
 """The playback speeds offered, as shown -> seconds of swarm time per second of wall time."""
@@ -125,6 +136,16 @@ class Recording:
         return self.metadata.get("run_start", {}).get("mission") or "docking"
 
     @property
+    def uwb_mode(self) -> str | None:
+        """The recorded radio (the Radio panel's, :mod:`dashboard.radio`): the ``uwb_mode`` its ``run_start``
+        names if any, else ``"tdoa"`` (TDoA, its variant not known) if it holds distance differences, else
+        None (the scenario's: two-way ranging unless ``--set uwb.mode=...``)."""
+        named = self.metadata.get("run_start", {}).get("uwb_mode")
+        if named in ("twr", "tdoa2", "tdoa3"):
+            return named
+        return "tdoa" if any(kind == "tdoa" for kind, _, _ in self.items) else None
+
+    @property
     def vehicle_ids(self) -> tuple[str, ...] | None:
         """The world's vehicles (its ``run_start`` event, written as a Python list by the recorder)."""
         text = self.metadata.get("run_start", {}).get("vehicles")
@@ -160,13 +181,17 @@ def load_recording(path: str | Path, default_namespace: str = "tpods") -> Record
         msg = safe_decode(m.payload, MESSAGE_FOR_KIND[kind], m.key, drops)
         if msg is None:
             continue
-        if isinstance(msg, VisionBatch):
-            for vid, frame in batch_rows(msg, m.key, drops):
-                items.append(("vision", vid, frame))
-                times.append(m.log_time_ns)
-            continue
-        items.append((kind, agent_id, msg))
-        times.append(m.log_time_ns)
+        if isinstance(msg, VisionBatch | TdoaBatch):
+            rows = batch_rows(msg, m.key, drops)
+        elif isinstance(msg, Bundle):
+            tdoa = bundle_messages(msg, m.key, drops, ("Tdoa",)) if "Tdoa" in msg.types else []
+            rows = [(agent_id, t) for t in tdoa]
+        else:
+            rows = [(agent_id, msg)]
+        row_kind = {"world_vision": "vision", "mothership_tdoa": "tdoa", "bundle": "tdoa"}.get(kind, kind)
+        for vid, row in rows:
+            items.append((row_kind, vid, row))
+            times.append(m.log_time_ns)
     drops.flush()
     if not items:
         raise LogError(

@@ -2,8 +2,8 @@
 rec.mcap`` as a process, headless Chromium on its page; the time slider set to two times moves the chaser:
 the screenshots differ where the recorded chaser is at either time (its pose projected through the
 dashboard's initial camera) and not around the anchors in view, which do not move; the agents table shows the
-recorded mode at each time; Play advances the time at the chosen speed and Pause stops it; no control that
-would command a swarm is on the page.
+recorded mode at each time; the Radio panel shows the recorded TDoA radio's rates (issue 45); Play advances
+the time at the chosen speed and Pause stops it; no control that would command a swarm is on the page.
 
 The recording is the scripted fake swarm written by the real Recorder (``tests/dashboard/recorded.py``).
 Screenshots are kept in ``artifacts/`` (``dashboard-playback-*.png``).
@@ -30,7 +30,7 @@ from swarm.transport.recording import read_recording
 from tests.dashboard.conftest import ARTIFACTS, START_TIMEOUT_S, choose
 from tests.dashboard.fake_swarm import ANCHORS_M
 from tests.dashboard.pinhole import project
-from tests.dashboard.recorded import NAMESPACE
+from tests.dashboard.recorded import ANCHOR_HZ, NAMESPACE, TAG_HZ
 from tests.dashboard.test_browser import MIN_SCENE_VARIANCE, SCENE_REGION, UI_TIMEOUT_MS
 from tests.transport.procs import Procs
 
@@ -166,6 +166,39 @@ def test_the_slider_moves_the_chaser_to_its_recorded_pose(page, recording: Path)
     print(f"chaser at {p1} then {p2}: change there {moved}; around the anchors {still}")
     assert all(v > MIN_MOVED for v in moved.values()), (moved, p1, p2)
     assert max(still) < MAX_STILL, still
+
+
+def _table_rows(pg, header: str) -> dict[str, list[str]]:
+    """The rows of the page's table whose header row has the cell ``header`` (up to the first line that is not
+    a row of as many cells, or is the next table's header: its first cell ``tag``), by their first cell."""
+    lines = [[c.strip() for c in line.split("\t")] for line in pg.inner_text("body").splitlines()]
+    start = next((i for i, cells in enumerate(lines) if header in cells), None)
+    rows: dict[str, list[str]] = {}
+    if start is None:
+        return rows
+    for cells in lines[start + 1 :]:
+        if len(cells) != len(lines[start]) or cells[0] == "tag":
+            break
+        rows[cells[0]] = cells
+    return rows
+
+
+def test_the_radio_panel_shows_the_recorded_tdoa_rates(page) -> None:
+    """The recording is a TDoA run (tests/dashboard/recorded.py): its Radio panel shows, as a live run's,
+    each anchor's packets a second (ANCHOR_HZ, heard by both tags) and each tag's differences a second
+    (TAG_HZ), accepted a second (50) and rejected share (1 of 51: 2 %). 1 % off at most (the 2 s window's
+    base slot, tests/dashboard/test_playback.py), so they print within 0.5 of the closed form."""
+    _seek(page, T2_S)
+    page.get_by_text("TDOA").first.wait_for(timeout=UI_TIMEOUT_MS)
+    anchors = _table_rows(page, "packets/s (best tag)")
+    tags = _table_rows(page, "differences/s")
+    assert set(anchors) == {"0", "1", "2", "3"} and set(tags) == {"chaser", "target"}, page.inner_text("body")
+    for cells in anchors.values():
+        assert abs(float(cells[1]) - ANCHOR_HZ) <= 0.5 and abs(float(cells[2]) - ANCHOR_HZ) <= 0.5, cells
+        assert cells[3] == "2", cells
+    for cells in tags.values():
+        assert abs(float(cells[1]) - TAG_HZ) <= 1.0 and abs(float(cells[2]) - 50.0) <= 0.5, cells
+        assert cells[3] == "2 %", cells
 
 
 def test_play_advances_at_the_chosen_speed_and_pause_stops(page) -> None:

@@ -21,13 +21,15 @@ import pytest
 from dashboard import cli
 from dashboard.app import DashboardApp
 from dashboard.playback import Player, Timeline, load_recording, scenario_of
+from dashboard.radio import radio_markdown
 from dashboard.state import Snapshot, SwarmState
 from swarm.errors import ConfigError, LogError
 from swarm.scenario import load_scenario
 from swarm.transport.keys import Keys
+from swarm.transport.messages import Event
 from swarm.transport.recording import read_recording
 from tests.dashboard.conftest import START_TIMEOUT_S
-from tests.dashboard.recorded import NAMESPACE
+from tests.dashboard.recorded import ANCHOR_HZ, NAMESPACE, TAG_HZ
 from tests.transport.procs import Procs, wait_until
 
 VEHICLES = {"chaser": ("chaser", "target"), "target": ("target", None)}
@@ -85,6 +87,7 @@ def _assert_same(a: Snapshot, b: Snapshot) -> None:
         b.clock_mode,
     )
     assert a.anchors[0] == b.anchors[0] and np.array_equal(a.anchors[1], b.anchors[1])
+    assert a.radio == b.radio
 
 
 def test_a_recording_is_read_with_its_namespace_scenario_and_vehicles(recording: Path) -> None:
@@ -104,7 +107,9 @@ def test_a_recording_is_read_with_its_namespace_scenario_and_vehicles(recording:
         "world_event",
         "world_clock",
         "anchors",
+        "tdoa",
     }
+    assert rec.uwb_mode == "tdoa"  # its distance differences say so; run_start does not name the radio
     sc = scenario_of(rec, None)
     assert sc.name == "docking" and set(sc.vehicles) == {"chaser", "target"}
 
@@ -126,6 +131,74 @@ def test_a_recorded_vision_batch_plays_as_each_vehicles_frame(tmp_path: Path) ->
     sink.close()
     rec = load_recording(path)
     assert rec.items == (("vision", "chaser", frame),) and rec.times_ns == (100_000_000,) and rec.dropped == 1
+
+
+def test_a_recorded_tdoa_run_plays_the_radio_panels_rates(recording: Path) -> None:
+    """The scripted run's tags hear each anchor ANCHOR_HZ times a second and form TAG_HZ differences; their
+    estimates accept 50 a second and reject 1 (tests/dashboard/recorded.py): the store at t, played from the
+    recording, says so in the Radio panel's table. Within 2 %: the 2 s window's base slot can sit one 0.02 s
+    slot off a float boundary (one slot of the window's 100 shifts an anchor's count by 1 of 50)."""
+    rec = load_recording(recording)
+    sc = load_scenario("docking")
+    state = SwarmState(VEHICLES, np.array(sc.anchors_m, dtype=float), uwb_mode=rec.uwb_mode)
+    timeline = Timeline(rec, state, lambda: SwarmState(VEHICLES, state._anchors[1], uwb_mode=rec.uwb_mode))
+    timeline.seek(13.5)
+    radio = state.snapshot(radio=True).radio
+    assert radio.mode == "tdoa" and [a.anchor for a in radio.anchors] == [0, 1, 2, 3]
+    for a in radio.anchors:
+        assert a.best_hz == pytest.approx(ANCHOR_HZ, rel=0.02) and a.mean_hz == pytest.approx(
+            ANCHOR_HZ, rel=0.02
+        )
+        assert a.tags == 2
+    tags = {t.tag: t for t in radio.tags}
+    assert set(tags) == {"chaser", "target"}
+    for t in tags.values():
+        assert t.heard_hz == pytest.approx(TAG_HZ, rel=0.02)
+        assert t.accepted_hz == pytest.approx(50.0, rel=0.02)
+        assert t.rejected_share == pytest.approx(1.0 / 51.0, rel=0.05)
+    text = radio_markdown(radio)
+    assert (
+        text.startswith("**TDOA**")
+        and "| anchor | packets/s (best tag) |" in text
+        and "differences/s" in text
+    )
+
+
+def test_recorded_tdoa_in_batches_and_bundles_plays_as_each_vehicles_tdoa(tmp_path: Path) -> None:
+    """However the differences travelled (docs/protocol.md: a mothership/tdoa batch for agent hosts, a Tdoa
+    entry of a vehicle's lockstep bundle), playback reads each as that vehicle's tdoa at its message's time,
+    as the live link does; a bundle's other entries are skipped; an entry that does not decode is counted in
+    the recording's drops and the others stay. A run_start naming the radio names the playback's."""
+    from swarm.transport.messages import Bundle, Imu, Tdoa, TdoaBatch, encode
+    from swarm.transport.recording import McapSink
+
+    keys = Keys(NAMESPACE)
+
+    def tdoa(k: int, t: float, b: int) -> Tdoa:
+        return Tdoa(k, t, (0,), (b,), np.array([0.25]))
+
+    imu = Imu(4, 0.04, 0.01, np.zeros(3))
+    path = tmp_path / "tdoa.mcap"
+    sink = McapSink(path, keys)
+    sink.write(
+        keys.world_event(), encode(Event(0.0, "run_start", {"scenario": "docking", "uwb_mode": "tdoa2"}))
+    )
+    batch = TdoaBatch(
+        2, 0.02, ("chaser", "target", "chaser2"), (encode(tdoa(2, 0.02, 1)), b"x", encode(tdoa(2, 0.02, 2)))
+    )
+    sink.write(keys.mothership_tdoa(), encode(batch))
+    bundle = Bundle(4, ("Imu", "Tdoa", "Tdoa"), (encode(imu), encode(tdoa(4, 0.04, 3)), b"y"))
+    sink.write(keys.bundle("chaser"), encode(bundle))
+    sink.close()
+    rec = load_recording(path)
+    tdoa_items = [(kind, vid, msg) for kind, vid, msg in rec.items if kind == "tdoa"]
+    assert tdoa_items == [
+        ("tdoa", "chaser", tdoa(2, 0.02, 1)),
+        ("tdoa", "chaser2", tdoa(2, 0.02, 2)),
+        ("tdoa", "chaser", tdoa(4, 0.04, 3)),
+    ]
+    assert rec.times_ns[-3:] == (20_000_000, 20_000_000, 40_000_000)
+    assert rec.dropped == 2 and rec.uwb_mode == "tdoa2"
 
 
 def test_the_store_at_t_holds_the_recorded_poses_and_mode_at_t(recording: Path) -> None:
@@ -167,13 +240,13 @@ def test_seeking_backward_then_forward_gives_the_store_of_a_straight_play(record
     assert timeline.checkpoints > 10
     for t in (18.0, 2.5, 11.111, 11.0, 20.0, 0.0, 6.0):
         restored = timeline.seek(t)
-        _assert_same(state.snapshot(), _straight(rec, t).snapshot())
+        _assert_same(state.snapshot(radio=True), _straight(rec, t).snapshot(radio=True))
         assert isinstance(restored, bool)
     t = 6.0  # then played forward frame by frame at 10x and 30 frames/s
     while t < 9.0:
         t += 10.0 / 30.0
         timeline.seek(t)
-    _assert_same(state.snapshot(), _straight(rec, t).snapshot())
+    _assert_same(state.snapshot(radio=True), _straight(rec, t).snapshot(radio=True))
 
 
 def test_a_backward_seek_says_the_store_was_restored(recording: Path) -> None:
@@ -238,6 +311,11 @@ def test_the_app_draws_the_recorded_pose_at_the_chosen_time_and_commands_nothing
             app.gui.playback.update()  # (the render thread's panel update, at its own rate)
             assert f"t = {t:.2f} s of 20.00 s" in app.gui.playback.time.content
             assert app.gui.playback.slider.value == t
+        snap = app.state.snapshot(radio=True)  # a panel frame: the Radio panel and the anchors' labels
+        app.gui.update_panels(snap, 0)
+        app.scene.update(snap, False)
+        assert app.state.radio.mode == "tdoa" and "| 0 | 25.0 | 25.0 | 2 |" in app.gui.radio.content
+        assert app.scene._anchor_labels[3].text == "anchor 3 · 25/s"
         assert app.link is None and app.gui.buttons == {}  # no Pause/Resume/Reset/New seed
         assert not app.gui.faults.button.visible and app.gui.faults.inject() is None
         assert "not sent" in app.gui.faults.sent.content
