@@ -17,7 +17,7 @@ from swarm.core.pad_vision import PadBoardParams, PadCameraParams
 from swarm.core.range_errors import check_range_errors
 from swarm.core.tdoa_radio import TdoaParams
 from swarm.errors import ConfigError
-from swarm.kinds.quadrotor import QuadrotorParams
+from swarm.kinds import KINDS
 from swarm.sensors.options import SensorsSpec, apply_sensor_profile
 
 Vec3 = tuple[float, float, float]
@@ -267,6 +267,10 @@ class LandingPlatform:
                                "touchdown_speed_m_s"), "platform.")  # fmt: skip
         if not (math.isfinite(self.start_arc_m) and self.start_arc_m >= 0):
             raise ConfigError(f"platform.start_arc_m must be a finite number >= 0, got {self.start_arc_m!r}")
+
+
+QuadrotorParams = KINDS["quadrotor"].Params
+"""The ``[kinds.quadrotor]`` tables, the registered kind's (:mod:`swarm.kinds`)."""
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from swarm.core.mdp import FixedParams, MdpParams
 from swarm.core.sensors import AhrsParams, GyroParams, UwbParams
 from swarm.core.tdoa_radio import TdoaParams
 from swarm.errors import ConfigError
-from swarm.kinds import KINDS, KindsParams, VehicleKind
+from swarm.kinds import KINDS, KindsParams, VehicleKind, check_docking_kind
 from swarm.kinds.dispersions import DispersionParams
 from swarm.sensors.options import SensorsSpec, apply_sensor_profile
 
@@ -51,7 +51,8 @@ class VehicleSpec:
     target: str | None = None
     """For a chaser: the id of the target it docks on."""
     kind: str = "cubesat"
-    """The vehicle's kind (:data:`swarm.kinds.KINDS`: ``cubesat``, ``ground``); its tables are
+    """The vehicle's kind (:data:`swarm.kinds.KINDS`: ``cubesat``, ``ground``; ``quadrotor`` is refused by
+    the docking runners, :func:`swarm.kinds.check_docking_kind`); its tables are
     ``[kinds.<kind>]``."""
     uwb_address: int | None = None
     """The UWB tag's address, which picks its TDMA slot (``uwb.tdma``): ``address % frame``; default the
@@ -285,14 +286,9 @@ class Scenario:
         if not self.vehicles:
             raise ConfigError("vehicles must define at least one vehicle, got none")
         for vid, v in self.vehicles.items():
-            if v.kind == "quadrotor":  # a kind of its own runners, not (yet) a docking vehicle
-                raise ConfigError(
-                    f"vehicles.{vid}.kind must be one of {sorted(KINDS)}, got 'quadrotor': a quadrotor flies "
-                    'landing scenarios (mission = "landing": swarm/scenarios/landing.toml, '
-                    "swarm/landing_scenario.py), not docking ones"
-                )
             if v.kind not in KINDS:
                 raise ConfigError(f"vehicles.{vid}.kind must be one of {sorted(KINDS)}, got {v.kind!r}")
+            check_docking_kind(vid, v.kind)
             if v.role == "chaser":
                 tgt = self.vehicles.get(v.target) if v.target is not None else None
                 if tgt is None or tgt.role != "target":

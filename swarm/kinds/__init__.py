@@ -9,11 +9,13 @@ from __future__ import annotations
 
 from dataclasses import field, make_dataclass
 
+from swarm.errors import ConfigError
 from swarm.kinds.base import VehicleKind
 from swarm.kinds.cubesat import CubesatKind
 from swarm.kinds.ground import GroundKind
+from swarm.kinds.quadrotor import QuadrotorKind
 
-KINDS: dict[str, type[VehicleKind]] = {k.name: k for k in (CubesatKind, GroundKind)}
+KINDS: dict[str, type[VehicleKind]] = {k.name: k for k in (CubesatKind, GroundKind, QuadrotorKind)}
 """Every registered kind by name."""
 
 assert len({k.code for k in KINDS.values()}) == len(KINDS), "kind codes must be distinct"
@@ -26,4 +28,17 @@ KindsParams = make_dataclass(
 KindsParams.__doc__ = "The ``[kinds]`` table: each registered kind's parameter tables (``[kinds.<name>]``)."
 KindsParams.__module__ = __name__
 
-__all__ = ["KINDS", "KindsParams", "VehicleKind"]
+
+def check_docking_kind(vehicle_id: str, name: str) -> None:
+    """ConfigError naming ``vehicles.<vehicle_id>.kind`` and its value unless the docking runners fly the
+    registered kind ``name`` (:attr:`~swarm.kinds.base.VehicleKind.docking_missing` says what they lack)."""
+    missing = KINDS[name].docking_missing
+    if missing is not None:
+        raise ConfigError(
+            f"vehicles.{vehicle_id}.kind = {name!r}: the docking runners cannot fly this kind yet: "
+            f"{missing}. "
+            'It flies landing scenarios (mission = "landing", swarm/scenarios/landing.toml)'
+        )
+
+
+__all__ = ["KINDS", "KindsParams", "VehicleKind", "check_docking_kind"]

@@ -137,6 +137,12 @@ class VehicleKind(ABC):
     planar: ClassVar[bool] = False
     """Moves in the nav x-y plane only (x, y, yaw): the filter then fuses a height and vertical-velocity
     constraint, and the initial dispersions act in the plane."""
+    imu_measures: ClassVar[frozenset[str]] = frozenset({"gyro"})
+    """What its IMU measures: ``"gyro"`` (rate), and ``"accelerometer"`` (specific force) where the world
+    models one. It picks the vehicle's filter (:func:`swarm.navigation.navigator_name`)."""
+    docking_missing: ClassVar[str | None] = None
+    """What the docking runners lack to fly this kind, for the refusal of a docking scenario that names it
+    (:func:`swarm.kinds.check_docking_kind`); None: they fly it."""
     effort_key: ClassVar[str]
     """Name of the kind's effort metric in run summaries (``total_impulse_ns``, ``wheel_travel_rad``)."""
     effort_unit: ClassVar[str]

@@ -48,15 +48,17 @@ from swarm.core.landing import MODES, LandingGuidance, LandingMode
 from swarm.core.mdp import nan_to_none
 from swarm.core.pad_vision import Renderer, detect, estimate_pose, make_detector
 from swarm.core.platform_path import PATH_HEAD, path_length_m
-from swarm.kinds.quadrotor import control as qc
-from swarm.kinds.quadrotor import control_row, truth_row
-from swarm.kinds.quadrotor import dynamics as qd
+from swarm.kinds import KINDS
+from swarm.kinds.base import VehicleDispersion
+from swarm.kinds.quadrotor.dynamics import S_GROUND
 from swarm.landing_scenario import LandingScenario, Uav, platform_path, platform_pose
 from swarm.step import landing_nb as lnb
 
 GATE_PROBABILITY = 0.9995
 """The filter's gate on a fix, a pad measurement and a rangefinder distance: the chi-square quantile."""
 
+QUADROTOR = KINDS["quadrotor"]
+"""The vehicle kind every UAV of a landing scenario is (:class:`swarm.kinds.quadrotor.QuadrotorKind`)."""
 R_BODY_CAM = rot.quat_to_matrix(np.array([1.0, 0.0, 0.0, 0.0]))
 """Camera to body of the downward camera: its optical axis (+z) along body -z."""
 
@@ -514,7 +516,7 @@ class LandingWorld:
         self.sc, self.seed = sc, seed
         qp = sc.kinds.quadrotor
         self.air = qp.airframe
-        self.kp = truth_row(self.air)
+        self.kp = QUADROTOR(qp, sc).truth(VehicleDispersion()).kp
         self.rates = Rates.of(sc)
         self.anchors = np.ascontiguousarray(anchors_of(sc))
         self.gnss_cov = np.diag(np.asarray(sc.gnss.sigma_m, float) ** 2)
@@ -546,7 +548,7 @@ class LandingWorld:
             x = np.zeros(13)
             x[0:3] = st.start
             x[6:10] = rot.rotvec_exp(np.array([0.0, 0.0, st.yaw_rad]))
-            s = np.zeros(qd.S_N)
+            s = np.zeros(QUADROTOR.S_N)
             s[0:4] = self.air.hover_omega_rad_s
             held = np.full(4, self.air.hover_omega_rad_s)
             render_rng = np.random.default_rng(_seeds(seed, u.index, 17))
@@ -585,7 +587,7 @@ class LandingWorld:
         lever = np.asarray(self.sc.uwb.lever_arm_m, float)
         U = list(self.uavs.values())
         tags = np.array([u.x[0:3] + qrotate(u.x[6:10], lever) for u in U])
-        airborne = np.array([u.s[qd.S_GROUND] == 0.0 for u in U])
+        airborne = np.array([u.s[S_GROUND] == 0.0 for u in U])
         rows = self.tdoa.step(t, tags, airborne)
         for i, (uid, u) in enumerate(self.uavs.items()):
             if uid not in inputs:
@@ -711,7 +713,7 @@ class LandingWorld:
     def outcome(self, uav_id: str) -> dict:
         """The world's half of a UAV's summary: where and how it ended."""
         u = self.uavs[uav_id]
-        on_ground = u.s[qd.S_GROUND] != 0.0
+        on_ground = u.s[S_GROUND] != 0.0
         out = {
             "on_ground": bool(on_ground),
             "error_m": float(np.linalg.norm(u.x[0:2] - u.setup.pad[0:2])),
@@ -783,7 +785,7 @@ class LandingAgent:
         self.setup = st
         qp = sc.kinds.quadrotor
         air = qp.airframe
-        self.cp = control_row(qp)
+        self.cp = QUADROTOR(qp, sc).control_row()
         self.dt = sc.dt_s
         self.rates = Rates.of(sc)
         anchors = anchors_of(sc)
@@ -834,7 +836,7 @@ class LandingAgent:
         self.cam_pos = np.asarray(cam.pos_body_m, float)
         half_fov = math.atan(min(cam.intrinsics.cx_px, cam.intrinsics.cy_px) / cam.intrinsics.fx_px)
         self.guidance = LandingGuidance(sc.landing, policy, st.pad, st.start, half_fov, air.gear_height_m)
-        self.cs, self.u, self.act = np.zeros(qc.CS_N), np.zeros(4), np.zeros(9)
+        self.cs, self.u, self.act = np.zeros(QUADROTOR.CS_N), np.zeros(4), np.zeros(9)
         self.board = sc.pad.board
         self.corners = np.ascontiguousarray(self.board.corners)
         self.CAM = camera_vector(cam.intrinsics)
