@@ -1,6 +1,7 @@
 """The mission registry (swarm/missions, docs/architecture.md "Adding a mission"): which mission a scenario
 file is, the refusals of a file that names none or an unknown one, and a toy mission registered from this
-file and run through ``swarm sim`` and ``swarm montecarlo`` without a line of any runner changed."""
+file and run through ``swarm sim`` and ``swarm montecarlo`` (the one campaign runner) without a line of any
+runner changed."""
 
 from __future__ import annotations
 
@@ -220,13 +221,20 @@ def test_the_toy_refuses_what_it_does_not_have(toy, tmp_path, capsys):
     assert "mission 'toy' has no processes to launch" in capsys.readouterr().err
 
 
-def test_a_toy_campaign_pairs_its_policies_through_the_shared_statistics(toy, tmp_path, capsys):
+def test_a_toy_campaign_pairs_its_policies_through_the_one_campaign_runner(toy, tmp_path, capsys):
     path = _toy_file(tmp_path)
-    out = tmp_path / "mc.json"
-    assert main(["montecarlo", str(path), "--runs", "12", "--seed", "7", "--json", str(out)]) == 0
-    rec = json.loads(out.read_text())
+    out, stats = tmp_path / "mc", tmp_path / "mc.json"
+    argv = ["montecarlo", str(path), "--seed", "7", "--out", str(out), "--no-progress", "--json", str(stats)]
+    assert main([*argv[:2], "--runs", "6", *argv[2:]]) == 0
+    assert json.loads((out / "campaign.json").read_text())["mission"] == "toy"  # the runner's directory
+    # resumed to 12 runs: the runner's resume, the 6 runs already there kept
+    assert main(["montecarlo", str(out / "scenario.toml"), "--runs", "12", "--resume", str(out),
+                 "--no-progress", "--json", str(stats)]) == 0  # fmt: skip
+    rec = json.loads(stats.read_text())
     assert rec["paired_policies"] == ["fixed", "mdp"]
     assert rec["policies"]["fixed"]["reached"] == rec["policies"]["mdp"]["reached"] == 12
+    rows = (out / "runs.csv").read_text().splitlines()
+    assert rows[0] == "run,seed,policy,reached,time_s,distance_m" and len(rows) == 1 + 24
     # paired: run i of each policy starts at the same point (one seed per run index), so mdp - fixed of
     # the time is -d_i / 2 run by run; the oracle draws those starts itself (to within a step)
     d = np.array([10.0 - np.random.default_rng(run_seed(7, i)).standard_normal() for i in range(12)])
@@ -236,3 +244,4 @@ def test_a_toy_campaign_pairs_its_policies_through_the_shared_statistics(toy, tm
     assert paired["p_value"] is not None and paired["p_value"] < 1e-6  # 12 differences of ~ -5 s
     assert rec["policies"]["fixed"]["distance_m"]["mean"] == pytest.approx(np.mean(d))
     assert "mdp - fixed time_s" in capsys.readouterr().out
+    assert json.loads((out / "stats.json").read_text()) == rec

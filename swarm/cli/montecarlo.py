@@ -71,70 +71,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def run_landing(args: argparse.Namespace) -> int:
-    """``swarm montecarlo`` of a landing scenario: the shared campaign (:func:`campaign`)."""
-    return campaign(args, "landing")
-
-
 def run(args: argparse.Namespace) -> int:
-    """``swarm montecarlo SCENARIO``: the scenario's mission runs it (:func:`swarm.missions.mission_of`)."""
+    """``swarm montecarlo SCENARIO``: the campaign of the scenario's mission
+    (:func:`swarm.missions.mission_of`, :meth:`swarm.missions.Mission.campaign`)."""
     from swarm.missions import mission_of
 
-    return mission_of(args.scenario).run_montecarlo(args)
+    return campaign(args, mission_of(args.scenario).campaign())
 
 
-def run_mission(args: argparse.Namespace) -> int:
-    """``swarm montecarlo`` of a mission that gives only ``run_one``
-    (:data:`swarm.missions.GENERIC_MONTECARLO`): its paired campaign (:mod:`swarm.missions.paired`)
-    printed, and written by ``--json``."""
-    from swarm.missions import mission_of, overrides_of
-    from swarm.missions.paired import paired_campaign
+def campaign(args: argparse.Namespace, plan) -> int:
+    """The paired campaign of a mission's scenario, ``plan`` its campaign part
+    (:class:`swarm.montecarlo.campaign.CampaignMission`): the same flags, directory, resume and ``--dask``
+    for every mission; the mission's report and summary."""
+    from swarm.missions import overrides_of
+    from swarm.montecarlo.campaign import CampaignSpec, read_manifest, run_campaign
     from swarm.montecarlo.report import finite_or_null
 
-    mission = mission_of(args.scenario)
-    for flag, value in (("--resume", args.resume), ("--dask", args.dask), ("--out", args.out),
-                        ("--workers", args.workers)):  # fmt: skip
-        if value is not None:
-            raise ConfigError(
-                f"{flag}: mission {mission.name!r} has no campaign runner of its own; its paired runs go "
-                "one after another in this process"
-            )
-    sc = mission.load(args.scenario, overrides_of(args))
-    policies = tuple(args.policies) if args.policies else ("fixed", "mdp")
-    seed = 0 if args.seed is None else args.seed
-    rec = paired_campaign(mission, sc, policies, 500 if args.runs is None else args.runs, seed)
-    for p, s in rec["policies"].items():
-        parts = [f"{mission.success_key} {s[mission.success_key]}/{s['n_runs']}"]
-        parts += [f"{m} {s[m]['mean']:.4g}" for m in mission.campaign_metrics() if s[m]["mean"] is not None]
-        print(f"  {p:<6} " + ", ".join(parts))
-    for m, d in rec.get("paired", {}).items():
-        if d["mean_diff"] is not None:
-            base, other = rec["paired_policies"]
-            pv = d["p_value"]
-            p_text = "-" if pv is None else f"{pv:.2g}"
-            print(f"  {other} - {base} {m}: {d['mean_diff']:+.4g}, paired t p = {p_text}")
-    if args.json is not None:
-        try:
-            args.json.write_text(json.dumps(finite_or_null(rec), indent=1) + "\n")
-        except OSError as exc:
-            raise ConfigError(f"--json: cannot write {str(args.json)!r}: {exc.strerror or exc}") from None
-    return 0
-
-
-def run_docking(args: argparse.Namespace) -> int:
-    """``swarm montecarlo`` of a docking scenario: the shared campaign (:func:`campaign`)."""
-    return campaign(args, "docking")
-
-
-def campaign(args: argparse.Namespace, mission: str) -> int:
-    """The paired campaign of ``mission``'s scenario (:data:`swarm.montecarlo.campaign.CAMPAIGNS`): the
-    same flags, directory, resume and ``--dask`` for every mission; the mission's report and summary."""
-    from swarm.config import parse_override
-    from swarm.montecarlo.campaign import CAMPAIGNS, CampaignSpec, read_manifest, run_campaign
-    from swarm.montecarlo.report import finite_or_null
-
-    plan = CAMPAIGNS[mission]
-    sc = plan.entry("load")(args.scenario, dict(parse_override(text) for text in args.overrides))
+    sc = plan.entry("load")(args.scenario, overrides_of(args))
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers must be a positive integer, got {args.workers}")
     if args.resume is not None:

@@ -12,7 +12,7 @@ import tomllib
 from pathlib import Path
 
 from swarm.errors import ConfigError
-from swarm.missions.base import GENERIC_MONTECARLO, GENERIC_SIM, Mission, overrides_of, resolve
+from swarm.missions.base import GENERIC_SIM, Mission, overrides_of, resolve
 from swarm.missions.docking import DockingMission
 from swarm.missions.landing import LandingMission
 
@@ -113,7 +113,6 @@ def _at(path: Path, key: str) -> str:
 
 __all__ = [
     "DEFAULT_MISSION",
-    "GENERIC_MONTECARLO",
     "GENERIC_SIM",
     "MISSIONS",
     "Mission",

@@ -4,13 +4,15 @@ A mission is what a run is for: docking a chaser with its target, landing a quad
 file names its mission with a top-level key, ``mission = "landing"``; a file without one is a docking
 scenario. :class:`Mission` is what a command asks of that mission: how to load the file, and the
 function each command runs (``swarm sim``, ``swarm launch``, ``swarm montecarlo``) given its parsed
-arguments. The dashboard asks it for the scenario to draw, live or from a recording.
+arguments, and its campaign part (:meth:`Mission.campaign`), which the one campaign runner takes. The
+dashboard asks it for the scenario to draw, live or from a recording.
 
 An entry point is named by its dotted path (``"swarm.cli.sim:run_docking"``), as a packaging entry point
 is, and imported when called: so this registry sits under the transport and the processes (the dashboard
 consults it), while the commands it names sit above. A mission that has no runner of its own gives
-:meth:`Mission.run_one` and gets ``swarm sim`` and a paired ``swarm montecarlo`` from the generic entries
-(:data:`GENERIC_SIM`, :data:`GENERIC_MONTECARLO`); ``swarm launch`` needs processes, so it has none.
+:meth:`Mission.run_one` and gets ``swarm sim`` from the generic entry (:data:`GENERIC_SIM`) and a paired
+campaign of its summaries (:mod:`swarm.montecarlo.summary_campaign`); ``swarm launch`` needs processes, so
+it has none.
 """
 
 from __future__ import annotations
@@ -28,9 +30,6 @@ _LOG = logging.getLogger(__name__)
 
 GENERIC_SIM = "swarm.cli.sim:run_mission"
 """``swarm sim`` of a mission that gives :meth:`Mission.run_one`: one run, its summary printed."""
-GENERIC_MONTECARLO = "swarm.cli.montecarlo:run_mission"
-"""``swarm montecarlo`` of a mission that gives :meth:`Mission.run_one`: paired runs of each policy, the
-shared statistics (:mod:`swarm.montecarlo.stats`)."""
 
 
 def resolve(entry: str) -> Callable[..., Any]:
@@ -64,8 +63,9 @@ class Mission:
     """``swarm sim``'s function, ``(args) -> exit code``."""
     launch_entry: ClassVar[str | None] = None
     """``swarm launch``'s function, ``(args) -> exit code``; None: the mission has no processes."""
-    montecarlo_entry: ClassVar[str] = GENERIC_MONTECARLO
-    """``swarm montecarlo``'s function, ``(args) -> exit code``."""
+    campaign_entry: ClassVar[str | None] = None
+    """Its campaign part, ``"module:NAME"`` of a :class:`~swarm.montecarlo.campaign.CampaignMission`; None:
+    the campaign of :meth:`run_one`'s summaries (:meth:`campaign`)."""
 
     def load(self, scenario: str | Path, overrides: dict | None = None) -> Any:
         """The mission's scenario from a file or a bundled name, ``overrides`` (dotted keys) applied.
@@ -108,9 +108,22 @@ class Mission:
             )
         return int(resolve(self.launch_entry)(args) or 0)
 
-    def run_montecarlo(self, args: argparse.Namespace) -> int:
-        """``swarm montecarlo SCENARIO``: a paired campaign of the policies; the exit code."""
-        return int(resolve(self.montecarlo_entry)(args) or 0)
+    def rights(self, keys: Any, vehicle: str | None, platforms: tuple[str, ...]) -> dict | None:
+        """What the mission's world (``vehicle`` None) or the agent of ``vehicle`` may send in a secured swarm
+        (:func:`swarm.transport.security.rights`: ACL message kind -> key expressions under ``keys``, a
+        :class:`swarm.transport.keys.Keys`; liveliness watching is added there). ``platforms``: the moving
+        pads' robots, whose shared estimates the world puts and the agents read. None: no such process."""
+        return None
+
+    def campaign(self) -> Any:
+        """What the campaign runner asks of this mission (:class:`swarm.montecarlo.campaign.CampaignMission`,
+        ``swarm montecarlo``): :attr:`campaign_entry`'s, else the campaign of :meth:`run_one`'s summaries
+        (:func:`swarm.montecarlo.summary_campaign.summary_campaign`)."""
+        if self.campaign_entry is not None:
+            return resolve(self.campaign_entry)
+        from swarm.montecarlo.summary_campaign import summary_campaign
+
+        return summary_campaign(self)
 
     def dashboard_scenario(self, args: argparse.Namespace) -> Any:
         """The scenario ``swarm dashboard SCENARIO`` draws a live swarm with (``--set``, ``--agents``)."""

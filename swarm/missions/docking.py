@@ -23,7 +23,7 @@ class DockingMission(Mission):
     fault_menu = ("uwb_dropout", "nlos_burst", "camera_loss", "gyro_bias_step", "sensor_delay")
     sim_entry = "swarm.cli.sim:run_docking"
     launch_entry = "swarm.cli.launch:run_docking"
-    montecarlo_entry = "swarm.cli.montecarlo:run_docking"
+    campaign_entry = "swarm.montecarlo.campaign:DOCKING"
 
     def scenario_keys(self) -> frozenset[str]:
         """The top-level keys of a docking file: the fields of Scenario and the keys of the format before
@@ -49,6 +49,29 @@ class DockingMission(Mission):
     def with_agents(self, scenario, agents: int | None):
         """The scenario's vehicles copied ``agents`` times (:meth:`swarm.scenario.Scenario.with_pairs`)."""
         return scenario if agents is None else scenario.with_pairs(agents)
+
+    def rights(self, keys, vehicle: str | None, platforms: tuple[str, ...]) -> dict:
+        """The docking world (``swarm/world/process.py``) puts every vehicle's sensors and bundles; an agent
+        (``agents/process.py``) reads its own and the shared ones, and every vehicle's estimate."""
+        ns = keys.namespace
+        if vehicle is None:
+            return {
+                "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu agent/*/vision agent/*/truth agent/*/event "
+                    "agent/*/bundle world/imu world/vision world/truth world/bundle world/clock "
+                    "world/event").split()),
+                "declare_subscriber": (keys.agent_all("command"), keys.agent_all("commands"),
+                                       keys.run_control(), keys.fault()),
+                "liveliness_token": (f"{ns}/alive/world/*",),
+            }  # fmt: skip
+        v = vehicle
+        return {
+            "put": (keys.estimate(v), keys.guidance(v), keys.command(v), keys.commands(v), keys.event(v)),
+            "declare_subscriber": (keys.imu(v), keys.uwb(v), keys.tdoa(v), keys.vision(v), keys.bundle(v),
+                                   keys.agent_all("estimate"), keys.world_imu(), keys.world_vision(),
+                                   keys.mothership_uwb(), keys.mothership_tdoa(),
+                                   keys.world_clock(), keys.world_event()),  # world_resumed
+            "liveliness_token": (keys.alive("agent", v),),
+        }  # fmt: skip
 
     def playback_scenario(
         self, scenario: str | Path, overrides: dict | None, vehicle_ids: Sequence[str] | None

@@ -2,7 +2,8 @@
 
 The runner is the same for every mission; a mission gives only its :class:`CampaignMission`: how to load
 its scenario, how to fly one seeded run of one policy and reduce it to ``runs.csv`` rows, which columns
-those rows have, and how to write its report from the directory (:data:`CAMPAIGNS`: docking, landing).
+those rows have, and how to write its report from the directory. The runner takes it as an argument; the
+mission registry (:data:`swarm.missions.MISSIONS`, a layer above) gives each mission's.
 
 Design:
 
@@ -77,66 +78,48 @@ def run_seed(root_seed: int, run: int) -> int:
 
 @dataclass(frozen=True)
 class CampaignMission:
-    """What the runner asks of a mission: beside its name, functions named ``"package.module:function"``
-    and imported when called (so the registry imports no simulator, and ``run_one`` pickles by reference)."""
+    """What the runner asks of a mission, given it by the mission registry (:meth:`swarm.missions.Mission.
+    campaign`): beside its name, functions, each a callable or named ``"package.module:function"`` and
+    imported when called (so a mission's campaign part imports no simulator, and ``run_one`` pickles by
+    reference)."""
 
     name: str
     """The mission (``campaign.json``'s ``mission``): ``docking``, ``landing``."""
-    load: str
+    load: str | Callable
     """``(scenario, overrides=None) -> scenario``: a scenario file or bundled name, ``--set`` applied; a
     ConfigError for one the campaign cannot run. Reads ``DIR/scenario.toml`` back too."""
-    columns: str
+    columns: str | Callable
     """``(scenario) -> {column: type}``: the ``runs.csv`` columns (types: ``int``, ``float``, ``bool``,
     ``str``; ``float?`` may be empty). Every row has ``run`` and ``policy``."""
-    run_one: str
+    run_one: str | Callable
     """``(scenario, policy, run, seed, trajectory_period_s) -> (rows, trajectories)``: run ``run`` of
     ``policy`` flown from ``seed``, in a worker; each trajectory is a JSON object with ``run`` and
     ``policy``."""
-    report: str
+    report: str | Callable
     """``(out_dir, figures=True) -> record``: the report written from the directory's files alone."""
-    summary: str
+    summary: str | Callable
     """``(record) -> str``: what ``swarm montecarlo`` prints of the record."""
     preload: str = ""
     """A module imported in the parent before a local pool forks (loaded and compiled once)."""
 
     def entry(self, what: str) -> Callable:
-        """The function field ``what`` names."""
-        return pkgutil.resolve_name(getattr(self, what))
+        """The function field ``what`` gives."""
+        f = getattr(self, what)
+        return f if callable(f) else pkgutil.resolve_name(f)
 
 
-CAMPAIGNS: dict[str, CampaignMission] = {
-    "docking": CampaignMission(
-        name="docking",
-        load="swarm.scenario:load_scenario",
-        columns="swarm.montecarlo.run:fields_for",
-        run_one="swarm.montecarlo.run:run_one",
-        report="swarm.montecarlo.report:campaign_report",
-        summary="swarm.montecarlo.report:summary_text",
-        preload="swarm.sim.docking",
-    ),
-    "landing": CampaignMission(
-        name="landing",
-        load="swarm.montecarlo.landing:load_campaign_scenario",
-        columns="swarm.montecarlo.landing:columns",
-        run_one="swarm.montecarlo.landing:run_one",
-        report="swarm.montecarlo.landing:write_report",
-        summary="swarm.montecarlo.landing:summary_text",
-        preload="swarm.sim.landing",
-    ),
-}
-"""The campaign of each mission, by the name ``campaign.json`` records (a directory without one is a
-docking campaign, as before missions)."""
-
-
-def mission_of_dir(out_dir: Path) -> CampaignMission:
-    """The campaign mission of the directory ``out_dir`` (its ``campaign.json``)."""
-    name = read_manifest(out_dir).get("mission", "docking")
-    try:
-        return CAMPAIGNS[name]
-    except KeyError:
-        raise ConfigError(
-            f"{Path(out_dir) / MANIFEST}: mission {name!r} has no campaign here; known: {sorted(CAMPAIGNS)}"
-        ) from None
+DOCKING = CampaignMission(
+    name="docking",
+    load="swarm.scenario:load_scenario",
+    columns="swarm.montecarlo.run:fields_for",
+    run_one="swarm.montecarlo.run:run_one",
+    report="swarm.montecarlo.report:campaign_report",
+    summary="swarm.montecarlo.report:summary_text",
+    preload="swarm.sim.docking",
+)
+"""The docking's campaign part: the mission of a directory whose ``campaign.json`` names none (as before
+missions), so the runner's default. Every mission's part is given by its entry in
+:data:`swarm.missions.MISSIONS`."""
 
 
 # ------------------------------------------------------------------------------------------- the campaign
@@ -150,8 +133,8 @@ class CampaignSpec:
     policies: tuple[str, ...] = POLICIES
     runs: int = 500
     root_seed: int = 0
-    mission: CampaignMission = CAMPAIGNS["docking"]
-    """Whose scenario it is (:data:`CAMPAIGNS`)."""
+    mission: CampaignMission = DOCKING
+    """Whose scenario it is (:meth:`swarm.missions.Mission.campaign`)."""
 
     def __post_init__(self) -> None:
         if not (isinstance(self.runs, int) and self.runs >= 1):
@@ -214,7 +197,7 @@ def _prepare_dir(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
     scen = to_mapping(spec.scenario)
     if resume:
         man = read_manifest(out_dir)
-        was = man.get("mission", "docking")
+        was = man.get("mission", DOCKING.name)
         if was != spec.mission.name:
             raise ConfigError(
                 f"--resume {str(out_dir)!r}: a {was} campaign, the scenario given is a {spec.mission.name} "
@@ -288,14 +271,16 @@ def _format(value) -> str:
     return str(value)
 
 
-def read_runs(out_dir: Path, scenario=None, mission: CampaignMission | None = None) -> list[dict]:
-    """The typed rows of ``DIR/runs.csv`` (the mission's ``columns`` of the campaign's scenario,
-    ``DIR/scenario.toml`` unless given; the mission ``DIR/campaign.json``'s unless given), in file order.
-    A last line cut short (a campaign killed mid-write) is dropped; any other malformed line is an error."""
+def read_runs(out_dir: Path, scenario=None, mission: CampaignMission = DOCKING) -> list[dict]:
+    """The typed rows of ``DIR/runs.csv`` (the ``mission``'s ``columns`` of the campaign's scenario,
+    ``DIR/scenario.toml`` unless given), in file order. A last line cut short (a campaign killed mid-write)
+    is dropped; any other malformed line is an error, and so is a directory of another mission."""
     path = Path(out_dir) / RUNS_FILE
     if not path.exists():
         return []
-    mission = mission if mission is not None else mission_of_dir(out_dir)
+    was = read_manifest(out_dir).get("mission", DOCKING.name)
+    if was != mission.name:
+        raise ConfigError(f"{Path(out_dir) / MANIFEST}: a {was} campaign, read as a {mission.name} one")
     if scenario is None:
         scenario = mission.entry("load")(Path(out_dir) / SCENARIO_FILE)
     fields = mission.entry("columns")(scenario)

@@ -1,12 +1,12 @@
 """The landing's campaign (issue 15; paper Figs. 9-10): what :mod:`swarm.montecarlo.campaign` asks of it.
 
-The campaign runner is the docking one (resume, ``--dask``, ``campaign.json``, rows as they finish); the
-landing gives its :class:`~swarm.montecarlo.campaign.CampaignMission`: its scenario (one UAV per run: a
-``[[fleet]]`` is refused), one seeded run reduced to a ``runs.csv`` row (:data:`COLUMNS`; a moving pad
-adds :data:`PLATFORM_COLUMNS`) and a trajectory, and ``report.md`` with ``stats.json``: the table, the
-paired differences (:func:`swarm.montecarlo.stats.paired`, the docking campaign's), what they mean, and the
-figures: trajectories coloured by mode (Fig. 9), landing error and energy distributions (Fig. 10) and the
-deviation points against the navigation quality.
+The campaign runner is the one of every mission (resume, ``--dask``, ``campaign.json``, rows as they
+finish); the landing gives its :class:`~swarm.montecarlo.campaign.CampaignMission`, :data:`CAMPAIGN`: its
+scenario (one UAV per run: a ``[[fleet]]`` is refused), one seeded run reduced to a ``runs.csv`` row
+(:data:`COLUMNS`; a moving pad adds :data:`PLATFORM_COLUMNS`) and a trajectory, and ``report.md`` with
+``stats.json``: the table, the paired differences (:func:`swarm.montecarlo.stats.paired`, the docking
+campaign's), what they mean, and the figures: trajectories coloured by mode (Fig. 9), landing error and
+energy distributions (Fig. 10) and the deviation points against the navigation quality.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ import numpy as np
 
 from swarm.errors import ConfigError
 from swarm.montecarlo.campaign import (
-    CAMPAIGNS,
     SCENARIO_FILE,
+    CampaignMission,
     read_manifest,
     read_runs,
     read_trajectories,
@@ -52,10 +52,30 @@ PLATFORM_COLUMNS: dict[str, str] = {
     "platform_speed_m_s": "float",
 }
 """The columns a scenario with a moving pad (``[platform] enabled``) adds."""
+TDOA_COLUMNS: dict[str, str] = {
+    "tdoa_accepted": "int",
+    "tdoa_rejected": "int",
+    "tdoa_nis_mean": "float?",
+}
+"""The columns a scenario on a TDoA radio (``uwb.mode`` tdoa2/tdoa3) adds, after :data:`COLUMNS` (only then:
+a two-way-ranging campaign's ``runs.csv`` is the same as before, byte for byte): the UAV's distance
+differences its filter accepted and rejected over the run and the mean NIS of the accepted ones (the
+summary's ``tdoa_pairs`` pooled: ``sum(nis_mean * accepted) / sum(accepted)``; 1 for a consistent filter;
+empty when none was accepted). :meth:`swarm.step.landing.LandingAgent.tdoa_counts`."""
 MODES = ("CRUISE", "DEVIATE", "DESCEND", "FINAL", "CLIMB", "LANDED", "ABORT")
 METRICS = ("energy_j", "landing_time_s", "landing_error_m", "deviation_distance_m")
 PAIRED_KEYS = ("n", "mean_diff", "ci95", "relative", "p_value", "wilcoxon_p_value")
 """What ``stats.json`` keeps of :func:`swarm.montecarlo.stats.paired` (its format since issue 15)."""
+CAMPAIGN = CampaignMission(
+    name="landing",
+    load="swarm.montecarlo.landing:load_campaign_scenario",
+    columns="swarm.montecarlo.landing:columns",
+    run_one="swarm.montecarlo.landing:run_one",
+    report="swarm.montecarlo.landing:write_report",
+    summary="swarm.montecarlo.landing:summary_text",
+    preload="swarm.sim.landing",
+)
+"""The landing's campaign part (:meth:`swarm.missions.Mission.campaign`)."""
 
 
 def _moving(sc) -> bool:
@@ -78,7 +98,16 @@ def load_campaign_scenario(scenario, overrides: dict | None = None):
 
 def columns(sc) -> dict[str, str]:
     """The ``runs.csv`` columns of a campaign of ``sc``."""
-    return COLUMNS | PLATFORM_COLUMNS if _moving(sc) else dict(COLUMNS)
+    tdoa = TDOA_COLUMNS if sc.uwb.mode != "twr" else {}
+    return COLUMNS | tdoa | (PLATFORM_COLUMNS if _moving(sc) else {})
+
+
+def tdoa_nis_mean(pairs: dict) -> float | None:
+    """The mean NIS of every accepted difference (:data:`TDOA_COLUMNS`) from the summary's ``tdoa_pairs``."""
+    acc = sum(p["accepted"] for p in pairs.values())
+    if not acc:
+        return None
+    return sum(p["nis_mean"] * p["accepted"] for p in pairs.values() if p["accepted"]) / acc
 
 
 def run_one(sc, policy: str, run: int, seed: int, trajectory_period_s: float = 1.0):
@@ -93,6 +122,8 @@ def run_one(sc, policy: str, run: int, seed: int, trajectory_period_s: float = 1
         if k in r:
             row[k] = r[k]
     row["start_x_m"], row["start_y_m"], row["start_z_m"] = r["start_m"]
+    if "tdoa_pairs" in r:  # (TDOA_COLUMNS)
+        row["tdoa_nis_mean"] = tdoa_nis_mean(r["tdoa_pairs"])
     s = r["series"]
     step = max(1, round(trajectory_period_s / (SERIES_EVERY * sc.dt_s)))
     traj = {
@@ -157,7 +188,7 @@ def write_report(out_dir: str | Path, figures: bool = True) -> dict:
     policies = tuple(man["policies"])
     sc = load_campaign_scenario(out_dir / SCENARIO_FILE)
     order = {p: k for k, p in enumerate(policies)}
-    rows = sorted(read_runs(out_dir, sc, CAMPAIGNS["landing"]), key=lambda r: (r["run"], order[r["policy"]]))
+    rows = sorted(read_runs(out_dir, sc, CAMPAIGN), key=lambda r: (r["run"], order[r["policy"]]))
     trajs = sorted(read_trajectories(out_dir), key=lambda t: (t["run"], order[t["policy"]]))
     rec = summarize(rows, policies)
     rec.update({"scenario": sc.name, "runs": int(man["runs"]), "root_seed": man["root_seed"],

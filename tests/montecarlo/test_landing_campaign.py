@@ -19,11 +19,12 @@ import swarm.montecarlo.campaign as campaign
 from swarm.cli.main import main
 from swarm.errors import ConfigError
 from swarm.landing_scenario import load_landing
-from swarm.montecarlo.campaign import CAMPAIGNS, CampaignSpec, read_runs, run_campaign
+from swarm.missions import MISSIONS
+from swarm.montecarlo.campaign import CampaignSpec, read_runs, run_campaign
 from swarm.montecarlo.landing import write_report
 from swarm.scenario import load_scenario
 
-LANDING = CAMPAIGNS["landing"]
+LANDING = MISSIONS["landing"].campaign()
 SHORT = {"vehicle.start_m": [12.0, 3.0, 5.0]}  # 13-17 s flights instead of 15-18 s
 RUNS, ROOT, POLICIES = 5, 3, ("fixed", "mdp")
 COMMITTED = Path(__file__).resolve().parents[2] / "docs" / "results" / "landing-500-seed0"
@@ -60,7 +61,7 @@ def test_a_killed_landing_campaign_resumes_to_the_same_files(whole, tmp_path, mo
     # what a kill in the middle of a write leaves: the last row cut short (its trajectory line complete)
     text = (out / "runs.csv").read_bytes()
     (out / "runs.csv").write_bytes(text[: len(text) - 30])
-    kept = len(read_runs(out))
+    kept = len(read_runs(out, mission=LANDING))
     assert kept == first.done - 1
     monkeypatch.setattr(campaign.cf, "as_completed", real)
     with cf.ThreadPoolExecutor(1) as ex:
