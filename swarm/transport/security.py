@@ -98,56 +98,30 @@ def identities(vehicle_ids: Iterable[str]) -> tuple[str, ...]:
     return (*ROLES, *(agent_name(v) for v in vehicle_ids))
 
 
-MISSIONS: tuple[str, ...] = ("docking", "landing")
-"""The swarms whose processes have rights: a docking swarm (world, mothership, agents) and a landing swarm
-(a landing world that also sends the ranges and the GNSS fixes, no mothership, landing agents)."""
-
-
 def rights(
     keys: Keys, name: str, mission: str = "docking", platforms: Sequence[str] = ()
 ) -> dict[str, tuple[str, ...]]:
     """What identity ``name`` may send to the router in a ``mission`` swarm: ACL message kind -> key
     expressions (wildcards included, so a rule on ``<ns>/agent/*/imu`` covers every vehicle). Kinds not
     listed are denied. ConfigError for a name that is not a swarm identity or an unknown mission.
-    ``platforms``: a landing swarm's moving pads' robots (``[platform] id``), simulated by the world, which
-    puts each one's shared ``estimate`` that the landing agents read."""
+    The world's and each agent's are the mission's (:meth:`swarm.missions.Mission.rights`), the other
+    roles' the same in every mission. ``platforms``: a swarm's moving pads' robots (``[platform] id``),
+    simulated by the world, which puts each one's shared ``estimate`` that the agents read."""
+    from swarm.missions import MISSIONS
+
     if mission not in MISSIONS:
         raise ConfigError(f"mission must be one of {', '.join(MISSIONS)}, got {mission!r}")
     ns = keys.namespace
     alive = (f"{ns}/alive/**",)
     watch = {"declare_liveliness_subscriber": alive, "liveliness_query": alive}
-    if mission == "landing" and name == "world":  # swarm.world.landing: every UAV's sensors, then its clock
-        return {
-            "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/uwb", "agent/*/tdoa", "agent/*/gnss",
-                                                "agent/*/rangefinder", "agent/*/barometer", "agent/*/vision",
-                                                "agent/*/truth", "world/clock", "world/event"))
-            + tuple(keys.estimate(p) for p in platforms),
-            "declare_subscriber": (keys.agent_all("command"), keys.run_control(), keys.fault()),
-            "liveliness_token": (f"{ns}/alive/world/*",),
-            **watch,
-        }  # fmt: skip
-    if mission == "landing" and name.startswith("agent-") and len(name) > len("agent-"):  # agents.landing
-        uid = check_id(name[len("agent-") :], "agent id of identity")
-        return {
-            "put": (keys.estimate(uid), keys.guidance(uid), keys.command(uid), keys.event(uid)),
-            "declare_subscriber": (keys.imu(uid), keys.uwb(uid), keys.tdoa(uid), keys.gnss(uid),
-                                   keys.rangefinder(uid), keys.barometer(uid), keys.vision(uid),
-                                   keys.world_event(),
-                                   *(keys.estimate(p) for p in platforms)),
-            "liveliness_token": (keys.alive("agent", uid),),
-            **watch,
-        }  # fmt: skip
-    if name == "world":
-        return {
-            "put": tuple(f"{ns}/{k}" for k in ("agent/*/imu", "agent/*/vision", "agent/*/truth",
-                                                "agent/*/event", "agent/*/bundle", "world/imu",
-                                                "world/vision", "world/truth", "world/bundle", "world/clock",
-                                                "world/event")),
-            "declare_subscriber": (keys.agent_all("command"), keys.agent_all("commands"), keys.run_control(),
-                                   keys.fault()),
-            "liveliness_token": (f"{ns}/alive/world/*",),
-            **watch,
-        }  # fmt: skip
+    vid = None
+    if name.startswith("agent-") and len(name) > len("agent-"):
+        vid = check_id(name[len("agent-") :], "agent id of identity")
+    if name == "world" or vid is not None:
+        own = MISSIONS[mission].rights(keys, vid, tuple(platforms))
+        if own is None:
+            raise ConfigError(f"a {mission} swarm has no {name} process")
+        return own | watch
     if name == "mothership":
         return {
             "put": (
@@ -184,19 +158,6 @@ def rights(
             "declare_subscriber": (keys.world_event(), keys.world_clock(), keys.agent_all("event"),
                                    keys.agent_all("guidance")),
             "liveliness_token": (f"{ns}/alive/launcher/*",),
-            **watch,
-        }  # fmt: skip
-    if name.startswith("agent-") and len(name) > len("agent-"):
-        vid = check_id(name[len("agent-") :], "agent id of identity")
-        return {
-            "put": (keys.estimate(vid), keys.guidance(vid), keys.command(vid), keys.commands(vid),
-                    keys.event(vid)),
-            "declare_subscriber": (keys.imu(vid), keys.uwb(vid), keys.tdoa(vid), keys.vision(vid),
-                                   keys.bundle(vid), keys.agent_all("estimate"),
-                                   keys.world_imu(), keys.world_vision(), keys.mothership_uwb(),
-                                   keys.mothership_tdoa(),
-                                   keys.world_clock(), keys.world_event()),  # world_resumed
-            "liveliness_token": (keys.alive("agent", vid),),
             **watch,
         }  # fmt: skip
     raise ConfigError(f"security identity must be one of {', '.join(ROLES)} or agent-<id>, got {name!r}")
