@@ -86,16 +86,23 @@ FIELDS: dict[str, str] = {
     "wall_s": "float",
 }
 """``runs.csv`` columns (the names of swarm/step/outcome.py's summary where it has them) and their types."""
+TDOA_FIELDS: dict[str, str] = {"tdoa_accepted": "int", "tdoa_rejected": "int"}
+"""The columns a campaign on a TDoA radio (``uwb.mode`` tdoa2/tdoa3) adds after ``accepted_vision``: the
+chaser's distance differences its filter accepted and rejected over the run (a difference is counted as a
+range, :func:`swarm.step.agent.agent_tdoa`; ``rejected_ranges`` then counts the same rejections). Only
+then, so that a two-way-ranging campaign's ``runs.csv`` is the same as before, byte for byte."""
 
 
 def fields_for(scenario) -> dict[str, str]:
     """The ``runs.csv`` columns of a campaign of ``scenario``: :data:`FIELDS` with its chasers' kind's
     effort (``total_impulse_ns`` and ``target_impulse_ns`` for a cube, as before kinds) and own dispersions
-    (``disp_thruster_rms_rad`` for a cube). A campaign's chasers are of one kind."""
+    (``disp_thruster_rms_rad`` for a cube), and on a TDoA radio :data:`TDOA_FIELDS`. A campaign's chasers
+    are of one kind."""
     kinds = {scenario.kind(c) for c in scenario.chasers}
     if len({k.name for k in kinds}) != 1:
         raise ConfigError(f"a campaign needs chasers of one kind, got {sorted(k.name for k in kinds)}")
     kind = kinds.pop()
+    tdoa = scenario.uwb.mode != "twr"
     out = {}
     for name, typ in FIELDS.items():
         if name == "total_impulse_ns":
@@ -106,6 +113,8 @@ def fields_for(scenario) -> dict[str, str]:
             out.update(dict.fromkeys(kind.dispersion_columns({}), "float"))
         else:
             out[name] = typ
+        if name == "accepted_vision" and tdoa:
+            out.update(TDOA_FIELDS)
     return out
 
 
@@ -173,6 +182,9 @@ def run_one(scenario, policy: str, run: int, seed: int, trajectory_period_s: flo
             "sim_time_s": res["sim_time_s"],
             "wall_s": wall,
         }
+        if scenario.uwb.mode != "twr":  # (TDOA_FIELDS)
+            row["tdoa_accepted"] = c["estimator"]["accepted_ranges"]
+            row["tdoa_rejected"] = c["estimator"]["rejected_ranges"]
         rows.append(row)
         s = c["series"]
         idx = list(range(0, len(s["t_s"]), every))
