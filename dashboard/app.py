@@ -42,6 +42,7 @@ from dashboard.playback import PlaybackPanel, Player, Recording, Timeline
 from dashboard.state import AgentSnap, FramePacer, RateLimiter, Snapshot, SwarmState
 from swarm.errors import ConfigError
 from swarm.landing_scenario import LandingScenario
+from swarm.missions import DEFAULT_MISSION, MISSIONS
 from swarm.scenario import Scenario
 from swarm.transport.keys import Keys
 from swarm.transport.messages import DropCounter
@@ -509,7 +510,8 @@ class DashboardApp:
             raise ValueError("a DashboardApp draws either a Zenoh session or a recording")
         self.params = params if params is not None else DashboardParams()
         self.drops = DropCounter()
-        landing = sc if isinstance(sc, LandingScenario) else None
+        drawer = MISSIONS[getattr(sc, "mission", DEFAULT_MISSION)].dashboard_drawer  # Scenario: no field
+        landing = sc if drawer == "landing" else None
         if landing is not None:
             vehicles = uav_vehicles(landing)
             anchors = np.array(landing.uwb.anchors_m, dtype=float)

@@ -26,7 +26,7 @@ from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
 
-def _docking() -> None:
+def docking_kernels() -> None:
     """The docking tick compiled whole (``swarm sim``, campaigns), then the world and agent processes'."""
     from agents.process import warm_up as warm_agent
     from swarm.scenario import load_scenario
@@ -40,7 +40,7 @@ def _docking() -> None:
         warm_agent(sc, 0, vid, sc.policy)
 
 
-def _landing() -> None:
+def landing_kernels() -> None:
     """The landing compiled whole (``swarm sim landing``), then the landing agent process's tick."""
     from agents.landing import warm_up
     from swarm.sim.landing import load_landing, run_landing
@@ -73,13 +73,21 @@ def _filters() -> None:
         replay_log(read_log(d))
 
 
+def _mission_chains() -> dict[str, tuple[Callable[[], None], str]]:
+    """Each registered mission's chain (:attr:`swarm.missions.Mission.compile_entry`), in their order."""
+    from swarm.missions import MISSIONS, resolve
+
+    named = {m.name: resolve(m.compile_entry) for m in MISSIONS.values() if m.compile_entry}
+    return {name: (f, (f.__doc__ or "").split("\n")[0]) for name, f in named.items()}
+
+
 CHAINS: dict[str, tuple[Callable[[], None], str]] = {
-    "docking": (_docking, "the docking tick, world and agents (~2 min on one core, cold)"),
-    "landing": (_landing, "the landing (~1 min cold)"),
+    **_mission_chains(),
     "filters": (_filters, "the batched estimator and the IMU-driven filter (~20 s cold)"),
 }
-"""The chains, longest first. Chains share only small helpers, so they compile in parallel; within a
-chain the order matters (the processes' paths reuse what the in-process run compiled)."""
+"""The chains, longest first: the missions' (docking ~2 min on one core cold, landing ~1 min), then the
+filters. Chains share only small helpers, so they compile in parallel; within a chain the order matters
+(the processes' paths reuse what the in-process run compiled)."""
 
 
 def _run_chain(name: str) -> float:

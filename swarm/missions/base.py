@@ -63,6 +63,12 @@ class Mission:
     """``swarm sim``'s function, ``(args) -> exit code``."""
     launch_entry: ClassVar[str | None] = None
     """``swarm launch``'s function, ``(args) -> exit code``; None: the mission has no processes."""
+    compile_entry: ClassVar[str | None] = None
+    """``swarm compile``'s chain of this mission, ``"module:function"``: ``() -> None`` runs its kernels once
+    on scratch objects, so numba's cache holds them (:mod:`swarm.cli.compile`); None: nothing to compile."""
+    dashboard_drawer: ClassVar[str | None] = None
+    """Which of the dashboard's scene drawers draws it: ``"docking"`` (``dashboard/app.py``'s ``SceneView``)
+    or ``"landing"`` (``dashboard/landing.py``); None: the dashboard has none."""
     campaign_entry: ClassVar[str | None] = None
     """Its campaign part, ``"module:NAME"`` of a :class:`~swarm.montecarlo.campaign.CampaignMission`; None:
     the campaign of :meth:`run_one`'s summaries (:meth:`campaign`)."""

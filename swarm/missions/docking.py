@@ -23,6 +23,8 @@ class DockingMission(Mission):
     fault_menu = ("uwb_dropout", "nlos_burst", "camera_loss", "gyro_bias_step", "sensor_delay")
     sim_entry = "swarm.cli.sim:run_docking"
     launch_entry = "swarm.cli.launch:run_docking"
+    compile_entry = "swarm.cli.compile:docking_kernels"
+    dashboard_drawer = "docking"
     campaign_entry = "swarm.montecarlo.campaign:DOCKING"
 
     def scenario_keys(self) -> frozenset[str]:

@@ -20,6 +20,8 @@ class LandingMission(Mission):
     fault_menu = ("camera_loss", "uwb_dropout")  # what swarm/world/landing.py applies
     sim_entry = "swarm.cli.sim:run_landing"
     launch_entry = "swarm.cli.launch_landing:run_landing_launch"
+    compile_entry = "swarm.cli.compile:landing_kernels"
+    dashboard_drawer = "landing"
     campaign_entry = "swarm.montecarlo.landing:CAMPAIGN"
 
     def scenario_keys(self) -> frozenset[str]:
