@@ -26,11 +26,12 @@ from swarm.core import _guidance_nb as gnb
 from swarm.core import rotations as rot
 from swarm.core._rot_nb import qrotate
 from swarm.core.camera import POSE_N, solve_pnp
-from swarm.core.estimator import PoseEstimator, UpdateStatus, chi2_gate
+from swarm.core.estimator import UpdateStatus, chi2_gate
 from swarm.core.guidance import ChaserGuidance, Mode, Reference, StationKeeping, reference_of
 from swarm.core.mdp import D_N, SW_N, make_switcher
 from swarm.kinds._dispatch import Controller, control_step, docked_step, idle_step
 from swarm.kinds.base import ACT_N
+from swarm.navigation import NAVIGATORS
 
 
 @dataclass
@@ -108,8 +109,10 @@ class VehicleAgent:
         self.control_phase = sc.control_phase(vehicle_id)
         self.control_dt = self.control_every * sc.dt_s
         est_params = sc.estimator_for(vehicle_id)
-        self.est = PoseEstimator.create(
-            est_params, p0_nav, v0_nav, q0_nav_body, cov0, n_anchors=len(sc.anchors_m)
+        # the vehicle's navigator (swarm.navigation): the scenario admits the MEKF only, on whose arrays X, P,
+        # counts, book (filter 0) the compiled steps below run
+        self.est = NAVIGATORS[sc.navigation(vehicle_id)].for_docking(
+            sc, vehicle_id, p0_nav, v0_nav, q0_nav_body, cov0
         )
         self.controller = Controller(self.kind)
         self.camera = sc.camera_for(vehicle_id)
@@ -299,7 +302,7 @@ class VehicleAgent:
     def published_cov(self) -> np.ndarray:
         """The 9 x 9 covariance this vehicle publishes: its filter's, with the position block in nav
         (:func:`absolute_cov_pos`: the target's uncertainty added while it navigates relative to it)."""
-        P = self.est.P[0, :9, :9].copy()
+        P = self.est.covariance()
         absolute_cov_pos(self.est.P[0], self.TGT, self.role == "chaser" and self.relative_nav, P[:3, :3])
         return P
 
@@ -329,9 +332,8 @@ class VehicleAgent:
     # ---- outputs ------------------------------------------------------------------------------------
     def estimate(self) -> TargetEstimate:
         """This vehicle's estimate in the form another agent consumes."""
-        return TargetEstimate(
-            self.t_s, self.est.p_nav[0].copy(), self.est.q_nav_body[0].copy(), self.est.P[0, :3, :3].copy()
-        )
+        s = self.est.state()
+        return TargetEstimate(self.t_s, s.p_nav, s.q_nav_body, self.est.covariance()[:3, :3].copy())
 
     @property
     def sigma_pos_max_m(self) -> float:

@@ -43,7 +43,7 @@ from swarm.core import rotations as rot
 from swarm.core import tdoa_radio as tr
 from swarm.core._pad_nb import camera_vector
 from swarm.core._rot_nb import qrotate
-from swarm.core.imu_filter import ImuFilter, ImuFilterParams, PhaseParams, chi2_gate, robust_vector
+from swarm.core.imu_filter import ImuFilterParams, PhaseParams, chi2_gate, robust_vector
 from swarm.core.landing import MODES, LandingGuidance, LandingMode
 from swarm.core.mdp import nan_to_none
 from swarm.core.pad_vision import Renderer, detect, estimate_pose, make_detector
@@ -52,6 +52,7 @@ from swarm.kinds import KINDS
 from swarm.kinds.base import VehicleDispersion
 from swarm.kinds.quadrotor.dynamics import S_GROUND
 from swarm.landing_scenario import LandingScenario, Uav, platform_path, platform_pose
+from swarm.navigation import NAVIGATORS, navigator_name
 from swarm.step import landing_nb as lnb
 
 GATE_PROBABILITY = 0.9995
@@ -799,7 +800,8 @@ class LandingAgent:
                 "gyro_noise": sc.imu.gyro_noise,
             }
         )
-        self.filt = ImuFilter.create(
+        # the navigator the quadrotor's IMU (gyro and accelerometer) calls for: "eskf" (swarm.navigation)
+        self.filt = NAVIGATORS[navigator_name(QUADROTOR.imu_measures)].create(
             params,
             anchors if len(anchors) else np.zeros((1, 3)),
             st.p0,
