@@ -49,6 +49,9 @@ def test_the_tree_keeps_its_import_layers():
         # so does a mission module added to the package (.importlinter lists swarm.missions.*, not names)
         ("swarm/missions/toy.py", "from swarm.missions import landing  # noqa: E402,F401",
          "swarm.missions.toy -> swarm.missions.landing"),
+        # a navigator reaching into the kinds (its sibling layer: it picks by the IMU it is told of)
+        ("swarm/navigation/mekf.py", "from swarm.kinds import base  # noqa: E402,F401",
+         "swarm.navigation.mekf -> swarm.kinds.base"),
     ],
 )  # fmt: skip
 def test_an_import_across_a_contract_breaks_it(tmp_path, victim, line, broken):
