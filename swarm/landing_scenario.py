@@ -416,6 +416,6 @@ def _scenario_path(name_or_path) -> Path:
 
 def load_landing(name_or_path, overrides: dict | None = None) -> LandingScenario:
     def migrate(data: dict, name: str) -> dict:
-        return apply_sensor_profile(data, name, "landing", overrides)
+        return apply_sensor_profile(data, name, LandingScenario, overrides)
 
     return load_toml(LandingScenario, _scenario_path(name_or_path), overrides, migrate=migrate)

@@ -29,7 +29,6 @@ from swarm.core.tdoa_radio import TdoaParams
 from swarm.errors import ConfigError
 from swarm.kinds import KINDS, KindsParams, VehicleKind, check_docking_kind
 from swarm.kinds.dispersions import DispersionParams
-from swarm.navigation import NAVIGATORS, check_docking_navigator, navigator_name
 from swarm.sensors.options import SensorsSpec, apply_sensor_profile
 
 Vec3 = tuple[float, float, float]
@@ -55,9 +54,6 @@ class VehicleSpec:
     """The vehicle's kind (:data:`swarm.kinds.KINDS`: ``cubesat``, ``ground``; ``quadrotor`` is refused by
     the docking runners, :func:`swarm.kinds.check_docking_kind`); its tables are
     ``[kinds.<kind>]``."""
-    navigation: str | None = None
-    """The vehicle's filter (:data:`swarm.navigation.NAVIGATORS`); default: the one its kind's IMU calls
-    for (:func:`swarm.navigation.navigator_name`). The docking runners run ``"mekf"`` only."""
     uwb_address: int | None = None
     """The UWB tag's address, which picks its TDMA slot (``uwb.tdma``): ``address % frame``; default the
     vehicle's index in ``[vehicles]``. Two tags whose addresses share a slot collide."""
@@ -293,8 +289,6 @@ class Scenario:
             if v.kind not in KINDS:
                 raise ConfigError(f"vehicles.{vid}.kind must be one of {sorted(KINDS)}, got {v.kind!r}")
             check_docking_kind(vid, v.kind)
-            nav = navigator_name(KINDS[v.kind].imu_measures, v.navigation, f"vehicles.{vid}")
-            check_docking_navigator(vid, NAVIGATORS[nav])
             if v.role == "chaser":
                 tgt = self.vehicles.get(v.target) if v.target is not None else None
                 if tgt is None or tgt.role != "target":
@@ -381,11 +375,6 @@ class Scenario:
     def kind(self, vehicle_id: str) -> VehicleKind:
         """The kind of ``vehicle_id``, bound to this scenario's ``[kinds.<kind>]`` tables."""
         return self._kinds[self.vehicles[vehicle_id].kind]
-
-    def navigation(self, vehicle_id: str) -> str:
-        """The name of ``vehicle_id``'s navigator (:data:`swarm.navigation.NAVIGATORS`)."""
-        v = self.vehicles[vehicle_id]
-        return navigator_name(KINDS[v.kind].imu_measures, v.navigation, f"vehicles.{vehicle_id}")
 
     def control_every(self, vehicle_id: str) -> int:
         """Ticks between two control steps of ``vehicle_id`` (its kind's controller rate)."""
@@ -557,6 +546,6 @@ def load_scenario(name_or_path: str | Path, overrides: dict | None = None) -> Sc
     def migrate(data: dict, name: str) -> dict:
         if data.get("mission") == "docking":  # the default mission, said (swarm.missions.mission_of)
             del data["mission"]
-        return apply_sensor_profile(migrate_legacy(data, name), name, "docking", overrides)
+        return apply_sensor_profile(migrate_legacy(data, name), name, Scenario, overrides)
 
     return load_toml(Scenario, path, overrides=overrides, migrate=migrate, migrate_key=migrate_override_key)

@@ -2,8 +2,11 @@
 (:class:`swarm.sensors.profile.SensorProfile`) become the scenario's ``[uwb]`` and IMU options, keys the
 scenario sets itself winning (and ``--set`` overrides over both).
 
-The mapping (:func:`profile_options`), for a docking scenario (:class:`swarm.scenario.Scenario`) and a
-landing one (:class:`swarm.landing_scenario.LandingScenario`), profile key -> scenario key:
+The mapping (:func:`profile_options`), profile key -> scenario key, lands on the tables and keys the
+scenario's schema has (:func:`apply_sensor_profile` leaves out the others): a docking scenario
+(:class:`swarm.scenario.Scenario`) has ``[gyro]`` and the uniform NLOS keys, a landing one
+(:class:`swarm.landing_scenario.LandingScenario`) ``[imu]`` and the outlier keys. So the options name no
+mission:
 
 * ``uwb.sigma_m`` -> ``uwb.sigma_m`` (the in-flight white noise);
 * ``uwb.offset_m``, ``offset_spread_m`` -> ``uwb.offset_m``, ``uwb.offset_spread_m``;
@@ -27,8 +30,10 @@ measurements (a scenario's anchors are not the fitted room's), the accelerometer
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
+import typing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -47,9 +52,9 @@ class SensorsSpec:
     the scenario leaves out (module docstring); empty: none."""
 
 
-def profile_options(profile: SensorProfile, mission: str) -> dict[str, dict[str, Any]]:
-    """The scenario options (``{table: {key: value}}``) that ``profile`` gives a ``mission`` (``"docking"``
-    or ``"landing"``) scenario (module docstring)."""
+def profile_options(profile: SensorProfile) -> dict[str, dict[str, Any]]:
+    """The scenario options (``{table: {key: value}}``) that ``profile`` gives, for every table and key a
+    scenario may have (module docstring)."""
     u, i = profile.uwb, profile.imu
     uwb: dict[str, Any] = {
         "sigma_m": u.sigma_m,
@@ -63,20 +68,18 @@ def profile_options(profile: SensorProfile, mission: str) -> dict[str, dict[str,
         "nlos_episode_s": u.nlos_duration_s,
         "nlos_episode_excess_m": u.nlos_excess_m,
     }
-    if mission == "landing":
-        uwb |= {"outlier_probability": u.outlier_share, "outlier_excess_m": u.outlier_excess_m}
-        imu = {
-            "accel_noise": i.accel_noise_m_s2_rthz,
-            "gyro_noise": i.gyro_noise_rad_s_rthz,
-            "vibration_accel_m_s2": i.accel_vibration_m_s2,
-            "vibration_gyro_rad_s": i.gyro_vibration_rad_s,
-        }
-        return {"uwb": uwb, "imu": imu}
+    uwb |= {"outlier_probability": u.outlier_share, "outlier_excess_m": u.outlier_excess_m}
+    imu = {
+        "accel_noise": i.accel_noise_m_s2_rthz,
+        "gyro_noise": i.gyro_noise_rad_s_rthz,
+        "vibration_accel_m_s2": i.accel_vibration_m_s2,
+        "vibration_gyro_rad_s": i.gyro_vibration_rad_s,
+    }
     uwb |= {"nlos_probability": u.outlier_share, "nlos_min_m": 0.0, "nlos_max_m": 2.0 * u.outlier_excess_m}
     gyro: dict[str, Any] = {"arw_deg_s_rthz": math.degrees(i.gyro_noise_rad_s_rthz)}
     if i.gyro_bias_instability_rad_s > 0:
         gyro["bias_instability_deg_h"] = math.degrees(i.gyro_bias_instability_rad_s) * 3600.0
-    return {"uwb": uwb, "gyro": gyro}
+    return {"uwb": uwb, "imu": imu, "gyro": gyro}
 
 
 def _resolve(profile: str, scenario_file: str) -> str | os.PathLike[str]:
@@ -86,11 +89,12 @@ def _resolve(profile: str, scenario_file: str) -> str | os.PathLike[str]:
 
 
 def apply_sensor_profile(
-    data: dict[str, Any], scenario_file: str, mission: str, overrides: dict | None = None
+    data: dict[str, Any], scenario_file: str, schema: type, overrides: dict | None = None
 ) -> dict[str, Any]:
     """The parsed scenario ``data`` with its ``[sensors] profile`` (or the ``sensors.profile`` of
-    ``overrides``) filled in: each option of :func:`profile_options` the scenario does not set. A profile
-    that cannot be read is a ConfigError naming the scenario file and the profile."""
+    ``overrides``) filled in: each option of :func:`profile_options` that the scenario's ``schema`` (its
+    dataclass) has and the scenario does not set. A profile that cannot be read is a ConfigError naming
+    the scenario file and the profile."""
     name = (overrides or {}).get("sensors.profile", (data.get("sensors") or {}).get("profile", ""))
     if not name:
         return data
@@ -100,10 +104,13 @@ def apply_sensor_profile(
         profile = load_profile(_resolve(name, scenario_file))
     except ConfigError as exc:
         raise ConfigError(f"{scenario_file}: sensors.profile {name!r}: {exc}") from exc
-    out = dict(data)
-    for table, values in profile_options(profile, mission).items():
-        have = dict(out.get(table) or {})
+    out, tables = dict(data), typing.get_type_hints(schema)
+    for table, values in profile_options(profile).items():
+        if not dataclasses.is_dataclass(tables.get(table)):
+            continue  # a table this scenario does not have
+        have, keys = dict(out.get(table) or {}), {f.name for f in dataclasses.fields(tables[table])}
         for key, value in values.items():
-            have.setdefault(key, value)
+            if key in keys:
+                have.setdefault(key, value)
         out[table] = have
     return out
