@@ -29,6 +29,7 @@ from swarm.core.tdoa_radio import TdoaParams
 from swarm.errors import ConfigError
 from swarm.kinds import KINDS, KindsParams, VehicleKind, check_docking_kind
 from swarm.kinds.dispersions import DispersionParams
+from swarm.navigation import NAVIGATORS, check_docking_navigator, navigator_name
 from swarm.sensors.options import SensorsSpec, apply_sensor_profile
 
 Vec3 = tuple[float, float, float]
@@ -54,6 +55,9 @@ class VehicleSpec:
     """The vehicle's kind (:data:`swarm.kinds.KINDS`: ``cubesat``, ``ground``; ``quadrotor`` is refused by
     the docking runners, :func:`swarm.kinds.check_docking_kind`); its tables are
     ``[kinds.<kind>]``."""
+    navigation: str | None = None
+    """The vehicle's filter (:data:`swarm.navigation.NAVIGATORS`); default: the one its kind's IMU calls
+    for (:func:`swarm.navigation.navigator_name`). The docking runners run ``"mekf"`` only."""
     uwb_address: int | None = None
     """The UWB tag's address, which picks its TDMA slot (``uwb.tdma``): ``address % frame``; default the
     vehicle's index in ``[vehicles]``. Two tags whose addresses share a slot collide."""
@@ -289,6 +293,8 @@ class Scenario:
             if v.kind not in KINDS:
                 raise ConfigError(f"vehicles.{vid}.kind must be one of {sorted(KINDS)}, got {v.kind!r}")
             check_docking_kind(vid, v.kind)
+            nav = navigator_name(KINDS[v.kind].imu_measures, v.navigation, f"vehicles.{vid}")
+            check_docking_navigator(vid, NAVIGATORS[nav])
             if v.role == "chaser":
                 tgt = self.vehicles.get(v.target) if v.target is not None else None
                 if tgt is None or tgt.role != "target":
@@ -375,6 +381,11 @@ class Scenario:
     def kind(self, vehicle_id: str) -> VehicleKind:
         """The kind of ``vehicle_id``, bound to this scenario's ``[kinds.<kind>]`` tables."""
         return self._kinds[self.vehicles[vehicle_id].kind]
+
+    def navigation(self, vehicle_id: str) -> str:
+        """The name of ``vehicle_id``'s navigator (:data:`swarm.navigation.NAVIGATORS`)."""
+        v = self.vehicles[vehicle_id]
+        return navigator_name(KINDS[v.kind].imu_measures, v.navigation, f"vehicles.{vehicle_id}")
 
     def control_every(self, vehicle_id: str) -> int:
         """Ticks between two control steps of ``vehicle_id`` (its kind's controller rate)."""
