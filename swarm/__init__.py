@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 KERNEL_SOURCES: tuple[str, ...] = (
-    "__init__.py", "config.py", "errors.py", "core", "kinds", "step", "logs", "sim/__init__.py",
+    "__init__.py", "config.py", "errors.py", "core", "kinds", "navigation", "step", "logs", "sim/__init__.py",
     "sim/estimation.py", "transport/_codec_nb.py", "bench/__init__.py", "bench/estimator.py",
     "bench/filterpy_mekf.py", "bench/replay.py",
 )  # fmt: skip
