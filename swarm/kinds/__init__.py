@@ -2,7 +2,9 @@
 
 :data:`KINDS` maps a scenario's ``kind = "..."`` to its :class:`~swarm.kinds.base.VehicleKind` class;
 :class:`KindsParams` is the scenario's ``[kinds]`` table, one sub-table per registered kind, built from
-:data:`KINDS` so that a new kind needs only its entry here (and its branch in :mod:`swarm.kinds._dispatch`).
+:data:`KINDS` so that a new kind needs only its entry here (and its branch in :mod:`swarm.kinds._dispatch`,
+or a :attr:`~swarm.kinds.base.VehicleKind.docking_missing` that keeps it out of docking scenarios, as the
+``quadrotor``'s does: the landing tick flies it).
 """
 
 from __future__ import annotations

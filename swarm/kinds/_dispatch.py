@@ -4,7 +4,8 @@ The compiled world and agent steps reach a vehicle's kind through these function
 the kind with that ``code``: its truth dynamics (:func:`truth_step`), how it holds a command
 (:func:`hold_step`) and its controller (:func:`control_step`, :func:`idle_step`, :func:`docked_step`).
 The arrays are described in :mod:`swarm.kinds.base`. A new kind adds one branch to each and one entry to
-:data:`swarm.kinds.KINDS`; nothing outside this package changes.
+:data:`swarm.kinds.KINDS`; nothing outside this package changes. A registered kind without branches (the
+``quadrotor``) declares ``docking_missing``, and docking scenarios refuse it.
 """
 
 from __future__ import annotations
