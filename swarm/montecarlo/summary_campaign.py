@@ -1,11 +1,9 @@
-"""The campaign part of a mission that gives only one run's summary (:meth:`swarm.missions.Mission.run_one`).
-
-Its runs go through the one runner (:func:`swarm.montecarlo.campaign.run_campaign`: paired seeds, resume,
-workers or ``--dask``). A run is one ``runs.csv`` row: ``run``, ``seed``, ``policy``, the mission's success
-flag and its campaign metrics; no trajectory. The report is the shared statistics
-(:mod:`swarm.montecarlo.stats`): per policy the success count with its Clopper-Pearson interval and each
-metric's Student-t interval of the mean over the runs that reached the goal; the paired t-test and
-Wilcoxon signed-rank test of ``other - base`` over the runs where both did (the first policy the base).
+"""The campaign part of a mission that gives only one run's summary (:class:`swarm.missions.Mission`'s
+``run_one``, ``name``, ``load``, ``success_key`` and ``summary_metrics``), run by the one runner
+(:func:`swarm.montecarlo.campaign.run_campaign`). A run is one ``runs.csv`` row: ``run``, ``seed``,
+``policy``, the success flag and the metrics; no trajectory. The report is the shared statistics
+(:mod:`swarm.montecarlo.stats`): the success count with its Clopper-Pearson interval and each metric's
+Student-t interval over the runs that reached the goal; the paired t and Wilcoxon tests of ``other - base``.
 """
 
 from __future__ import annotations
@@ -13,53 +11,38 @@ from __future__ import annotations
 import json
 from functools import partial
 from pathlib import Path
-from typing import Any, Protocol
 
 from swarm.montecarlo.campaign import CampaignMission, read_manifest, read_runs
 
 
-class SummaryMission(Protocol):
-    """What this campaign asks of a mission (:class:`swarm.missions.Mission` has it)."""
-
-    name: str
-    success_key: str
-
-    def load(self, scenario: Any, overrides: dict | None = None) -> Any: ...
-
-    def run_one(self, scenario: Any, policy: str | None, seed: int) -> dict: ...
-
-    def campaign_metrics(self) -> tuple[str, ...]: ...
-
-
-def summary_campaign(mission: SummaryMission) -> CampaignMission:
+def summary_campaign(mission) -> CampaignMission:
     """The campaign part of ``mission`` (module docstring)."""
     cols = {"run": "int", "seed": "int", "policy": "str", mission.success_key: "bool"}
-    cols |= dict.fromkeys(mission.campaign_metrics(), "float?")
+    cols |= dict.fromkeys(mission.summary_metrics, "float?")
     return CampaignMission(
         name=mission.name,
         load=mission.load,
         columns=lambda _sc: dict(cols),
-        run_one=partial(_run_one, mission, tuple(cols)),
+        run_one=partial(_run_one, mission),
         report=partial(_report, mission),
         summary=partial(_summary_text, mission.success_key),
     )
 
 
-def _run_one(mission: SummaryMission, cols, sc, policy: str, run: int, seed: int, trajectory_period_s=1.0):
+def _run_one(mission, sc, policy: str, run: int, seed: int, trajectory_period_s: float = 1.0):
     """One run's row, in a worker: its summary's success flag and metrics (None where it has none)."""
-    res = mission.run_one(sc, policy, seed)
-    row = {"run": run, "seed": seed, "policy": policy, mission.success_key: bool(res[mission.success_key])}
-    return [row | {m: res.get(m) for m in cols[4:]}], []
+    res, key = mission.run_one(sc, policy, seed), mission.success_key
+    row = {"run": run, "seed": seed, "policy": policy, key: bool(res[key])}
+    return [row | {m: res.get(m) for m in mission.summary_metrics}], []
 
 
-def _report(mission: SummaryMission, out_dir: str | Path, figures: bool = True) -> dict:
+def _report(mission, out_dir: str | Path, figures: bool = True) -> dict:
     """``stats.json`` and ``report.md`` (no figures) from the directory; the statistics."""
     from swarm.montecarlo.report import finite_or_null
     from swarm.montecarlo.stats import describe, paired, success
 
-    out_dir = Path(out_dir)
-    man = read_manifest(out_dir)
-    policies, key, metrics = tuple(man["policies"]), mission.success_key, mission.campaign_metrics()
+    out_dir, man = Path(out_dir), read_manifest(out_dir)
+    policies, key, metrics = tuple(man["policies"]), mission.success_key, mission.summary_metrics
     rows = read_runs(out_dir, mission=summary_campaign(mission))
     rec: dict = {
         "mission": mission.name,
@@ -85,7 +68,7 @@ def _report(mission: SummaryMission, out_dir: str | Path, figures: bool = True) 
     rec = finite_or_null(rec)
     (out_dir / "stats.json").write_text(json.dumps(rec, indent=1) + "\n")
     (out_dir / "report.md").write_text(
-        f"# {mission.name}: {rec['runs']} paired runs\n\n```\n{_summary_text(key, rec)}\n```\n"
+        f"# {mission.name}, {rec['runs']} paired runs\n\n```\n{_summary_text(key, rec)}\n```\n"
     )
     return rec
 
