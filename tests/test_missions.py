@@ -167,13 +167,6 @@ def test_the_fault_menus_are_faults_the_swarm_knows():
         assert mission.fault_menu and set(mission.fault_menu) <= set(FAULT_KINDS), mission
 
 
-def test_the_campaign_metrics_are_the_campaign_runners():
-    from swarm.montecarlo import landing, stats
-
-    assert MISSIONS["docking"].campaign_metrics() == tuple(stats.METRICS)
-    assert MISSIONS["landing"].campaign_metrics() == tuple(landing.METRICS)
-
-
 def test_the_summary_metrics_are_what_a_run_of_each_mission_reports():
     """A short run of each stack (a few simulated seconds: the goal is not reached, the fields exist)."""
     from swarm.sim.docking import run_docking

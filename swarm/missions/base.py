@@ -83,10 +83,6 @@ class Mission:
         key is recognised (:func:`swarm.missions.mission_of`); none by default."""
         return frozenset()
 
-    def campaign_metrics(self) -> tuple[str, ...]:
-        """The summary fields a campaign compares between policies (means, paired differences)."""
-        return self.summary_metrics
-
     def run_one(self, scenario: Any, policy: str | None, seed: int) -> dict:
         """One run of ``scenario`` with ``policy`` (None: the scenario's) from root seed ``seed``: its
         summary, with :attr:`success_key` and :attr:`summary_metrics`. Used by the generic entries."""

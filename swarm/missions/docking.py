@@ -41,13 +41,6 @@ class DockingMission(Mission):
 
         return load_scenario(scenario, overrides)
 
-    def campaign_metrics(self) -> tuple[str, ...]:
-        """The paper's Table II metrics (:data:`swarm.montecarlo.stats.METRICS`; the impulse is the
-        chaser kind's effort in a campaign of another kind)."""
-        from swarm.montecarlo.stats import METRICS
-
-        return tuple(METRICS)
-
     def with_agents(self, scenario, agents: int | None):
         """The scenario's vehicles copied ``agents`` times (:meth:`swarm.scenario.Scenario.with_pairs`)."""
         return scenario if agents is None else scenario.with_pairs(agents)

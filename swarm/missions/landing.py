@@ -37,12 +37,6 @@ class LandingMission(Mission):
 
         return load_landing(scenario, overrides)
 
-    def campaign_metrics(self) -> tuple[str, ...]:
-        """The landing campaign's metrics (:data:`swarm.montecarlo.landing.METRICS`)."""
-        from swarm.montecarlo.landing import METRICS
-
-        return tuple(METRICS)
-
     def with_agents(self, scenario, agents: int | None):
         """The scenario as it is: its UAVs are the file's (``[[fleet]]``), so ``--agents`` other than 1
         is refused."""
