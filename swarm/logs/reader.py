@@ -266,10 +266,22 @@ class TdoaLog:
     each anchor's modelled slow error moves the innovations of its differences by 1-2 of their sigmas for
     half a second at a time, 200-400 of them a second; with 1.0 clean anchors were held out 20-30 % of the
     time on the development flights, with 2.0 an anchor whose packets come 0.8 m late is held in ~0.1 s."""
+    offsets: bool = False
+    """Estimate each anchor's offset (``[estimator] range_bias``) in a TDoA log. Off: in a room whose anchors
+    stand in two layers (floor and ceiling, the Loco Positioning and UTIL layouts) a height error ``dz``
+    moves every difference as offsets ``-u_z dz`` would (``u_z`` the unit vector's height to each anchor:
+    about +0.25 to the upper layer, -0.25 to the lower from mid-height), so offsets of 0.1 m let a 0.4 m
+    height error stand; only the change of ``u_z`` across the room tells them apart, which a flight at one
+    height hardly gives, and a random-walk offset holds what it took for tens of seconds. The
+    Gauss-Markov term (``gm_sigma_m``) takes each anchor's slow error instead and lets it go within
+    ``gm_tau_s``. Measured on the 39 development TDoA flights (BENCHMARKS.md): median 3-D RMSE 0.196 m with
+    offsets, 0.188 m without; 0.251 -> 0.226 m on the 16 flights without a range finder (height RMS
+    0.14-0.45 -> 0.14-0.25 m)."""
     offset_sigma_m: float = 0.1
-    """A TDoA log's prior sigma of each anchor's offset [m] (in place of ``[initial] sigma_range_bias_m``):
-    only their differences enter, so only their spread matters (0.076 m over the development hover's
-    anchors; 0.05-0.15 m on the TDoA flights); the common offset cancels and is not a state."""
+    """A TDoA log's prior sigma of each anchor's offset [m] with ``offsets`` (in place of ``[initial]
+    sigma_range_bias_m``): only their differences enter, so only their spread matters (0.076 m over the
+    development hover's anchors; 0.05-0.15 m on the TDoA flights); the common offset cancels and is not a
+    state."""
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.sigma_m) and self.sigma_m > 0):

@@ -370,12 +370,14 @@ def is_tdoa(log: Log) -> bool:
 
 def tdoa_estimator(cfg):
     """The estimator of a TDoA log: the per-anchor Gauss-Markov term of ``[tdoa] gm_sigma_m`` and
-    ``gm_tau_s``, and no common offset (every distance difference cancels it: a state nothing observes)."""
+    ``gm_tau_s``, no common offset (every distance difference cancels it: a state nothing observes), and
+    per-anchor offsets only with ``[tdoa] offsets`` (a height error hides in them: ``TdoaLog.offsets``)."""
     return dataclasses.replace(
         cfg.estimator,
         range_gm_sigma_m=cfg.tdoa.gm_sigma_m,
         range_gm_tau_s=cfg.tdoa.gm_tau_s,
         range_common_offset=False,
+        range_bias=cfg.estimator.range_bias and cfg.tdoa.offsets,
     )
 
 

@@ -181,7 +181,8 @@ def test_the_live_navigator_pins_and_lands_as_the_replay_does(landing):
 
 def test_a_tdoa_log_models_each_anchor_with_the_tdoa_keys(landing):
     d, _, _ = landing
-    log = read_log(d, {"tdoa.gm_sigma_m": 0.2, "tdoa.gm_tau_s": 0.7, "tdoa.offset_sigma_m": 0.08})
+    keys = {"tdoa.gm_sigma_m": 0.2, "tdoa.gm_tau_s": 0.7, "tdoa.offset_sigma_m": 0.08}
+    log = read_log(d, {**keys, "tdoa.offsets": True})
     f, _, _ = build_filter(log)
     lay = f.layout
     # every difference cancels a common offset: no state for it; each anchor's Gauss-Markov term has the
@@ -191,6 +192,12 @@ def test_a_tdoa_log_models_each_anchor_with_the_tdoa_keys(landing):
     assert np.allclose(ext[lay.gm - nb.N_CORE], [0.7, 0.2])
     assert np.allclose(np.sqrt(np.diag(f.P[0])[lay.offset]), 0.08)
     assert np.allclose(np.sqrt(np.diag(f.P[0])[lay.gm]), 0.2)
+    # by default no offset per anchor (a height error hides in them, TdoaLog.offsets): the Gauss-Markov
+    # terms alone, right after the 15 core states
+    f, _, _ = build_filter(read_log(d, keys))
+    assert (f.layout.offset == -1).all() and f.layout.common == -1
+    assert np.array_equal(f.layout.gm, nb.N_CORE + np.arange(len(f.anchors)))
+    assert f.layout.n_err == nb.N_CORE + len(f.anchors)
 
 
 def _phase_state():
