@@ -133,7 +133,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
     ``free``: the world is free-running (module docstring): a tick with a later one already complete is
     fused, not decided on. ``resume``: its checkpoint (module docstring)."""
     from swarm.step.landing import LandingAgent, LandingInputs, Rates
-    from swarm.transport import landing_wire as wire
+    from swarm.transport import wire
     from swarm.transport.messages import (
         DropCounter,
         Estimate,
@@ -284,7 +284,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
             agent.fuse(old)
         skipped += len(stale)
         cmd = agent.tick(inp)
-        out, n_modes = wire.agent_tick(keys, uid, agent, cmd, n_modes)
+        out, n_modes = wire.landing_agent_tick(keys, uid, agent, cmd, n_modes)
         with cond:
             sent.append((k, *out[0]))  # the command, first
         for key, payload in out:
@@ -296,7 +296,7 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
             ckpt.write({"run": resume.run_id, "k": k + 1, "agent": snap["state"], "n_modes": n_modes,
                         "skipped": skipped, "sent": list(sent)}, snap["records"])  # fmt: skip
     if state["ended"]:
-        key, payload = wire.agent_summary(keys, uid, agent)
+        key, payload = wire.landing_summary(keys, uid, agent)
         pub[key].put(payload)
         _LOG.info("%s: run ended: %s (%d ticks fused without a decision, behind the world)", uid,
                   agent.outcome()["final_mode"], skipped)  # fmt: skip

@@ -55,17 +55,6 @@ from swarm.step.agent import AgentInputs, TargetEstimate, VehicleAgent
 from swarm.step.initial import initial_estimate
 from swarm.step.radio import exchange_ticks
 from swarm.step.world import initial_truth
-from swarm.transport.docking_wire import (
-    command_payload,
-    estimate_args,
-    estimate_payload,
-    estimate_read,
-    estimate_reads,
-    filter_counts,
-    guidance_payload,
-    mode_events,
-    target_reads,
-)
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import AgentTickAssembler, TickInputs
 from swarm.transport.messages import (
@@ -91,6 +80,17 @@ from swarm.transport.session import (
     watch_liveliness,
 )
 from swarm.transport.stopping import Stopping, process_name
+from swarm.transport.wire import (
+    command_payload,
+    estimate_args,
+    estimate_payload,
+    estimate_read,
+    estimate_reads,
+    filter_counts,
+    guidance_payload,
+    mode_events,
+    target_reads,
+)
 
 _LOG = logging.getLogger("swarm.agent")
 

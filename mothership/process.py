@@ -36,7 +36,6 @@ import numpy as np
 import zenoh
 
 from swarm.step.radio import UwbNetwork
-from swarm.transport.docking_wire import tdoa_slot, tdoa_slot_batch, uwb_slot, uwb_slot_batch
 from swarm.transport.keys import Keys
 from swarm.transport.messages import (
     Anchors,
@@ -53,6 +52,7 @@ from swarm.transport.messages import (
 from swarm.transport.process import PROCESS_NOISE_BLOCK, declare_reliable, print_ready
 from swarm.transport.session import declare_liveliness, subscribe_decoded, watch_liveliness
 from swarm.transport.stopping import Stopping, process_name
+from swarm.transport.wire import tdoa_slot, tdoa_slot_batch, uwb_slot, uwb_slot_batch
 
 _LOG = logging.getLogger("swarm.mothership")
 

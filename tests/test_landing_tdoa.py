@@ -16,7 +16,7 @@ from swarm.landing_scenario import load_landing
 from swarm.sim.landing import run_landing, run_landing_fleet
 from swarm.step import landing_nb as lnb
 from swarm.step.landing import LandingAgent, LandingInputs, LandingWorld
-from swarm.transport import landing_wire as wire
+from swarm.transport import wire
 from swarm.transport.keys import Keys
 from swarm.transport.messages import Estimate, Tdoa, decode
 
@@ -112,7 +112,8 @@ def test_a_difference_naming_an_unknown_anchor_is_skipped_and_counted_never_fuse
     assert b.tdoa_counts()["tdoa_skipped"] == 0
     assert a.tdoa_counts()["tdoa_accepted"] == b.tdoa_counts()["tdoa_accepted"] > 0
     assert np.array_equal(a.filt.X, b.filt.X) and np.array_equal(a.filt.P, b.filt.P)
-    est = decode(wire.agent_tick(Keys("t"), "uav", a, a.tick(world.step(121)["uav"]), 0)[0][1][1], Estimate)
+    out, _ = wire.landing_agent_tick(Keys("t"), "uav", a, a.tick(world.step(121)["uav"]), 0)
+    est = decode(out[1][1], Estimate)
     assert est.counts["range_refused"] == n_bad
 
 
@@ -124,7 +125,7 @@ def test_the_world_publishes_a_tdoa_every_uwb_tick_and_the_agent_takes_it_back_t
     seen = 0
     for k in range(1, 41):
         inputs = world.step(k)
-        out = dict(wire.world_tick(keys, world, k, inputs, 0))
+        out = dict(wire.landing_world_tick(keys, world, k, inputs, 0))
         assert keys.uwb("uav") not in out
         assert (keys.tdoa("uav") in out) == world.rates.tdoa_tick(sc, k)
         if keys.tdoa("uav") in out:

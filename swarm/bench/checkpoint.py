@@ -64,7 +64,7 @@ def _landing(ticks: int, base: str | None) -> dict:
     """The landing world's and one agent's checkpoint per tick (module docstring)."""
     from swarm.landing_scenario import load_landing
     from swarm.step.landing import LandingAgent, LandingWorld
-    from swarm.transport import landing_wire as wire
+    from swarm.transport import wire
     from swarm.transport.checkpoint import CheckpointFile, checkpoint_path
     from swarm.transport.keys import Keys
 
@@ -83,7 +83,7 @@ def _landing(ticks: int, base: str | None) -> dict:
             inputs = world.step(k)
             if not inputs:
                 break
-            tick_wire = wire.world_tick(keys, world, k, inputs, 0)
+            tick_wire = wire.landing_world_tick(keys, world, k, inputs, 0)
             t1 = time.perf_counter()
             w_bytes = w_file.write({"tick": k, "world": world.snapshot(), "wire": tick_wire})
             t2 = time.perf_counter()

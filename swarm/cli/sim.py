@@ -135,9 +135,9 @@ def run_landing(args: argparse.Namespace) -> int:
     record = not args.no_series or args.json is not None
     tap = None
     if args.mcap is not None:
-        from swarm.transport.landing_wire import McapTap
+        from swarm.transport.wire import LandingTap
 
-        tap = McapTap(args.mcap, args.seed, args.namespace)
+        tap = LandingTap(args.mcap, args.seed, args.namespace)
     if not sc.fleet and tap is None:
         res = landing.run_landing(sc, args.policy, args.seed, record_series=record)
         print_landing(res)
@@ -195,7 +195,7 @@ def run_docking(args: argparse.Namespace) -> int:
     sc = load_from_args(args).with_pairs(args.agents)
     tap = None
     if args.mcap is not None:
-        from swarm.transport.docking_wire import DockingTap
+        from swarm.transport.wire import DockingTap
 
         tap = DockingTap(args.mcap, args.seed, args.namespace)
     record = not args.no_series or args.plot is not None or args.json is not None

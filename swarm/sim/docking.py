@@ -113,7 +113,7 @@ class DockingSim:
         # either way, this only saves turning the others into lists (a campaign needs two of eight)
         self.series_keys = series_keys
         # fast=False: every tick through the per-object Python path (the reference); so with a tap:
-        # ``swarm sim --mcap`` (swarm.transport.docking_wire.DockingTap) sees every tick as the processes
+        # ``swarm sim --mcap`` (swarm.transport.wire.DockingTap) sees every tick as the processes
         # would publish it: tap.start(sim), then per tick tap.world(sim, k, frames), tap.uwb(sim, k) and
         # tap.agent(sim, vid, k, command or None) of every vehicle, tap.keepout(cid, t, mode, range_m) and
         # tap.contact(cid, t, mode, contact) for the referee's verdicts, and tap.end(sim, k, reason, wall_s)

@@ -176,7 +176,7 @@ class UwbNetwork:
         tags = np.array([X[i, 0:3] + qrotate(X[i, 6:10], self.lever[i]) for i in range(len(self.ids))])
         rows = self.tdoa.step(t_s, tags, self.airborne)
         lost = np.broadcast_to(np.asarray(False if env_lost is None else env_lost), (len(self.ids),))
-        # kept for the mothership's messages (swarm.transport.docking_wire.tdoa_slot), as the TWR radios'
+        # kept for the mothership's messages (swarm.transport.wire.tdoa_slot), as the TWR radios'
         # ranges are kept in range_m
         self.heard = {
             vid: TdoaSample(t_s, np.ascontiguousarray(rows[i][:, [tr.ROW_A, tr.ROW_B, tr.ROW_DDIST]]))

@@ -64,8 +64,8 @@ def reads_target(reads: tuple | None, k: int) -> bool:
     """Whether a chaser's tick ``k`` reads its target's estimate (``estimate(k - 1)``; tick 0 the initial
     one): every tick if ``reads`` is ``None``, else the ticks of its periods (:func:`period_phase`; tick 0
     among them).
-    ``reads`` is :func:`~swarm.transport.docking_wire.target_reads`'s; the target sends by the same rule
-    (:func:`~swarm.transport.docking_wire.estimate_read`)."""
+    ``reads`` is :func:`~swarm.transport.wire.target_reads`'s; the target sends by the same rule
+    (:func:`~swarm.transport.wire.estimate_read`)."""
     if reads is None or k == 0:
         return True
     for r in reads:  # a loop, not any() over a generator: a chaser asks every tick
@@ -172,7 +172,7 @@ class AgentTickAssembler:
         thread waits for a tick of any of them (:meth:`poll`); ``ready``: a set, shared with them as well,
         to which this assembler adds itself when it notifies, so that the host polls only those;
         ``target_reads``: a chaser's ticks that read the target's estimate, the multiples of these periods
-        (:func:`~swarm.transport.docking_wire.target_reads`; ``None``: every tick): only those wait for it;
+        (:func:`~swarm.transport.wire.target_reads`; ``None``: every tick): only those wait for it;
         ``late_ticks``: a free-running agent's late fusion (``None``: off, the lockstep rule). With it, a tick
         is ready for :meth:`poll` as soon as its ``imu`` is in (the estimator does not wait for a range or a
         frame), and a ``uwb``/``vision`` of a tick already taken, at most ``late_ticks`` ticks before the

@@ -130,8 +130,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
     from swarm.errors import ConfigError
     from swarm.landing_scenario import load_landing
     from swarm.step.landing import LandingCommand, LandingWorld
-    from swarm.transport import checkpoint
-    from swarm.transport import landing_wire as wire
+    from swarm.transport import checkpoint, wire
     from swarm.transport.keys import Keys
     from swarm.transport.messages import (
         LANDING_MODES,
@@ -294,11 +293,11 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
             )
             held, late, wall_before = resume["held"], resume["late"], resume["wall_s"]
             put([wire.world_event(keys, "world_resumed", (k0 - 1) * dt, {"tick": k0}),
-                 wire.running_clock(keys, k0 - 1, dt, args.seed)])  # fmt: skip
+                 wire.clock(keys, k0 - 1, dt, args.seed)])  # fmt: skip
             _LOG.warning("resumed from the checkpoint of tick %d (t = %.2f s)", k0, k0 * dt)
         else:
-            put([wire.run_start(keys, sc, args.seed, policy, ids, str(args.clock)),
-                 wire.running_clock(keys, 0, dt, args.seed)])  # fmt: skip
+            put([wire.landing_run_start(keys, sc, args.seed, policy, ids, str(args.clock)),
+                 wire.clock(keys, 0, dt, args.seed)])  # fmt: skip
         k = k0 - 1
         # the wall clock of tick k is t_wall + k dt / factor (a resumed run starts its clock again at k0 - 1)
         t_wall = time.monotonic() - (k0 - 1) * dt / (pace.factor if pace is not None else 1.0)
@@ -332,7 +331,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                     k -= 1
                     break
                 uids = list(inputs)
-                prev_wire, tick_wire = tick_wire, wire.world_tick(keys, world, k, inputs, args.seed,
+                prev_wire, tick_wire = tick_wire, wire.landing_world_tick(keys, world, k, inputs, args.seed,
                                                                   args.clock_every)  # fmt: skip
             with cond:
                 now["k"] = k
@@ -420,7 +419,8 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         wall = wall_before + time.monotonic() - t_start
         if ckpt is not None:
             ckpt.close()
-        put(wire.run_end(keys, world, k, reason, wall, late if free else None, asked.get("next_seed")))
+        late_ticks = late if free else None
+        put(wire.landing_run_end(keys, world, k, reason, wall, late_ticks, asked.get("next_seed")))
         _LOG.info("run ended (%s) at tick %d, %.1f s simulated in %.1f s", reason, k, k * dt, wall)
         time.sleep(0.2)  # let the last messages leave before the session closes
         _ = _token

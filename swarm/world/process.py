@@ -53,7 +53,6 @@ from swarm.step.referee import Referee
 from swarm.step.world import World
 from swarm.transport import checkpoint
 from swarm.transport.checkpoint import CheckpointError
-from swarm.transport.docking_wire import batch_samples, contact_event, keepout_event, world_sensors
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import CommandBarrier
 from swarm.transport.messages import (
@@ -78,6 +77,7 @@ from swarm.transport.session import (
     watch_liveliness,
 )
 from swarm.transport.stopping import Stopping, process_name, wait_for_stop
+from swarm.transport.wire import batch_samples, contact_event, keepout_event, world_sensors
 
 _LOG = logging.getLogger("swarm.world")
 
@@ -461,8 +461,8 @@ class WorldProcess:
         self.pub_world_event.put(encode(Event(t_s, kind, data)))
 
     def _encode_tick(self, k: int, frames) -> list[tuple[str, str, bytes]]:
-        """The samples of tick ``k``, encoded, in publishing order (:func:`~swarm.transport.docking_wire.
-        world_sensors`): ``(kind, vehicle, payload)``."""
+        """The samples of tick ``k``, encoded, in publishing order
+        (:func:`~swarm.transport.wire.world_sensors`): ``(kind, vehicle, payload)``."""
         t = k * self.sc.dt_s
         # a vehicle whose samples a sensor_delay window holds back keeps its own imu key (held in _send)
         solo = {v for v in self._delays if self._delay_s(v, t) is not None}

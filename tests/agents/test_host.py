@@ -63,8 +63,8 @@ def test_an_estimate_is_encoded_only_for_a_subscriber_and_always_handed_to_a_hos
     estimate(4) does, estimate(3) does not, to a subscriber or to the chaser."""
     from swarm.step.agent import VehicleAgent
     from swarm.step.world import initial_truth
-    from swarm.transport.docking_wire import estimate_payload
     from swarm.transport.messages import Estimate, decode
+    from swarm.transport.wire import estimate_payload
 
     sc = load_scenario("docking")
     assert sc.every(sc.camera.rate_hz) == 5 and sc.control_every("chaser") == 10
@@ -143,8 +143,8 @@ def test_a_free_running_agent_fuses_a_late_range_and_frame_as_the_tick_would_hav
     agent (rejoin) takes a late range into its initial fix. Lockstep agents have no late fusion."""
     from swarm.step.agent import VehicleAgent
     from swarm.step.world import initial_truth
-    from swarm.transport.docking_wire import filter_counts
     from swarm.transport.messages import Uwb, Vision
+    from swarm.transport.wire import filter_counts
 
     sc = load_scenario("docking")
     host, p = _host(["chaser", "target"], sc, clock="realtime")
@@ -457,9 +457,9 @@ def test_a_free_running_agent_alone_takes_its_range_frame_and_target_estimate_at
     import time
 
     from swarm.step.world import initial_truth
-    from swarm.transport.docking_wire import estimate_payload
     from swarm.transport.messages import Imu, Uwb, Vision, encode
     from swarm.transport.session import ZenohArgs, open_session
+    from swarm.transport.wire import estimate_payload
     from tests.transport.procs import free_port, loopback, wait_until
 
     sc = load_scenario("docking")

@@ -20,8 +20,8 @@ import numpy as np
 from dashboard.landing import frame_landing_scene
 from swarm.landing_scenario import load_landing
 from swarm.sim.landing import run_landing_fleet
-from swarm.transport.landing_wire import McapTap
 from swarm.transport.recording import read_recording
+from swarm.transport.wire import LandingTap
 from tests.dashboard.conftest import ARTIFACTS, START_TIMEOUT_S
 from tests.dashboard.pinhole import project
 from tests.dashboard.test_browser import MIN_SCENE_VARIANCE, SCENE_REGION, UI_TIMEOUT_MS
@@ -64,7 +64,7 @@ def _table_rows(body: str) -> list[str]:
 def test_the_played_back_moving_landing_draws_the_pad_where_the_robot_was(browser, tmp_path):
     sc = load_landing("landing-moving", OVERRIDES)
     rec = tmp_path / "moving.mcap"
-    run_landing_fleet(sc, seed=0, record_series=False, tap=McapTap(rec, 0))
+    run_landing_fleet(sc, seed=0, record_series=False, tap=LandingTap(rec, 0))
     pads = {t: _shared_pad(rec, t) for t in (T1_S, T2_S)}
     assert np.linalg.norm(pads[T2_S][:2] - pads[T1_S][:2]) > 5.0  # 10 s at 0.6 m/s along the lap
     ARTIFACTS.mkdir(exist_ok=True)

@@ -231,13 +231,13 @@ def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
 
 
 def test_swarm_sim_mcap_writes_what_the_launched_processes_published(launched, tmp_path):
-    from swarm.transport.landing_wire import McapTap
     from swarm.transport.recording import read_recording
+    from swarm.transport.wire import LandingTap
 
     code, text, _, sc, rec, ns, garbage, _ = launched
     assert code == 0, text
     sim = tmp_path / "sim.mcap"
-    run_landing_fleet(sc, seed=0, record_series=False, tap=McapTap(sim, 0, ns), faults=[FAULT])
+    run_landing_fleet(sc, seed=0, record_series=False, tap=LandingTap(sim, 0, ns), faults=[FAULT])
     heard, _ = read_recording(rec)
     wrote, meta = read_recording(sim)
 
@@ -528,10 +528,11 @@ def test_what_a_landing_launch_does_not_do_yet_is_refused_before_anything_starts
 
 
 def test_the_landing_worlds_clock_goes_out_every_clock_every_ticks_and_nothing_else_changes():
-    """``world_tick``: the samples of every tick as before, the ``running`` clock only on the ticks that are a
-    multiple of ``clock_every`` (CLOCK_EVERY by default), last; with ``clock_every=1`` every tick."""
+    """``landing_world_tick``: the samples of every tick as before, the ``running`` clock only on the ticks
+    that are a multiple of ``clock_every`` (CLOCK_EVERY by default), last; with ``clock_every=1`` every
+    tick."""
     from swarm.step.landing import LandingWorld
-    from swarm.transport import landing_wire as wire
+    from swarm.transport import wire
     from swarm.transport.messages import Clock, decode
 
     sc = load_landing("landing-swarm")
@@ -540,8 +541,8 @@ def test_the_landing_worlds_clock_goes_out_every_clock_every_ticks_and_nothing_e
     for k in range(1, 2 * CLOCK_EVERY + 2):
         inputs = world.step(k)
         every, default = (
-            wire.world_tick(keys, world, k, inputs, 7, 1),
-            wire.world_tick(keys, world, k, inputs, 7),
+            wire.landing_world_tick(keys, world, k, inputs, 7, 1),
+            wire.landing_world_tick(keys, world, k, inputs, 7),
         )
         assert every[-1][0] == keys.world_clock() and every[:-1] == [
             s for s in default if s[0] != keys.world_clock()

@@ -18,9 +18,9 @@ import pytest
 
 from swarm.scenario import load_scenario
 from swarm.sim.docking import run_docking
-from swarm.transport.docking_wire import estimate_payload
 from swarm.transport.keys import Keys
 from swarm.transport.session import ZenohArgs, open_session
+from swarm.transport.wire import estimate_payload
 from tests.transport.procs import Procs, free_port, loopback
 
 SEED = 3

@@ -115,11 +115,11 @@ def test_a_chaser_waits_for_its_targets_estimate_only_on_the_ticks_that_read_it(
 
 
 def test_a_target_sends_the_estimates_its_chasers_read():
-    """docking_wire.target_reads / estimate_reads / estimate_read against the scenario's rates: the target
+    """wire.target_reads / estimate_reads / estimate_read against the scenario's rates: the target
     of the docking scenario sends estimate(0) and those of the ticks before a camera or control tick; a
     chaser (no one's target) every one; without the latch every one (its published covariance reads it)."""
     from swarm.scenario import load_scenario
-    from swarm.transport.docking_wire import estimate_read, estimate_reads, target_reads
+    from swarm.transport.wire import estimate_read, estimate_reads, target_reads
 
     sc = load_scenario("docking")
     cam, ctl = sc.every(sc.camera.rate_hz), sc.control_every("chaser")

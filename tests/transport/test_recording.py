@@ -205,11 +205,11 @@ def test_a_fresh_agent_fed_the_recorded_sensors_reproduces_the_recorded_estimate
 
 def test_swarm_sim_mcap_writes_what_the_launched_processes_published(recorded, tmp_path):
     """`swarm sim docking --mcap FILE`: the in-process run written as its processes would have published it
-    in lockstep (the same encoders, swarm.transport.docking_wire) holds, on every vehicle key, the same
+    in lockstep (the same encoders, swarm.transport.wire) holds, on every vehicle key, the same
     payloads in the same order as the launched run's recording of the same seed."""
     from swarm.scenario import load_scenario
     from swarm.sim.docking import run_docking
-    from swarm.transport.docking_wire import DockingTap
+    from swarm.transport.wire import DockingTap
 
     ns = recorded["ns"]
     sim = tmp_path / "sim.mcap"

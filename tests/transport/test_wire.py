@@ -1,4 +1,4 @@
-"""The world's samples of a tick as the processes publish them (swarm.transport.docking_wire.world_sensors):
+"""The world's samples of a tick as the processes publish them (swarm.transport.wire.world_sensors):
 for agent hosts, every vehicle's imu in one ImuBatch on world/imu, and every chaser's camera frame in one
 VisionBatch on world/vision.
 
@@ -15,7 +15,6 @@ import pytest
 from swarm.scenario import load_scenario
 from swarm.step.radio import UwbNetwork
 from swarm.step.world import World
-from swarm.transport.docking_wire import batch_samples, uwb_slot, uwb_slot_batch, world_sensors
 from swarm.transport.messages import (
     MAX_BATCH,
     MAX_PAYLOAD_BYTES,
@@ -33,6 +32,7 @@ from swarm.transport.messages import (
     encode,
     pack_entries,
 )
+from swarm.transport.wire import batch_samples, uwb_slot, uwb_slot_batch, world_sensors
 
 
 def _tick(pairs: int, k_ahrs: bool, camera: bool = False):
@@ -163,7 +163,7 @@ def test_a_vehicle_held_back_by_a_delay_keeps_its_own_imu_and_a_big_swarm_severa
     out = world_sensors(w, ids, chasers, w.k, frames, 1, batch=True, solo={"target1"})
     assert [v for kd, v, _ in out if kd == "imu"] == ["target1"]
     assert decode(out[-1][2], ImuBatch).ids == ("chaser0", "target0", "chaser1")
-    monkeypatch.setattr("swarm.transport.docking_wire.MAX_BATCH", 3)  # 4 vehicles: batches of 3 and 1
+    monkeypatch.setattr("swarm.transport.wire.MAX_BATCH", 3)  # 4 vehicles: batches of 3 and 1
     out = world_sensors(w, ids, chasers, w.k, frames, 1, batch=True)
     assert [decode(p, ImuBatch).ids for kd, _, p in out if kd == "imu_batch"] == [tuple(ids[:3]), (ids[3],)]
     assert MAX_BATCH >= 128  # the real cap: the 128-vehicle swarm's imu are one message

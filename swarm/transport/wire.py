@@ -1,23 +1,43 @@
-"""The docking tick's messages (``docs/protocol.md``): what the world, the mothership and a docking agent
-publish for tick ``k``, encoded once here for the processes (:mod:`swarm.world.process`,
-:mod:`mothership.process`, :mod:`agents.process`) and for ``swarm sim docking --mcap`` (:class:`DockingTap`:
-the in-process run written as the processes would have published it)."""
+"""The wire form of a tick (``docs/protocol.md``): what each process of a mission publishes for tick ``k``,
+encoded once here for the processes and for ``swarm sim --mcap`` (a tap: the in-process run written as the
+processes would have published it, the same encoders in the same order per key).
+
+Every mission: the world's clock (:func:`clock`), its events (:func:`world_event`) and the taps' writer
+(:class:`Tap`). Docking: the world's samples (:func:`world_sensors`; :mod:`swarm.world.process`), the
+mothership's ranges (:func:`uwb_slot`; :mod:`mothership.process`), an agent's estimate, guidance and command
+(:mod:`agents.process`), the referee's events, :class:`DockingTap`. Landing: the landing world's tick
+(:func:`landing_world_tick`; :mod:`swarm.world.landing`), a landing agent's answer
+(:func:`landing_agent_tick`; :mod:`agents.landing`), :class:`LandingTap`."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from swarm.core import rotations as rot
 from swarm.core.estimator import MeasKind
+from swarm.step import landing_nb as lnb
 from swarm.transport.keys import Keys
 from swarm.transport.lockstep import period_phase, reads_target
 from swarm.transport.messages import (
+    CLOCK_EVERY,
     MAX_BATCH,
+    NEW_RUN_COMMANDS,
     Clock,
+    Command,
+    Estimate,
     Event,
+    Gnss,
     Guidance,
+    Imu,
     ImuBatch,
+    MessageError,
+    Rangefinder,
+    Tdoa,
     TdoaBatch,
+    Truth,
+    Uwb,
     UwbBatch,
+    Vision,
     VisionBatch,
     decode,
     encode,
@@ -29,8 +49,44 @@ from swarm.transport.messages import (
     encode_truth_batch,
     encode_uwb,
     encode_vision,
+    estimate_message,
     pack_entries,
 )
+
+Wire = list[tuple[str, bytes]]
+"""``(key, payload)`` in publishing order."""
+
+
+def clock(keys: Keys, k: int, dt: float, seed: int, state: str = "running") -> tuple[str, bytes]:
+    """The world's clock at tick ``k`` in ``state`` (``running``, ``paused``, ``stopped``)."""
+    return keys.world_clock(), encode(Clock(k, k * dt, state, seed))
+
+
+def world_event(keys: Keys, kind: str, t_s: float, data: dict) -> tuple[str, bytes]:
+    """An event of the world on ``world/event`` (``run_start``, ``fault``, ``fault_refused``, ...)."""
+    return keys.world_event(), encode(Event(t_s, kind, data))
+
+
+class Tap:
+    """What a tap of ``swarm sim --mcap FILE`` shares: the recorder's
+    :class:`~swarm.transport.recording.McapSink` on the run's namespace, written in publishing order."""
+
+    def __init__(self, path, seed: int, namespace: str = "tpods") -> None:
+        from swarm.transport.recording import sim_sink
+
+        self.keys = Keys(namespace)
+        self.seed = seed
+        self.sink = sim_sink(path, self.keys)
+
+    def _put(self, key: str, payload: bytes) -> None:
+        self.sink.write(key, payload)
+
+    def _write(self, wire: Wire) -> None:
+        for key, payload in wire:
+            self.sink.write(key, payload)
+
+
+# ---------------------------------------------------------------------------------------------- docking
 
 Sensors = list[tuple[str, str, bytes]]
 """``(kind, vehicle, payload)`` in publishing order; ``kind`` is ``truth``, ``vision``, ``imu``, or
@@ -297,26 +353,16 @@ def keepout_event(t: float, mode: str, range_m: float) -> bytes:
     return encode(Event(t, "keepout_violation", {"t_s": t, "mode": mode, "range_m": range_m}))
 
 
-class DockingTap:
+class DockingTap(Tap):
     """``swarm sim docking --mcap FILE``: the in-process run written as its processes would have published
     it in lockstep (the same encoders, in the same order per key), through the recorder's
     :class:`~swarm.transport.recording.McapSink`; a tap of :class:`swarm.sim.docking.DockingSim` (which then
     runs every tick through its per-object Python path, so that each tick's samples exist)."""
 
     def __init__(self, path, seed: int, namespace: str = "tpods", clock_every: int = 10) -> None:
-        from swarm.transport.recording import sim_sink
-
-        self.keys = Keys(namespace)
-        self.seed = seed
+        super().__init__(path, seed, namespace)
         self.clock_every = clock_every
-        self.sink = sim_sink(path, self.keys)
         self._held: dict[str, tuple] = {}
-
-    def _write(self, key: str, payload: bytes) -> None:
-        self.sink.write(key, payload)
-
-    def _clock(self, k: int, t: float, state: str) -> None:
-        self._write(self.keys.world_clock(), encode(Clock(k, t, state, self.seed)))
 
     def start(self, sim) -> None:
         """Tick 0: ``run_start`` and the clock."""
@@ -328,8 +374,7 @@ class DockingTap:
         self._command_every = {vid: (sc.control_every(vid), sc.control_phase(vid)) for vid in self._ids}
         ids = self._ids
         data = {"seed": self.seed, "vehicles": ids, "clock": "lockstep", "scenario": sc.name}
-        self._write(self.keys.world_event(), encode(Event(0.0, "run_start", data)))
-        self._clock(0, 0.0, "running")
+        self._write([world_event(self.keys, "run_start", 0.0, data), clock(self.keys, 0, sc.dt_s, self.seed)])
         for vid in ids:
             mode = "HOLD" if vid in sc.chasers else "STATION"
             self._held[vid] = (np.zeros(sc.kind(vid).U_N), mode, None, None)
@@ -342,9 +387,9 @@ class DockingTap:
             sim.world, self._ids, self._chasers, k, frames, self._truth_every
         ):
             key = self.keys.world_truth() if kind == "truth_batch" else getattr(self.keys, kind)(vid)
-            self._write(key, payload)
+            self._put(key, payload)
         if k % self.clock_every == 0:
-            self._clock(k, k * sim.sc.dt_s, "running")
+            self._write([clock(self.keys, k, sim.sc.dt_s, self.seed)])
 
     def uwb(self, sim, k: int) -> None:
         """The mothership's ranges of slot tick ``k`` (after the network's step)."""
@@ -352,10 +397,10 @@ class DockingTap:
             return
         if sim.network.tdoa is not None:  # uwb.mode tdoa2/tdoa3: the differences on agent/<id>/tdoa
             for vid, payload in tdoa_slot(sim.network, self._ids, k, k * sim.sc.dt_s):
-                self._write(self.keys.tdoa(vid), payload)
+                self._put(self.keys.tdoa(vid), payload)
             return
         for vid, payload in uwb_slot(sim.network, self._ids, k, k * sim.sc.dt_s):
-            self._write(self.keys.uwb(vid), payload)
+            self._put(self.keys.uwb(vid), payload)
 
     def agent(self, sim, vid: str, k: int, cmd) -> None:
         """Agent ``vid``'s answer to tick ``k``: ``estimate`` (a target's on the ticks its chasers read),
@@ -363,33 +408,212 @@ class DockingTap:
         next)."""
         a, sc = sim.agents[vid], sim.sc
         if estimate_read(self._reads[vid], k):
-            self._write(self.keys.estimate(vid), estimate_payload(a, k))
+            self._put(self.keys.estimate(vid), estimate_payload(a, k))
         if cmd is not None:
             mode = a.mode.value
             self._held[vid] = (cmd.u, mode, cmd.force_body_n, cmd.torque_body_nm)
             for payload in mode_events(cmd):
-                self._write(self.keys.event(vid), payload)
-            self._write(
+                self._put(self.keys.event(vid), payload)
+            self._put(
                 self.keys.guidance(vid), guidance_payload(sc, sim.policy, vid in sc.chasers, a, k, mode, cmd)
             )
         every, phase = self._command_every[vid]
         if (k - phase) % every == 0:
             u, mode, force, torque = self._held[vid]
-            self._write(self.keys.command(vid), command_payload(k, sc.dt_s, u, mode, force, torque))
+            self._put(self.keys.command(vid), command_payload(k, sc.dt_s, u, mode, force, torque))
 
     def keepout(self, cid: str, t: float, mode: str, range_m: float) -> None:
         """The referee's keep-out verdict on the chaser's event key."""
-        self._write(self.keys.event(cid), keepout_event(t, mode, range_m))
+        self._put(self.keys.event(cid), keepout_event(t, mode, range_m))
 
     def contact(self, cid: str, t: float, mode: str, ct) -> None:
         """The referee's contact or collision on the chaser's event key."""
-        self._write(self.keys.event(cid), contact_event(t, mode, ct))
+        self._put(self.keys.event(cid), contact_event(t, mode, ct))
 
     def end(self, sim, k: int, reason: str, wall_s: float) -> None:
         """``run_end`` and the stopped clock; the file is closed."""
         t = k * sim.sc.dt_s
         data = {"reason": reason, "tick": k, "t_s": t, "seed": self.seed, "wall_s": wall_s,
                 "effort": sim.world.effort_by_vehicle, "done": sorted(sim.done)}  # fmt: skip
-        self._write(self.keys.world_event(), encode(Event(t, "run_end", data)))
-        self._clock(k, t, "stopped")
+        self._write([world_event(self.keys, "run_end", t, data), clock(self.keys, k, sim.sc.dt_s, self.seed,
+                                                                             "stopped")])  # fmt: skip
+        self.sink.close()
+
+
+# ---------------------------------------------------------------------------------------------- landing
+
+
+def landing_world_tick(keys: Keys, world, k: int, inputs: dict, seed: int, clock_every: int = CLOCK_EVERY
+                       ) -> Wire:  # fmt: skip
+    """The world's tick ``k``: per UAV ``imu``, ``uwb`` (a UWB tick; on a TDoA radio a ``tdoa`` instead: the
+    differences heard since the last, none in it when there were none), ``gnss`` (a fix), ``rangefinder`` (a
+    rangefinder tick), ``vision`` (a camera tick: the pad's corners as pixels) and ``truth``; a moving pad's
+    robot's shared estimate on its share ticks (:func:`platform_estimate`); then, every ``clock_every``
+    ticks, the clock."""
+    sc, dt = world.sc, world.sc.dt_s
+    t = k * dt
+    out: Wire = []
+    for uid, inp in inputs.items():
+        out.append((keys.imu(uid), encode(Imu(k, t - dt, dt, inp.gyro, None, inp.acc))))
+        if world.rates.uwb_tick(sc, k):
+            a, z = inp.uwb if inp.uwb is not None else (world.uavs[uid].next_anchor - 1, None)
+            out.append((keys.uwb(uid), encode(Uwb(k, t, int(a) % len(world.anchors), z))))
+        elif world.rates.tdoa_tick(sc, k):
+            rows = inp.tdoa if inp.tdoa is not None else np.zeros((0, 3))
+            out.append((keys.tdoa(uid), encode_tdoa(k, t, rows)))
+        if inp.gnss is not None:
+            out.append((keys.gnss(uid), encode(Gnss(k, t, inp.gnss, world.gnss_cov))))
+        if world.rates.rangefinder_tick(sc, k):
+            out.append(
+                (keys.rangefinder(uid), encode(Rangefinder(k, t, inp.rangefinder, sc.rangefinder.sigma_m)))
+            )
+        if inp.camera is not None:
+            mids, corners = inp.camera
+            rows = tuple(int(m) * 4 + c for m in mids for c in range(4))
+            vis = Vision(k, t, f"pad-{uid}", "+z", "pixels", corners.reshape(-1, 2), rows)
+            out.append((keys.vision(uid), encode(vis)))
+        u = world.uavs[uid]
+        x = u.x
+        out.append((keys.truth(uid), encode(Truth(k, t, x[0:3], x[3:6], x[6:10], x[10:13], u.energy_j))))
+        if inp.pad is not None:
+            out.append(platform_estimate(keys, world, uid, k, inp.pad))
+    if k % clock_every == 0:
+        out.append(clock(keys, k, dt, seed))
+    return out
+
+
+def platform_estimate(keys: Keys, world, uid: str, k: int, pad: np.ndarray) -> tuple[str, bytes]:
+    """A moving pad's robot shares its estimate of the pad (``[platform]``): an ``Estimate`` on
+    ``<ns>/agent/<platform.id>/estimate`` (docs/protocol.md), its position and velocity the tick's shared
+    ones (``pad``, (6,)), its attitude the robot's heading, its covariance the stated sigmas' (the attitude
+    block zero: the UAV does not use it)."""
+    pf, t = world.sc.platform, k * world.sc.dt_s
+    R = world.uavs[uid].WC[lnb.WC_R_NAV_PAD : lnb.WC_R_NAV_PAD + 9].reshape(3, 3)
+    cov = np.diag([pf.share_sigma_m**2] * 3 + [pf.share_sigma_m_s**2] * 3 + [0.0] * 3)
+    q = rot.matrix_to_quat(R)
+    msg = estimate_message(k, t, pad[0:3], pad[3:6], q, cov, pf.share_sigma_m, 0.0, 0.0, {})
+    return keys.estimate(pf.id), encode(msg)
+
+
+def pad_input(msg: Estimate) -> np.ndarray:
+    """A robot's shared ``Estimate`` as the agent step's moving pad (position and velocity, (6,))."""
+    return np.concatenate([msg.p_nav, msg.v_nav])
+
+
+def camera_frame(msg: Vision) -> tuple[np.ndarray, np.ndarray]:
+    """The pad's frame back from a ``Vision`` of :func:`world_tick`: marker ids (n,), corners (n, 4, 2).
+    MessageError for a frame that is not one (another kind, or rows that are not every corner ``4 m + c``
+    of each marker in order): a valid message of the protocol that a landing agent cannot use."""
+    if msg.kind != "pixels":
+        raise MessageError(f"kind: a landing camera frame is 'pixels', got {msg.kind!r}")
+    ids = np.asarray(msg.marker_ids, dtype=np.int64)
+    if len(ids) % 4:
+        raise MessageError(f"marker_ids: {len(ids)} rows, not the four corners of each marker")
+    quads = ids.reshape(-1, 4)
+    if np.any(quads % 4 != np.arange(4)) or np.any(quads // 4 != quads[:, :1] // 4):
+        raise MessageError("marker_ids: rows must be 4 m, 4 m + 1, 4 m + 2, 4 m + 3 for each marker m")
+    return quads[:, 0] // 4, msg.data.reshape(-1, 4, 2)
+
+
+def tdoa_input(msg: Tdoa) -> np.ndarray:
+    """A ``Tdoa`` as the agent step's differences (K, 3) (:attr:`swarm.step.landing.LandingInputs.tdoa`); a
+    row naming an anchor the scenario does not have is the agent step's to skip and count."""
+    return msg.rows()
+
+
+def range_input(msg: Uwb, n_anchors: int) -> tuple[int, float] | None:
+    """A ``Uwb`` as the agent step's ``(anchor index, range)`` (None: no reply in this slot). MessageError for
+    an anchor the scenario does not have."""
+    if not 0 <= msg.anchor_id < n_anchors:
+        raise MessageError(f"anchor_id: {msg.anchor_id} is not one of the scenario's {n_anchors} anchors")
+    return None if msg.range_m is None else (msg.anchor_id, msg.range_m)
+
+
+def landing_agent_tick(keys: Keys, uid: str, agent, cmd, n_modes: int) -> tuple[Wire, int]:
+    """A landing agent's answer to tick ``k = cmd.k``: ``command``, ``estimate``, ``guidance`` and a ``mode``
+    event per switch since the ``n_modes`` already sent; returns them and the new count."""
+    k, t = cmd.k, cmd.k * agent.dt
+    mode = str(cmd.mode)
+    out: Wire = [(keys.command(uid), encode(Command(k, t, cmd.u, mode)))]
+    out.append((keys.estimate(uid), encode(_landing_estimate(agent, k, t))))
+    dist = float(np.linalg.norm(agent.p_est[:2] - agent.pad_est[:2]))
+    modes = agent.guidance.modes
+    reason = str(modes[-1]["reason"])[:1024] if modes else ""
+    out.append((keys.guidance(uid), encode(Guidance(k, t, mode, dist, reason=reason))))
+    for m in modes[n_modes:]:
+        data = {"from": m["from"], "to": m["mode"], "reason": m["reason"], "p_est_nav": m["p_est_nav"]}
+        out.append((keys.event(uid), encode(Event(m["t_s"], "mode", data))))
+    return out, len(modes)
+
+
+def _landing_estimate(agent, k: int, t: float) -> Estimate:
+    f = agent.filt
+    P = f.P[0, 0:9, 0:9]
+    d2 = agent.last_d2  # the latest range's (none before the first)
+    d = float(np.sqrt(d2)) if d2 is not None else 0.0
+    # a TDoA difference counts as a range (the dashboard's accepted rate), one naming no anchor as refused
+    tc = agent.TC.sum(axis=(0, 1))
+    tc[2] += agent.TSKIP[0]
+    outcomes = ("accepted", "rejected", "refused")
+    counts = {f"range_{w}": int(f.counts[:, i].sum() + tc[i]) for i, w in enumerate(outcomes)}
+    sigma = float(np.sqrt(np.max(np.diag(P)[0:3])))
+    return estimate_message(k, t, f.p_nav[0], f.v_nav[0], f.q_nav_body[0], P, sigma, d, 0.0, counts)
+
+
+def landing_summary(keys: Keys, uid: str, agent) -> tuple[str, bytes]:
+    """The agent's ``summary`` event at the run's end: its half of the outcome (the number of Algorithm 1
+    records, not the records)."""
+    out = agent.outcome()
+    out["decisions"] = len(out["decisions"])
+    return keys.event(uid), encode(Event(agent.landed_t or 0.0, "summary", out))
+
+
+def landing_run_start(
+    keys: Keys, sc, seed: int, policy: str, ids: list[str], clock: str
+) -> tuple[str, bytes]:
+    """The landing world's ``run_start`` on ``world/event``."""
+    data = {"scenario": sc.name, "mission": "landing", "seed": seed, "policy": policy, "uavs": ids,
+            "clock": clock}  # fmt: skip
+    return world_event(keys, "run_start", 0.0, data)
+
+
+def landing_run_end(keys: Keys, world, k: int, reason: str, wall_s: float, late: dict[str, int] | None = None,
+                    next_seed: int | None = None) -> Wire:  # fmt: skip
+    """The world's ``run_end`` (each UAV's outcome) and its ``stopped`` clock; a free-running world adds each
+    UAV's ``late_ticks`` (ticks whose command had not come by the tick's wall time), a run ended by a
+    ``reset`` or ``new_seed`` the ``next_seed`` asked for (nil: the same seed, or the launcher's next)."""
+    outcome = {uid: {**world.outcome(uid), "end_tick": world.uavs[uid].end_k} for uid in world.uavs}
+    for uid, n in (late or {}).items():
+        outcome[uid]["late_ticks"] = n
+    t = k * world.sc.dt_s
+    data = {"reason": reason, "ticks": k, "wall_s": wall_s, "uavs": outcome}
+    if reason in NEW_RUN_COMMANDS:
+        data["next_seed"] = next_seed
+    return [world_event(keys, "run_end", t, data), clock(keys, k, world.sc.dt_s, world.seed, "stopped")]
+
+
+class LandingTap(Tap):
+    """``swarm sim landing --mcap FILE``: the in-process run written as its processes would have published
+    it (the same encoders, in the same order per key), through the recorder's :class:`McapSink`; a tap of
+    :func:`swarm.sim.landing.run_landing_fleet`."""
+
+    def __init__(self, path, seed: int, namespace: str = "tpods") -> None:
+        super().__init__(path, seed, namespace)
+        self.n_modes: dict[str, int] = {}
+
+    def start(self, world, policy: str) -> None:
+        ids = [u for u in world.uavs if not world.uavs[u].done]
+        self._write([landing_run_start(self.keys, world.sc, self.seed, policy, ids, "sim"),
+                     clock(self.keys, 0, world.sc.dt_s, self.seed)])  # fmt: skip
+
+    def world(self, k: int, world, inputs: dict) -> None:
+        self._write(landing_world_tick(self.keys, world, k, inputs, self.seed))
+
+    def agent(self, uid: str, agent, cmd) -> None:
+        out, self.n_modes[uid] = landing_agent_tick(self.keys, uid, agent, cmd, self.n_modes.get(uid, 0))
+        self._write(out)
+
+    def end(self, world, agents: dict, k: int, wall_s: float) -> None:
+        self._write(landing_run_end(self.keys, world, k, "done", wall_s))
+        self._write([landing_summary(self.keys, uid, a) for uid, a in agents.items()])
         self.sink.close()
