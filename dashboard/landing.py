@@ -10,7 +10,9 @@ the world's clock and events: docs/protocol.md, "Processes and topology"), store
   moving pad (``[platform]``, ``landing-moving``) where its robot's shared estimate puts it (the robot's
   ``Estimate`` on ``agent/<platform.id>/estimate``: position and heading), the robot itself not drawn as a
   vehicle;
-- the UWB anchors around the pads (from the scenario: a landing swarm has no mothership to ask);
+- the UWB anchors around the pads (from the scenario: a landing swarm has no mothership to ask); on a TDoA
+  radio (``uwb.mode`` tdoa2/tdoa3) each labelled with its packets a second as the UAVs' tags hear them
+  (:mod:`dashboard.radio`, as a docking swarm's; the Radio panel has the table);
 - every UAV as a quadrotor (:func:`dashboard.kinds.draw_quadrotor`) in its guidance mode's colour, drawn
   :data:`DRAW_SCALE` times its size (a 0.45 m airframe would be a few pixels in a 60 m scene), its label,
   its true and estimated trails, its estimated pose (axes) and the estimate's covariance ellipsoid;
@@ -33,6 +35,8 @@ import viser
 
 from dashboard import kinds, mapping
 from dashboard import nodes as scene_nodes
+from dashboard.nodes import set_if_changed
+from dashboard.radio import RadioSnap
 from dashboard.state import AgentSnap, Snapshot
 from swarm.core import rotations as rot
 from swarm.core.pad_vision import PadBoardParams, PadCameraParams
@@ -234,6 +238,7 @@ class LandingSceneView:
         self.uavs = {u.id: u for u in sc.uavs()}
         self._anchors_version: int | None = None
         self._anchor_nodes: list[object] = []
+        self._anchor_labels: dict[int, viser.LabelHandle] = {}
         self._run: int | None = None
         self.pad_frames = {u.id: _draw_pad(server.scene, u, sc.pad.board) for u in self.uavs.values()}
         pf = sc.platform
@@ -247,18 +252,31 @@ class LandingSceneView:
         for node in self._anchor_nodes:
             node.remove()  # type: ignore[attr-defined]
         self._anchor_nodes = []
+        self._anchor_labels = {}
         for anchor_id, p in zip(ids, positions, strict=True):
             node = self.server.scene.add_icosphere(
                 mapping.anchor_node(anchor_id), radius=0.25, color=ANCHOR_COLOR, position=tuple(p)
             )
             self._anchor_nodes.append(node)
-            self.server.scene.add_label(f"{mapping.anchor_node(anchor_id)}/label", f"anchor {anchor_id}",
-                                        position=(0.0, 0.0, 0.5))  # fmt: skip
+            self._anchor_labels[anchor_id] = self.server.scene.add_label(
+                f"{mapping.anchor_node(anchor_id)}/label", f"anchor {anchor_id}", position=(0.0, 0.0, 0.5)
+            )
+
+    def _label_anchors(self, rates: RadioSnap) -> None:
+        """On a TDoA radio, each anchor's label says its packets a second (the best tag's)."""
+        if rates.mode == "twr":
+            return
+        heard = rates.anchor_hz()
+        for anchor_id, label in self._anchor_labels.items():
+            hz = heard.get(anchor_id)
+            set_if_changed(label, "text", f"anchor {anchor_id}" + ("" if hz is None else f" · {hz:.0f}/s"))
 
     def update(self, snap: Snapshot, trails_due: bool) -> None:
         if snap.anchors_version != self._anchors_version:
             self._anchors_version = snap.anchors_version
             self._draw_anchors(*snap.anchors)
+        if snap.radio is not None:
+            self._label_anchors(snap.radio)
         new_run = snap.run != self._run
         self._run = snap.run
         robot = snap.agents.get(self.platform_id) if self.platform_id is not None else None

@@ -16,7 +16,7 @@ from dashboard import kinds, landing, panels
 from dashboard.app import DashboardApp, DashboardParams
 from dashboard.faults import LANDING
 from dashboard.mapping import FOV_COLORS, MODE_COLORS
-from dashboard.playback import Recording, scenario_of
+from dashboard.playback import Recording, load_recording, scenario_of
 from dashboard.state import SwarmState
 from swarm.core import rotations as rot
 from swarm.kinds.quadrotor.dynamics import rotor_positions
@@ -197,6 +197,63 @@ def test_a_landing_recording_is_drawn_with_its_landing_scenario(tmp_path, sc):
         app.gui.update_panels(app.state.snapshot(), 0)
         assert "| uav1 | CRUISE |" in app.gui.table.content
         assert app.scene.nodes["uav1"].fov.color != FOV_COLORS["seen"]
+    finally:
+        app.close()
+
+
+def _tdoa_rows_per_s(path: Path, t_s: float, window_s: float = 2.0) -> dict[str, float]:
+    """Each UAV's distance differences a second over ``(t_s - window_s, t_s]``, counted in the recording with
+    plain msgpack (each ``agent/<id>/tdoa`` message's rows by its ``t_s``)."""
+    import msgpack
+
+    from swarm.transport.recording import read_recording
+
+    rows: dict[str, int] = {}
+    for m in read_recording(path)[0]:
+        if m.key.endswith("/tdoa"):
+            obj = msgpack.unpackb(m.payload, raw=False)
+            if t_s - window_s < obj["t_s"] <= t_s + 1e-9:
+                uid = m.key.split("/")[-2]
+                rows[uid] = rows.get(uid, 0) + len(obj["anchor_b"])
+    return {uid: n / window_s for uid, n in rows.items()}
+
+
+def test_a_tdoa_landing_s_dashboard_shows_its_radio_rates_and_labels_its_anchors(tmp_path):
+    """``swarm sim landing-swarm --set uwb.mode=tdoa3 --mcap`` (the landing world's wire, in process; 6 s of
+    the approach) played in the landing dashboard: the Radio panel has a row for every anchor of the scenario
+    and every UAV, each UAV's differences a second are those of the recording (counted with plain msgpack,
+    within 3 %: the panel's window starts at a slot, the count at an instant), accepted at most as many, and
+    each anchor's label in the scene says its panel rate."""
+    from tests.inprocess import swarm_exit_status
+
+    path = tmp_path / "tdoa.mcap"
+    argv = ["sim", "landing-swarm", "--seed", "0", "--set", "uwb.mode=tdoa3", "--set", "max_duration_s=6",
+            "--mcap", str(path)]  # fmt: skip
+    assert swarm_exit_status(argv) == 1  # (not landed in 6 s: the run is cut short)
+    rec = load_recording(path)
+    sc = scenario_of(rec, None)
+    app = DashboardApp(sc, None, None, "127.0.0.1", 0, recording=rec)
+    try:
+        t = 5.9
+        app.player.seek(t)
+        app.frame()
+        snap = app.state.snapshot(radio=True)
+        app.gui.update_panels(snap, 0)
+        app.scene.update(snap, False)
+        radio = snap.radio
+        assert radio.mode == "tdoa" and "**TDOA**" in app.gui.radio.content
+        assert [a.anchor for a in radio.anchors] == list(range(len(sc.uwb.anchors_m)))
+        counted = _tdoa_rows_per_s(path, t)
+        tags = {x.tag: x for x in radio.tags}
+        assert set(tags) == {u.id for u in sc.uavs()} and max(counted.values()) > 50.0
+        for uid, x in tags.items():
+            assert x.heard_hz == pytest.approx(counted.get(uid, 0.0), rel=0.03, abs=1.0), uid
+            assert x.accepted_hz <= x.heard_hz + 1e-9, uid
+            assert f"| {uid} | {x.heard_hz:.1f} | {x.accepted_hz:.1f} |" in app.gui.radio.content
+        for a in radio.anchors:
+            assert f"| {a.anchor} | {a.best_hz:.1f} |" in app.gui.radio.content
+            label = app.scene._anchor_labels[a.anchor].text
+            assert label == f"anchor {a.anchor} · {a.best_hz:.0f}/s", label
     finally:
         app.close()
 
