@@ -308,7 +308,9 @@ def make_log(directory, seed: int = 0, spec: SyntheticSpec | None = None, profil
 
         tdoa = write_tdoa(d, seed, spec, profile, ANCHORS, b0, step, truth_at)
         if "tdoa" in LogConfig.__dataclass_fields__:
-            extra_toml += f"\n[tdoa]\nsigma_m = {tdoa['sigma_m']:g}\n"
+            # its anchors carry constant offsets of 0.2-0.5 m (range_bias_m): the filter's offset states
+            # (off by default in a TDoA log, [tdoa] offsets)
+            extra_toml += f"\n[tdoa]\nsigma_m = {tdoa['sigma_m']:g}\noffsets = true\n"
     vision_toml = ""
     outliers = np.zeros(0, dtype=np.int64)
     if spec.vision_rate_hz > 0:

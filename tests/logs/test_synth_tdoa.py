@@ -42,6 +42,9 @@ def test_a_tdoa_log_has_the_same_flight_and_no_ranges(tmp_path):
     written = info["tdoa"]["counts"]["rows"] - info["tdoa"]["beyond_baseline"]
     assert len(log.uwb_t) == 0 and len(log.tdoa_t) == written > 3000
     assert log.config.tdoa.sigma_m == pytest.approx(math.sqrt(2) * 0.05, rel=1e-5)
+    # its anchors carry constant offsets of 0.2-0.5 m: the log says so, and the replay estimates them (a TDoA
+    # log has no offset states by default, TdoaLog.offsets)
+    assert log.config.tdoa.offsets
     assert not (tmp_path / "twr" / "tdoa.csv").exists()
 
 

@@ -200,6 +200,22 @@ def test_a_tdoa_log_models_each_anchor_with_the_tdoa_keys(landing):
     assert f.layout.n_err == nb.N_CORE + len(f.anchors)
 
 
+def test_without_offsets_the_height_is_what_the_differences_tell(landing):
+    """Anchors in two layers (0.2 and 3 m): from the cruise's 1.2 m a height error moves each difference as
+    offsets of about -0.3 and +0.2 of it on the two layers would, so with an offset state per anchor the
+    height is far less certain (TdoaLog.offsets); this flight's anchors have none (Gauss-Markov errors
+    only)."""
+    d, _, _ = landing
+    sig = {}
+    for off in (False, True):
+        r = replay_log(read_log(d, {"tdoa.offsets": off}))
+        cruise = (r.t > 5.0) & (r.t < 11.0)  # at one height, moving in x and y
+        sig[off] = np.sqrt(np.median(r.P[cruise][:, [0, 1, 2], [0, 1, 2]], axis=0))
+    # measured: height 0.136 m without, 0.217 m with; x and y 0.072 and 0.101 (the offsets cost them less)
+    assert sig[False][2] < 0.15 < 0.2 < sig[True][2]
+    assert sig[True][2] / sig[False][2] > 1.4
+
+
 def _phase_state():
     PH = np.zeros(nb.N_PH)
     PH[nb.PH_SINCE] = -1.0
