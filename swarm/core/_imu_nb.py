@@ -626,7 +626,9 @@ VIB_MEAN_TAU_S = 0.01
 AUX_HEIGHT, AUX_BARO = 0, 1
 (AX_H_SIGMA, AX_H_GROUND, AX_H_COS, AX_H_MAX, AX_H_GATE, AX_B_SIGMA, AX_B_INDEX, AX_B_GATE, AX_H_ON,
  AX_B_ON) = range(10)  # fmt: skip
-N_AX = 10
+AX_H_RESET_N = 10  # the height re-opens after this many range-finder readings rejected in a row (0: never)
+AX_H_REJECTED = 11  # the readings rejected in a row so far (the aux stream's state)
+N_AX = 12
 
 
 @njit(cache=True)
@@ -962,13 +964,32 @@ def fuse_aux(X, P, AX, kind, z, res):
     """One height sample: ``AUX_HEIGHT`` a downward rangefinder's distance ``z`` [m]
     (:func:`update_height_one`, refused beyond ``AX_H_MAX`` or past the tilt limit), ``AUX_BARO`` a
     barometric height ``z`` [m] with its offset state: ``h = p_z + b_baro`` (``AX_B_INDEX``). Gated on the
-    squared Mahalanobis distance; returns the outcome (``res``: outcome, d2)."""
+    squared Mahalanobis distance; returns the outcome (``res``: outcome, d2).
+
+    A range finder rejected ``AX_H_RESET_N`` times in a row re-opens the height: its variance grows by the
+    squared height difference the reading implies, and that reading is fused. A 2 cm sensor that keeps
+    disagreeing says the height is wrong, not itself: the gate otherwise locks it out while the
+    estimate is a few of its sigmas off (a take-off the pin on the pad held down: the UTIL flights 0425
+    traj10, 11, 16, 17 lagged 0.3-0.6 m for 1.5 s). PX4's EKF2 likewise resets its height to the height
+    source whose fusion has timed out (``height_control.cpp``)."""
     res[0], res[1] = REFUSED, 0.0
     if not np.isfinite(z):
         return REFUSED
     if kind == AUX_HEIGHT:
         if AX[AX_H_ON] <= 0.0 or z < 0.0 or z > AX[AX_H_MAX]:
             return REFUSED
+        out = update_height_one(X, P, AX[AX_H_GROUND], z, AX[AX_H_SIGMA], AX[AX_H_COS], AX[AX_H_GATE], res)
+        if out != REJECTED:
+            if out == ACCEPTED:
+                AX[AX_H_REJECTED] = 0.0
+            return out
+        AX[AX_H_REJECTED] += 1.0
+        if AX[AX_H_RESET_N] <= 0.0 or AX[AX_H_REJECTED] < AX[AX_H_RESET_N]:
+            return out
+        r22 = qmat9(X[XQ], X[XQ + 1], X[XQ + 2], X[XQ + 3])[8]
+        dz = z * r22 - (X[XP + 2] - AX[AX_H_GROUND])  # the height the reading says, less the estimate's
+        P[EP + 2, EP + 2] += dz * dz
+        AX[AX_H_REJECTED] = 0.0
         return update_height_one(X, P, AX[AX_H_GROUND], z, AX[AX_H_SIGMA], AX[AX_H_COS], AX[AX_H_GATE], res)
     ib = int(AX[AX_B_INDEX])
     if AX[AX_B_ON] <= 0.0 or ib < 0:

@@ -415,6 +415,7 @@ def aux_streams(log: Log, f: ImuFilter, cal: StaticCalibration | None):
         ax[nb.AX_H_COS] = hc.min_cos_tilt
         ax[nb.AX_H_GROUND] = ground_height(log, cal)
         ax[nb.AX_H_GATE] = chi2.ppf(hc.gate_probability, 1)
+        ax[nb.AX_H_RESET_N] = hc.reset_after
         parts_t.append(log.height_t)
         parts_k.append(np.full(len(log.height_t), nb.AUX_HEIGHT, np.int64))
         parts_z.append(log.height_range)
