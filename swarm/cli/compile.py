@@ -25,6 +25,8 @@ import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
+from swarm.missions import MISSIONS, resolve
+
 
 def docking_kernels() -> None:
     """The docking tick compiled whole (``swarm sim``, campaigns), then the world and agent processes'."""
@@ -73,21 +75,14 @@ def _filters() -> None:
         replay_log(read_log(d))
 
 
-def _mission_chains() -> dict[str, tuple[Callable[[], None], str]]:
-    """Each registered mission's chain (:attr:`swarm.missions.Mission.compile_entry`), in their order."""
-    from swarm.missions import MISSIONS, resolve
-
-    named = {m.name: resolve(m.compile_entry) for m in MISSIONS.values() if m.compile_entry}
-    return {name: (f, (f.__doc__ or "").split("\n")[0]) for name, f in named.items()}
-
-
 CHAINS: dict[str, tuple[Callable[[], None], str]] = {
-    **_mission_chains(),
+    **{m.name: (resolve(m.compile_entry), m.name) for m in MISSIONS.values() if m.compile_entry},
     "filters": (_filters, "the batched estimator and the IMU-driven filter (~20 s cold)"),
 }
-"""The chains, longest first: the missions' (docking ~2 min on one core cold, landing ~1 min), then the
-filters. Chains share only small helpers, so they compile in parallel; within a chain the order matters
-(the processes' paths reuse what the in-process run compiled)."""
+"""The chains, longest first: each registered mission's (:attr:`swarm.missions.Mission.compile_entry`:
+docking ~2 min on one core cold, landing ~1 min), then the filters. Chains share only small helpers, so
+they compile in parallel; within a chain the order matters (the processes' paths reuse what the in-process
+run compiled)."""
 
 
 def _run_chain(name: str) -> float:
