@@ -23,7 +23,10 @@ _NO_INDEX = np.full(3, -1, dtype=np.int64)
 class Eskf(ImuFilter, Navigator):
     """An :class:`~swarm.core.imu_filter.ImuFilter` with the navigation interface on its filter 0. Its camera
     (for :meth:`fuse_landmark`) is ``cam_pos_body_m`` and ``R_body_cam``, set by the caller that has the
-    vehicle's mounts; a downward camera at the centre of mass until then."""
+    vehicle's mounts; a downward camera at the centre of mass until then. :meth:`propagate` predicts over the
+    interval it is given and advances ``t`` by it: a caller uses either the interface or the time-stamped
+    :meth:`~swarm.core.imu_filter.ImuFilter.imu` and ``update_*`` of the class (which predict to each
+    sample's time with the held IMU sample), not both on one object."""
 
     name = "eskf"
     needs = frozenset({"gyro", "accelerometer"})
