@@ -1,12 +1,14 @@
 """The dashboard of a landing swarm in a real browser (issue 15, part 5): ``swarm launch landing-swarm`` with
-its dashboard (no ``--headless``) and ``--record``, the real landing world and four landing agent processes
-in lockstep over loopback Zenoh. Headless Chromium on the live page sees the four UAVs, their landing modes
-and their rotor energy; its Faults panel offers the landing world's two kinds and a UWB dropout injected
-from it is applied by the world and listed; its Pause and Resume stop and restart the world's clock; and all
-four LANDED when the run ends; the launcher then holds until SIGINT, which
-stops it cleanly. The run's recording played back (``python -m dashboard --open``) shows the landing from
-its recorded scenario: at two times of the time slider the screenshots differ where the recorded UAVs are
-(their poses projected through the dashboard's initial camera).
+its dashboard (no ``--headless``) and ``--record``, on the TDoA3 radio (``--set uwb.mode=tdoa3``, issue 45),
+the real landing world and four landing agent processes in lockstep over loopback Zenoh. Headless Chromium on
+the live page sees the four UAVs, their landing modes and their rotor energy, and while they fly the Radio
+panel's rates (every anchor's packets a second, each UAV's differences and accepted ones); its Faults panel
+offers the landing world's two kinds and a UWB dropout injected from it is applied by the world and listed;
+its Pause and Resume stop and restart the world's clock; and all four LANDED when the run ends; the launcher
+then holds until SIGINT, which stops it cleanly. The run's recording played back (``python -m dashboard
+--open``) shows the landing from its recorded scenario: at two times of the time slider the screenshots
+differ where the recorded UAVs are (their poses projected through the dashboard's initial camera), and the
+Radio panel shows each UAV's differences a second as the recording has them.
 
 numba's cache is warmed in this process first (a cold compile in five processes at once outlasts the
 world's start timeout on two cores). The run is paced (``--pace scaled:0.5``: lockstep, never ahead of half
@@ -40,7 +42,8 @@ from swarm.transport.recording import read_recording
 from tests.dashboard.conftest import ARTIFACTS, START_TIMEOUT_S, choose, fill_number, new_namespace
 from tests.dashboard.pinhole import project
 from tests.dashboard.test_browser import MIN_SCENE_VARIANCE, SCENE_REGION, UI_TIMEOUT_MS
-from tests.dashboard.test_browser_playback import _seek, _steady_screenshot, _window
+from tests.dashboard.test_browser_playback import _seek, _steady_screenshot, _table_rows, _window
+from tests.dashboard.test_landing import _tdoa_rows_per_s
 from tests.transport.procs import Proc, Procs, free_port, loopback
 
 WIDTH, HEIGHT = 1280, 800
@@ -71,7 +74,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LandingRun]:
         launcher = procs.start(
             [sys.executable, "-m", "swarm.cli.main", "launch", "landing-swarm", "--seed", "0",
              "--dashboard-port", "0", "--namespace", ns, "--listen", loopback(free_port()),
-             "--record", str(rec), "--timeout", "600", "--pace", "scaled:0.5"]
+             "--record", str(rec), "--timeout", "600", "--pace", "scaled:0.5", "--set", "uwb.mode=tdoa3"]
         )  # fmt: skip
         url = launcher.wait_for_line(r"^dashboard on (http://\S+)$", 120.0).group(1)
         yield LandingRun(launcher, url, rec, ns)
@@ -144,11 +147,55 @@ def test_the_landing_page_injects_the_landing_worlds_faults_and_pauses_and_resum
     assert "the UWB network" not in live_page.inner_text("body")
 
 
+def _radio(pg) -> tuple[dict[str, list[str]], dict[str, list[str]]]:
+    """The Radio panel's anchor rows and UAV rows as the page shows them, by anchor id and UAV id."""
+    return _table_rows(pg, "packets/s (best tag)"), _table_rows(pg, "differences/s")
+
+
+def _flying_radio(pg, timeout_s: float) -> tuple[dict[str, list[str]], dict[str, list[str]]]:
+    """The Radio panel once it has a row for every anchor and every UAV, two UAVs or more hear differences
+    (a UAV out of every anchor's reach, or landed, hears none) and the best heard anchor more than a third of
+    its transmit rate (50 a second: the UAVs far out hear little the first seconds, 6 a second at 2 s)."""
+    anchors_ids = {str(j) for j in range(len(load_landing("landing-swarm").uwb.anchors_m))}
+    deadline = time.monotonic() + timeout_s
+    seen = []
+    while True:
+        anchors, tags = _radio(pg)
+        seen.append((anchors, tags))
+        if set(anchors) == anchors_ids and set(tags) == set(UAVS):
+            hearing = sum(1 for r in tags.values() if _number(r[1]) and float(r[1]) > 0)
+            if hearing >= 2 and max(float(r[1]) for r in anchors.values()) > 50.0 / 3:
+                return anchors, tags
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the Radio panel never showed two UAVs hearing: {seen[-20:]}")
+        time.sleep(0.2)
+
+
+def _number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def test_the_live_page_shows_four_uavs_flying_landing_modes_then_all_landed(live_page, run: LandingRun):
+    """... and the Radio panel, read once its rates are measured (:func:`_flying_radio`): the run's radio
+    (TDOA3), every anchor's packets a second as the best tag hears them, at most its transmit rate (50 a
+    second, [tdoa] rate_hz; measured 10-29 here, an anchor out of most UAVs' reach the lowest); each UAV's
+    differences a second, accepted at most as many (to one slot's rows), a rejected share."""
     ARTIFACTS.mkdir(exist_ok=True)
     flying = _wait_rows(live_page, lambda r: r[1] in LANDING_MODES, "four UAVs with a landing mode", 120.0)
     live_page.screenshot(path=str(ARTIFACTS / "dashboard-landing-live.png"))
     assert all(r[7] == "alive" for r in flying.values()), flying  # the agent process column
+    anchors, tags = _flying_radio(live_page, 60.0)
+    print(f"the live Radio panel: anchors {anchors}, UAVs {tags}")
+    assert "TDOA3" in live_page.inner_text("body")
+    best = [float(r[1]) for r in anchors.values()]
+    assert all(0.0 <= b <= 52.5 for b in best), anchors
+    for uid, r in tags.items():  # (accepted and heard are counted at their own instants: one slot apart)
+        if _number(r[1]) and float(r[1]) > 0:
+            assert float(r[2]) <= float(r[1]) + 1.0 and r[3].endswith("%"), (uid, r)
     landed = _wait_rows(live_page, lambda r: r[1] == "LANDED", "four LANDED UAVs", RUN_TIMEOUT_S)
     live_page.screenshot(path=str(ARTIFACTS / "dashboard-landing-landed.png"))
     energy_kj = {u: float(r[6]) for u, r in landed.items()}
@@ -212,8 +259,15 @@ def test_the_recording_plays_back_as_a_landing_and_the_uavs_move(browser, run: L
                 _seek(pg, t)
                 shots[t] = _steady_screenshot(pg, ARTIFACTS / f"dashboard-landing-playback-{t:g}s.png")
                 modes[t] = {u: r[1] for u, r in _rows(pg).items()}
+            _, radio_tags = _radio(pg)  # at T2_S
         finally:
             context.close()
+    # the recorded differences (counted with plain msgpack, tests/dashboard/test_landing.py) at T2_S: the
+    # panel's 2 s window starts at a slot, the count at an instant, and the page prints one decimal
+    counted = _tdoa_rows_per_s(run.recording, T2_S)
+    assert set(radio_tags) == set(UAVS), radio_tags
+    for uid, r in radio_tags.items():
+        assert float(r[1]) == pytest.approx(counted.get(uid, 0.0), rel=0.03, abs=1.0), (uid, r, counted)
     assert set(modes[T1_S]) == set(UAVS) and set(modes[T1_S].values()) <= {"CRUISE", "DEVIATE"}, modes
     assert set(modes[T2_S].values()) <= LANDING_MODES - {"CRUISE"}, modes
     assert shots[T1_S][SCENE_REGION].var() > MIN_SCENE_VARIANCE
