@@ -72,21 +72,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """``swarm montecarlo SCENARIO``: the campaign of the scenario's mission
-    (:func:`swarm.missions.mission_of`, :meth:`swarm.missions.Mission.campaign`)."""
-    from swarm.missions import mission_of
-
-    return campaign(args, mission_of(args.scenario).campaign())
-
-
-def campaign(args: argparse.Namespace, plan) -> int:
-    """The paired campaign of a mission's scenario, ``plan`` its campaign part
-    (:class:`swarm.montecarlo.campaign.CampaignMission`): the same flags, directory, resume and ``--dask``
-    for every mission; the mission's report and summary."""
-    from swarm.missions import overrides_of
+    """``swarm montecarlo SCENARIO``: the paired campaign of the scenario's mission, its campaign part
+    (:meth:`swarm.missions.Mission.campaign`) handed to the one runner: the same flags, directory, resume
+    and ``--dask`` for every mission; the mission's report and summary."""
+    from swarm.missions import mission_of, overrides_of
     from swarm.montecarlo.campaign import CampaignSpec, read_manifest, run_campaign
     from swarm.montecarlo.report import finite_or_null
 
+    plan = mission_of(args.scenario).campaign()
     sc = plan.entry("load")(args.scenario, overrides_of(args))
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers must be a positive integer, got {args.workers}")
