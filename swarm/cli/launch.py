@@ -1,38 +1,33 @@
-"""``swarm launch SCENARIO``: the whole swarm as separate processes over Zenoh.
+"""``swarm launch SCENARIO``: the whole swarm as separate processes over Zenoh, for every mission.
 
 The launcher opens a Zenoh **router** (``--listen``, default a free loopback port; the line ``swarm
 listening on <endpoint>`` says where an outside client connects) and starts, each in its own process
-group, the mothership, one agent per vehicle, the world and (unless ``--headless``) the dashboard. The
-dashboard is a client of the router; the others are Zenoh peers that meet at the router and link directly
-to one another (``--topology mesh``; ``auto``, the default, for a few processes), or clients of it
-(``star``: ``auto`` for many, and the only topology with ``--secure``; ``swarm.cli.children.topology``),
-docs/protocol.md "Processes and topology" (why a chaser's subscription to its target's estimate is in
-place before the world announces the run, in either).
+group, the dashboard (unless ``--headless``: it prints ``dashboard on <url>``, and the run starts once it
+serves), then the world and the agents (a docking swarm also has a mothership). The dashboard is a client of
+the router; the others are Zenoh peers that meet at the router and link directly to one another
+(``--topology mesh``; ``auto``, the default, for a few processes), or clients of it (``star``: ``auto`` for
+many, and the only topology with ``--secure``; ``swarm.cli.children.topology``), docs/protocol.md
+"Processes and topology". How the vehicles' agents share processes, whether their controller clocks are
+staggered and how a free-running agent wakes, the launcher chooses from the vehicle count and the cores
+(``swarm.cli.launch_plan``; a landing swarm runs a process per UAV); ``--vehicles-per-process`` and
+``--set swarm.stagger_control=...`` or ``--set agent.wake_at_control=...`` override their part of it.
 
-How the vehicles' agents share processes (a process each, or agent hosts of several), whether their
-controller clocks are staggered and how a free-running agent wakes, the launcher chooses from the vehicle
-count and the cores it may run on, and logs its plan (``swarm.cli.launch_plan``: 32 vehicles on 2 cores run
-in four hosts of 8, staggered); ``--vehicles-per-process`` and ``--set swarm.stagger_control=...`` or
-``--set agent.wake_at_control=...`` override their part of it.
-
-It waits for every liveliness token (not for a time), supervises the children (an agent or the mothership
-whose token goes or that exits is reported lost and restarted with ``--rejoin``, the world with
+It waits for every liveliness token (not for a time), supervises the children (a process whose token goes
+or that exits is reported lost and restarted, an agent or the mothership to rejoin the run, the world with
 ``--resume`` from the checkpoint it writes every tick into a private directory of the launcher; each with
-exponential backoff, at most ``--max-restarts`` times), and collects the run from ``world/event``,
-``agent/*/event`` and ``agent/*/guidance``. The summary has ``swarm sim``'s fields per chaser
-(swarm/step/outcome.py) and the restarts of each process. After the run: ``--until-docked`` exits;
-``--repeat`` starts
-the next run with a new seed; otherwise the swarm stays up (for the dashboard) until Ctrl-C or
-``--timeout``. Ctrl-C, SIGTERM or the end stop every child in an order that no process mistakes for a
-failure (:mod:`swarm.transport.stopping`): a ``stopping`` event on ``world/event``, then the world, then
-the rest, each by SIGTERM, then SIGKILL of its process group after a grace period; a stop logs no error
-and no loss. ``--cpu-latency 0`` holds a PM QoS request that no CPU take longer than 0 us to wake while the
-swarm runs (``swarm.cpu_latency``: processes woken every tick start on a warm CPU; needs root).
+exponential backoff, at most ``--max-restarts`` times), tells a world clock that stands still
+(``--stall-s``) with every process's stacks, and collects the run's events. The summary has ``swarm
+sim``'s fields per vehicle and the restarts of each process. After the run: ``--until-docked`` exits;
+``--repeat`` (or the dashboard's Reset and New seed) starts the next run; otherwise the swarm stays up until
+Ctrl-C or ``--timeout``. Ctrl-C, SIGTERM or the end stop every child in an order that no process mistakes for
+a failure (:mod:`swarm.transport.stopping`). ``--cpu-latency 0`` holds a PM QoS request that no CPU take
+longer than 0 us to wake while the swarm runs (``swarm.cpu_latency``; needs root).
 
-Exit status: 0 every chaser docked, 1 not (or the run failed), 2 bad input, 130 interrupted (Ctrl-C or
-SIGTERM) before the run in progress ended, a ``--repeat``'s later run included; a stop after a run ended
-(the swarm held for the dashboard, or the pause between two ``--repeat`` runs) exits with that run's
-status.
+What differs per mission (its processes and their flags, which losses end the run, how the run is judged
+and printed) is a small plan in :mod:`swarm.cli.launch_missions`. Exit status: 0 the mission's goal reached
+(every chaser docked; every UAV landed on its pad or aborted safely), 1 not (or the run failed), 2 bad
+input, 130 interrupted (Ctrl-C or SIGTERM) before the run in progress ended, a ``--repeat``'s later run
+included; a stop after a run ended exits with that run's status.
 """
 
 from __future__ import annotations
@@ -67,9 +62,9 @@ from swarm.cli.children import (
     swarm_processes,
     topology,
 )
-from swarm.cli.launch_plan import HOSTS_PER_CORE, PROCESS_EACH_PER_CORE, resolve_plan
+from swarm.cli.launch_missions import LAUNCHES, clock_name, mothership_args, world_args  # noqa: F401
+from swarm.cli.launch_plan import HOSTS_PER_CORE, PROCESS_EACH_PER_CORE
 from swarm.errors import ConfigError, SwarmError
-from swarm.step.outcome import chaser_summary, run_summary
 from swarm.transport.checkpoint import EXIT_BAD_CHECKPOINT
 from swarm.transport.stopping import process_name
 
@@ -85,8 +80,8 @@ GUIDANCE_KEPT = 256
 """Guidance messages the launcher keeps per chaser (25 s at 10 Hz): only the last one before its contact is
 read, and none after a known contact is kept, so this need only span the contact event's way to the
 launcher."""
-
-VISION_COUNTS = ("features_accepted", "pose_accepted")
+SUMMARY_WAIT_S = 10.0
+"""How long [s] the launcher waits, after ``run_end``, for each live agent's ``summary`` event."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -114,7 +109,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     g.add_argument("--dashboard-port", type=int, default=8080, metavar="PORT", help="dashboard port (8080)")
     g.add_argument(
-        "--until-docked", action="store_true", help="exit when the run ends (every chaser in contact)"
+        "--until-docked",
+        action="store_true",
+        help="exit when the run ends (every chaser in contact, every UAV landed or aborted)",
     )
     g.add_argument("--repeat", action="store_true", help="after each run, start another with a new seed")
     g.add_argument(
@@ -169,38 +166,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def world_args(args: argparse.Namespace) -> list[str]:
-    """The world process's own flags (the common ones and its Zenoh config aside)."""
-    world = ["swarm.world", "--clock", str(args.clock), "--step-timeout", str(args.step_timeout),
-             "--start-timeout", str(args.start_timeout),
-             "--checkpoint-dir", str(args.checkpoint_dir)]  # fmt: skip
-    if args.pace is not None:
-        world += ["--pace", str(args.pace)]
-    if _hosted(args):  # one message for many vehicles' imu, one for their truths
-        world += ["--batch"]
-    if not args.bundles:
-        world += ["--no-bundles"]
-    return world
-
-
-def mothership_args(args: argparse.Namespace) -> list[str]:
-    """The mothership process's own flags (the common ones and its Zenoh config aside)."""
-    return ["mothership", *(["--batch"] if _hosted(args) else [])]  # one message for many vehicles' ranges
-
-
-def _hosted(args: argparse.Namespace) -> bool:
-    """Whether the agents run in hosts of several vehicles, which take the world's and the mothership's
-    batches (docs/protocol.md, "Rates")."""
-    return getattr(args, "vehicles_per_process", 1) > 1
-
-
-def _hosts(args: argparse.Namespace, sc) -> dict[str, list[str]]:
+def _hosts(args: argparse.Namespace, ids) -> dict[str, list[str]]:
     """The agent processes to start, ``{child name: [vehicle ids]}``: ``agent/<id>`` with one vehicle each
     (the default), or ``agents/<i>`` hosting ``--vehicles-per-process`` vehicles in scenario order."""
-    n = getattr(args, "vehicles_per_process", 1)
+    n, ids = getattr(args, "vehicles_per_process", 1), list(ids)
     if n < 1 or n > 64:
         raise ConfigError(f"--vehicles-per-process must be an integer in 1..64, got {n}")
-    ids = list(sc.vehicles)
     if n == 1:
         return {f"agent/{v}": [v] for v in ids}
     if getattr(args, "secure", False):
@@ -209,14 +180,10 @@ def _hosts(args: argparse.Namespace, sc) -> dict[str, list[str]]:
     return {f"agents/{i // n}": ids[i : i + n] for i in range(0, len(ids), n)}
 
 
-def _child_of(args: argparse.Namespace, sc) -> dict[str, str]:
-    """Vehicle id -> the name of the child process that hosts its agent."""
-    return {v: name for name, vids in _hosts(args, sc).items() for v in vids}
-
-
 class RunLog:
-    """What the launcher hears of a run (thread-safe): the world's events, each agent's mode events,
-    guidance and summary, and whether the world's clock stands still (:class:`StallWatch`)."""
+    """What the launcher hears of a run (thread-safe): the world's events, each agent's events and summary,
+    the guidance of the vehicles asked for (a docking summary reads it), and whether the world's clock
+    stands still (:class:`StallWatch`)."""
 
     def __init__(self, stall_s: float = STALL_S, hung_ticks: int = HUNG_TICKS) -> None:
         from swarm.cli.supervisor import StallWatch
@@ -292,94 +259,33 @@ class RunLog:
                 self.decisions.setdefault(vid, {}).setdefault(dec["t_s"], (msg.t_s, dec))
 
 
-def summarize(sc, policy: str, seed: int, log: RunLog, wall_s: float) -> dict:
-    """The run summary with ``swarm sim``'s fields per chaser, from what the launcher heard."""
-    end = log.run_end or {}
-    chasers = {}
-    with log.lock:
-        for cid in sc.chasers:
-            events = log.events.get(cid, [])
-            contact = next((e for e in events if e.kind in ("contact", "collision")), None)
-            t_end = contact.data["t_s"] if contact is not None else float("inf")
-            picked = [e.data for e in events if e.kind == "mode" and e.data.get("t_s", 0.0) <= t_end]
-            picked.sort(key=lambda d: d["t_s"])
-            if contact is not None:
-                picked.append(contact.data)
-            modes = [
-                {"mode": d["to"], "t_s": d["t_s"], "range_m": d["range_m"], "reason": d["reason"]}
-                for d in picked
-            ]
-            guid = [g for g in log.guidance.get(cid, ()) if g.t_s <= t_end]
-            last = guid[-1] if guid else None
-            decisions = [dec for t_s, dec in log.decisions.get(cid, {}).values() if t_s <= t_end]
-            summary = log.summaries.get(cid, {})
-            counts = summary.get("counts", {})
-            c = chaser_summary(
-                sc, cid,
-                docked=bool(contact is not None and contact.data["docked"]),
-                collided=bool(contact is not None and not contact.data["docked"]),
-                docking_time_s=None if contact is None else contact.data["docking_time_s"],
-                effort=end.get("effort", {}).get(cid),
-                position_error_m=None if contact is None else contact.data["position_error_m"],
-                attitude_error_rad=None if contact is None else contact.data["attitude_error_rad"],
-                final_mode=last.mode if last is not None else summary.get("final_mode"),
-                modes=modes,
-                r1_m=last.r1_m if last is not None else summary.get("r1_m"),
-                r2_m=last.r2_m if last is not None else summary.get("r2_m"),
-                keepout_violated=any(e.kind == "keepout_violation" for e in events),
-                closest_approach_m=end.get("closest_approach_m", {}).get(cid),
-                contact=None if contact is None else contact.data["contact"],
-                estimator={  # absent counters are zero; no summary at all: unknown
-                    "rejected_ranges": counts.get("range_rejected", 0) if summary else None,
-                    "accepted_ranges": counts.get("range_accepted", 0) if summary else None,
-                    "accepted_vision": sum(counts.get(k, 0) for k in VISION_COUNTS) if summary else None,
-                },
-                wall_s=end.get("wall_s"),
-                realtime_factor=end.get("realtime_factor"),
-                restarted=any(e.kind == "restarted" for e in events),
-                tick_assembly=summary.get("assembler"),  # the agent's drop counters of late/odd messages
-            )  # fmt: skip
-            if policy == "mdp":
-                c["decisions"] = decisions
-            chasers[cid] = c
-    cpu = {"world": end.get("cpu_s"), **{v: s.get("cpu_s") for v, s in log.summaries.items()}}
-    out = run_summary(sc, policy, seed, end.get("t_s"), end.get("wall_s", wall_s), end.get("effort", {}),
-                      chasers, end_reason=end.get("reason", "no run_end received"), cpu_s=cpu)  # fmt: skip
-    if end.get("realtime_factor") is not None:
-        out["realtime_factor"] = end["realtime_factor"]
-    for key in ("late_commands", "late_control_commands"):  # free-running: [late, of] (world/process.py)
-        if end.get(key) is not None:
-            out[key] = end[key]
-    return out
-
-
 def run(args: argparse.Namespace) -> int:
-    """The launch, docking or landing, with ``--cpu-latency``'s request held from before the first process
-    starts until the last has stopped."""
+    """The launch of the scenario's mission, with ``--cpu-latency``'s request held from before the first
+    process starts until the last has stopped."""
     with cpu_latency.hold(args.cpu_latency):
-        return _run(args)
+        import zenoh
 
+        zenoh.try_init_log_from_env()  # RUST_LOG=...: Zenoh's own log (its ACL: access_control=trace)
 
-def _run(args: argparse.Namespace) -> int:
-    import zenoh
+        from swarm.missions import mission_of
 
-    zenoh.try_init_log_from_env()  # RUST_LOG=...: Zenoh's own log (its ACL decisions: access_control=trace)
-
-    from swarm.missions import mission_of
-
-    return mission_of(args.scenario).run_launch(args)
+        return mission_of(args.scenario).run_launch(args)
 
 
 def run_docking(args: argparse.Namespace) -> int:
     """``swarm launch`` of a docking scenario (:class:`swarm.missions.docking.DockingMission`)."""
-    import zenoh
+    return launch(args, LAUNCHES["docking"])
 
-    from swarm.transport.process import check_pace
 
-    check_pace(args.clock, args.pace)
+def run_landing(args: argparse.Namespace) -> int:
+    """``swarm launch`` of a landing scenario (:class:`swarm.missions.landing.LandingMission`)."""
+    return launch(args, LAUNCHES["landing"])
 
-    from swarm.cli.sim import print_summary
-    from swarm.cli.supervisor import Child, Supervisor, forward_stacks_signal
+
+def launch(args: argparse.Namespace, m) -> int:
+    """The swarm of mission plan ``m`` (:mod:`swarm.cli.launch_missions`) as processes (module
+    docstring); the exit status."""
+    from swarm.cli.supervisor import Supervisor, forward_stacks_signal
     from swarm.transport.keys import Keys
     from swarm.transport.messages import (
         NEW_RUN_COMMANDS,
@@ -390,21 +296,18 @@ def run_docking(args: argparse.Namespace) -> int:
         encode,
         next_run_seed,
     )
-    from swarm.transport.process import scenario_from
-    from swarm.transport.session import (
-        open_session,
-        subscribe_decoded,
-        watch_liveliness,
-    )
+    from swarm.transport.process import check_pace
+    from swarm.transport.session import open_session, subscribe_decoded, watch_liveliness
 
-    sc = scenario_from(args)
-    plan = _plan(args, sc)
-    if plan is not None:
-        sc = scenario_from(args)  # with the plan's overrides
-    _hosts(args, sc)  # the agent processes' layout (swarm_processes counts it), checked before any start
+    check_pace(args.clock, args.pace)
+    sc = m.load(args)  # (refusals and the launch plan: before anything starts)
+    ids = m.vehicles(sc)
+    hosts = _hosts(args, ids)
+    child_of = {v: name for name, vids in hosts.items() for v in vids}
     check_record(args)
-    # the world, the mothership and the agent processes (mesh with --secure refused before anything starts)
-    args.links = links = topology(args, swarm_processes(len(sc.vehicles), args.vehicles_per_process))
+    # mesh with --secure refused before anything starts
+    n_proc = swarm_processes(len(ids), args.vehicles_per_process, mothership=m.mothership)
+    args.links = links = topology(args, n_proc)
     keys = Keys(args.namespace)
     policy = args.policy or sc.policy
     listen = launch_listen(args)  # (--secure: mutual TLS + Zenoh ACL, each process its own certificate)
@@ -412,13 +315,11 @@ def run_docking(args: argparse.Namespace) -> int:
     zargs = router_args(args, listen)
     endpoint = client_endpoint(listen[0])
     stop = threading.Event()
-    interrupted = threading.Event()
     why = ["the launcher's end"]  # what the stop announcement says (swarm.transport.stopping)
 
     def on_signal(signum: int, _frame: object) -> None:
         why[0] = signal.Signals(signum).name
         _LOG.info("%s: stopping the swarm", why[0])
-        interrupted.set()
         stop.set()
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -428,10 +329,9 @@ def run_docking(args: argparse.Namespace) -> int:
     seed = args.seed
     result: dict | None = None
     wall0 = time.monotonic()
-    args.checkpoint_root = checkpoint_root()
-    runs = itertools.count()
+    ckpt_root = checkpoint_root()  # every run's checkpoints (removed at exit)
     try:
-        zargs = secure_router(args, keys, sc.vehicles, listen, zargs, "docking")
+        zargs = secure_router(args, keys, ids, listen, zargs, m.name, m.platforms(sc))
         with open_session(zargs, lean=True) as session:  # its own swarm's paced ticks
             print(
                 f"swarm listening on {' '.join(listen)} (clients: --mode client --connect {endpoint})",
@@ -439,19 +339,13 @@ def run_docking(args: argparse.Namespace) -> int:
             )
             _LOG.info("the swarm's processes: %s", TOPOLOGY_TEXT[links])
             drops = DropCounter()
-            # the current run's log: the callbacks always feed the current one
-            box = [RunLog(args.stall_s, args.hung_ticks)]
-            subscribe_decoded(
-                session, keys.world_event(), Event, lambda k, m: box[0].on_world_event(k, m), drops
-            )
-            subscribe_decoded(session, keys.world_clock(), Clock, lambda k, m: box[0].on_clock(k, m), drops)
-            subscribe_decoded(
-                session, keys.agent_all("event"), Event, lambda k, m: box[0].on_event(k, m, keys), drops
-            )
-            for cid in sc.chasers:  # its chasers' only: a target's guidance is then sent to a viewer alone
-                subscribe_decoded(
-                    session, keys.guidance(cid), Guidance, lambda k, m: box[0].on_guidance(k, m, keys), drops
-                )
+            box = [RunLog(args.stall_s, args.hung_ticks)]  # the current run's: the callbacks feed it
+            for key, kind, on in ((keys.world_event(), Event, lambda k, e: box[0].on_world_event(k, e)),
+                                  (keys.world_clock(), Clock, lambda k, c: box[0].on_clock(k, c)),
+                                  (keys.agent_all("event"), Event, lambda k, e: box[0].on_event(k, e, keys)),
+                                  *((keys.guidance(v), Guidance, lambda k, g: box[0].on_guidance(k, g, keys))
+                                    for v in m.guided(sc))):  # fmt: skip
+                subscribe_decoded(session, key, kind, on, drops)
             watch_liveliness(session, keys, lambda r, p, a: alive_changes.put((r, p, a, time.monotonic())))
             _token = session.liveliness().declare_token(keys.alive("launcher", "launcher"))
 
@@ -462,48 +356,42 @@ def run_docking(args: argparse.Namespace) -> int:
 
             recorder = start_recorder(args, session, keys)  # --record: on this router session
             try:
-                while True:  # one iteration per run
+                if not args.headless:
+                    _start_dashboard(args, endpoint, sup, stop)
+                for run_i in itertools.count():  # one iteration per run (--repeat, Reset, New seed)
                     log = box[0]
                     result = None  # (a run stopped before its end has none: exit 130, not a past run's)
-                    args.checkpoint_dir = args.checkpoint_root / f"run-{next(runs)}"
-                    args.checkpoint_dir.mkdir()
-                    _start_run(args, sc, seed, endpoint, sup, Child)
-                    ok = _wait_alive(sc, sup, alive_changes, args.start_timeout, stop)
-                    if not ok:
-                        result = None
+                    run_dir = ckpt_root / f"run-{run_i}"  # this run's checkpoints: none of another run's
+                    run_dir.mkdir()
+                    for child in m.children(args, sc, hosts, child_args(args, endpoint, seed), run_dir):
+                        sup.start(child)
+                    if not _wait_alive(m, ids, sup, alive_changes, args.start_timeout, stop):
                         break
-                    n_proc = len(sup.children)
-                    paced = "" if args.pace is None else f" paced at {args.pace}"
-                    print(f"swarm up: {n_proc} processes, seed {seed}, clock {args.clock}{paced}", flush=True)
-                    outcome = _supervise(args, sc, sup, alive_changes, log, stop, wall0, announce)
-                    if outcome == "ended":
-                        _wait_summaries(sc, log, sup, child_of=_child_of(args, sc))
-                        result = summarize(sc, policy, seed, log, time.monotonic() - wall0)
-                        result["restarts"] = {c.name: c.restarts for c in sup.children.values()}
-                        result["world_resumed_at"] = [d.get("tick") for d in log.resumed]
-                        result["launch_plan"] = args.launch_plan
-                        print_summary(result)
-                        restarted = {n: r for n, r in result["restarts"].items() if r}
-                        if restarted:
-                            print("  restarts: " + ", ".join(f"{n} {r}" for n, r in restarted.items()))
-                        if args.json is not None:
-                            args.json.write_text(json.dumps(result, indent=1))
-                        end = log.run_end or {}
-                        # the dashboard asked for a new run
-                        asked = end.get("reason") in NEW_RUN_COMMANDS
-                        if (args.repeat or asked) and not stop.is_set():
-                            seed = next_run_seed(end, seed)
-                            if not asked:
-                                stop.wait(3.0)  # a moment to look at the docked pair
-                            if stop.is_set():  # Ctrl-C meanwhile: no next run
-                                break
-                            stop_swarm(sup, session, keys, "next run", log.t_s, keep=("dashboard",))
-                            box[0] = RunLog(args.stall_s, args.hung_ticks)
-                            continue
-                        if not args.until_docked:
-                            _hold(args, stop, wall0)
+                    print(f"swarm up: world{', mothership' if m.mothership else ''} and {len(ids)} {m.name} "
+                          f"agents in {len(hosts)} processes, seed {seed}, clock "
+                          f"{clock_name(args.clock, args.pace)}", flush=True)  # fmt: skip
+                    outcome = _supervise(args, m, child_of, sup, alive_changes, log, stop, wall0, announce)
+                    if outcome != "ended":
+                        break
+                    _wait_summaries(ids, log, sup, child_of)
+                    result = m.summary(args, sc, policy, seed, log, time.monotonic() - wall0)
+                    if result is not None:
+                        _report(args, result, sup, log)
+                    end = log.run_end or {}
+                    asked = end.get("reason") in NEW_RUN_COMMANDS  # the dashboard's Reset, New seed
+                    if (args.repeat or asked) and not stop.is_set():
+                        seed = next_run_seed(end, seed)
+                        if not asked:
+                            stop.wait(3.0)  # a moment to look at the docked pair, the landed UAVs
+                        if stop.is_set():  # Ctrl-C meanwhile: no next run
+                            break
+                        stop_swarm(sup, session, keys, "next run", log.t_s, keep=("dashboard",))
+                        box[0] = RunLog(args.stall_s, args.hung_ticks)
+                        continue
+                    if not args.until_docked and (m.hold_headless or not args.headless):
+                        _hold(args, stop, wall0)
                     break
-                _ = (_token, zenoh)
+                _ = (_token, session)
             finally:
                 # every process's last samples are in before the file is finished; announced while the
                 # session is open (a failure's way out too)
@@ -512,59 +400,43 @@ def run_docking(args: argparse.Namespace) -> int:
                     recorder.close()
     finally:
         sup.stop_all()
-        shutil.rmtree(args.checkpoint_root, ignore_errors=True)
+        shutil.rmtree(ckpt_root, ignore_errors=True)
         if args.secure_material is not None:
             args.secure_material.close()
         for s, h in previous.items():
             signal.signal(s, h)  # type: ignore[arg-type]
         restore_stacks()
-    if interrupted.is_set() and result is None:
-        return 130
     if result is None:
-        return 1
-    return 0 if result["chasers"] and all(c["docked"] for c in result["chasers"].values()) else 1
+        return 130 if stop.is_set() else 1
+    return 0 if m.ok(result) else 1
 
 
-def _plan(args: argparse.Namespace, sc):
-    """The swarm's layout (:func:`swarm.cli.launch_plan.resolve_plan`): ``args.vehicles_per_process`` set,
-    the ``--set`` overrides of the parts the plan chose added to ``args.overrides`` (the children load the
-    scenario with them), the plan logged and kept for the summary (``args.launch_plan``). Returns the plan
-    when it added overrides (the launcher's scenario must be loaded again), else None."""
-    plan, extra = resolve_plan(len(sc.vehicles), args.clock.lockstep, args.vehicles_per_process,
-                               args.overrides, secure=bool(getattr(args, "secure", False)))  # fmt: skip
-    args.vehicles_per_process = plan.vehicles_per_process
-    args.overrides = [*args.overrides, *extra]
-    args.launch_plan = plan.as_dict()
-    _LOG.info("launch plan: %s", plan.describe())
-    return plan if extra else None
+def _start_dashboard(args, endpoint: str, sup, stop: threading.Event) -> None:
+    """The dashboard child, once it serves (it prints its URL as ``dashboard on <url>``): kept across runs
+    (the browser stays connected) and restarted like the others when it dies (the page reconnects to the
+    same port and rebuilds its state from the next messages). ConfigError if it exits or does not serve
+    within ``--start-timeout``."""
+    from swarm.cli.supervisor import Child
 
+    ready = threading.Event()
 
-def _start_run(args, sc, seed, endpoint, sup, Child):
-    common = child_args(args, endpoint, seed)
-    from swarm.transport.security import agent_name
+    def on_line(line: str) -> None:
+        if line.startswith("dashboard listening on "):
+            print(f"dashboard on {line.split()[-1]}", flush=True)
+            ready.set()
 
-    mothership = [*mothership_args(args), *common, *config_args(args, "mothership")]
-    sup.start(Child("mothership", mothership, restartable=True, rejoin_args=["--rejoin"]))
-    for name, vids in _hosts(args, sc).items():
-        agent = ["agents", "--id", ",".join(vids), "--clock", str(args.clock), *common,
-                 *config_args(args, agent_name(vids[0]))]  # fmt: skip
-        sup.start(Child(name, agent, restartable=True, rejoin_args=["--rejoin"]))
-    world = [*world_args(args), *common, *config_args(args, "world")]
-    sup.start(Child("world", world, restartable=True, rejoin_args=["--resume"]))
-    if not args.headless and not (sup.children.get("dashboard") and sup.children["dashboard"].running):
-        dash = [str(args.scenario), "--agents", str(args.agents), "--namespace", args.namespace,
-                "--port", str(args.dashboard_port), "--mode", "client", "--connect", endpoint]  # fmt: skip
-        for o in args.overrides:
-            dash += ["--set", o]
-        dash += config_args(args, "dashboard")
-
-        def on_line(line: str) -> None:
-            if line.startswith("dashboard listening on "):
-                print(f"dashboard on {line.split()[-1]}", flush=True)
-
-        # kept across runs: the browser stays connected; restarted like the others when it dies (the page
-        # reconnects to the same port and rebuilds its state from the next messages)
-        sup.start(Child("dashboard", ["dashboard", *dash], restartable=True, on_line=on_line))
+    dash = [str(args.scenario), "--agents", str(args.agents), "--namespace", args.namespace,
+            "--port", str(args.dashboard_port), "--mode", "client", "--connect", endpoint]  # fmt: skip
+    for o in args.overrides:
+        dash += ["--set", o]
+    dash += config_args(args, "dashboard")
+    sup.start(Child("dashboard", ["dashboard", *dash], restartable=True, on_line=on_line))
+    deadline = time.monotonic() + args.start_timeout
+    while not ready.wait(0.1):
+        if stop.is_set():
+            return
+        if sup.exited() or time.monotonic() > deadline:
+            raise ConfigError(f"the dashboard did not serve within {args.start_timeout:g} s (its log says)")
 
 
 def _name(role: str, pid: str) -> str:
@@ -572,8 +444,10 @@ def _name(role: str, pid: str) -> str:
     return f"agent/{pid}" if role == "agent" else role
 
 
-def _wait_alive(sc, sup, changes: queue.Queue, timeout_s: float, stop: threading.Event) -> bool:
-    want = {"world", "mothership", *(f"agent/{v}" for v in sc.vehicles)}
+def _wait_alive(m, ids, sup, changes: queue.Queue, timeout_s: float, stop: threading.Event) -> bool:
+    """Until the world's, the mothership's (if any) and every vehicle's liveliness token is up; False at a
+    stop, a child's exit or ``timeout_s``."""
+    want = {"world", *(["mothership"] if m.mothership else []), *(f"agent/{v}" for v in ids)}
     seen: set[str] = set()
     deadline = time.monotonic() + timeout_s
     while not want <= seen:
@@ -594,11 +468,11 @@ def _wait_alive(sc, sup, changes: queue.Queue, timeout_s: float, stop: threading
 
 
 def _supervise(
-    args, sc, sup, changes: queue.Queue, log: RunLog, stop: threading.Event, wall0: float, announce=None
-) -> str:
+    args, m, child_of: dict[str, str], sup, changes: queue.Queue, log: RunLog, stop: threading.Event,
+    wall0: float, announce=None,
+) -> str:  # fmt: skip
     """Until the run ends (``"ended"``), a stop (``"stopped"``), the timeout or a fatal loss
-    (``"failed"``)."""
-    child_of = _child_of(args, sc)
+    (``"failed"``: a process ``m.essential`` names gone for good)."""
     while not stop.is_set():
         if log.ended.is_set():
             return "ended"
@@ -612,48 +486,53 @@ def _supervise(
             role, pid, alive, t_seen = changes.get(timeout=0.05)
         except queue.Empty:
             role = None
+        if log.ended.is_set():
+            return "ended"  # (a process gone meanwhile, as a landing world after its run_end: no loss)
         if role is not None and not alive and role in ("agent", "world", "mothership"):
             name = child_of.get(pid, _name(role, pid)) if role == "agent" else _name(role, pid)
             if name in sup.children:
-                if role == "world" and log.ended.is_set():
-                    continue  # the run is over: nothing to resume
-                what = sup.lost(name, "liveliness token gone")
+                what, fatal = _lose(m, sup, name, "liveliness token gone")
                 if what:
                     _LOG.warning("%s (seen %.0f ms after the loss)", what, 1000 * (time.monotonic() - t_seen))
                 if role in ("agent", "world") and announce is not None and what:
                     data = {"why": "liveliness token gone", "action": what}
                     announce(pid if role == "agent" else None, "lost", {**data, "role": role, "id": pid})
-                if role == "world" and what and sup.children[name].next_start_s is None:
-                    _LOG.error("the world is gone for good: the run cannot go on")
+                if fatal:
                     return "failed"
         elif role is not None and alive and role in ("agent", "world"):
             _LOG.info("%s is alive", process_name(role, pid))
         for c in sup.exited():
             code = c.popen.returncode
-            if c.name == "world" and log.ended.is_set():
-                continue
-            if c.name == "world" and code == EXIT_BAD_CHECKPOINT:
-                _LOG.error("world exited with status %d: it could not resume from its checkpoint (its log "
-                           "says why); giving up rather than resuming from a bad state", code)  # fmt: skip
+            if log.ended.is_set():
+                return "ended"
+            if code == EXIT_BAD_CHECKPOINT and c.name != "dashboard":
+                _LOG.error("%s exited with status %d: it could not resume from its checkpoint (its log says "
+                           "why); giving up rather than resuming from a bad state", c.name, code)  # fmt: skip
                 c.popen = None
                 return "failed"
-            if c.name == "dashboard":  # the run does not need it: restarted while the budget lasts
-                what = sup.lost(c.name, f"exited with status {code}")
-                _LOG.warning("%s", what or f"dashboard exited with status {code}")
-                c.popen = None
-                continue
-            what = sup.lost(c.name, f"exited with status {code}")
-            if what:
-                _LOG.warning("%s", what)
-            if c.name == "world" and c.next_start_s is None:
-                _LOG.error("the world is gone for good: the run cannot go on")
+            what, fatal = _lose(m, sup, c.name, f"exited with status {code}")
+            _LOG.warning("%s", what)
+            if fatal:
                 return "failed"
         for c in sup.due_restarts():
-            how = {"world": "resuming from its checkpoint", "dashboard": "serving the page again"}.get(
-                c.name, "rejoining the run"
-            )
-            _LOG.warning("%s restarted (pid %d), %s", c.name, c.popen.pid, how)
+            how = {"world": "resuming from its checkpoint", "dashboard": "serving the page again"}
+            _LOG.warning("%s restarted (pid %d), %s", c.name, c.popen.pid, how.get(c.name, m.agent_back))
     return "stopped"
+
+
+def _lose(m, sup, name: str, why: str) -> tuple[str, bool]:
+    """:meth:`~swarm.cli.supervisor.Supervisor.lost` of ``name``: what to log, and whether the run cannot
+    go on (said): ``m.essential`` names it and it is not coming back. A child not coming back is forgotten
+    (its exit is not a loss again)."""
+    what = sup.lost(name, why)
+    child = sup.children[name]
+    if not what or child.next_start_s is not None:
+        return what, False
+    child.popen = None
+    if not m.essential(name):
+        return what, False
+    _LOG.error("%s is gone for good: the run cannot go on", "the world" if name == "world" else name)
+    return what, True
 
 
 def _restart_hung(args, sup, log: RunLog, child_of: dict[str, str], announce=None) -> None:
@@ -680,19 +559,36 @@ def _restart_hung(args, sup, log: RunLog, child_of: dict[str, str], announce=Non
                 announce(vid, "lost", {"why": why, "action": what, "role": "agent", "id": vid})
 
 
-def _wait_summaries(sc, log: RunLog, sup, timeout_s: float = 3.0, *, child_of: dict[str, str]) -> None:
+def _wait_summaries(
+    ids, log: RunLog, sup, child_of: dict[str, str], timeout_s: float = SUMMARY_WAIT_S
+) -> None:
     """After ``run_end``, until every live agent's ``summary`` event arrived (or ``timeout_s``)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         with log.lock:
-            missing = [v for v in sc.vehicles if v not in log.summaries and sup.children[child_of[v]].running]
+            missing = [v for v in ids if v not in log.summaries and sup.children[child_of[v]].running]
         if not missing:
             return
         time.sleep(0.01)
 
 
+def _report(args, result: dict, sup, log: RunLog) -> None:
+    """The summary's launcher fields (each process's restarts, the ticks the world resumed at), the
+    restarts printed under the mission's summary, and ``--json``."""
+    result["restarts"] = {c.name: c.restarts for c in sup.children.values()}
+    result["world_resumed_at"] = [d.get("tick") for d in log.resumed]
+    restarted = {n: r for n, r in result["restarts"].items() if r}
+    if restarted:
+        print("  restarts: " + ", ".join(f"{n} {r}" for n, r in restarted.items()), flush=True)
+    if args.json is not None:
+        args.json.write_text(json.dumps(result, indent=1))
+
+
 def _hold(args, stop: threading.Event, wall0: float) -> None:
-    print("run over; the swarm stays up until Ctrl-C (or --timeout)", flush=True)
+    """After the run, keep the processes up (for the dashboard, or an outside client) until Ctrl-C or
+    ``--timeout``."""
+    who = "swarm" if args.headless else "dashboard"
+    print(f"run over; the {who} stays up until Ctrl-C (or --timeout)", flush=True)
     while not stop.wait(0.1):
         if args.timeout is not None and time.monotonic() - wall0 > args.timeout:
             return

@@ -12,14 +12,14 @@ from swarm.missions.base import Mission
 
 class LandingMission(Mission):
     """The landing stack's runners: ``swarm/sim/landing.py``, the processes of
-    ``swarm/cli/launch_landing.py``, the campaign of ``swarm/montecarlo/landing.py``."""
+    ``swarm/cli/launch.py``, the campaign of ``swarm/montecarlo/landing.py``."""
 
     name = "landing"
     success_key = "landed"
     summary_metrics = ("landing_error_m", "landing_time_s", "energy_j", "deviation_distance_m")
     fault_menu = ("camera_loss", "uwb_dropout")  # what swarm/world/landing.py applies
     sim_entry = "swarm.cli.sim:run_landing"
-    launch_entry = "swarm.cli.launch_landing:run_landing_launch"
+    launch_entry = "swarm.cli.launch:run_landing"
     compile_entry = "swarm.cli.compile:landing_kernels"
     dashboard_drawer = "landing"
     campaign_entry = "swarm.montecarlo.landing:CAMPAIGN"

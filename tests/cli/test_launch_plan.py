@@ -125,7 +125,9 @@ def test_the_launcher_logs_its_plan_and_runs_the_children_it_says(caplog, tmp_pa
     """``swarm launch`` resolves the plan before any child starts: the agent processes it will start
     (``_hosts``) are the plan's, the world and mothership send batches to its hosts, and the plan's line
     is logged."""
-    from swarm.cli.launch import _hosts, _plan, world_args
+    from swarm.cli.launch import _hosts
+    from swarm.cli.launch_missions import plan as _plan
+    from swarm.cli.launch_missions import world_args
     from swarm.cli.main import build_parser
     from swarm.transport.process import scenario_from
 
@@ -137,7 +139,7 @@ def test_the_launcher_logs_its_plan_and_runs_the_children_it_says(caplog, tmp_pa
     cores = available_cores()
     want = auto_launch_plan(32, cores)
     assert args.vehicles_per_process == want.vehicles_per_process
-    assert len(_hosts(args, scenario_from(args))) == want.agent_processes
+    assert len(_hosts(args, scenario_from(args).vehicles)) == want.agent_processes
     assert ("--batch" in world_args(args)) == (want.vehicles_per_process > 1)
     assert ("swarm.stagger_control=true" in args.overrides) == want.stagger_control == (plan is not None)
     assert args.launch_plan["agent_processes"] == want.agent_processes

@@ -4,7 +4,8 @@ and the summary it gives the one of the whole stream (the last guidance before t
 
 from __future__ import annotations
 
-from swarm.cli.launch import GUIDANCE_KEPT, RunLog, summarize
+from swarm.cli.launch import GUIDANCE_KEPT, RunLog
+from swarm.cli.launch_missions import summarize
 from swarm.core.decision_keys import DECISION_KEYS
 from swarm.scenario import load_scenario
 from swarm.transport.keys import Keys

@@ -181,15 +181,16 @@ def test_the_launchers_loop_dumps_every_stack_at_a_stall_and_at_the_timeout():
     import threading
 
     from swarm.cli.launch import RunLog, _supervise
-    from swarm.scenario import load_scenario
+    from swarm.cli.launch_missions import LAUNCHES
     from swarm.transport.messages import Clock
 
-    sc = load_scenario("docking")
     args = argparse.Namespace(timeout=1.0, vehicles_per_process=1)
     log, sup = RunLog(stall_s=0.2), _Sup()
     log.on_clock("ns/world/clock", Clock(40, 0.4, "running", 1))
     t0 = time.monotonic()
-    assert _supervise(args, sc, sup, queue.Queue(), log, threading.Event(), t0) == "failed"
+    assert (
+        _supervise(args, LAUNCHES["docking"], {}, sup, queue.Queue(), log, threading.Event(), t0) == "failed"
+    )
     assert time.monotonic() - t0 >= 1.0
     wait_until(lambda: len(sup.dumps) == 2, 5.0, "the stall's dump, on its thread")
     assert sorted(sup.dumps) == sorted([

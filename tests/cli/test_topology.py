@@ -89,6 +89,6 @@ def test_the_process_count_that_auto_decides_by_is_the_launchers_layout(pairs, p
     from swarm.transport.process import scenario_from
 
     args = _args("--agents", str(pairs), "--vehicles-per-process", str(per_process))
-    sc = scenario_from(args)
-    assert swarm_processes(len(sc.vehicles), per_process) == 2 + len(_hosts(args, sc))  # world, mothership
-    assert swarm_processes(2 * pairs, per_process, mothership=False) == 1 + len(_hosts(args, sc))
+    ids = scenario_from(args).vehicles
+    assert swarm_processes(len(ids), per_process) == 2 + len(_hosts(args, ids))  # world, mothership
+    assert swarm_processes(2 * pairs, per_process, mothership=False) == 1 + len(_hosts(args, ids))

@@ -212,7 +212,7 @@ def test_four_uavs_land_on_four_pads_and_lockstep_equals_swarm_sim(launched):
     assert len(re.findall(STALL_TOLD, text)) == 1, text
     dumps = text.split("in a running run: the stacks of the launcher", 1)[1]
     assert re.search(r'swarm/world/landing\.py", line \d+ in ', dumps), dumps
-    assert "agents/landing.py" in dumps and "swarm/cli/launch_landing.py" in dumps, dumps
+    assert "agents/landing.py" in dumps and "swarm/cli/launch.py" in dumps, dumps
     assert dumps.count("(most recent call first)") >= 4  # the launcher, the world, two agent hosts
     want = run_landing_fleet(sc, seed=0, record_series=False, faults=[FAULT])
     assert want["uavs"]["uav1"]["retries"] == 1  # the pad lost for 1.5 s in the descent: it climbed, retried
