@@ -33,7 +33,9 @@ dataclass                               table
 
 A key missing from a table keeps its default: the value in the enclosing field's default instance when
 there is one (``chaser: Vehicle = Vehicle(mass_kg=3.0)`` keeps 3.0 when ``[chaser]`` sets only other
-keys), else the dataclass's own default. Unknown keys are errors. Every error is a
+keys), else the dataclass's own default. Unknown keys are errors; a key a rename retired (a dataclass's
+``RENAMED = {old: (new, factor)}``, factor from the old unit to the new) is refused with the key and value
+to write instead. Every error is a
 :class:`swarm.errors.ConfigError` whose message names the dotted path of the field (``chaser.dynamics.
 mass_kg``, ``markers_nav[2][0]``) and quotes the bad value. A dataclass's own ``__post_init__`` error
 (``estimator.sigma_range_m must be ...``, by the project's convention) is re-rooted at the field's real
@@ -374,6 +376,10 @@ def _prepare_table(cls: type, data: Mapping[str, Any], path: str, base: Any) -> 
     schema = _schema(cls)
     unknown = [k for k in data if k not in schema]
     if unknown:
+        renamed = getattr(cls, "RENAMED", {})
+        for k in unknown:
+            if k in renamed:
+                raise _renamed_key(path, str(k), renamed[k], data[k])
         raise _unknown_keys(path, unknown, list(schema))
     out = {}
     for name, (f, tp) in schema.items():
@@ -507,6 +513,16 @@ def _unknown_keys(path: str, unknown: list, valid: list[str]) -> ConfigError:
     return ConfigError(
         f"{_join(path, first)}: unknown key{hint}; valid keys {where}: {', '.join(valid) or '(none)'}{more}"
     )
+
+
+def _renamed_key(path: str, old: str, new: tuple[str, float], value: Any) -> ConfigError:
+    """An old file's key that a rename retired: the key to write instead and, when the unit changed with
+    the name, the value converted (``new`` is the new name and the factor from the old unit to the new)."""
+    name, factor = new
+    write = f"{_join(path, name)} = {value!r}"
+    if factor != 1.0 and isinstance(value, int | float) and not isinstance(value, bool):
+        write = f"{_join(path, name)} = {value * factor!r} (the value in the new unit)"
+    return ConfigError(f"{_join(path, old)}: renamed; write {write} instead")
 
 
 def _with_path(path: str, msg: str, fields: Mapping[str, Any]) -> str:

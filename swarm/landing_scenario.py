@@ -9,6 +9,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 from swarm.config import load_toml
 from swarm.core.imu_filter import ImuFilterParams, RobustParams
@@ -72,8 +73,16 @@ class LandingImu:
     """``[imu]``: the 6-axis IMU at the tick rate; biases drawn per run, uniform in ``[-x, x]`` per axis,
     then known to the filter to its ``initial`` sigmas (a bias calibration on the ground)."""
 
-    accel_noise: float = 0.01
-    gyro_noise: float = 0.001
+    RENAMED: ClassVar[dict[str, tuple[str, float]]] = {
+        "accel_noise": ("accel_noise_m_s2_rthz", 1.0),
+        "gyro_noise": ("gyro_noise_rad_s_rthz", 1.0),
+    }
+    """Keys of older files and the names that replaced them (:mod:`swarm.config`)."""
+
+    accel_noise_m_s2_rthz: float = 0.01
+    """Accelerometer white-noise density [m/s^2/sqrt(Hz)], the sensor profiles' name."""
+    gyro_noise_rad_s_rthz: float = 0.001
+    """Gyro white-noise density, the angle random walk [rad/s/sqrt(Hz)], the sensor profiles' name."""
     accel_bias_m_s2: float = 0.02
     gyro_bias_rad_s: float = 0.002
     vibration_accel_m_s2: float = 0.0

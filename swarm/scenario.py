@@ -14,7 +14,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 
@@ -100,14 +100,21 @@ class SimParams:
 @dataclass(frozen=True)
 class InitialEstimateParams:
     """Initial estimate of every agent: truth plus a Gaussian error with these standard deviations, which
-    are also the filter's initial covariance."""
+    are also the filter's initial covariance. The names are the landing's and the log replay's."""
 
-    sigma_pos_m: float = 0.05
-    sigma_vel_m_s: float = 0.005
-    sigma_att_deg: float = 2.0
+    RENAMED: ClassVar[dict[str, tuple[str, float]]] = {
+        "sigma_pos_m": ("sigma_position_m", 1.0),
+        "sigma_vel_m_s": ("sigma_velocity_m_s", 1.0),
+        "sigma_att_deg": ("sigma_attitude_deg", 1.0),
+    }
+    """Keys of older files and the names that replaced them (:mod:`swarm.config`)."""
+
+    sigma_position_m: float = 0.05
+    sigma_velocity_m_s: float = 0.005
+    sigma_attitude_deg: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("sigma_pos_m", "sigma_vel_m_s", "sigma_att_deg"):
+        for name in ("sigma_position_m", "sigma_velocity_m_s", "sigma_attitude_deg"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ConfigError(f"initial.{name} must be a positive number, got {v!r}")
@@ -116,7 +123,9 @@ class InitialEstimateParams:
     def sigmas(self) -> np.ndarray:
         """(9,) standard deviations in the filter's error-state order (d_p, d_v, d_theta)."""
         return np.array(
-            [self.sigma_pos_m] * 3 + [self.sigma_vel_m_s] * 3 + [np.radians(self.sigma_att_deg)] * 3
+            [self.sigma_position_m] * 3
+            + [self.sigma_velocity_m_s] * 3
+            + [np.radians(self.sigma_attitude_deg)] * 3
         )
 
 

@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from swarm.config import dump_toml, to_mapping
 from swarm.errors import ConfigError
+from swarm.landing_scenario import load_landing
 from swarm.scenario import SCENARIO_DIR, Scenario, load_scenario
 
 DOCKING_TOML = SCENARIO_DIR / "docking.toml"
@@ -178,6 +179,31 @@ def test_unknown_key_is_named(tmp_path, table, key, field):
         load_variant(tmp_path, table, key, "1.0")
 
 
+@pytest.mark.parametrize(
+    ("table", "old", "value", "write"),
+    [
+        ("initial", "sigma_pos_m", "0.07", "initial.sigma_position_m = 0.07 instead"),
+        ("initial", "sigma_att_deg", "3.0", "initial.sigma_attitude_deg = 3.0 instead"),
+        # the unit changed with the name: the value to write is converted (0.0035 deg = 6.1087e-05 rad)
+        ("gyro", "arw_deg_s_rthz", "0.0035", f"gyro.gyro_noise_rad_s_rthz = {0.0035 * math.pi / 180.0!r}"),
+    ],
+)
+def test_a_renamed_key_names_the_key_and_value_to_write(tmp_path, table, old, value, write):
+    with pytest.raises(ConfigError, match=rf"{re.escape(table + '.' + old)}: renamed; write") as exc:
+        load_variant(tmp_path, table, old, value)
+    assert write in str(exc.value) and "variant.toml" in str(exc.value)
+
+
+def test_a_renamed_landing_imu_key_names_the_new_key(tmp_path):
+    text = (SCENARIO_DIR / "landing.toml").read_text()
+    assert "gyro_noise_rad_s_rthz = 0.001" in text
+    path = tmp_path / "old-landing.toml"
+    path.write_text(text.replace("gyro_noise_rad_s_rthz = 0.001", "gyro_noise = 0.001"))
+    want = r"imu\.gyro_noise: renamed; write imu\.gyro_noise_rad_s_rthz = 0\.001"
+    with pytest.raises(ConfigError, match=want):
+        load_landing(path)
+
+
 def test_unknown_key_suggests_the_close_one(tmp_path):
     with pytest.raises(ConfigError, match="did you mean 'keepout_radius_m'"):
         load_variant(tmp_path, "guidance", "keepout_radius", "0.15")
@@ -228,7 +254,7 @@ def test_wrong_type_is_named(tmp_path, table, key, value, field):
         ("fixed", "r1_m", "0.9", "fixed.r1_m"),
         ("sim", "imu_rate_hz", "0.0", "sim.imu_rate_hz"),
         ("station", "deadband_m", "-0.01", "station.deadband_m"),
-        ("initial", "sigma_pos_m", "0.0", "initial.sigma_pos_m"),
+        ("initial", "sigma_position_m", "0.0", "initial.sigma_position_m"),
         ("agent", "health_window_s", "0.0", "agent.health_window_s"),
         ("vehicles.chaser", "role", '"pilot"', "vehicles.chaser.role"),
         ("", "euler_seq", '"xyw"', "euler_seq"),

@@ -43,7 +43,8 @@ def test_a_landing_scenario_takes_the_profile_s_numbers(folder):
     assert (u.multipath_sigma_m, u.multipath_tau_s) == (0.047, 1.3)
     assert (u.nlos_episode_rate_hz, u.nlos_episode_s, u.nlos_episode_excess_m) == (0.021, 3.7, 0.29)
     assert (u.outlier_probability, u.outlier_excess_m) == (0.011, 0.8)
-    assert (i.accel_noise, i.gyro_noise, i.vibration_accel_m_s2, i.vibration_gyro_rad_s) == (
+    noise = (i.accel_noise_m_s2_rthz, i.gyro_noise_rad_s_rthz)
+    assert (*noise, i.vibration_accel_m_s2, i.vibration_gyro_rad_s) == (
         0.023, 0.0021, 0.11, 0.041,
     )  # fmt: skip
     assert sc.sensors.profile == "bench.toml"
@@ -51,12 +52,13 @@ def test_a_landing_scenario_takes_the_profile_s_numbers(folder):
 
 def test_the_scenario_s_own_keys_win_and_set_wins_over_both(folder):
     path = _landing_file(
-        folder, '[sensors]\nprofile = "bench.toml"\n[uwb]\nsigma_m = 0.2\n[imu]\naccel_noise = 0.5\n'
+        folder,
+        '[sensors]\nprofile = "bench.toml"\n[uwb]\nsigma_m = 0.2\n[imu]\naccel_noise_m_s2_rthz = 0.5\n',
     )
     sc = load_landing(path, {"uwb.multipath_sigma_m": 0.0})
-    assert sc.uwb.sigma_m == 0.2 and sc.imu.accel_noise == 0.5  # the file's
+    assert sc.uwb.sigma_m == 0.2 and sc.imu.accel_noise_m_s2_rthz == 0.5  # the file's
     assert sc.uwb.multipath_sigma_m == 0.0  # the override's
-    assert sc.uwb.offset_m == -0.27 and sc.imu.gyro_noise == 0.0021  # the profile's
+    assert sc.uwb.offset_m == -0.27 and sc.imu.gyro_noise_rad_s_rthz == 0.0021  # the profile's
 
 
 def test_set_may_name_the_profile_and_a_bundled_one_by_name(folder):
@@ -73,7 +75,7 @@ def test_a_docking_scenario_maps_the_outliers_and_the_gyro(folder):
     sc = load_scenario("docking", {"sensors.profile": str(folder / "bench.toml")})
     u, g = sc.uwb, sc.gyro
     # docking.toml sets sigma_m, the NLOS outliers and the gyro itself: those stay
-    assert (u.sigma_m, u.nlos_probability, g.arw_deg_s_rthz) == (0.02, 0.0, 0.0035)
+    assert (u.sigma_m, u.nlos_probability, g.gyro_noise_rad_s_rthz) == (0.02, 0.0, math.radians(0.0035))
     assert (u.offset_m, u.multipath_sigma_m, u.nlos_episode_s) == (-0.27, 0.047, 3.7)
     path = folder / "dock.toml"
     path.write_text('[sensors]\nprofile = "bench.toml"\n')  # every other key the paper's default
@@ -81,7 +83,7 @@ def test_a_docking_scenario_maps_the_outliers_and_the_gyro(folder):
     u, g = sc.uwb, sc.gyro
     # outliers: the docking radio's uniform [min, max] excess with the profile's exponential mean
     assert (u.nlos_probability, u.nlos_min_m, u.nlos_max_m) == (0.011, 0.0, 1.6)
-    assert g.arw_deg_s_rthz == pytest.approx(math.degrees(0.0021))
+    assert g.gyro_noise_rad_s_rthz == 0.0021
     assert g.bias_instability_deg_h == pytest.approx(math.degrees(1e-4) * 3600)
 
 

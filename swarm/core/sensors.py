@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import numba
 import numpy as np
@@ -67,8 +67,12 @@ class GyroParams:
 
     rate_hz: float = 100.0
     """Output rate [Hz]; the hardware's IMU is read at 100 Hz (paper sec. VI-A)."""
-    arw_deg_s_rthz: float = 0.0035
-    """Angle random walk, the white rate-noise density [deg/s/sqrt(Hz)] (VN-100 datasheet: 0.0035)."""
+    RENAMED: ClassVar[dict[str, tuple[str, float]]] = {"arw_deg_s_rthz": ("gyro_noise_rad_s_rthz", _DEG)}
+    """Keys of older files and the names that replaced them (:mod:`swarm.config`)."""
+
+    gyro_noise_rad_s_rthz: float = 0.0035 * _DEG
+    """Angle random walk, the white rate-noise density [rad/s/sqrt(Hz)] (VN-100 datasheet: 0.0035
+    deg/s/sqrt(Hz)); the name of the landing's and the sensor profiles' IMU key."""
     bias_instability_deg_h: float = 10.0
     """In-run bias instability [deg/h] (VN-100 class: ~10 deg/h), used as the stationary standard
     deviation of the Gauss-Markov bias."""
@@ -81,7 +85,7 @@ class GyroParams:
     """Add the bias; ``False`` gives the paper's unbiased white-noise gyro (paper eq. 3)."""
 
     def __post_init__(self) -> None:
-        for name in ("rate_hz", "arw_deg_s_rthz", "bias_corr_time_s"):
+        for name in ("rate_hz", "gyro_noise_rad_s_rthz", "bias_corr_time_s"):
             _check_positive("gyro", name, getattr(self, name))
         for name in ("bias_instability_deg_h", "initial_bias_sigma_deg_s"):
             _check_nonneg("gyro", name, getattr(self, name))
@@ -92,11 +96,6 @@ class GyroParams:
     def dt_s(self) -> float:
         """Sample interval [s]."""
         return 1.0 / self.rate_hz
-
-    @property
-    def arw_rad_rts(self) -> float:
-        """Angle random walk [rad/sqrt(s)] (deg/s/sqrt(Hz) and deg/sqrt(s) are the same unit)."""
-        return self.arw_deg_s_rthz * _DEG
 
     @property
     def bias_sigma_rad_s(self) -> float:
@@ -146,7 +145,8 @@ def gyro_sample(
     else:
         phi, s_b = 1.0, 0.0
     w = np.asarray(w_true_body, dtype=np.float64)
-    _gyro_kernel(w, np.asarray(bias, dtype=np.float64), z, params.arw_rad_rts / math.sqrt(dt), phi, s_b)
+    sigma_w = params.gyro_noise_rad_s_rthz / math.sqrt(dt)
+    _gyro_kernel(w, np.asarray(bias, dtype=np.float64), z, sigma_w, phi, s_b)
     return z[:3], z[3:]
 
 

@@ -365,21 +365,24 @@ def _dispersion_table(sc) -> list[str]:
     dist = "normal" if d.distribution == "normal" else "uniform ±√3σ"
     L = ["| quantity | distribution | σ | declared in |", "|---|---|---|---|"]
     L.append(
-        f"| initial estimate error, position (per axis) | normal | {ini.sigma_pos_m} m | "
-        "`[initial] sigma_pos_m` |"
+        f"| initial estimate error, position (per axis) | normal | {ini.sigma_position_m} m | "
+        "`[initial] sigma_position_m` |"
     )
     L.append(
-        f"| initial estimate error, velocity | normal | {ini.sigma_vel_m_s} m/s | `[initial] sigma_vel_m_s` |"
+        f"| initial estimate error, velocity | normal | {ini.sigma_velocity_m_s} m/s | "
+        "`[initial] sigma_velocity_m_s` |"
     )
     L.append(
-        f"| initial estimate error, attitude | normal | {ini.sigma_att_deg} deg | `[initial] sigma_att_deg` |"
+        f"| initial estimate error, attitude | normal | {ini.sigma_attitude_deg} deg | "
+        "`[initial] sigma_attitude_deg` |"
     )
     L.append(
         f"| UWB range noise | normal | {sc.uwb.sigma_m} m (NLOS p = {sc.uwb.nlos_probability}, "
         f"dropout p = {sc.uwb.dropout_probability}) | `[uwb]` |"
     )
     L.append(
-        f"| gyro noise and bias | ARW + Gauss-Markov | {sc.gyro.arw_deg_s_rthz} deg/s/√Hz, "
+        "| gyro noise and bias | ARW + Gauss-Markov | "
+        f"{math.degrees(sc.gyro.gyro_noise_rad_s_rthz):.4g} deg/s/√Hz, "
         f"{sc.gyro.bias_instability_deg_h} deg/h | `[gyro]` |"
     )
     if sc.ahrs.enabled:

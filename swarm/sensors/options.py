@@ -18,8 +18,10 @@ mission:
 * ``uwb.outlier_share``, ``outlier_excess_m`` -> landing: ``uwb.outlier_probability``,
   ``uwb.outlier_excess_m``; docking: ``uwb.nlos_probability``, with ``uwb.nlos_min_m = 0`` and
   ``uwb.nlos_max_m = 2 outlier_excess_m`` (a uniform excess of the same mean);
-* ``imu.gyro_noise_rad_s_rthz`` -> landing: ``imu.gyro_noise``; docking: ``gyro.arw_deg_s_rthz`` (deg);
-* ``imu.accel_noise_m_s2_rthz`` -> landing: ``imu.accel_noise`` (a docking kind has no accelerometer);
+* ``imu.gyro_noise_rad_s_rthz`` -> landing: ``imu.gyro_noise_rad_s_rthz``; docking:
+  ``gyro.gyro_noise_rad_s_rthz``;
+* ``imu.accel_noise_m_s2_rthz`` -> landing: ``imu.accel_noise_m_s2_rthz`` (a docking kind has no
+  accelerometer);
 * ``imu.gyro_bias_instability_rad_s`` -> docking, when > 0: ``gyro.bias_instability_deg_h``;
 * ``imu.accel_vibration_m_s2``, ``gyro_vibration_rad_s`` -> landing: ``imu.vibration_accel_m_s2``,
   ``imu.vibration_gyro_rad_s``.
@@ -70,13 +72,13 @@ def profile_options(profile: SensorProfile) -> dict[str, dict[str, Any]]:
     }
     uwb |= {"outlier_probability": u.outlier_share, "outlier_excess_m": u.outlier_excess_m}
     imu = {
-        "accel_noise": i.accel_noise_m_s2_rthz,
-        "gyro_noise": i.gyro_noise_rad_s_rthz,
+        "accel_noise_m_s2_rthz": i.accel_noise_m_s2_rthz,
+        "gyro_noise_rad_s_rthz": i.gyro_noise_rad_s_rthz,
         "vibration_accel_m_s2": i.accel_vibration_m_s2,
         "vibration_gyro_rad_s": i.gyro_vibration_rad_s,
     }
     uwb |= {"nlos_probability": u.outlier_share, "nlos_min_m": 0.0, "nlos_max_m": 2.0 * u.outlier_excess_m}
-    gyro: dict[str, Any] = {"arw_deg_s_rthz": math.degrees(i.gyro_noise_rad_s_rthz)}
+    gyro: dict[str, Any] = {"gyro_noise_rad_s_rthz": i.gyro_noise_rad_s_rthz}
     if i.gyro_bias_instability_rad_s > 0:
         gyro["bias_instability_deg_h"] = math.degrees(i.gyro_bias_instability_rad_s) * 3600.0
     return {"uwb": uwb, "imu": imu, "gyro": gyro}

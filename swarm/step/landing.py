@@ -481,7 +481,7 @@ def world_row(sc: LandingScenario) -> np.ndarray:
     WP = np.zeros(lnb.WP_N)
     for i, v in (
         (lnb.WP_DT, sc.dt_s), (lnb.WP_G, sc.kinds.quadrotor.airframe.gravity_m_s2),
-        (lnb.WP_ACC_NOISE, sc.imu.accel_noise), (lnb.WP_GYRO_NOISE, sc.imu.gyro_noise),
+        (lnb.WP_ACC_NOISE, sc.imu.accel_noise_m_s2_rthz), (lnb.WP_GYRO_NOISE, sc.imu.gyro_noise_rad_s_rthz),
         (lnb.WP_UWB_SIGMA, sc.uwb.sigma_m), (lnb.WP_RATE_CAM, rates.camera), (lnb.WP_RATE_UWB, rates.uwb),
         (lnb.WP_RATE_GNSS, rates.gnss),
         (lnb.WP_UWB_ON, sc.uwb.mode == "twr" and sc.uwb.enabled and len(sc.uwb.anchors_m) > 0),
@@ -796,8 +796,8 @@ class LandingAgent:
                 **sc.estimator.__dict__,
                 "lever_arm_m": tuple(sc.uwb.lever_arm_m),
                 "gravity_nav": (0.0, 0.0, -air.gravity_m_s2),
-                "accel_noise": sc.imu.accel_noise,
-                "gyro_noise": sc.imu.gyro_noise,
+                "accel_noise": sc.imu.accel_noise_m_s2_rthz,
+                "gyro_noise": sc.imu.gyro_noise_rad_s_rthz,
             }
         )
         # the navigator the quadrotor's IMU (gyro and accelerometer) calls for: "eskf" (swarm.navigation)

@@ -111,7 +111,8 @@ class World:
         g = sc.gyro
         phi = math.exp(-self.dt / g.bias_corr_time_s) if g.enabled_bias else 1.0
         s_b = g.bias_sigma_rad_s * math.sqrt(1.0 - phi * phi) if g.enabled_bias else 0.0
-        self.prm = np.array([self.dt, g.arw_rad_rts / math.sqrt(self.dt), phi, s_b, sc.ahrs.sigma_rad])
+        sigma_w = g.gyro_noise_rad_s_rthz / math.sqrt(self.dt)
+        self.prm = np.array([self.dt, sigma_w, phi, s_b, sc.ahrs.sigma_rad])
         # truth and actuator state, one row per vehicle (views by id in ``x``), padded to the widest kind
         self.kinds = [sc.kind(vid) for vid in self.ids]
         self.codes = np.array([k.code for k in self.kinds], dtype=np.int64)

@@ -65,7 +65,7 @@ def test_gyro_allan_deviation_follows_arw_over_sqrt_tau():
     """White rate noise has Allan deviation N / sqrt(tau) (IEEE Std 952-1997, Annex C)."""
     params = GyroParams(enabled_bias=False)
     w, _ = _gyro_run(params, 60_000, params.dt_s, seed=2)  # 600 s
-    arw = params.arw_rad_rts
+    arw = params.gyro_noise_rad_s_rthz
     for tau_s in (0.1, 1.0, 10.0):
         m = round(tau_s * params.rate_hz)
         clusters = (w[: len(w) // m * m] - W_TRUE).reshape(-1, m, 3).mean(axis=1)
@@ -104,7 +104,7 @@ def test_gyro_measurement_carries_the_current_bias():
     params = GyroParams(bias_instability_deg_h=36_000.0, initial_bias_sigma_deg_s=10.0)  # bias >> noise
     rng = np.random.default_rng(4)
     b = gyro_init_bias(params, rng)
-    sigma_w = params.arw_rad_rts / math.sqrt(params.dt_s)
+    sigma_w = params.gyro_noise_rad_s_rthz / math.sqrt(params.dt_s)
     for _ in range(100):
         w, b_next = gyro_sample(W_TRUE, b, params.dt_s, params, rng)
         assert np.all(np.abs(w - W_TRUE - b) < 6 * sigma_w)
@@ -276,7 +276,7 @@ def test_ahrs_noise_multiplies_on_the_right():
     ("cls", "kwargs", "field"),
     [
         (GyroParams, {"rate_hz": 0.0}, "gyro.rate_hz"),
-        (GyroParams, {"arw_deg_s_rthz": -1.0}, "gyro.arw_deg_s_rthz"),
+        (GyroParams, {"gyro_noise_rad_s_rthz": -1.0}, "gyro.gyro_noise_rad_s_rthz"),
         (GyroParams, {"bias_instability_deg_h": float("nan")}, "gyro.bias_instability_deg_h"),
         (GyroParams, {"bias_corr_time_s": 0.0}, "gyro.bias_corr_time_s"),
         (GyroParams, {"initial_bias_sigma_deg_s": -0.1}, "gyro.initial_bias_sigma_deg_s"),

@@ -76,7 +76,7 @@ def test_dispersions_change_the_truth_and_the_initial_estimate_follows_it():
         assert not np.allclose(B, allocation_matrix(p.thrusters))
     # the agents keep the nominal models; the initial estimate is the dispersed truth plus the [initial] error
     err = sim.agents["chaser"].est.p_nav[0] - sim.world.X[c, 0:3]
-    assert np.linalg.norm(err) < 5 * math.sqrt(3) * sc.initial.sigma_pos_m
+    assert np.linalg.norm(err) < 5 * math.sqrt(3) * sc.initial.sigma_position_m
     assert sim.agents["chaser"].mass_kg == p.dynamics.mass_kg
 
 
