@@ -348,6 +348,7 @@ def test_a_killed_landing_world_and_agent_come_back_and_the_run_still_equals_swa
     assert left == set(), left
 
 
+@pytest.mark.alone  # its late ticks are counted against the wall clock: no test beside it under xdist
 def test_a_free_running_landing_world_keeps_the_wall_clock_and_a_stalled_agent_costs_only_its_uav(tmp_path):
     """`--clock scaled:N` alone: the landing world steps at the wall clock whatever the agents do. One UAV's
     agent is stopped (SIGSTOP) for a second of wall time: the world goes on at its pace, that UAV flies its
