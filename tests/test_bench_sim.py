@@ -36,3 +36,11 @@ def test_bench_sim_quick_writes_realtime_factors(tmp_path, capsys):
     assert (
         "UAV landing" in text and "rendered camera, per 640 x 480 frame" in text and "corner camera" in text
     )
+    missions = rec["missions"]
+    assert rec["mission_target_realtime_factor"] == 1000.0
+    assert {m["mission"] for m in missions.values()} == {"docking", "landing"}  # through the registry
+    assert "landing-moving" in missions  # the third mission's scenario, a moving pad
+    for name, m in missions.items():
+        assert m["realtime_factor"] == min(c["realtime_factor_median"] for c in m["cases"].values()) > 0
+        assert all(c["sim_time_s"] > 10.0 for c in m["cases"].values()), name  # whole runs
+    assert "goal: every mission >= 1000x" in text

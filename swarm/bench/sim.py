@@ -17,6 +17,11 @@ import pstats
 import time
 
 TARGET_RTF = 500.0
+MISSION_TARGET_RTF = 1000.0
+"""Issue 44's target: one in-process run of every mission >= 1000x real time."""
+
+MISSION_SCENARIOS = ("docking", "ground-docking", "landing", "landing-moving")
+"""One bundled scenario of each mission (and of the docking's second kind), in :func:`_missions`."""
 
 BENCH_SCENARIOS = {
     "cubesat": ("docking", {}),
@@ -113,6 +118,34 @@ def _landing(quick: bool) -> dict:
             "image_px": [cam.width_px, cam.height_px]}  # fmt: skip
 
 
+def _missions(quick: bool) -> dict:
+    """Each of :data:`MISSION_SCENARIOS` through its mission's in-process runner (``swarm sim``'s, by the
+    registry): real-time factor per policy, median over the seeds, after a warm-up run."""
+    from swarm.missions import mission_of
+
+    out = {}
+    for name in MISSION_SCENARIOS:
+        mission = mission_of(name)
+        sc = mission.load(name)
+        mission.run_one(sc, "fixed", 0)  # warm-up: compilation, caches
+        cases = {}
+        for policy in ("fixed", "mdp"):
+            rtf, sim = [], 0.0
+            for seed in (0,) if quick else (0, 1, 2):
+                t0 = time.perf_counter()
+                r = mission.run_one(sc, policy, seed)
+                wall = time.perf_counter() - t0
+                sim = float(r["sim_time_s"])
+                rtf.append(sim / wall)
+            cases[policy] = {"realtime_factor_median": sorted(rtf)[len(rtf) // 2], "sim_time_s": sim}
+        out[name] = {
+            "mission": mission.name,
+            "cases": cases,
+            "realtime_factor": min(c["realtime_factor_median"] for c in cases.values()),
+        }
+    return out
+
+
 def run(quick: bool = False) -> dict:
     from swarm.scenario import load_scenario
     from swarm.sim.docking import run_docking
@@ -139,6 +172,8 @@ def run(quick: bool = False) -> dict:
         "load_avg_1m": round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None,
         "profile_top": buf.getvalue(),
         "landing": _landing(quick),
+        "mission_target_realtime_factor": MISSION_TARGET_RTF,
+        "missions": _missions(quick),
     }
 
 
@@ -180,6 +215,17 @@ def format_report(rec: dict) -> str:
     )
     lines.append(
         f"  corner camera, per frame (compiled projection, noise, PnP): {lnd['corner_frame_us']:.0f} us"
+    )
+    lines.append("")
+    lines.append("Every mission, in-process (swarm sim's runner), real-time factor (median over seeds):")
+    for name, m in rec["missions"].items():
+        per = ", ".join(f"{p} {c['realtime_factor_median']:.0f}x" for p, c in m["cases"].items())
+        lines.append(f"  {name:<16} {m['mission']:<8} {per}")
+    slowest = min(m["realtime_factor"] for m in rec["missions"].values())
+    met_m = slowest >= rec["mission_target_realtime_factor"]
+    lines.append(
+        f"  goal: every mission >= {rec['mission_target_realtime_factor']:.0f}x: "
+        f"{'met' if met_m else 'NOT met'} ({slowest:.0f}x, the slowest)"
     )
     lines.append(f"machine: 1-min load {rec['load_avg_1m']}")
     lines.append("")

@@ -41,6 +41,13 @@ class DockingMission(Mission):
 
         return load_scenario(scenario, overrides)
 
+    def run_one(self, scenario, policy: str | None, seed: int) -> dict:
+        """One in-process docking without series (``swarm sim``'s runner): its summary, each chaser's
+        fields under ``chasers``."""
+        from swarm.sim.docking import run_docking
+
+        return run_docking(scenario, policy, seed, record_series=False)
+
     def with_agents(self, scenario, agents: int | None):
         """The scenario's vehicles copied ``agents`` times (:meth:`swarm.scenario.Scenario.with_pairs`)."""
         return scenario if agents is None else scenario.with_pairs(agents)

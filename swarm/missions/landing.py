@@ -37,6 +37,12 @@ class LandingMission(Mission):
 
         return load_landing(scenario, overrides)
 
+    def run_one(self, scenario, policy: str | None, seed: int) -> dict:
+        """One in-process landing of the scenario's first UAV without series (``swarm sim``'s runner)."""
+        from swarm.sim.landing import run_landing
+
+        return run_landing(scenario, policy, seed, record_series=False)
+
     def with_agents(self, scenario, agents: int | None):
         """The scenario as it is: its UAVs are the file's (``[[fleet]]``), so ``--agents`` other than 1
         is refused."""
