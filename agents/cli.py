@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import threading
-from collections.abc import Callable
 
 DESCRIPTION = (
     "One vehicle's on-board software: subscribes its sensors (and its target's estimate), runs estimator, "
@@ -70,34 +69,6 @@ def hosted_ids(text: str, noun: str) -> list[str]:
     if len(set(ids)) != len(ids):
         raise ConfigError(f"--id names a {noun} twice: {text!r}")
     return ids
-
-
-def run_host(runs: dict[str, Callable[[], None]], stop: threading.Event) -> int:
-    """Run several agents in this process (an agent host), each ``runs[id]()`` on its own thread; the first
-    that fails stops the others and the host exits 1 (its supervisor restarts all of its vehicles, which
-    rejoin the run). The landing agents (:mod:`agents.landing`); the docking agents have their own host, one
-    thread for all (:class:`agents.host.AgentHost`)."""
-    import logging
-
-    from swarm.transport.stopping import SIGNAL_POLL_S
-
-    failed: list[BaseException] = []
-
-    def run_one(vid: str) -> None:
-        try:
-            runs[vid]()
-        except BaseException as exc:  # reported, then the whole host stops
-            logging.getLogger("agents").exception("%s: agent failed: %s", vid, exc)
-            failed.append(exc)
-            stop.set()
-
-    threads = [threading.Thread(target=run_one, args=(v,), name=f"agent-{v}", daemon=True) for v in runs]
-    for t in threads:
-        t.start()
-    for t in threads:
-        while t.is_alive():  # in steps: this thread runs the stop signal's handler (swarm.transport.stopping)
-            t.join(SIGNAL_POLL_S)
-    return 1 if failed else 0
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

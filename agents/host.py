@@ -2,7 +2,9 @@
 
 ``swarm launch --vehicles-per-process N`` (``python -m agents --id a,b,...``) hosts several vehicles in one
 process, as a ROS 2 component container hosts several nodes; a process per vehicle is a host of one. Keys,
-liveliness tokens and supervision stay per vehicle (``docs/architecture.md``, "Agent hosts").
+liveliness tokens and supervision stay per vehicle (``docs/architecture.md``, "Agent hosts"). It steps
+docking agents (:class:`agents.process.AgentProcess`) and landing UAVs' agents
+(:class:`agents.landing.LandingAgentProcess`, ``python -m agents.landing``) alike.
 
 What the host shares among its vehicles:
 
@@ -124,7 +126,7 @@ class AgentHost:
         # last: batched, the two no longer overlap (32 vehicles in hosts of 16: 3.6x against 4.3-5.0x)
         self._commands: list[tuple[str, bytes]] = []
         self._pub_commands = None
-        self.batch_commands = not self.inline and not self.clock.lockstep
+        self.batch_commands = not self.inline and not self.clock.lockstep and self.procs[0].batched
         if self.batch_commands:
             for p in self.procs:
                 p.command_sink = self._commands
@@ -182,17 +184,8 @@ class AgentHost:
         if self.batch_commands:  # batched, as the world's samples are: one message to the world per round
             self._pub_commands = declare_reliable(self.session, k.commands(self.procs[0].id), express=False)
         watch_liveliness(self.session, k, self._on_alive, history=any(p.rejoin for p in self.procs))
-        subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.shared_drops)
-        direct = not self.inline  # as the vehicles' own sensor subscribers (AgentProcess.open)
-        subscribe_decoded(self.session, k.world_imu(), ImuBatch, self._on_batch, self.shared_drops,
-                          direct=direct, stamped=True)  # fmt: skip
-        subscribe_decoded(self.session, k.mothership_uwb(), UwbBatch, self._on_batch, self.shared_drops,
-                          direct=direct)  # fmt: skip
-        if any(p.tdoa for p in self.procs):  # uwb.mode tdoa2/tdoa3: a slot's differences (mothership/tdoa)
-            subscribe_decoded(self.session, k.mothership_tdoa(), TdoaBatch, self._on_batch, self.shared_drops,
-                              direct=direct)  # fmt: skip
-        subscribe_decoded(self.session, k.world_vision(), VisionBatch, self._on_batch, self.shared_drops,
-                          direct=direct)  # fmt: skip
+        if self.procs[0].batched:  # (a landing UAV's agent takes its own keys only: agents.landing)
+            self._subscribe_batches()
         subscribe_decoded(self.session, k.world_event(), Event, self._on_world_event, self.shared_drops)
         for p in self.procs:
             p.announce()
@@ -204,6 +197,21 @@ class AgentHost:
             self.shared_drops.flush()
             for p in self.procs:
                 p.drops.flush()
+
+    def _subscribe_batches(self) -> None:
+        """The world's clock, and the batches of the world and the mothership (docking)."""
+        k = self.keys
+        subscribe_decoded(self.session, k.world_clock(), Clock, self._on_clock, self.shared_drops)
+        direct = not self.inline  # as the vehicles' own sensor subscribers (AgentProcess.open)
+        subscribe_decoded(self.session, k.world_imu(), ImuBatch, self._on_batch, self.shared_drops,
+                          direct=direct, stamped=True)  # fmt: skip
+        subscribe_decoded(self.session, k.mothership_uwb(), UwbBatch, self._on_batch, self.shared_drops,
+                          direct=direct)  # fmt: skip
+        if any(p.tdoa for p in self.procs):  # uwb.mode tdoa2/tdoa3: a slot's differences (mothership/tdoa)
+            subscribe_decoded(self.session, k.mothership_tdoa(), TdoaBatch, self._on_batch, self.shared_drops,
+                              direct=direct)  # fmt: skip
+        subscribe_decoded(self.session, k.world_vision(), VisionBatch, self._on_batch, self.shared_drops,
+                          direct=direct)  # fmt: skip
 
     def _loop(self) -> bool:
         """Step the vehicles until every run is over or ``stop``; ``True`` if some run ended (a summary).

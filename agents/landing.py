@@ -1,15 +1,16 @@
 """The landing agent process (``python -m agents.landing SCENARIO --id UAV``; started by ``swarm launch`` for
 a landing scenario): one UAV's on-board software, the agent step of :mod:`swarm.step.landing`, over Zenoh.
 
-It subscribes its UAV's ``imu``, ``uwb`` (``tdoa`` on a TDoA radio), ``gnss``, ``rangefinder`` and ``vision``
-(and, for a moving pad,
-the robot's shared ``estimate`` on ``agent/<platform.id>/estimate``, waited for on its share ticks) and the
-world's events,
-declares its liveliness, and runs tick by tick in lockstep: once tick ``k``'s samples are all in (the IMU
-every tick, a range, a fix, a distance and a camera frame on their ticks, as the scenario's rates say, so
-nothing is waited for that will not come), it fuses them, decides, and publishes its ``command`` (rotor speeds
-[rad/s], the landing mode), its ``estimate`` (the position, velocity and attitude block of the IMU-driven
-filter's covariance), its ``guidance`` (mode, distance to its pad) and each mode switch as an ``event``. At
+It runs in the agent host (:class:`agents.host.AgentHost`: one Zenoh session and one stepping thread for
+the UAVs of ``--id a,b,...``), as a docking agent does; :class:`LandingAgentProcess` is the host's face of
+one UAV. It subscribes its UAV's ``imu``, ``uwb`` (``tdoa`` on a TDoA radio), ``gnss``, ``rangefinder`` and
+``vision`` (and, for a moving pad, the robot's shared ``estimate`` on ``agent/<platform.id>/estimate``,
+waited for on its share ticks) and the world's events, declares its liveliness, and runs tick by tick in
+lockstep (:class:`LandingTicks`): once tick ``k``'s samples are all in (the IMU every tick, a range, a fix,
+a distance and a camera frame on their ticks, as the scenario's rates say, so nothing is waited for that
+will not come), it fuses them, decides, and publishes its ``command`` (rotor speeds [rad/s], the landing
+mode), its ``estimate`` (the position, velocity and attitude block of the IMU-driven filter's covariance),
+its ``guidance`` (mode, distance to its pad) and each mode switch as an ``event``. At
 the world's ``run_end`` it publishes a ``summary`` event (its half of the run's outcome) and stays up until
 stopped. Behind a free-running world (``--clock realtime`` or ``scaled:N``), a tick whose successor is already
 complete is only fused (its command would reach the world after it flew that tick): the agent decides and
@@ -36,23 +37,47 @@ import logging
 import sys
 import threading
 from collections import deque
-from functools import partial
+from typing import NamedTuple
 
-from swarm.transport.process import print_ready, process_main
+from agents.cli import hosted_ids
+from agents.host import AgentHost
+from swarm.config import parse_override
+from swarm.errors import ConfigError
+from swarm.landing_scenario import load_landing
+from swarm.step.landing import LandingAgent, LandingInputs, LandingWorld, Rates
+from swarm.transport import checkpoint, wire
+from swarm.transport.keys import Keys
+from swarm.transport.messages import (
+    DropCounter,
+    Estimate,
+    Gnss,
+    Imu,
+    MessageError,
+    Rangefinder,
+    Tdoa,
+    Uwb,
+    Vision,
+)
+from swarm.transport.process import (
+    add_checkpoint_arguments,
+    add_process_arguments,
+    declare_reliable,
+    print_ready,
+    process_main,
+)
+from swarm.transport.session import declare_liveliness, open_session, subscribe_decoded, zenoh_args_from
 
 _LOG = logging.getLogger("agents.landing")
 DESCRIPTION = "One landing UAV's on-board software: IMU-driven filter, landing guidance, quadrotor control."
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from swarm.transport.process import add_checkpoint_arguments, add_process_arguments
-
     add_process_arguments(p)
     p.add_argument(
         "--id",
         required=True,
         help="the UAV this agent flies (a [[fleet]] id, or 'uav'); several, comma-separated, make this "
-        "process an agent host: their agents on one Zenoh session, each on its own thread, keys and "
+        "process an agent host: their agents on one Zenoh session, stepped by one thread, keys and "
         "liveliness per UAV",
     )
     add_checkpoint_arguments(
@@ -64,14 +89,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, stop: threading.Event) -> int:
-    from agents.cli import hosted_ids, run_host
-    from swarm.config import parse_override
-    from swarm.errors import ConfigError
-    from swarm.landing_scenario import load_landing
-    from swarm.transport.checkpoint import EXIT_BAD_CHECKPOINT, CheckpointError
-    from swarm.transport.keys import Keys
-    from swarm.transport.session import open_session, zenoh_args_from
-
     sc = load_landing(args.scenario, dict(parse_override(o) for o in args.overrides))
     uavs = {u.id: u for u in sc.uavs()}
     ids = hosted_ids(args.id, "UAV")
@@ -83,20 +100,23 @@ def run(args: argparse.Namespace, stop: threading.Event) -> int:
     policy = args.policy or sc.policy
     try:  # read before joining the swarm: a bad checkpoint never shows up as an agent
         resumed = {u: Resume(args, sc, uavs[u], policy) for u in ids}
-    except CheckpointError as exc:
+    except checkpoint.CheckpointError as exc:
         print(f"agents.landing: error: {exc}; not resuming", file=sys.stderr, flush=True)
-        return EXIT_BAD_CHECKPOINT
+        return checkpoint.EXIT_BAD_CHECKPOINT
     warm_up(sc, args.seed, uavs[ids[0]].index, policy)
     keys = Keys(args.namespace)
     with open_session(zenoh_args_from(args)) as session:
-        free = not args.clock.lockstep
-        if len(ids) == 1:
-            _fly(session, keys, sc, args.seed, uavs[ids[0]], policy, stop, free, resumed[ids[0]])
-            return 0
-        # an agent host: one session, one thread per UAV (agents.cli.run_host)
-        flights = {u: partial(_fly, session, keys, sc, args.seed, uavs[u], policy, stop, free, resumed[u])
-                   for u in ids}  # fmt: skip
-        return run_host(flights, stop)
+        # the UAVs' tick assemblers share a condition and a set of those with news: one thread steps all
+        cond, ready = threading.Condition(), set()
+        procs = [LandingAgentProcess(session, keys, sc, args.seed, uavs[u], policy, args.clock, resumed[u],
+                                     cond, ready, len(ids)) for u in ids]  # fmt: skip
+        try:
+            AgentHost(procs, session, keys, stop).run()
+        except Exception as exc:  # logged with the UAV; its supervisor restarts every hosted UAV
+            _LOG.error("agent host of %s failed: %s", ",".join(ids), exc)
+            stop.set()
+            return 1
+    return 0
 
 
 class Resume:
@@ -104,8 +124,6 @@ class Resume:
     (None: not resuming, or nothing written yet), and what it must share with this run."""
 
     def __init__(self, args: argparse.Namespace, sc, uav, policy: str) -> None:
-        from swarm.transport import checkpoint
-
         self.run_id = {"scenario": sc.name, "fingerprint": checkpoint.fingerprint(sc), "seed": args.seed,
                        "policy": policy, "uav": uav.id, "clock": str(args.clock)}  # fmt: skip
         self.path = None
@@ -120,56 +138,124 @@ class Resume:
 
     def file(self):
         """The file to write this UAV's checkpoints to (after the one resumed from), or None."""
-        from swarm.transport import checkpoint
-
         if self.path is None:
             return None
         return checkpoint.CheckpointFile(self.path, None if self.state is None else self.state["checkpoint"])
 
 
-def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, free: bool = False,
-         resume: Resume | None = None) -> None:  # fmt: skip
-    """One UAV's agent on ``session`` until the run ends (then its summary, and it waits for ``stop``).
-    ``free``: the world is free-running (module docstring): a tick with a later one already complete is
-    fused, not decided on. ``resume``: its checkpoint (module docstring)."""
-    from swarm.step.landing import LandingAgent, LandingInputs, Rates
-    from swarm.transport import wire
-    from swarm.transport.messages import (
-        DropCounter,
-        Estimate,
-        Event,
-        Gnss,
-        Imu,
-        MessageError,
-        Rangefinder,
-        Tdoa,
-        Uwb,
-        Vision,
-    )
-    from swarm.transport.process import declare_reliable
-    from swarm.transport.session import declare_liveliness, subscribe_decoded
-    from swarm.transport.stopping import Stopping, wait_for_stop
+SAMPLES = ("imu", "uwb", "tdoa", "gnss", "rangefinder", "vision", "pad")
+"""What a landing tick is made of (:class:`swarm.step.landing.LandingInputs`; ``pad``: a moving pad's
+robot's shared estimate)."""
 
-    uid = uav.id
-    stopping = Stopping(stop)  # (the launcher's stopping event, a signal: swarm.transport.stopping)
-    agent = LandingAgent(sc, seed, uav.index, policy)
-    rates = Rates.of(sc)
-    dt = sc.dt_s
-    cond = threading.Condition()
-    inbox: dict[str, dict[int, object]] = {"imu": {}, "uwb": {}, "gnss": {}, "rangefinder": {}, "vision": {},
-                                           "pad": {}, "tdoa": {}}  # fmt: skip
-    state = {"k": 1, "ended": False}
-    sent: deque = deque(maxlen=2)  # the last two commands sent, (tick, key, payload): sent again on a restart
-    drops = DropCounter()
-    n_anchors = len(sc.uwb.anchors_m) if sc.uwb.enabled else 0
 
-    def usable(kind: str, msg):
+class Tick(NamedTuple):
+    """A complete tick as the host takes it (its ``tick``, as a docking agent's
+    :class:`~swarm.transport.lockstep.TickInputs`), and what the agent step takes."""
+
+    tick: int
+    inputs: LandingInputs
+
+
+class LandingTicks:
+    """One UAV's samples collected into complete ticks, for :class:`agents.host.AgentHost` (the landing
+    agent's :class:`~swarm.transport.lockstep.AgentTickAssembler`): tick ``k`` is complete once its IMU
+    sample and each sample its ticks' rates say is due (:class:`swarm.step.landing.Rates`) are in, so nothing
+    is waited for that will not come; a sample of a tick already taken is ignored. ``cond`` and ``ready``
+    are the host's, shared by its UAVs."""
+
+    def __init__(self, sc, k: int, free: bool, cond: threading.Condition, ready: set) -> None:
+        self.sc, self.rates, self.k, self.free = sc, Rates.of(sc), k, free
+        self.cond, self.ready = cond, ready
+        self.inbox: dict[str, dict[int, object]] = {kind: {} for kind in SAMPLES}
+
+    def add(self, kind: str, tick: int, value) -> bool:
+        """Keep ``value``, tick ``tick``'s sample of ``kind``; True if kept (a tick not taken yet)."""
+        with self.cond:
+            if tick < self.k:
+                return False
+            self.inbox[kind][tick] = value
+            if self.complete(self.k):
+                self.ready.add(self)
+                self.cond.notify_all()
+            return True
+
+    def complete(self, k: int) -> bool:
+        sc, r, box = self.sc, self.rates, self.inbox
+        return (
+            k in box["imu"]
+            and (not r.uwb_tick(sc, k) or k in box["uwb"])
+            and (not r.tdoa_tick(sc, k) or k in box["tdoa"])
+            and (not r.gnss_tick(sc, k) or k in box["gnss"])
+            and (not r.rangefinder_tick(sc, k) or k in box["rangefinder"])
+            and (not r.camera_tick(k) or k in box["vision"])
+            and (not r.share_tick(sc, k) or k in box["pad"])
+        )
+
+    def _take(self, k: int):
+        box = self.inbox
+        gyro, acc = box["imu"].pop(k)
+        inp = LandingInputs(k, k * self.sc.dt_s, gyro, acc)
+        inp.uwb, inp.gnss = box["uwb"].pop(k, None), box["gnss"].pop(k, None)
+        inp.rangefinder, inp.camera = box["rangefinder"].pop(k, None), box["vision"].pop(k, None)
+        inp.pad, inp.tdoa = box["pad"].pop(k, None), box["tdoa"].pop(k, None)
+        return inp
+
+    def poll_round(self, _grace_s=None) -> tuple[list, object, bool]:
+        """The host's look at this UAV (``cond`` held by the host): ``(stale, inputs, more)``. ``inputs``: the
+        next tick if it is complete (else None). Behind a free-running world, the ticks before the newest
+        complete one would be flown before their commands came: they are ``stale``, only fused, and the
+        newest is decided on. ``more``: the tick after is complete already."""
+        if not self.complete(self.k):
+            return [], None, False
+        stale = []
+        while self.free and self.complete(self.k + 1):
+            stale.append(self._take(self.k))
+            self.k += 1
+        inp = Tick(self.k, self._take(self.k))
+        self.k += 1
+        return stale, inp, self.complete(self.k)
+
+
+class LandingAgentProcess:
+    """One UAV's agent over an open Zenoh session, stepped by :class:`agents.host.AgentHost` (module
+    docstring): the interface of :class:`agents.process.AgentProcess` that the host uses."""
+
+    batched = False  # its own keys only: no clock or batches from the world, no CommandBatch to it
+    chaser, rejoin, wake_at_control = False, False, False
+
+    def __init__(self, session, keys, sc, seed: int, uav, policy: str, clock, resume: Resume,
+                 cond: threading.Condition, ready: set, hosted: int) -> None:  # fmt: skip
+        self.session, self.keys, self.sc, self.id, self.clock = session, keys, sc, uav.id, clock
+        self.agent = LandingAgent(sc, seed, uav.index, policy)
+        self.drops = DropCounter()
+        self.direct = hosted > 1  # several UAVs: their callbacks on Zenoh's own threads, as docking's
+        self.n_anchors = len(sc.uwb.anchors_m) if sc.uwb.enabled else 0
+        self.on_news = None  # set by a host of this UAV alone: called after a kept sample
+        self.stopping = None  # set by the host
+        self.resume, self.ckpt = resume, resume.file()
+        self.ended = False
+        self.n_modes = self.skipped = 0
+        # the last two commands, (tick, key, payload): sent again on restarts
+        self.sent: deque = deque(maxlen=2)
+        self._rest: list = []  # the tick's messages after its command, for flush()
+        k = 1
+        if resume.state is not None:  # warm from the checkpoint: the tick after it next
+            st = resume.state
+            self.agent.restore({"state": st["agent"], "records": st["samples"]})
+            k, self.n_modes, self.skipped = st["k"], st["n_modes"], st["skipped"]
+            self.sent.extend(st["sent"])
+            _LOG.warning("%s: resumed from its checkpoint of tick %d", self.id, k - 1)
+        self.assembler = LandingTicks(sc, k, not clock.lockstep, cond, ready)
+
+    # ------------------------------------------------------------------------------ Zenoh side
+
+    def _usable(self, kind: str, msg):
         """What the agent step takes of a message (None for nothing), or MessageError: a message of the
         protocol that this agent cannot use is dropped and counted like one that does not decode."""
         if kind == "vision":
             return wire.camera_frame(msg)
         if kind == "uwb":
-            return wire.range_input(msg, n_anchors)
+            return wire.range_input(msg, self.n_anchors)
         if kind == "tdoa":
             return wire.tdoa_input(msg)
         if kind == "gnss":
@@ -182,136 +268,125 @@ def _fly(session, keys, sc, seed: int, uav, policy: str, stop: threading.Event, 
             raise MessageError("acc_body: an IMU sample without the specific force cannot drive this filter")
         return msg.gyro_body, msg.acc_body
 
-    def on_sample(kind: str):
+    def _on_sample(self, kind: str):
         def handler(key: str, msg) -> None:
             try:
-                value = usable(kind, msg)
+                value = self._usable(kind, msg)
             except MessageError as exc:
-                drops.drop(key, str(exc))
+                self.drops.drop(key, str(exc))
                 return
-            with cond:
-                if msg.tick >= state["k"]:
-                    inbox[kind][msg.tick] = value
-                    cond.notify_all()
+            if self.assembler.add(kind, msg.tick, value) and self.on_news is not None:
+                self.on_news()
 
         return handler
 
-    def on_world_event(_key: str, msg: Event) -> None:
-        if stopping.hear(msg.kind):
+    def _on_world_event(self, _key: str, msg) -> None:
+        """``run_end``: the run is over; ``world_resumed`` at tick ``j``: the commands of tick ``j`` or later
+        sent again (the world that had them is gone)."""
+        if self.stopping.hear(msg.kind):
             return
         if msg.kind == "run_end":
-            with cond:
-                state["ended"] = True
-                cond.notify_all()
+            with self.assembler.cond:
+                self.ended = True
         elif msg.kind == "world_resumed":
             j = msg.data.get("tick")
-            with cond:
-                again = [c for c in sent if isinstance(j, int) and c[0] >= j]
-            for tick, key, payload in again:  # the world that had them is gone
+            with self.assembler.cond:
+                again = [c for c in self.sent if isinstance(j, int) and c[0] >= j]
+            for tick, key, payload in again:
                 try:
-                    pub[key].put(payload)
+                    self.pub[key].put(payload)
                 except Exception as exc:
-                    if not stopping.quiet(exc):  # (its session closing while it stops: no error)
+                    if not self.stopping.quiet(exc):  # (its session closing while it stops: no error)
                         raise
                     return
-                _LOG.warning("%s: world resumed at tick %s: its command of tick %d sent again", uid, j, tick)
+                _LOG.warning(
+                    "%s: world resumed at tick %s: its command of tick %d sent again", self.id, j, tick
+                )
 
-    def complete(k: int) -> bool:
-        return (
-            k in inbox["imu"]
-            and (not rates.uwb_tick(sc, k) or k in inbox["uwb"])
-            and (not rates.tdoa_tick(sc, k) or k in inbox["tdoa"])
-            and (not rates.gnss_tick(sc, k) or k in inbox["gnss"])
-            and (not rates.rangefinder_tick(sc, k) or k in inbox["rangefinder"])
-            and (not rates.camera_tick(k) or k in inbox["vision"])
-            and (not rates.share_tick(sc, k) or k in inbox["pad"])
-        )
+    def _on_alive(self, _role: str, _pid: str, _alive: bool) -> None:
+        pass  # (a landing agent waits for no peer: the world sends every sample)
 
-    def inputs(k: int) -> LandingInputs:
-        gyro, acc = inbox["imu"].pop(k)
-        inp = LandingInputs(k, k * dt, gyro, acc)
-        inp.uwb = inbox["uwb"].pop(k, None)
-        inp.gnss = inbox["gnss"].pop(k, None)
-        inp.rangefinder = inbox["rangefinder"].pop(k, None)
-        inp.camera = inbox["vision"].pop(k, None)
-        inp.pad = inbox["pad"].pop(k, None)
-        inp.tdoa = inbox["tdoa"].pop(k, None)
-        return inp
+    # ------------------------------------------------------------------------------ driven by AgentHost
 
-    pub = {getattr(keys, kind)(uid): declare_reliable(session, getattr(keys, kind)(uid))
-           for kind in ("command", "estimate", "guidance", "event")}  # fmt: skip
-    for kind, cls in (
-        ("imu", Imu),
-        ("uwb", Uwb),
-        ("gnss", Gnss),
-        ("rangefinder", Rangefinder),
-        ("vision", Vision),
-    ):
-        subscribe_decoded(session, getattr(keys, kind)(uid), cls, on_sample(kind), drops)
-    if sc.uwb.mode != "twr":  # a TDoA radio's differences, a Tdoa every UWB tick
-        subscribe_decoded(session, keys.tdoa(uid), Tdoa, on_sample("tdoa"), drops)
-    if sc.platform.enabled and sc.platform.share_estimate:  # the moving pad's robot's shared estimate
-        subscribe_decoded(session, keys.estimate(sc.platform.id), Estimate, on_sample("pad"), drops)
-    n_modes = skipped = 0
-    ckpt = None if resume is None else resume.file()
-    if resume is not None and resume.state is not None:  # warm from the checkpoint: the tick after it next
-        st = resume.state
-        agent.restore({"state": st["agent"], "records": st["samples"]})
-        state["k"], n_modes, skipped = st["k"], st["n_modes"], st["skipped"]
-        sent.extend(st["sent"])
-        _LOG.warning("%s: resumed from its checkpoint of tick %d", uid, st["k"] - 1)
-    subscribe_decoded(session, keys.world_event(), Event, on_world_event, drops)
-    token = declare_liveliness(session, keys, "agent", uid)
-    print_ready("agent", uid)
-    for _tick, key, payload in sent:  # (the world may be waiting for one: the agent was killed meanwhile)
-        pub[key].put(payload)
-    while not stop.is_set():
-        with cond:
-            k = state["k"]
-            while not (complete(k) or state["ended"] or stop.is_set()):
-                cond.wait(0.05)
-            if stop.is_set() or not complete(k):  # stopped, or the run ended
-                break
-            # free-running and behind: the ticks before the newest complete one would be flown before their
-            # commands came; they are fused, and the newest decided on
-            stale = []
-            while free and complete(k + 1):
-                stale.append(inputs(k))
-                k += 1
-            inp = inputs(k)
-            state["k"] = k + 1
-        for old in stale:
-            agent.fuse(old)
-        skipped += len(stale)
-        cmd = agent.tick(inp)
-        out, n_modes = wire.landing_agent_tick(keys, uid, agent, cmd, n_modes)
-        with cond:
-            sent.append((k, *out[0]))  # the command, first
-        for key, payload in out:
-            pub[key].put(payload)
-        if ckpt is not None:  # after the command went out, while the world collects the others (off the
-            # tick's critical path): an agent killed before this write comes back at tick k, which the world
-            # sends it again
-            snap = agent.snapshot()  # (its records go as the file's samples: each checksummed once)
-            ckpt.write({"run": resume.run_id, "k": k + 1, "agent": snap["state"], "n_modes": n_modes,
-                        "skipped": skipped, "sent": list(sent)}, snap["records"])  # fmt: skip
-    if state["ended"]:
-        key, payload = wire.landing_summary(keys, uid, agent)
-        pub[key].put(payload)
-        _LOG.info("%s: run ended: %s (%d ticks fused without a decision, behind the world)", uid,
-                  agent.outcome()["final_mode"], skipped)  # fmt: skip
-        wait_for_stop(stop)  # (in steps: a signal's handler must get to run, swarm.transport.stopping)
-    if ckpt is not None:
-        ckpt.close()
-    token.undeclare()
+    def open(self, shared: bool = False) -> None:
+        """Declare the publishers and subscribe this UAV's samples (the host subscribes the world's events
+        for all of its UAVs)."""
+        k, sc, uid = self.keys, self.sc, self.id
+        self.pub = {getattr(k, kind)(uid): declare_reliable(self.session, getattr(k, kind)(uid))
+                    for kind in ("command", "estimate", "guidance", "event")}  # fmt: skip
+        subs = [("imu", Imu), ("uwb", Uwb), ("gnss", Gnss), ("rangefinder", Rangefinder), ("vision", Vision)]
+        if sc.uwb.mode != "twr":  # a TDoA radio's differences, a Tdoa every UWB tick
+            subs.append(("tdoa", Tdoa))
+        for kind, cls in subs:
+            subscribe_decoded(self.session, getattr(k, kind)(uid), cls, self._on_sample(kind), self.drops,
+                              direct=self.direct)  # fmt: skip
+        if sc.platform.enabled and sc.platform.share_estimate:  # the moving pad's robot's shared estimate
+            subscribe_decoded(self.session, k.estimate(sc.platform.id), Estimate, self._on_sample("pad"),
+                              self.drops, direct=self.direct)  # fmt: skip
+
+    def announce(self) -> None:
+        """Declare this UAV's liveliness token, print its ready line, and send its last commands again (a
+        resumed agent: the world may be waiting for one, the agent was killed meanwhile)."""
+        self._token = declare_liveliness(self.session, self.keys, "agent", self.id)
+        print_ready("agent", self.id)
+        for _tick, key, payload in self.sent:
+            self.pub[key].put(payload)
+
+    def ticking(self) -> bool:
+        return True
+
+    def commands_at(self, _k: int) -> bool:
+        return True  # a rotor command every tick
+
+    def fuse_late(self, stale: list) -> None:
+        """Free-running and behind: the ticks before the newest complete one, fused without a decision."""
+        for inp in stale:
+            self.agent.fuse(inp)
+        self.skipped += len(stale)
+
+    def process(self, inp: Tick) -> None:
+        """Tick ``inp.tick``: fuse, decide, send the command (its estimate, guidance and mode events go out
+        with :meth:`flush`)."""
+        cmd = self.agent.tick(inp.inputs)
+        out, self.n_modes = wire.landing_agent_tick(self.keys, self.id, self.agent, cmd, self.n_modes)
+        with self.assembler.cond:
+            self.sent.append((inp.tick, *out[0]))  # the command, first
+        self.pub[out[0][0]].put(out[0][1])
+        self._rest, self._k = out[1:], inp.tick
+
+    def flush(self) -> None:
+        """The tick's estimate, guidance and events, then its checkpoint: after the host's round sent its
+        commands, while the world collects the others' (off the tick's critical path). An agent killed
+        before this write comes back at that tick, which the world sends it again."""
+        rest, self._rest = self._rest, []
+        for key, payload in rest:
+            self.pub[key].put(payload)
+        if self.ckpt is not None:
+            snap = self.agent.snapshot()  # (its records go as the file's samples: each checksummed once)
+            self.ckpt.write({"run": self.resume.run_id, "k": self._k + 1, "agent": snap["state"],
+                             "n_modes": self.n_modes, "skipped": self.skipped, "sent": list(self.sent)},
+                            snap["records"])  # fmt: skip
+
+    def done(self, _now: float) -> bool:
+        """The world's ``run_end`` came and no tick is complete."""
+        with self.assembler.cond:
+            return self.ended and not self.assembler.complete(self.assembler.k)
+
+    def finish(self) -> bool:
+        """At the run's end: the ``summary`` event (its half of the outcome)."""
+        key, payload = wire.landing_summary(self.keys, self.id, self.agent)
+        self.pub[key].put(payload)
+        _LOG.info("%s: run ended: %s (%d ticks fused without a decision, behind the world)", self.id,
+                  self.agent.outcome()["final_mode"], self.skipped)  # fmt: skip
+        if self.ckpt is not None:
+            self.ckpt.close()
+        return True
 
 
 def warm_up(sc, seed: int, index: int, policy: str) -> None:
     """Compile (or load from numba's cache) every kernel a tick may call, on a scratch world and agent, before
     the agent says it is up: a first compilation inside the run would outlast the world's step timeout. One
     tick of each sensor's rate compiles them all (numba compiles a kernel whole, every branch)."""
-    from swarm.step.landing import LandingAgent, LandingWorld, Rates
-
     world, agent = LandingWorld(sc, seed), LandingAgent(sc, seed, index, policy)
     uid = sc.uavs()[index].id
     for k in range(1, max(vars(Rates.of(sc)).values()) + 1):

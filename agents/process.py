@@ -115,6 +115,8 @@ def _target(e: Estimate) -> TargetEstimate:
 class AgentProcess:
     """One vehicle's on-board software over an open Zenoh session (module docstring)."""
 
+    batched = True  # its host takes the world's clock and batches, and may send CommandBatch messages
+
     def __init__(
         self,
         scenario,
