@@ -16,8 +16,8 @@
 
 Both classes are pure logic (no Zenoh): Zenoh callbacks feed them decoded messages; the agent host's loop
 polls its vehicles' assemblers (:meth:`AgentTickAssembler.poll`, waiting on their shared condition), the
-world's loop waits on :meth:`CommandBarrier.wait`; :meth:`AgentTickAssembler.next_tick` and
-:meth:`~AgentTickAssembler.take_partial` are the same rules for a consumer of one assembler. Every method
+world's loop waits on :meth:`CommandBarrier.wait`; :meth:`AgentTickAssembler.next_tick` is the same rule
+for a consumer of one assembler. Every method
 is thread-safe. Messages that do not fit (an old tick, a duplicate, a tick too far ahead) are dropped and
 counted, never raised into a callback.
 """
@@ -139,10 +139,11 @@ class AgentTickAssembler:
     lost, ticks complete without them and carry its latest estimate; when it is back, they are required
     again from the first estimate it publishes.
 
-    Counters (read-only, cumulative): ``stale`` (a tick already processed), ``duplicates`` (a second
+    Counters (:meth:`counts`, cumulative): ``stale`` (a tick already processed), ``duplicates`` (a second
     message of one kind for a pending tick; the first is kept), ``future`` (more than ``max_ahead`` ticks
     ahead), ``unexpected`` (``uwb``/``vision`` off this vehicle's slots, a message of another vehicle, a
-    message type an agent does not take).
+    message type an agent does not take), ``incomplete`` (a free-running tick taken without all of its
+    inputs, or skipped without its ``imu``), ``late`` (late fusion: kept for :meth:`take_late`).
     """
 
     def __init__(
@@ -473,21 +474,6 @@ class AgentTickAssembler:
         with self._cond:
             self._notify()
 
-    def take_partial(self) -> TickInputs | None:
-        """A free-running clock's way out of a tick that does not complete in time: the next tick that has
-        its ``imu``, with whatever else arrived (missing inputs counted as ``incomplete``, earlier ticks
-        without an ``imu`` skipped); ``None`` if no later ``imu`` arrived either. Messages of the returned
-        tick that come later are stale."""
-        with self._cond:
-            if self._next is None or self._closed:
-                return None
-            ready = sorted(t for t, f in self._frames.items() if f.imu is not None and t >= self._next)
-            if not ready:
-                return None
-            self._counts["incomplete"] += 1
-            self._skip_to(ready[0])
-            return self._take()
-
     def _skip_to(self, k: int) -> None:
         """Make tick ``k`` the next one, dropping the frames of the ticks before it (``_cond`` held)."""
         self._next = k
@@ -550,36 +536,6 @@ class AgentTickAssembler:
         """A snapshot of the drop counters."""
         with self._cond:
             return dict(self._counts)
-
-    @property
-    def stale(self) -> int:
-        """Messages of ticks already processed (or before the start of a joining agent)."""
-        return self.counts()["stale"]
-
-    @property
-    def duplicates(self) -> int:
-        """Second messages of one kind for one pending tick (the first is kept)."""
-        return self.counts()["duplicates"]
-
-    @property
-    def future(self) -> int:
-        """Messages more than ``max_ahead`` ticks ahead of the next expected tick."""
-        return self.counts()["future"]
-
-    @property
-    def unexpected(self) -> int:
-        """``uwb``/``vision`` off this vehicle's slots, messages of another vehicle, other message types."""
-        return self.counts()["unexpected"]
-
-    @property
-    def incomplete(self) -> int:
-        """Ticks taken without all their inputs (:meth:`take_partial`), or skipped without their ``imu``."""
-        return self.counts()["incomplete"]
-
-    @property
-    def late(self) -> int:
-        """Late fusion: ranges and frames kept for :meth:`take_late` after their tick was taken."""
-        return self.counts()["late"]
 
 
 class CommandBarrier:
@@ -739,23 +695,3 @@ class CommandBarrier:
         """A snapshot of the drop counters."""
         with self._cond:
             return dict(self._counts)
-
-    @property
-    def stale(self) -> int:
-        """Commands of ticks already released."""
-        return self.counts()["stale"]
-
-    @property
-    def duplicates(self) -> int:
-        """Second commands of one agent for one tick."""
-        return self.counts()["duplicates"]
-
-    @property
-    def future(self) -> int:
-        """Commands more than ``max_ahead`` ticks ahead."""
-        return self.counts()["future"]
-
-    @property
-    def unknown(self) -> int:
-        """Commands of agents not in ``agent_ids``."""
-        return self.counts()["unknown"]
