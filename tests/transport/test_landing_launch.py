@@ -261,6 +261,7 @@ def test_swarm_sim_mcap_writes_what_the_launched_processes_published(launched, t
     assert meta["recorder"]["source"] == "swarm sim" and "run_end" in meta
 
 
+@pytest.mark.alone  # a restart must beat the world's wait for its command: no test beside it under xdist
 def test_a_killed_landing_world_and_agent_come_back_and_the_run_still_equals_swarm_sim(tmp_path):
     """SIGKILL mid-run (lockstep, one process per UAV): first the world, then uav3's agent once the world is
     back. The launcher restarts each (``--max-restarts``): the world resumes from its checkpoint of the last

@@ -474,6 +474,7 @@ def test_a_world_whose_checkpoint_is_damaged_is_not_resumed_and_the_launcher_giv
     assert "Traceback" not in text
 
 
+@pytest.mark.alone  # its faults are sent while a paced run is on: no test beside it under xdist
 def test_faults_injected_at_run_time_reach_the_world_and_the_radios(tmp_path, sim_result):
     """``swarm fault`` during a lockstep run: a 5 s UWB dropout, a gyro bias step on the target and a camera
     loss of the chaser. The world applies each (logged) from the next tick, the dropout through the radio
