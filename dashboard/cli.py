@@ -111,6 +111,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     line) until SIGINT or SIGTERM, whose handlers it installs and restores. Returns 0 after a clean close;
     ConfigError / SwarmError for bad input or a session that cannot open."""
     from dashboard.app import DashboardApp, DashboardParams
+    from dashboard.drawer import drawer_of
     from swarm.errors import ConfigError
     from swarm.missions import mission_of
     from swarm.transport.keys import Keys, check_id
@@ -126,6 +127,7 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     if args.scenario is None:
         args.scenario = "docking"
     sc = mission_of(args.scenario).dashboard_scenario(args)
+    drawer_of(sc)  # a mission without a drawer is refused before a session opens
     zargs = zenoh_args_from(args)
     with open_session(zargs) as session:
         make = lambda: DashboardApp(sc, session, keys, args.host, args.port, params, args.process_id)  # noqa: E731

@@ -10,10 +10,9 @@ sensor delay) and the mothership (UWB) answer with ``fault`` events when they ap
 ``fault_refused`` event when it cannot (a ``sensor_delay`` in a lockstep run, a vehicle it does not know,
 a camera loss on a vehicle without a camera); the panel lists both (:func:`dashboard.panels.faults_markdown`).
 
-What the panel offers follows the world it talks to (:class:`FaultMenu`): a docking swarm's five kinds
-(:data:`DOCKING`), and a landing swarm's two (:data:`LANDING`, the kinds
-:attr:`~swarm.step.landing.LandingWorld.FAULTS` models: ``camera_loss`` hides the pad from a UAV's camera,
-``uwb_dropout`` loses its UWB replies, on one UAV or on every UAV, both applied by the landing world).
+What the panel offers follows the world it talks to (:class:`FaultMenu`): the kinds are the mission's
+(:attr:`swarm.missions.Mission.fault_menu`), the words its drawer's (:meth:`dashboard.drawer.MissionDrawer.
+fault_menu`: a docking swarm's in :mod:`dashboard.docking`, a landing swarm's in :mod:`dashboard.landing`).
 
 :func:`fault_of` and :func:`kind_hint` are pure (tested without a server); :class:`FaultPanel` is the Viser
 side.
@@ -32,12 +31,11 @@ import viser
 from dashboard import panels
 from dashboard.state import Snapshot
 from swarm.errors import ConfigError, MessageError
-from swarm.step.landing import LandingWorld
-from swarm.transport.messages import FAULT_KINDS, Fault
+from swarm.transport.messages import Fault
 
 __all__ = [
-    "DOCKING", "EVERY_CHASER", "EVERY_UAV", "FAULT_INPUTS", "LANDING", "FaultForm", "FaultMenu", "FaultPanel",
-    "fault_of", "kind_hint", "sent_text",
+    "EVERY_CHASER", "FAULT_INPUTS", "FaultForm", "FaultMenu", "FaultPanel", "fault_of", "kind_hint",
+    "sent_text",
 ]  # fmt: skip
 
 _LOG = logging.getLogger("dashboard.faults")
@@ -55,9 +53,6 @@ FAULT_INPUTS: dict[str, tuple[str, ...]] = {
 """The panel inputs each fault kind uses (the others are hidden and not sent). UWB faults have no vehicle:
 the mothership applies them to the whole radio network."""
 
-EVERY_UAV = "every UAV"
-"""A landing swarm's choice that sends ``vehicle = None`` (the landing world applies it to every UAV)."""
-
 LABELS: dict[str, str] = {
     "vehicle": "vehicle",
     "duration": "duration [s]",
@@ -73,30 +68,13 @@ _INPUT_OF_FIELD = {
     "rate_rad_s": "rate", "delay_s": "delay",
 }  # fmt: skip
 
-_HINTS = {
-    "uwb_dropout": "every UWB exchange of every vehicle fails (the mothership applies it)",
-    "nlos_burst": "each UWB exchange of every vehicle is an NLOS outlier with this probability (mothership)",
-    "camera_loss": "the camera sees no marker (the world applies it; chasers only)",
-    "gyro_bias_step": "a constant rate added to the gyro from the start on, for good (world)",
-    "sensor_delay": (
-        "imu and vision samples leave the world up to this late, so also out of order (world). "
-        "Free-running clocks only (realtime, scaled:N): a lockstep world refuses it"
-    ),
-}
-
-
-_LANDING_HINTS = {
-    "camera_loss": "the UAV's camera sees no pad marker (the landing world applies it)",
-    "uwb_dropout": "every UWB reply to the UAV is lost: no range (the landing world applies it)",
-}
-
 
 @dataclass(frozen=True)
 class FaultMenu:
     """The faults a world takes, as the panel offers them."""
 
-    inputs: Mapping[str, tuple[str, ...]]
-    """Each kind offered, in the panel's order, and the inputs it uses (the others hidden and not sent)."""
+    kinds: tuple[str, ...]
+    """Each kind offered, in the panel's order: the mission's ``fault_menu``."""
     hints: Mapping[str, str]
     """One line per kind on what it does and who applies it."""
     every: str
@@ -107,18 +85,12 @@ class FaultMenu:
     appliers: str
     """Who announces a fault applied, as the panel's sent line says it."""
 
-
-DOCKING = FaultMenu(
-    {k: FAULT_INPUTS[k] for k in FAULT_KINDS}, _HINTS, EVERY_CHASER, uwb_network=True,
-    appliers="world or mothership",
-)  # fmt: skip
-"""A docking swarm's world and mothership: every kind of :data:`~swarm.transport.messages.FAULT_KINDS`."""
-
-LANDING = FaultMenu(
-    {kind: ("vehicle", "duration", "start") for kind in LandingWorld.FAULTS}, _LANDING_HINTS, EVERY_UAV,
-    uwb_network=False, appliers="world",
-)  # fmt: skip
-"""A landing swarm's world: the kinds it models, each on one UAV or every UAV, for a window."""
+    @property
+    def inputs(self) -> dict[str, tuple[str, ...]]:
+        """Each kind offered and the inputs it uses (:data:`FAULT_INPUTS`; the others hidden and not sent),
+        a vehicle too when a UWB fault acts on the vehicles it names (not ``uwb_network``)."""
+        named = lambda uses: uses if self.uwb_network or "vehicle" in uses else ("vehicle", *uses)  # noqa: E731
+        return {kind: named(FAULT_INPUTS[kind]) for kind in self.kinds}
 
 
 @dataclass(frozen=True)
@@ -128,7 +100,7 @@ class FaultForm:
     kind: str
     """One of :data:`~swarm.transport.messages.FAULT_KINDS`."""
     vehicle: str = EVERY_CHASER
-    """A vehicle id, or the menu's ``every`` (:data:`EVERY_CHASER`, :data:`EVERY_UAV`)."""
+    """A vehicle id, or the menu's ``every`` (:data:`EVERY_CHASER`, a landing swarm's "every UAV")."""
     duration_s: object = 5.0
     """Length of the window [s] (the GUI's number; validated by ``Fault``)."""
     start_s: object = 0.0
@@ -146,7 +118,7 @@ def _error(field: str, why: str) -> ConfigError:
     return ConfigError(f"{label} ({field}): {why}" if label else f"{field}: {why}")
 
 
-def fault_of(form: FaultForm, menu: FaultMenu = DOCKING) -> Fault:
+def fault_of(form: FaultForm, menu: FaultMenu) -> Fault:
     """The :class:`Fault` the panel sends for ``form``: the inputs of its kind only (``menu.inputs``),
     ``start_s`` 0 as "at once", the gyro rate converted from deg/s to rad/s, validated by ``Fault`` itself.
     ConfigError naming the panel input, the wire field and the value, e.g. ``NLOS probability (probability):
@@ -177,7 +149,7 @@ def fault_of(form: FaultForm, menu: FaultMenu = DOCKING) -> Fault:
         raise _error(field, why) from None
 
 
-def kind_hint(kind: str, clock_mode: str | None, menu: FaultMenu = DOCKING) -> str:
+def kind_hint(kind: str, clock_mode: str | None, menu: FaultMenu) -> str:
     """One line on what ``kind`` does, who applies it, and (``sensor_delay``) whether this run's clock,
     as the world announced it in ``run_start``, lets it."""
     text = f"_{menu.hints.get(kind, '')}._"
@@ -188,7 +160,7 @@ def kind_hint(kind: str, clock_mode: str | None, menu: FaultMenu = DOCKING) -> s
     return text
 
 
-def sent_text(msg: Fault, listening: bool, at: str, menu: FaultMenu = DOCKING) -> str:
+def sent_text(msg: Fault, listening: bool, at: str, menu: FaultMenu) -> str:
     """The panel's line after a fault was published at wall time ``at``."""
     network = menu.uwb_network and msg.kind in ("uwb_dropout", "nlos_burst")
     who = "" if network else f" on {msg.vehicle or menu.every}"
@@ -203,8 +175,8 @@ class FaultPanel:
     """The Faults folder of the GUI: kind, vehicle, the kind's parameters, Inject, the last action and the
     faults applied or refused. ``send`` publishes a :class:`Fault`; ``listening`` says whether anyone
     subscribes to ``control/fault``. With ``send=None`` (a recording's playback) the panel only lists the
-    faults: its inputs and Inject are hidden. ``menu`` says which kinds the world takes (:data:`DOCKING`,
-    :data:`LANDING`)."""
+    faults: its inputs and Inject are hidden. ``menu`` says which kinds the world takes (the mission drawer's
+    :attr:`~dashboard.drawer.MissionDrawer.faults`)."""
 
     def __init__(
         self,
@@ -212,7 +184,7 @@ class FaultPanel:
         send: Callable[[Fault], object] | None,
         listening: Callable[[], bool],
         vehicles: Sequence[str],
-        menu: FaultMenu = DOCKING,
+        menu: FaultMenu,
     ) -> None:
         self._send = send
         self.listening = listening

@@ -22,8 +22,9 @@ the world's clock and events: docs/protocol.md, "Processes and topology"), store
   projects into the image but nothing was detected (hidden, too small, not in this frame), red when the pad
   is out of the image.
 
-The pure functions (geometry, colours) are tested without a server; :class:`LandingSceneView` has the
-interface of :class:`dashboard.app.SceneView` so that :class:`dashboard.app.DashboardApp` drives either.
+Panels: a row per UAV (distance and altitude to its pad, pad markers seen, rotor energy), the selected
+UAV's state and its distance to the pad. The pure functions (geometry, colours) are tested without a
+server; :class:`LandingDrawer` is the landing mission's drawer (:mod:`dashboard.drawer`).
 """
 
 from __future__ import annotations
@@ -33,10 +34,18 @@ import math
 import numpy as np
 import viser
 
-from dashboard import kinds, mapping
-from dashboard import nodes as scene_nodes
-from dashboard.nodes import set_if_changed
-from dashboard.radio import RadioSnap
+from dashboard import kinds, mapping, panels
+from dashboard.drawer import (
+    STALE,
+    MissionDrawer,
+    MissionScene,
+    VehicleNodes,
+    update_color,
+    update_estimate,
+    update_trails,
+    update_truth,
+)
+from dashboard.faults import FaultMenu
 from dashboard.state import AgentSnap, Snapshot
 from swarm.core import rotations as rot
 from swarm.core.pad_vision import PadBoardParams, PadCameraParams
@@ -46,6 +55,8 @@ from swarm.transport.keys import check_id
 
 __all__ = [
     "DRAW_SCALE",
+    "EVERY_UAV",
+    "LandingDrawer",
     "LandingSceneView",
     "camera_wxyz",
     "frame_landing_scene",
@@ -63,7 +74,13 @@ FRUSTUM_MIN_M = 0.3
 """Shortest frustum drawn [m] (a UAV on its pad still shows its camera)."""
 PAD_COLOR = (236, 240, 241)
 MARKER_COLOR = (30, 30, 30)
-ANCHOR_COLOR = (192, 57, 43)
+EVERY_UAV = "every UAV"
+"""The Faults panel's choice that sends ``vehicle = None`` (the landing world applies it to every UAV)."""
+HINTS = {
+    "camera_loss": "the UAV's camera sees no pad marker (the landing world applies it)",
+    "uwb_dropout": "every UWB reply to the UAV is lost: no range (the landing world applies it)",
+}
+"""The Faults panel's line on each kind the landing world applies."""
 
 
 def uav_vehicles(sc: LandingScenario) -> dict[str, tuple[str, str | None]]:
@@ -177,10 +194,11 @@ def _draw_pad(scene: viser.SceneApi, uav: Uav, board: PadBoardParams):
     return frame
 
 
-class _UavNodes:
+class _UavNodes(VehicleNodes):
     """The scene nodes of one UAV and what was last pushed to them."""
 
     def __init__(self, scene: viser.SceneApi, a: AgentSnap, sc: LandingScenario) -> None:
+        super().__init__()
         base = f"/uavs/{check_id(a.agent_id)}"
         self.truth = scene.add_frame(f"{base}/truth", show_axes=False, visible=False)
         scene.add_frame(f"{base}/truth/quad", show_axes=False, scale=DRAW_SCALE)
@@ -194,24 +212,12 @@ class _UavNodes:
             receive_shadow=False,
         )  # fmt: skip
         self.estimate = scene.add_frame(f"{base}/estimate", axes_length=1.0, axes_radius=0.04, visible=False)
-        self.cov = scene.add_icosphere(
-            f"{base}/cov", radius=1.0, color=(52, 73, 94), opacity=0.2, subdivisions=2, visible=False,
-            cast_shadow=False, receive_shadow=False,
-        )  # fmt: skip
-        empty = np.zeros((1, 2, 3))
-        self.trail_truth = scene.add_line_segments(
-            f"{base}/trail/truth", empty, (90, 90, 90), thickness=2.0, thickness_units="screen", visible=False
-        )
-        self.trail_estimate = scene.add_line_segments(
-            f"{base}/trail/estimate", empty, (52, 152, 219), thickness=1.5, thickness_units="screen",
-            visible=False,
-        )  # fmt: skip
-        self.truth_msg: object = None
-        self.estimate_msg: object = None
-        self.cov_key: object = None
-        self.color: object = None
+        self.add_cov_and_trails(scene, base, 0.2)
         self.fov_key: object = None
-        self.trail_versions: tuple[int, int] | None = None
+
+    def stale(self) -> None:
+        super().stale()
+        self.fov_key = STALE
 
 
 class _QuadKind:
@@ -221,74 +227,33 @@ class _QuadKind:
         self.p = sc.kinds.quadrotor
 
 
-_STALE = object()
-
-
-class LandingSceneView:
+class LandingSceneView(MissionScene):
     """The 3D scene of a landing swarm (module docstring): pads and anchors at start, each UAV on first
-    sight. The interface of :class:`dashboard.app.SceneView`."""
+    sight."""
+
+    ANCHOR_RADIUS_M = 0.25
+    ANCHOR_LABEL_Z_M = 0.5
 
     def __init__(self, server: viser.ViserServer, sc: LandingScenario, params) -> None:
-        self.server = server
-        self.sc = sc
-        self.params = params
-        self.nodes: dict[str, _UavNodes] = {}
-        self.n_sigma = params.n_sigma
-        self.show_trails = True
+        super().__init__(server, sc, params)
         self.uavs = {u.id: u for u in sc.uavs()}
-        self._anchors_version: int | None = None
-        self._anchor_nodes: list[object] = []
-        self._anchor_labels: dict[int, viser.LabelHandle] = {}
-        self._run: int | None = None
         self.pad_frames = {u.id: _draw_pad(server.scene, u, sc.pad.board) for u in self.uavs.values()}
         pf = sc.platform
         self.platform_id = pf.id if pf.enabled else None
         """A moving pad's robot: its estimate moves the (one) pad, it is not drawn as a UAV."""
+        self.hidden = frozenset({self.platform_id} - {None})
         self.pad_now: dict[str, np.ndarray] = {}
         """Each moving pad where its robot's latest estimate puts it (nav) [m]."""
         self._platform_msg: object = None
 
-    def _draw_anchors(self, ids: tuple[int, ...], positions: np.ndarray) -> None:
-        for node in self._anchor_nodes:
-            node.remove()  # type: ignore[attr-defined]
-        self._anchor_nodes = []
-        self._anchor_labels = {}
-        for anchor_id, p in zip(ids, positions, strict=True):
-            node = self.server.scene.add_icosphere(
-                mapping.anchor_node(anchor_id), radius=0.25, color=ANCHOR_COLOR, position=tuple(p)
-            )
-            self._anchor_nodes.append(node)
-            self._anchor_labels[anchor_id] = self.server.scene.add_label(
-                f"{mapping.anchor_node(anchor_id)}/label", f"anchor {anchor_id}", position=(0.0, 0.0, 0.5)
-            )
-
-    def _label_anchors(self, rates: RadioSnap) -> None:
-        """On a TDoA radio, each anchor's label says its packets a second (the best tag's)."""
-        if rates.mode == "twr":
-            return
-        heard = rates.anchor_hz()
-        for anchor_id, label in self._anchor_labels.items():
-            hz = heard.get(anchor_id)
-            set_if_changed(label, "text", f"anchor {anchor_id}" + ("" if hz is None else f" · {hz:.0f}/s"))
-
     def update(self, snap: Snapshot, trails_due: bool) -> None:
-        if snap.anchors_version != self._anchors_version:
-            self._anchors_version = snap.anchors_version
-            self._draw_anchors(*snap.anchors)
-        if snap.radio is not None:
-            self._label_anchors(snap.radio)
-        new_run = snap.run != self._run
-        self._run = snap.run
         robot = snap.agents.get(self.platform_id) if self.platform_id is not None else None
         if robot is not None:  # first: the UAVs' frustums look for the pad where it is now
             self._move_pad(robot)
-        for agent_id, a in snap.agents.items():
-            if agent_id == self.platform_id:
-                continue
-            nodes = self.nodes.get(agent_id)
-            if nodes is None:
-                nodes = self.nodes[agent_id] = _UavNodes(self.server.scene, a, self.sc)
-            self._update_uav(nodes, a, trails_due or new_run)
+        super().update(snap, trails_due)
+
+    def add_vehicle(self, a: AgentSnap) -> _UavNodes:
+        return _UavNodes(self.server.scene, a, self.sc)
 
     def _move_pad(self, a: AgentSnap) -> None:
         """The moving pad to its robot's latest estimate: the position at the deck's height, the heading."""
@@ -305,25 +270,13 @@ class LandingSceneView:
     def invalidate(self) -> None:
         """Push everything again at the next frame (a playback's backward seek)."""
         self._platform_msg = None
-        self._anchors_version = None
-        self._run = None
-        for nodes in list(self.nodes.values()):
-            nodes.truth_msg = nodes.estimate_msg = nodes.cov_key = nodes.color = nodes.fov_key = _STALE
-            nodes.trail_versions = None
+        super().invalidate()
 
-    def set_show_trails(self, show: bool) -> None:
-        self.show_trails = show
-        for nodes in list(self.nodes.values()):
-            nodes.trail_versions = None
-
-    def trail_versions(self) -> dict[str, tuple[int, int]]:
-        return {k: n.trail_versions for k, n in self.nodes.items() if n.trail_versions is not None}
-
-    def _update_uav(self, nodes: _UavNodes, a: AgentSnap, trails_due: bool) -> None:
+    def update_vehicle(self, nodes: _UavNodes, a: AgentSnap, snap: Snapshot, trails_due: bool) -> None:
         uav = self.uavs.get(a.agent_id)
-        scene_nodes.update_truth(nodes, a)
-        scene_nodes.update_color(nodes, a, "uav")
-        scene_nodes.update_estimate(nodes, a, self.n_sigma, trails_due)
+        update_truth(nodes, a)
+        update_color(nodes, a, "uav")
+        update_estimate(nodes, a, self.n_sigma, trails_due)
         if a.truth is not None and uav is not None:
             cam = self.sc.camera
             pad = self.pad_now.get(uav.id, np.asarray(uav.pad_m, float))
@@ -337,4 +290,37 @@ class LandingSceneView:
                 nodes.fov.color = mapping.FOV_COLORS[state]
                 nodes.fov.scale = depth
         if trails_due and a.truth_trail is not None:
-            scene_nodes.update_trails(nodes, a, self.show_trails)
+            update_trails(nodes, a, self.show_trails)
+
+
+class LandingDrawer(MissionDrawer):
+    """A landing swarm: UAVs and their pads, the anchors around them, no mothership."""
+
+    title = " · landing"
+    selection = "UAV"
+    status_roles = ("world",)
+    plot_title = "distance to the pad"
+    plot_series = ({"label": "t [s]"}, {"label": "to pad [m]", "stroke": "#2c3e50", "width": 2})
+    mode_title = "mode: -1 ABORT · 1 CRUISE · 2 DEVIATE, CLIMB · 3 DESCEND · 4 FINAL · 5 LANDED"
+
+    def __init__(self, sc: LandingScenario, mission) -> None:
+        super().__init__(sc, mission)
+        self.vehicles = uav_vehicles(sc)
+        self.anchors_m = np.array(sc.uwb.anchors_m, dtype=float)
+        self.selectable = sorted(self.vehicles, key=panels.natural_key)
+        self.pads = {u.id: u.pad_m for u in sc.uavs()}
+
+    @classmethod
+    def fault_menu(cls, kinds) -> FaultMenu:
+        """The landing world's faults, each on one UAV or every UAV (a UWB dropout too), for a window."""
+        return FaultMenu(tuple(kinds), HINTS, EVERY_UAV, uwb_network=False, appliers="world")
+
+    def draw_scene(self, server: viser.ViserServer, params) -> LandingSceneView:
+        frame_landing_scene(server, self.sc)
+        return LandingSceneView(server, self.sc, params)
+
+    def table(self, snap: Snapshot) -> str:
+        return panels.landing_table(snap, self.pads)
+
+    def selected_markdown(self, agent_id: str | None, a: AgentSnap | None) -> str:
+        return panels.landing_uav_markdown(agent_id, a, self.pads)

@@ -212,6 +212,9 @@ def test_the_toy_refuses_what_it_does_not_have(toy, tmp_path, capsys):
     # no processes are launched for the toy: its Mission names no launch_entry
     assert main(["launch", str(path), "--headless"]) == 2
     assert "mission 'toy' has no processes to launch" in capsys.readouterr().err
+    # nor a drawing: its Mission names no dashboard_drawer, so the dashboard refuses it
+    assert main(["dashboard", str(path), "--port", "0"]) == 2
+    assert "mission 'toy' has no dashboard drawer" in capsys.readouterr().err
 
 
 def test_a_toy_campaign_pairs_its_policies_through_the_one_campaign_runner(toy, tmp_path, capsys):

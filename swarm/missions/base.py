@@ -67,8 +67,8 @@ class Mission:
     """``swarm compile``'s chain of this mission, ``"module:function"``: ``() -> None`` runs its kernels once
     on scratch objects, so numba's cache holds them (:mod:`swarm.cli.compile`); None: nothing to compile."""
     dashboard_drawer: ClassVar[str | None] = None
-    """Which of the dashboard's scene drawers draws it: ``"docking"`` (``dashboard/app.py``'s ``SceneView``)
-    or ``"landing"`` (``dashboard/landing.py``); None: the dashboard has none."""
+    """Its dashboard drawer, ``"module:Class"`` of a :class:`dashboard.drawer.MissionDrawer` (its scene,
+    panels and fault menu); None: the dashboard refuses the mission."""
     campaign_entry: ClassVar[str | None] = None
     """Its campaign part, ``"module:NAME"`` of a :class:`~swarm.montecarlo.campaign.CampaignMission`; None:
     the campaign of :meth:`run_one`'s summaries (:meth:`campaign`)."""

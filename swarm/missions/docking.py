@@ -24,7 +24,7 @@ class DockingMission(Mission):
     sim_entry = "swarm.cli.sim:run_docking"
     launch_entry = "swarm.cli.launch:run_docking"
     compile_entry = "swarm.cli.compile:docking_kernels"
-    dashboard_drawer = "docking"
+    dashboard_drawer = "dashboard.docking:DockingDrawer"
     campaign_entry = "swarm.montecarlo.campaign:DOCKING"
 
     def scenario_keys(self) -> frozenset[str]:

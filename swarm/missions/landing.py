@@ -21,7 +21,7 @@ class LandingMission(Mission):
     sim_entry = "swarm.cli.sim:run_landing"
     launch_entry = "swarm.cli.launch:run_landing"
     compile_entry = "swarm.cli.compile:landing_kernels"
-    dashboard_drawer = "landing"
+    dashboard_drawer = "dashboard.landing:LandingDrawer"
     campaign_entry = "swarm.montecarlo.landing:CAMPAIGN"
 
     def scenario_keys(self) -> frozenset[str]:

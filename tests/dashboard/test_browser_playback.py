@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
-from dashboard.app import _frame_the_scene
+from dashboard.docking import frame_docking_scene
 from swarm.scenario import load_scenario
 from swarm.transport.recording import read_recording
 from tests.dashboard.conftest import ARTIFACTS, START_TIMEOUT_S, choose
@@ -114,7 +114,7 @@ def _steady_screenshot(pg, path: Path) -> np.ndarray:
 def _camera() -> tuple[np.ndarray, np.ndarray]:
     """The dashboard's initial camera (position, look-at) for the docking scenario, from its own code."""
     server = SimpleNamespace(scene=MagicMock(), initial_camera=SimpleNamespace())
-    _frame_the_scene(server, load_scenario("docking"))
+    frame_docking_scene(server, load_scenario("docking"))
     return np.array(server.initial_camera.position), np.array(server.initial_camera.look_at)
 
 

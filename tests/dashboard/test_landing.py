@@ -14,7 +14,6 @@ import pytest
 
 from dashboard import kinds, landing, panels
 from dashboard.app import DashboardApp, DashboardParams
-from dashboard.faults import LANDING
 from dashboard.mapping import FOV_COLORS, MODE_COLORS
 from dashboard.playback import Recording, load_recording, scenario_of
 from dashboard.state import SwarmState
@@ -190,7 +189,10 @@ def test_a_landing_recording_is_drawn_with_its_landing_scenario(tmp_path, sc):
         assert app.scene.nodes["uav1"].fov.color == FOV_COLORS["seen"]
         assert not app.gui.buttons  # the landing world takes no run control
         # a recording's Faults panel: the landing world's kinds, the recorded faults listed, nothing to inject
-        assert app.gui.faults.menu is LANDING and tuple(app.gui.faults.kind.options) == LandingWorld.FAULTS
+        assert (
+            app.gui.faults.menu == landing.LandingDrawer.fault_menu(LandingWorld.FAULTS)
+            and tuple(app.gui.faults.kind.options) == LandingWorld.FAULTS
+        )
         assert not app.gui.faults.button.visible and app.gui.faults.log.content == "no fault applied yet"
         app.player.seek(0.5)  # backward: CRUISE, no markers yet
         app.frame()
