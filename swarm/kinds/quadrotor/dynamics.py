@@ -32,6 +32,7 @@ import math
 import numba
 import numpy as np
 
+from swarm.core._fma_nb import matvec3, tmatvec3
 from swarm.kinds.quadrotor.params import AirframeParams
 
 U_N = 4
@@ -87,29 +88,35 @@ def _rotmat(q):
 
 
 @numba.njit(cache=True)
-def _derivative(x, T, tau, kp, out):
-    """``dx/dt`` of the truth row under thrust ``T`` [N] and body torque ``tau`` [N m]."""
-    q = x[6:10]
-    w = x[10:13]
-    R = _rotmat(q)
+def _derivative(x, T, t0, t1, t2, kp, out):
+    """``dx/dt`` of the truth row under thrust ``T`` [N] and body torque ``(t0, t1, t2)`` [N m]. In registers:
+    the rotation's products are those ``R.T @ v`` and ``R @ f`` computed on the BLAS, to the bit
+    (:mod:`swarm.core._fma_nb`)."""
+    qx, qy, qz, qw = x[6], x[7], x[8], x[9]
+    # _rotmat's entries
+    r00, r01, r02 = 1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)
+    r10, r11, r12 = 2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)
+    r20, r21, r22 = 2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)
     m = kp[KP_MASS]
-    vb = R.T @ x[3:6]
-    fb = np.array([-kp[KP_DRAG] * vb[0], -kp[KP_DRAG + 1] * vb[1], T - kp[KP_DRAG + 2] * vb[2]])
-    a = R @ fb / m
-    out[0:3] = x[3:6]
-    out[3] = a[0]
-    out[4] = a[1]
-    out[5] = a[2] - kp[KP_G]
-    qx, qy, qz, qw = q[0], q[1], q[2], q[3]
-    out[6] = 0.5 * (qw * w[0] + qy * w[2] - qz * w[1])
-    out[7] = 0.5 * (qw * w[1] + qz * w[0] - qx * w[2])
-    out[8] = 0.5 * (qw * w[2] + qx * w[1] - qy * w[0])
-    out[9] = -0.5 * (qx * w[0] + qy * w[1] + qz * w[2])
-    J = kp[KP_J : KP_J + 3]
-    Jw = J * w
-    out[10] = (tau[0] - (w[1] * Jw[2] - w[2] * Jw[1])) / J[0]
-    out[11] = (tau[1] - (w[2] * Jw[0] - w[0] * Jw[2])) / J[1]
-    out[12] = (tau[2] - (w[0] * Jw[1] - w[1] * Jw[0])) / J[2]
+    v0, v1, v2 = x[3], x[4], x[5]
+    vb0 = tmatvec3(r00, r10, r20, v0, v1, v2)  # R^T v
+    vb1 = tmatvec3(r01, r11, r21, v0, v1, v2)
+    vb2 = tmatvec3(r02, r12, r22, v0, v1, v2)
+    f0, f1, f2 = -kp[KP_DRAG] * vb0, -kp[KP_DRAG + 1] * vb1, T - kp[KP_DRAG + 2] * vb2
+    out[0], out[1], out[2] = v0, v1, v2
+    out[3] = matvec3(r00, r01, r02, f0, f1, f2) / m  # R f / m
+    out[4] = matvec3(r10, r11, r12, f0, f1, f2) / m
+    out[5] = matvec3(r20, r21, r22, f0, f1, f2) / m - kp[KP_G]
+    w0, w1, w2 = x[10], x[11], x[12]
+    out[6] = 0.5 * (qw * w0 + qy * w2 - qz * w1)
+    out[7] = 0.5 * (qw * w1 + qz * w0 - qx * w2)
+    out[8] = 0.5 * (qw * w2 + qx * w1 - qy * w0)
+    out[9] = -0.5 * (qx * w0 + qy * w1 + qz * w2)
+    J0, J1, J2 = kp[KP_J], kp[KP_J + 1], kp[KP_J + 2]
+    Jw0, Jw1, Jw2 = J0 * w0, J1 * w1, J2 * w2
+    out[10] = (t0 - (w1 * Jw2 - w2 * Jw1)) / J0
+    out[11] = (t1 - (w2 * Jw0 - w0 * Jw2)) / J1
+    out[12] = (t2 - (w0 * Jw1 - w1 * Jw0)) / J2
 
 
 @numba.njit(cache=True)
@@ -119,38 +126,51 @@ def quadrotor_truth_step(x, s, u, kp, dt):
     n = int(kp[KP_SUB])
     h = dt / n
     decay = 1.0 - math.exp(-h / kp[KP_TAU])
-    k1, k2, k3, k4 = np.empty(13), np.empty(13), np.empty(13), np.empty(13)
-    tmp = np.empty(13)
+    work = np.empty((5, 13))  # one allocation a tick: the four RK4 slopes and the stage
+    k1, k2, k3, k4, tmp = work[0], work[1], work[2], work[3], work[4]
     energy = 0.0
     floor = kp[KP_GROUND] + kp[KP_GEAR]
+    h2, h6 = 0.5 * h, h / 6.0
     for _ in range(n):
-        w2 = np.empty(4)
+        w2_0 = w2_1 = w2_2 = w2_3 = 0.0
         for i in range(4):
             cmd = min(max(u[i], 0.0), kp[KP_WMAX])
             s[S_ROTORS + i] += (cmd - s[S_ROTORS + i]) * decay
             om = s[S_ROTORS + i]
-            w2[i] = om * om
+            if i == 0:
+                w2_0 = om * om
+            elif i == 1:
+                w2_1 = om * om
+            elif i == 2:
+                w2_2 = om * om
+            else:
+                w2_3 = om * om
             energy += kp[KP_KQ] * om * om * om / kp[KP_EFF] * h
-        wr = np.zeros(4)
-        for r in range(4):
-            for c in range(4):
-                wr[r] += kp[KP_MIX + 4 * r + c] * w2[c]
-        T = wr[0]
-        tau = wr[1:4]
+        # wr = M w2, summed from 0.0 column by column as the loop over a zeroed array did
+        M = KP_MIX
+        T = 0.0 + kp[M] * w2_0 + kp[M + 1] * w2_1 + kp[M + 2] * w2_2 + kp[M + 3] * w2_3
+        t0 = 0.0 + kp[M + 4] * w2_0 + kp[M + 5] * w2_1 + kp[M + 6] * w2_2 + kp[M + 7] * w2_3
+        t1 = 0.0 + kp[M + 8] * w2_0 + kp[M + 9] * w2_1 + kp[M + 10] * w2_2 + kp[M + 11] * w2_3
+        t2 = 0.0 + kp[M + 12] * w2_0 + kp[M + 13] * w2_1 + kp[M + 14] * w2_2 + kp[M + 15] * w2_3
         if s[S_GROUND] != 0.0 and T <= kp[KP_MASS] * kp[KP_G]:
             x[3:6] = 0.0  # resting on its skids
             x[10:13] = 0.0
             continue
-        _derivative(x, T, tau, kp, k1)
-        tmp[:] = x + 0.5 * h * k1
-        _derivative(tmp, T, tau, kp, k2)
-        tmp[:] = x + 0.5 * h * k2
-        _derivative(tmp, T, tau, kp, k3)
-        tmp[:] = x + h * k3
-        _derivative(tmp, T, tau, kp, k4)
-        x[:13] += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        _derivative(x, T, t0, t1, t2, kp, k1)
+        for i in range(13):
+            tmp[i] = x[i] + h2 * k1[i]
+        _derivative(tmp, T, t0, t1, t2, kp, k2)
+        for i in range(13):
+            tmp[i] = x[i] + h2 * k2[i]
+        _derivative(tmp, T, t0, t1, t2, kp, k3)
+        for i in range(13):
+            tmp[i] = x[i] + h * k3[i]
+        _derivative(tmp, T, t0, t1, t2, kp, k4)
+        for i in range(13):
+            x[i] += h6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
         nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
-        x[6:10] /= nq
+        for i in range(6, 10):
+            x[i] /= nq
         if x[2] <= floor:
             x[2] = floor
             if x[5] < 0.0 or s[S_GROUND] != 0.0:
