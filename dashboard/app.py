@@ -181,7 +181,7 @@ class GuiView:
 
     def invalidate(self) -> None:
         """Push the event log, the fault log and the plots again at their next update (the store was
-        restored, :meth:`SceneView.invalidate`)."""
+        restored, :meth:`~dashboard.drawer.MissionScene.invalidate`)."""
         self._events_version = None
         self._plot_key = None
         self.faults.invalidate()

@@ -29,9 +29,11 @@ from dashboard.drawer import (
 )
 from dashboard.drawer import set_if_changed as _set
 from dashboard.faults import EVERY_CHASER, FaultMenu
+from dashboard.panels import DASH, cell, fmt
 from dashboard.state import AgentSnap, Snapshot
+from swarm.transport.messages import Guidance
 
-__all__ = ["DockingDrawer", "DockingScene", "frame_docking_scene"]
+__all__ = ["DockingDrawer", "DockingScene", "agents_table", "decision_markdown", "frame_docking_scene"]
 
 HINTS = {
     "uwb_dropout": "every UWB exchange of every vehicle fails (the mothership applies it)",
@@ -186,6 +188,60 @@ class DockingScene(MissionScene):
                 _set(handle, "visible", True)
 
 
+def agents_table(snap: Snapshot) -> str:
+    """Markdown table, one row per vehicle: role, mode, estimated range to its target [m], largest position
+    sigma [cm], rejected measurements, and whether its agent process is alive (``alive``, ``lost``, or
+    ``unseen`` before its liveliness token ever appeared)."""
+    lines = [
+        "| agent | role | mode | range [m] | σ [cm] | rejected | agent process |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for agent_id in sorted(snap.agents, key=panels.natural_key):
+        a = snap.agents[agent_id]
+        g = a.guidance
+        role = a.role
+        mode = g.mode if g is not None else DASH
+        rng = fmt(g.range_m if g is not None else None, 3)
+        sigma = fmt(a.estimate.sigma_pos_max_m if a.estimate is not None else None, 2, 100.0)
+        cells = (agent_id, role, mode, rng, sigma, panels.rejected_text(a), a.alive)
+        lines.append("| " + " | ".join(cell(c) for c in cells) + " |")
+    return "\n".join(lines)
+
+
+_MATRIX_KEYS = (("A11", None, None), (None, "A22", "A23"), (None, "A32", "A33"))
+
+
+def decision_markdown(agent_id: str | None, guidance: Guidance | None) -> str:
+    """The latest pass of Algorithm 1 of chaser ``agent_id``: the transition probabilities ``A_ij`` between
+    APPROACH (1), REORIENT (2) and ALIGN (3), the steady state ``pi`` of the REORIENT/ALIGN chain, and the
+    inputs (``r``, ``d``, ``||q_e||``, ``sigma``) and radii after the pass (paper section V, Algorithm 1)."""
+    if agent_id is None:
+        return "no chaser"
+    if guidance is None:
+        return f"**{agent_id}**: no guidance yet"
+    head = (
+        f"**{agent_id}** · {guidance.mode} · r = {fmt(guidance.range_m)} m · "
+        f"r2 = {fmt(guidance.r2_m)} m · r1 = {fmt(guidance.r1_m)} m"
+    )
+    d = guidance.decision
+    if d is None:
+        return f"{head}  \nno Algorithm 1 pass yet (outside r_t, or the fixed policy)"
+    rows = ["| A | 1 | 2 | 3 |", "|---|---|---|---|"]
+    for i, keys in enumerate(_MATRIX_KEYS, start=1):
+        rows.append(f"| {i} | " + " | ".join(DASH if k is None else fmt(d.get(k)) for k in keys) + " |")
+    inputs = (
+        f"pass at t = {fmt(d.get('t_s'), 2)} s, r = {fmt(d.get('r_m'))} m  \n"
+        f"π1 = {fmt(d.get('pi1'))} · π2 = {fmt(d.get('pi2'))}  \n"
+        f"d = {fmt(d.get('d'), 2)} · ‖q_e‖ = {fmt(d.get('qe_vec_norm'), 3)} · "
+        f"σ_pos = {fmt(d.get('sigma_pos_max_m'), 2, 100.0)} cm · "
+        f"σ_uwb = {fmt(d.get('sigma_uwb_m'), 2, 100.0)} cm  \n"
+        f"r_t = {fmt(d.get('r_t_m'))} m · r_d = {fmt(d.get('r_d_m'))} m → "
+        f"r2 = {fmt(d.get('r2_m'))} m, r1 = {fmt(d.get('r1_m'))} m"
+    )
+    reason = f"  \n_{cell(guidance.reason)}_" if guidance.reason else ""
+    return f"{head}\n\n" + "\n".join(rows) + f"\n\n{inputs}{reason}"
+
+
 class DockingDrawer(MissionDrawer):
     """A docking swarm: chasers and targets, the mothership's anchors, Algorithm 1's decisions."""
 
@@ -217,7 +273,7 @@ class DockingDrawer(MissionDrawer):
         return DockingScene(server, self.sc, params)
 
     def table(self, snap: Snapshot) -> str:
-        return panels.agents_table(snap)
+        return agents_table(snap)
 
     def selected_markdown(self, agent_id: str | None, a: AgentSnap | None) -> str:
-        return panels.decision_markdown(agent_id, a.guidance if a else None)
+        return decision_markdown(agent_id, a.guidance if a else None)

@@ -30,6 +30,7 @@ server; :class:`LandingDrawer` is the landing mission's drawer (:mod:`dashboard.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import viser
@@ -46,6 +47,7 @@ from dashboard.drawer import (
     update_truth,
 )
 from dashboard.faults import FaultMenu
+from dashboard.panels import DASH, cell, fmt
 from dashboard.state import AgentSnap, Snapshot
 from swarm.core import rotations as rot
 from swarm.core.pad_vision import PadBoardParams, PadCameraParams
@@ -63,6 +65,8 @@ __all__ = [
     "frustum_depth",
     "frustum_mesh",
     "frustum_state",
+    "landing_table",
+    "landing_uav_markdown",
     "pad_pixel",
     "pad_wxyz",
     "uav_vehicles",
@@ -293,6 +297,64 @@ class LandingSceneView(MissionScene):
             update_trails(nodes, a, self.show_trails)
 
 
+def _pad_markers(a: AgentSnap) -> str:
+    """Pad markers in the UAV's latest camera frame (its rows are marker corners, four a marker)."""
+    return DASH if a.vision_rows is None else str(a.vision_rows // 4)
+
+
+def _altitude(a: AgentSnap, pads: Mapping[str, Sequence[float]]) -> float | None:
+    pad = pads.get(a.agent_id)
+    return None if a.truth is None or pad is None else float(a.truth.p_nav[2]) - float(pad[2])
+
+
+def landing_table(snap: Snapshot, pads: Mapping[str, Sequence[float]]) -> str:
+    """Markdown table of a landing swarm, one row per UAV: mode, estimated horizontal distance to its pad
+    [m] (the guidance's ``range_m``), true altitude above its pad [m] (``pads``: each UAV's pad position),
+    largest position sigma [cm], pad markers detected in its latest camera frame, rotor energy so far [kJ]
+    (``Truth.effort`` of a quadrotor, J), and whether its agent process is alive."""
+    lines = [
+        "| UAV | mode | to pad [m] | altitude [m] | σ [cm] | pad markers | energy [kJ] | agent process |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for agent_id in sorted(snap.agents, key=panels.natural_key):
+        if agent_id not in pads:  # (a moving pad's robot shares its estimate: not a UAV)
+            continue
+        a = snap.agents[agent_id]
+        g = a.guidance
+        cells = (
+            agent_id,
+            g.mode if g is not None else DASH,
+            fmt(g.range_m if g is not None else None, 2),
+            fmt(_altitude(a, pads), 2),
+            fmt(a.estimate.sigma_pos_max_m if a.estimate is not None else None, 1, 100.0),
+            _pad_markers(a),
+            fmt(a.truth.effort if a.truth is not None else None, 2, 1e-3),
+            a.alive,
+        )
+        lines.append("| " + " | ".join(cell(c) for c in cells) + " |")
+    return "\n".join(lines)
+
+
+def landing_uav_markdown(
+    agent_id: str | None, a: AgentSnap | None, pads: Mapping[str, Sequence[float]]
+) -> str:
+    """The selected UAV of a landing: mode, distance to its pad, altitude, speed, energy, the pad markers of
+    its latest camera frame and the reason of its latest mode switch."""
+    if agent_id is None or a is None:
+        return "no UAV"
+    g = a.guidance
+    if g is None and a.truth is None:
+        return f"**{agent_id}**: nothing heard yet"
+    speed = float(np.linalg.norm(a.truth.v_nav)) if a.truth is not None else None
+    energy = fmt(a.truth.effort if a.truth is not None else None, 2, 1e-3)
+    text = (
+        f"**{agent_id}** · {g.mode if g is not None else DASH} · {fmt(g.range_m if g else None, 2)} m to "
+        f"its pad  \naltitude {fmt(_altitude(a, pads), 2)} m · speed {fmt(speed, 2)} m/s · energy {energy} "
+        f"kJ · pad markers in the latest frame {_pad_markers(a)}"
+    )
+    return text + (f"  \n_{cell(g.reason)}_" if g is not None and g.reason else "")
+
+
 class LandingDrawer(MissionDrawer):
     """A landing swarm: UAVs and their pads, the anchors around them, no mothership."""
 
@@ -320,7 +382,7 @@ class LandingDrawer(MissionDrawer):
         return LandingSceneView(server, self.sc, params)
 
     def table(self, snap: Snapshot) -> str:
-        return panels.landing_table(snap, self.pads)
+        return landing_table(snap, self.pads)
 
     def selected_markdown(self, agent_id: str | None, a: AgentSnap | None) -> str:
-        return panels.landing_uav_markdown(agent_id, a, self.pads)
+        return landing_uav_markdown(agent_id, a, self.pads)

@@ -131,11 +131,6 @@ class Recording:
         return self.metadata.get("run_start", {}).get("scenario") or None
 
     @property
-    def mission(self) -> str:
-        """The recorded run's mission (its ``run_start``): ``landing`` for a landing swarm, else docking."""
-        return self.metadata.get("run_start", {}).get("mission") or "docking"
-
-    @property
     def uwb_mode(self) -> str | None:
         """The recorded radio (the Radio panel's, :mod:`dashboard.radio`): the ``uwb_mode`` its ``run_start``
         names if any, else ``"tdoa"`` (TDoA, its variant not known) if it holds distance differences, else

@@ -12,7 +12,7 @@ from unittest.mock import MagicMock
 import numpy as np
 import pytest
 
-from dashboard import kinds, landing, panels
+from dashboard import kinds, landing
 from dashboard.app import DashboardApp, DashboardParams
 from dashboard.mapping import FOV_COLORS, MODE_COLORS
 from dashboard.playback import Recording, load_recording, scenario_of
@@ -120,13 +120,13 @@ def test_the_table_shows_each_uav_s_energy_altitude_and_pad_markers(sc):
     state.on_message("guidance", "uav2", Guidance(100, 1.0, "DESCEND", 0.42))
     state.on_message("vision", "uav2", _vision(20))
     pads = {u.id: u.pad_m for u in sc.uavs()}
-    table = panels.landing_table(state.snapshot(), pads)
+    table = landing.landing_table(state.snapshot(), pads)
     rows = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]] for line in
             table.splitlines()[2:]}  # fmt: skip
     assert list(rows) == ["uav1", "uav2", "uav3", "uav4"]
     assert rows["uav2"] == ["DESCEND", "0.42", "3.25", "–", "5", "12.35", "unseen"]
     assert rows["uav1"][-2] == "–"  # nothing heard: no energy yet
-    text = panels.landing_uav_markdown("uav2", state.snapshot().agents["uav2"], pads)
+    text = landing.landing_uav_markdown("uav2", state.snapshot().agents["uav2"], pads)
     assert "energy 12.35 kJ" in text and "DESCEND" in text and "pad markers in the latest frame 5" in text
 
 
@@ -284,4 +284,4 @@ def test_a_moving_pad_is_drawn_where_its_robot_s_estimate_puts_it_and_the_robot_
     assert set(view.nodes) == {"uav"}
     assert view.nodes["uav"].fov.color == FOV_COLORS["in_cone"]  # the moved pad in the image, no frame yet
     pads = {u.id: u.pad_m for u in sc.uavs()}
-    assert "robot" not in panels.landing_table(state.snapshot(), pads)
+    assert "robot" not in landing.landing_table(state.snapshot(), pads)

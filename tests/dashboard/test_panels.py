@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dashboard import panels
+from dashboard import docking, panels
 from dashboard.state import SwarmState
 from swarm.core.mdp import DECISION_KEYS
 from swarm.transport.messages import Clock, Estimate, Event, Guidance
@@ -39,7 +39,7 @@ def test_table_has_a_row_per_agent_with_role_mode_range_sigma_and_process() -> N
     state.on_liveliness("agent", "chaser", True)
     state.on_liveliness("agent", "target", True)
     state.on_liveliness("agent", "target", False)
-    table = panels.agents_table(state.snapshot())
+    table = docking.agents_table(state.snapshot())
     assert _table_row(table, "chaser") == "| chaser | chaser | REORIENT | 0.512 | 1.23 | 10 (25 %) | alive |"
     assert _table_row(table, "target") == "| target | target | – | – | – | – | lost |"
 
@@ -56,7 +56,7 @@ def test_status_names_run_state_tick_seed_processes_and_drops() -> None:
 def test_decision_panel_shows_the_probabilities_of_the_latest_pass() -> None:
     d = _decision(A22=0.514, A23=0.486, A32=0.417, A33=0.583, pi1=0.462, pi2=0.538, r2_m=0.7, r1_m=0.45)
     g = Guidance(tick=1, t_s=25.65, mode="ALIGN", range_m=0.45, r1_m=0.45, r2_m=0.7, r_t_m=1.0, decision=d)
-    text = panels.decision_markdown("chaser", g)
+    text = docking.decision_markdown("chaser", g)
     assert "| 2 | – | 0.514 | 0.486 |" in text
     assert "| 3 | – | 0.417 | 0.583 |" in text
     assert "| 1 | – | – | – |" in text  # A11 was not computed in this branch of Algorithm 1
@@ -66,8 +66,8 @@ def test_decision_panel_shows_the_probabilities_of_the_latest_pass() -> None:
 
 def test_decision_panel_without_a_pass_says_so() -> None:
     g = Guidance(tick=1, t_s=1.0, mode="APPROACH", range_m=1.5)
-    assert "no Algorithm 1 pass yet" in panels.decision_markdown("chaser", g)
-    assert "no guidance yet" in panels.decision_markdown("chaser", None)
+    assert "no Algorithm 1 pass yet" in docking.decision_markdown("chaser", g)
+    assert "no guidance yet" in docking.decision_markdown("chaser", None)
 
 
 def test_mode_steps_hold_each_mode_until_the_next_change() -> None:
@@ -101,7 +101,7 @@ def test_missing_numbers_are_dashes() -> None:
 
 def test_agents_are_listed_in_natural_order() -> None:
     vehicles = {f"chaser{i}": ("chaser", f"target{i}") for i in (10, 2, 1)}
-    table = panels.agents_table(SwarmState(vehicles, ANCHORS).snapshot())
+    table = docking.agents_table(SwarmState(vehicles, ANCHORS).snapshot())
     assert [line.split(" | ")[0][2:] for line in table.splitlines()[2:]] == ["chaser1", "chaser2", "chaser10"]
 
 
