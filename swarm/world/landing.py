@@ -9,7 +9,8 @@ anchor's index; ``range_m`` nil when the anchor is out of reach; with ``uwb.mode
 of every detected marker: row ``4 m + c`` is corner ``c`` of marker ``m``; none when the pad is not in
 view), and a ``Truth``; then, every ``--clock-every`` ticks (10), ``world/clock`` (also at the run's start
 and on a resume). The world waits for each such UAV's ``Command`` of tick ``k`` (its mode one of the
-landing modes), holds it, and steps on. When
+landing modes; :class:`~swarm.transport.lockstep.CommandBarrier`, as the docking world), holds it, and
+steps on. When
 every UAV is done (landed for a second, or hovering at the abort height) it publishes ``run_end`` on
 ``world/event`` with each UAV's outcome and a ``stopped`` clock, and exits 0. It waits for every UAV's agent
 (liveliness ``alive/agent/<id>``) before the first tick. It takes run-time faults on ``control/fault``
@@ -132,6 +133,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
     from swarm.step.landing import LandingCommand, LandingWorld
     from swarm.transport import checkpoint, wire
     from swarm.transport.keys import Keys
+    from swarm.transport.lockstep import CommandBarrier
     from swarm.transport.messages import (
         LANDING_MODES,
         NEW_RUN_COMMANDS,
@@ -169,7 +171,8 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
     drops = DropCounter()
     stopping = Stopping(stop)  # an agent that goes then is no loss (swarm.transport.stopping)
     cond = threading.Condition()
-    commands: dict[tuple[str, int], Command] = {}
+    commands: dict[tuple[str, int], Command] = {}  # free-running: each UAV's newest is flown at its tick
+    barrier = CommandBarrier(ids)  # lockstep: every command of the tick is waited for
     alive: set[str] = set()
     back: set[str] = set()  # agents whose token came back in a running run: sent the current tick again
     # the tick whose commands are awaited, whether the run is on, and whether it is paused
@@ -233,12 +236,12 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         if uid not in world.uavs or msg.mode not in LANDING_MODES or len(msg.actuators) != 4:
             drops.drop(key, f"not a landing UAV's rotor command: {uid!r}, mode {msg.mode}")
             return
-        with cond:
-            # lockstep: a command of a tick stepped already (sent again by a restarted agent) is not kept;
-            # free-running: a late one still counts (the newest of each UAV is flown)
-            if not args.clock.lockstep or msg.tick >= now["k"]:
-                commands[(uid, msg.tick)] = msg
-                cond.notify_all()
+        if args.clock.lockstep:  # a command of a tick stepped already (a restarted agent's) is stale
+            barrier.add(uid, msg)
+            return
+        with cond:  # free-running: a late one still counts (the newest of each UAV is flown)
+            commands[(uid, msg.tick)] = msg
+            cond.notify_all()
 
     def on_alive(role: str, pid: str, up: bool) -> None:
         if role == "agent":
@@ -375,38 +378,30 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                         h = held[uid]
                         world.hold(uid, LandingCommand(k, h.u, h.mode))
                 continue
+            barrier.set_live(uids)  # every UAV still flying commands every tick
             step_deadline = time.monotonic() + args.step_timeout
-            with cond:
-                while not all((uid, k) in commands for uid in uids):
-                    if stop.is_set():
-                        reason = "stopped"
-                        break
-                    if time.monotonic() > step_deadline:
-                        reason = "agent_missing"
-                        break
-                    if back:  # a restarted agent: its UAV's samples of the tick before (which its checkpoint
-                        # may lack: it writes it after its command) and of this tick again
-                        again = [
-                            (key, data) for key, data in (*prev_wire, *tick_wire) if _owner(keys, key) in back
-                        ]
+            while not barrier.poll(k, 0.05):
+                if stop.is_set():
+                    reason = "stopped"
+                    break
+                if time.monotonic() > step_deadline:
+                    reason = "agent_missing"
+                    break
+                with cond:  # a restarted agent: its UAV's samples of the tick before (which its checkpoint
+                    # may lack: it writes it after its command) and of this tick again
+                    again = [(key, d) for key, d in (*prev_wire, *tick_wire) if _owner(keys, key) in back]
+                    if back:
                         _LOG.warning("agent %s back at tick %d: its samples sent again",
                                      ", ".join(sorted(back)), k)  # fmt: skip
-                        back.clear()
-                        cond.release()
-                        try:
-                            put(again)
-                        finally:
-                            cond.acquire()
-                        continue
-                    cond.wait(0.05)
-                got = {uid: commands.pop((uid, k), None) for uid in uids}
+                    back.clear()
+                put(again)
+            got, missing = barrier.wait(k, 0)
             if reason != "done":
                 if reason == "agent_missing":  # (stopped: no fault)
-                    missing = [u for u, c in got.items() if c is None]
                     _LOG.error("tick %d: %s (no command from %s)", k, reason, ", ".join(missing) or "-")
                 break
-            for uid, cmd in got.items():
-                world.hold(uid, LandingCommand(k, cmd.actuators, LandingMode(cmd.mode)))
+            for uid in uids:
+                world.hold(uid, LandingCommand(k, got[uid].actuators, LandingMode(got[uid].mode)))
             if pace is not None:  # paced lockstep: never ahead of the wall clock (and still every command)
                 left = t_wall + k * dt / pace.factor - time.monotonic()
                 if left > 0:
