@@ -29,7 +29,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.stats import chi2
 
 from swarm.core import _imu_nb as nb
 from swarm.errors import ConfigError
@@ -137,7 +136,7 @@ class ImuFilterParams:
         prm[nb.PRM_SIG_RB] = self.range_bias_rw
         prm[nb.PRM_G : nb.PRM_G + 3] = self.gravity_nav
         prm[nb.PRM_LEVER : nb.PRM_LEVER + 3] = self.lever_arm_m
-        prm[nb.PRM_GATE] = chi2.ppf(self.gate_probability, 1)
+        prm[nb.PRM_GATE] = chi2_gate(self.gate_probability, 1)
         prm[nb.PRM_HUBER] = self.huber_k
         return prm
 
@@ -365,6 +364,8 @@ def state_layout(n_anchors: int, params: ImuFilterParams, baro: bool = False) ->
 def divergence_limits(window: int, alpha: float) -> np.ndarray:
     """``limits[n]``: the largest mean NIS of ``n`` accepted scalar ranges a consistent filter exceeds with
     probability ``alpha``, ``chi2.ppf(1 - alpha, n) / n`` (``limits[0]`` unused)."""
+    from scipy.stats import chi2  # here, not at the top: ~0.26 s of CPU at a process start
+
     n = np.arange(1, window + 1)
     return np.concatenate([[np.inf], chi2.ppf(1.0 - alpha, n) / n])
 
@@ -373,6 +374,8 @@ def divergence_limits(window: int, alpha: float) -> np.ndarray:
 def chi2_gate(probability: float, dof: int) -> float:
     """The chi-square(``dof``) gate of a measurement, once per probability (scipy's ppf costs ~80 us a
     call)."""
+    from scipy.stats import chi2  # here, not at the top: ~0.26 s of CPU at a process start
+
     return float(chi2.ppf(probability, dof))
 
 
