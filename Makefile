@@ -4,6 +4,8 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 PYTEST_ARGS ?=
+# pytest's workers (pytest-xdist) in `make test`: two for the two cores of the target machine; 0 runs serially
+PYTEST_JOBS ?= 2
 
 .PHONY: demo test lint bench clean chromium compile
 
@@ -43,9 +45,12 @@ chromium:
 	  $$SUDO apt-get update && $$SUDO apt-get install -y chromium \
 	    || echo "make: could not install chromium: browser tests will skip" >&2; }
 
-# pytest exits 5 when it collects nothing: that is a failure of the suite, say so instead of passing.
+# The suite on $(PYTEST_JOBS) workers: whole files per worker (their module fixtures start once), the files that
+# launch swarms and browsers handed out first; a test marked `alone` runs with nothing beside it
+# (tests/xdist_turns.py). pytest exits 5 when it collects nothing: that is a failure of the suite, say so
+# instead of passing.
 test: lint chromium compile
-	$(PY) -m pytest $(PYTEST_ARGS); rc=$$?; \
+	$(PY) -m pytest -n $(PYTEST_JOBS) --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS); rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests" >&2; exit 1; fi; exit $$rc
 
 bench: $(STAMP)
