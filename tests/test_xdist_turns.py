@@ -1,0 +1,106 @@
+"""tests/xdist_turns.py under a real ``pytest -n 2``: a test marked ``alone`` overlaps no other test, the
+others do run side by side, and the costly files are handed out first.
+
+Oracle: each test of a small suite written here appends its worker and its start and end times to a file;
+the intervals are compared. The suite imports only the plugin (no swarm), so the run takes a few seconds.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("xdist")
+
+ROOT = Path(__file__).resolve().parents[1]
+
+RECORD = """
+import os, time
+from pathlib import Path
+
+def record(name, hold_s):
+    t0 = time.monotonic()
+    time.sleep(hold_s)
+    with open(Path(__file__).parent / "log.txt", "a") as f:
+        f.write(f"{name} {os.environ['PYTEST_XDIST_WORKER']} {t0:.4f} {time.monotonic():.4f}\\n")
+"""
+
+SHARED = """
+import pytest
+from record import record
+
+@pytest.mark.parametrize("i", range(8))
+def test_shared(i):
+    record(f"shared{i}", 0.15)
+"""
+
+ALONE = """
+import pytest
+from record import record
+
+@pytest.mark.alone
+@pytest.mark.parametrize("i", range(3))
+def test_alone(i):
+    record(f"alone{i}", 0.3)
+
+@pytest.mark.parametrize("i", range(4))
+def test_beside(i):
+    record(f"beside{i}", 0.15)
+"""
+
+
+def test_an_alone_test_runs_with_nothing_beside_it_and_the_others_run_side_by_side(tmp_path):
+    (tmp_path / "conftest.py").write_text('pytest_plugins = ["tests.xdist_turns"]\n')
+    (tmp_path / "pytest.ini").write_text("[pytest]\nmarkers =\n    alone: nothing beside it\n")
+    (tmp_path / "record.py").write_text(RECORD)
+    (tmp_path / "test_a_shared.py").write_text(SHARED)
+    (tmp_path / "test_b_alone.py").write_text(ALONE)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(tmp_path)])}
+    args = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "2", "--dist", "loadfile",
+            "--no-loadscope-reorder", "--basetemp", str(tmp_path / "base")]  # fmt: skip
+    run = subprocess.run(args, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stdout + run.stderr
+    rows = [line.split() for line in (tmp_path / "log.txt").read_text().splitlines()]
+    spans = {name: (worker, float(t0), float(t1)) for name, worker, t0, t1 in rows}
+    assert len(spans) == 15 and {w for w, _, _ in spans.values()} == {"gw0", "gw1"}, spans
+
+    def overlap(a: str, b: str) -> bool:
+        return spans[a][1] < spans[b][2] and spans[b][1] < spans[a][2]
+
+    alone = [n for n in spans if n.startswith("alone")]
+    for a in alone:
+        beside = [b for b in spans if b != a and overlap(a, b)]
+        assert beside == [], (a, beside, spans)
+    # without the lock's exclusive turns, the two files' tests do overlap (each worker has one file)
+    others = [n for n in spans if not n.startswith("alone")]
+    assert any(overlap(a, b) for a in others for b in others if spans[a][0] != spans[b][0]), spans
+
+
+def test_the_costly_files_go_first_under_xdist_and_a_serial_run_keeps_pytests_order():
+    from types import SimpleNamespace
+
+    from tests.xdist_turns import FILE_COST_S, pytest_collection_modifyitems
+
+    def item(rel: str, name: str):
+        return SimpleNamespace(path=ROOT / rel, name=name)
+
+    launch, stop = "tests/transport/test_launch.py", "tests/transport/test_launch_stop.py"
+    collected = [
+        item("tests/test_a.py", "a1"),
+        item(stop, "stop1"),
+        item("tests/test_b.py", "b1"),
+        item(launch, "launch1"),
+        item(launch, "launch2"),
+        item("tests/test_a2.py", "a2"),
+    ]
+    serial = list(collected)
+    pytest_collection_modifyitems(SimpleNamespace(rootpath=ROOT), serial)
+    assert serial == collected  # no worker: pytest's order
+    worker = list(collected)
+    pytest_collection_modifyitems(SimpleNamespace(rootpath=ROOT, workerinput={}), worker)
+    assert [i.name for i in worker] == ["launch1", "launch2", "stop1", "a1", "b1", "a2"]
+    assert FILE_COST_S[launch] > FILE_COST_S[stop]
