@@ -26,7 +26,7 @@ import math
 import numba
 import numpy as np
 
-from swarm.kinds.quadrotor.dynamics import U_N, _rotmat, mixer_matrix
+from swarm.kinds.quadrotor.dynamics import U_N, mixer_matrix
 from swarm.kinds.quadrotor.params import QuadrotorParams
 
 (CP_MASS, CP_J, CP_G, CP_KP_XY, CP_KP_Z, CP_KV_XY, CP_KI_XY, CP_KV_Z, CP_KI_Z, CP_VMAX_XY, CP_VMAX_Z,
@@ -107,47 +107,60 @@ def quadrotor_control(cs, cp, p, v, q, w, p_ref, v_ref, a_ref, q_ref, u, act):
     """One control step (module docstring): writes the rotor speeds ``u`` and ``act`` (the known body force
     ``(0, 0, T)`` and net force, the net torque); returns whether a rotor saturated."""
     m, g, dt = cp[CP_MASS], cp[CP_G], cp[CP_DT]
-    # 1. position -> velocity setpoint
-    vsp = np.empty(3)
-    for i in range(3):
-        k = cp[CP_KP_Z] if i == 2 else cp[CP_KP_XY]
-        vsp[i] = v_ref[i] + k * (p_ref[i] - p[i])
-    hxy = math.hypot(vsp[0], vsp[1])
+    # 1. position -> velocity setpoint (scalars throughout: no allocation but Rd's, qd's and tau's)
+    kxy, kz = cp[CP_KP_XY], cp[CP_KP_Z]
+    vsp0 = v_ref[0] + kxy * (p_ref[0] - p[0])
+    vsp1 = v_ref[1] + kxy * (p_ref[1] - p[1])
+    vsp2 = v_ref[2] + kz * (p_ref[2] - p[2])
+    hxy = math.hypot(vsp0, vsp1)
     if hxy > cp[CP_VMAX_XY]:
-        vsp[0] *= cp[CP_VMAX_XY] / hxy
-        vsp[1] *= cp[CP_VMAX_XY] / hxy
-    vsp[2] = min(max(vsp[2], -cp[CP_VMAX_Z]), cp[CP_VMAX_Z])
+        vsp0 *= cp[CP_VMAX_XY] / hxy
+        vsp1 *= cp[CP_VMAX_XY] / hxy
+    vsp2 = min(max(vsp2, -cp[CP_VMAX_Z]), cp[CP_VMAX_Z])
     # 2. velocity PI -> acceleration setpoint, 3. thrust vector
-    F = np.empty(3)
+    F0 = F1 = F2 = 0.0
     for i in range(3):
         kv, ki = (cp[CP_KV_Z], cp[CP_KI_Z]) if i == 2 else (cp[CP_KV_XY], cp[CP_KI_XY])
-        e = vsp[i] - v[i]
+        e = (vsp0 if i == 0 else (vsp1 if i == 1 else vsp2)) - v[i]
         cs[CS_INT + i] += e * dt
         if ki > 0.0:
             lim = cp[CP_INT_LIM] / ki
             cs[CS_INT + i] = min(max(cs[CS_INT + i], -lim), lim)
-        F[i] = m * (a_ref[i] + kv * e + ki * cs[CS_INT + i])
-    F[2] += m * g
-    F[2] = max(F[2], 0.1 * m * g)  # never command thrust downwards
-    horiz = math.hypot(F[0], F[1])
-    max_h = F[2] * math.tan(cp[CP_TILT])
+        f = m * (a_ref[i] + kv * e + ki * cs[CS_INT + i])
+        if i == 0:
+            F0 = f
+        elif i == 1:
+            F1 = f
+        else:
+            F2 = f
+    F2 += m * g
+    F2 = max(F2, 0.1 * m * g)  # never command thrust downwards
+    horiz = math.hypot(F0, F1)
+    max_h = F2 * math.tan(cp[CP_TILT])
     if horiz > max_h:
-        F[0] *= max_h / horiz
-        F[1] *= max_h / horiz
-    zd = F / math.sqrt(F[0] ** 2 + F[1] ** 2 + F[2] ** 2)
-    # heading of the reference: its body x axis projected on the horizontal
-    Rr = _rotmat(q_ref)
-    xc = np.array([Rr[0, 0], Rr[1, 0], 0.0])
-    if math.hypot(xc[0], xc[1]) < 1e-6:
-        xc = np.array([1.0, 0.0, 0.0])
-    yd = np.cross(zd, xc)
-    yd /= math.sqrt(yd[0] ** 2 + yd[1] ** 2 + yd[2] ** 2)
-    xd = np.cross(yd, zd)
+        F0 *= max_h / horiz
+        F1 *= max_h / horiz
+    nf = math.sqrt(F0**2 + F1**2 + F2**2)
+    zd0, zd1, zd2 = F0 / nf, F1 / nf, F2 / nf
+    # heading of the reference: its body x axis projected on the horizontal (_rotmat(q_ref)'s column 0)
+    rx, ry, rz, rw = q_ref[0], q_ref[1], q_ref[2], q_ref[3]
+    xc0, xc1, xc2 = 1 - 2 * (ry * ry + rz * rz), 2 * (rx * ry + rz * rw), 0.0
+    if math.hypot(xc0, xc1) < 1e-6:
+        xc0, xc1, xc2 = 1.0, 0.0, 0.0
+    # yd = zd x xc, normalised; xd = yd x zd (np.cross's products and differences)
+    yd0, yd1, yd2 = zd1 * xc2 - zd2 * xc1, zd2 * xc0 - zd0 * xc2, zd0 * xc1 - zd1 * xc0
+    ny = math.sqrt(yd0**2 + yd1**2 + yd2**2)
+    yd0, yd1, yd2 = yd0 / ny, yd1 / ny, yd2 / ny
+    xd0, xd1, xd2 = yd1 * zd2 - yd2 * zd1, yd2 * zd0 - yd0 * zd2, yd0 * zd1 - yd1 * zd0
     Rd = np.empty((3, 3))
-    Rd[:, 0], Rd[:, 1], Rd[:, 2] = xd, yd, zd
+    Rd[0, 0], Rd[1, 0], Rd[2, 0] = xd0, xd1, xd2
+    Rd[0, 1], Rd[1, 1], Rd[2, 1] = yd0, yd1, yd2
+    Rd[0, 2], Rd[1, 2], Rd[2, 2] = zd0, zd1, zd2
     qd = _matrix_to_quat(Rd)
-    R = _rotmat(q)
-    T = F[0] * R[0, 2] + F[1] * R[1, 2] + F[2] * R[2, 2]
+    # _rotmat(q)'s column 2: the body z axis in nav
+    qx, qy, qz, qw = q[0], q[1], q[2], q[3]
+    R02, R12, R22 = 2 * (qx * qz + qy * qw), 2 * (qy * qz - qx * qw), 1 - 2 * (qx * qx + qy * qy)
+    T = F0 * R02 + F1 * R12 + F2 * R22
     T = max(T, 0.0)
     # 4. attitude error -> rate setpoint (body frame): q_e = q^-1 (x) q_d
     x1, y1, z1, w1 = -q[0], -q[1], -q[2], q[3]
@@ -157,21 +170,21 @@ def quadrotor_control(cs, cp, p, v, q, w, p_ref, v_ref, a_ref, q_ref, u, act):
     ez = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
     ew = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
     sgn = 1.0 if ew >= 0.0 else -1.0
-    wsp = np.array(
-        [2.0 * sgn * ex * cp[CP_ATT], 2.0 * sgn * ey * cp[CP_ATT], 2.0 * sgn * ez * cp[CP_ATT_YAW]]
-    )
-    for i in range(3):
-        wsp[i] = min(max(wsp[i], -cp[CP_WMAX_RATE]), cp[CP_WMAX_RATE])
+    wmax = cp[CP_WMAX_RATE]
+    wsp0 = min(max(2.0 * sgn * ex * cp[CP_ATT], -wmax), wmax)
+    wsp1 = min(max(2.0 * sgn * ey * cp[CP_ATT], -wmax), wmax)
+    wsp2 = min(max(2.0 * sgn * ez * cp[CP_ATT_YAW], -wmax), wmax)
     # 5. rate -> torque
-    J = cp[CP_J : CP_J + 3]
+    J0, J1, J2 = cp[CP_J], cp[CP_J + 1], cp[CP_J + 2]
+    w0_, w1_, w2_ = w[0], w[1], w[2]
     tau = np.empty(3)
-    for i in range(3):
-        k = cp[CP_RATE_YAW] if i == 2 else cp[CP_RATE]
-        tau[i] = J[i] * k * (wsp[i] - w[i])
-    Jw = J * w
-    tau[0] += w[1] * Jw[2] - w[2] * Jw[1]
-    tau[1] += w[2] * Jw[0] - w[0] * Jw[2]
-    tau[2] += w[0] * Jw[1] - w[1] * Jw[0]
+    tau[0] = J0 * cp[CP_RATE] * (wsp0 - w0_)
+    tau[1] = J1 * cp[CP_RATE] * (wsp1 - w1_)
+    tau[2] = J2 * cp[CP_RATE_YAW] * (wsp2 - w2_)
+    Jw0, Jw1, Jw2 = J0 * w0_, J1 * w1_, J2 * w2_
+    tau[0] += w1_ * Jw2 - w2_ * Jw1
+    tau[1] += w2_ * Jw0 - w0_ * Jw2
+    tau[2] += w0_ * Jw1 - w1_ * Jw0
     # 6. mixer
     sat = mix(cp, T, tau, u)
     Ta = 0.0
