@@ -59,7 +59,8 @@ def test_an_alone_test_runs_with_nothing_beside_it_and_the_others_run_side_by_si
     (tmp_path / "record.py").write_text(RECORD)
     (tmp_path / "test_a_shared.py").write_text(SHARED)
     (tmp_path / "test_b_alone.py").write_text(ALONE)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(tmp_path)])}
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}  # (this run may be a worker)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(tmp_path)])
     args = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "2", "--dist", "loadfile",
             "--no-loadscope-reorder", "--basetemp", str(tmp_path / "base")]  # fmt: skip
     run = subprocess.run(args, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
