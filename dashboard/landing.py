@@ -1,7 +1,7 @@
 """The dashboard of a landing swarm (issue 15): ``swarm dashboard landing-swarm``, live or from a recording.
 
-A landing scenario (:class:`swarm.landing_scenario.LandingScenario`, ``mission = "landing"``) has UAVs and
-pads instead of chasers and targets; the messages are the same (truth, estimate, guidance, vision, events,
+A landing scenario (:class:`swarm.landing_scenario.LandingScenario`, ``[mission] name = "landing"``) has UAVs
+and pads instead of chasers and targets; the messages are the same (truth, estimate, guidance, vision, events,
 the world's clock and events: docs/protocol.md, "Processes and topology"), stored by the same
 :class:`~dashboard.state.SwarmState`. What differs is drawn here:
 

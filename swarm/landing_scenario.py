@@ -19,6 +19,7 @@ from swarm.core.range_errors import check_range_errors
 from swarm.core.tdoa_radio import TdoaParams
 from swarm.errors import ConfigError
 from swarm.kinds import KINDS
+from swarm.scenario_tables import MissionTable, check_mission, refuse_mission_key
 from swarm.sensors.options import SensorsSpec, apply_sensor_profile
 
 Vec3 = tuple[float, float, float]
@@ -321,7 +322,8 @@ class Uav:
 class LandingScenario:
     """A landing scenario file (``swarm/scenarios/landing.toml``)."""
 
-    mission: str = "landing"
+    mission: MissionTable = field(default_factory=lambda: MissionTable("landing"))
+    """``[mission]``: ``name = "landing"``."""
     name: str = "landing"
     policy: str = "mdp"
     dt_s: float = 0.01
@@ -389,8 +391,7 @@ class LandingScenario:
             raise ConfigError("fleet: two UAVs share a pad; give each its own pad_m")
         if self.platform.enabled and self.fleet:
             raise ConfigError("platform: a moving pad carries one UAV's pad; leave [[fleet]] out")
-        if self.mission != "landing":
-            raise ConfigError(f"mission must be 'landing' for a landing scenario, got {self.mission!r}")
+        check_mission(self.mission, "landing")
         if self.policy not in ("fixed", "mdp"):
             raise ConfigError(f"policy must be 'fixed' or 'mdp', got {self.policy!r}")
         if not (math.isfinite(self.dt_s) and 0 < self.dt_s <= 0.02):
@@ -425,6 +426,7 @@ def _scenario_path(name_or_path) -> Path:
 
 def load_landing(name_or_path, overrides: dict | None = None) -> LandingScenario:
     def migrate(data: dict, name: str) -> dict:
+        refuse_mission_key(data, name)
         return apply_sensor_profile(data, name, LandingScenario, overrides)
 
     return load_toml(LandingScenario, _scenario_path(name_or_path), overrides, migrate=migrate)

@@ -30,6 +30,7 @@ from swarm.errors import ConfigError
 from swarm.kinds import KINDS, KindsParams, VehicleKind, check_docking_kind
 from swarm.kinds.dispersions import DispersionParams
 from swarm.navigation import NAVIGATORS, check_docking_navigator, navigator_name
+from swarm.scenario_tables import MissionTable, check_mission, refuse_mission_key
 from swarm.sensors.options import SensorsSpec, apply_sensor_profile
 
 Vec3 = tuple[float, float, float]
@@ -252,6 +253,8 @@ class Scenario:
     mothership axes, in that order), uppercase = intrinsic."""
     policy: Literal["fixed", "mdp"] = "mdp"
     """Default switching policy (the CLI's ``--policy`` overrides it)."""
+    mission: MissionTable = field(default_factory=MissionTable)
+    """``[mission]``: ``name = "docking"``, as a file without the table is read."""
     anchors_m: tuple[Vec3, ...] = PAPER_ANCHORS_M
     """UWB anchors fixed in the nav frame [m]: the mothership's (paper sec. III), a table's corners, ..."""
     vehicles: dict[str, VehicleSpec] = field(default_factory=_paper_vehicles)
@@ -291,6 +294,7 @@ class Scenario:
     (:mod:`swarm.sensors.options`); read when the file is loaded."""
 
     def __post_init__(self) -> None:
+        check_mission(self.mission, "docking")
         seq = self.euler_seq
         if len(seq) != 3 or not (set(seq) <= set("xyz") or set(seq) <= set("XYZ")):
             raise ConfigError(f"euler_seq must be three of x/y/z (all lower or all upper case), got {seq!r}")
@@ -564,8 +568,7 @@ def load_scenario(name_or_path: str | Path, overrides: dict | None = None) -> Sc
         path = SCENARIO_DIR / f"{name_or_path}.toml"
 
     def migrate(data: dict, name: str) -> dict:
-        if data.get("mission") == "docking":  # the default mission, said (swarm.missions.mission_of)
-            del data["mission"]
+        refuse_mission_key(data, name)
         return apply_sensor_profile(migrate_legacy(data, name), name, Scenario, overrides)
 
     return load_toml(Scenario, path, overrides=overrides, migrate=migrate, migrate_key=migrate_override_key)

@@ -6,7 +6,7 @@ runner changed."""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +16,11 @@ import swarm.missions as missions
 from swarm.cli.main import main
 from swarm.config import load_toml
 from swarm.errors import ConfigError
+from swarm.landing_scenario import load_landing
 from swarm.missions import MISSIONS, Mission, mission_of, register, scenario_path
 from swarm.montecarlo.campaign import run_seed
+from swarm.scenario import load_scenario
+from swarm.scenario_tables import MissionTable
 
 SCENARIOS = Path(missions.__file__).resolve().parent.parent / "scenarios"
 
@@ -29,8 +32,8 @@ SCENARIOS = Path(missions.__file__).resolve().parent.parent / "scenarios"
 class ToyScenario:
     """A point on a line that moves to a target at a constant speed."""
 
-    mission: str = "toy"
-    """What the file says (``mission = "toy"``)."""
+    mission: MissionTable = field(default_factory=lambda: MissionTable("toy"))
+    """What the file says (``[mission] name = "toy"``)."""
     name: str = "toy"
     policy: str = "fixed"
     """``fixed``: ``speed_m_s``; ``mdp``: twice that (a toy's faster policy)."""
@@ -78,9 +81,9 @@ def toy():
 
 
 def _toy_file(tmp_path: Path, body: str = "") -> Path:
-    """Step 3 of the recipe: a scenario file that says ``mission = "toy"``."""
+    """Step 3 of the recipe: a scenario file that says ``[mission] name = "toy"``."""
     path = tmp_path / "toy.toml"
-    path.write_text('mission = "toy"\nname = "toy-line"\n' + body)
+    path.write_text('name = "toy-line"\n' + body + '[mission]\nname = "toy"\n')
     return path
 
 
@@ -89,47 +92,59 @@ def _toy_file(tmp_path: Path, body: str = "") -> Path:
 
 def test_the_bundled_scenarios_name_their_missions():
     assert {"docking", "landing"} <= set(MISSIONS)
-    assert mission_of("docking").name == "docking"  # no key: the default
+    assert mission_of("docking").name == "docking"  # [mission] name = "docking"
     assert mission_of("ground-docking").name == "docking"
-    assert mission_of("landing").name == "landing"  # mission = "landing"
+    assert mission_of("landing").name == "landing"  # [mission] name = "landing"
     assert mission_of(SCENARIOS / "landing-swarm.toml").name == "landing"
 
 
 def test_an_unknown_mission_is_refused_naming_the_file_line_key_value_and_the_registered_names(tmp_path):
     path = tmp_path / "orbit.toml"
-    path.write_text('name = "x"\nmission = "orbit"\n')
+    path.write_text('name = "x"\n[mission]\nname = "orbit"\n')
     with pytest.raises(ConfigError) as err:
         mission_of(path)
     msg = str(err.value)
-    assert str(path) in msg and "(line 2)" in msg and 'mission = "orbit"' in msg, msg
+    assert str(path) in msg and "(line 3)" in msg and 'mission.name = "orbit"' in msg, msg
     assert "registered: docking, landing" in msg, msg
 
 
 def test_a_mission_that_is_no_string_is_refused(tmp_path):
     path = tmp_path / "n.toml"
-    path.write_text("mission = 3\n")
-    with pytest.raises(ConfigError, match=r"mission = 3 is not a registered mission"):
+    path.write_text("[mission]\nname = 3\n")
+    with pytest.raises(ConfigError, match=r"mission.name = 3 is not a registered mission"):
         mission_of(path)
+
+
+@pytest.mark.parametrize("load", [mission_of, load_landing, load_scenario])
+def test_the_old_top_level_mission_key_is_refused_with_the_table_to_write(tmp_path, load):
+    text = (SCENARIOS / "landing.toml").read_text().replace('[mission]\nname = "landing"\n', "")
+    path = tmp_path / "old.toml"
+    path.write_text('# a file of the format before [mission]\nmission = "landing"\n' + text)
+    with pytest.raises(ConfigError) as err:  # by the registry and by either loader called directly
+        load(path)
+    msg = str(err.value)
+    assert msg.startswith(f"{path} (line 2): "), msg
+    assert 'write [mission] name = "landing" instead' in msg, msg
 
 
 def test_a_landing_file_without_its_mission_key_is_refused_with_the_key_to_write(tmp_path):
     text = (SCENARIOS / "landing.toml").read_text()
     path = tmp_path / "old-landing.toml"
-    path.write_text("\n".join(line for line in text.splitlines() if not line.startswith("mission")))
+    path.write_text(text.replace('[mission]\nname = "landing"\n', ""))
     with pytest.raises(ConfigError) as err:
         mission_of(path)
     msg = str(err.value)
-    assert str(path) in msg and 'add mission = "landing"' in msg, msg
+    assert str(path) in msg and 'write [mission] name = "landing"' in msg, msg
     # the keys that gave it away, each with its line ([pad] is a landing table, docking has none)
     pad_line = next(n for n, line in enumerate(path.read_text().splitlines(), 1) if line.strip() == "[pad]")
     assert "more" in msg or f"pad (line {pad_line})" in msg, msg
 
 
-def test_a_docking_file_without_the_key_or_with_it_is_docking(tmp_path):
+def test_a_docking_file_without_the_table_or_with_it_is_docking(tmp_path):
     plain = tmp_path / "plain.toml"
     plain.write_text('name = "mine"\n[sim]\nmax_duration_s = 50.0\n')
     said = tmp_path / "said.toml"
-    said.write_text('mission = "docking"\nname = "mine"\n')
+    said.write_text('name = "mine"\n[mission]\nname = "docking"\n')
     assert mission_of(plain).name == mission_of(said).name == "docking"
     assert mission_of(plain).load(plain).sim.max_duration_s == 50.0
     assert mission_of(said).load(said).name == "mine"  # the key is read, not refused as unknown

@@ -31,7 +31,7 @@ def folder(tmp_path):
 
 def _landing_file(folder, body: str):
     path = folder / "landing-bench.toml"
-    path.write_text('mission = "landing"\n' + body)
+    path.write_text('[mission]\nname = "landing"\n' + body)
     return path
 
 

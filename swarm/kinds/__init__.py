@@ -39,7 +39,7 @@ def check_docking_kind(vehicle_id: str, name: str) -> None:
         raise ConfigError(
             f"vehicles.{vehicle_id}.kind = {name!r}: the docking runners cannot fly this kind yet: "
             f"{missing}. "
-            'It flies landing scenarios (mission = "landing", swarm/scenarios/landing.toml)'
+            'It flies landing scenarios ([mission] name = "landing", swarm/scenarios/landing.toml)'
         )
 
 

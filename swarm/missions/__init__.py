@@ -1,26 +1,27 @@
 """Missions as plug-ins (docs/architecture.md, "Missions").
 
-:data:`MISSIONS` maps a scenario file's top-level ``mission = "..."`` to its :class:`Mission`;
+:data:`MISSIONS` maps a scenario file's ``[mission] name = "..."`` to its :class:`Mission`;
 :func:`mission_of` is the one place a command, the dashboard or a playback asks which mission a scenario
-is. A file without the key is a docking one (:data:`DEFAULT_MISSION`). :func:`register` adds a mission.
+is. A file without the table is a docking one (:data:`DEFAULT_MISSION`). :func:`register` adds a mission.
 """
 
 from __future__ import annotations
 
-import re
 import tomllib
 from pathlib import Path
 
+from swarm.config import _locate
 from swarm.errors import ConfigError
 from swarm.missions.base import GENERIC_SIM, Mission, overrides_of, resolve
 from swarm.missions.docking import DockingMission
 from swarm.missions.landing import LandingMission
+from swarm.scenario_tables import refuse_mission_key
 
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 """Where the bundled scenarios are (``swarm/scenarios/<name>.toml``)."""
 
 DEFAULT_MISSION = "docking"
-"""The mission of a scenario file without a ``mission`` key."""
+"""The mission of a scenario file without a ``[mission]`` table."""
 
 MISSIONS: dict[str, Mission] = {m.name: m for m in (DockingMission(), LandingMission())}
 """Every registered mission by name."""
@@ -47,24 +48,26 @@ def scenario_path(scenario: str | Path) -> Path:
 
 
 def mission_of(scenario: str | Path) -> Mission:
-    """The mission of ``scenario`` (a file or a bundled name), from its top-level ``mission`` key.
+    """The mission of ``scenario`` (a file or a bundled name), from its ``[mission]`` table's ``name``.
 
-    ConfigError naming the file, the line, the key and the value for a value that is not a registered
-    mission, and for a file without the key that has another mission's tables (``[pad]`` without
-    ``mission = "landing"``). A file that cannot be read or parsed is left to the default mission's
-    loader, which names the problem."""
+    ConfigError naming the file, the line and the value for a name that is not a registered mission, for
+    the top-level ``mission = "..."`` of the format before the table (the table to write instead), and for
+    a file without the table that has another mission's tables (``[pad]`` without ``[mission] name =
+    "landing"``). A file that cannot be read or parsed is left to the default mission's loader, which names
+    the problem."""
     path = scenario_path(scenario)
     try:
         with open(path, "rb") as fh:
             data = tomllib.load(fh)
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
         return MISSIONS[DEFAULT_MISSION]
+    refuse_mission_key(data, str(path))
     if "mission" in data:
-        value = data["mission"]
+        value = data["mission"].get("name", DEFAULT_MISSION)
         if isinstance(value, str) and value in MISSIONS:
             return MISSIONS[value]
         raise ConfigError(
-            f"{path}{_at(path, 'mission')}: mission = {_toml(value)} is not a registered mission; "
+            f"{path}{_at(path, 'mission.name')}: mission.name = {_toml(value)} is not a registered mission; "
             f"registered: {', '.join(sorted(MISSIONS))}"
         )
     default = MISSIONS[DEFAULT_MISSION]
@@ -81,8 +84,8 @@ def mission_of(scenario: str | Path) -> Mission:
             )
             raise ConfigError(
                 f"{path}: {where} {'is a key' if len(keys) == 1 else 'are keys'} of a {name} scenario, and "
-                f'the file has no mission key ({DEFAULT_MISSION} is assumed then): add mission = "{name}" '
-                "at its top"
+                f"the file has no [mission] table ({DEFAULT_MISSION} is assumed then): write [mission] "
+                f'name = "{name}" after its top-level keys'
             )
     return default
 
@@ -93,22 +96,9 @@ def _toml(value: object) -> str:
 
 
 def _at(path: Path, key: str) -> str:
-    """`` (line N)``: the first line of ``path`` that sets the top-level ``key`` or opens its table; ``""``
-    if none does (tomllib keeps no positions)."""
-    assign = re.compile(rf"\s*{re.escape(key)}\s*=")
-    header = re.compile(rf"\s*\[\[?\s*{re.escape(key)}\s*[\].]")
-    in_table = False
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError):
-        return ""
-    for n, line in enumerate(lines, 1):
-        if header.match(line):
-            return f" (line {n})"
-        in_table = in_table or line.lstrip().startswith("[")
-        if not in_table and assign.match(line):
-            return f" (line {n})"
-    return ""
+    """`` (line N)``: the line of ``path`` that sets the dotted ``key`` or opens its table (``""``: none)."""
+    at = _locate(path, f"{key}: ")
+    return "" if at is None else f" (line {at[0]})"
 
 
 __all__ = [

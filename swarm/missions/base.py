@@ -1,8 +1,8 @@
 """The mission plug-in interface (docs/architecture.md, "Missions").
 
 A mission is what a run is for: docking a chaser with its target, landing a quadrotor on a pad. A scenario
-file names its mission with a top-level key, ``mission = "landing"``; a file without one is a docking
-scenario. :class:`Mission` is what a command asks of that mission: how to load the file, and the
+file names its mission with its ``[mission]`` table, ``name = "landing"``; a file without the table is a
+docking scenario. :class:`Mission` is what a command asks of that mission: how to load the file, and the
 function each command runs (``swarm sim``, ``swarm launch``, ``swarm montecarlo``) given its parsed
 arguments, and its campaign part (:meth:`Mission.campaign`), which the one campaign runner takes. The
 dashboard asks it for the scenario to draw, live or from a recording.
@@ -52,7 +52,7 @@ class Mission:
     registered in :data:`swarm.missions.MISSIONS` (:func:`swarm.missions.register`)."""
 
     name: ClassVar[str] = ""
-    """What a scenario file's ``mission = "..."`` says."""
+    """What a scenario file's ``[mission] name = "..."`` says."""
     success_key: ClassVar[str] = ""
     """The run summary's flag that says the run reached its goal (``docked``, ``landed``)."""
     summary_metrics: ClassVar[tuple[str, ...]] = ()
@@ -79,8 +79,8 @@ class Mission:
         raise NotImplementedError(f"mission {self.name!r} gives no load()")
 
     def scenario_keys(self) -> frozenset[str]:
-        """The top-level keys a file of this mission may have, by which a file that forgot its ``mission``
-        key is recognised (:func:`swarm.missions.mission_of`); none by default."""
+        """The top-level keys a file of this mission may have, by which a file that forgot its ``[mission]``
+        table is recognised (:func:`swarm.missions.mission_of`); none by default."""
         return frozenset()
 
     def run_one(self, scenario: Any, policy: str | None, seed: int) -> dict:

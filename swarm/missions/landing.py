@@ -1,4 +1,4 @@
-"""Landing (paper sec. VI-B): a quadrotor lands on a pad with an ArUco board; ``mission = "landing"``
+"""Landing (paper sec. VI-B): a quadrotor lands on a pad with an ArUco board; ``[mission] name = "landing"``
 (:class:`swarm.landing_scenario.LandingScenario`)."""
 
 from __future__ import annotations
