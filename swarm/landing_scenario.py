@@ -15,11 +15,12 @@ from swarm.config import load_toml
 from swarm.core.imu_filter import ImuFilterParams, RobustParams
 from swarm.core.landing import LandingGuidanceParams
 from swarm.core.pad_vision import PadBoardParams, PadCameraParams
+from swarm.core.range_error_params import RangeErrorParams
 from swarm.core.range_errors import check_range_errors
 from swarm.core.tdoa_radio import TdoaParams
 from swarm.errors import ConfigError
 from swarm.kinds import KINDS
-from swarm.scenario_tables import MissionTable, check_mission, refuse_mission_key
+from swarm.scenario_tables import InitialEstimateParams, MissionTable, check_mission, refuse_mission_key
 from swarm.sensors.options import SensorsSpec, apply_sensor_profile
 
 Vec3 = tuple[float, float, float]
@@ -100,8 +101,9 @@ class LandingImu:
 
 
 @dataclass(frozen=True)
-class LandingUwb:
-    """``[uwb]``: anchors around the pad, ranged round-robin, only within ``max_range_m``."""
+class LandingUwb(RangeErrorParams):
+    """``[uwb]``: anchors around the pad, ranged round-robin, only within ``max_range_m``, with the range
+    errors of real flights (:class:`~swarm.core.range_error_params.RangeErrorParams`)."""
 
     enabled: bool = True
     mode: str = "twr"
@@ -115,25 +117,6 @@ class LandingUwb:
     sigma_m: float = 0.10
     max_range_m: float = 15.0
     lever_arm_m: Vec3 = (0.0, 0.0, 0.05)
-    # The range errors of real flights (swarm.core.range_errors; docs/logs.md): all off by default.
-    offset_m: float = 0.0
-    """Common range offset [m] (an antenna delay: real Loco Positioning ranges read short, -0.17..-0.36)."""
-    offset_spread_m: float = 0.0
-    """Standard deviation of the per-anchor offsets around ``offset_m`` (uniform, drawn per run) [m]."""
-    takeoff_bias_step_m: float = 0.0
-    """Mean ground-to-air bias step [m], added while the UAV is off the ground."""
-    takeoff_bias_step_spread_m: float = 0.0
-    """Standard deviation of that step over the anchors (uniform, drawn per run and UAV) [m]."""
-    multipath_sigma_m: float = 0.0
-    """Stationary sigma of the time-correlated multipath error in flight (Gauss-Markov, per anchor) [m]."""
-    multipath_tau_s: float = 1.0
-    """Its correlation time [s]."""
-    nlos_episode_rate_hz: float = 0.0
-    """Onset rate of sustained NLOS episodes per anchor in flight [1/s] (0: none)."""
-    nlos_episode_s: float = 4.0
-    """Mean length of an episode (exponential) [s]."""
-    nlos_episode_excess_m: float = 0.3
-    """Mean excess of an episode's ranges [m] (uniform in [0.5, 1.5] times this, per episode)."""
     outlier_probability: float = 0.0
     """Probability that a range is an isolated outlier, long by an exponential excess."""
     outlier_excess_m: float = 1.0
@@ -180,23 +163,6 @@ class LandingRangefinder:
             raise ConfigError(f"rangefinder.min_range_m must be below max_range_m = {hi!r}, got {lo!r}")
         if not self.max_tilt_deg < 90:
             raise ConfigError(f"rangefinder.max_tilt_deg must be below 90, got {self.max_tilt_deg!r}")
-
-
-@dataclass(frozen=True)
-class LandingInitial:
-    """``[initial]``: the first estimate's errors (drawn) and sigmas."""
-
-    sigma_position_m: float = 1.0
-    """GNSS-class start."""
-    sigma_velocity_m_s: float = 0.05
-    sigma_attitude_deg: float = 1.0
-    sigma_accel_bias_m_s2: float = 0.02
-    sigma_gyro_bias_rad_s: float = 0.002
-    sigma_range_offset_m: float = 0.1
-    """Prior of each anchor's range offset (``[estimator] range_bias``) [m]."""
-    sigma_common_offset_m: float = 0.5
-    """Prior of the offset common to every anchor (``[estimator] range_common_offset``) [m]: a Loco
-    Positioning tag's antenna delay reads ranges 0.2-0.4 m short."""
 
 
 @dataclass(frozen=True)
@@ -343,7 +309,12 @@ class LandingScenario:
     uwb: LandingUwb = LandingUwb()
     gnss: LandingGnss = LandingGnss()
     rangefinder: LandingRangefinder = LandingRangefinder()
-    initial: LandingInitial = LandingInitial()
+    initial: InitialEstimateParams = field(
+        default_factory=lambda: InitialEstimateParams(
+            sigma_position_m=1.0, sigma_velocity_m_s=0.05, sigma_attitude_deg=1.0
+        )
+    )
+    """A GNSS-class start (the shared table, :mod:`swarm.scenario_tables`)."""
     estimator: ImuFilterParams = field(
         default_factory=lambda: ImuFilterParams(
             range_bias=False, range_common_offset=False, range_gm=False, range_bias_rw=0.01, huber_k=2.0

@@ -14,7 +14,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar, Literal
+from typing import Literal
 
 import numpy as np
 
@@ -30,7 +30,7 @@ from swarm.errors import ConfigError
 from swarm.kinds import KINDS, KindsParams, VehicleKind, check_docking_kind
 from swarm.kinds.dispersions import DispersionParams
 from swarm.navigation import NAVIGATORS, check_docking_navigator, navigator_name
-from swarm.scenario_tables import MissionTable, check_mission, refuse_mission_key
+from swarm.scenario_tables import InitialEstimateParams, MissionTable, check_mission, refuse_mission_key
 from swarm.sensors.options import SensorsSpec, apply_sensor_profile
 
 Vec3 = tuple[float, float, float]
@@ -96,38 +96,6 @@ class SimParams:
                 raise ConfigError(f"sim.{name} must be a positive number, got {v!r}")
         if self.series_every < 1:
             raise ConfigError(f"sim.series_every must be >= 1, got {self.series_every!r}")
-
-
-@dataclass(frozen=True)
-class InitialEstimateParams:
-    """Initial estimate of every agent: truth plus a Gaussian error with these standard deviations, which
-    are also the filter's initial covariance. The names are the landing's and the log replay's."""
-
-    RENAMED: ClassVar[dict[str, tuple[str, float]]] = {
-        "sigma_pos_m": ("sigma_position_m", 1.0),
-        "sigma_vel_m_s": ("sigma_velocity_m_s", 1.0),
-        "sigma_att_deg": ("sigma_attitude_deg", 1.0),
-    }
-    """Keys of older files and the names that replaced them (:mod:`swarm.config`)."""
-
-    sigma_position_m: float = 0.05
-    sigma_velocity_m_s: float = 0.005
-    sigma_attitude_deg: float = 2.0
-
-    def __post_init__(self) -> None:
-        for name in ("sigma_position_m", "sigma_velocity_m_s", "sigma_attitude_deg"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"initial.{name} must be a positive number, got {v!r}")
-
-    @property
-    def sigmas(self) -> np.ndarray:
-        """(9,) standard deviations in the filter's error-state order (d_p, d_v, d_theta)."""
-        return np.array(
-            [self.sigma_position_m] * 3
-            + [self.sigma_velocity_m_s] * 3
-            + [np.radians(self.sigma_attitude_deg)] * 3
-        )
 
 
 @dataclass(frozen=True)

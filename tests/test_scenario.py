@@ -13,6 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from swarm.config import dump_toml, to_mapping
+from swarm.core.range_error_params import RangeErrorParams
 from swarm.errors import ConfigError
 from swarm.landing_scenario import load_landing
 from swarm.scenario import SCENARIO_DIR, Scenario, load_scenario
@@ -481,3 +482,30 @@ def test_thrust_dispersions_with_the_nominal_acceleration_psd_warn():
         w.simplefilter("error")
         load_scenario("docking", {"dispersions.mass_sigma_frac": 0.03, "estimator.accel_psd_m2_s3": 1e-8})
         load_scenario("docking", {"dispersions.position_sigma_m": 0.03})
+
+
+# --------------------------------------------------------------------- tables shared by every mission
+
+
+def test_a_shared_table_is_one_dataclass_in_every_mission_with_its_own_defaults():
+    docking, landing = load_scenario("docking"), load_landing("landing")
+    assert type(docking.initial) is type(landing.initial)
+    assert set(RangeErrorParams.__dataclass_fields__) <= set(type(docking.uwb).__dataclass_fields__)
+    assert isinstance(docking.uwb, RangeErrorParams) and isinstance(landing.uwb, RangeErrorParams)
+    # each mission keeps its defaults: a 2 deg MEKF start (paper) and a GNSS-class landing start
+    assert (docking.initial.sigma_position_m, docking.initial.sigma_attitude_deg) == (0.05, 2.0)
+    assert (landing.initial.sigma_position_m, landing.initial.sigma_attitude_deg) == (1.0, 1.0)
+
+
+def test_a_landing_file_gets_the_shared_tables_refusals(tmp_path):
+    text = (SCENARIO_DIR / "landing.toml").read_text()
+    path = tmp_path / "old.toml"
+    path.write_text(text.replace("[initial]\n", "[initial]\nsigma_att_deg = 3.0\n"))
+    with pytest.raises(ConfigError, match=r"initial\.sigma_attitude_deg = 3\.0 instead"):
+        load_landing(path)
+    path.write_text(text.replace("[initial]\n", "[initial]\nsigma_velocity_m_s = 0.0\n"))
+    with pytest.raises(ConfigError, match=r"initial\.sigma_velocity_m_s must be a positive number"):
+        load_landing(path)
+    path.write_text(text.replace("[uwb]\n", "[uwb]\nmultipath_tau_s = -1.0\n"))
+    with pytest.raises(ConfigError, match=r"uwb\.multipath_tau_s must be a finite number > 0"):
+        load_landing(path)

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from swarm.core._rot_nb import qexp, qmul, qnormalize
+from swarm.core.range_error_params import RangeErrorParams
 from swarm.core.range_errors import check_range_errors
 from swarm.errors import ConfigError
 
@@ -165,9 +166,10 @@ def _gyro_kernel(w, bias, z, s_w, phi, s_b):
 
 
 @dataclass(frozen=True)
-class UwbParams:
+class UwbParams(RangeErrorParams):
     """UWB two-way ranging of one tag against fixed anchors, one anchor per exchange in round robin
-    (paper sec. III, sec. VI-A: ~50 Hz, 2 cm), with switchable faults (paper sec. IV-D)."""
+    (paper sec. III, sec. VI-A: ~50 Hz, 2 cm), with switchable faults (paper sec. IV-D) and the range errors
+    of real flights (:class:`~swarm.core.range_error_params.RangeErrorParams`)."""
 
     mode: str = "twr"
     """``"twr"``: two-way ranging, one anchor per exchange (this class); ``"tdoa2"`` / ``"tdoa3"``: the
@@ -206,27 +208,6 @@ class UwbParams:
     """Length of one TDMA slot [s] (Loco Positioning TWR-TDMA: ~4.2 ms per exchange)."""
     tdma_frame_slots: int = 0
     """Slots per TDMA frame, a power of two; 0: the smallest power of two >= the number of tags."""
-    # The range errors of real flights (swarm.core.range_errors; docs/logs.md): all off by default.
-    offset_m: float = 0.0
-    """Common range offset [m] (an antenna delay: real Loco Positioning ranges read short, -0.17..-0.36)."""
-    offset_spread_m: float = 0.0
-    """Standard deviation of the per-anchor offsets around ``offset_m`` (uniform, drawn per run) [m]."""
-    takeoff_bias_step_m: float = 0.0
-    """Mean ground-to-air bias step [m], added while a vehicle is airborne (a docking vehicle of a planar
-    kind is on the ground, the others fly)."""
-    takeoff_bias_step_spread_m: float = 0.0
-    """Standard deviation of that step over vehicle-anchor links (uniform, drawn per run) [m]."""
-    multipath_sigma_m: float = 0.0
-    """Stationary sigma of the time-correlated multipath error in flight, a first-order Gauss-Markov
-    process per vehicle and anchor [m] (0: none)."""
-    multipath_tau_s: float = 1.0
-    """Its correlation time [s]."""
-    nlos_episode_rate_hz: float = 0.0
-    """Onset rate of sustained NLOS episodes per vehicle-anchor link in flight [1/s] (0: none)."""
-    nlos_episode_s: float = 4.0
-    """Mean length of an episode (exponential) [s]."""
-    nlos_episode_excess_m: float = 0.3
-    """Mean excess of an episode's ranges [m] (uniform in [0.5, 1.5] times this, drawn per episode)."""
 
     def __post_init__(self) -> None:
         _check_positive("uwb", "rate_hz", self.rate_hz)
