@@ -62,6 +62,7 @@ from swarm.transport.process import (
     add_checkpoint_arguments,
     add_process_arguments,
     declare_reliable,
+    exit_process,
     print_ready,
     process_main,
 )
@@ -399,4 +400,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_process(main())

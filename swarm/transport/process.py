@@ -211,6 +211,20 @@ def install_stop_signals(stop: threading.Event) -> dict[int, object]:
     return install(stop, _LOG)
 
 
+def exit_process(code: int) -> None:
+    """End a swarm process (``python -m ...``) with ``code`` once its session is closed and its output
+    flushed, without the interpreter's finalization: there a Zenoh object's finalizer collected with a
+    closed session's callbacks still tied to it can block in the garbage collector (seen: a hosted landing
+    agent stuck "Garbage-collecting" for its launcher's whole 3 s grace, then SIGKILLed). Files it owes are
+    closed by then (checkpoints at the run's end, recordings by their writers)."""
+    import os
+
+    sys.stdout.flush()
+    sys.stderr.flush()
+    logging.shutdown()
+    os._exit(code)
+
+
 def process_main(
     prog: str,
     description: str,

@@ -57,7 +57,7 @@ import sys
 import threading
 import time
 
-from swarm.transport.process import check_pace, print_ready, process_main
+from swarm.transport.process import check_pace, exit_process, print_ready, process_main
 
 _LOG = logging.getLogger("swarm.world.landing")
 DESCRIPTION = "The landing world: quadrotor truth and sensors of every UAV, lockstep over Zenoh."
@@ -445,4 +445,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_process(main())
