@@ -105,3 +105,42 @@ def test_the_costly_files_go_first_under_xdist_and_a_serial_run_keeps_pytests_or
     pytest_collection_modifyitems(SimpleNamespace(rootpath=ROOT, workerinput={}), worker)
     assert [i.name for i in worker] == ["launch1", "launch2", "stop1", "a1", "b1", "a2"]
     assert FILE_COST_S[launch] > FILE_COST_S[stop]
+
+
+BROWSER = """
+import pytest
+from record import record
+
+@pytest.fixture(scope="module")
+def page():  # a module's browser and swarm: set up in the first test, torn down after the last
+    record("{name}-setup", 0.1)
+    yield
+    record("{name}-teardown", 0.1)
+
+@pytest.mark.parametrize("i", range(3))
+def test_page(page, i):
+    record(f"{name}{{i}}", 0.15)
+"""
+
+
+def test_two_browser_modules_never_run_side_by_side_from_setup_to_teardown(tmp_path):
+    (tmp_path / "conftest.py").write_text('pytest_plugins = ["tests.xdist_turns"]\n')
+    (tmp_path / "pytest.ini").write_text("[pytest]\nmarkers =\n    alone: nothing beside it\n")
+    (tmp_path / "record.py").write_text(RECORD)
+    for name in ("one", "two"):
+        (tmp_path / f"test_browser_{name}.py").write_text(BROWSER.replace("{name}", name))
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(tmp_path)])
+    args = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "2", "--dist", "loadfile",
+            "--no-loadscope-reorder", "--basetemp", str(tmp_path / "base")]  # fmt: skip
+    run = subprocess.run(args, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stdout + run.stderr
+    rows = [line.split() for line in (tmp_path / "log.txt").read_text().splitlines()]
+    span = {}
+    for name, worker, t0, t1 in rows:
+        module = "one" if name.startswith("one") else "two"
+        _, a, b = span.get(module, (worker, float(t0), float(t1)))
+        span[module] = (worker, min(a, float(t0)), max(b, float(t1)))
+    assert {w for w, _, _ in span.values()} == {"gw0", "gw1"}, span  # one module a worker
+    (_, a0, a1), (_, b0, b1) = span["one"], span["two"]
+    assert a1 <= b0 or b1 <= a0, span  # without the browser lock both start at once

@@ -9,6 +9,8 @@ in which order (a plugin of ``tests/conftest.py``; without xdist it changes noth
   shared, so the two workers run side by side otherwise. The lock is a file lock (``fcntl.flock``) in the
   run's temporary directory; a turnstile in front of it lets an ``alone`` test in even while the other
   worker goes from test to test (a shared lock is never held across tests).
+- **One browser at a time.** A ``tests/dashboard/test_browser*.py`` module holds a browser lock from its
+  first test to its last: another worker reaching a browser module waits for it.
 - **Order.** xdist hands out whole files (``--dist loadfile``) in collection order. The files that launch
   swarms, dashboards and browsers take minutes; started last, one of them would keep one worker busy while
   the other idles at the end. :data:`FILE_COST_S` moves them to the front, longest first; the rest keep
@@ -79,14 +81,51 @@ def _turn(lock_dir: Path, alone: bool) -> Iterator[None]:
             fcntl.flock(turn, fcntl.LOCK_UN)
 
 
+_BROWSER: dict[str, object] = {}
+"""The open browser lock file of the browser module this worker is in (by module path)."""
+
+
+def _browser_module(item: pytest.Item | None) -> str | None:
+    """The path of ``item``'s module if it drives Chromium (``tests/dashboard/test_browser*.py``)."""
+    if item is None:
+        return None
+    path = Path(str(item.path))
+    return str(path) if path.name.startswith("test_browser") else None
+
+
+def _browser_turn(lock_dir: Path, item: pytest.Item, nextitem: pytest.Item | None) -> None:
+    """Before a browser module's first test: take the browser lock exclusively (two Chromiums and their
+    launched swarms side by side missed the page's timeouts on two cores, BENCHMARKS.md "Test time"); it is
+    held across the module (its swarm and browser are module fixtures) and taken before the turn lock, so
+    the two locks are always taken in one order."""
+    module = _browser_module(item)
+    if module is not None and module not in _BROWSER:
+        fh = open(lock_dir / "xdist-browser.lock", "a")  # held across the module's tests
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        _BROWSER[module] = fh
+
+
+def _browser_release(item: pytest.Item, nextitem: pytest.Item | None) -> None:
+    """After a browser module's last test (its module fixtures torn down in that test's teardown)."""
+    module = _browser_module(item)
+    if module is not None and _browser_module(nextitem) != module and module in _BROWSER:
+        fh = _BROWSER.pop(module)
+        fcntl.flock(fh, fcntl.LOCK_UN)
+        fh.close()
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
     lock_dir = _lock_dir(item.config)
     if lock_dir is None:
         yield
         return
-    with _turn(lock_dir, alone=item.get_closest_marker("alone") is not None):
-        yield
+    _browser_turn(lock_dir, item, nextitem)
+    try:
+        with _turn(lock_dir, alone=item.get_closest_marker("alone") is not None):
+            yield
+    finally:
+        _browser_release(item, nextitem)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
