@@ -380,9 +380,12 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                 continue
             barrier.set_live(uids)  # every UAV still flying commands every tick
             step_deadline = time.monotonic() + args.step_timeout
-            while not barrier.poll(k, 0.05):
+            while True:  # the stop looked at before each wait: agents that answer within a poll never
+                # leave it a timed-out one (a paced run stopped mid-run otherwise flew on to its end)
                 if stop.is_set():
                     reason = "stopped"
+                    break
+                if barrier.poll(k, 0.05):
                     break
                 if time.monotonic() > step_deadline:
                     reason = "agent_missing"

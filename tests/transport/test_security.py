@@ -650,7 +650,12 @@ def test_a_world_killed_in_a_secure_run_resumes_with_its_identity_and_the_run_eq
         time.sleep(1.0)  # into the run (a lockstep pair docks ~3.5 s into it here)
         (first,) = world()
         os.kill(int(first[0]), signal.SIGKILL)
-        wait_until(lambda: len(world()) == 1 and world()[0][0] != first[0], 60.0, "the restarted world")
+
+        def restarted() -> bool:  # one look at the processes (two could see the old one go in between)
+            now = world()
+            return len(now) == 1 and now[0][0] != first[0]
+
+        wait_until(restarted, 60.0, "the restarted world")
         (second,) = world()
         rc = proc.wait(RUN_S)
         text = proc.output()
