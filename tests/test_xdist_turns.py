@@ -53,12 +53,14 @@ def test_beside(i):
 """
 
 
-def test_an_alone_test_runs_with_nothing_beside_it_and_the_others_run_side_by_side(tmp_path):
+def _run_two_workers(tmp_path: Path, modules: dict[str, str]) -> list[list[str]]:
+    """The test ``modules`` (file name -> text) with the plugin, run by a real ``pytest -n 2`` in
+    ``tmp_path``; the rows each test wrote (name, worker, start, end)."""
     (tmp_path / "conftest.py").write_text('pytest_plugins = ["tests.xdist_turns"]\n')
     (tmp_path / "pytest.ini").write_text("[pytest]\nmarkers =\n    alone: nothing beside it\n")
     (tmp_path / "record.py").write_text(RECORD)
-    (tmp_path / "test_a_shared.py").write_text(SHARED)
-    (tmp_path / "test_b_alone.py").write_text(ALONE)
+    for name, text in modules.items():
+        (tmp_path / name).write_text(text)
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}  # (this run may be a worker)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(tmp_path)])
     args = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "2", "--dist", "loadfile",
@@ -66,6 +68,11 @@ def test_an_alone_test_runs_with_nothing_beside_it_and_the_others_run_side_by_si
     run = subprocess.run(args, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stdout + run.stderr
     rows = [line.split() for line in (tmp_path / "log.txt").read_text().splitlines()]
+    return rows
+
+
+def test_an_alone_test_runs_with_nothing_beside_it_and_the_others_run_side_by_side(tmp_path):
+    rows = _run_two_workers(tmp_path, {"test_a_shared.py": SHARED, "test_b_alone.py": ALONE})
     spans = {name: (worker, float(t0), float(t1)) for name, worker, t0, t1 in rows}
     assert len(spans) == 15 and {w for w, _, _ in spans.values()} == {"gw0", "gw1"}, spans
 
@@ -124,18 +131,8 @@ def test_page(page, i):
 
 
 def test_two_browser_modules_never_run_side_by_side_from_setup_to_teardown(tmp_path):
-    (tmp_path / "conftest.py").write_text('pytest_plugins = ["tests.xdist_turns"]\n')
-    (tmp_path / "pytest.ini").write_text("[pytest]\nmarkers =\n    alone: nothing beside it\n")
-    (tmp_path / "record.py").write_text(RECORD)
-    for name in ("one", "two"):
-        (tmp_path / f"test_browser_{name}.py").write_text(BROWSER.replace("{name}", name))
-    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(tmp_path)])
-    args = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "2", "--dist", "loadfile",
-            "--no-loadscope-reorder", "--basetemp", str(tmp_path / "base")]  # fmt: skip
-    run = subprocess.run(args, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
-    assert run.returncode == 0, run.stdout + run.stderr
-    rows = [line.split() for line in (tmp_path / "log.txt").read_text().splitlines()]
+    modules = {f"test_browser_{name}.py": BROWSER.replace("{name}", name) for name in ("one", "two")}
+    rows = _run_two_workers(tmp_path, modules)
     span = {}
     for name, worker, t0, t1 in rows:
         module = "one" if name.startswith("one") else "two"
