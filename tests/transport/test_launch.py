@@ -88,6 +88,7 @@ def sim_result():
     return run_docking(load_scenario("docking"), seed=SEED, record_series=False)
 
 
+@pytest.mark.alone  # under -n 2 a fresh clone once docked 2 s late: nothing beside it until understood
 def test_lockstep_launch_equals_the_in_process_run_even_under_garbage_on_every_key(tmp_path, sim_result):
     """Lockstep, same seed as ``swarm sim``: the launched run is the in-process one bit for bit (docking
     time, impulse, errors, modes, Algorithm 1 decisions; not to 1e-9: both runners call the same kernels in
